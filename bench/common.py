@@ -1,0 +1,60 @@
+"""What every bench script shares: one-thread setup, timing, and the table / JSON report.
+
+Each script prints a table of its figures and, with --json, one JSON object last whose keys are the
+figure names its issue gives. Medians and ratios come from one run, since these machines are noisy.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import time
+
+# One thread for numpy's BLAS and torch: the figures are per core.
+for _var in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS"):
+    os.environ.setdefault(_var, "1")
+
+
+def parser(description: str) -> argparse.ArgumentParser:
+    p = argparse.ArgumentParser(description=description)
+    p.add_argument("--json", action="store_true", help="print one JSON object with the figures last")
+    p.add_argument("--quick", action="store_true", help="fewer samples, for a smoke run")
+    return p
+
+
+def time_calls(fn, args_list, repeat: int = 1) -> list[float]:
+    """Seconds per call of fn(*args) for each args in args_list (best of `repeat` per item)."""
+    out = []
+    for args in args_list:
+        best = float("inf")
+        for _ in range(repeat):
+            t = time.perf_counter()
+            fn(*args)
+            best = min(best, time.perf_counter() - t)
+        out.append(best)
+    return out
+
+
+def percentile(values, q: float) -> float:
+    import numpy as np
+
+    return float(np.percentile(np.asarray(values), q))
+
+
+def report(title: str, figures: dict, targets: dict | None = None, as_json: bool = False) -> None:
+    """Print the figures as a table (with the issue's target where there is one), then JSON if asked."""
+    from rich.console import Console
+    from rich.table import Table
+
+    targets = targets or {}
+    table = Table(title=title, title_justify="left")
+    table.add_column("figure")
+    table.add_column("value", justify="right")
+    table.add_column("target")
+    for key, value in figures.items():
+        shown = f"{value:.4g}" if isinstance(value, float) else str(value)
+        table.add_row(key, shown, targets.get(key, ""))
+    Console(stderr=as_json).print(table)
+    if as_json:
+        print(json.dumps(figures))

@@ -1,0 +1,1 @@
+"""Robot descriptions: URDF parsing, kinematics, inverse kinematics and exact self-collision."""

@@ -1,0 +1,219 @@
+"""Exact self-collision on python-fcl, with per-link labels and the colliding link pairs.
+
+fcl decides every contact. Two vectorised numpy filters only decide which shape pairs fcl needs to
+look at: bounding spheres, then, for box pairs, the face axes of the separating-axis test (a pair they
+let through may still be apart, and fcl decides; a pair they drop is apart for sure).
+Link pairs that are never checked (parent and child, and pairs that touch in every sampled
+configuration) come from the exclusion file next to the URDF (see exclusions.py).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import fcl
+import numpy as np
+
+from teleprev.robot.exclusions import Exclusions, load_exclusions
+from teleprev.robot.model import RobotModel
+
+_SAT_GAP = 1e-9  # a box pair counts as separated only when some axis separates it by more than this
+
+
+@dataclass(frozen=True)
+class CollisionReport:
+    labels: np.ndarray  # bool per checked link (SelfCollisionChecker.link_names)
+    pairs: tuple[tuple[str, str], ...]  # colliding link pairs
+
+    @property
+    def colliding(self) -> bool:
+        return bool(self.pairs)
+
+    def colliding_links(self, link_names) -> list[str]:
+        return [n for n, hit in zip(link_names, self.labels) if hit]
+
+
+def _fcl_geometry(kind: str, size: tuple[float, ...]):
+    if kind == "box":
+        return fcl.Box(*size)
+    if kind == "sphere":
+        return fcl.Sphere(size[0])
+    if kind == "cylinder":
+        return fcl.Cylinder(size[0], size[1])
+    return fcl.Capsule(size[0], size[1])
+
+
+def _bounding_radius(kind: str, size: tuple[float, ...]) -> float:
+    if kind == "box":
+        return 0.5 * float(np.linalg.norm(size))
+    if kind == "sphere":
+        return size[0]
+    if kind == "cylinder":
+        return float(np.hypot(size[0], 0.5 * size[1]))
+    return size[0] + 0.5 * size[1]
+
+
+def boxes_separated(ta: np.ndarray, tb: np.ndarray, half_a: np.ndarray, half_b: np.ndarray) -> np.ndarray:
+    """Face-axis separation test for k pairs of oriented boxes (world transforms (k, 4, 4), half extents
+    (k, 3)): True where one of the six face normals separates the pair, so it certainly does not touch.
+
+    The nine edge-edge axes of the full separating-axis test are left to fcl: on collision-free hand
+    configurations the face axes already clear all but about 0.4 pairs per configuration.
+    """
+    rat = np.swapaxes(ta[:, :3, :3], -1, -2)
+    r = rat @ tb[:, :3, :3]
+    t = (rat @ (tb[:, :3, 3] - ta[:, :3, 3])[..., None])[..., 0]
+    ar = np.abs(r)
+    face_a = np.abs(t) - half_a - (ar @ half_b[..., None])[..., 0]
+    face_b = np.abs((t[:, None, :] @ r)[:, 0, :]) - (half_a[:, None, :] @ ar)[:, 0, :] - half_b
+    return np.maximum(face_a.max(axis=1), face_b.max(axis=1)) > _SAT_GAP
+
+
+def _distance2(centres: np.ndarray) -> np.ndarray:
+    """Squared distances between all shape centres, (..., S, 3) -> (..., S, S)."""
+    sq = np.einsum("...i,...i->...", centres, centres)
+    return sq[..., :, None] + sq[..., None, :] - 2.0 * (centres @ np.swapaxes(centres, -1, -2))
+
+
+class SelfCollisionChecker:
+    """Self-collision of one robot model.
+
+    `link_names` are the links with collision geometry (the m labels of a configuration), in model order.
+    """
+
+    def __init__(self, model: RobotModel, exclusions: Exclusions | None = None):
+        self.model = model
+        self.exclusions = exclusions if exclusions is not None else load_exclusions(model)
+        self.link_names = tuple(n for n in model.link_names if model.links[n].collisions)
+        link_pos = {n: i for i, n in enumerate(self.link_names)}
+
+        shape_link, local, kinds, half, radius, objects = [], [], [], [], [], []
+        for name in self.link_names:
+            for shape in model.links[name].collisions:
+                shape_link.append(link_pos[name])
+                local.append(shape.origin)
+                kinds.append(shape.kind)
+                half.append(np.array(shape.size) / 2 if shape.kind == "box" else np.zeros(3))
+                radius.append(_bounding_radius(shape.kind, shape.size))
+                objects.append(fcl.CollisionObject(_fcl_geometry(shape.kind, shape.size), fcl.Transform()))
+        self._shape_link = np.array(shape_link)
+        self._shape_model_link = np.array([model.link_index[self.link_names[i]] for i in shape_link])
+        self._local = np.array(local)
+        self._half = np.array(half)
+        self._objects = objects
+
+        # Link pairs that are checked, and the shape pairs under each.
+        excluded = self.exclusions.pair_set()
+        self.link_pairs: tuple[tuple[str, str], ...] = tuple(
+            (a, b)
+            for i, a in enumerate(self.link_names)
+            for b in self.link_names[i + 1:]
+            if frozenset((a, b)) not in excluded
+        )
+        pair_index = {frozenset(p): k for k, p in enumerate(self.link_pairs)}
+        si, sj, lp = [], [], []
+        for i in range(len(shape_link)):
+            for j in range(i + 1, len(shape_link)):
+                key = frozenset((self.link_names[shape_link[i]], self.link_names[shape_link[j]]))
+                if shape_link[i] != shape_link[j] and key in pair_index:
+                    si.append(i)
+                    sj.append(j)
+                    lp.append(pair_index[key])
+        self._si, self._sj, self._lp = np.array(si, dtype=int), np.array(sj, dtype=int), np.array(lp, dtype=int)
+        self._flat_pair = self._si * len(shape_link) + self._sj  # into the (S, S) distance matrix
+        rad = np.array(radius)
+        self._reach2 = (rad[self._si] + rad[self._sj]) ** 2
+        is_box = np.array([k == "box" for k in kinds])
+        self._both_boxes = is_box[self._si] & is_box[self._sj]
+        # Pair -> (link a, link b) positions, to turn colliding pairs into per-link labels.
+        self._pair_links = np.array([(link_pos[a], link_pos[b]) for a, b in self.link_pairs], dtype=int).reshape(-1, 2)
+        self._request = fcl.CollisionRequest()
+
+    # ---- internals -----------------------------------------------------------------------------
+    def _shape_world(self, world: np.ndarray) -> np.ndarray:
+        """Shape transforms (..., S, 4, 4) from link transforms (..., L, 4, 4)."""
+        return world[..., self._shape_model_link, :, :] @ self._local
+
+    def _candidates(self, shapes: np.ndarray) -> np.ndarray:
+        """Indices into the shape-pair tables of the pairs fcl must decide, for one configuration."""
+        near = np.flatnonzero(_distance2(shapes[:, :3, 3]).ravel()[self._flat_pair] < self._reach2)
+        boxes = self._both_boxes[near]
+        if boxes.any():
+            a, b = self._si[near[boxes]], self._sj[near[boxes]]
+            apart = boxes_separated(shapes[a], shapes[b], self._half[a], self._half[b])
+            boxes[boxes] = ~apart
+            near = near[boxes | ~self._both_boxes[near]]
+        return near
+
+    def _fcl_pairs(self, shapes: np.ndarray, candidates: np.ndarray, first_only: bool) -> list[int]:
+        """Link-pair indices that fcl finds in contact, trying each link pair's shape pairs until one hits."""
+        hit: list[int] = []
+        seen: set[int] = set()
+        placed: set[int] = set()
+        objects = self._objects
+        for lp, a, b in zip(self._lp[candidates].tolist(), self._si[candidates].tolist(), self._sj[candidates].tolist()):
+            if lp in seen:
+                continue
+            for s in (a, b):
+                if s not in placed:
+                    objects[s].setRotation(shapes[s, :3, :3])  # cheaper than building an fcl.Transform
+                    objects[s].setTranslation(shapes[s, :3, 3])
+                    placed.add(s)
+            if fcl.collide(objects[a], objects[b], self._request, fcl.CollisionResult()):
+                seen.add(lp)
+                hit.append(lp)
+                if first_only:
+                    break
+        return hit
+
+    def _report(self, hits: list[int]) -> CollisionReport:
+        labels = np.zeros(len(self.link_names), dtype=bool)
+        if hits:
+            labels[self._pair_links[hits].ravel()] = True
+        return CollisionReport(labels, tuple(self.link_pairs[i] for i in sorted(hits)))
+
+    # ---- public --------------------------------------------------------------------------------
+    def check(self, q: np.ndarray) -> CollisionReport:
+        """All colliding link pairs and the per-link labels of one configuration."""
+        shapes = self._shape_world(self.model.fk(q).world)
+        return self._report(self._fcl_pairs(shapes, self._candidates(shapes), first_only=False))
+
+    def collides(self, q: np.ndarray) -> bool:
+        """Whether one configuration is in self-collision; stops at the first contact."""
+        shapes = self._shape_world(self.model.fk(q).world)
+        return bool(self._fcl_pairs(shapes, self._candidates(shapes), first_only=True))
+
+    def pair_matrix(self, q: np.ndarray, world: np.ndarray | None = None) -> np.ndarray:
+        """(N, len(link_pairs)) bool: which checked link pairs collide, for a batch of configurations.
+
+        `world` may pass link transforms already computed (for example by the batched FK on a GPU).
+        """
+        q = np.atleast_2d(q)
+        world = self.model.fk(q).world if world is None else world
+        shapes = self._shape_world(world)  # (N, S, 4, 4)
+        centres = shapes[..., :3, 3]
+        d = centres[:, self._si] - centres[:, self._sj]  # gathering beats (N, S, S) matmuls for batches
+        rows, cols = np.nonzero(np.einsum("npi,npi->np", d, d) < self._reach2)
+        boxes = self._both_boxes[cols]
+        if boxes.any():
+            rb, cb = rows[boxes], cols[boxes]
+            a, b = self._si[cb], self._sj[cb]
+            apart = boxes_separated(shapes[rb, a], shapes[rb, b], self._half[a], self._half[b])
+            keep = np.ones(len(rows), dtype=bool)
+            keep[np.flatnonzero(boxes)[apart]] = False
+            rows, cols = rows[keep], cols[keep]
+        out = np.zeros((len(q), len(self.link_pairs)), dtype=bool)
+        starts = np.flatnonzero(np.r_[True, rows[1:] != rows[:-1]]) if len(rows) else []
+        for n, sel in zip(rows[starts], np.split(cols, starts[1:])):  # rows come sorted from nonzero
+            out[n, self._fcl_pairs(shapes[n], sel, first_only=False)] = True
+        return out
+
+    def labels(self, q: np.ndarray, world: np.ndarray | None = None) -> np.ndarray:
+        """(N, m) bool per-link labels for a batch of configurations."""
+        return self.labels_from_pairs(self.pair_matrix(q, world))
+
+    def labels_from_pairs(self, pairs: np.ndarray) -> np.ndarray:
+        labels = np.zeros((len(pairs), len(self.link_names)), dtype=bool)
+        for side in (0, 1):
+            np.logical_or.at(labels, (slice(None), self._pair_links[:, side]), pairs)
+        return labels

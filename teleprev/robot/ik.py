@@ -1,0 +1,111 @@
+"""Arm inverse kinematics: damped least squares, warm-started, never outside the joint limits."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from teleprev.robot.model import RobotModel
+from teleprev.robot.transforms import rotation_error
+
+
+@dataclass(frozen=True)
+class IkResult:
+    q: np.ndarray
+    converged: bool
+    iterations: int
+    position_error: float  # metres
+    rotation_error: float  # radians
+
+
+class ArmIK:
+    """Solves for the joints of the serial chain from the model's root to `tip`.
+
+    `tcp` is a fixed transform from the tip link to the point being placed (for example a palm centre).
+    Each iteration takes a damped least-squares step on the 6-D pose error, caps the step size and
+    clips to the joint limits, so every iterate (and the result) is within limits.
+    """
+
+    def __init__(
+        self,
+        model: RobotModel,
+        tip: str,
+        tcp: np.ndarray | None = None,
+        position_tolerance: float = 5e-4,
+        rotation_tolerance: float = 5e-3,
+        max_iterations: int = 60,
+        damping: float = 1e-6,
+        max_step: float = 0.4,
+    ):
+        self.chain = model.chain_to(tip)
+        self.joint_names = self.chain.joint_names
+        self.tip = tip
+        self.tcp = np.eye(4) if tcp is None else np.asarray(tcp, dtype=float)
+        self.position_tolerance = position_tolerance
+        self.rotation_tolerance = rotation_tolerance
+        self.max_iterations = max_iterations
+        self.damping = damping
+        self.max_step = max_step
+        self._tip_index = self.chain.link_index[tip]
+        self._joint_links = np.array([self.chain.link_index[j.child] for j in self.chain.joints])
+        self._axes = np.array([j.axis for j in self.chain.joints])
+        self._revolute = np.array([j.type != "prismatic" for j in self.chain.joints])
+
+    def pose(self, q: np.ndarray) -> np.ndarray:
+        """The TCP pose (4x4) for arm joints q."""
+        return self.chain.fk(q).world[self._tip_index] @ self.tcp
+
+    def _pose_and_jacobian(self, q: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        world = self.chain.fk(q).world
+        tcp = world[self._tip_index] @ self.tcp
+        frames = world[self._joint_links]
+        axes = (frames[:, :3, :3] @ self._axes[:, :, None])[:, :, 0]
+        lever = tcp[:3, 3] - frames[:, :3, 3]
+        jac = np.zeros((6, len(axes)))
+        ax, ay, az = axes.T
+        lx, ly, lz = lever.T
+        cross = np.stack([ay * lz - az * ly, az * lx - ax * lz, ax * ly - ay * lx])  # np.cross is slow on small arrays
+        jac[:3] = np.where(self._revolute, cross, axes.T)
+        jac[3:] = (axes * self._revolute[:, None]).T
+        return tcp, jac
+
+    def solve(self, target: np.ndarray, q_start: np.ndarray) -> IkResult:
+        result = self._solve(target, q_start, self.max_step)
+        if not result.converged:
+            # A long first step can land a joint on its limit in a local minimum; short steps from the
+            # start follow the error down more faithfully (rare, so the common case stays fast).
+            retry = self._solve(target, q_start, self.max_step / 8)
+            if retry.converged or retry.position_error < result.position_error:
+                return retry
+        return result
+
+    def _solve(self, target: np.ndarray, q_start: np.ndarray, max_step: float) -> IkResult:
+        q = self.chain.clip(np.asarray(q_start, dtype=float))
+        eye = np.eye(6)
+        pos_err = rot_err = np.inf
+        for it in range(self.max_iterations + 1):
+            tcp, jac = self._pose_and_jacobian(q)
+            e_pos = target[:3, 3] - tcp[:3, 3]
+            e_rot = rotation_error(target[:3, :3], tcp[:3, :3])
+            pos_err, rot_err = float(np.linalg.norm(e_pos)), float(np.linalg.norm(e_rot))
+            if pos_err <= self.position_tolerance and rot_err <= self.rotation_tolerance:
+                return IkResult(q, True, it, pos_err, rot_err)
+            if it == self.max_iterations:
+                break
+            err = np.concatenate([e_pos, e_rot])
+            # Damping grows with the error, so far targets take careful steps near singularities while
+            # the last millimetres converge quickly.
+            lam2 = self.damping + 1e-2 * float(err @ err)
+            dq = jac.T @ np.linalg.solve(jac @ jac.T + lam2 * eye, err)
+            # Joints pinned at a limit and pushed further out are taken out of the step, so the others
+            # make up for them instead of the solver stalling against the limit.
+            pinned = ((q <= self.chain.lower + 1e-9) & (dq < 0)) | ((q >= self.chain.upper - 1e-9) & (dq > 0))
+            if pinned.any():
+                free = jac * ~pinned
+                dq = free.T @ np.linalg.solve(free @ free.T + lam2 * eye, err)
+            biggest = np.max(np.abs(dq))
+            if biggest > max_step:
+                dq *= max_step / biggest
+            q = self.chain.clip(q + dq)
+        return IkResult(q, False, self.max_iterations, pos_err, rot_err)

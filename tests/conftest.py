@@ -1,0 +1,28 @@
+import numpy as np
+import pytest
+
+
+@pytest.fixture(scope="session")
+def hand():
+    from teleprev.robot.model import load_robot
+
+    return load_robot("leap_hand_right")
+
+
+@pytest.fixture(scope="session")
+def xarm6():
+    from teleprev.robot.model import load_robot
+
+    return load_robot("xarm6")
+
+
+@pytest.fixture(scope="session")
+def hand_checker(hand):
+    from teleprev.robot.collision import SelfCollisionChecker
+
+    return SelfCollisionChecker(hand)
+
+
+@pytest.fixture
+def rng():
+    return np.random.default_rng(12345)
