@@ -104,3 +104,38 @@ def matrix_to_quat(r: np.ndarray) -> np.ndarray:
 def rotation_error(r_target: np.ndarray, r_current: np.ndarray) -> np.ndarray:
     """Rotation vector (world frame) that turns r_current into r_target."""
     return matrix_to_axis_angle(r_target @ r_current.T)
+
+
+def quat_multiply(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """Hamilton product of quaternions (..., 4) as x y z w."""
+    ax, ay, az, aw = np.moveaxis(np.asarray(a, dtype=float), -1, 0)
+    bx, by, bz, bw = np.moveaxis(np.asarray(b, dtype=float), -1, 0)
+    return np.stack(
+        [
+            aw * bx + ax * bw + ay * bz - az * by,
+            aw * by - ax * bz + ay * bw + az * bx,
+            aw * bz + ax * by - ay * bx + az * bw,
+            aw * bw - ax * bx - ay * by - az * bz,
+        ],
+        axis=-1,
+    )
+
+
+def quat_from_axis_angle(axis_angle: np.ndarray) -> np.ndarray:
+    v = np.asarray(axis_angle, dtype=float)
+    angle = np.linalg.norm(v, axis=-1, keepdims=True)
+    half = 0.5 * angle
+    scale = np.where(angle > 1e-12, np.sin(half) / np.where(angle > 1e-12, angle, 1.0), 0.5)
+    return np.concatenate([v * scale, np.cos(half)], axis=-1)
+
+
+def quat_to_axis_angle(q: np.ndarray) -> np.ndarray:
+    """Quaternions (..., 4) x y z w to rotation vectors (..., 3), taking the short way round."""
+    q = np.asarray(q, dtype=float)
+    q = q / np.linalg.norm(q, axis=-1, keepdims=True)
+    q = np.where(q[..., 3:4] < 0, -q, q)
+    v, w = q[..., :3], q[..., 3]
+    s = np.linalg.norm(v, axis=-1)
+    angle = 2.0 * np.arctan2(s, w)
+    scale = np.where(s > 1e-12, angle / np.where(s > 1e-12, s, 1.0), 2.0)
+    return v * scale[..., None]

@@ -1,0 +1,84 @@
+"""SMPL-X joint names and teleprev's convention for reading finger angles out of hand rotations.
+
+Only the joint tree is needed (no SMPL-X model files). A hand pose is the 15 hand joints' local rotations
+as axis-angle vectors (SMPL-X's `right_hand_pose`, shape (15, 3)), recorded as a JointSample of 45
+values named "<joint>.x", "<joint>.y", "<joint>.z".
+
+Convention (right hand, SMPL-X rest pose): the fingers point along -x, the palm faces -y and the thumb
+side is +z. Each joint has a joint frame B in which abduction is a rotation about y (positive towards the
+thumb) and flexion a rotation about z (positive curls towards the palm); the local rotation is
+    R = B @ Ry(abduction) @ Rz(flexion) @ B.T
+and angles_from_hand_pose inverts it (any twist about the bone is ignored). For the four fingers B is the
+identity; the thumb's frame is the finger frame turned 60 degrees about y, so the thumb points out and
+forwards and curls across the palm.
+"""
+
+from __future__ import annotations
+
+import functools
+
+import numpy as np
+
+from teleprev.robot.transforms import axis_angle_to_matrix, quat_from_axis_angle, quat_multiply, quat_to_axis_angle
+
+FINGERS = ("index", "middle", "pinky", "ring", "thumb")
+HAND_JOINTS: tuple[str, ...] = tuple(f"{f}{i}" for f in FINGERS for i in (1, 2, 3))
+HAND_POSE_NAMES: tuple[str, ...] = tuple(f"{j}.{c}" for j in HAND_JOINTS for c in "xyz")
+JOINT_INDEX = {j: i for i, j in enumerate(HAND_JOINTS)}
+
+# SMPL-X body joints (the first 22 of the skeleton); SMPL's 24 add left_hand and right_hand.
+BODY_JOINTS: tuple[str, ...] = (
+    "pelvis", "left_hip", "right_hip", "spine1", "left_knee", "right_knee", "spine2", "left_ankle",
+    "right_ankle", "spine3", "left_foot", "right_foot", "neck", "left_collar", "right_collar", "head",
+    "left_shoulder", "right_shoulder", "left_elbow", "right_elbow", "left_wrist", "right_wrist",
+)
+
+_THUMB_TILT = np.deg2rad(60.0)
+
+
+def _joint_frames() -> np.ndarray:
+    frames = np.tile(np.eye(3), (len(HAND_JOINTS), 1, 1))
+    c, s = np.cos(_THUMB_TILT), np.sin(_THUMB_TILT)
+    thumb = np.array([[c, 0.0, s], [0.0, 1.0, 0.0], [-s, 0.0, c]])
+    for j in ("thumb1", "thumb2", "thumb3"):
+        frames[JOINT_INDEX[j]] = thumb
+    return frames
+
+
+JOINT_FRAMES = _joint_frames()  # (15, 3, 3)
+_FRAME_QUATS = quat_from_axis_angle(np.array([[0.0, _THUMB_TILT if j.startswith("thumb") else 0.0, 0.0] for j in HAND_JOINTS]))
+_FRAME_QUATS_INV = _FRAME_QUATS * np.array([-1.0, -1.0, -1.0, 1.0])
+
+
+def hand_pose_from_angles(flexion: np.ndarray, abduction: np.ndarray) -> np.ndarray:
+    """Axis-angle hand pose (..., 15, 3) from flexion and abduction angles (..., 15) in radians."""
+    flexion = np.asarray(flexion, dtype=float)
+    abduction = np.asarray(abduction, dtype=float)
+    zeros = np.zeros_like(flexion)
+    q_abd = quat_from_axis_angle(np.stack([zeros, abduction, zeros], axis=-1))
+    q_flex = quat_from_axis_angle(np.stack([zeros, zeros, flexion], axis=-1))
+    q = quat_multiply(_FRAME_QUATS, quat_multiply(quat_multiply(q_abd, q_flex), _FRAME_QUATS_INV))
+    return quat_to_axis_angle(q)
+
+
+def angles_from_hand_pose(pose: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """(flexion, abduction) angles (..., 15) from an axis-angle hand pose (..., 15, 3)."""
+    r = axis_angle_to_matrix(np.asarray(pose, dtype=float))
+    m = np.swapaxes(JOINT_FRAMES, -1, -2) @ r @ JOINT_FRAMES
+    flexion = np.arctan2(m[..., 1, 0], m[..., 1, 1])
+    abduction = np.arctan2(m[..., 0, 2], m[..., 2, 2])
+    return flexion, abduction
+
+
+@functools.lru_cache(maxsize=64)
+def _order(names: tuple[str, ...]) -> np.ndarray:
+    index = {n: i for i, n in enumerate(names)}
+    missing = [n for n in HAND_POSE_NAMES if n not in index]
+    if missing:
+        raise KeyError(f"hand pose is missing {len(missing)} components, e.g. {missing[:3]}")
+    return np.array([index[n] for n in HAND_POSE_NAMES])
+
+
+def hand_pose_from_values(names: tuple[str, ...], values: np.ndarray) -> np.ndarray:
+    """A (15, 3) hand pose from named values (any order), as recorded in a JointSample."""
+    return np.asarray(values, dtype=float)[_order(tuple(names))].reshape(15, 3)

@@ -1,0 +1,106 @@
+"""The messages that flow through teleprev: from devices into the session loop, the recorder and the
+pipeline, and back out of recorded sessions.
+
+Every message carries `stamp_ns`, the time its data was acquired, on the session clock (integer
+nanoseconds). The time a message reached the host (MCAP log_time) is not part of the message: the
+session loop assigns it. Values are float64, so a session read back gives bit-identical inputs.
+
+Recorded as (see teleprev/session/topics.py):
+    JointSample  -> foxglove.JointStates     PoseSample -> foxglove.PoseInFrame
+    ImageSample  -> foxglove.CompressedImage TransformsSample -> foxglove.FrameTransforms
+    Event        -> JSON with a titled schema (one schema per event type)
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Any, Union
+
+import numpy as np
+
+
+@dataclass(frozen=True, slots=True)
+class JointSample:
+    """Named joint values: radians (metres for prismatic joints); a glove's SMPL-X hand pose is 45
+    axis-angle components named "<joint>.x|y|z" (see teleprev/human/smplx.py)."""
+
+    stamp_ns: int
+    names: tuple[str, ...]
+    positions: np.ndarray
+    velocities: np.ndarray | None = None
+
+    def value(self, name: str) -> float:
+        return float(self.positions[self.names.index(name)])
+
+    def as_dict(self) -> dict[str, float]:
+        return dict(zip(self.names, self.positions.tolist()))
+
+
+@dataclass(frozen=True, slots=True)
+class PoseSample:
+    """A pose of `frame_id`'s child in `frame_id`: position (3,) metres, orientation (4,) x y z w."""
+
+    stamp_ns: int
+    frame_id: str
+    position: np.ndarray
+    orientation: np.ndarray
+
+    def matrix(self) -> np.ndarray:
+        from teleprev.robot.transforms import make_transform, quat_to_matrix
+
+        return make_transform(quat_to_matrix(self.orientation), self.position)
+
+
+@dataclass(frozen=True, slots=True)
+class ImageSample:
+    """An encoded image (`format` "jpeg" or "png"), as a camera produced it."""
+
+    stamp_ns: int
+    frame_id: str
+    data: bytes
+    format: str = "jpeg"
+
+
+@dataclass(frozen=True, slots=True)
+class Transform:
+    parent: str
+    child: str
+    translation: np.ndarray  # (3,)
+    rotation: np.ndarray  # (4,) x y z w
+
+
+@dataclass(frozen=True, slots=True)
+class TransformsSample:
+    """Link frames of a robot at one instant (recorded on /tf so Foxglove's URDF panel animates)."""
+
+    stamp_ns: int
+    transforms: tuple[Transform, ...]
+
+
+@dataclass(frozen=True, slots=True)
+class Event:
+    """A JSON message: `schema` is its schema title (an entry of topics.EVENT_SCHEMAS), `data` its fields."""
+
+    stamp_ns: int
+    schema: str
+    data: dict[str, Any] = field(default_factory=dict)
+
+
+Payload = Union[JointSample, PoseSample, ImageSample, TransformsSample, Event]
+
+
+@dataclass(frozen=True, slots=True)
+class Sample:
+    """A payload on its topic, as a device or the pipeline hands it to the session loop."""
+
+    topic: str
+    payload: Payload
+
+
+@dataclass(frozen=True, slots=True)
+class Logged:
+    """A message as recorded: topic, host receive time (MCAP log_time) and payload."""
+
+    topic: str
+    log_time_ns: int
+    payload: Payload

@@ -1,0 +1,1 @@
+"""Human motion to robot commands: one pure pipeline step for live recording and offline replay alike."""

@@ -1,0 +1,23 @@
+"""The [pipeline] table of a rig file: how human motion becomes robot commands."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+
+@dataclass(frozen=True)
+class PipelineConfig:
+    trigger: str = "glove"  # the device whose samples trigger a pipeline step (pipeline outputs at its rate)
+    wrist_scale: float = 1.0  # metres of robot motion per metre of wrist motion
+    workspace_min: tuple[float, float, float] = (0.15, -0.45, 0.05)  # TCP box in the arm base frame, metres
+    workspace_max: tuple[float, float, float] = (0.70, 0.45, 0.65)
+    tcp_link: str = "palm_lower"  # the robot link the wrist drives
+    stale_ms: float = 150.0  # inputs older than this hold the last valid command
+    arm_speed: float = 2.14  # rad/s cap on arm command steps (planners' value; the URDF's limit is 3.14)
+    hand_speed: float = 6.0  # rad/s cap on hand command steps (the URDF's limit is 8.48)
+    engage_speed_frac: float = 0.5  # fraction of the caps used while ramping to the preview on engage
+    gripper_joint: str = "index1"  # SMPL-X joint whose flexion drives a parallel-jaw or vacuum gripper
+    gripper_closed_flexion: float = 1.2  # flexion (rad) at which the gripper is fully closed
+    vacuum_on_flexion: float = 0.9  # hysteresis: vacuum switches on above this flexion ...
+    vacuum_off_flexion: float = 0.6  # ... and off below this one
+    tf_rate_hz: float = 30.0  # robot link frames on /tf

@@ -1,0 +1,114 @@
+"""Rig files (TOML): which devices make up a setup, their settings, the robot, and the pipeline.
+
+    [rig]                        # what is being driven, and who operates
+    robot = "xarm6_leap_hand"
+    end_effector = "leap_hand"   # leap_hand | parallel_gripper | vacuum
+
+    [pipeline]                   # see teleprev/pipeline/config.py
+    wrist_scale = 1.0
+
+    [devices.glove]              # one table per device: a plugin and that plugin's settings
+    plugin = "sim.glove"
+
+Everything is checked when the file is loaded, before any device opens: unknown keys, wrong types,
+unknown plugins and missing devices are ConfigErrors that name the file, the table and the key.
+The default rig (devices/rigs/sim.toml) is all simulated devices.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any, Literal
+
+from teleprev.config import from_table, read_toml
+from teleprev.errors import ConfigError
+from teleprev.paths import data_dir
+from teleprev.pipeline.config import PipelineConfig
+
+END_EFFECTOR_JOINTS = {"leap_hand": tuple(str(i) for i in range(16)), "parallel_gripper": ("gripper",), "vacuum": ("vacuum",)}
+
+
+@dataclass(frozen=True)
+class RigSection:
+    name: str = "sim"
+    robot: str = "xarm6_leap_hand"  # URDF (name in urdf/ or path) of arm + end effector
+    end_effector: Literal["leap_hand", "parallel_gripper", "vacuum"] = "leap_hand"
+    calibration: str = ""  # calibration TOML (teleprev calibrate writes one); empty: defaults
+    models: str = ""  # folder with CPN/CCN weights; empty: the shipped models/
+    operator: str = ""
+    task: str = "pick_place"  # default task label of episodes
+    participant: str = ""  # user-study metadata
+    condition: str = ""
+
+
+@dataclass(frozen=True)
+class DeviceEntry:
+    name: str
+    plugin: str
+    kind: str
+    cls: type
+    settings: Any
+
+
+@dataclass(frozen=True)
+class Rig:
+    path: Path | None
+    rig: RigSection
+    pipeline: PipelineConfig
+    devices: dict[str, DeviceEntry]
+    raw: dict = field(default_factory=dict)  # the file's content, recorded as session metadata
+
+    @property
+    def dir(self) -> Path:
+        return self.path.parent if self.path else Path(".")
+
+    def of_kind(self, kind: str) -> list[DeviceEntry]:
+        return [d for d in self.devices.values() if d.kind == kind]
+
+    def require(self, *kinds: str) -> None:
+        """Fail clearly unless the rig has at least one device of each kind."""
+        missing = [k for k in kinds if not self.of_kind(k)]
+        if missing:
+            where = str(self.path) if self.path else "rig"
+            raise ConfigError(f"the rig has no {' and no '.join(missing)} device (add a [devices.<name>] table)", where)
+
+    def resolve(self, relative: str) -> Path:
+        """A path from the rig file, relative to the rig file's folder."""
+        p = Path(relative)
+        return p if p.is_absolute() else self.dir / p
+
+
+def default_rig_path() -> Path:
+    return data_dir("devices") / "rigs" / "sim.toml"
+
+
+def load_rig(path: str | Path | None = None) -> Rig:
+    from devices.base import KINDS
+    from devices.registry import load_plugin
+
+    path = Path(path) if path else default_rig_path()
+    data = read_toml(path)
+    where = str(path)
+    unknown = sorted(set(data) - {"rig", "pipeline", "devices"})
+    if unknown:
+        raise ConfigError(f"unknown table [{unknown[0]}] (expected [rig], [pipeline] and [devices.<name>])", where)
+    rig = from_table(RigSection, data.get("rig", {}), f"{where} [rig]")
+    pipeline = from_table(PipelineConfig, data.get("pipeline", {}), f"{where} [pipeline]")
+    devices_table = data.get("devices", {})
+    if not isinstance(devices_table, dict) or not devices_table:
+        raise ConfigError("no devices: add at least one [devices.<name>] table", where)
+    devices = {}
+    for name, table in devices_table.items():
+        dwhere = f"{where} [devices.{name}]"
+        if not isinstance(table, dict):
+            raise ConfigError("expected a table", dwhere)
+        if "plugin" not in table:
+            raise ConfigError("missing required key 'plugin' (e.g. plugin = \"sim.glove\")", dwhere)
+        settings_table = {k: v for k, v in table.items() if k != "plugin"}
+        cls = load_plugin(table["plugin"], dwhere)
+        if getattr(cls, "kind", None) not in KINDS:
+            raise ConfigError(f"plugin {table['plugin']!r} declares no valid kind", dwhere)
+        settings = from_table(cls.Settings, settings_table, dwhere)
+        devices[name] = DeviceEntry(name, table["plugin"], cls.kind, cls, settings)
+    return Rig(path.resolve(), rig, pipeline, devices, data)

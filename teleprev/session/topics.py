@@ -1,0 +1,129 @@
+"""Topic names and the JSON schemas of teleprev sessions: the one place that says what a session holds.
+
+Raw device streams are named after the device (its name in the rig):
+    /glove/<device>/hand      JointSample   SMPL-X hand pose, 45 axis-angle components ("index1.x", ...)
+    /suit/<device>/wrist      PoseSample    right wrist pose in the suit's world frame
+    /suit/<device>/body       JointSample   SMPL-X body joints, axis-angle components (optional)
+    /camera/<device>/image    ImageSample   JPEG
+    /arm/<device>/state       JointSample   measured arm joints
+    /hand/<device>/state      JointSample   measured end-effector joints (LEAP "0".."15", "gripper", "vacuum")
+
+What the pipeline computed and sent:
+    /pipeline/retargeted      JointSample   end-effector joints from retargeting, before correction
+    /pipeline/corrected       JointSample   after the Corrector (always collision-free)
+    /pipeline/arm_target      JointSample   arm joints from IK
+    /pipeline/report          Event         teleprev.StepReport: corrector action, flags, latency
+    /command/arm              JointSample   arm command actually sent (execute mode only)
+    /command/hand             JointSample   end-effector command actually sent (execute mode only)
+    /tf                       TransformsSample   robot link frames (for Foxglove's URDF panel)
+
+Events:
+    /events/episode           teleprev.EpisodeEvent
+    /events/mode              teleprev.ModeSwitch
+    /events/device            teleprev.DeviceEvent
+    /events/operator          teleprev.OperatorEvent
+"""
+
+from __future__ import annotations
+
+FORMAT_VERSION = 1  # session layout version, written to the "teleprev" metadata record
+
+TF = "/tf"
+RETARGETED = "/pipeline/retargeted"
+CORRECTED = "/pipeline/corrected"
+ARM_TARGET = "/pipeline/arm_target"
+STEP_REPORT = "/pipeline/report"
+COMMAND_ARM = "/command/arm"
+COMMAND_HAND = "/command/hand"
+EPISODE = "/events/episode"
+MODE = "/events/mode"
+DEVICE_EVENT = "/events/device"
+OPERATOR = "/events/operator"
+
+KIND_TOPICS = {
+    "glove": ("hand",),
+    "suit": ("wrist", "body"),
+    "camera": ("image",),
+    "arm": ("state",),
+    "hand": ("state",),
+}
+
+
+def device_topic(kind: str, device: str, stream: str) -> str:
+    """The topic of one stream of a device, e.g. device_topic("glove", "right", "hand")."""
+    return f"/{kind}/{device}/{stream}"
+
+
+def parse_device_topic(topic: str) -> tuple[str, str, str] | None:
+    """(kind, device, stream) of a raw device topic, or None for pipeline/event topics."""
+    parts = topic.strip("/").split("/")
+    if len(parts) == 3 and parts[0] in KIND_TOPICS:
+        return parts[0], parts[1], parts[2]
+    return None
+
+
+def _schema(title: str, description: str, properties: dict, required: list[str]) -> dict:
+    return {
+        "title": title,
+        "description": description,
+        "type": "object",
+        "properties": properties,
+        "required": required,
+    }
+
+
+_STR = {"type": "string"}
+_INT = {"type": "integer"}
+_NUM = {"type": "number"}
+
+EVENT_SCHEMAS: dict[str, dict] = {
+    "teleprev.EpisodeEvent": _schema(
+        "teleprev.EpisodeEvent",
+        "An episode starts, stops or is discarded; outcome is marked by the operator when known.",
+        {
+            "event": {"type": "string", "enum": ["start", "stop", "discard", "outcome"]},
+            "episode": _INT,
+            "task": _STR,
+            "outcome": {"type": ["string", "null"], "enum": ["success", "failure", None]},
+        },
+        ["event", "episode"],
+    ),
+    "teleprev.ModeSwitch": _schema(
+        "teleprev.ModeSwitch",
+        "The pipeline's gate changed mode: preview (robot does not move) or execute.",
+        {"mode": {"type": "string", "enum": ["preview", "execute"]}, "reason": _STR},
+        ["mode"],
+    ),
+    "teleprev.DeviceEvent": _schema(
+        "teleprev.DeviceEvent",
+        "A device stopped sending (gap), came back (recovered), or sent something unusable (error).",
+        {
+            "device": _STR,
+            "event": {"type": "string", "enum": ["connected", "gap", "recovered", "error", "disconnected"]},
+            "message": _STR,
+            "since_ns": _INT,
+        },
+        ["device", "event"],
+    ),
+    "teleprev.OperatorEvent": _schema(
+        "teleprev.OperatorEvent",
+        "Something the operator declared, e.g. 'ready' at the end of practice.",
+        {"event": _STR, "detail": _STR},
+        ["event"],
+    ),
+    "teleprev.StepReport": _schema(
+        "teleprev.StepReport",
+        "One pipeline step: what the Corrector did, which links collided before correction, flags.",
+        {
+            "step": _INT,
+            "mode": _STR,
+            "corrector": {"type": "string", "enum": ["untouched", "ccn", "fallback", "held"]},
+            "colliding_links": {"type": "array", "items": _STR},
+            "deviation_rad": _NUM,
+            "ik_converged": {"type": "boolean"},
+            "flags": {"type": "array", "items": _STR},
+            "latency_us": _NUM,
+        },
+        ["step", "corrector"],
+    ),
+}
