@@ -1,0 +1,1 @@
+"""Retargeting: SMPL-X hand and wrist motion to robot joints."""
