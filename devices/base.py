@@ -19,7 +19,7 @@ from __future__ import annotations
 from abc import ABC, abstractmethod
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, ClassVar
+from typing import Any, Callable, ClassVar
 
 from teleprev.messages import JointSample, Sample
 from teleprev.session.clock import SessionClock
@@ -45,6 +45,8 @@ class DeviceContext:
     shared: dict[str, Any] = field(default_factory=dict)  # state plugins of one family share (e.g. the sim world)
     robot: str = "xarm6_leap_hand"  # the rig's robot URDF name
     end_effector: str = "leap_hand"
+    # Called with the task label whenever an episode starts (a simulated operator switches task on it).
+    task_listeners: list[Callable[[str], None]] = field(default_factory=list)
 
 
 @dataclass
@@ -80,6 +82,11 @@ class Device(ABC):
 
     def disconnect(self) -> None:
         """Close the device; must be safe to call twice and after a failed connect."""
+
+    def counters(self) -> dict[str, int]:
+        """Running totals of input the device skipped (e.g. {"malformed_packets": 3}); the runner reports
+        increases as error events and shows them. Must be cheap and safe to call from another thread."""
+        return {}
 
 
 class Actuator(Device):

@@ -46,9 +46,12 @@ class PoseSample:
     orientation: np.ndarray
 
     def matrix(self) -> np.ndarray:
-        from teleprev.robot.transforms import make_transform, quat_to_matrix
+        from teleprev.robot.transforms import quat_to_matrix
 
-        return make_transform(quat_to_matrix(self.orientation), self.position)
+        t = np.eye(4)
+        t[:3, :3] = quat_to_matrix(self.orientation)
+        t[:3, 3] = self.position
+        return t
 
 
 @dataclass(frozen=True, slots=True)

@@ -11,11 +11,12 @@ class PipelineConfig:
     wrist_scale: float = 1.0  # metres of robot motion per metre of wrist motion
     workspace_min: tuple[float, float, float] = (0.15, -0.45, 0.05)  # TCP box in the arm base frame, metres
     workspace_max: tuple[float, float, float] = (0.70, 0.45, 0.65)
-    tcp_link: str = "palm_lower"  # the robot link the wrist drives
+    tcp_link: str = ""  # the robot link the wrist drives; empty: palm_lower, gripper_tcp or vacuum_tcp by end effector
     stale_ms: float = 150.0  # inputs older than this hold the last valid command
     arm_speed: float = 2.14  # rad/s cap on arm command steps (planners' value; the URDF's limit is 3.14)
     hand_speed: float = 6.0  # rad/s cap on hand command steps (the URDF's limit is 8.48)
     engage_speed_frac: float = 0.5  # fraction of the caps used while ramping to the preview on engage
+    max_command_dt_ms: float = 25.0  # a gap between commands longer than this still allows only this much motion
     gripper_joint: str = "index1"  # SMPL-X joint whose flexion drives a parallel-jaw or vacuum gripper
     gripper_closed_flexion: float = 1.2  # flexion (rad) at which the gripper is fully closed
     vacuum_on_flexion: float = 0.9  # hysteresis: vacuum switches on above this flexion ...

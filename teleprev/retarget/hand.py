@@ -66,11 +66,11 @@ class LeapRetargeter:
         self._offset = np.zeros(n)
         self._src[order], self._gain[order], self._offset[order] = src, gain, offset
 
-    def raw(self, hand_pose: np.ndarray) -> np.ndarray:
-        """Mapped joint values before clamping to the limits, for one pose (15, 3) or a batch (..., 15, 3)."""
-        flexion, abduction = angles_from_hand_pose(hand_pose)
+    def from_angles(self, flexion: np.ndarray, abduction: np.ndarray) -> np.ndarray:
+        """Joint values, clamped to the limits, from finger angles (..., 15) as angles_from_hand_pose gives."""
         angles = np.concatenate([flexion, abduction], axis=-1)
-        return angles[..., self._src] * self._gain + self._offset
+        return self.hand.clip(angles[..., self._src] * self._gain + self._offset)
 
     def __call__(self, hand_pose: np.ndarray) -> np.ndarray:
-        return self.hand.clip(self.raw(hand_pose))
+        """Joint values for one pose (15, 3) or a batch (..., 15, 3)."""
+        return self.from_angles(*angles_from_hand_pose(hand_pose))

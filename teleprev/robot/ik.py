@@ -10,6 +10,9 @@ from teleprev.robot.model import RobotModel
 from teleprev.robot.transforms import rotation_error
 
 
+_EYE6 = np.eye(6)
+
+
 @dataclass(frozen=True)
 class IkResult:
     q: np.ndarray
@@ -38,16 +41,23 @@ class ArmIK:
         damping: float = 1e-6,
         max_step: float = 0.4,
     ):
-        self.chain = model.chain_to(tip)
-        self.joint_names = self.chain.joint_names
+        full = model.chain_to(tip)
+        self.joint_names = full.joint_names
         self.tip = tip
-        self.tcp = np.eye(4) if tcp is None else np.asarray(tcp, dtype=float)
+        # Fixed joints after the last actuated one are folded into a constant tool transform, so each FK
+        # evaluates only the moving part of the chain.
+        last = next(j for j in reversed(full.desc.joints) if j.type != "fixed")
+        fixed = np.eye(4)
+        for j in full.desc.joints[full.desc.joints.index(last) + 1:]:
+            fixed = fixed @ j.origin
+        self.chain = full.chain_to(last.child)
+        self.tcp = fixed @ (np.eye(4) if tcp is None else np.asarray(tcp, dtype=float))
         self.position_tolerance = position_tolerance
         self.rotation_tolerance = rotation_tolerance
         self.max_iterations = max_iterations
         self.damping = damping
         self.max_step = max_step
-        self._tip_index = self.chain.link_index[tip]
+        self._tip_index = self.chain.link_index[last.child]
         self._joint_links = np.array([self.chain.link_index[j.child] for j in self.chain.joints])
         self._axes = np.array([j.axis for j in self.chain.joints])
         self._revolute = np.array([j.type != "prismatic" for j in self.chain.joints])
@@ -56,9 +66,7 @@ class ArmIK:
         """The TCP pose (4x4) for arm joints q."""
         return self.chain.fk(q).world[self._tip_index] @ self.tcp
 
-    def _pose_and_jacobian(self, q: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        world = self.chain.fk(q).world
-        tcp = world[self._tip_index] @ self.tcp
+    def _jacobian(self, world: np.ndarray, tcp: np.ndarray) -> np.ndarray:
         frames = world[self._joint_links]
         axes = (frames[:, :3, :3] @ self._axes[:, :, None])[:, :, 0]
         lever = tcp[:3, 3] - frames[:, :3, 3]
@@ -68,7 +76,7 @@ class ArmIK:
         cross = np.stack([ay * lz - az * ly, az * lx - ax * lz, ax * ly - ay * lx])  # np.cross is slow on small arrays
         jac[:3] = np.where(self._revolute, cross, axes.T)
         jac[3:] = (axes * self._revolute[:, None]).T
-        return tcp, jac
+        return jac
 
     def solve(self, target: np.ndarray, q_start: np.ndarray) -> IkResult:
         result = self._solve(target, q_start, self.max_step)
@@ -82,17 +90,19 @@ class ArmIK:
 
     def _solve(self, target: np.ndarray, q_start: np.ndarray, max_step: float) -> IkResult:
         q = self.chain.clip(np.asarray(q_start, dtype=float))
-        eye = np.eye(6)
+        eye = _EYE6
         pos_err = rot_err = np.inf
         for it in range(self.max_iterations + 1):
-            tcp, jac = self._pose_and_jacobian(q)
+            world = self.chain.fk(q).world
+            tcp = world[self._tip_index] @ self.tcp
             e_pos = target[:3, 3] - tcp[:3, 3]
             e_rot = rotation_error(target[:3, :3], tcp[:3, :3])
-            pos_err, rot_err = float(np.linalg.norm(e_pos)), float(np.linalg.norm(e_rot))
+            pos_err, rot_err = float(e_pos @ e_pos) ** 0.5, float(e_rot @ e_rot) ** 0.5
             if pos_err <= self.position_tolerance and rot_err <= self.rotation_tolerance:
                 return IkResult(q, True, it, pos_err, rot_err)
             if it == self.max_iterations:
                 break
+            jac = self._jacobian(world, tcp)
             err = np.concatenate([e_pos, e_rot])
             # Damping grows with the error, so far targets take careful steps near singularities while
             # the last millimetres converge quickly.
@@ -107,5 +117,5 @@ class ArmIK:
             biggest = np.max(np.abs(dq))
             if biggest > max_step:
                 dq *= max_step / biggest
-            q = self.chain.clip(q + dq)
+            q = np.minimum(np.maximum(q + dq, self.chain.lower), self.chain.upper)
         return IkResult(q, False, self.max_iterations, pos_err, rot_err)

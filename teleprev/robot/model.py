@@ -46,8 +46,8 @@ class LinkPoses:
 
 @dataclass(frozen=True)
 class _Level:
-    child: slice  # link indices; also the rows of the per-link joint tables
-    parent: np.ndarray
+    child: slice | int  # link indices (an int where the level has one link); also rows of the joint tables
+    parent: np.ndarray | int
 
 
 class RobotModel:
@@ -124,8 +124,12 @@ class RobotModel:
         for d in range(1, max(depth.values()) + 1):
             kids = [self.link_index[l] for l in order if depth[l] == d]
             parents = np.array([self.link_index[joint_of_child[order[k]].parent] for k in kids])
-            # Breadth-first order keeps each level contiguous, so children are a plain slice.
-            levels.append(_Level(slice(kids[0], kids[-1] + 1), parents))
+            # Breadth-first order keeps each level contiguous, so children are a plain slice; a level with
+            # one link (a serial arm) indexes with ints, which numpy does fastest.
+            if len(kids) == 1:
+                levels.append(_Level(kids[0], int(parents[0])))
+            else:
+                levels.append(_Level(slice(kids[0], kids[-1] + 1), parents))
         self._levels = tuple(levels)
 
     # ---- names ---------------------------------------------------------------------------------
@@ -153,7 +157,7 @@ class RobotModel:
 
     # ---- limits --------------------------------------------------------------------------------
     def clip(self, q: np.ndarray) -> np.ndarray:
-        return np.clip(q, self.lower, self.upper)
+        return np.minimum(np.maximum(q, self.lower), self.upper)  # np.clip's wrapper costs more than the work
 
     def within_limits(self, q: np.ndarray, tol: float = 0.0) -> bool:
         return bool(np.all(q >= self.lower - tol) and np.all(q <= self.upper + tol))
@@ -171,7 +175,10 @@ class RobotModel:
         q = np.asarray(q, dtype=float)
         qj = q[..., self._q_source] * self._q_mult + self._q_offset
         angle = qj * self._revolute
-        coeffs = np.stack([np.sin(angle), 1.0 - np.cos(angle), qj * self._prismatic], axis=-1)
+        coeffs = np.empty(qj.shape + (3,))  # [sin a, 1 - cos a, d], filled in place (np.stack is slow here)
+        np.sin(angle, out=coeffs[..., 0])
+        np.subtract(1.0, np.cos(angle), out=coeffs[..., 1])
+        np.multiply(qj, self._prismatic, out=coeffs[..., 2])
         local = self._origin + (coeffs[..., None, :] @ self._terms).reshape(q.shape[:-1] + self._origin.shape)
         world = local  # the root's row is the identity, and each level overwrites its children's rows
         for lv in self._levels:

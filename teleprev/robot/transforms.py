@@ -47,10 +47,10 @@ def axis_angle_to_matrix(axis_angle: np.ndarray) -> np.ndarray:
 
 def matrix_to_axis_angle(r: np.ndarray) -> np.ndarray:
     """Rotation matrix (3, 3) to rotation vector (3,), stable near 0 and pi."""
-    cos = (np.trace(r) - 1.0) / 2.0
-    cos = min(1.0, max(-1.0, cos))
+    (r00, r01, r02), (r10, r11, r12), (r20, r21, r22) = r.tolist()
+    cos = min(1.0, max(-1.0, (r00 + r11 + r22 - 1.0) / 2.0))
     angle = math.acos(cos)
-    w = np.array([r[2, 1] - r[1, 2], r[0, 2] - r[2, 0], r[1, 0] - r[0, 1]])
+    w = np.array([r21 - r12, r02 - r20, r10 - r01])
     if angle < 1e-7:
         return 0.5 * w
     if math.pi - angle > 1e-4:
@@ -67,6 +67,15 @@ def matrix_to_axis_angle(r: np.ndarray) -> np.ndarray:
 def quat_to_matrix(q) -> np.ndarray:
     """Quaternion(s) (..., 4) as x y z w to rotation matrices (..., 3, 3); normalises first."""
     q = np.asarray(q, dtype=float)
+    if q.shape == (4,):  # one quaternion: plain floats are several times faster than array operations
+        x, y, z, w = q.tolist()
+        n = 1.0 / math.sqrt(x * x + y * y + z * z + w * w)
+        x, y, z, w = x * n, y * n, z * n, w * n
+        return np.array([
+            [1 - 2 * (y * y + z * z), 2 * (x * y - z * w), 2 * (x * z + y * w)],
+            [2 * (x * y + z * w), 1 - 2 * (x * x + z * z), 2 * (y * z - x * w)],
+            [2 * (x * z - y * w), 2 * (y * z + x * w), 1 - 2 * (x * x + y * y)],
+        ])
     q = q / np.linalg.norm(q, axis=-1, keepdims=True)
     x, y, z, w = q[..., 0], q[..., 1], q[..., 2], q[..., 3]
     m = np.stack(

@@ -1,0 +1,98 @@
+"""What the sim arm and hand share: joints that follow position commands and report their state."""
+
+from __future__ import annotations
+
+import threading
+from collections import deque
+
+import numpy as np
+
+from devices.base import Actuator, StreamSpec
+from devices.sim.device import SimDevice
+from devices.sim.follow import JointFollower
+from devices.sim.world import shared_world
+from teleprev.errors import DeviceError
+from teleprev.messages import JointSample
+
+
+class SimActuator(SimDevice, Actuator):
+    """Subclasses set, in __init__ after this one: joint_names, topic, home, lower, upper, max_velocity,
+    max_acceleration. A command takes effect from the first state step after it was received."""
+
+    def __init__(self, name, settings, context):
+        super().__init__(name, settings, context)
+        self.world = shared_world(context)
+        self.max_acceleration: float = np.inf
+        self._commands: deque[tuple[int, np.ndarray]] = deque(maxlen=1000)
+        self._lock = threading.Lock()
+
+    def check_home(self, home: np.ndarray) -> np.ndarray:
+        if len(home) != len(self.joint_names):
+            raise self.bad_setting("home", f"needs {len(self.joint_names)} values ({', '.join(self.joint_names)}), "
+                                           f"got {len(home)}")
+        outside = [f"{n}={v:g} not in [{lo:g}, {hi:g}]"
+                   for n, v, lo, hi in zip(self.joint_names, home, self.lower, self.upper) if not lo <= v <= hi]
+        if outside:
+            raise self.bad_setting("home", "outside the joint limits: " + "; ".join(outside))
+        return np.asarray(home, dtype=float)
+
+    def velocity_caps(self, urdf_velocity: np.ndarray, setting: float) -> np.ndarray:
+        """The URDF's limits, or the `max_velocity` setting where it is given (never above the URDF)."""
+        if setting <= 0:
+            return urdf_velocity
+        if np.any(setting > urdf_velocity):
+            raise self.bad_setting("max_velocity", f"{setting:g} is above the URDF's limit ({urdf_velocity.min():g})")
+        return np.full_like(urdf_velocity, setting)
+
+    def streams(self) -> list[StreamSpec]:
+        return [StreamSpec(self.topic, "joints", self.settings.rate_hz)]
+
+    def _open(self) -> None:
+        self.follower = JointFollower(self.home, self.lower, self.upper, self.max_velocity, self.max_acceleration)
+        self._index = {n: i for i, n in enumerate(self.joint_names)}
+        self._stepped_ns: int | None = None
+        with self._lock:
+            self._commands.clear()
+        self.world.set_joints(self.joint_names, self.state_positions())
+
+    def send(self, command: JointSample) -> None:
+        where = f"device {self.name!r}"
+        unknown = [n for n in command.names if n not in self.joint_names]
+        if unknown:
+            raise DeviceError(f"command names unknown joints {unknown} (expected {', '.join(self.joint_names)})", where)
+        positions = np.asarray(command.positions, dtype=float)
+        if positions.shape != (len(command.names),) or not np.all(np.isfinite(positions)):
+            raise DeviceError("command positions must be finite, one per name", where)
+        if not self._connected:
+            raise DeviceError("not connected", where)
+        with self._lock:
+            target = (self._commands[-1][1] if self._commands else self.follower.target).copy()
+            target[[self._index[n] for n in command.names]] = positions
+            self._commands.append((self.context.clock.now_ns(), target))
+
+    def _advance(self, true_ns: int) -> None:
+        """Integrate up to true_ns in steps of the state period, each with the latest command received by then."""
+        if self._stepped_ns is None:
+            self._stepped_ns = true_ns
+            return
+        dt = self.period_ns / 1e9
+        steps = max(0, int(round((true_ns - self._stepped_ns) / self.period_ns)))
+        for k in range(1, steps + 1):
+            t = self._stepped_ns + k * self.period_ns
+            with self._lock:
+                while self._commands and self._commands[0][0] <= t:
+                    self.follower.set_target(self._commands.popleft()[1])
+            self.follower.step(dt)
+        self._stepped_ns = true_ns
+
+    def state_positions(self) -> np.ndarray:
+        return self.follower.q.copy()
+
+    def state_velocities(self) -> np.ndarray:
+        return self.follower.v.copy()
+
+    def _acquire(self, true_ns: int):
+        self._advance(true_ns)
+        q = self.state_positions()
+        self.world.set_joints(self.joint_names, q)
+        return [(self.topic, JointSample(0, self.joint_names, q, self.state_velocities()))]

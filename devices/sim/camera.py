@@ -1,0 +1,79 @@
+"""sim.camera: a synthetic view of the scene with the robot in it, JPEG-encoded like a webcam's."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Literal
+
+import cv2
+
+from devices.base import StreamSpec
+from devices.sim.device import SimDevice, TimingSettings
+from devices.sim.render import VIEWS, SceneRenderer
+from devices.sim.world import shared_world
+from teleprev.errors import DeviceError
+from teleprev.messages import ImageSample
+from teleprev.session.topics import device_topic
+
+
+@dataclass
+class CameraSettings(TimingSettings):
+    rate_hz: float = 30.0
+    latency_ms: float = 20.0  # exposure read-out + USB; more than a frame's render time
+    jitter_ms: float = 1.0
+    clock_offset_s: float = -42.0
+    clock_drift_ppm: float = -18.0
+    width: int = 640
+    height: int = 480
+    view: Literal["front", "side", "top"] = "front"
+    fov_deg: float = 60.0  # horizontal field of view
+    jpeg_quality: int = 85
+    noise: float = 2.0  # pixel noise (standard deviation, 0..255 scale), so that frames differ
+    label: bool = True  # print the device name and session time in a corner
+
+    def __post_init__(self):
+        super().__post_init__()
+        if not (16 <= self.width <= 4096 and 16 <= self.height <= 4096):
+            raise ValueError(f"width and height must be 16..4096, got {self.width}x{self.height}")
+        if not 10 <= self.fov_deg <= 150:
+            raise ValueError(f"fov_deg must be 10..150, got {self.fov_deg}")
+        if not 1 <= self.jpeg_quality <= 100:
+            raise ValueError(f"jpeg_quality must be 1..100, got {self.jpeg_quality}")
+        if self.noise < 0:
+            raise ValueError(f"noise must be >= 0, got {self.noise}")
+        if self.view not in VIEWS:
+            raise ValueError(f"view must be one of {', '.join(VIEWS)}, got {self.view!r}")
+
+
+class SimCamera(SimDevice):
+    """ImageSample (JPEG) on /camera/<name>/image, frame_id = the device name."""
+
+    kind = "camera"
+    Settings = CameraSettings
+    acquire_on_time = True  # the picture shows the world at the moment of exposure
+
+    def __init__(self, name, settings, context):
+        super().__init__(name, settings, context)
+        self.world = shared_world(context)
+        self.topic = device_topic("camera", name, "image")
+
+    def streams(self) -> list[StreamSpec]:
+        return [StreamSpec(self.topic, "image", self.settings.rate_hz)]
+
+    def _open(self) -> None:
+        s = self.settings
+        self.renderer = SceneRenderer(self.world.model, s.width, s.height, s.view, s.fov_deg, s.noise, s.seed)
+
+    def _acquire(self, true_ns: int):
+        q = self.world.joints()
+        img = self.renderer.render(q, self.world.scene(true_ns, q), self._label(true_ns))
+        ok, buf = cv2.imencode(".jpg", img, [cv2.IMWRITE_JPEG_QUALITY, self.settings.jpeg_quality])
+        if not ok:
+            raise DeviceError("JPEG encoding failed", f"device {self.name!r}")
+        return [(self.topic, ImageSample(0, self.name, buf.tobytes(), "jpeg"))]
+
+    def _label(self, true_ns: int) -> str:
+        if not self.settings.label:
+            return ""
+        seconds = (true_ns - self.context.clock.start_ns) / 1e9
+        return f"{self.name}  t={seconds:7.2f}s"

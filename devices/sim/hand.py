@@ -1,0 +1,73 @@
+"""sim.hand: the rig's end effector, kinematic: a LEAP Hand ("0".."15"), a parallel-jaw gripper
+("gripper", metres of opening) or a vacuum tool ("vacuum", 0 off / 1 on), following commands within
+its speed limits and reporting its state."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from devices.sim.actuator import SimActuator
+from devices.sim.device import TimingSettings
+from teleprev.rig import END_EFFECTOR_JOINTS
+from teleprev.session.topics import device_topic
+
+
+@dataclass
+class HandSettings(TimingSettings):
+    rate_hz: float = 90.0  # the LEAP Hand's position read-out tops out around 90 Hz
+    latency_ms: float = 1.5
+    jitter_ms: float = 0.3
+    clock_offset_s: float = 77.7
+    clock_drift_ppm: float = -6.0
+    home: tuple[float, ...] = ()  # starting positions; empty: open (LEAP all zeros, gripper 0.085 m, vacuum off)
+    max_velocity: float = 0.0  # rad/s (m/s for the gripper) for every joint; 0: the URDF's velocity limits
+    switch_ms: float = 60.0  # vacuum: time for the suction to build up or release
+
+    def __post_init__(self):
+        super().__post_init__()
+        if self.max_velocity < 0 or self.switch_ms <= 0:
+            raise ValueError(f"max_velocity must be >= 0 and switch_ms > 0, got {self.max_velocity} and {self.switch_ms}")
+
+
+class SimHand(SimActuator):
+    """JointSample of the end effector's joints on /hand/<name>/state (context.end_effector decides which)."""
+
+    kind = "hand"
+    Settings = HandSettings
+
+    def __init__(self, name, settings, context):
+        super().__init__(name, settings, context)
+        model = self.world.model
+        ee = context.end_effector
+        if ee not in END_EFFECTOR_JOINTS:
+            raise self.bad_setting(None, f"unknown end effector {ee!r} (expected {', '.join(END_EFFECTOR_JOINTS)})")
+        self.end_effector = ee
+        self.joint_names = END_EFFECTOR_JOINTS[ee]
+        if ee == "vacuum":
+            # A switch, not a URDF joint: a 0..1 level ramps over 2 x switch_ms and the state flips half way.
+            self.lower, self.upper = np.zeros(1), np.ones(1)
+            self.max_velocity = np.array([1000.0 / (2 * settings.switch_ms)])
+            default_home = np.zeros(1)
+        else:
+            missing = [n for n in self.joint_names if n not in model.joint_index]
+            if missing:
+                raise self.bad_setting(None, f"robot {model.name!r} has no joints {missing} for end effector "
+                                             f"{ee!r}; check [rig] robot and end_effector")
+            idx = model.indices(self.joint_names)
+            self.lower, self.upper = model.lower[idx], model.upper[idx]
+            self.max_velocity = self.velocity_caps(model.velocity_limit[idx], settings.max_velocity)
+            default_home = np.clip(np.zeros(len(idx)), self.lower, self.upper) if ee == "leap_hand" else self.upper.copy()
+        self.home = self.check_home(np.array(settings.home, dtype=float) if settings.home else default_home)
+        self.topic = device_topic("hand", name, "state")
+
+    def state_positions(self) -> np.ndarray:
+        if self.end_effector == "vacuum":
+            return (self.follower.q >= 0.5).astype(float)
+        return self.follower.q.copy()
+
+    def state_velocities(self) -> np.ndarray:
+        if self.end_effector == "vacuum":
+            return np.zeros(1)
+        return self.follower.v.copy()

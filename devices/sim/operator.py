@@ -1,0 +1,351 @@
+"""The simulated operator: a deterministic (seeded) person performing the paper's five tasks.
+
+For a time t (seconds since the operator started) it gives the right hand's finger angles (flexion and
+abduction of the 15 SMPL-X hand joints; `hand_pose` turns them into the glove's axis-angle pose) and the
+right wrist pose in the suit's world frame: metres, z up, the operator standing at the origin facing +x,
+the resting wrist 0.30 m in front, 0.15 m to the right and 1.00 m up, palm facing left, thumb up, fingers
+forward and tilted 20 degrees down. Its hand frame is SMPL-X's (fingers -x, palm -y, thumb +z).
+
+Episodes repeat one after another, each one task's script (devices/sim/tasks.py), ending at rest and a
+short pause. Every transition is a minimum-jerk move (zero velocity and acceleration at both ends); on
+top a person's physiological tremor (8-12 Hz, a fraction of a millimetre) and slow sway. Repetitions
+differ in layout, speed (0.85-1.2x), grasp tightness and angles, drawn from (seed, episode number).
+
+Phase scripts (grasp shapes in devices/sim/grasps.py; c = tightness):
+    pick_place    reach+pre-shape, approach, grasp power(c), lift (squeezing: c+0.25..0.45), move,
+                  place, release, retreat, return, pause
+    hang          reach palm-down+pre-shape, approach, pinch(c), lift (firmer pinch c+0.3), move to the
+                  peg, hang (roll), lower, release, retreat, return, pause
+    pour          pick as above, move beside the bowl, pour (pronate 85-115 deg, grip tightens to c+0.3..0.45),
+                  shake twice, upright (grip eases),
+                  move back, place, release, retreat, return, pause
+    box_rotation  reach palm-down, approach, claw grip, rotate (yaw 70-100 deg), release, lift, unwind,
+                  reposition with a flat hand, push (fingers squeezed together), retreat, return, pause
+    cup_stack     two picks (power grasps) each placed onto the third cup, then return, pause
+Power grasps tighter than c ~ 0.65, pinches tighter than ~0.75 and flat hands squeezed past ~0.55
+retarget into LEAP self-collision (fingertips in the palm, thumb across the fingers, index over middle);
+every task squeezes that far while carrying or pushing (lift/move/place, pour/shake, hang, push) and
+is collision-free while reaching, pre-shaping, returning and pausing.
+
+The task follows `set_task` (the session calls it at every episode start through
+DeviceContext.task_listeners): the current phase finishes, the hand returns to rest, and the next
+episode is the new task. `mode="fixed"` ignores set_task and
+`mode="cycle"` goes through the five tasks in turn.
+"""
+
+from __future__ import annotations
+
+import bisect
+import threading
+from dataclasses import dataclass
+from typing import Literal
+
+import numpy as np
+
+from devices.sim import grasps
+from devices.sim.tasks import SCRIPTS, TASKS, SceneObject, Script
+from teleprev.human.smplx import hand_pose_from_angles
+from teleprev.robot.transforms import matrix_to_quat, rpy_to_matrix
+
+REST_WRIST = np.array([0.30, -0.15, 1.00])
+# Palm left (+y), thumb up (+z), fingers forward (+x), as columns of the SMPL-X hand frame's axes
+# (fingers -x, palm -y, thumb +z), then tilted 20 degrees down about the world y axis.
+REST_ROTATION = rpy_to_matrix(0.0, np.deg2rad(20.0), 0.0) @ np.diag([-1.0, -1.0, 1.0])
+_KEEP_EPISODES = 6
+
+
+def min_jerk(s: np.ndarray | float) -> np.ndarray | float:
+    """0 -> 1 with zero velocity and acceleration at both ends."""
+    return s * s * s * (10.0 + s * (-15.0 + 6.0 * s))
+
+
+@dataclass(frozen=True)
+class OperatorState:
+    t: float
+    episode: int
+    task: str
+    phase: str
+    wrist_position: np.ndarray  # (3,) suit frame, metres
+    wrist_rotation: np.ndarray  # (3, 3)
+    flexion: np.ndarray  # (15,)
+    abduction: np.ndarray  # (15,)
+
+    @property
+    def wrist_quaternion(self) -> np.ndarray:
+        return matrix_to_quat(self.wrist_rotation)
+
+    @property
+    def hand_pose(self) -> np.ndarray:
+        return hand_pose_from_angles(self.flexion, self.abduction)
+
+
+class _Track:
+    """Knots (time, value) joined by minimum-jerk segments; equal neighbouring values hold."""
+
+    def __init__(self, t0: float, value: np.ndarray):
+        self.times = [t0]
+        self.values = [np.array(value, dtype=float)]
+
+    def move(self, start: float, end: float, target: np.ndarray) -> None:
+        start = max(start, self.times[-1])
+        end = max(end, start)
+        if start > self.times[-1]:
+            self.times.append(start)
+            self.values.append(self.values[-1])
+        self.times.append(end)
+        self.values.append(np.array(target, dtype=float))
+
+    def hold_until(self, t: float) -> None:
+        if t > self.times[-1]:
+            self.times.append(t)
+            self.values.append(self.values[-1])
+
+    def __call__(self, t: float) -> np.ndarray:
+        times = self.times
+        if t <= times[0]:
+            return self.values[0]
+        if t >= times[-1]:
+            return self.values[-1]
+        i = bisect.bisect_right(times, t) - 1
+        t0, t1 = times[i], times[i + 1]
+        a, b = self.values[i], self.values[i + 1]
+        if t1 <= t0:
+            return b
+        return a + (b - a) * min_jerk((t - t0) / (t1 - t0))
+
+    def truncate(self, t: float) -> None:
+        """Drop everything after t, which must be a knot time (the track is at rest there)."""
+        keep = bisect.bisect_right(self.times, t)
+        value = self(t)
+        del self.times[keep:], self.values[keep:]
+        if self.times[-1] < t:
+            self.times.append(t)
+            self.values.append(value)
+
+
+@dataclass
+class _Episode:
+    index: int
+    task: str
+    script: Script
+    start: float
+    end: float
+    phase_starts: list[float]
+    phase_names: list[str]
+    wrist: _Track  # (6,): position (task frame), roll pitch yaw
+    hand: _Track  # (30,)
+    cut: bool = False  # ended early by set_task
+
+
+class _Tremor:
+    """A person's involuntary motion: sums of sines (physiological tremor and slow sway), smooth."""
+
+    def __init__(self, rng: np.random.Generator, dims: int, tremor: float, sway: float):
+        freq = np.concatenate([rng.uniform(8.0, 12.0, (dims, 2)), rng.uniform(0.15, 0.6, (dims, 2))], axis=1)
+        self.omega = 2 * np.pi * freq
+        self.amp = np.concatenate([rng.uniform(0.5, 1.0, (dims, 2)) * tremor / 2, rng.uniform(0.5, 1.0, (dims, 2)) * sway / 2], axis=1)
+        self.phase = rng.uniform(0.0, 2 * np.pi, (dims, 4))
+
+    def __call__(self, t: float) -> np.ndarray:
+        return (self.amp * np.sin(self.omega * t + self.phase)).sum(axis=1)
+
+
+class SimOperator:
+    """A seeded simulated person. Times are seconds since the operator started (see `time_s`)."""
+
+    def __init__(self, seed: int = 0, task: str = "pick_place", mode: Literal["follow", "fixed", "cycle"] = "follow",
+                 origin_ns: int = 0, clock=None):
+        if task not in SCRIPTS:
+            raise ValueError(f"unknown task {task!r} (tasks: {', '.join(TASKS)})")
+        if mode not in ("follow", "fixed", "cycle"):
+            raise ValueError(f"unknown mode {mode!r} (follow, fixed or cycle)")
+        self.seed = seed
+        self.mode = mode
+        self.origin_ns = origin_ns
+        self._clock = clock
+        self._task = task
+        self._lock = threading.RLock()
+        rng = np.random.default_rng([seed, 0x5EED])
+        self._wrist_tremor = _Tremor(rng, 3, tremor=0.0006, sway=0.006)
+        self._rot_tremor = _Tremor(rng, 3, tremor=0.004, sway=0.02)
+        self._finger_tremor = _Tremor(rng, 30, tremor=0.008, sway=0.03)
+        self._episodes: list[_Episode] = []
+        self._next_index = 0
+        self._append_episode(0.0, np.concatenate([np.zeros(3), np.zeros(3)]), grasps.rest(0.2))
+
+    # ---- time ----------------------------------------------------------------------------------
+    def time_s(self, session_ns: int) -> float:
+        return (session_ns - self.origin_ns) / 1e9
+
+    def _now_s(self) -> float:
+        return 0.0 if self._clock is None else self.time_s(self._clock.now_ns())
+
+    # ---- the timeline --------------------------------------------------------------------------
+    def _next_task(self) -> str:
+        if self.mode == "cycle":
+            return TASKS[self._next_index % len(TASKS)]
+        return self._task
+
+    def _append_episode(self, start: float, wrist0: np.ndarray, hand0: np.ndarray) -> None:
+        index = self._next_index
+        task = self._next_task()
+        self._next_index += 1
+        rng = np.random.default_rng([self.seed, index])
+        rest = rng.normal(0.0, 0.006, 3).clip(-0.015, 0.015)
+        script = SCRIPTS[task](rng, rest)
+        wrist, hand = _Track(start, wrist0), _Track(start, hand0)
+        t = start
+        phase_starts = []
+        for ph in script.phases:
+            phase_starts.append(t)
+            if ph.position is not None or ph.rpy is not None:
+                current = wrist.values[-1]
+                target = np.concatenate([
+                    current[:3] if ph.position is None else ph.position,
+                    current[3:] if ph.rpy is None else ph.rpy,
+                ])
+                wrist.move(t + ph.wrist_window[0] * ph.duration, t + ph.wrist_window[1] * ph.duration, target)
+            if ph.hand is not None:
+                hand.move(t + ph.hand_window[0] * ph.duration, t + ph.hand_window[1] * ph.duration, ph.hand)
+            t += ph.duration
+            wrist.hold_until(t)
+            hand.hold_until(t)
+        self._episodes.append(_Episode(index, task, script, start, t, phase_starts, [p.name for p in script.phases], wrist, hand))
+        del self._episodes[:-_KEEP_EPISODES]
+
+    def _episode(self, t: float) -> _Episode:
+        with self._lock:
+            while t >= self._episodes[-1].end:
+                last = self._episodes[-1]
+                self._append_episode(last.end, last.wrist.values[-1], last.hand.values[-1])
+            for ep in reversed(self._episodes):
+                if t >= ep.start:
+                    return ep
+            return self._episodes[0]  # older than what is kept: the earliest state we have
+
+    def set_task(self, name: str) -> bool:
+        """Switch to another task: the current phase ends, the hand returns to rest, then the new task's
+        episodes follow. Returns False (and changes nothing) when the task is fixed or cycling."""
+        if name not in SCRIPTS:
+            raise ValueError(f"unknown task {name!r} (tasks: {', '.join(TASKS)})")
+        if self.mode != "follow":
+            return False
+        with self._lock:
+            if name == self._task:
+                return True
+            self._task = name
+            now = self._now_s()
+            ep = self._episode(now)
+            del self._episodes[self._episodes.index(ep) + 1:]  # what follows is made again, as the new task
+            self._next_index = ep.index + 1
+            if ep.task == name or ep.cut:
+                return True
+            # Cut at the end of the current phase, where both hand and wrist are at rest.
+            cut = next((s for s in ep.phase_starts if s >= now), ep.end)
+            pause_start = ep.phase_starts[-1]  # already resting in the pause: end the episode here
+            if now >= pause_start:
+                cut = max(now, pause_start)
+            ep.wrist.truncate(cut)
+            ep.hand.truncate(cut)
+            keep = sum(1 for s in ep.phase_starts if s < cut)
+            ep.phase_starts, ep.phase_names = ep.phase_starts[:keep], ep.phase_names[:keep]
+            if cut < pause_start:
+                ep.phase_starts.append(cut)
+                ep.phase_names.append("return")
+                ep.wrist.move(cut, cut + 1.1, np.zeros(6))
+                ep.hand.move(cut, cut + 0.9, grasps.rest(0.2))
+                cut += 1.6
+                ep.wrist.hold_until(cut)
+                ep.hand.hold_until(cut)
+            ep.end = cut
+            ep.cut = True
+            return True
+
+    def on_episode_task(self, name: str) -> None:
+        """The session's episode-start hook (DeviceContext.task_listeners): follow the episode's task
+        label when it is one of the five; any other label leaves the operator at what it is doing."""
+        if name in SCRIPTS:
+            self.set_task(name)
+
+    @property
+    def task(self) -> str:
+        """The task being performed now."""
+        return self._episode(self._now_s()).task
+
+    # ---- what the person does at time t --------------------------------------------------------
+    def state(self, t: float) -> OperatorState:
+        ep = self._episode(t)
+        with self._lock:
+            w = ep.wrist(t)
+            h = ep.hand(t)
+            phase_i = bisect.bisect_right(ep.phase_starts, t) - 1
+            phase = ep.phase_names[max(phase_i, 0)]
+        position = REST_WRIST + w[:3] + self._wrist_tremor(t)
+        rpy = w[3:] + self._rot_tremor(t)
+        rotation = rpy_to_matrix(*rpy) @ REST_ROTATION
+        angles = h + self._finger_tremor(t)
+        return OperatorState(t, ep.index, ep.task, phase, position, rotation, angles[:15], angles[15:])
+
+    def hand_angles(self, t: float) -> tuple[np.ndarray, np.ndarray]:
+        """Flexion and abduction (15,) each; the glove's fast path (no wrist)."""
+        ep = self._episode(t)
+        with self._lock:
+            h = ep.hand(t)
+        angles = h + self._finger_tremor(t)
+        return angles[:15], angles[15:]
+
+    def hand_pose(self, t: float) -> np.ndarray:
+        """The SMPL-X right hand pose (15, 3), axis-angle."""
+        return self.state(t).hand_pose
+
+    def wrist(self, t: float) -> tuple[np.ndarray, np.ndarray]:
+        """Right wrist position (3,) and orientation quaternion (x y z w) in the suit frame."""
+        s = self.state(t)
+        return s.wrist_position, s.wrist_quaternion
+
+    def objects(self, t: float) -> tuple[SceneObject, ...]:
+        """The scene of the episode at t, in the task frame (metres from the resting wrist)."""
+        return self._episode(t).script.objects
+
+    def episode(self, t: float) -> tuple[int, str]:
+        ep = self._episode(t)
+        return ep.index, ep.task
+
+
+def task_mode(task_setting: str) -> tuple[str, str]:
+    """(initial task, mode) from a device's `task` setting: "" follows set_task, "cycle" goes through
+    all five, a task name fixes it."""
+    if task_setting == "":
+        return "pick_place", "follow"
+    if task_setting == "cycle":
+        return TASKS[0], "cycle"
+    if task_setting in SCRIPTS:
+        return task_setting, "fixed"
+    raise ValueError(f"task must be '', 'cycle' or one of {', '.join(TASKS)}; got {task_setting!r}")
+
+
+def shared_operator(context, device: str, seed: int, task_setting: str) -> SimOperator:
+    """The rig's one operator, so that glove and suit stream the same person. Created by the first sim
+    device that asks; a second device asking for another seed or task is a configuration error."""
+    from devices.sim.shared import get_or_create
+    from teleprev.errors import ConfigError
+
+    task, mode = task_mode(task_setting)
+
+    def create():
+        op = SimOperator(seed, task, mode, origin_ns=context.clock.start_ns, clock=context.clock)
+        op.created_by = (device, seed, task_setting)
+        listeners = getattr(context, "task_listeners", None)
+        if listeners is not None:
+            listeners.append(op.on_episode_task)  # the session sets the task at every episode start
+        return op
+
+    op = get_or_create(context.shared, "sim.operator", create)
+    first, first_seed, first_task = op.created_by
+    if (first_seed, first_task) != (seed, task_setting):
+        raise ConfigError(
+            f"the sim operator is shared: seed={seed}, task={task_setting!r} here but seed={first_seed}, "
+            f"task={first_task!r} in [devices.{first}]; give both devices the same seed and task",
+            f"[devices.{device}]",
+        )
+    return op

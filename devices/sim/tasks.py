@@ -1,0 +1,210 @@
+"""The five tasks of the paper as scripts of phases, drawn afresh for every repetition.
+
+Coordinates are the task frame: metres from the operator's resting right wrist, x forward, y left,
+z up; the table top is TABLE_Z below the resting wrist. Wrist orientation is roll/pitch/yaw about the
+world x, y, z axes applied to the resting orientation (palm facing left, thumb up, fingers forward and
+20 degrees down). A phase moves the wrist and/or the hand to a target by its end (min-jerk, inside a
+window of the phase); None holds. Each repetition draws its own object layout, speed, grasp tightness
+and angles from the episode's random generator; see devices/sim/operator.py for the phase lists.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from devices.sim import grasps
+
+TABLE_Z = -0.30
+TASKS = ("pick_place", "hang", "pour", "box_rotation", "cup_stack")
+
+# Colours are BGR (OpenCV).
+CUP_COLOURS = ((40, 60, 200), (200, 120, 40), (60, 170, 60))
+
+
+@dataclass(frozen=True)
+class SceneObject:
+    """A rigid object in the task frame: a box (size x y z) or a cylinder (radius, height), centre and yaw."""
+
+    name: str
+    kind: str
+    size: tuple[float, ...]
+    centre: tuple[float, float, float]
+    yaw: float = 0.0
+    colour: tuple[int, int, int] = (160, 160, 160)
+    graspable: bool = True
+
+
+@dataclass(frozen=True)
+class Phase:
+    name: str
+    duration: float
+    position: np.ndarray | None = None  # wrist position target (task frame)
+    rpy: np.ndarray | None = None  # wrist orientation target
+    hand: np.ndarray | None = None  # (30,) finger angles target, see grasps.py
+    wrist_window: tuple[float, float] = (0.0, 1.0)  # part of the phase in which the wrist moves
+    hand_window: tuple[float, float] = (0.0, 1.0)
+
+
+@dataclass(frozen=True)
+class Script:
+    task: str
+    phases: tuple[Phase, ...]
+    objects: tuple[SceneObject, ...] = field(default_factory=tuple)
+
+
+def _v(*xs: float) -> np.ndarray:
+    return np.array(xs, dtype=float)
+
+
+class _Builder:
+    """Collects phases, scaling every duration by the repetition's speed and a little per-phase jitter."""
+
+    def __init__(self, rng: np.random.Generator):
+        self.rng = rng
+        self.speed = rng.uniform(0.85, 1.2)
+        self.phases: list[Phase] = []
+
+    def add(self, name, duration, position=None, rpy=None, hand=None, wrist_window=(0.0, 1.0), hand_window=(0.0, 1.0)):
+        d = duration * self.speed * self.rng.uniform(0.9, 1.1)
+        self.phases.append(Phase(name, d, position, rpy, hand, wrist_window, hand_window))
+
+    def jitter(self, scale: float = 0.02) -> np.ndarray:
+        return self.rng.normal(0.0, scale / 2, 3).clip(-scale, scale) * _v(1, 1, 0)
+
+
+def _rest(b: _Builder, rest_position: np.ndarray) -> None:
+    b.add("return", 1.1, rest_position, _v(0, 0, 0), grasps.rest(b.rng.uniform(0, 0.6)), hand_window=(0.0, 0.8))
+    b.add("pause", b.rng.uniform(0.8, 2.2))
+
+
+def _cup(name: str, xy: np.ndarray, colour, height: float = 0.10) -> SceneObject:
+    return SceneObject(name, "cylinder", (0.04, height), (float(xy[0]), float(xy[1]), TABLE_Z + height / 2), 0.0, colour)
+
+
+def _side_grasp_point(centre: np.ndarray, z: float) -> np.ndarray:
+    # The palm faces left (+y), so the hand closes on a cup from its right and a little behind.
+    return _v(centre[0] - 0.02, centre[1] - 0.065, z)
+
+
+def _pick(b: _Builder, cup: np.ndarray, grasp_z: float, yaw: float, squeeze: float,
+          tightness: tuple[float, float] = (0.35, 0.95)) -> float:
+    """Reach, pre-shape, grasp and lift a cup; returns the grasp tightness."""
+    c = b.rng.uniform(*tightness)
+    above = _side_grasp_point(cup, grasp_z + b.rng.uniform(0.07, 0.10)) + _v(-0.03, -0.02, 0)
+    b.add("reach", 1.2, above, _v(0, 0, yaw), grasps.open_hand(b.rng.uniform(0, 1)), hand_window=(0.3, 1.0))
+    b.add("approach", 0.6, _side_grasp_point(cup, grasp_z))
+    b.add("grasp", 0.5, hand=grasps.power(c))
+    b.add("lift", 0.7, _side_grasp_point(cup, grasp_z + b.rng.uniform(0.10, 0.14)), hand=grasps.power(min(1.0, c + squeeze)))
+    return c
+
+
+def _place(b: _Builder, target: np.ndarray, place_z: float, yaw: float) -> None:
+    b.add("move", 1.2, _side_grasp_point(target, place_z + b.rng.uniform(0.08, 0.12)), _v(0, 0, yaw))
+    b.add("place", 0.7, _side_grasp_point(target, place_z))
+    b.add("release", 0.5, hand=grasps.open_hand(b.rng.uniform(0, 0.5)))
+    b.add("retreat", 0.5, _side_grasp_point(target, place_z) + _v(-0.05, -0.03, 0.08))
+
+
+def pick_place(rng: np.random.Generator, rest: np.ndarray) -> Script:
+    b = _Builder(rng)
+    cup = _v(0.10, -0.10, 0) + b.jitter()
+    target = _v(0.12, 0.14, 0) + b.jitter()
+    grasp_z = TABLE_Z + 0.05
+    _pick(b, cup, grasp_z, rng.uniform(-0.25, 0.0), squeeze=rng.uniform(0.25, 0.45))
+    _place(b, target, grasp_z, rng.uniform(0.0, 0.3))
+    _rest(b, rest)
+    return Script("pick_place", tuple(b.phases), (_cup("cup", cup, CUP_COLOURS[0]),))
+
+
+def hang(rng: np.random.Generator, rest: np.ndarray) -> Script:
+    b = _Builder(rng)
+    spoon = _v(0.10, -0.12, 0) + b.jitter()
+    peg = _v(0.17, 0.12, 0) + b.jitter(0.01)
+    peg_z = TABLE_Z + 0.22
+    down = _v(-1.2, 0.35, 0)  # palm turned down over the spoon, fingers pointing down a little more
+    c = rng.uniform(0.5, 0.95)
+    b.add("reach", 1.1, spoon + _v(-0.04, -0.01, TABLE_Z + 0.11), down, grasps.open_hand(0.2), hand_window=(0.3, 1.0))
+    b.add("approach", 0.6, spoon + _v(-0.04, -0.01, TABLE_Z + 0.05))
+    b.add("pinch", 0.5, hand=grasps.pinch(c))
+    # Holding a spoon up by its tip takes a firmer pinch than picking it up.
+    b.add("lift", 0.8, spoon + _v(-0.04, -0.01, peg_z + 0.05), _v(-0.5, 0.1, 0), grasps.pinch(min(1.0, c + 0.3)))
+    b.add("move", 1.2, peg + _v(-0.12, -0.01, peg_z + 0.05))
+    b.add("hang", 0.8, peg + _v(-0.04, -0.01, peg_z + 0.04), _v(-0.3, 0.1, 0.15))
+    b.add("lower", 0.5, peg + _v(-0.04, -0.01, peg_z + 0.01))
+    b.add("release", 0.5, hand=grasps.open_hand(0.2))
+    b.add("retreat", 0.6, peg + _v(-0.13, -0.03, peg_z + 0.03), _v(0, 0, 0))
+    _rest(b, rest)
+    objects = (
+        SceneObject("spoon", "box", (0.16, 0.025, 0.012), (spoon[0], spoon[1], TABLE_Z + 0.006), 0.15, (190, 190, 200)),
+        SceneObject("peg_stand", "box", (0.03, 0.03, 0.26), (peg[0] + 0.03, peg[1], TABLE_Z + 0.13), 0.0, (40, 90, 140), False),
+        SceneObject("peg", "box", (0.07, 0.012, 0.012), (peg[0] - 0.005, peg[1], peg_z), 0.0, (40, 90, 140), False),
+    )
+    return Script("hang", tuple(b.phases), objects)
+
+
+def pour(rng: np.random.Generator, rest: np.ndarray) -> Script:
+    b = _Builder(rng)
+    cup = _v(0.08, -0.12, 0) + b.jitter()
+    bowl = _v(0.15, 0.10, 0) + b.jitter()
+    grasp_z = TABLE_Z + 0.05
+    pour_z = TABLE_Z + rng.uniform(0.20, 0.25)
+    tilt = -rng.uniform(1.5, 2.0)  # pronation tips the cup's mouth to the left, over the bowl
+    c = _pick(b, cup, grasp_z, rng.uniform(-0.2, 0.0), squeeze=0.0, tightness=(0.3, 0.6))
+    b.add("move", 1.2, bowl + _v(-0.03, -0.10, pour_z))
+    # The grip tightens while the cup is upside down and shaken, and eases once it is upright again.
+    b.add("pour", 1.2, rpy=_v(tilt, 0, 0), hand=grasps.power(min(1.0, c + rng.uniform(0.3, 0.45))))
+    b.add("shake", 0.35, rpy=_v(tilt - 0.15, 0, 0))
+    b.add("shake", 0.35, rpy=_v(tilt + 0.05, 0, 0))
+    b.add("upright", 1.0, rpy=_v(0, 0, 0), hand=grasps.power(c))
+    b.add("move", 1.1, _side_grasp_point(cup, grasp_z + 0.10))
+    b.add("place", 0.7, _side_grasp_point(cup, grasp_z))
+    b.add("release", 0.5, hand=grasps.open_hand(0.3))
+    b.add("retreat", 0.5, _side_grasp_point(cup, grasp_z) + _v(-0.05, -0.03, 0.08))
+    _rest(b, rest)
+    objects = (
+        _cup("cup", cup, CUP_COLOURS[1]),
+        SceneObject("bowl", "cylinder", (0.075, 0.06), (bowl[0], bowl[1], TABLE_Z + 0.03), 0.0, (70, 140, 200), False),
+    )
+    return Script("pour", tuple(b.phases), objects)
+
+
+def box_rotation(rng: np.random.Generator, rest: np.ndarray) -> Script:
+    b = _Builder(rng)
+    box = _v(0.15, 0.0, 0) + b.jitter()
+    size = (0.10, 0.14, 0.08)
+    top = TABLE_Z + size[2]
+    down = _v(-1.4, 0.3, 0)  # palm down on the lid
+    turn = rng.uniform(1.2, 1.7)
+    b.add("reach", 1.1, box + _v(-0.03, 0, top + 0.10), down, grasps.open_hand(0.8), hand_window=(0.3, 1.0))
+    b.add("approach", 0.6, box + _v(-0.03, 0, top + 0.035))
+    b.add("grip", 0.5, hand=grasps.claw(rng.uniform(0.2, 1.0)))
+    b.add("rotate", 1.4, rpy=down + _v(0, 0, turn))
+    b.add("release", 0.4, hand=grasps.open_hand(0.3))
+    b.add("lift", 0.6, box + _v(-0.03, 0, top + 0.08))
+    b.add("unwind", 1.1, box + _v(-0.10, -0.02, top + 0.06), _v(-0.6, 0.1, 0), grasps.rest(0.2))
+    # Then square the box up with a flat hand against its near face, fingers pressed together.
+    press = rng.uniform(0.2, 0.7)
+    b.add("reposition", 1.2, box + _v(-0.13, -0.02, TABLE_Z + 0.05), _v(0, 0, -1.2), grasps.flat(press))
+    # Pushing squeezes the fingers together.
+    b.add("push", 0.9, box + _v(-0.09, -0.02, TABLE_Z + 0.05), hand=grasps.flat(min(1.0, press + 0.4)))
+    b.add("retreat", 0.5, box + _v(-0.16, -0.04, TABLE_Z + 0.10), _v(0, 0, 0), grasps.rest(0.3))
+    _rest(b, rest)
+    objects = (SceneObject("box", "box", size, (box[0], box[1], TABLE_Z + size[2] / 2), rng.uniform(-0.2, 0.2), (60, 140, 180)),)
+    return Script("box_rotation", tuple(b.phases), objects)
+
+
+def cup_stack(rng: np.random.Generator, rest: np.ndarray) -> Script:
+    b = _Builder(rng)
+    cups = [_v(0.08, -0.16, 0) + b.jitter(), _v(0.15, -0.02, 0) + b.jitter(), _v(0.10, 0.15, 0) + b.jitter()]
+    grasp_z = TABLE_Z + 0.05
+    for level, cup in enumerate(cups[:2], start=1):
+        _pick(b, cup, grasp_z, rng.uniform(-0.25, 0.0), squeeze=rng.uniform(0.2, 0.4))
+        _place(b, cups[2], grasp_z + 0.03 * level, rng.uniform(0.0, 0.25))
+    _rest(b, rest)
+    objects = tuple(_cup(f"cup{i + 1}", c, CUP_COLOURS[i]) for i, c in enumerate(cups))
+    return Script("cup_stack", tuple(b.phases), objects)
+
+
+SCRIPTS = {"pick_place": pick_place, "hang": hang, "pour": pour, "box_rotation": box_rotation, "cup_stack": cup_stack}

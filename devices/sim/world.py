@@ -1,0 +1,178 @@
+"""The simulated world shared by the sim devices of one rig (context.shared["sim.world"]).
+
+It holds the robot's current joint state (SimArm and SimHand write it, SimCamera draws it), the table
+and the objects of the operator's current task. Objects are laid out per episode from the operator's
+script, mapped from the task frame into the robot's base frame through `anchor`: the robot point that
+the operator's resting wrist corresponds to (the TCP at the arm's home pose). The robot base stands on
+the table top (z = 0). An object the end effector closes on moves with it until it lets go, then
+drops upright onto the table (or the cup below it), or hangs from the peg it was let go at, so the
+camera shows a grasp that worked.
+"""
+
+from __future__ import annotations
+
+import threading
+from dataclasses import dataclass
+
+import numpy as np
+
+from devices.sim.shared import get_or_create
+from devices.sim.tasks import TABLE_Z, SCRIPTS, SceneObject
+from teleprev.robot.model import RobotModel, load_robot
+from teleprev.robot.transforms import make_transform, rpy_to_matrix
+
+# SimArm's default home: the palm (TCP) forward at about (0.40, 0, 0.30) m, fingers 20 degrees down.
+DEFAULT_HOME = (0.0, -0.27, -0.11, 0.0, -0.85, -1.571)
+DEFAULT_ANCHOR = np.array([0.405, 0.0, 0.30])  # that TCP, in the robot base frame
+TABLE = SceneObject("table", "box", (1.2, 1.3, 0.04), (0.30, 0.0, -0.02), 0.0, (95, 120, 150), False)
+
+# The points that close on objects, per end effector: (link, offset in the link frame); for the LEAP
+# Hand the palm (power grasps) and, in _grasp_points, the pinch between the thumb and index tips.
+GRASP_POINT = {
+    "leap_hand": ("palm_lower", np.array([-0.03, -0.035, -0.05])),
+    "parallel_gripper": ("gripper_tcp", np.zeros(3)),
+    "vacuum": ("vacuum_tcp", np.zeros(3)),
+}
+TCP_LINK = {"leap_hand": "palm_lower", "parallel_gripper": "gripper_tcp", "vacuum": "vacuum_tcp"}
+_GRASP_REACH = 0.09  # metres between the grasp point and an object's centre for a grasp to hold it
+
+
+@dataclass
+class PlacedObject:
+    spec: SceneObject
+    pose: np.ndarray  # 4x4 in the robot base frame
+    held: np.ndarray | None = None  # pose relative to the grasp point while held
+
+
+class SimWorld:
+    def __init__(self, robot: str, end_effector: str, shared: dict | None = None):
+        self.model: RobotModel = load_robot(robot)
+        self.end_effector = end_effector
+        self._shared = shared if shared is not None else {}
+        self._lock = threading.Lock()
+        # Until an arm reports, the robot stands at the sim arm's default home.
+        self._q = self.model.clip(self.model.vector({f"joint{i + 1}": v for i, v in enumerate(DEFAULT_HOME)
+                                                     if f"joint{i + 1}" in self.model.joint_index}, self.model.neutral()))
+        self.vacuum_on = False
+        self.anchor = DEFAULT_ANCHOR.copy()
+        self._grasp_link, self._grasp_offset = GRASP_POINT.get(end_effector, (None, None))
+        if self._grasp_link not in self.model.link_index:
+            self._grasp_link = None
+        self._episode: tuple | None = None
+        self._objects: list[PlacedObject] = []
+
+    # ---- robot state ---------------------------------------------------------------------------
+    def set_joints(self, names: tuple[str, ...], values: np.ndarray) -> None:
+        idx = [self.model.joint_index[n] for n in names if n in self.model.joint_index]
+        vals = [v for n, v in zip(names, values) if n in self.model.joint_index]
+        with self._lock:
+            if idx:
+                self._q[idx] = vals
+            if "vacuum" in names:
+                self.vacuum_on = bool(values[names.index("vacuum")] >= 0.5)
+
+    def joints(self) -> np.ndarray:
+        with self._lock:
+            return self._q.copy()
+
+    def set_home(self, q_arm: dict[str, float]) -> None:
+        """Place the task scene relative to the TCP at the arm's home pose."""
+        tcp = TCP_LINK.get(self.end_effector)
+        if tcp in self.model.link_index:
+            q = self.model.vector(q_arm, self.model.neutral())
+            with self._lock:
+                self.anchor = self.model.fk(q).position(tcp).copy()
+                self._episode = None  # lay the scene out again
+
+    def grasp_point(self, q: np.ndarray) -> np.ndarray | None:
+        """The pose that carries a held object (the palm, the jaws' centre, the suction cup)."""
+        if self._grasp_link is None:
+            return None
+        m = self.model.fk(q).matrix(self._grasp_link)
+        return m @ make_transform(translation=self._grasp_offset)
+
+    def _reach_points(self, q: np.ndarray, grip: np.ndarray) -> list[np.ndarray]:
+        points = [grip[:3, 3]]
+        if self.end_effector == "leap_hand" and "thumb_tip_head" in self.model.link_index:
+            poses = self.model.fk(q)
+            points.append(0.5 * (poses.position("thumb_tip_head") + poses.position("index_tip_head")))
+        return points
+
+    def closed(self, q: np.ndarray) -> bool:
+        """Whether the end effector is holding on (fingers curled, jaws shut, suction on)."""
+        if self.end_effector == "leap_hand":
+            flex = [q[self.model.joint_index[j]] for j in ("1", "5", "9") if j in self.model.joint_index]
+            return bool(flex) and float(np.mean(flex)) > 0.6
+        if self.end_effector == "parallel_gripper" and "gripper" in self.model.joint_index:
+            return float(q[self.model.joint_index["gripper"]]) < 0.07
+        return self.vacuum_on
+
+    # ---- scene ---------------------------------------------------------------------------------
+    def _layout(self, objects: tuple[SceneObject, ...]) -> list[PlacedObject]:
+        placed = []
+        for o in objects:
+            centre = np.array([self.anchor[0] + o.centre[0], self.anchor[1] + o.centre[1], o.centre[2] - TABLE_Z])
+            placed.append(PlacedObject(o, make_transform(rpy_to_matrix(0.0, 0.0, o.yaw), centre)))
+        return placed
+
+    def _scene_source(self, now_ns: int) -> tuple[tuple, tuple[SceneObject, ...]]:
+        op = self._shared.get("sim.operator")
+        if op is None:
+            return ("default",), SCRIPTS["pick_place"](np.random.default_rng(0), np.zeros(3)).objects
+        t = op.time_s(now_ns)
+        index, task = op.episode(t)
+        return (index, task), op.objects(t)
+
+    def scene(self, now_ns: int, q: np.ndarray | None = None) -> list[PlacedObject]:
+        """The objects now (robot base frame), after letting the end effector pick up or drop them."""
+        q = self.joints() if q is None else q
+        key, objects = self._scene_source(now_ns)
+        grip = self.grasp_point(q)
+        closed = self.closed(q)
+        with self._lock:
+            if key != self._episode:
+                self._episode = key
+                self._objects = self._layout(objects)
+            for obj in self._objects:
+                if obj.held is not None:
+                    if closed and grip is not None:
+                        obj.pose = grip @ obj.held
+                    else:
+                        obj.held = None
+                        self._drop(obj)
+            if closed and grip is not None and not any(o.held is not None for o in self._objects):
+                points = self._reach_points(q, grip)
+
+                def distance(o: PlacedObject) -> float:
+                    return min(float(np.linalg.norm(o.pose[:3, 3] - p)) for p in points)
+
+                near = [o for o in self._objects if o.spec.graspable and distance(o) < _GRASP_REACH]
+                if near:
+                    obj = min(near, key=distance)
+                    obj.held = np.linalg.inv(grip) @ obj.pose
+            return [PlacedObject(o.spec, o.pose.copy(), o.held) for o in self._objects]
+
+    def _drop(self, obj: PlacedObject) -> None:
+        height = obj.spec.size[2] if obj.spec.kind == "box" else obj.spec.size[1]
+        x_axis = obj.pose[:3, 0]
+        yaw = float(np.arctan2(x_axis[1], x_axis[0]))
+        for peg in (o for o in self._objects if o.spec.name == "peg"):
+            if np.linalg.norm(peg.pose[:3, 3] - obj.pose[:3, 3]) < _GRASP_REACH:
+                # Let go next to the peg: it hangs from it, long side down.
+                hang = peg.pose[:3, 3] - [0.0, 0.0, obj.spec.size[0] / 2 - 0.01]
+                obj.pose = make_transform(rpy_to_matrix(0.0, np.pi / 2, 0.0), hang)
+                return
+        # Onto whatever it is above (a stacked cup rests on the one below), else the table.
+        floor = 0.0
+        for other in self._objects:
+            if other is obj or other.spec.kind != "cylinder" or obj.spec.kind != "cylinder":
+                continue
+            if np.linalg.norm(other.pose[:2, 3] - obj.pose[:2, 3]) < other.spec.size[0]:
+                floor = max(floor, other.pose[2, 3] + other.spec.size[1] / 2 - 0.07)
+        obj.pose = make_transform(rpy_to_matrix(0.0, 0.0, yaw), [obj.pose[0, 3], obj.pose[1, 3], floor + height / 2])
+
+
+def shared_world(context) -> SimWorld:
+    """The rig's world (created by the first sim device that needs it)."""
+    return get_or_create(context.shared, "sim.world",
+                         lambda: SimWorld(context.robot, context.end_effector, context.shared))

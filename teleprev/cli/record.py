@@ -1,0 +1,51 @@
+"""`teleprev record`: collect a session with the terminal preview, or unattended from a script."""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Optional
+
+import typer
+
+TASKS_HELP = "Task label of the episodes (the sim operator performs it): pick_place, hang, pour, box_rotation, cup_stack."
+
+
+def record(
+    rig: Optional[Path] = typer.Argument(None, help="Rig file (TOML). Default: the all-simulated rig."),
+    out: Optional[Path] = typer.Option(None, "--out", "-o", help="Session file to write (default: sessions/<time>_<task>.mcap)."),
+    task: str = typer.Option("", "--task", "-t", help=TASKS_HELP),
+    duration: Optional[float] = typer.Option(None, "--duration", help="Run unattended for this many seconds, then stop."),
+    episodes: int = typer.Option(1, "--episodes", help="Unattended: split the duration into this many episodes."),
+    engage_after: Optional[float] = typer.Option(
+        None, "--engage-after", help="Unattended: switch to execute this many seconds into each episode (default: stay in preview)."
+    ),
+    preview: bool = typer.Option(True, "--preview/--no-preview", help="Show the terminal preview (--no-preview runs headless)."),
+    view: str = typer.Option("side", "--view", help="Robot view: front, side or top."),
+    fps: float = typer.Option(25.0, "--fps", help="Terminal preview redraws per second."),
+    models: Optional[Path] = typer.Option(None, "--models", help="Folder with CPN/CCN weights (default: the rig's, else models/)."),
+    operator: str = typer.Option("", "--operator", help="Operator name, stored with the session."),
+    participant: str = typer.Option("", "--participant", help="User-study participant id."),
+    condition: str = typer.Option("", "--condition", help="User-study condition, e.g. 'w/ preview'."),
+    practice: bool = typer.Option(False, "--practice", help="Mark the session as practice; press r when ready."),
+) -> None:
+    """Record a session: devices, pipeline, preview and execute, episodes, all into one MCAP file."""
+    from rich.console import Console
+
+    from teleprev.session.recording import RecordOptions, Recording, default_session_path
+    from teleprev.session.run import run_interactive, run_script, print_summary
+
+    console = Console()
+    options = RecordOptions(
+        out=out or default_session_path(task), rig=rig, models=models, task=task,
+        operator=operator, participant=participant, condition=condition, practice=practice,
+    )
+    recording = Recording(options)
+    try:
+        recording.start()
+        if duration is not None:
+            run_script(recording, duration, episodes, engage_after, console if preview else None, view, fps)
+        else:
+            run_interactive(recording, console, view, fps, show=preview)
+    finally:
+        summary = recording.stop()
+    print_summary(console, recording, summary)

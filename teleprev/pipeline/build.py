@@ -1,0 +1,51 @@
+"""Assemble a Pipeline from a rig: robot, IK chain, calibration, end effector and Corrector."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+
+from teleprev.pipeline.effectors import GripperEffector, LeapEffector, VacuumEffector
+from teleprev.pipeline.guard import JointGuard
+from teleprev.pipeline.step import Pipeline
+from teleprev.retarget.arm import ArmRetargeter
+from teleprev.retarget.calibration import Calibration, load_calibration
+from teleprev.rig import Rig
+from teleprev.robot.ik import ArmIK
+from teleprev.robot.model import load_robot
+
+TCP_LINKS = {"leap_hand": "palm_lower", "parallel_gripper": "gripper_tcp", "vacuum": "vacuum_tcp"}
+HAND_URDF = "leap_hand_right"
+
+
+def rig_calibration(rig: Rig) -> Calibration:
+    return load_calibration(rig.resolve(rig.rig.calibration) if rig.rig.calibration else None)
+
+
+def models_dir(rig: Rig, override: str | Path | None = None) -> Path | None:
+    if override:
+        return Path(override)
+    return rig.resolve(rig.rig.models) if rig.rig.models else None
+
+
+def build_pipeline(rig: Rig, models: str | Path | None = None, calibration: Calibration | None = None) -> Pipeline:
+    cfg = rig.pipeline
+    calibration = calibration if calibration is not None else rig_calibration(rig)
+    robot = load_robot(rig.rig.robot)
+    ik = ArmIK(robot, cfg.tcp_link or TCP_LINKS[rig.rig.end_effector])
+    arm_speed = np.minimum(ik.chain.velocity_limit, cfg.arm_speed)
+    max_dt = cfg.max_command_dt_ms / 1000.0
+    arm_guard = JointGuard(ik.chain.lower, ik.chain.upper, arm_speed, max_dt)
+    arm = ArmRetargeter(ik, cfg.wrist_scale, cfg.workspace_min, cfg.workspace_max, calibration.suit_to_robot())
+    if rig.rig.end_effector == "leap_hand":
+        from teleprev.noncollision.corrector import Corrector
+
+        hand = load_robot(HAND_URDF)
+        corrector = Corrector.load(models_dir(rig, models), hand)
+        effector = LeapEffector(hand, corrector, cfg, max_dt, calibration.leap_map())
+    elif rig.rig.end_effector == "parallel_gripper":
+        effector = GripperEffector(robot, cfg, max_dt)
+    else:
+        effector = VacuumEffector(cfg, max_dt)
+    return Pipeline(cfg, arm, arm_guard, effector)

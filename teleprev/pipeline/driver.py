@@ -1,0 +1,104 @@
+"""Feeds a Pipeline from one ordered stream of logged samples, live or from a recording.
+
+It keeps the latest sample of each input stream, runs a step on every sample of the trigger stream (the
+glove: pipeline outputs at glove rate) and applies mode switches. Everything it decides depends only on
+the samples and their log times, in log-time order, so replaying a session's raw streams and its mode
+switches through a driver built from the same rig and models reproduces the recorded commands.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from teleprev.messages import Event, JointSample, Logged, PoseSample
+from teleprev.pipeline.step import Pipeline, PipelineState, StepInputs, StepResult
+from teleprev.session import topics
+
+
+@dataclass(frozen=True)
+class InputTopics:
+    hand: str  # glove hand pose: also the trigger
+    wrist: str
+    arm: str
+    effector: str
+
+    @classmethod
+    def for_devices(cls, glove: str, suit: str, arm: str, hand: str) -> "InputTopics":
+        return cls(
+            topics.device_topic("glove", glove, "hand"),
+            topics.device_topic("suit", suit, "wrist"),
+            topics.device_topic("arm", arm, "state"),
+            topics.device_topic("hand", hand, "state"),
+        )
+
+
+@dataclass
+class Outputs:
+    """What one fed sample produced: messages to record and commands to send."""
+
+    logged: list[tuple[str, object]] = field(default_factory=list)  # (topic, payload) stamped at the trigger time
+    arm_command: JointSample | None = None
+    effector_command: JointSample | None = None
+    result: StepResult | None = None
+
+
+class PipelineDriver:
+    def __init__(self, pipeline: Pipeline, inputs: InputTopics):
+        self.pipeline = pipeline
+        self.topics = inputs
+        self.state = PipelineState()
+        self.latest: dict[str, object] = {}
+        self.last_result: StepResult | None = None
+
+    @property
+    def mode(self) -> str:
+        return self.state.mode
+
+    def _inputs(self, t_ns: int) -> StepInputs:
+        g = self.latest.get
+        return StepInputs(t_ns, g(self.topics.hand), g(self.topics.wrist), g(self.topics.arm), g(self.topics.effector))
+
+    def request_mode(self, mode: str, t_ns: int) -> str:
+        """Switch preview/execute at log time t_ns; returns "" or why it was refused."""
+        self.state, refused = self.pipeline.set_mode(self.state, mode, self._inputs(t_ns))
+        return refused
+
+    def feed(self, msg: Logged) -> Outputs:
+        """One logged sample, in log-time order."""
+        out = Outputs()
+        payload = msg.payload
+        if msg.topic in (self.topics.hand, self.topics.wrist, self.topics.arm, self.topics.effector):
+            if isinstance(payload, (JointSample, PoseSample)):
+                self.latest[msg.topic] = payload
+        elif msg.topic == topics.MODE and isinstance(payload, Event):
+            # A recorded switch: it was accepted live, and the same state accepts it again.
+            self.request_mode(payload.data.get("mode", ""), msg.log_time_ns)
+            return out
+        if msg.topic != self.topics.hand:
+            return out
+        result = self.pipeline.step(self.state, self._inputs(msg.log_time_ns))
+        self.state = result.state
+        self.last_result = result
+        out.result = result
+        t = msg.log_time_ns
+        eff_names = self.pipeline.effector_names
+        arm_names = self.pipeline.arm_names
+        if result.retargeted is not None:
+            out.logged.append((topics.RETARGETED, JointSample(t, eff_names, result.retargeted)))
+            out.logged.append((topics.CORRECTED, JointSample(t, eff_names, result.corrected)))
+        if result.arm_target is not None:
+            out.logged.append((topics.ARM_TARGET, JointSample(t, arm_names, result.arm_target)))
+        if result.arm_command is not None:
+            out.arm_command = JointSample(t, arm_names, result.arm_command)
+            out.logged.append((topics.COMMAND_ARM, out.arm_command))
+        if result.effector_command is not None:
+            out.effector_command = JointSample(t, eff_names, result.effector_command)
+            out.logged.append((topics.COMMAND_HAND, out.effector_command))
+        out.logged.append((topics.STEP_REPORT, Event(t, "teleprev.StepReport", _json_ready(result.report))))
+        return out
+
+
+def _json_ready(report: dict) -> dict:
+    return {k: (float(v) if isinstance(v, np.floating) else bool(v) if isinstance(v, np.bool_) else v) for k, v in report.items()}

@@ -1,0 +1,215 @@
+"""One pipeline step: human pose in, robot targets and (in execute mode) guarded commands out.
+
+    glove hand pose --retarget--> effector joints --Corrector--> collision-free target --guard--> command
+    suit wrist pose --relative to the anchor--> TCP target --IK--> arm joints ------------guard--> command
+
+`Pipeline.step(state, inputs)` is a pure function of its arguments: the same state and inputs give the
+same outputs bit for bit, which is what lets `teleprev eval` re-run recorded sessions exactly. In preview
+mode it computes everything and commands nothing; switching to execute starts an engage ramp from the
+robot's measured joints to the previewed target at a fraction of the speed caps, after which the robot
+follows at the full caps. Inputs that are missing, stale, non-finite or implausible hold the last valid
+target and are flagged; nothing computed from them is sent.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field, replace
+
+import numpy as np
+
+from teleprev.human.smplx import angles_from_hand_pose, hand_pose_from_values
+from teleprev.messages import JointSample, PoseSample
+from teleprev.pipeline.config import PipelineConfig
+from teleprev.pipeline.guard import JointGuard
+from teleprev.retarget.arm import Anchor, ArmRetargeter
+
+# Human plausibility limits: beyond these a glove or suit is broken, not bending.
+MAX_FLEXION, MIN_FLEXION, MAX_ABDUCTION = 2.7, -1.2, 1.3
+MAX_JOINT_ROTATION = 2.9  # rad: no finger joint turns this far (axis-angle beyond it wraps round)
+MAX_WRIST_DISTANCE = 3.0  # metres from the suit's origin
+ENGAGED_TOL = 1e-3  # rad: the engage ramp is over when every command is this close to its target
+
+
+@dataclass(frozen=True)
+class StepInputs:
+    """The latest sample of each input stream at trigger time t_ns (session clock)."""
+
+    t_ns: int
+    hand: JointSample | None = None  # SMPL-X hand pose from the glove
+    wrist: PoseSample | None = None  # right wrist from the suit
+    arm: JointSample | None = None  # measured arm joints
+    effector: JointSample | None = None  # measured end-effector joints
+
+
+@dataclass(frozen=True)
+class PipelineState:
+    step: int = 0
+    mode: str = "preview"
+    anchor: Anchor | None = None
+    arm_q: np.ndarray | None = None  # last IK solution: the previewed arm target
+    arm_q_before: np.ndarray | None = None  # the one before: with arm_q, a constant-velocity IK warm start
+    effector_q: np.ndarray | None = None  # last effector target (collision-free for a hand)
+    arm_cmd: np.ndarray | None = None  # last commands sent (execute mode)
+    effector_cmd: np.ndarray | None = None
+    cmd_ns: int | None = None
+    engaging: bool = False
+
+
+@dataclass(frozen=True)
+class StepResult:
+    state: PipelineState
+    retargeted: np.ndarray | None = None
+    corrected: np.ndarray | None = None
+    arm_target: np.ndarray | None = None
+    arm_command: np.ndarray | None = None
+    effector_command: np.ndarray | None = None
+    report: dict = field(default_factory=dict)
+
+
+def _stale(stamp_ns: int, t_ns: int, stale_ns: int) -> bool:
+    return t_ns - stamp_ns > stale_ns
+
+
+class Pipeline:
+    def __init__(self, cfg: PipelineConfig, arm: ArmRetargeter, arm_guard: JointGuard, effector):
+        self.cfg = cfg
+        self.arm = arm
+        self.arm_names = arm.ik.joint_names
+        self.arm_guard = arm_guard
+        self.effector = effector
+        self.effector_names = effector.names
+        self._stale_ns = int(cfg.stale_ms * 1e6)
+
+    # ---- inputs --------------------------------------------------------------------------------
+    def _finger_angles(self, inputs: StepInputs, flags: list[str]) -> tuple[np.ndarray, np.ndarray] | None:
+        s = inputs.hand
+        if s is None:
+            flags.append("no_glove")
+            return None
+        if _stale(s.stamp_ns, inputs.t_ns, self._stale_ns):
+            flags.append("glove_stale")
+            return None
+        try:
+            pose = hand_pose_from_values(s.names, s.positions)
+        except KeyError:
+            flags.append("glove_invalid")
+            return None
+        if not np.isfinite(pose).all():
+            flags.append("glove_invalid")
+            return None
+        if np.einsum("ij,ij->i", pose, pose).max() > MAX_JOINT_ROTATION**2:
+            flags.append("glove_out_of_range")
+            return None
+        flexion, abduction = angles_from_hand_pose(pose)
+        if flexion.max() > MAX_FLEXION or flexion.min() < MIN_FLEXION or abs(abduction).max() > MAX_ABDUCTION:
+            flags.append("glove_out_of_range")
+            return None
+        return flexion, abduction
+
+    def _wrist(self, inputs: StepInputs, flags: list[str]) -> np.ndarray | None:
+        s = inputs.wrist
+        if s is None:
+            flags.append("no_suit")
+            return None
+        if _stale(s.stamp_ns, inputs.t_ns, self._stale_ns):
+            flags.append("suit_stale")
+            return None
+        p, q = np.asarray(s.position, dtype=float), np.asarray(s.orientation, dtype=float)
+        if not (np.isfinite(p).all() and np.isfinite(q).all()):
+            flags.append("suit_invalid")
+            return None
+        if float(p @ p) > MAX_WRIST_DISTANCE**2 or abs(float(q @ q) ** 0.5 - 1.0) > 0.1:
+            flags.append("suit_out_of_range")
+            return None
+        return s.matrix()
+
+    def measured(self, sample: JointSample | None, names: tuple[str, ...]) -> np.ndarray | None:
+        if sample is None:
+            return None
+        if sample.names == names:
+            q = np.asarray(sample.positions, dtype=float)
+        else:
+            try:
+                q = np.array([sample.positions[sample.names.index(n)] for n in names], dtype=float)
+            except ValueError:
+                return None
+        return q if np.isfinite(q).all() else None
+
+    # ---- mode ----------------------------------------------------------------------------------
+    def set_mode(self, state: PipelineState, mode: str, inputs: StepInputs) -> tuple[PipelineState, str]:
+        """Switch preview/execute; returns the new state and "" or why the switch was refused."""
+        if mode == state.mode:
+            return state, ""
+        if mode == "preview":
+            # Re-anchor at the next step: the preview starts again from where the robot is.
+            return replace(state, mode="preview", anchor=None, arm_q=None, arm_q_before=None, arm_cmd=None, effector_cmd=None, engaging=False), ""
+        if mode != "execute":
+            return state, f"unknown mode {mode!r}"
+        arm_q = self.measured(inputs.arm, self.arm_names)
+        eff_q = self.measured(inputs.effector, self.effector_names)
+        if arm_q is None or eff_q is None:
+            return state, "no measured state from the arm or the end effector"
+        if state.arm_q is None or state.effector_q is None:
+            return state, "nothing previewed yet (waiting for glove and suit)"
+        arm_q = np.clip(arm_q, self.arm_guard.lower, self.arm_guard.upper)
+        eff_q = np.clip(eff_q, self.effector.guard.lower, self.effector.guard.upper)
+        if not self.effector.guard.valid(eff_q):
+            return state, "the end effector's measured state is not a valid command (self-collision?)"
+        return replace(state, mode="execute", arm_cmd=arm_q, effector_cmd=eff_q, cmd_ns=inputs.t_ns, engaging=True), ""
+
+    # ---- step ----------------------------------------------------------------------------------
+    def step(self, state: PipelineState, inputs: StepInputs) -> StepResult:
+        flags: list[str] = []
+        report: dict = {"step": state.step, "mode": state.mode, "corrector": "held", "colliding_links": [], "deviation_rad": 0.0}
+
+        angles = self._finger_angles(inputs, flags)
+        retargeted = corrected = None
+        effector_q = state.effector_q
+        if angles is not None:
+            t = self.effector.target(*angles, state.effector_q)
+            retargeted, corrected, effector_q = t.retargeted, t.target, t.target
+            report.update(corrector=t.action, colliding_links=list(t.colliding_links), deviation_rad=t.deviation)
+
+        wrist = self._wrist(inputs, flags)
+        anchor, arm_q, arm_q_before, arm_fresh = state.anchor, state.arm_q, state.arm_q_before, False
+        measured_arm = self.measured(inputs.arm, self.arm_names)
+        if wrist is not None and anchor is None:
+            if measured_arm is None:
+                flags.append("no_arm_state")
+            else:
+                anchor = self.arm.anchor(wrist, measured_arm)
+        if wrist is not None and anchor is not None:
+            start = arm_q if arm_q is not None else measured_arm
+            if arm_q is not None and arm_q_before is not None:
+                # Tracking a smooth motion: extrapolating the last two solutions usually lands within
+                # tolerance, so the solver confirms it with one FK instead of iterating.
+                start = 2.0 * arm_q - arm_q_before
+            if start is not None:
+                ik, clipped = self.arm.solve(anchor, wrist, start)
+                arm_q_before, arm_q, arm_fresh = arm_q, ik.q, True
+                report["ik_converged"] = ik.converged
+                if not ik.converged:
+                    flags.append("ik_not_converged")
+                if clipped:
+                    flags.append("workspace_clipped")
+
+        new = replace(state, step=state.step + 1, anchor=anchor, arm_q=arm_q, arm_q_before=arm_q_before, effector_q=effector_q)
+        arm_cmd = eff_cmd = None
+        if state.mode == "execute":
+            dt = (inputs.t_ns - state.cmd_ns) / 1e9 if state.cmd_ns is not None else 0.0
+            frac = self.cfg.engage_speed_frac if state.engaging else 1.0
+            if arm_fresh:
+                arm_cmd = self.arm_guard.step(state.arm_cmd, arm_q, dt, frac)
+            if angles is not None:
+                eff_cmd = self.effector.guard.step(state.effector_cmd, effector_q, dt, frac, target_valid=True)
+            if arm_cmd is not None or eff_cmd is not None:
+                a = arm_cmd if arm_cmd is not None else state.arm_cmd
+                e = eff_cmd if eff_cmd is not None else state.effector_cmd
+                engaging = state.engaging and not (
+                    np.max(np.abs(a - arm_q)) < ENGAGED_TOL and np.max(np.abs(e - effector_q)) < ENGAGED_TOL
+                )
+                new = replace(new, arm_cmd=a, effector_cmd=e, cmd_ns=inputs.t_ns, engaging=engaging)
+            if state.engaging:
+                flags.append("engaging")
+        report["flags"] = flags
+        return StepResult(new, retargeted, corrected, arm_q if arm_fresh else None, arm_cmd, eff_cmd, report)

@@ -1,0 +1,61 @@
+"""Wrist motion to arm joints.
+
+The robot's tool point (TCP) follows the operator's wrist *relative to an anchor*: when the anchor is
+set, the wrist pose W0 and the robot's TCP pose T0 are remembered, and afterwards
+
+    position    p = p(T0) + scale * M (p(W) - p(W0))           clipped to the rig's workspace box
+    orientation R = (M R(W) R(W0)^T M^T) R(T0)
+
+where M turns the suit's world frame into the robot's base frame (a calibrated rotation; identity when
+both have x forward and z up). The anchor is set when preview begins; the robot does not move in
+preview, so T0 is also its pose when execution is engaged. The joints come from the warm-started IK.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from teleprev.robot.ik import ArmIK, IkResult
+
+
+_EYE4 = np.eye(4)
+
+
+@dataclass(frozen=True)
+class Anchor:
+    wrist: np.ndarray  # 4x4, suit frame
+    tcp: np.ndarray  # 4x4, robot base frame
+
+
+class ArmRetargeter:
+    def __init__(
+        self,
+        ik: ArmIK,
+        scale: float = 1.0,
+        workspace_min=(-np.inf,) * 3,
+        workspace_max=(np.inf,) * 3,
+        suit_to_robot: np.ndarray | None = None,
+    ):
+        self.ik = ik
+        self.scale = scale
+        self.lo = np.asarray(workspace_min, dtype=float)
+        self.hi = np.asarray(workspace_max, dtype=float)
+        self.m = np.eye(3) if suit_to_robot is None else np.asarray(suit_to_robot, dtype=float)
+
+    def anchor(self, wrist: np.ndarray, arm_q: np.ndarray) -> Anchor:
+        return Anchor(np.array(wrist, dtype=float), self.ik.pose(arm_q))
+
+    def target(self, anchor: Anchor, wrist: np.ndarray) -> tuple[np.ndarray, bool]:
+        """The TCP target pose, and whether the workspace box clipped it."""
+        m = self.m
+        t = _EYE4.copy()
+        desired = anchor.tcp[:3, 3] + self.scale * (m @ (wrist[:3, 3] - anchor.wrist[:3, 3]))
+        t[:3, 3] = np.clip(desired, self.lo, self.hi)
+        t[:3, :3] = m @ wrist[:3, :3] @ anchor.wrist[:3, :3].T @ m.T @ anchor.tcp[:3, :3]
+        return t, bool((t[:3, 3] != desired).any())
+
+    def solve(self, anchor: Anchor, wrist: np.ndarray, q_start: np.ndarray) -> tuple[IkResult, bool]:
+        target, clipped = self.target(anchor, wrist)
+        return self.ik.solve(target, q_start), clipped

@@ -1,0 +1,78 @@
+"""The operator calibration a rig references: per-joint scale and offset for the hand mapping, and the
+yaw between the suit's world frame and the robot's base frame. `teleprev calibrate` writes it.
+
+    [calibration]
+    suit_yaw = 0.0            # rad: the robot's +x as seen in the suit frame, so "forward" is forward
+    [joints."1"]              # a LEAP joint: q = sign * scale * angle + offset (sign and source fixed)
+    scale = 1.1
+    offset = -0.05
+"""
+
+from __future__ import annotations
+
+import datetime as _dt
+from dataclasses import dataclass, field, replace
+from pathlib import Path
+
+import numpy as np
+
+from teleprev.config import from_table, read_toml
+from teleprev.errors import ConfigError
+from teleprev.retarget.hand import DEFAULT_LEAP_MAP, JointMap
+
+
+@dataclass(frozen=True)
+class JointCalibration:
+    scale: float = 1.0
+    offset: float = 0.0
+
+
+@dataclass(frozen=True)
+class CalibrationSection:
+    suit_yaw: float = 0.0
+    created: str = ""
+    operator: str = ""
+
+
+@dataclass(frozen=True)
+class Calibration:
+    calibration: CalibrationSection = field(default_factory=CalibrationSection)
+    joints: dict[str, JointCalibration] = field(default_factory=dict)
+
+    def leap_map(self) -> dict[str, JointMap]:
+        return {
+            name: replace(m, scale=self.joints[name].scale, offset=self.joints[name].offset) if name in self.joints else m
+            for name, m in DEFAULT_LEAP_MAP.items()
+        }
+
+    def suit_to_robot(self) -> np.ndarray:
+        c, s = np.cos(self.calibration.suit_yaw), np.sin(self.calibration.suit_yaw)
+        return np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])
+
+
+def load_calibration(path: str | Path | None) -> Calibration:
+    if not path:
+        return Calibration()
+    where = str(path)
+    cal = from_table(Calibration, read_toml(path), where)
+    unknown = sorted(set(cal.joints) - set(DEFAULT_LEAP_MAP))
+    if unknown:
+        raise ConfigError(f"unknown LEAP joint {unknown[0]!r} in [joints] (joints are \"0\"..\"15\")", where)
+    return cal
+
+
+def write_calibration(cal: Calibration, path: str | Path) -> Path:
+    path = Path(path)
+    lines = [
+        "# Operator calibration written by `teleprev calibrate`; a rig points at it with [rig] calibration = ...",
+        "[calibration]",
+        f"suit_yaw = {float(cal.calibration.suit_yaw)!r}",
+        f'created = "{cal.calibration.created or _dt.datetime.now().isoformat(timespec="seconds")}"',
+        f'operator = "{cal.calibration.operator}"',
+        "",
+    ]
+    for name in sorted(cal.joints, key=int):
+        j = cal.joints[name]
+        lines += [f'[joints."{name}"]', f"scale = {float(j.scale)!r}", f"offset = {float(j.offset)!r}", ""]
+    path.write_text("\n".join(lines))
+    return path

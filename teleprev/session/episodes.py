@@ -1,0 +1,40 @@
+"""Episodes inside a session: start, stop, discard, outcome, each as a teleprev.EpisodeEvent."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+
+@dataclass
+class EpisodeTracker:
+    index: int = -1  # the current (or last) episode; -1 before the first
+    active: bool = False
+    task: str = ""
+    started_ns: int = 0
+
+    def start(self, task: str, t_ns: int) -> list[dict]:
+        """Events that start a new episode (stopping the running one first)."""
+        events = self.stop(t_ns)
+        self.index += 1
+        self.active, self.task, self.started_ns = True, task, t_ns
+        return events + [{"event": "start", "episode": self.index, "task": task}]
+
+    def stop(self, t_ns: int) -> list[dict]:
+        if not self.active:
+            return []
+        self.active = False
+        return [{"event": "stop", "episode": self.index, "task": self.task}]
+
+    def discard(self, t_ns: int) -> list[dict]:
+        """Discard the running episode (stopping it), or the last one if none is running."""
+        if self.index < 0:
+            return []
+        return self.stop(t_ns) + [{"event": "discard", "episode": self.index, "task": self.task}]
+
+    def outcome(self, success: bool) -> list[dict]:
+        if self.index < 0:
+            return []
+        return [{"event": "outcome", "episode": self.index, "task": self.task, "outcome": "success" if success else "failure"}]
+
+    def elapsed_s(self, now_ns: int) -> float:
+        return (now_ns - self.started_ns) / 1e9 if self.active else 0.0

@@ -1,0 +1,239 @@
+"""The session loop: where every sample of a recording passes, in one order.
+
+Device reader threads (devices/runner.py) hand samples to a bounded queue; one loop thread takes them in
+arrival order, gives each a strictly increasing log time on the session clock (its host receive time),
+records it, feeds the pipeline driver, sends the guarded commands to the arm and the end effector,
+publishes the robot's frames on /tf, and carries out the operator's controls (mode switches, episodes).
+Because the loop is the only place where order is decided, replaying a session's raw streams in
+log-time order meets the pipeline with exactly the inputs it met live.
+
+The terminal preview reads `snapshot`, which the loop replaces (never mutates) after every change.
+"""
+
+from __future__ import annotations
+
+import queue
+import threading
+import time
+from collections import Counter
+from dataclasses import dataclass, field, replace
+from typing import Any, Callable
+
+import numpy as np
+
+from devices.base import Actuator, Device
+from teleprev.errors import DeviceError
+from teleprev.messages import Event, JointSample, Logged, Sample
+from teleprev.pipeline.driver import PipelineDriver
+from teleprev.session import topics
+from teleprev.session.clock import SessionClock
+from teleprev.session.episodes import EpisodeTracker
+
+_STOP = object()
+
+
+@dataclass(frozen=True)
+class LoopSnapshot:
+    """What the terminal preview shows; replaced as a whole by the loop thread."""
+
+    mode: str = "preview"
+    episode: int = -1
+    episode_active: bool = False
+    task: str = ""
+    episode_started_ns: int = 0
+    session_started_ns: int = 0
+    step: Any = None  # the last StepResult
+    measured_arm: np.ndarray | None = None
+    measured_effector: np.ndarray | None = None
+    message: str = ""  # the last refusal or warning, for the operator
+    commands_sent: int = 0
+    dropped: int = 0
+
+
+@dataclass
+class StreamCounter:
+    count: int = 0
+    first_ns: int = 0
+    last_ns: int = 0
+    latency_ns: int = 0  # receive - acquisition of the last sample
+
+    def rate_hz(self) -> float:
+        return (self.count - 1) * 1e9 / (self.last_ns - self.first_ns) if self.count > 1 and self.last_ns > self.first_ns else 0.0
+
+
+@dataclass
+class LoopStats:
+    streams: dict[str, StreamCounter] = field(default_factory=dict)
+    dropped: Counter = field(default_factory=Counter)  # samples the loop queue had no room for, per topic
+    commands_sent: Counter = field(default_factory=Counter)
+    command_errors: Counter = field(default_factory=Counter)
+    step_ns: list[int] = field(default_factory=list)  # pipeline step durations (bounded)
+
+
+class SessionLoop:
+    def __init__(
+        self,
+        clock: SessionClock,
+        log: Callable[[Logged], Any],
+        driver: PipelineDriver | None = None,
+        actuators: dict[str, Actuator] | None = None,
+        frames=None,
+        tf_period_ns: int = 33_333_333,
+        queue_size: int = 4096,
+        on_episode_start: Callable[[str], None] | None = None,
+    ):
+        """`log` receives every message to record (Recorder.log); `actuators` maps "arm" and "hand" to the
+        devices that receive commands; `frames` (a FramePublisher) turns measured joints into /tf."""
+        self.clock = clock
+        self._log = log
+        self.driver = driver
+        self.actuators = actuators or {}
+        self.frames = frames
+        self.tf_period_ns = tf_period_ns
+        self.on_episode_start = on_episode_start
+        self.stats = LoopStats()
+        self.episodes = EpisodeTracker()
+        self.snapshot = LoopSnapshot(session_started_ns=clock.now_ns())
+        self._queue: queue.Queue = queue.Queue(maxsize=queue_size)
+        self._last_ns = 0
+        self._last_tf_ns = 0
+        self._thread: threading.Thread | None = None
+
+    # ---- producers (any thread) ----------------------------------------------------------------
+    def sink(self, sample: Sample, receive_ns: int) -> None:
+        """For device threads: never blocks; a full queue drops the sample and counts it."""
+        try:
+            self._queue.put_nowait((receive_ns, sample))
+        except queue.Full:
+            self.stats.dropped[sample.topic] += 1
+
+    def control(self, action: str, **data) -> None:
+        """For the operator (keys) and scripts: 'mode' (mode=), 'start' (task=), 'stop', 'discard',
+        'outcome' (success=), 'operator' (event=, detail=). Controls are never dropped."""
+        self._queue.put((None, (action, data)))
+
+    # ---- lifecycle -----------------------------------------------------------------------------
+    def start(self) -> None:
+        self._thread = threading.Thread(target=self._run, name="session-loop", daemon=True)
+        self._thread.start()
+
+    def stop(self, timeout: float = 5.0) -> None:
+        """Process everything queued so far, then stop."""
+        self._queue.put((None, _STOP))
+        if self._thread:
+            self._thread.join(timeout)
+
+    def _run(self) -> None:
+        while True:
+            receive_ns, item = self._queue.get()
+            if item is _STOP:
+                return
+            if receive_ns is None:
+                self._control(*item)
+            else:
+                self._sample(item, receive_ns)
+
+    # ---- the loop thread -------------------------------------------------------------------------
+    def _stamp(self, receive_ns: int | None = None) -> int:
+        t = self.clock.now_ns() if receive_ns is None else receive_ns
+        self._last_ns = max(t, self._last_ns + 1)
+        return self._last_ns
+
+    def _event(self, topic: str, schema: str, data: dict, t_ns: int | None = None) -> int:
+        t = self._stamp(t_ns)
+        self._log(Logged(topic, t, Event(t, schema, data)))
+        return t
+
+    def _sample(self, sample: Sample, receive_ns: int) -> None:
+        t = self._stamp(receive_ns)
+        msg = Logged(sample.topic, t, sample.payload)
+        self._log(msg)
+        counter = self.stats.streams.get(sample.topic)
+        if counter is None:
+            counter = self.stats.streams[sample.topic] = StreamCounter(first_ns=t)
+        counter.count += 1
+        counter.last_ns = t
+        counter.latency_ns = t - getattr(sample.payload, "stamp_ns", t)
+        if self.driver is None:
+            return
+        started = time.perf_counter_ns()
+        out = self.driver.feed(msg)
+        if out.result is None:
+            return
+        if len(self.stats.step_ns) < 100_000:
+            self.stats.step_ns.append(time.perf_counter_ns() - started)
+        for topic, payload in out.logged:
+            self._log(Logged(topic, self._stamp(), payload))
+        self._send("arm", out.arm_command)
+        self._send("hand", out.effector_command)
+        pipeline, latest = self.driver.pipeline, self.driver.latest
+        self.snapshot = replace(
+            self.snapshot, mode=self.driver.mode, step=out.result,
+            measured_arm=pipeline.measured(latest.get(self.driver.topics.arm), pipeline.arm_names),
+            measured_effector=pipeline.measured(latest.get(self.driver.topics.effector), pipeline.effector_names),
+            commands_sent=sum(self.stats.commands_sent.values()), dropped=sum(self.stats.dropped.values()),
+        )
+        self._publish_frames(t)
+
+    def _send(self, kind: str, command: JointSample | None) -> None:
+        if command is None:
+            return
+        device = self.actuators.get(kind)
+        if device is None:
+            return
+        try:
+            device.send(command)
+            self.stats.commands_sent[kind] += 1
+        except DeviceError as exc:
+            self.stats.command_errors[kind] += 1
+            self._event(topics.DEVICE_EVENT, "teleprev.DeviceEvent", {"device": device.name, "event": "error", "message": f"command not sent: {exc}"})
+
+    def _publish_frames(self, t_ns: int) -> None:
+        if self.frames is None or t_ns - self._last_tf_ns < self.tf_period_ns:
+            return
+        snap = self.snapshot
+        arm, eff = snap.measured_arm, snap.measured_effector
+        if arm is None:
+            return
+        self._last_tf_ns = t_ns
+        pipeline, model = self.driver.pipeline, self.frames.model
+        joints = dict(zip(pipeline.arm_names, arm))
+        if eff is not None and pipeline.effector_names[0] in model.joint_index:
+            joints.update(zip(pipeline.effector_names, eff))
+        q = model.vector(joints)
+        stamp = self._stamp()
+        self._log(Logged(topics.TF, stamp, self.frames.sample(q, stamp)))
+
+    def _control(self, action: str, data: dict) -> None:
+        now = self.clock.now_ns()
+        message = ""
+        if action == "mode":
+            mode = data["mode"]
+            t = self._stamp(now)
+            refused = self.driver.request_mode(mode, t) if self.driver else "no pipeline"
+            if refused:
+                message = f"cannot switch to {mode}: {refused}"
+            else:
+                self._log(Logged(topics.MODE, t, Event(t, "teleprev.ModeSwitch", {"mode": mode, "reason": data.get("reason", "key")})))
+        elif action in ("start", "stop", "discard", "outcome"):
+            tracker = self.episodes
+            if action == "start":
+                task = data.get("task") or tracker.task or ""
+                events = tracker.start(task, now)
+                if self.on_episode_start:
+                    self.on_episode_start(task)
+            elif action == "stop":
+                events = tracker.stop(now)
+            elif action == "discard":
+                events = tracker.discard(now)
+            else:
+                events = tracker.outcome(bool(data.get("success", True)))
+            for e in events:
+                self._event(topics.EPISODE, "teleprev.EpisodeEvent", e, now)
+        elif action == "operator":
+            self._event(topics.OPERATOR, "teleprev.OperatorEvent", {"event": data.get("event", ""), "detail": data.get("detail", "")}, now)
+        self.snapshot = replace(
+            self.snapshot, mode=self.driver.mode if self.driver else "preview", episode=self.episodes.index,
+            episode_active=self.episodes.active, task=self.episodes.task, episode_started_ns=self.episodes.started_ns,
+            message=message or self.snapshot.message,
+        )

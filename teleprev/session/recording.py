@@ -1,0 +1,142 @@
+"""A recording in progress: the rig's devices, the pipeline, the session loop and the recorder, wired.
+
+    with Recording(options) as rec:      # opens devices, starts threads
+        rec.loop.control("start", task="pour")
+        ...
+    rec.summary                          # counts, drops, where the file is
+
+`teleprev record` drives one from the keyboard and the terminal preview, or from a script (--duration,
+--episodes); tests and benchmarks drive it directly.
+"""
+
+from __future__ import annotations
+
+import datetime as _dt
+import hashlib
+import json
+from dataclasses import dataclass, field
+from pathlib import Path
+
+from devices.base import DeviceContext
+from teleprev import __version__
+from teleprev.errors import ConfigError
+from teleprev.pipeline.build import build_pipeline, rig_calibration
+from teleprev.pipeline.driver import InputTopics, PipelineDriver
+from teleprev.preview.dashboard import DeviceRow
+from teleprev.rig import Rig, load_rig
+from teleprev.robot.frames import FramePublisher
+from teleprev.robot.model import load_robot
+from teleprev.session import topics
+from teleprev.session.clock import SessionClock
+from teleprev.session.loop import SessionLoop
+
+
+@dataclass
+class RecordOptions:
+    out: Path
+    rig: Path | None = None  # None: the default all-sim rig
+    models: Path | None = None  # None: the rig's, else the shipped models/
+    task: str = ""  # default task label (else the rig's)
+    operator: str = ""
+    participant: str = ""
+    condition: str = ""
+    practice: bool = False
+    queue_size: int = 8192
+
+
+def default_session_path(task: str) -> Path:
+    stamp = _dt.datetime.now().strftime("%Y%m%d_%H%M%S")
+    return Path("sessions") / f"{stamp}_{task or 'session'}.mcap"
+
+
+def _sha256(path: Path) -> str:
+    return hashlib.sha256(path.read_bytes()).hexdigest() if path.is_file() else ""
+
+
+class Recording:
+    def __init__(self, options: RecordOptions):
+        from devices.runner import DeviceRunner
+        from teleprev.session.recorder import Recorder
+
+        self.options = options
+        self.rig: Rig = load_rig(options.rig)
+        rig = self.rig
+        rig.require("glove", "suit", "arm", "hand")
+        self.task = options.task or rig.rig.task
+        out = Path(options.out)
+        if out.exists():
+            raise ConfigError("a session with this name exists already; choose another --out", str(out))
+        self.clock = SessionClock()
+        self.context = DeviceContext(self.clock, rig.dir, {}, rig.rig.robot, rig.rig.end_effector)
+        self.devices = {name: entry.cls(name, entry.settings, self.context) for name, entry in rig.devices.items()}
+        first = {kind: rig.of_kind(kind)[0].name for kind in ("glove", "suit", "arm", "hand")}
+        self.pipeline = build_pipeline(rig, options.models)
+        self.driver = PipelineDriver(self.pipeline, InputTopics.for_devices(first["glove"], first["suit"], first["arm"], first["hand"]))
+        self.robot = load_robot(rig.rig.robot)
+        out.parent.mkdir(parents=True, exist_ok=True)
+        self.recorder = Recorder(out, self._metadata())
+        self.loop = SessionLoop(
+            self.clock, self.recorder.log, self.driver,
+            actuators={"arm": self.devices[first["arm"]], "hand": self.devices[first["hand"]]},
+            frames=FramePublisher(self.robot), tf_period_ns=int(1e9 / rig.pipeline.tf_rate_hz),
+            queue_size=options.queue_size, on_episode_start=self._episode_started,
+        )
+        self.runners = {name: DeviceRunner(dev, self.loop.sink, self.clock) for name, dev in self.devices.items()}
+        self.summary = None
+
+    def _episode_started(self, task: str) -> None:
+        for listener in self.context.task_listeners:
+            listener(task)
+
+    def _metadata(self) -> dict[str, dict[str, str]]:
+        rig, o = self.rig, self.options
+        cal_path = rig.resolve(rig.rig.calibration) if rig.rig.calibration else None
+        meta = {
+            "rig": {"path": str(rig.path), "toml": rig.path.read_text() if rig.path else "", "name": rig.rig.name,
+                    "robot": rig.rig.robot, "end_effector": rig.rig.end_effector,
+                    "robot_urdf_sha256": load_robot(rig.rig.robot).urdf_sha256},
+            "calibration": {"path": str(cal_path or ""), "toml": cal_path.read_text() if cal_path else ""},
+            "session": {"operator": o.operator or rig.rig.operator, "task": self.task, "participant": o.participant or rig.rig.participant,
+                        "condition": o.condition or rig.rig.condition, "end_effector": rig.rig.end_effector,
+                        "practice": "true" if o.practice else "false", "software_version": __version__},
+        }
+        corrector = getattr(self.pipeline.effector, "corrector", None)
+        if corrector is not None and hasattr(corrector, "model_files"):
+            meta["models"] = {name: _sha256(Path(p)) for name, p in corrector.model_files().items()}
+        meta["pipeline"] = {"inputs": json.dumps(self.driver.topics.__dict__)}
+        return meta
+
+    def start(self) -> "Recording":
+        self.recorder.start()
+        self.loop.start()
+        for runner in self.runners.values():
+            runner.start()
+        if self.options.practice:
+            self.loop.control("operator", event="practice_start")
+        return self
+
+    def stop(self):
+        """Stop the devices, let the loop finish what is queued, close the file; returns its summary."""
+        for runner in self.runners.values():
+            runner.stop()
+        self.loop.control("stop")
+        self.loop.stop()
+        stats = self.loop.stats
+        extra = {"loop": {"dropped": json.dumps(dict(stats.dropped)), "commands_sent": json.dumps(dict(stats.commands_sent)),
+                          "command_errors": json.dumps(dict(stats.command_errors))}}
+        self.summary = self.recorder.close(extra)
+        return self.summary
+
+    def __enter__(self) -> "Recording":
+        return self.start()
+
+    def __exit__(self, *exc) -> None:
+        if self.summary is None:
+            self.stop()
+
+    def device_rows(self) -> list[DeviceRow]:
+        rows = []
+        for name, runner in self.runners.items():
+            s = runner.stats()
+            rows.append(DeviceRow(name, self.devices[name].kind, s.state, s.rate_hz, s.nominal_hz, s.latency_ms, self.loop.stats.dropped.get(name, 0), s.errors))
+        return rows

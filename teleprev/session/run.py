@@ -1,0 +1,145 @@
+"""Driving a Recording: from the keyboard with the terminal preview, or from a script (unattended).
+
+The preview redraws on the main thread while the session loop runs on its own; the redraw rate is
+measured and kept in `PreviewStats` so the pipeline benchmark can report it.
+"""
+
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass, field
+
+from rich.console import Console
+from rich.live import Live
+
+from teleprev.preview.dashboard import Dashboard
+from teleprev.preview.keys import KeyReader
+from teleprev.preview.robot_view import RobotView
+from teleprev.robot.model import load_robot
+from teleprev.session.recording import Recording
+
+# Fixed view bounds (metres) that hold an xArm's workspace, so the picture does not rescale.
+ROBOT_BOUNDS = {"front": (-0.75, 0.75, -0.1, 1.0), "side": (-0.35, 0.95, -0.1, 1.0), "top": (-0.75, 0.75, -0.35, 0.95)}
+
+
+@dataclass
+class PreviewStats:
+    frames: int = 0
+    started: float = field(default_factory=time.perf_counter)
+    render_s: list[float] = field(default_factory=list)
+
+    def fps(self) -> float:
+        elapsed = time.perf_counter() - self.started
+        return self.frames / elapsed if elapsed > 0 else 0.0
+
+
+def make_dashboard(recording: Recording, view: str) -> Dashboard:
+    hand_view = None
+    if recording.rig.rig.end_effector == "leap_hand":
+        hand_view = RobotView(load_robot("leap_hand_right"), "side")
+    return Dashboard(
+        RobotView(recording.robot, view, ROBOT_BOUNDS.get(view)), hand_view,
+        recording.pipeline.arm_names, recording.pipeline.effector_names, recording.robot,
+    )
+
+
+def handle_key(recording: Recording, key: str, quit_flag: list) -> None:
+    loop = recording.loop
+    if key == " ":
+        loop.control("mode", mode="preview" if loop.snapshot.mode == "execute" else "execute")
+    elif key == "s":
+        loop.control("start", task=recording.task)
+    elif key == "n":
+        loop.control("mode", mode="preview")
+        loop.control("start", task=recording.task)
+    elif key == "d":
+        loop.control("discard")
+    elif key in ("y", "f"):
+        loop.control("outcome", success=key == "y")
+    elif key == "r":
+        loop.control("operator", event="ready")
+    elif key in ("q", "\x1b"):
+        loop.control("mode", mode="preview")
+        quit_flag.append(True)
+
+
+def _frame(dashboard: Dashboard, recording: Recording, console: Console):
+    size = console.size
+    return dashboard.render(recording.loop.snapshot, recording.device_rows(), size.width, size.height, recording.clock.now_ns())
+
+
+def run_interactive(recording: Recording, console: Console, view: str, fps: float, show: bool = True) -> PreviewStats:
+    stats = PreviewStats()
+    quit_flag: list = []
+    dashboard = make_dashboard(recording, view) if show else None
+    with KeyReader(lambda k: handle_key(recording, k, quit_flag)):
+        if dashboard is None:
+            while not quit_flag:
+                time.sleep(0.1)
+            return stats
+        with Live(console=console, auto_refresh=False, screen=console.is_terminal, transient=False) as live:
+            while not quit_flag:
+                t = time.perf_counter()
+                live.update(_frame(dashboard, recording, console), refresh=True)
+                stats.frames += 1
+                stats.render_s.append(time.perf_counter() - t)
+                time.sleep(max(0.0, 1.0 / fps - (time.perf_counter() - t)))
+    return stats
+
+
+def run_script(recording: Recording, duration: float, episodes: int, engage_after: float | None,
+               console: Console | None = None, view: str = "side", fps: float = 25.0) -> PreviewStats:
+    """Unattended: `episodes` episodes filling `duration` seconds, each engaging after `engage_after` s."""
+    stats = PreviewStats()
+    loop = recording.loop
+    dashboard = make_dashboard(recording, view) if console is not None else None
+    live = Live(console=console, auto_refresh=False, transient=False) if dashboard is not None else None
+    length = duration / max(episodes, 1)
+    start = time.perf_counter()
+    plan = []  # (time offset, action, kwargs)
+    for k in range(max(episodes, 1)):
+        t0 = k * length
+        plan.append((t0, "start", {"task": recording.task}))
+        if engage_after is not None and engage_after < length:
+            plan.append((t0 + engage_after, "mode", {"mode": "execute", "reason": "script"}))
+        plan.append((t0 + length - 1e-3, "mode", {"mode": "preview", "reason": "script"}))
+        plan.append((t0 + length - 1e-3, "stop", {}))
+    if live:
+        live.start()
+    try:
+        while True:
+            elapsed = time.perf_counter() - start
+            while plan and plan[0][0] <= elapsed:
+                _, action, kwargs = plan.pop(0)
+                loop.control(action, **kwargs)
+            if elapsed >= duration and not plan:
+                break
+            if live:
+                t = time.perf_counter()
+                live.update(_frame(dashboard, recording, console), refresh=True)
+                stats.frames += 1
+                stats.render_s.append(time.perf_counter() - t)
+                time.sleep(max(0.0, 1.0 / fps - (time.perf_counter() - t)))
+            else:
+                time.sleep(0.01)
+    finally:
+        if live:
+            live.stop()
+    return stats
+
+
+def print_summary(console: Console, recording: Recording, summary) -> None:
+    from rich.table import Table
+
+    table = Table(title=f"session {recording.options.out}", title_justify="left")
+    table.add_column("stream")
+    table.add_column("written", justify="right")
+    table.add_column("dropped", justify="right")
+    for topic, s in sorted(summary.streams.items()):
+        table.add_row(topic, str(s.written), str(s.dropped))
+    console.print(table)
+    loop_drops = sum(recording.loop.stats.dropped.values())
+    console.print(
+        f"episodes: {recording.loop.episodes.index + 1}   commands sent: {sum(recording.loop.stats.commands_sent.values())}"
+        f"   dropped before recording: {loop_drops}   file: {recording.options.out}"
+    )

@@ -1,0 +1,148 @@
+"""The simulated operator: deterministic, varied, smooth, and in LEAP self-collision now and then."""
+
+import numpy as np
+import pytest
+
+from devices.sim.operator import SimOperator
+from devices.sim.tasks import TASKS
+from teleprev.human.smplx import angles_from_hand_pose, hand_pose_from_angles
+from teleprev.retarget.hand import LeapRetargeter
+
+RATE = 120.0
+
+
+class FakeClock:
+    def __init__(self):
+        self.start_ns = 0
+        self.t_ns = 0
+
+    def now_ns(self):
+        return self.t_ns
+
+
+def trajectory(op, t0, t1, rate=RATE):
+    ts = np.arange(t0, t1, 1.0 / rate)
+    states = [op.state(t) for t in ts]
+    return ts, states
+
+
+def test_same_seed_same_person_and_other_seeds_differ():
+    a, b, c = SimOperator(seed=7), SimOperator(seed=7), SimOperator(seed=8)
+    ts = np.linspace(0.0, 20.0, 97)
+    for t in ts:
+        sa, sb = a.state(t), b.state(t)
+        assert np.array_equal(sa.wrist_position, sb.wrist_position)
+        assert np.array_equal(sa.wrist_rotation, sb.wrist_rotation)
+        assert np.array_equal(sa.flexion, sb.flexion) and np.array_equal(sa.abduction, sb.abduction)
+    diff = max(np.abs(a.state(t).wrist_position - c.state(t).wrist_position).max() for t in ts)
+    assert diff > 0.01
+
+
+def test_evaluation_order_does_not_matter():
+    a, b = SimOperator(seed=3), SimOperator(seed=3)
+    ts = np.linspace(0.0, 30.0, 61)
+    forward = [a.state(t).flexion for t in ts]
+    b.state(30.0)  # jump ahead first
+    backward = [b.state(t).flexion for t in ts[::-1]][::-1]
+    assert all(np.array_equal(x, y) for x, y in zip(forward, backward))
+
+
+def test_repetitions_vary():
+    op = SimOperator(seed=1, task="pick_place", mode="fixed")
+    ts, states = trajectory(op, 0.0, 45.0, rate=20)
+    episodes = sorted({s.episode for s in states})
+    assert len(episodes) >= 3
+    # Each repetition has its own duration and its own grasp.
+    starts = [ts[[s.episode for s in states].index(e)] for e in episodes]
+    durations = np.diff(starts)
+    assert np.ptp(durations) > 0.2
+    grasps = [max(s.flexion[0] for s in states if s.episode == e and s.phase == "move") for e in episodes[:3]]
+    assert np.ptp(grasps) > 0.02
+
+
+@pytest.mark.parametrize("task", TASKS)
+def test_every_task_is_smooth(task):
+    op = SimOperator(seed=2, task=task, mode="fixed")
+    ts, states = trajectory(op, 0.0, 25.0)
+    assert {s.task for s in states} == {task}
+    phases = {s.phase for s in states}
+    assert {"return", "pause"} <= phases and len(phases) >= 8
+    pos = np.array([s.wrist_position for s in states])
+    rot = np.array([s.wrist_rotation for s in states])
+    fingers = np.array([np.r_[s.flexion, s.abduction] for s in states])
+    speed = np.linalg.norm(np.diff(pos, axis=0), axis=1) * RATE
+    turn = np.arccos(np.clip((np.einsum("nij,nij->n", rot[1:], rot[:-1]) - 1) / 2, -1, 1)) * RATE
+    finger_speed = np.abs(np.diff(fingers, axis=0)).max(axis=1) * RATE
+    assert speed.max() < 1.5, f"wrist moves at {speed.max():.2f} m/s"
+    assert turn.max() < 6.0, f"wrist turns at {turn.max():.2f} rad/s"
+    assert finger_speed.max() < 10.0, f"a finger moves at {finger_speed.max():.2f} rad/s"
+    # It does move: the wrist travels and the fingers open and close.
+    assert np.ptp(pos, axis=0).max() > 0.08 and np.ptp(fingers, axis=0).max() > 0.8
+    # A person at a table: in front of the body, between the table (0.70 m) and the chest.
+    assert pos[:, 0].min() > 0.15 and pos[:, 2].min() > 0.70 and pos[:, 2].max() < 1.2
+
+
+@pytest.mark.parametrize("task", TASKS)
+def test_some_grasps_put_the_leap_hand_into_self_collision_most_poses_do_not(task, hand, hand_checker):
+    retarget = LeapRetargeter(hand)
+    op = SimOperator(seed=5, task=task, mode="fixed")
+    ts, states = trajectory(op, 0.0, 30.0, rate=10)
+    colliding = np.array([hand_checker.collides(retarget(s.hand_pose)) for s in states])
+    assert 0.03 < colliding.mean() < 0.5, f"{task}: {colliding.mean():.0%} of poses collide"
+    hits = {s.phase for s, c in zip(states, colliding) if c}
+    assert not hits & {"reach", "approach", "pause"}, f"{task}: collisions while {hits}"
+
+
+def test_set_task_switches_after_the_current_phase_and_stays_smooth():
+    clock = FakeClock()
+    op = SimOperator(seed=4, clock=clock)
+    assert op.task == "pick_place"
+    clock.t_ns = int(3.3e9)
+    before = [op.state(t) for t in np.arange(0, 3.3, 1 / RATE)]
+    assert op.set_task("pour")
+    after = [op.state(t) for t in np.arange(3.3, 20.0, 1 / RATE)]
+    states = before + after
+    assert all(s.task == "pick_place" for s in before)
+    tasks = [s.task for s in after]
+    assert "pour" in tasks
+    switch = 3.3 + tasks.index("pour") / RATE
+    assert switch < 3.3 + 4.0  # the current phase, a return to rest and a short pause
+    pos = np.array([s.wrist_position for s in states])
+    assert (np.linalg.norm(np.diff(pos, axis=0), axis=1) * RATE).max() < 1.5
+    with pytest.raises(ValueError, match="unknown task"):
+        op.set_task("juggle")
+
+
+def test_fixed_and_cycle_modes():
+    fixed = SimOperator(seed=0, task="hang", mode="fixed")
+    assert not fixed.set_task("pour")
+    assert {fixed.episode(t)[1] for t in np.arange(0, 40, 0.5)} == {"hang"}
+    cycle = SimOperator(seed=0, mode="cycle")
+    seen = []
+    for t in np.arange(0, 120, 0.5):
+        task = cycle.episode(t)[1]
+        if not seen or seen[-1] != task:
+            seen.append(task)
+    assert seen[:5] == list(TASKS)
+
+
+def test_switching_twice_within_an_episode_stays_smooth():
+    clock = FakeClock()
+    op = SimOperator(seed=6, clock=clock)
+    states = []
+    t = 0.0
+    for switch_at, task in ((2.0, "pour"), (3.9, "hang"), (4.6, "box_rotation")):
+        while t < switch_at:
+            states.append(op.state(t))
+            t += 1 / RATE
+        clock.t_ns = int(switch_at * 1e9)
+        op.set_task(task)
+    while t < 12.0:
+        states.append(op.state(t))
+        t += 1 / RATE
+    tasks = [s.task for s in states]
+    assert tasks[-1] == "box_rotation" and "hang" not in tasks  # hang was superseded before it began
+    pos = np.array([s.wrist_position for s in states])
+    fingers = np.array([s.flexion for s in states])
+    assert (np.linalg.norm(np.diff(pos, axis=0), axis=1) * RATE).max() < 1.5
+    assert (np.abs(np.diff(fingers, axis=0)) * RATE).max() < 10.0
