@@ -84,12 +84,26 @@ def default_rig_path() -> Path:
 
 
 def load_rig(path: str | Path | None = None) -> Rig:
+    path = Path(path) if path else default_rig_path()
+    return parse_rig(read_toml(path), path)
+
+
+def load_rig_text(text: str, where: str, path: Path | None = None) -> Rig:
+    """A rig from TOML text (e.g. the copy a session keeps in its metadata); `path` anchors relative paths."""
+    import tomllib
+
+    try:
+        data = tomllib.loads(text)
+    except tomllib.TOMLDecodeError as exc:
+        raise ConfigError(f"not valid TOML ({exc})", where) from None
+    return parse_rig(data, path, where)
+
+
+def parse_rig(data: dict, path: Path | None, where: str | None = None) -> Rig:
     from devices.base import KINDS
     from devices.registry import load_plugin
 
-    path = Path(path) if path else default_rig_path()
-    data = read_toml(path)
-    where = str(path)
+    where = where or str(path)
     unknown = sorted(set(data) - {"rig", "pipeline", "devices"})
     if unknown:
         raise ConfigError(f"unknown table [{unknown[0]}] (expected [rig], [pipeline] and [devices.<name>])", where)
@@ -111,4 +125,4 @@ def load_rig(path: str | Path | None = None) -> Rig:
             raise ConfigError(f"plugin {table['plugin']!r} declares no valid kind", dwhere)
         settings = from_table(cls.Settings, settings_table, dwhere)
         devices[name] = DeviceEntry(name, table["plugin"], cls.kind, cls, settings)
-    return Rig(path.resolve(), rig, pipeline, devices, data)
+    return Rig(path.resolve() if path else None, rig, pipeline, devices, data)

@@ -53,8 +53,23 @@ class Calibration:
 def load_calibration(path: str | Path | None) -> Calibration:
     if not path:
         return Calibration()
-    where = str(path)
-    cal = from_table(Calibration, read_toml(path), where)
+    return parse_calibration(read_toml(path), str(path))
+
+
+def load_calibration_text(text: str, where: str) -> Calibration:
+    """A calibration from TOML text (a session keeps a copy in its metadata); empty text: the defaults."""
+    import tomllib
+
+    if not text.strip():
+        return Calibration()
+    try:
+        return parse_calibration(tomllib.loads(text), where)
+    except tomllib.TOMLDecodeError as exc:
+        raise ConfigError(f"not valid TOML ({exc})", where) from None
+
+
+def parse_calibration(data: dict, where: str) -> Calibration:
+    cal = from_table(Calibration, data, where)
     unknown = sorted(set(cal.joints) - set(DEFAULT_LEAP_MAP))
     if unknown:
         raise ConfigError(f"unknown LEAP joint {unknown[0]!r} in [joints] (joints are \"0\"..\"15\")", where)

@@ -1,0 +1,42 @@
+"""`teleprev eval` as a function: re-run sessions, measure, compare with a baseline."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from pathlib import Path
+
+from teleprev.replay.metrics import session_metrics
+from teleprev.replay.report import Regression, Tolerances, compare, default_tolerances, make_report
+from teleprev.replay.rerun import Rerun, rerun_session
+
+
+@dataclass
+class Evaluation:
+    report: dict
+    reruns: list[Rerun]
+    regressions: list[Regression] | None = None
+
+
+def evaluate(sessions: list[str | Path], models=None, rig=None, baseline: dict | None = None,
+             tolerances: Tolerances | None = None) -> Evaluation:
+    from teleprev.robot.collision import SelfCollisionChecker
+    from teleprev.robot.model import load_robot
+
+    results, reruns = [], []
+    checker = None
+    for path in sessions:
+        r = rerun_session(path, models, rig)
+        if checker is None and len(r.effector_names) == 16:
+            checker = SelfCollisionChecker(load_robot("leap_hand_right"))
+        m = session_metrics(r, checker if len(r.effector_names) == 16 else None)
+        facts = {
+            "bit_identical": bool(m["overall"].get("reproduced", False)),
+            "models": {True: "as recorded", False: "different from the recording", None: "unknown"}[r.models_match],
+            "rig": r.rig_source,
+            "notes": r.notes,
+        }
+        results.append((str(path), m, facts))
+        reruns.append(r)
+    report = make_report(results)
+    regressions = compare(baseline, report, tolerances or default_tolerances()) if baseline is not None else None
+    return Evaluation(report, reruns, regressions)

@@ -1,0 +1,128 @@
+"""`teleprev replay` run live: the player on its own thread, the robot's state read back, the screen."""
+
+from __future__ import annotations
+
+import threading
+import time
+from pathlib import Path
+
+import numpy as np
+from rich.console import Console, Group
+from rich.live import Live
+from rich.text import Text
+
+from devices.base import DeviceContext
+from teleprev.errors import ConfigError
+from teleprev.messages import JointSample
+from teleprev.pipeline.build import build_pipeline, rig_calibration
+from teleprev.preview.keys import KeyReader
+from teleprev.preview.robot_view import Layer, RobotView
+from teleprev.replay.player import Player, load_playback, safe_speed, validate
+from teleprev.rig import load_rig, load_rig_text
+from teleprev.robot.model import load_robot
+from teleprev.session.clock import SessionClock
+from teleprev.session.reader import SessionReader
+from teleprev.session.run import ROBOT_BOUNDS
+
+
+class StateTap:
+    """Keeps the latest state each actuator reports, for the engage ramp and the screen."""
+
+    def __init__(self):
+        self.latest: dict[str, JointSample] = {}
+
+    def sink(self, sample, receive_ns: int) -> None:
+        if isinstance(sample.payload, JointSample):
+            self.latest[sample.topic] = sample.payload
+
+
+def _recorded_rig(session: Path):
+    meta = SessionReader(session).metadata
+    text = meta.get("rig", {}).get("toml")
+    if not text:
+        raise ConfigError("the session does not carry its rig; pass --rig", str(session))
+    return load_rig_text(text, f"{session}: recorded rig", Path(meta["rig"].get("path") or session))
+
+
+def build_player(session: Path, episode, speed: float, to: str, rig_path=None):
+    """The player and what it drives; returns (player, runners, tap, rig, message)."""
+    from devices.registry import load_plugin
+    from devices.runner import DeviceRunner
+
+    rig = load_rig(rig_path) if rig_path else _recorded_rig(session)
+    pipeline = build_pipeline(rig, calibration=rig_calibration(rig) if rig_path else None)
+    eff_guard = pipeline.effector.guard
+    playback = validate(load_playback(session, episode), pipeline.arm_guard, eff_guard)
+    effective = safe_speed(playback, pipeline.arm_guard.speed, eff_guard.speed, speed)
+    message = "" if effective >= speed else f"playing at {effective:.2f}x: {speed:g}x would exceed a joint's speed limit"
+    clock = SessionClock()
+    actuators, runners, tap = {}, [], StateTap()
+    if to != "preview":
+        context = DeviceContext(clock, rig.dir, {}, rig.rig.robot, rig.rig.end_effector)
+        if to == "sim":
+            entries = {"arm": load_plugin("sim.arm"), "hand": load_plugin("sim.hand")}
+            devices = {kind: cls(f"replay_{kind}", cls.Settings(), context) for kind, cls in entries.items()}
+        else:
+            rig.require("arm", "hand")
+            devices = {kind: rig.of_kind(kind)[0].cls(rig.of_kind(kind)[0].name, rig.of_kind(kind)[0].settings, context) for kind in ("arm", "hand")}
+        actuators = devices
+        runners = [DeviceRunner(dev, tap.sink, clock) for dev in devices.values()]
+
+    def measured():
+        arm = next((s for t, s in tap.latest.items() if t.startswith("/arm/")), None)
+        hand = next((s for t, s in tap.latest.items() if t.startswith("/hand/")), None)
+        if arm is None or hand is None:
+            return None  # not connected yet: the ramp waits
+
+        pick = lambda s, names: np.array([s.positions[s.names.index(n)] for n in names])
+        return pick(arm, playback.arm_names), pick(hand, playback.effector_names)
+
+    player = Player(playback, effective, actuators, pipeline.arm_guard, eff_guard, measured, rig.pipeline.engage_speed_frac)
+    return player, runners, tap, rig, message
+
+
+def play(session: Path, episode, speed: float, to: str, rig_path, engage_after, console: Console, view: str, show: bool) -> None:
+    player, runners, tap, rig, message = build_player(session, episode, speed, to, rig_path)
+    for r in runners:
+        r.start()
+    thread = threading.Thread(target=player.run, daemon=True)
+    thread.start()
+    if to == "preview":
+        player.engage()  # nothing moves: play at once
+    elif engage_after is not None:
+        threading.Timer(engage_after, player.engage).start()
+    robot = load_robot(rig.rig.robot)
+    robot_view = RobotView(robot, view, ROBOT_BOUNDS.get(view))
+    p = player.p
+
+    def frame():
+        k = player.state.index
+        joints = dict(zip(p.arm_names, p.arm[k]))
+        if p.effector_names[0] in robot.joint_index:
+            joints.update(zip(p.effector_names, p.effector[k]))
+        banner = {"preview": ("REPLAY: PREVIEW (the robot holds; space to engage)", "bold black on yellow"),
+                  "ramp": ("REPLAY: moving to the start", "bold white on red"),
+                  "playing": ("REPLAY: PLAYING", "bold white on red"), "done": ("REPLAY: done", "bold")}[player.state.mode]
+        info = Text(f"{session.name}  step {k + 1}/{len(p.t_ns)}  {(p.t_ns[k] - p.t_ns[0]) / 1e9:6.2f} s  speed {player.speed:.2f}x  "
+                    f"({p.source}; {p.adjusted} steps adjusted by the guards)")
+        size = console.size
+        picture = robot_view.render([Layer(robot.vector(joints), "cyan")], max(size.width - 2, 20), max(size.height - 5, 6))
+        return Group(Text(banner[0], style=banner[1], justify="center"), info, Text(message, style="yellow"), picture)
+
+    try:
+        with KeyReader(lambda key: player.engage() if key == " " else player.stop() if key in ("q", "\x1b") else None):
+            if show:
+                with Live(console=console, auto_refresh=False) as live:
+                    while thread.is_alive():
+                        live.update(frame(), refresh=True)
+                        time.sleep(0.04)
+                    live.update(frame(), refresh=True)
+            else:
+                thread.join()
+    finally:
+        player.stop()
+        thread.join(2.0)
+        for r in runners:
+            r.stop()
+    sent = sum(1 for phase, _, _ in player.state.sent if phase == "playing")
+    console.print(f"played {len(p.t_ns)} steps at {player.speed:.2f}x to {to}; {sent} commands sent" + (f"; {message}" if message else ""))

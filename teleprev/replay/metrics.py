@@ -1,0 +1,118 @@
+"""The numbers `teleprev eval` reports for a re-run session, per episode and overall.
+
+    steps                      pipeline steps (glove samples)
+    collision_before_frac      steps whose retargeted hand was in self-collision (the Corrector's verdict)
+    collision_after_frac       hand commands in self-collision, by the exact checker (must be 0)
+    deviation_mean_rad/_max    max |corrected - retargeted| over joints, mean and worst over steps
+    untouched/ccn/fallback     what the Corrector did, as counts
+    arm_speed_max, hand_speed_max      rad/s (m/s for a gripper) between consecutive commands
+    arm_jerk_max, hand_jerk_max        rad/s^3, third differences of commands at their own spacing
+    latency_ms_p50/_p99        pipeline step time in this re-run
+    held_frac                  steps whose input was flagged and held (stale, invalid, out of range)
+    reproduced                 re-run equals recorded, bit for bit, on every command and corrected target
+"""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+
+from teleprev.replay.rerun import Rerun
+from teleprev.session import topics
+
+HOLD_FLAGS = {"glove_stale", "glove_invalid", "glove_out_of_range", "suit_stale", "suit_invalid", "suit_out_of_range"}
+
+
+def _same(a: np.ndarray, b: np.ndarray) -> bool:
+    """Bit-identical, NaN (nothing produced) matching NaN."""
+    return a.shape == b.shape and bool(np.all((a == b) | (np.isnan(a) & np.isnan(b))))
+
+
+MAX_RUN_GAP_S = 0.05  # commands further apart than this belong to different runs (e.g. before/after preview)
+
+
+def _motion(t_ns: np.ndarray, q: np.ndarray) -> tuple[float, float]:
+    """Max speed and jerk over the rows of q that hold a command, within runs of consecutive commands."""
+    have = ~np.isnan(q).any(axis=1)
+    t, q = t_ns[have], q[have]
+    speed = jerk = 0.0
+    if len(t) < 2:
+        return speed, jerk
+    dt = np.diff(t) / 1e9  # difference the integer nanoseconds first: epoch seconds in float64 lose ~1e-7 s
+    breaks = np.flatnonzero(dt > MAX_RUN_GAP_S) + 1
+    for tr, qr in zip(np.split(t, breaks), np.split(q, breaks)):
+        if len(tr) < 2:
+            continue
+        d = np.diff(tr) / 1e9
+        v = np.diff(qr, axis=0) / d[:, None]
+        speed = max(speed, float(np.abs(v).max()))
+        if len(tr) >= 4:
+            a = np.diff(v, axis=0) / d[1:, None]
+            jerk = max(jerk, float(np.abs(np.diff(a, axis=0) / d[2:, None]).max()))
+    return speed, jerk
+
+
+def step_metrics(r: Rerun, rows: np.ndarray, hand_collides: np.ndarray | None) -> dict:
+    """Metrics over the steps selected by the boolean mask `rows`."""
+    n = int(rows.sum())
+    out: dict = {"steps": n}
+    if n == 0:
+        return out
+    action = r.corrector[rows]
+    corrected = action != "held"
+    retargeted, fixed = r.rerun[topics.RETARGETED][rows], r.rerun[topics.CORRECTED][rows]
+    dev = np.nanmax(np.abs(fixed - retargeted), axis=1) if retargeted.shape[1] else np.zeros(n)
+    dev = dev[~np.isnan(dev)]
+    out["collision_before_frac"] = float(np.isin(action, ("ccn", "fallback")).sum() / max(corrected.sum(), 1))
+    if hand_collides is not None:
+        commanded = ~np.isnan(r.rerun[topics.COMMAND_HAND][rows]).any(axis=1)
+        out["collision_after_frac"] = float(hand_collides[rows][commanded].sum() / max(commanded.sum(), 1))
+    out["deviation_mean_rad"] = float(dev.mean()) if len(dev) else 0.0
+    out["deviation_max_rad"] = float(dev.max()) if len(dev) else 0.0
+    for name in ("untouched", "ccn", "fallback"):
+        out[name] = int((action == name).sum())
+    out["arm_speed_max"], out["arm_jerk_max"] = _motion(r.t_ns[rows], r.rerun[topics.COMMAND_ARM][rows])
+    out["hand_speed_max"], out["hand_jerk_max"] = _motion(r.t_ns[rows], r.rerun[topics.COMMAND_HAND][rows])
+    lat = r.latency_ns[rows] / 1e6
+    out["latency_ms_p50"], out["latency_ms_p99"] = float(np.percentile(lat, 50)), float(np.percentile(lat, 99))
+    flags = [r.flags[i] for i in np.flatnonzero(rows)]
+    out["held_frac"] = float(sum(bool(HOLD_FLAGS & set(f)) for f in flags) / n)
+    out["reproduced"] = all(_same(r.rerun[k][rows], r.recorded[k][rows]) for k in (topics.COMMAND_ARM, topics.COMMAND_HAND, topics.CORRECTED))
+    return out
+
+
+def dropped_inputs(meta: dict) -> int:
+    """Messages the recording lost before they reached the file (the loop's queue and the recorder's)."""
+    total = 0
+    for record, key in (("loop", "dropped"), ("recorder", "dropped")):
+        raw = meta.get(record, {}).get(key)
+        if raw:
+            try:
+                value = json.loads(raw)
+                total += sum(value.values()) if isinstance(value, dict) else int(value)
+            except (ValueError, TypeError):
+                pass
+    return total
+
+
+def session_metrics(r: Rerun, checker=None) -> dict:
+    """{"overall": {...}, "episodes": [{...}, ...]} for one re-run session."""
+    hand_cmd = r.rerun[topics.COMMAND_HAND]
+    collides = None
+    if checker is not None:
+        collides = np.zeros(len(r.t_ns), dtype=bool)
+        have = np.flatnonzero(~np.isnan(hand_cmd).any(axis=1))
+        if len(have):
+            collides[have] = checker.pair_matrix(hand_cmd[have]).any(axis=1)
+    overall = step_metrics(r, np.ones(len(r.t_ns), dtype=bool), collides)
+    overall["dropped_inputs"] = dropped_inputs(r.metadata)
+    overall["duration_s"] = r.duration_s
+    overall["rerun_wall_s"] = r.wall_s
+    overall["realtime_x"] = r.duration_s / r.wall_s if r.wall_s > 0 else 0.0
+    episodes = []
+    for ep in r.episodes:
+        stop = ep.stop_ns if ep.stop_ns is not None else np.iinfo(np.int64).max
+        m = step_metrics(r, (r.t_ns >= ep.start_ns) & (r.t_ns < stop), collides)
+        episodes.append({"episode": ep.index, "task": ep.task, "discarded": ep.discarded, "outcome": ep.outcome, **m})
+    return {"overall": overall, "episodes": episodes}

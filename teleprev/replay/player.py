@@ -1,0 +1,186 @@
+"""Playing a session's commands back: on screen, to the simulated robot, or to a real one.
+
+The sequence played is the recorded commands (or, for a session recorded in preview only, the previewed
+targets). It goes through the same guards as live commands, in the recording's own time: a sequence
+that was valid when recorded passes unchanged, anything else is stepped within the caps. Played X
+times faster, every step would be X times faster, so the speed is capped at the largest multiple that
+keeps every joint under its speed limit; the values sent never depend on the speed.
+
+With a robot attached, playback starts in preview (the robot receives nothing); engaging first ramps
+the robot from where it is to the first command at a fraction of the caps, then plays.
+"""
+
+from __future__ import annotations
+
+import threading
+import time
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from teleprev.errors import SessionError
+from teleprev.messages import JointSample
+from teleprev.pipeline.guard import JointGuard
+from teleprev.session import topics
+from teleprev.session.reader import SessionReader
+
+
+@dataclass
+class Playback:
+    t_ns: np.ndarray  # recorded step times
+    arm: np.ndarray  # (N, arm joints)
+    effector: np.ndarray  # (N, effector joints)
+    arm_names: tuple[str, ...]
+    effector_names: tuple[str, ...]
+    source: str  # "commands" or "targets"
+    adjusted: int = 0  # steps the guards had to change
+
+
+def _stream(reader: SessionReader, topic: str, lo: int, hi: int) -> tuple[dict[int, np.ndarray], tuple[str, ...]]:
+    values, names = {}, ()
+    if topic in reader.topics:
+        for msg in reader.messages(topics=[topic], start_ns=lo, end_ns=hi):
+            values[msg.payload.stamp_ns] = msg.payload.positions
+            names = msg.payload.names
+    return values, names
+
+
+def load_playback(path, episode: int | None = None) -> Playback:
+    reader = SessionReader(path)
+    lo, hi = 0, 1 << 63
+    if episode is not None:
+        eps = {e.index: e for e in reader.episodes()}
+        if episode not in eps:
+            raise SessionError(f"no episode {episode} (episodes: {sorted(eps) or 'none'})", str(path))
+        lo, hi = eps[episode].start_ns, eps[episode].stop_ns or hi
+    arm, arm_names = _stream(reader, topics.COMMAND_ARM, lo, hi)
+    eff, eff_names = _stream(reader, topics.COMMAND_HAND, lo, hi)
+    source = "commands"
+    if not arm:
+        arm, arm_names = _stream(reader, topics.ARM_TARGET, lo, hi)
+        eff, eff_names = _stream(reader, topics.CORRECTED, lo, hi)
+        source = "targets"
+    if not arm or not eff:
+        raise SessionError("nothing to play: the session holds no arm and end-effector commands or targets", str(path))
+    stamps = sorted(set(arm) | set(eff))
+    first_arm = arm[min(arm)]
+    first_eff = eff[min(eff)]
+    a, e, last_a, last_e = [], [], first_arm, first_eff
+    for s in stamps:  # hold the other stream's last value where only one was commanded at a step
+        last_a, last_e = arm.get(s, last_a), eff.get(s, last_e)
+        a.append(last_a)
+        e.append(last_e)
+    return Playback(np.array(stamps, dtype=np.int64), np.array(a), np.array(e), tuple(arm_names), tuple(eff_names), source)
+
+
+def validate(p: Playback, arm_guard: JointGuard, effector_guard: JointGuard) -> Playback:
+    """The sequence as the guards pass it in the recording's time (unchanged when it was valid)."""
+    arm, eff = p.arm.copy(), p.effector.copy()
+    adjusted = 0
+    for k in range(1, len(p.t_ns)):
+        dt = (p.t_ns[k] - p.t_ns[k - 1]) / 1e9
+        a = arm_guard.step(arm[k - 1], p.arm[k], dt)
+        e = effector_guard.step(eff[k - 1], p.effector[k], dt, target_valid=effector_guard.valid(p.effector[k]))
+        adjusted += not (np.array_equal(a, p.arm[k]) and np.array_equal(e, p.effector[k]))
+        arm[k], eff[k] = a, e
+    return Playback(p.t_ns, arm, eff, p.arm_names, p.effector_names, p.source, adjusted)
+
+
+def safe_speed(p: Playback, arm_caps: np.ndarray, effector_caps: np.ndarray, requested: float) -> float:
+    """The largest speed up to `requested` at which no step exceeds a joint's speed cap in wall time."""
+    if len(p.t_ns) < 2:
+        return requested
+    dt = np.diff(p.t_ns) / 1e9
+    ratios = []
+    for q, caps in ((p.arm, arm_caps), (p.effector, effector_caps)):
+        step = np.abs(np.diff(q, axis=0))
+        with np.errstate(divide="ignore", invalid="ignore"):
+            r = caps[None, :] * dt[:, None] / step  # speed multiple each step allows
+        ratios.append(np.nanmin(np.where(np.isfinite(r), r, np.inf)) if step.size else np.inf)
+    return float(min(requested, *ratios))
+
+
+@dataclass
+class PlayerState:
+    mode: str = "preview"  # preview | ramp | playing | done
+    index: int = 0
+    sent: list[tuple[str, str, np.ndarray]] = field(default_factory=list)  # (phase, kind, command) in send order
+    message: str = ""
+
+
+class Player:
+    """Sends a validated Playback to actuators ("arm", "hand") at `speed`; `measured()` gives the robot's
+    current (arm, effector) joints for the engage ramp."""
+
+    def __init__(self, playback: Playback, speed: float, actuators: dict, arm_guard: JointGuard, effector_guard: JointGuard,
+                 measured=None, engage_speed_frac: float = 0.5, rate_hz: float = 120.0):
+        self.p = playback
+        self.speed = speed
+        self.actuators = actuators
+        self.arm_guard, self.effector_guard = arm_guard, effector_guard
+        self.measured = measured
+        self.engage_speed_frac = engage_speed_frac
+        self.period = 1.0 / rate_hz
+        self.connect_timeout_s = 10.0
+        self.state = PlayerState()
+        self._engage = threading.Event()
+        self._stop = threading.Event()
+
+    def engage(self) -> None:
+        self._engage.set()
+
+    def stop(self) -> None:
+        self._stop.set()
+
+    def _send(self, arm: np.ndarray, eff: np.ndarray, t_ns: int) -> None:
+        for kind, names, q in (("arm", self.p.arm_names, arm), ("hand", self.p.effector_names, eff)):
+            device = self.actuators.get(kind)
+            if device is not None:
+                device.send(JointSample(t_ns, names, q))
+            self.state.sent.append((self.state.mode, kind, q))
+
+    def run(self) -> PlayerState:
+        """Preview until engaged (or stopped), ramp, then play; returns what was sent."""
+        while not self._engage.wait(0.05):
+            if self._stop.is_set():
+                self.state.mode = "done"
+                return self.state
+        if self.actuators and not self._ramp():
+            self.state.mode = "done"
+            return self.state
+        self.state.mode = "playing"
+        start, t0 = time.perf_counter(), self.p.t_ns[0]
+        for k in range(len(self.p.t_ns)):
+            if self._stop.is_set():
+                break
+            due = (self.p.t_ns[k] - t0) / 1e9 / self.speed
+            time.sleep(max(0.0, due - (time.perf_counter() - start)))
+            self.state.index = k
+            self._send(self.p.arm[k], self.p.effector[k], int(self.p.t_ns[k]))
+        self.state.mode = "done"
+        return self.state
+
+    def _ramp(self) -> bool:
+        """Move from the robot's measured joints to the first command; False if the robot never reported."""
+        self.state.mode = "ramp"
+        measured, deadline = None, time.perf_counter() + self.connect_timeout_s
+        while measured is None and not self._stop.is_set():
+            measured = self.measured() if self.measured else (self.p.arm[0], self.p.effector[0])
+            if measured is None:
+                if time.perf_counter() > deadline:
+                    self.state.message = "the robot reports no state: not moving it"
+                    return False
+                time.sleep(0.02)
+        if measured is None:
+            return False
+        arm, eff = measured
+        arm = np.clip(arm, self.arm_guard.lower, self.arm_guard.upper)
+        target_a, target_e = self.p.arm[0], self.p.effector[0]
+        while not self._stop.is_set():
+            if np.max(np.abs(arm - target_a)) < 1e-9 and np.max(np.abs(eff - target_e)) < 1e-9:
+                return True
+            arm = self.arm_guard.step(arm, target_a, self.period, self.engage_speed_frac)
+            eff = self.effector_guard.step(eff, target_e, self.period, self.engage_speed_frac, target_valid=True)
+            self._send(arm, eff, 0)
+            time.sleep(self.period)
+        return False

@@ -1,0 +1,140 @@
+"""Re-running the pipeline on a session's recorded raw streams.
+
+The session's raw device streams and mode switches go through a PipelineDriver in log-time order, as
+they went through the live session loop; the driver is built from the rig and calibration the session
+recorded in its metadata (or from a rig file given instead) and from the models given (default: the
+shipped ones). Every step's outputs are kept next to what the session recorded for the same step.
+"""
+
+from __future__ import annotations
+
+import json
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from teleprev.errors import SessionError
+from teleprev.messages import Event, JointSample
+from teleprev.pipeline.build import build_pipeline, rig_calibration
+from teleprev.pipeline.driver import InputTopics, PipelineDriver
+from teleprev.retarget.calibration import load_calibration_text
+from teleprev.rig import load_rig, load_rig_text
+from teleprev.session import topics
+from teleprev.session.reader import Episode, SessionReader
+
+RECORDED_OUTPUTS = (topics.RETARGETED, topics.CORRECTED, topics.ARM_TARGET, topics.COMMAND_ARM, topics.COMMAND_HAND)
+
+
+@dataclass
+class Rerun:
+    """Per pipeline step (one row per glove sample), re-run and recorded side by side; NaN where a step
+    produced nothing on that stream (e.g. no command in preview)."""
+
+    session: Path
+    t_ns: np.ndarray
+    mode: np.ndarray  # "preview" | "execute"
+    corrector: np.ndarray  # "untouched" | "ccn" | "fallback" | "held"
+    latency_ns: np.ndarray
+    flags: list[list[str]]
+    arm_names: tuple[str, ...]
+    effector_names: tuple[str, ...]
+    rerun: dict[str, np.ndarray]  # topic -> (steps, joints)
+    recorded: dict[str, np.ndarray]
+    episodes: list[Episode]
+    metadata: dict[str, dict[str, str]]
+    models_match: bool | None  # the recorded models' hashes equal those used now (None: unknown)
+    rig_source: str
+    duration_s: float
+    input_messages: int
+    wall_s: float = 0.0
+    notes: list[str] = field(default_factory=list)
+
+
+def _pipeline_for(reader: SessionReader, path: Path, models, rig_path):
+    meta = reader.metadata
+    if rig_path:
+        rig = load_rig(rig_path)
+        return build_pipeline(rig, models, rig_calibration(rig)), f"rig file {rig_path}"
+    if "rig" not in meta or not meta["rig"].get("toml"):
+        raise SessionError("the session does not carry its rig (metadata 'rig'); pass --config RIG", str(path))
+    recorded_path = meta["rig"].get("path") or None
+    rig = load_rig_text(meta["rig"]["toml"], f"{path}: recorded rig", Path(recorded_path) if recorded_path else None)
+    calibration = load_calibration_text(meta.get("calibration", {}).get("toml", ""), f"{path}: recorded calibration")
+    return build_pipeline(rig, models, calibration), "recorded in the session"
+
+
+def _models_match(meta: dict, pipeline) -> bool | None:
+    recorded = meta.get("models")
+    corrector = getattr(pipeline.effector, "corrector", None)
+    if not recorded or corrector is None or not hasattr(corrector, "model_files"):
+        return None if corrector is not None else True
+    import hashlib
+
+    now = {name: hashlib.sha256(Path(p).read_bytes()).hexdigest() for name, p in corrector.model_files().items()}
+    return now == recorded
+
+
+def rerun_session(path: str | Path, models: str | Path | None = None, rig_path: str | Path | None = None) -> Rerun:
+    path = Path(path)
+    started = time.perf_counter()
+    reader = SessionReader(path)
+    meta = reader.metadata
+    pipeline, rig_source = _pipeline_for(reader, path, models, rig_path)
+    try:
+        inputs = InputTopics(**json.loads(meta["pipeline"]["inputs"]))
+    except (KeyError, TypeError, ValueError):
+        raise SessionError("the session does not say which streams fed its pipeline (metadata 'pipeline')", str(path)) from None
+    missing = [t for t in (inputs.hand, inputs.wrist, inputs.arm, inputs.effector) if t not in reader.topics]
+    if missing:
+        raise SessionError(f"the session lacks the pipeline's input streams {missing}", str(path))
+    driver = PipelineDriver(pipeline, inputs)
+    arm_names, eff_names = pipeline.arm_names, pipeline.effector_names
+    widths = {topics.RETARGETED: len(eff_names), topics.CORRECTED: len(eff_names), topics.ARM_TARGET: len(arm_names),
+              topics.COMMAND_ARM: len(arm_names), topics.COMMAND_HAND: len(eff_names)}
+
+    t_list, mode, action, latency, flags = [], [], [], [], []
+    rows: dict[str, list] = {k: [] for k in RECORDED_OUTPUTS}
+    recorded_by_stamp: dict[str, dict[int, np.ndarray]] = {k: {} for k in RECORDED_OUTPUTS}
+    n_inputs = 0
+    wanted = [inputs.hand, inputs.wrist, inputs.arm, inputs.effector, topics.MODE, *RECORDED_OUTPUTS]
+    for msg in reader.messages(topics=[t for t in wanted if t in reader.topics]):
+        if msg.topic in recorded_by_stamp:
+            if isinstance(msg.payload, JointSample):
+                recorded_by_stamp[msg.topic][msg.payload.stamp_ns] = msg.payload.positions
+            continue
+        n_inputs += 1
+        t0 = time.perf_counter_ns()
+        out = driver.feed(msg)
+        if out.result is None:
+            continue
+        latency.append(time.perf_counter_ns() - t0)
+        t_list.append(msg.log_time_ns)
+        report = out.result.report
+        mode.append(report["mode"])
+        action.append(report["corrector"])
+        flags.append(report["flags"])
+        produced = {topic: payload.positions for topic, payload in out.logged if isinstance(payload, JointSample)}
+        for topic in RECORDED_OUTPUTS:
+            rows[topic].append(produced.get(topic))
+    t = np.array(t_list, dtype=np.int64)
+
+    def table(values: list, width: int) -> np.ndarray:
+        out = np.full((len(values), width), np.nan)
+        for i, v in enumerate(values):
+            if v is not None:
+                out[i] = v
+        return out
+
+    rerun = {k: table(rows[k], widths[k]) for k in RECORDED_OUTPUTS}
+    recorded = {k: table([recorded_by_stamp[k].get(int(s)) for s in t], widths[k]) for k in RECORDED_OUTPUTS}
+    notes = []
+    extra = {k: len(set(recorded_by_stamp[k]) - set(t.tolist())) for k in RECORDED_OUTPUTS}
+    if any(extra.values()):
+        notes.append(f"recorded outputs at times the re-run never stepped: { {k: v for k, v in extra.items() if v} }")
+    return Rerun(
+        path, t, np.array(mode), np.array(action), np.array(latency, dtype=np.int64), flags, arm_names, eff_names,
+        rerun, recorded, reader.episodes(), meta, _models_match(meta, pipeline), rig_source, reader.duration_s, n_inputs,
+        time.perf_counter() - started, notes,
+    )

@@ -1,0 +1,32 @@
+"""Recording real sim sessions for tests (the whole path: sim devices, loop, pipeline, recorder)."""
+
+from __future__ import annotations
+
+import time
+from pathlib import Path
+
+from teleprev.rig import default_rig_path
+from teleprev.session.recording import RecordOptions, Recording
+
+RIGS = default_rig_path().parent
+
+
+def record_sim(out: Path, rig: str = "sim.toml", seconds: float = 3.0, episodes: int = 1, engage_after: float | None = 1.0,
+               task: str = "pick_place", **options) -> Recording:
+    """Record `episodes` episodes of `seconds` each; engage `engage_after` s into each (None: preview only)."""
+    rec = Recording(RecordOptions(out=out, rig=RIGS / rig, task=task, **options))
+    rec.start()
+    try:
+        for _ in range(episodes):
+            rec.loop.control("start", task=task)
+            if engage_after is not None:
+                time.sleep(engage_after)
+                rec.loop.control("mode", mode="execute", reason="test")
+                time.sleep(seconds - engage_after)
+            else:
+                time.sleep(seconds)
+            rec.loop.control("mode", mode="preview", reason="test")
+            rec.loop.control("stop")
+    finally:
+        rec.stop()
+    return rec
