@@ -53,3 +53,19 @@ def test_bad_calibration_files_are_named(tmp_path):
     bad.write_text('[joints."3"]\nscale = "big"\n')
     with pytest.raises(ConfigError, match=r"bad.toml.*joints.3.scale.*expected a number"):
         load_calibration(bad)
+
+
+def test_calibrate_command_on_the_sim_rig_writes_a_usable_file(tmp_path):
+    """The guided command, unattended: the simulated operator holds each pose when asked."""
+    import subprocess
+    import sys
+
+    out = tmp_path / "cal.toml"
+    run = subprocess.run([sys.executable, "-m", "teleprev.cli.app", "calibrate", "--out", str(out), "--hold", "0.6", "--seconds", "0.5"],
+                         capture_output=True, text=True, timeout=120)
+    assert run.returncode == 0, run.stderr
+    assert "[rig] calibration" in run.stdout
+    cal = load_calibration(out)
+    # the sim's fist closes well past its open hand, so the flexion joints got real scales
+    assert all(0.5 < cal.joints[j].scale < 3.0 and cal.joints[j].scale != 1.0 for j in ("1", "2", "5", "6", "9", "10"))
+    assert abs(cal.calibration.suit_yaw) < 0.2  # the sim operator faces the robot

@@ -165,6 +165,7 @@ class SimOperator:
         self._clock = clock
         self._task = task
         self._lock = threading.RLock()
+        self._hold: np.ndarray | None = None  # a calibration pose held instead of the task (see hold)
         rng = np.random.default_rng([seed, 0x5EED])
         self._wrist_tremor = _Tremor(rng, 3, tremor=0.0006, sway=0.006)
         self._rot_tremor = _Tremor(rng, 3, tremor=0.004, sway=0.02)
@@ -263,9 +264,19 @@ class SimOperator:
 
     def on_episode_task(self, name: str) -> None:
         """The session's episode-start hook (DeviceContext.task_listeners): follow the episode's task
-        label when it is one of the five; any other label leaves the operator at what it is doing."""
+        label when it is one of the five; "calibration:<pose>" holds a calibration pose (open, fist,
+        neutral) until "calibration:done"; any other label leaves the operator at what it is doing."""
         if name in SCRIPTS:
             self.set_task(name)
+        elif name.startswith("calibration:"):
+            self.hold(name.split(":", 1)[1])
+
+    def hold(self, pose: str) -> None:
+        """Hold a calibration pose with the wrist at rest: "open" (flat hand), "fist", "neutral" (the
+        relaxed hand); "done" goes back to the task."""
+        shapes = {"open": grasps.flat(0.0), "fist": grasps.fist(1.0), "neutral": grasps.rest()}
+        with self._lock:
+            self._hold = None if pose == "done" else shapes.get(pose, self._hold)
 
     @property
     def task(self) -> str:
@@ -276,8 +287,8 @@ class SimOperator:
     def state(self, t: float) -> OperatorState:
         ep = self._episode(t)
         with self._lock:
-            w = ep.wrist(t)
-            h = ep.hand(t)
+            w = ep.wrist(t) if self._hold is None else np.zeros(6)
+            h = ep.hand(t) if self._hold is None else self._hold
             phase_i = bisect.bisect_right(ep.phase_starts, t) - 1
             phase = ep.phase_names[max(phase_i, 0)]
         position = REST_WRIST + w[:3] + self._wrist_tremor(t)
@@ -290,7 +301,7 @@ class SimOperator:
         """Flexion and abduction (15,) each; the glove's fast path (no wrist)."""
         ep = self._episode(t)
         with self._lock:
-            h = ep.hand(t)
+            h = ep.hand(t) if self._hold is None else self._hold
         angles = h + self._finger_tremor(t)
         return angles[:15], angles[15:]
 

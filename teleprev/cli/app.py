@@ -11,7 +11,12 @@ import sys
 import typer
 
 from teleprev import __version__
+from teleprev.cli import devices as devices_cli
+from teleprev.cli import calibrate as calibrate_cli
+from teleprev.cli import record as record_cli
+from teleprev.cli import replay as replay_cli
 from teleprev.cli import robot
+from teleprev.cli import session as session_cli
 
 app = typer.Typer(
     name="teleprev",
@@ -22,9 +27,22 @@ app = typer.Typer(
     context_settings={"help_option_names": ["-h", "--help"]},
 )
 
+COLLECT = "Collect"
 MODELS = "Robot and models"
 
+app.command("record", rich_help_panel=COLLECT)(record_cli.record)
+app.command("calibrate", rich_help_panel=COLLECT)(calibrate_cli.calibrate)
+
+app.add_typer(devices_cli.app, name="devices", rich_help_panel=COLLECT)
+
 app.add_typer(robot.app, name="robot", rich_help_panel=MODELS)
+
+SESSIONS = "Sessions"
+
+app.command("info", rich_help_panel=SESSIONS)(session_cli.info)
+app.command("recover", rich_help_panel=SESSIONS)(session_cli.recover)
+app.command("replay", rich_help_panel=SESSIONS)(replay_cli.replay)
+app.command("eval", rich_help_panel=SESSIONS)(replay_cli.eval_)
 
 
 def _version(value: bool) -> None:
@@ -48,8 +66,10 @@ def main() -> None:
         app()
     except TeleprevError as exc:
         from rich.console import Console
+        from rich.markup import escape
 
-        Console(stderr=True).print(f"[bold red]error:[/] {exc}", highlight=False, soft_wrap=True)
+        # escape: "[devices.suit]" in a message is where the error is, not rich markup
+        Console(stderr=True).print(f"[bold red]error:[/] {escape(str(exc))}", highlight=False, soft_wrap=True)
         sys.exit(2)
     except KeyboardInterrupt:
         sys.exit(130)

@@ -22,8 +22,7 @@ from typing import Any, Callable
 import numpy as np
 
 from devices.base import Actuator, Device
-from teleprev.errors import DeviceError
-from teleprev.messages import Event, JointSample, Logged, Sample
+from teleprev.messages import Event, JointSample, Logged, PoseSample, Sample
 from teleprev.pipeline.driver import PipelineDriver
 from teleprev.session import topics
 from teleprev.session.clock import SessionClock
@@ -83,7 +82,7 @@ class SessionLoop:
         on_episode_start: Callable[[str], None] | None = None,
     ):
         """`log` receives every message to record (Recorder.log); `actuators` maps "arm" and "hand" to the
-        devices that receive commands; `frames` (a FramePublisher) turns measured joints into /tf."""
+        ActuatorPorts that pass commands on; `frames` (a FramePublisher) turns measured joints into /tf."""
         self.clock = clock
         self._log = log
         self.driver = driver
@@ -146,14 +145,20 @@ class SessionLoop:
 
     def _sample(self, sample: Sample, receive_ns: int) -> None:
         t = self._stamp(receive_ns)
-        msg = Logged(sample.topic, t, sample.payload)
+        payload = sample.payload
+        if isinstance(payload, PoseSample):
+            # Foxglove's pose schema cannot store -0.0 (it reads back as +0.0); adding +0.0 turns -0.0
+            # into +0.0 and leaves every other value alone, so the pipeline sees what a replay will.
+            payload = replace(payload, position=np.asarray(payload.position, float) + 0.0,
+                              orientation=np.asarray(payload.orientation, float) + 0.0)
+        msg = Logged(sample.topic, t, payload)
         self._log(msg)
         counter = self.stats.streams.get(sample.topic)
         if counter is None:
             counter = self.stats.streams[sample.topic] = StreamCounter(first_ns=t)
         counter.count += 1
         counter.last_ns = t
-        counter.latency_ns = t - getattr(sample.payload, "stamp_ns", t)
+        counter.latency_ns = t - getattr(payload, "stamp_ns", t)
         if self.driver is None:
             return
         started = time.perf_counter_ns()
@@ -176,17 +181,16 @@ class SessionLoop:
         self._publish_frames(t)
 
     def _send(self, kind: str, command: JointSample | None) -> None:
+        """Through an ActuatorPort: never raises; a device that is down or refuses is counted, not retried."""
         if command is None:
             return
-        device = self.actuators.get(kind)
-        if device is None:
+        port = self.actuators.get(kind)
+        if port is None:
             return
-        try:
-            device.send(command)
+        if port.send(command):
             self.stats.commands_sent[kind] += 1
-        except DeviceError as exc:
+        else:
             self.stats.command_errors[kind] += 1
-            self._event(topics.DEVICE_EVENT, "teleprev.DeviceEvent", {"device": device.name, "event": "error", "message": f"command not sent: {exc}"})
 
     def _publish_frames(self, t_ns: int) -> None:
         if self.frames is None or t_ns - self._last_tf_ns < self.tf_period_ns:

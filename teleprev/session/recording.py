@@ -55,7 +55,7 @@ def _sha256(path: Path) -> str:
 
 class Recording:
     def __init__(self, options: RecordOptions):
-        from devices.runner import DeviceRunner
+        from devices.runner import ActuatorPort, DeviceRunner
         from teleprev.session.recorder import Recorder
 
         self.options = options
@@ -76,12 +76,11 @@ class Recording:
         out.parent.mkdir(parents=True, exist_ok=True)
         self.recorder = Recorder(out, self._metadata())
         self.loop = SessionLoop(
-            self.clock, self.recorder.log, self.driver,
-            actuators={"arm": self.devices[first["arm"]], "hand": self.devices[first["hand"]]},
-            frames=FramePublisher(self.robot), tf_period_ns=int(1e9 / rig.pipeline.tf_rate_hz),
-            queue_size=options.queue_size, on_episode_start=self._episode_started,
+            self.clock, self.recorder.log, self.driver, frames=FramePublisher(self.robot),
+            tf_period_ns=int(1e9 / rig.pipeline.tf_rate_hz), queue_size=options.queue_size, on_episode_start=self._episode_started,
         )
         self.runners = {name: DeviceRunner(dev, self.loop.sink, self.clock) for name, dev in self.devices.items()}
+        self.loop.actuators = {kind: ActuatorPort(self.devices[first[kind]], self.runners[first[kind]]) for kind in ("arm", "hand")}
         self.summary = None
 
     def _episode_started(self, task: str) -> None:
@@ -104,6 +103,9 @@ class Recording:
         if corrector is not None and hasattr(corrector, "model_files"):
             meta["models"] = {name: _sha256(Path(p)) for name, p in corrector.model_files().items()}
         meta["pipeline"] = {"inputs": json.dumps(self.driver.topics.__dict__)}
+        # The post-condition questionnaire is answered after the file is closed: it goes in a sidecar
+        # next to the session, which the session names here so that nothing recorded is rewritten.
+        meta["study"] = {"survey_sidecar": Path(o.out).with_suffix(".survey.json").name}
         return meta
 
     def start(self) -> "Recording":
@@ -138,5 +140,7 @@ class Recording:
         rows = []
         for name, runner in self.runners.items():
             s = runner.stats()
-            rows.append(DeviceRow(name, self.devices[name].kind, s.state, s.rate_hz, s.nominal_hz, s.latency_ms, self.loop.stats.dropped.get(name, 0), s.errors))
+            prefix = f"/{self.devices[name].kind}/{name}/"
+            dropped = sum(n for topic, n in self.loop.stats.dropped.items() if topic.startswith(prefix))
+            rows.append(DeviceRow(name, self.devices[name].kind, s.state, s.rate_hz, s.nominal_hz, s.latency_ms, dropped, s.errors))
         return rows

@@ -1,0 +1,260 @@
+"""leap.hand: the 16-motor LEAP Hand over a Dynamixel bus (protocol 2.0) through dynamixel-sdk
+(`uv sync --extra leap`).
+
+    [devices.hand]
+    plugin = "leap.hand"
+    port = "/dev/ttyUSB0"
+    current_limit_ma = 350     # 350 for the Lite hand, 550 for the Full one
+    rate_hz = 90.0             # position reads; the bus manages about 90 Hz for positions alone
+
+Joints "0".."15" are motors 0..15. The hand's "sim" angles (zero = flat open hand, as in the URDF) and
+the motors' positions differ by pi: position = angle + pi, 4096 ticks per turn (2048 = open). Motors run
+current-based position control (operating mode 5) with kP / kD (x0.75 on the side-to-side joints 0, 4
+and 8) and a current limit, as the LEAP Hand's own driver sets them. The plugin talks to the bus
+through DynamixelBus, a five-call interface; SdkDynamixelBus is the real one.
+"""
+
+from __future__ import annotations
+
+import math
+import threading
+import time
+from dataclasses import dataclass
+from typing import ClassVar, Protocol, Sequence
+
+import numpy as np
+
+from devices._limits import JointLimits
+from devices.base import Actuator, StreamSpec
+from teleprev.errors import DeviceError
+from teleprev.messages import JointSample, Sample
+from teleprev.session.topics import device_topic
+
+# Control table (protocol 2.0, XC330/XM430 series): address, size in bytes.
+OPERATING_MODE = (11, 1)
+TORQUE_ENABLE = (64, 1)
+POSITION_D_GAIN = (80, 2)
+POSITION_I_GAIN = (82, 2)
+POSITION_P_GAIN = (84, 2)
+GOAL_CURRENT = (102, 2)
+GOAL_POSITION = (116, 4)
+PRESENT_POSITION = (132, 4)
+
+CURRENT_BASED_POSITION = 5
+TICKS_PER_TURN = 4096
+MOTOR_IDS = tuple(range(16))
+SIDE_TO_SIDE = (0, 4, 8)
+BAUDRATE = 4_000_000
+
+
+def ticks_from_angles(q: np.ndarray) -> np.ndarray:
+    """Sim angles (rad) -> Dynamixel positions: (q + pi), 4096 per turn."""
+    return np.rint((np.asarray(q, dtype=float) + math.pi) * (TICKS_PER_TURN / (2 * math.pi))).astype(np.int64)
+
+
+def angles_from_ticks(ticks: np.ndarray) -> np.ndarray:
+    return np.asarray(ticks, dtype=float) * (2 * math.pi / TICKS_PER_TURN) - math.pi
+
+
+def signed32(value: int) -> int:
+    """A 4-byte register as read (unsigned) to its signed value."""
+    return value - (1 << 32) if value & 0x80000000 else value
+
+
+class DynamixelBus(Protocol):
+    """The motors as the plugin needs them. Every call raises DeviceError on failure; values are the
+    registers' raw unsigned integers."""
+
+    def open(self) -> None: ...
+    def write(self, ids: Sequence[int], address: int, size: int, values: Sequence[int]) -> None: ...  # each motor answers
+    def sync_read(self, ids: Sequence[int], address: int, size: int) -> dict[int, int]: ...
+    def sync_write(self, ids: Sequence[int], address: int, size: int, values: Sequence[int]) -> None: ...
+    def close(self) -> None: ...
+
+
+def _import_dynamixel_sdk():
+    try:
+        import dynamixel_sdk
+    except ImportError:
+        raise DeviceError("dynamixel-sdk is not installed; install the extra: `uv sync --extra leap`", "leap.hand") from None
+    return dynamixel_sdk
+
+
+class SdkDynamixelBus:
+    """DynamixelBus over dynamixel_sdk (PortHandler, PacketHandler 2.0, GroupSyncRead/Write)."""
+
+    def __init__(self, port: str, baudrate: int = BAUDRATE, sdk=None):
+        self.port_name = port
+        self.baudrate = baudrate
+        self.where = f"Dynamixel bus {port}"
+        self._sdk = sdk
+        self.port = None
+
+    def open(self) -> None:
+        sdk = self._sdk or _import_dynamixel_sdk()
+        self._sdk = sdk
+        self.port = sdk.PortHandler(self.port_name)
+        self.packet = sdk.PacketHandler(2.0)
+        try:
+            opened = self.port.openPort() and self.port.setBaudRate(self.baudrate)
+        except Exception as exc:  # pyserial raises when the device node is missing or busy
+            raise DeviceError(f"cannot open the serial port ({exc})", self.where) from None
+        if not opened:
+            raise DeviceError(f"cannot open the serial port at {self.baudrate} baud", self.where)
+
+    def _result(self, result: int, error: int, what: str) -> None:
+        if result != self._sdk.COMM_SUCCESS:
+            raise DeviceError(f"{what}: {self.packet.getTxRxResult(result)}", self.where)
+        if error:
+            raise DeviceError(f"{what}: {self.packet.getRxPacketError(error)}", self.where)
+
+    def write(self, ids, address, size, values) -> None:
+        call = {1: self.packet.write1ByteTxRx, 2: self.packet.write2ByteTxRx, 4: self.packet.write4ByteTxRx}[size]
+        for i, v in zip(ids, values):
+            result, error = call(self.port, i, address, int(v))
+            self._result(result, error, f"motor {i}: writing {int(v)} at address {address}")
+
+    def sync_read(self, ids, address, size) -> dict[int, int]:
+        group = self._sdk.GroupSyncRead(self.port, self.packet, address, size)
+        for i in ids:
+            group.addParam(i)
+        self._result(group.txRxPacket(), 0, f"sync read at address {address}")
+        missing = [i for i in ids if not group.isAvailable(i, address, size)]
+        if missing:
+            raise DeviceError(f"motors {missing} did not answer the sync read at address {address}", self.where)
+        return {i: group.getData(i, address, size) for i in ids}
+
+    def sync_write(self, ids, address, size, values) -> None:
+        group = self._sdk.GroupSyncWrite(self.port, self.packet, address, size)
+        for i, v in zip(ids, values):
+            group.addParam(i, list(int(v).to_bytes(size, "little", signed=False)))
+        self._result(group.txPacket(), 0, f"sync write at address {address}")
+
+    def close(self) -> None:
+        port, self.port = self.port, None
+        if port is not None and getattr(port, "is_open", True):
+            port.closePort()
+
+
+@dataclass
+class LeapSettings:
+    port: str = "/dev/ttyUSB0"  # the U2D2's serial device (COM3 on Windows)
+    rate_hz: float = 90.0
+    kp: int = 600
+    kd: int = 200
+    current_limit_ma: int = 350  # Lite 350, Full 550 (XC330 goal current is in mA)
+
+    def __post_init__(self):
+        if not self.port:
+            raise ValueError("port is required, e.g. port = \"/dev/ttyUSB0\"")
+        if not 0 < self.rate_hz <= 90:
+            raise ValueError(f"rate_hz must be in (0, 90] (position reads manage about 90 Hz), got {self.rate_hz}")
+        if not (0 <= self.kp <= 16383 and 0 <= self.kd <= 16383):
+            raise ValueError(f"kp and kd must be 0..16383, got {self.kp} and {self.kd}")
+        if not 0 < self.current_limit_ma <= 1000:
+            raise ValueError(f"current_limit_ma must be 1..1000, got {self.current_limit_ma}")
+
+
+class LeapHand(Actuator):
+    """JointSample of "0".."15" on /hand/<name>/state; send() writes goal positions."""
+
+    kind = "hand"
+    Settings = LeapSettings
+    extra: ClassVar[str] = "leap"
+    sdk_module: ClassVar[str] = "dynamixel_sdk"
+
+    def __init__(self, name, settings: LeapSettings, context, bus: DynamixelBus | None = None):
+        super().__init__(name, settings, context)
+        self.where = f"device {name!r} (LEAP Hand on {settings.port})"
+        self.joint_names = tuple(str(i) for i in MOTOR_IDS)
+        robot = context.robot if _has_joint(context.robot, "0") else "leap_hand_right"
+        self.limits = JointLimits.from_urdf(robot, self.joint_names, f"[devices.{name}]")
+        self.topic = device_topic("hand", name, "state")
+        self.bus: DynamixelBus = bus or SdkDynamixelBus(settings.port)
+        self.period_ns = int(round(1e9 / settings.rate_hz))
+        self._lock = threading.Lock()
+        self._connected = False
+        self._target: np.ndarray | None = None
+        self._refused = 0
+        self._next_ns = 0
+
+    def streams(self) -> list[StreamSpec]:
+        return [StreamSpec(self.topic, "joints", self.settings.rate_hz)]
+
+    def connect(self) -> None:
+        s = self.settings
+        ids = list(MOTOR_IDS)
+
+        def gains(g: int) -> list[int]:
+            return [round(0.75 * g) if i in SIDE_TO_SIDE else g for i in ids]
+
+        with self._lock:
+            self.bus.open()
+            try:
+                self.bus.write(ids, *TORQUE_ENABLE, [0] * 16)  # the operating mode only changes with torque off
+                self.bus.write(ids, *OPERATING_MODE, [CURRENT_BASED_POSITION] * 16)
+                self.bus.write(ids, *POSITION_P_GAIN, gains(s.kp))
+                self.bus.write(ids, *POSITION_I_GAIN, [0] * 16)
+                self.bus.write(ids, *POSITION_D_GAIN, gains(s.kd))
+                self.bus.write(ids, *GOAL_CURRENT, [s.current_limit_ma] * 16)
+                q = self._positions()
+                # Hold where the hand is before torque comes on, so it does not jump to a stale goal.
+                self.bus.sync_write(ids, *GOAL_POSITION, ticks_from_angles(q).tolist())
+                self.bus.write(ids, *TORQUE_ENABLE, [1] * 16)
+            except DeviceError:
+                self.bus.close()
+                raise
+            self._target = np.clip(q, self.limits.lower, self.limits.upper)
+            self._connected = True
+            self._next_ns = self.context.clock.now_ns()
+
+    def disconnect(self) -> None:
+        with self._lock:
+            was, self._connected = self._connected, False
+            if was:
+                self.bus.close()
+
+    def counters(self) -> dict[str, int]:
+        return {"refused_commands": self._refused}
+
+    def _positions(self) -> np.ndarray:
+        raw = self.bus.sync_read(list(MOTOR_IDS), *PRESENT_POSITION)
+        return angles_from_ticks(np.array([signed32(raw[i]) for i in MOTOR_IDS]))
+
+    def read(self, timeout_s: float) -> list[Sample]:
+        clock = self.context.clock
+        wait = (self._next_ns - clock.now_ns()) / 1e9
+        if wait > timeout_s:
+            time.sleep(timeout_s)
+            return []
+        if wait > 0:
+            time.sleep(wait)
+        with self._lock:
+            if not self._connected:
+                raise DeviceError("not connected", self.where)
+            before = clock.now_ns()
+            q = self._positions()
+            after = clock.now_ns()
+        self._next_ns = max(self._next_ns + self.period_ns, after)
+        return [Sample(self.topic, JointSample((before + after) // 2, self.joint_names, q))]
+
+    def send(self, command: JointSample) -> None:
+        with self._lock:
+            if not self._connected:
+                raise DeviceError("not connected: command dropped", self.where)
+            try:
+                target = self.limits.target(command, self._target, self.where)
+            except DeviceError:
+                self._refused += 1
+                raise
+            self.bus.sync_write(list(MOTOR_IDS), *GOAL_POSITION, ticks_from_angles(target).tolist())
+            self._target = target
+
+
+def _has_joint(robot: str, joint: str) -> bool:
+    from teleprev.robot.model import load_robot
+
+    try:
+        return joint in load_robot(robot).joint_index
+    except Exception:
+        return False

@@ -1,0 +1,323 @@
+"""Runs one device on its own thread: connect (and reconnect), read, hand samples on, watch for gaps.
+
+    runner = DeviceRunner(device, sink, clock)   # sink(sample, receive_ns): the session loop's queue
+    runner.start(); ...; runner.stats(); runner.stop()
+
+Whatever a device does (fails to open, raises from read(), goes quiet, sends garbage) stays inside its
+runner: the runner records it as a teleprev.DeviceEvent on /events/device and keeps trying, so the other
+devices keep recording. Events:
+    connected      the device opened
+    error          connect() or read() raised (message says what); also skipped garbage (counters())
+    disconnected   the device was closed after an error; reconnect attempts follow every reconnect_s
+    gap            no sample for gap_s; since_ns = receive time of the last sample (or of connecting)
+    recovered      samples again after a gap; since_ns = the gap's since_ns
+"""
+
+from __future__ import annotations
+
+import statistics
+import threading
+import time
+from collections import deque
+from dataclasses import dataclass, field
+from typing import Callable
+
+import numpy as np
+
+from devices.base import Actuator, Device
+from teleprev.errors import DeviceError
+from teleprev.messages import Event, JointSample, Sample
+from teleprev.session import topics
+from teleprev.session.clock import SessionClock
+
+Sink = Callable[[Sample, int], None]
+
+_LATENCY_WINDOW = 512  # samples the latency median/max are taken over
+_COUNTER_CHECK_NS = 1_000_000_000  # how often skipped-garbage counters are turned into error events
+_FIRST_SAMPLE_GRACE_S = 1.0  # a device just opened may take this long for its first sample
+
+
+def default_gap_s(nominal_hz: float) -> float:
+    """Five nominal periods, at least 0.25 s."""
+    return max(0.25, 5.0 / nominal_hz) if nominal_hz > 0 else 1.0
+
+
+@dataclass(frozen=True)
+class RunnerStats:
+    """A snapshot of one device's runner, for the CLI and the terminal preview."""
+
+    name: str
+    kind: str
+    state: str  # connecting | ok | gap | error | stopped
+    received: int  # samples handed to the sink
+    errors: int  # connect/read failures plus skipped garbage
+    rate_hz: float  # measured rate of the device's first stream (sliding window)
+    nominal_hz: float
+    latency_ms: float  # receive - acquisition stamp: median over the last samples
+    latency_max_ms: float
+    last_receive_ns: int | None
+    last_error: str
+    connects: int
+    gaps: int
+    skipped: dict[str, int] = field(default_factory=dict)  # the device's own counters (malformed, NaN, ...)
+    topics: dict[str, int] = field(default_factory=dict)  # samples per topic
+
+
+class DeviceRunner:
+    def __init__(
+        self,
+        device: Device,
+        sink: Sink,
+        clock: SessionClock,
+        reconnect_s: float = 1.0,
+        gap_s: float | None = None,
+        read_timeout_s: float = 0.05,
+        rate_window_s: float = 2.0,
+    ):
+        self.device = device
+        self.sink = sink
+        self.clock = clock
+        self.reconnect_s = reconnect_s
+        streams = device.streams()
+        self.primary_topic = streams[0].topic if streams else ""
+        self.nominal_hz = streams[0].rate_hz if streams else 0.0
+        fastest = max((s.rate_hz for s in streams), default=0.0)
+        self.gap_ns = int((default_gap_s(fastest) if gap_s is None else gap_s) * 1e9)
+        self.read_timeout_s = min(read_timeout_s, self.gap_ns / 2e9)
+        self.rate_window_ns = int(rate_window_s * 1e9)
+
+        self._lock = threading.Lock()
+        self._stop = threading.Event()
+        self._thread: threading.Thread | None = None
+        self.connected = False
+        self._state = "connecting"
+        self._received = 0
+        self._faults = 0
+        self._connects = 0
+        self._gaps = 0
+        self._sink_errors = 0
+        self._last_error = ""
+        self._last_receive: int | None = None
+        self._per_topic: dict[str, int] = {}
+        self._primary_times: deque[int] = deque()
+        self._latencies: deque[int] = deque(maxlen=_LATENCY_WINDOW)
+        self._gap_since: int | None = None  # set while in a gap
+        self._quiet_since = 0  # receive time of the last sample, or when the device connected
+        self._grace_ns = 0
+        self._counters: dict[str, int] = {}
+        self._counters_reported: dict[str, int] = {}
+        self._counters_checked = 0
+
+    @property
+    def name(self) -> str:
+        return self.device.name
+
+    # ---- lifecycle -----------------------------------------------------------------------------
+    def start(self) -> DeviceRunner:
+        self._thread = threading.Thread(target=self._run, name=f"device-{self.name}", daemon=True)
+        self._thread.start()
+        return self
+
+    def stop(self, timeout: float = 5.0) -> None:
+        """Stop reading, close the device and wait for the thread (a read() in progress finishes first)."""
+        self._stop.set()
+        if self._thread is not None:
+            self._thread.join(timeout)
+
+    def is_alive(self) -> bool:
+        return self._thread is not None and self._thread.is_alive()
+
+    # ---- the device thread -----------------------------------------------------------------------
+    def _run(self) -> None:
+        try:
+            while not self._stop.is_set():
+                if not self.connected:
+                    self._connect()
+                    continue
+                try:
+                    samples = self.device.read(self.read_timeout_s)
+                except Exception as exc:  # a plugin bug must not end the thread either
+                    self._fault("read", exc)
+                    continue
+                now = self.clock.now_ns()
+                if samples:
+                    self._deliver(samples, now)
+                self._check_gap(now)
+                self._check_counters(now)
+        finally:
+            self._close()
+            with self._lock:
+                self._state = "stopped"
+
+    def _connect(self) -> None:
+        try:
+            self.device.connect()
+        except Exception as exc:
+            self._fault("connect", exc)
+            return
+        now = self.clock.now_ns()
+        with self._lock:
+            self.connected = True
+            self._connects += 1
+            if self._last_receive is None:  # no data yet: give the first sample a little longer
+                self._quiet_since = now
+                self._grace_ns = max(self.gap_ns, int(_FIRST_SAMPLE_GRACE_S * 1e9))
+            self._state = "gap" if self._gap_since is not None else "ok"
+        self._emit("connected", now, f"{type(self.device).__name__} opened")
+
+    def _fault(self, during: str, exc: Exception) -> None:
+        message = str(exc) if isinstance(exc, DeviceError) else f"{type(exc).__name__}: {exc}"
+        now = self.clock.now_ns()
+        with self._lock:
+            repeated = not self.connected and message == self._last_error
+            self._faults += 1
+            self._last_error = message
+            self._state = "error"
+        if not repeated:  # a device that stays unreachable is reported once, not every reconnect_s
+            self._emit("error", now, f"{during} failed: {message}")
+        if self.connected:
+            self._close()
+            self._emit("disconnected", self.clock.now_ns(), f"reconnecting every {self.reconnect_s:g} s")
+        deadline = time.monotonic() + self.reconnect_s
+        while not self._stop.is_set() and time.monotonic() < deadline:
+            self._check_gap(self.clock.now_ns())
+            self._stop.wait(min(0.05, max(0.0, deadline - time.monotonic())))
+
+    def _close(self) -> None:
+        with self._lock:
+            self.connected = False
+        try:
+            self.device.disconnect()
+        except Exception as exc:  # closing a broken device may fail too; nothing more to do about it
+            with self._lock:
+                self._last_error = f"disconnect failed: {exc}"
+
+    def _deliver(self, samples: list[Sample], now: int) -> None:
+        for sample in samples:
+            try:
+                self.sink(sample, now)
+            except Exception:
+                self._sink_errors += 1
+        with self._lock:
+            self._received += len(samples)
+            self._last_receive = now
+            self._quiet_since = now
+            self._grace_ns = self.gap_ns
+            for s in samples:
+                self._per_topic[s.topic] = self._per_topic.get(s.topic, 0) + 1
+                stamp = getattr(s.payload, "stamp_ns", None)
+                if stamp is not None:
+                    self._latencies.append(now - stamp)
+                if s.topic == self.primary_topic:
+                    self._primary_times.append(now)
+            while self._primary_times and self._primary_times[0] < now - self.rate_window_ns:
+                self._primary_times.popleft()
+            gap_since, self._gap_since = self._gap_since, None
+            if self.connected:
+                self._state = "ok"
+        if gap_since is not None:
+            self._emit("recovered", now, f"data again after {(now - gap_since) / 1e9:.2f} s", since_ns=gap_since)
+
+    def _check_gap(self, now: int) -> None:
+        with self._lock:
+            if self._gap_since is not None or self._quiet_since == 0 or now - self._quiet_since <= self._grace_ns:
+                return
+            self._gap_since = self._quiet_since
+            self._gaps += 1
+            self._primary_times.clear()
+            if self.connected:
+                self._state = "gap"
+            since = self._gap_since
+        what = " since connecting" if self._last_receive is None else ""
+        self._emit("gap", now, f"no data for {(now - since) / 1e9:.2f} s{what}", since_ns=since)
+
+    def _check_counters(self, now: int) -> None:
+        """Turn the device's skipped-garbage counters into an error event, at most once a second."""
+        if now - self._counters_checked < _COUNTER_CHECK_NS:
+            return
+        self._counters_checked = now
+        try:
+            current = dict(self.device.counters())
+        except Exception:
+            return
+        new = {k: v - self._counters_reported.get(k, 0) for k, v in current.items() if v > self._counters_reported.get(k, 0)}
+        with self._lock:
+            self._counters = current
+        if new:
+            self._counters_reported = current
+            detail = ", ".join(f"{v} {k.replace('_', ' ')}" for k, v in sorted(new.items()))
+            self._emit("error", now, f"skipped {detail}")
+
+    def _emit(self, event: str, now: int, message: str = "", since_ns: int | None = None) -> None:
+        data = {"device": self.name, "event": event, "message": message}
+        if since_ns is not None:
+            data["since_ns"] = int(since_ns)
+        try:
+            self.sink(Sample(topics.DEVICE_EVENT, Event(now, "teleprev.DeviceEvent", data)), now)
+        except Exception:
+            self._sink_errors += 1
+
+    # ---- what the CLI and the preview show --------------------------------------------------------
+    def stats(self) -> RunnerStats:
+        now = self.clock.now_ns()
+        with self._lock:
+            times = [t for t in self._primary_times if t >= now - self.rate_window_ns]
+            rate = (len(times) - 1) * 1e9 / (times[-1] - times[0]) if len(times) > 1 and times[-1] > times[0] else 0.0
+            lat = list(self._latencies)
+            skipped = dict(self._counters)
+            return RunnerStats(
+                name=self.name,
+                kind=self.device.kind,
+                state=self._state,
+                received=self._received,
+                errors=self._faults + sum(skipped.values()),
+                rate_hz=rate,
+                nominal_hz=self.nominal_hz,
+                latency_ms=statistics.median(lat) / 1e6 if lat else 0.0,
+                latency_max_ms=max(lat) / 1e6 if lat else 0.0,
+                last_receive_ns=self._last_receive,
+                last_error=self._last_error,
+                connects=self._connects,
+                gaps=self._gaps,
+                skipped=skipped,
+                topics=dict(self._per_topic),
+            )
+
+
+class ActuatorPort:
+    """What the session loop sends arm/hand commands through: never raises, counts what did not go out.
+
+    A command is dropped (and counted) while the runner has the device closed; a DeviceError from the
+    device's send() (a refused or failed command) is counted with its message.
+    """
+
+    def __init__(self, device: Actuator, runner: DeviceRunner | None = None):
+        self.device = device
+        self.runner = runner
+        self.sent = 0
+        self.dropped_down = 0
+        self.failed = 0
+        self.last_error = ""
+
+    @property
+    def name(self) -> str:
+        return self.device.name
+
+    @property
+    def joint_names(self) -> tuple[str, ...]:
+        return self.device.joint_names
+
+    def send(self, command: JointSample) -> bool:
+        if self.runner is not None and not self.runner.connected:
+            self.dropped_down += 1
+            return False
+        try:
+            if not np.all(np.isfinite(np.asarray(command.positions, dtype=float))):
+                raise DeviceError("command has non-finite positions", f"device {self.name!r}")
+            self.device.send(command)
+        except Exception as exc:
+            self.failed += 1
+            self.last_error = str(exc)
+            return False
+        self.sent += 1
+        return True

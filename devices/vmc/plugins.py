@@ -1,0 +1,177 @@
+"""vmc.suit and vmc.glove: a VMC-protocol sender (Rebocap, UDCAP-class gloves, VMC-speaking apps) as a
+suit and/or a glove. See devices/vmc/unity.py for the conversions and devices/vmc/receiver.py for
+the socket; both plugins on one host and port share one receiver (one sender, two devices).
+
+    [devices.suit]             [devices.glove]
+    plugin = "vmc.suit"        plugin = "vmc.glove"
+    port = 39539               port = 39539
+"""
+
+from __future__ import annotations
+
+import ipaddress
+from dataclasses import dataclass
+
+import numpy as np
+
+from devices.base import Device, StreamSpec
+from devices.vmc import unity
+from devices.vmc.receiver import Frame, VmcReceiver, acquire, release
+from teleprev.errors import DeviceError
+from teleprev.human.smplx import BODY_JOINTS, HAND_POSE_NAMES
+from teleprev.messages import JointSample, PoseSample, Sample
+from teleprev.robot.transforms import quat_multiply
+from teleprev.session.topics import device_topic
+
+BODY_POSE_NAMES: tuple[str, ...] = tuple(f"{j}.{c}" for j in BODY_JOINTS for c in "xyz")
+_IDENTITY = np.array([0.0, 0.0, 0.0, 1.0])
+
+
+@dataclass
+class VmcSettings:
+    host: str = "127.0.0.1"  # the address to listen on; "0.0.0.0" accepts senders on other machines
+    port: int = 39539  # VMC's usual receiving port
+    rate_hz: float = 60.0  # the sender's frame rate (for the rate display and gap detection)
+    timeout_s: float = 0.0  # > 0: no frame for this long is a fault (the runner reopens the socket); 0: only a gap
+
+    def __post_init__(self):
+        try:
+            ipaddress.IPv4Address(self.host)
+        except ValueError:
+            raise ValueError(f"host must be an IPv4 address to listen on (e.g. 127.0.0.1), got {self.host!r}") from None
+        if not 0 <= self.port <= 65535:
+            raise ValueError(f"port must be 0..65535, got {self.port}")
+        if not 0 < self.rate_hz <= 1000:
+            raise ValueError(f"rate_hz must be in (0, 1000], got {self.rate_hz}")
+        if self.timeout_s < 0:
+            raise ValueError(f"timeout_s must be >= 0, got {self.timeout_s}")
+
+
+@dataclass
+class VmcSuitSettings(VmcSettings):
+    body: bool = False  # also publish the SMPL-X body joints on /suit/<name>/body
+
+
+class _VmcDevice(Device):
+    def __init__(self, name, settings, context):
+        super().__init__(name, settings, context)
+        self._receiver: VmcReceiver | None = None
+        self._sub = None
+        self._last_frame_ns = 0
+
+    def connect(self) -> None:
+        s = self.settings
+        self._receiver = acquire(self.context.shared, s.host, s.port, self.context.clock)
+        self._sub = self._receiver.subscribe()
+        self._last_frame_ns = self.context.clock.now_ns()
+
+    def disconnect(self) -> None:
+        receiver, self._receiver = self._receiver, None
+        if receiver is not None:
+            receiver.unsubscribe(self._sub)
+            release(self.context.shared, receiver)
+
+    def counters(self) -> dict[str, int]:
+        return self._receiver.counters.errors() if self._receiver is not None else {}
+
+    def read(self, timeout_s: float) -> list[Sample]:
+        receiver = self._receiver
+        if receiver is None:
+            raise DeviceError("not connected", f"device {self.name!r}")
+        frames = receiver.wait(self._sub, timeout_s)
+        out: list[Sample] = []
+        for frame in frames:
+            out.extend(self.convert(frame))
+        self._check_timeout(bool(frames))
+        return out
+
+    def _check_timeout(self, got: bool) -> None:
+        limit = self.settings.timeout_s
+        if limit <= 0:
+            return
+        now = self.context.clock.now_ns()
+        if got:
+            self._last_frame_ns = now
+        elif now - self._last_frame_ns > limit * 1e9:
+            s = self.settings
+            raise DeviceError(f"no VMC frames on UDP {s.host}:{s.port} for {limit:g} s "
+                              "(is the sender running and sending to this address?)", f"device {self.name!r}")
+
+    def convert(self, frame: Frame) -> list[Sample]:
+        raise NotImplementedError
+
+
+class VmcSuit(_VmcDevice):
+    """The right wrist (PoseSample, frame "suit") on /suit/<name>/wrist; with body = true also the SMPL-X
+    body joints' local rotations (JointSample, "<joint>.x|y|z") on /suit/<name>/body."""
+
+    kind = "suit"
+    Settings = VmcSuitSettings
+
+    def __init__(self, name, settings, context):
+        super().__init__(name, settings, context)
+        self.wrist_topic = device_topic("suit", name, "wrist")
+        self.body_topic = device_topic("suit", name, "body")
+        self._chain = frozenset(unity.RIGHT_ARM_CHAIN) | {""}
+
+    def streams(self) -> list[StreamSpec]:
+        out = [StreamSpec(self.wrist_topic, "pose", self.settings.rate_hz)]
+        if self.settings.body:
+            out.append(StreamSpec(self.body_topic, "joints", self.settings.rate_hz))
+        return out
+
+    def convert(self, frame: Frame) -> list[Sample]:
+        out = []
+        bones = frame.bones
+        if not frame.updated.isdisjoint(self._chain) and unity.RIGHT_ARM_REQUIRED <= bones.keys():
+            out.append(Sample(self.wrist_topic, wrist_pose(bones, frame.stamp_ns)))
+        if self.settings.body and "Hips" in bones:
+            out.append(Sample(self.body_topic, JointSample(frame.stamp_ns, BODY_POSE_NAMES, body_pose(bones))))
+        return out
+
+
+class VmcGlove(_VmcDevice):
+    """The right hand's finger bones as the SMPL-X hand pose (45 values) on /glove/<name>/hand."""
+
+    kind = "glove"
+    Settings = VmcSettings
+
+    def __init__(self, name, settings, context):
+        super().__init__(name, settings, context)
+        self.topic = device_topic("glove", name, "hand")
+        self._fingers = frozenset(unity.RIGHT_HAND_BONES)
+
+    def streams(self) -> list[StreamSpec]:
+        return [StreamSpec(self.topic, "joints", self.settings.rate_hz)]
+
+    def convert(self, frame: Frame) -> list[Sample]:
+        if frame.updated.isdisjoint(self._fingers):
+            return []
+        return [Sample(self.topic, JointSample(frame.stamp_ns, HAND_POSE_NAMES, hand_pose(frame.bones)))]
+
+
+def _rotations(bones: dict, names: tuple[str, ...]) -> np.ndarray:
+    """Local quaternions of the named bones; a bone never received stays in rest (identity)."""
+    return np.array([bones[n].rotation if n in bones else _IDENTITY for n in names])
+
+
+def hand_pose(bones: dict) -> np.ndarray:
+    """(45,) SMPL-X right-hand pose from Unity's right finger bones."""
+    return unity.local_rotations_to_smplx(_rotations(bones, unity.RIGHT_HAND_BONES)).reshape(45)
+
+
+def body_pose(bones: dict) -> np.ndarray:
+    """(66,) SMPL-X body joints' axis-angle; pelvis = the global orientation (root * Hips)."""
+    quats = _rotations(bones, unity.BODY_BONES)
+    root = bones.get("")
+    if root is not None:
+        quats[0] = quat_multiply(root.rotation, quats[0])
+    return unity.local_rotations_to_smplx(quats).reshape(-1)
+
+
+def wrist_pose(bones: dict, stamp_ns: int) -> PoseSample:
+    root = bones.get("")
+    t_root = unity.transform(root.position, root.rotation) if root is not None else np.eye(4)
+    locals_ = [unity.transform(bones[b].position, bones[b].rotation) for b in unity.RIGHT_ARM_CHAIN if b in bones]
+    position, quat = unity.wrist_in_suit(unity.chain(t_root, locals_))
+    return PoseSample(stamp_ns, "suit", position, quat)

@@ -1,0 +1,237 @@
+"""One UDP socket per (host, port) receiving VMC (OSC) datagrams, shared by the plugins that listen there.
+
+A datagram is one frame (senders put a frame in one bundle). The receiver keeps the latest transform of
+every bone (a sender may split the skeleton over several bundles), and hands each subscriber a Frame:
+what this datagram updated plus the whole skeleton as known so far. Garbage never stops it: datagrams
+that do not parse, VMC messages with wrong arguments, unknown bone names and non-finite numbers are
+counted and skipped. /VMC/Ext/T (sender time, seconds) stamps the frame through ClockSync; without it
+the receive time does.
+"""
+
+from __future__ import annotations
+
+import math
+import socket
+import threading
+from collections import deque
+from dataclasses import dataclass
+
+import numpy as np
+from pythonosc.osc_packet import OscPacket
+
+from devices.vmc.unity import KNOWN_BONES
+from teleprev.errors import DeviceError
+from teleprev.session.clock import ClockSync, SessionClock
+
+_MAX_DATAGRAM = 65535
+_QUEUE = 256  # frames kept per subscriber that is not reading fast enough
+_RESYNC_NS = 1_000_000_000  # sender time going back this much: the sender restarted, start ClockSync over
+
+ROOT = "/VMC/Ext/Root/Pos"
+BONE = "/VMC/Ext/Bone/Pos"
+TIME = "/VMC/Ext/T"
+
+
+@dataclass(frozen=True, slots=True)
+class BonePose:
+    position: np.ndarray  # (3,) Unity coordinates, metres
+    rotation: np.ndarray  # (4,) x y z w, Unity coordinates
+
+
+@dataclass(frozen=True, slots=True)
+class Frame:
+    receive_ns: int
+    stamp_ns: int  # acquisition time on the session clock
+    updated: frozenset[str]  # bones this datagram carried ("" for the root)
+    bones: dict[str, BonePose]  # every bone received so far (latest values); the root under ""
+
+
+@dataclass
+class Counters:
+    datagrams: int = 0
+    frames: int = 0
+    malformed_packets: int = 0  # not OSC at all
+    malformed_messages: int = 0  # a VMC address with the wrong arguments
+    unknown_bones: int = 0
+    non_finite: int = 0
+
+    def errors(self) -> dict[str, int]:
+        return {"malformed_packets": self.malformed_packets, "malformed_messages": self.malformed_messages,
+                "unknown_bones": self.unknown_bones, "non_finite": self.non_finite}
+
+
+class _Subscriber:
+    def __init__(self):
+        self.frames: deque[Frame] = deque(maxlen=_QUEUE)
+        self.ready = threading.Condition()
+
+
+class VmcReceiver:
+    def __init__(self, host: str, port: int, clock: SessionClock):
+        self.host, self.port, self.clock = host, port, clock
+        self.counters = Counters()
+        self.where = f"VMC receiver {self.host}:{self.port}"
+        self._subs: list[_Subscriber] = []
+        self._lock = threading.Lock()
+        self._bones: dict[str, BonePose] = {}
+        self._sync = ClockSync()
+        self._last_device_ns: int | None = None
+        self._stop = threading.Event()
+        self.failure = ""  # set when the socket broke; subscribers then raise
+        try:
+            self._sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+            self._sock.bind((self.host, self.port))
+        except OSError as exc:
+            raise DeviceError(f"cannot listen on UDP {self.host}:{self.port} ({exc.strerror or exc}); "
+                              "is another program using the port?", self.where) from None
+        self._sock.settimeout(0.1)
+        self._thread = threading.Thread(target=self._run, name=f"vmc-{self.port}", daemon=True)
+        self._thread.start()
+
+    # ---- subscribers -----------------------------------------------------------------------------
+    def subscribe(self) -> _Subscriber:
+        sub = _Subscriber()
+        with self._lock:
+            self._subs.append(sub)
+        return sub
+
+    def unsubscribe(self, sub: _Subscriber) -> int:
+        with self._lock:
+            if sub in self._subs:
+                self._subs.remove(sub)
+            return len(self._subs)
+
+    def wait(self, sub: _Subscriber, timeout_s: float) -> list[Frame]:
+        with sub.ready:
+            if not sub.frames and not self.failure:
+                sub.ready.wait(timeout_s)
+            frames = list(sub.frames)
+            sub.frames.clear()
+        if self.failure and not frames:
+            raise DeviceError(self.failure, self.where)
+        return frames
+
+    def close(self) -> None:
+        self._stop.set()
+        self._thread.join(1.0)
+        self._sock.close()
+
+    # ---- the receiving thread --------------------------------------------------------------------
+    def _run(self) -> None:
+        while not self._stop.is_set():
+            try:
+                data = self._sock.recv(_MAX_DATAGRAM)
+            except socket.timeout:
+                continue
+            except OSError as exc:
+                if not self._stop.is_set():
+                    self._fail(f"socket error: {exc}")
+                return
+            frame = self.parse(data, self.clock.now_ns())
+            if frame is not None:
+                self._publish(frame)
+
+    def _fail(self, message: str) -> None:
+        self.failure = message
+        with self._lock:
+            subs = list(self._subs)
+        for sub in subs:
+            with sub.ready:
+                sub.ready.notify_all()
+
+    def _publish(self, frame: Frame) -> None:
+        with self._lock:
+            subs = list(self._subs)
+        for sub in subs:
+            with sub.ready:
+                sub.frames.append(frame)
+                sub.ready.notify_all()
+
+    def parse(self, data: bytes, receive_ns: int) -> Frame | None:
+        """Apply one datagram; a Frame if it carried any bone (None for garbage or other messages)."""
+        c = self.counters
+        c.datagrams += 1
+        try:
+            messages = [m.message for m in OscPacket(data).messages]
+        except Exception:  # python-osc raises ParseError, and on some garbage IndexError/struct errors
+            c.malformed_packets += 1
+            return None
+        updated: dict[str, BonePose] = {}
+        device_ns = None
+        for msg in messages:
+            address, params = msg.address, msg.params
+            if address in (ROOT, BONE):
+                pose = self._bone(address, params)
+                if pose is not None:
+                    updated[pose[0]] = pose[1]
+            elif address == TIME:
+                if len(params) < 1 or not isinstance(params[0], (int, float)) or isinstance(params[0], bool):
+                    c.malformed_messages += 1
+                elif not math.isfinite(params[0]):
+                    c.non_finite += 1
+                else:
+                    device_ns = int(round(float(params[0]) * 1e9))
+            # every other VMC address (/VMC/Ext/OK, blend shapes, camera, ...) is not needed here
+        if not updated:
+            return None
+        stamp = receive_ns
+        if device_ns is not None:
+            if self._last_device_ns is not None and device_ns < self._last_device_ns - _RESYNC_NS:
+                self._sync = ClockSync()
+            self._last_device_ns = device_ns
+            stamp = self._sync.observe(device_ns, receive_ns)
+        self._bones.update(updated)
+        c.frames += 1
+        return Frame(receive_ns, stamp, frozenset(updated), dict(self._bones))
+
+    def _bone(self, address: str, params: list) -> tuple[str, BonePose] | None:
+        c = self.counters
+        if len(params) < 8 or not isinstance(params[0], str) or not all(
+                isinstance(v, (int, float)) and not isinstance(v, bool) for v in params[1:8]):
+            c.malformed_messages += 1
+            return None
+        name = params[0]
+        if address == BONE and name not in KNOWN_BONES:
+            c.unknown_bones += 1
+            return None
+        values = np.array(params[1:8], dtype=float)
+        if not np.all(np.isfinite(values)):
+            c.non_finite += 1
+            return None
+        q = values[3:]
+        norm = float(np.linalg.norm(q))
+        if norm < 1e-6:
+            c.malformed_messages += 1  # a zero quaternion is no rotation
+            return None
+        return ("" if address == ROOT else name), BonePose(values[:3], q / norm)
+
+
+_SHARED_LOCK = threading.Lock()
+
+
+def acquire(shared: dict, host: str, port: int, clock: SessionClock) -> VmcReceiver:
+    """The receiver for (host, port), opened by the first plugin that asks (kept in context.shared)."""
+    with _SHARED_LOCK:
+        key = ("vmc", host, port)
+        entry = shared.get(key)
+        if entry is not None and entry[0].failure:  # its socket broke: open a fresh one
+            entry[0].close()
+            entry = None
+        if entry is None:
+            entry = shared[key] = [VmcReceiver(host, port, clock), 0]
+        entry[1] += 1
+        return entry[0]
+
+
+def release(shared: dict, receiver: VmcReceiver) -> None:
+    """Give a receiver back; the last plugin to do so closes the socket."""
+    with _SHARED_LOCK:
+        key = ("vmc", receiver.host, receiver.port)
+        entry = shared.get(key)
+        if entry is None or entry[0] is not receiver:  # a failed receiver already replaced
+            receiver.close()
+            return
+        entry[1] -= 1
+        if entry[1] <= 0:
+            del shared[key]
+            receiver.close()

@@ -1,0 +1,94 @@
+"""Unity's humanoid skeleton (as VMC sends it) into teleprev's frames and the SMPL-X conventions.
+
+Unity is left-handed: x right, y up, z forward; a humanoid avatar faces +z, so its right arm in T-pose
+points along +x, palm down (-y), thumb forward (+z). VMC senders stream *normalized* bone rotations
+(VRM-style rigs: every bone's local rotation is the identity in T-pose and its axes are the avatar's),
+so a bone's local quaternion is its rotation away from T-pose, in Unity axes. Unity's Quaternion * Vector3
+uses the usual (right-handed) formula, so quat_to_matrix gives the matrix acting on Unity coordinates.
+
+Two changes of coordinates, both reflections (det -1), applied as v' = A v and R' = A R A^-1:
+
+  D = diag(-1, 1, 1)       Unity axes -> SMPL-X body axes (x left, y up, z forward, right-handed).
+                           SMPL-X's right hand in rest: fingers -x, palm -y, thumb +z; Unity's right
+                           hand in T-pose: fingers +x, palm -y, thumb +z. D maps one onto the other.
+                           A local rotation becomes R_smplx = D R_unity D; for a quaternion
+                           (x, y, z, w) -> (x, -y, -z, w). A finger curling towards the palm is a
+                           negative turn about Unity z and a positive one about SMPL-X z (= flexion).
+
+  C = [[0,0,1],[-1,0,0],[0,1,0]]   Unity world -> the suit's world frame (teleprev: x forward, y left,
+                           z up, right-handed; the avatar faces +x): x = z_u, y = -x_u, z = y_u.
+
+The wrist pose on /suit/<name>/wrist is the pose of the SMPL-X right-hand frame in the suit frame: a
+vector h in the hand frame is D h in Unity bone axes, R_unity D h in Unity world, C R_unity D h in the
+suit frame, so R_wrist = C R_unity D and p_wrist = C p_unity. In T-pose R_wrist = C D: fingers -> -y
+(the operator's right), palm -> -z (down), thumb -> +x (forward).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from teleprev.human.smplx import BODY_JOINTS, HAND_JOINTS
+from teleprev.robot.transforms import matrix_to_quat, quat_to_axis_angle, quat_to_matrix
+
+# UnityEngine.HumanBodyBones, in enum order.
+HUMAN_BODY_BONES: tuple[str, ...] = (
+    "Hips", "LeftUpperLeg", "RightUpperLeg", "LeftLowerLeg", "RightLowerLeg", "LeftFoot", "RightFoot",
+    "Spine", "Chest", "Neck", "Head", "LeftShoulder", "RightShoulder", "LeftUpperArm", "RightUpperArm",
+    "LeftLowerArm", "RightLowerArm", "LeftHand", "RightHand", "LeftToes", "RightToes", "LeftEye", "RightEye",
+    "Jaw",
+    *(f"{side}{finger}{part}" for side in ("Left", "Right")
+      for finger in ("Thumb", "Index", "Middle", "Ring", "Little")
+      for part in ("Proximal", "Intermediate", "Distal")),
+    "UpperChest",
+)
+KNOWN_BONES = frozenset(HUMAN_BODY_BONES)
+
+# Hips up the right arm. Optional bones (absent from many rigs, so not sent) are skipped: in Unity's
+# hierarchy the next bone then hangs from the previous one directly.
+RIGHT_ARM_CHAIN = ("Hips", "Spine", "Chest", "UpperChest", "RightShoulder", "RightUpperArm", "RightLowerArm", "RightHand")
+RIGHT_ARM_REQUIRED = frozenset({"Hips", "Spine", "RightUpperArm", "RightLowerArm", "RightHand"})
+
+_FINGER_BONE = {"index": "Index", "middle": "Middle", "pinky": "Little", "ring": "Ring", "thumb": "Thumb"}
+_PART = {"1": "Proximal", "2": "Intermediate", "3": "Distal"}
+# SMPL-X hand joint -> Unity bone, in HAND_JOINTS order (index1 <- RightIndexProximal, ...).
+RIGHT_HAND_BONES: tuple[str, ...] = tuple(f"Right{_FINGER_BONE[j[:-1]]}{_PART[j[-1]]}" for j in HAND_JOINTS)
+
+# SMPL-X body joint -> Unity bone, in BODY_JOINTS order; pelvis is the global orientation (root * Hips).
+BODY_BONES: tuple[str, ...] = tuple({
+    "pelvis": "Hips", "left_hip": "LeftUpperLeg", "right_hip": "RightUpperLeg", "spine1": "Spine",
+    "left_knee": "LeftLowerLeg", "right_knee": "RightLowerLeg", "spine2": "Chest", "left_ankle": "LeftFoot",
+    "right_ankle": "RightFoot", "spine3": "UpperChest", "left_foot": "LeftToes", "right_foot": "RightToes",
+    "neck": "Neck", "left_collar": "LeftShoulder", "right_collar": "RightShoulder", "head": "Head",
+    "left_shoulder": "LeftUpperArm", "right_shoulder": "RightUpperArm", "left_elbow": "LeftLowerArm",
+    "right_elbow": "RightLowerArm", "left_wrist": "LeftHand", "right_wrist": "RightHand",
+}[j] for j in BODY_JOINTS)
+
+D = np.diag([-1.0, 1.0, 1.0])
+C = np.array([[0.0, 0.0, 1.0], [-1.0, 0.0, 0.0], [0.0, 1.0, 0.0]])
+_D_QUAT = np.array([1.0, -1.0, -1.0, 1.0])  # D R D on a quaternion x y z w
+
+
+def local_rotations_to_smplx(quats: np.ndarray) -> np.ndarray:
+    """Unity local rotations (..., 4) x y z w -> SMPL-X axis-angle (..., 3): D R D."""
+    return quat_to_axis_angle(np.asarray(quats, dtype=float) * _D_QUAT)
+
+
+def transform(position: np.ndarray, quat: np.ndarray) -> np.ndarray:
+    t = np.eye(4)
+    t[:3, :3] = quat_to_matrix(quat)
+    t[:3, 3] = position
+    return t
+
+
+def chain(root: np.ndarray, locals_: list[np.ndarray]) -> np.ndarray:
+    """A bone's world transform in Unity coordinates: root, then each local transform from Hips down."""
+    t = root
+    for local in locals_:
+        t = t @ local
+    return t
+
+
+def wrist_in_suit(world_unity: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """(position (3,), quaternion x y z w) of the SMPL-X right-hand frame in the suit frame."""
+    return C @ world_unity[:3, 3], matrix_to_quat(C @ world_unity[:3, :3] @ D)

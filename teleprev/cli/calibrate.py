@@ -1,0 +1,88 @@
+"""`teleprev calibrate`: guided open hand, fist and neutral wrist; writes the calibration a rig references."""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Optional
+
+import typer
+
+STEPS = (
+    ("open", "Open your hand flat, fingers together, and hold it still."),
+    ("fist", "Make a firm fist, thumb over the fingers, and hold it."),
+    ("neutral", "Relax your hand and point your fingers straight forward, towards the robot's front."),
+)
+
+
+def calibrate(
+    rig: Optional[Path] = typer.Argument(None, help="Rig file (TOML) whose glove and suit to read. Default: the all-simulated rig."),
+    out: Path = typer.Option(Path("calibration.toml"), "--out", "-o", help="Calibration file to write."),
+    seconds: float = typer.Option(1.5, "--seconds", help="How long each pose is averaged."),
+    hold: Optional[float] = typer.Option(None, "--hold", help="Unattended: wait this long for each pose instead of asking for Enter."),
+    operator: str = typer.Option("", "--operator", help="Operator name, stored in the file."),
+) -> None:
+    """Guided calibration: open hand, fist and neutral wrist, averaged from the live glove and suit."""
+    import time
+
+    import numpy as np
+    from rich.console import Console
+
+    from devices.base import DeviceContext
+    from devices.runner import DeviceRunner
+    from teleprev.errors import DeviceError
+    from teleprev.human.smplx import hand_pose_from_values
+    from teleprev.messages import JointSample, PoseSample
+    from teleprev.retarget.calibrate import calibrate as compute
+    from teleprev.retarget.calibration import write_calibration
+    from teleprev.rig import load_rig
+    from teleprev.session.clock import SessionClock
+
+    console = Console()
+    r = load_rig(rig)
+    r.require("glove", "suit")
+    clock = SessionClock()
+    context = DeviceContext(clock, r.dir, {}, r.rig.robot, r.rig.end_effector)
+    glove, suit = r.of_kind("glove")[0], r.of_kind("suit")[0]
+    devices = [e.cls(e.name, e.settings, context) for e in (glove, suit)]
+    samples: dict[str, list] = {"hand": [], "wrist": []}
+    collecting = [False]
+
+    def sink(sample, receive_ns: int) -> None:
+        if not collecting[0]:
+            return
+        if isinstance(sample.payload, JointSample) and sample.topic.startswith("/glove/"):
+            samples["hand"].append(hand_pose_from_values(sample.payload.names, sample.payload.positions))
+        elif isinstance(sample.payload, PoseSample) and sample.topic.startswith("/suit/"):
+            samples["wrist"].append(sample.payload.matrix()[:3, :3])
+
+    runners = [DeviceRunner(d, sink, clock) for d in devices]
+    for runner in runners:
+        runner.start()
+    held: dict[str, dict[str, list]] = {}
+    try:
+        for pose, instruction in STEPS:
+            for listener in context.task_listeners:  # a simulated operator takes the pose when asked
+                listener(f"calibration:{pose}")
+            console.print(f"[bold]{pose}[/]: {instruction}")
+            if hold is None:
+                console.input("  press Enter when you are holding it ")
+            else:
+                time.sleep(hold)
+            for key in samples:
+                samples[key].clear()
+            collecting[0] = True
+            time.sleep(seconds)
+            collecting[0] = False
+            if not samples["hand"] or not samples["wrist"]:
+                raise DeviceError(f"no glove or suit data arrived while holding '{pose}'; check `teleprev devices check`", str(r.path))
+            held[pose] = {k: list(v) for k, v in samples.items()}
+            console.print(f"  [green]ok[/]: {len(held[pose]['hand'])} glove and {len(held[pose]['wrist'])} suit samples")
+    finally:
+        for listener in context.task_listeners:
+            listener("calibration:done")
+        for runner in runners:
+            runner.stop()
+    cal = compute(np.array(held["open"]["hand"]), np.array(held["fist"]["hand"]), np.array(held["neutral"]["wrist"]), operator)
+    path = write_calibration(cal, out)
+    console.print(f"wrote {path}: suit yaw {np.degrees(cal.calibration.suit_yaw):.1f} deg; "
+                  f"reference it from the rig with \\[rig] calibration = \"{path}\"")

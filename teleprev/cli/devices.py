@@ -1,0 +1,121 @@
+"""`teleprev devices`: the installed device plugins, and a quick check of a rig's devices."""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Optional
+
+import typer
+
+app = typer.Typer(help="Device plugins: list what is installed, check a rig's devices.", no_args_is_help=True)
+
+
+@app.command("list")
+def list_plugins() -> None:
+    """Installed plugins (the `teleprev.devices` entry points): kind, module, and whether they load."""
+    import importlib.util
+
+    from rich.console import Console
+    from rich.table import Table
+
+    from devices.registry import available
+
+    table = Table(title="device plugins", title_justify="left")
+    for col in ("plugin", "kind", "module", "status"):
+        table.add_column(col, overflow="fold")
+    for name, ep in sorted(available().items()):
+        try:
+            cls = ep.load()
+        except Exception as exc:
+            table.add_row(name, "?", ep.value, f"[red]cannot load: {type(exc).__name__}: {exc}[/]")
+            continue
+        sdk, extra = getattr(cls, "sdk_module", ""), getattr(cls, "extra", "")
+        if sdk and importlib.util.find_spec(sdk) is None:
+            status = f"[yellow]needs the '{extra}' extra[/] (uv sync --extra {extra})"
+        else:
+            status = "[green]ok[/]"
+        table.add_row(name, getattr(cls, "kind", "?"), ep.value, status)
+    Console().print(table)
+
+
+@app.command("check")
+def check(
+    rig: Optional[Path] = typer.Argument(None, help="Rig file (TOML); default: the all-sim rig."),
+    seconds: float = typer.Option(3.0, "--seconds", "-s", min=0.1, help="How long to read from every device."),
+) -> None:
+    """Open every device of a rig, read for a few seconds, and print rates, latency and errors."""
+    import time
+
+    from rich import box
+    from rich.console import Console
+    from rich.table import Table
+
+    from devices.base import DeviceContext
+    from devices.runner import DeviceRunner
+    from teleprev.errors import TeleprevError
+    from teleprev.rig import default_rig_path, load_rig
+    from teleprev.session import topics
+    from teleprev.session.clock import SessionClock
+
+    console = Console()
+    loaded = load_rig(rig or default_rig_path())
+    clock = SessionClock()
+    context = DeviceContext(clock, loaded.dir, {}, loaded.rig.robot, loaded.rig.end_effector)
+    events: list[dict] = []
+
+    def sink(sample, receive_ns: int) -> None:
+        if sample.topic == topics.DEVICE_EVENT:
+            events.append(sample.payload.data)
+
+    runners: dict[str, DeviceRunner] = {}
+    failed: dict[str, str] = {}
+    for name, entry in loaded.devices.items():
+        try:
+            runners[name] = DeviceRunner(entry.cls(name, entry.settings, context), sink, clock)
+        except TeleprevError as exc:
+            failed[name] = str(exc)
+    console.print(f"reading {len(runners)} devices of {loaded.path} for {seconds:g} s ...")
+    for r in runners.values():
+        r.start()
+    try:
+        time.sleep(seconds)
+    finally:
+        stats = {name: r.stats() for name, r in runners.items()}
+        for r in runners.values():
+            r.stop()
+
+    table = Table(title=f"rig {loaded.path}", title_justify="left", box=box.SIMPLE_HEAD, pad_edge=False)
+    for col, just in (("device", "left"), ("plugin", "left"), ("kind", "left"), ("state", "left"), ("msgs", "right"),
+                      ("Hz/nominal", "right"), ("latency ms\nmed/max", "right"), ("errors", "right")):
+        table.add_column(col, justify=just, no_wrap=True)
+    table.add_column("last error", overflow="fold", min_width=10)
+    bad = 0
+    for name, entry in loaded.devices.items():
+        if name in failed:
+            bad += 1
+            table.add_row(name, entry.plugin, entry.kind, "[bold red]not opened[/]", "0", "", "", "1", failed[name])
+            continue
+        s = stats[name]
+        healthy = s.received > 0 and s.state == "ok"
+        bad += not healthy
+        style = {"ok": "green", "gap": "bold yellow", "error": "bold red"}.get(s.state, "dim")
+        slow = s.nominal_hz > 0 and s.rate_hz < 0.8 * s.nominal_hz
+        table.add_row(
+            name, entry.plugin, entry.kind, f"[{style}]{s.state}[/]", str(s.received),
+            f"{'[yellow]' if slow else ''}{s.rate_hz:.1f}/{s.nominal_hz:g}{'[/]' if slow else ''}",
+            f"{s.latency_ms:.1f}/{s.latency_max_ms:.1f}" if s.received else "",
+            f"{'[red]' if s.errors else ''}{s.errors}{'[/]' if s.errors else ''}",
+            s.last_error or _skipped(s.skipped),
+        )
+    console.print(table)
+    for e in events:
+        if e["event"] in ("error", "gap", "disconnected"):
+            console.print(f"  {e['device']}: {e['event']}: {e.get('message', '')}", highlight=False, markup=False)
+    if bad:
+        console.print(f"[bold red]{bad} of {len(loaded.devices)} devices did not stream cleanly[/]")
+        raise typer.Exit(1)
+    console.print(f"[bold green]all {len(loaded.devices)} devices streaming[/]")
+
+
+def _skipped(skipped: dict[str, int]) -> str:
+    return ", ".join(f"{v} {k.replace('_', ' ')}" for k, v in skipped.items() if v)

@@ -1,0 +1,536 @@
+"""Payloads to MCAP message bytes and back: foxglove protobuf schemas for samples, titled JSON for events.
+
+Encoding uses the foxglove-sdk message classes. Decoding reads the schema stored in the file (protobuf
+FileDescriptorSet or JSON schema), with a fast path for foxglove.JointStates, the bulk of a session:
+a channel's messages share one byte layout apart from the timestamp and the float64 values, so once a
+layout is seen, a message is checked against it and its doubles are gathered with numpy (a few µs for
+45 joints instead of ~30 µs through the protobuf runtime). Anything that does not match the layout
+exactly goes through a full wire-format parse, so the fast path never changes a result.
+
+Event JSON carries the payload's `stamp_ns` as an extra "stamp_ns" property (the schemas in
+topics.EVENT_SCHEMAS allow additional properties), so `data` must not use that key.
+
+Caveat: foxglove.Vector3 / Quaternion fields have implicit presence, so a pose or transform component
+of -0.0 reads back as +0.0. Joint values (explicit presence) and everything else round-trip bit-exactly.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+from dataclasses import dataclass
+from itertools import repeat
+from typing import Callable
+
+import numpy as np
+
+from teleprev.messages import Event, ImageSample, JointSample, Payload, PoseSample, Transform, TransformsSample
+from teleprev.session.topics import EVENT_SCHEMAS
+
+JOINT_STATES = "foxglove.JointStates"
+POSE_IN_FRAME = "foxglove.PoseInFrame"
+COMPRESSED_IMAGE = "foxglove.CompressedImage"
+FRAME_TRANSFORMS = "foxglove.FrameTransforms"
+STAMP_KEY = "stamp_ns"
+
+_NS = 1_000_000_000
+
+
+@dataclass(frozen=True, slots=True)
+class SchemaSpec:
+    """What a channel needs: schema name, schema encoding and data, and the message encoding."""
+
+    name: str
+    encoding: str
+    data: bytes
+    message_encoding: str
+
+
+_FOXGLOVE_CLASS = {
+    JointSample: "JointStates",
+    PoseSample: "PoseInFrame",
+    ImageSample: "CompressedImage",
+    TransformsSample: "FrameTransforms",
+}
+_spec_cache: dict[str, SchemaSpec] = {}
+
+
+def schema_for(payload: Payload) -> SchemaSpec:
+    """The schema a payload is recorded with (foxglove.* protobuf, or the event's titled JSON schema)."""
+    if isinstance(payload, Event):
+        key = payload.schema
+        if key not in _spec_cache:
+            if key not in EVENT_SCHEMAS:
+                raise ValueError(f"unknown event schema {key!r} (known: {', '.join(EVENT_SCHEMAS)})")
+            content = json.dumps(EVENT_SCHEMAS[key], sort_keys=True).encode()
+            _spec_cache[key] = SchemaSpec(key, "jsonschema", content, "json")
+        return _spec_cache[key]
+    cls_name = _FOXGLOVE_CLASS.get(type(payload))
+    if cls_name is None:
+        raise TypeError(f"cannot record a {type(payload).__name__} (expected one of the payloads in teleprev.messages)")
+    if cls_name not in _spec_cache:
+        import foxglove.messages as fm
+
+        schema = getattr(fm, cls_name).get_schema()
+        _spec_cache[cls_name] = SchemaSpec(schema.name, schema.encoding, bytes(schema.data), "protobuf")
+    return _spec_cache[cls_name]
+
+
+# --- encoding ------------------------------------------------------------------------------------
+
+
+def _fm():
+    import foxglove.messages as fm
+
+    return fm
+
+
+def _timestamp(fm, stamp_ns: int):
+    stamp_ns = int(stamp_ns)
+    if stamp_ns < 0:
+        raise ValueError(f"negative stamp_ns {stamp_ns}")
+    return fm.Timestamp(sec=stamp_ns // _NS, nsec=stamp_ns % _NS)
+
+
+def _floats(values, n: int, what: str) -> list[float]:
+    """Exactly n float64 values as Python floats (float32 input widens exactly)."""
+    if type(values) is np.ndarray and values.ndim == 1 and values.dtype == np.float64:
+        out = values.tolist()
+    else:
+        out = np.asarray(values, dtype=np.float64).reshape(-1).tolist()
+    if len(out) != n:
+        raise ValueError(f"{what} has {len(out)} values, expected {n}")
+    return out
+
+
+def _vec3(fm, v):
+    x, y, z = _floats(v, 3, "translation/position")
+    return fm.Vector3(x=x, y=y, z=z)
+
+
+def _quat(fm, q):
+    x, y, z, w = _floats(q, 4, "rotation/orientation")
+    return fm.Quaternion(x=x, y=y, z=z, w=w)
+
+
+def encode(payload: Payload) -> bytes:
+    """The message bytes of a payload, in the encoding schema_for(payload) names."""
+    fm = _fm()
+    t = type(payload)
+    if t is JointSample:
+        names = payload.names
+        pos = _floats(payload.positions, len(names), "positions")
+        js = fm.JointState
+        if payload.velocities is None:
+            joints = [js(name=n, position=p) for n, p in zip(names, pos)]
+        else:
+            vel = _floats(payload.velocities, len(names), "velocities")
+            joints = [js(name=n, position=p, velocity=v) for n, p, v in zip(names, pos, vel)]
+        return fm.JointStates(timestamp=_timestamp(fm, payload.stamp_ns), joints=joints).encode()
+    if t is ImageSample:
+        return fm.CompressedImage(
+            timestamp=_timestamp(fm, payload.stamp_ns), frame_id=payload.frame_id, data=bytes(payload.data),
+            format=payload.format,
+        ).encode()
+    if t is PoseSample:
+        pose = fm.Pose(position=_vec3(fm, payload.position), orientation=_quat(fm, payload.orientation))
+        return fm.PoseInFrame(timestamp=_timestamp(fm, payload.stamp_ns), frame_id=payload.frame_id, pose=pose).encode()
+    if t is TransformsSample:
+        ts = _timestamp(fm, payload.stamp_ns)
+        return fm.FrameTransforms(transforms=[
+            fm.FrameTransform(timestamp=ts, parent_frame_id=tr.parent, child_frame_id=tr.child,
+                              translation=_vec3(fm, tr.translation), rotation=_quat(fm, tr.rotation))
+            for tr in payload.transforms
+        ]).encode()
+    if t is Event:
+        if STAMP_KEY in payload.data:
+            raise ValueError(f"event data may not use the reserved key {STAMP_KEY!r}")
+        return json.dumps({**payload.data, STAMP_KEY: int(payload.stamp_ns)}, separators=(",", ":")).encode()
+    schema_for(payload)  # raises the TypeError naming the type
+    raise AssertionError("unreachable")
+
+
+# --- decoding ------------------------------------------------------------------------------------
+
+Decoder = Callable[[bytes], Payload]
+
+
+def decoder_for(schema_name: str, schema_encoding: str, schema_data: bytes, message_encoding: str) -> Decoder:
+    """A function from message bytes to a payload, for a channel with this schema. Raises ValueError
+    for a schema teleprev does not read."""
+    if message_encoding == "json":
+        title = schema_name
+        if schema_encoding == "jsonschema" and schema_data:
+            try:
+                title = json.loads(schema_data).get("title", schema_name)
+            except (ValueError, AttributeError):
+                pass
+        return _EventDecoder(title)
+    if message_encoding != "protobuf" or schema_encoding != "protobuf":
+        raise ValueError(f"unsupported message encoding {message_encoding!r} / schema encoding {schema_encoding!r}")
+    if schema_name == JOINT_STATES:
+        return JointStatesDecoder()
+    cls = _protobuf_class(schema_name, schema_data)
+    if schema_name == POSE_IN_FRAME:
+        return _pose_decoder(cls)
+    if schema_name == COMPRESSED_IMAGE:
+        return _image_decoder(cls)
+    if schema_name == FRAME_TRANSFORMS:
+        return _transforms_decoder(cls)
+    raise ValueError(f"unsupported schema {schema_name!r}")
+
+
+class _EventDecoder:
+    __slots__ = ("title",)
+
+    def __init__(self, title: str):
+        self.title = title
+
+    def __call__(self, data: bytes) -> Event:
+        obj = json.loads(data)
+        if not isinstance(obj, dict):
+            raise ValueError("event JSON is not an object")
+        stamp = obj.pop(STAMP_KEY, 0)
+        return Event(int(stamp), self.title, obj)
+
+
+_class_cache: dict[tuple[str, bytes], type] = {}
+
+
+def _protobuf_class(name: str, fds_bytes: bytes) -> type:
+    """The protobuf message class for `name`, built from the FileDescriptorSet stored in the file."""
+    key = (name, fds_bytes)
+    if key not in _class_cache:
+        from google.protobuf import descriptor_pb2, descriptor_pool, message_factory
+
+        fds = descriptor_pb2.FileDescriptorSet.FromString(fds_bytes)
+        pool = descriptor_pool.DescriptorPool()
+        for f in fds.file:
+            pool.Add(f)
+        _class_cache[key] = message_factory.GetMessageClass(pool.FindMessageTypeByName(name))
+    return _class_cache[key]
+
+
+def _stamp(ts) -> int:
+    return ts.seconds * _NS + ts.nanos
+
+
+def _pose_decoder(cls) -> Decoder:
+    def decode(data: bytes) -> PoseSample:
+        m = cls.FromString(data)
+        p, q = m.pose.position, m.pose.orientation
+        return PoseSample(_stamp(m.timestamp), m.frame_id, np.array((p.x, p.y, p.z)), np.array((q.x, q.y, q.z, q.w)))
+
+    return decode
+
+
+def _image_decoder(cls) -> Decoder:
+    def decode(data: bytes) -> ImageSample:
+        m = cls.FromString(data)
+        return ImageSample(_stamp(m.timestamp), m.frame_id, m.data, m.format)
+
+    return decode
+
+
+def _transforms_decoder(cls) -> Decoder:
+    def decode(data: bytes) -> TransformsSample:
+        m = cls.FromString(data)
+        out = []
+        stamp = 0
+        for i, t in enumerate(m.transforms):
+            if i == 0:
+                stamp = _stamp(t.timestamp)
+            tr, r = t.translation, t.rotation
+            out.append(Transform(t.parent_frame_id, t.child_frame_id, np.array((tr.x, tr.y, tr.z)),
+                                 np.array((r.x, r.y, r.z, r.w))))
+        return TransformsSample(stamp, tuple(out))
+
+    return decode
+
+
+# --- foxglove.JointStates: wire-format parser and per-layout fast path ---------------------------
+
+
+def _varint(buf: bytes, pos: int) -> tuple[int, int]:
+    result = shift = 0
+    while True:
+        b = buf[pos]
+        pos += 1
+        result |= (b & 0x7F) << shift
+        if b < 0x80:
+            return result, pos
+        shift += 7
+        if shift > 63:
+            raise ValueError("malformed varint")
+
+
+def _skip(buf: bytes, pos: int, wire: int) -> int:
+    if wire == 0:
+        return _varint(buf, pos)[1]
+    if wire == 1:
+        return pos + 8
+    if wire == 2:
+        n, pos = _varint(buf, pos)
+        return pos + n
+    if wire == 5:
+        return pos + 4
+    raise ValueError(f"unsupported protobuf wire type {wire}")
+
+
+def _uvarint5(b: bytes, p: int) -> tuple[int, int]:
+    """An unsigned varint of at most 5 bytes (a timestamp field); (-1, p) for a longer one."""
+    x = b[p]
+    if x < 0x80:
+        return x, p + 1
+    r = x & 0x7F
+    x = b[p + 1]
+    r |= (x & 0x7F) << 7
+    if x < 0x80:
+        return r, p + 2
+    x = b[p + 2]
+    r |= (x & 0x7F) << 14
+    if x < 0x80:
+        return r, p + 3
+    x = b[p + 3]
+    r |= (x & 0x7F) << 21
+    if x < 0x80:
+        return r, p + 4
+    x = b[p + 4]
+    r |= (x & 0x7F) << 28
+    if x < 0x80:
+        return r, p + 5
+    return -1, p
+
+
+def _parse_timestamp(buf: bytes, pos: int, end: int) -> int:
+    sec = nsec = 0
+    while pos < end:
+        tag, pos = _varint(buf, pos)
+        if tag == 0x08:
+            sec, pos = _varint(buf, pos)
+            if sec >= 1 << 63:
+                sec -= 1 << 64
+        elif tag == 0x10:
+            nsec, pos = _varint(buf, pos)
+            if nsec >= 1 << 63:
+                nsec -= 1 << 64
+        else:
+            pos = _skip(buf, pos, tag & 7)
+    if pos != end:
+        raise ValueError("malformed timestamp")
+    return sec * _NS + nsec
+
+
+_F64 = np.dtype("<f8")
+_U8 = np.dtype(np.uint8)
+
+
+@dataclass(slots=True)
+class _Layout:
+    """One byte layout of a whole JointStates message: everything but the doubles and the timestamp's
+    varint payload bits is fixed (names, tags, lengths, varint continuation bits)."""
+
+    names: tuple[str, ...]
+    mask: np.ndarray  # uint8: 0x00 over the doubles, 0x80 over timestamp varints, 0xFF elsewhere
+    skeleton: bytes  # message & mask
+    skel: np.ndarray  # the same as an array, for checking many messages at once
+    pos_idx: np.ndarray  # byte indices of the position doubles, joint-major
+    vel_idx: np.ndarray | None
+    sec: tuple[int, int]  # (first byte, length) of the seconds varint; length 0 when absent
+    nsec: tuple[int, int]
+
+    def stamp(self, data: bytes) -> int:
+        return _varint_span(data, *self.sec) * _NS + _varint_span(data, *self.nsec)
+
+    def stamps(self, rows: np.ndarray) -> list[int]:
+        sec, nsec = _varint_column(rows, *self.sec), _varint_column(rows, *self.nsec)
+        if sec.max() < 9_000_000_000:  # no int64 overflow in ns (until the year 2255)
+            return (sec * _NS + nsec).tolist()
+        return [s * _NS + n for s, n in zip(sec.tolist(), nsec.tolist())]
+
+
+def _varint_span(data: bytes, start: int, n: int) -> int:
+    r = 0
+    for j in range(n):
+        r |= (data[start + j] & 0x7F) << (7 * j)
+    return r
+
+
+_SHIFTS = np.arange(0, 35, 7, dtype=np.int64)
+
+
+def _varint_column(rows: np.ndarray, start: int, n: int) -> np.ndarray:
+    if n == 0:
+        return np.zeros(rows.shape[0], dtype=np.int64)
+    return ((rows[:, start:start + n] & 0x7F).astype(np.int64) << _SHIFTS[:n]).sum(axis=1)
+
+
+class JointStatesDecoder:
+    """Decodes foxglove.JointStates into JointSample (float64 values bit-exact, names a shared tuple).
+
+    `batch()` decodes many messages of one channel at once: messages of a known layout are checked and
+    gathered as rows of one array."""
+
+    _MAX_LAYOUTS = 32
+
+    def __init__(self) -> None:
+        self._layouts: dict[int, list[_Layout]] = {}
+        self._count = 0
+
+    def __call__(self, data: bytes) -> JointSample:
+        for layout in self._layouts.get(len(data), ()):
+            a = np.frombuffer(data, _U8)
+            if (a & layout.mask).tobytes() == layout.skeleton:
+                vel = None if layout.vel_idx is None else a[layout.vel_idx].view(_F64)
+                return JointSample(layout.stamp(data), layout.names, a[layout.pos_idx].view(_F64), vel)
+        return self._slow(data)
+
+    def batch(self, datas: list[bytes]) -> list[JointSample]:
+        out: list = [None] * len(datas)
+        by_len: dict[int, list[int]] = {}
+        for i, n in enumerate(map(len, datas)):
+            idxs = by_len.get(n)
+            if idxs is None:
+                by_len[n] = [i]
+            else:
+                idxs.append(i)
+        for n, idxs in by_len.items():
+            layouts = self._layouts.get(n)
+            if not layouts or len(idxs) < 4:
+                for i in idxs:
+                    out[i] = self(datas[i])
+                continue
+            layout = layouts[0]
+            rows = np.frombuffer(b"".join([datas[i] for i in idxs]), _U8).reshape(len(idxs), n)
+            ok = ((rows & layout.mask) == layout.skel).all(axis=1)
+            pos = list(np.ascontiguousarray(rows[:, layout.pos_idx]).view(_F64))
+            vel = (repeat(None) if layout.vel_idx is None
+                   else list(np.ascontiguousarray(rows[:, layout.vel_idx]).view(_F64)))
+            names = layout.names
+            decoded = [JointSample(t, names, p, v) for t, p, v in zip(layout.stamps(rows), pos, vel)]
+            if not ok.all():
+                for r in np.flatnonzero(~ok).tolist():
+                    decoded[r] = self(datas[idxs[r]])
+            for i, sample in zip(idxs, decoded):
+                out[i] = sample
+        return out
+
+    def _slow(self, data: bytes) -> JointSample:
+        stamp, names, pos, vel, pos_off, vel_off, plain = _parse_joint_states(data)
+        names = tuple(names)
+        if plain and self._count < self._MAX_LAYOUTS:
+            self._learn(data, names, pos_off, vel_off)
+        velocities = None if vel is None else np.array(vel, dtype=np.float64)
+        return JointSample(stamp, names, np.array(pos, dtype=np.float64), velocities)
+
+    def _learn(self, data: bytes, names: tuple[str, ...], pos_off: list[int], vel_off: list[int] | None) -> None:
+        spans = _timestamp_spans(data)
+        if spans is None:
+            return
+        sec, nsec = spans
+        a = np.frombuffer(data, _U8)
+        eight = np.arange(8)
+        pos_idx = (np.asarray(pos_off, dtype=np.intp)[:, None] + eight).reshape(-1)
+        vel_idx = None if vel_off is None else (np.asarray(vel_off, dtype=np.intp)[:, None] + eight).reshape(-1)
+        mask = np.full(a.shape[0], 0xFF, np.uint8)
+        mask[pos_idx] = 0
+        if vel_idx is not None:
+            mask[vel_idx] = 0
+        for start, n in (sec, nsec):
+            mask[start:start + n] = 0x80
+        skel = a & mask
+        self._layouts.setdefault(a.shape[0], []).append(
+            _Layout(names, mask, skel.tobytes(), skel, pos_idx, vel_idx, sec, nsec))
+        self._count += 1
+
+
+def _timestamp_spans(data: bytes) -> tuple[tuple[int, int], tuple[int, int]] | None:
+    """Where the seconds and nanos varints of a leading timestamp field are, if each is at most 5 bytes
+    (so a stamp fits the fast paths); None otherwise."""
+    if len(data) < 2 or data[0] != 0x0A or data[1] >= 0x80:
+        return None
+    end = 2 + data[1]
+    p = 2
+    spans = [(p, 0), (p, 0)]
+    for which, tag in ((0, 0x08), (1, 0x10)):
+        if p < end and data[p] == tag:
+            value, q = _uvarint5(data, p + 1)
+            if value < 0:
+                return None
+            spans[which] = (p + 1, q - p - 1)
+            p = q
+    if p != end:
+        return None
+    return spans[0], spans[1]
+
+
+def _parse_joint_states(data: bytes):
+    """Full parse. Returns stamp, names, positions (NaN where absent), velocities (None when no joint has
+    one), the byte offsets of the position / velocity doubles, and whether the message has the plain
+    layout the fast path can learn (one timestamp, first; each joint exactly name + position
+    [+ velocity]; velocities on all joints or none)."""
+    n = len(data)
+    pos = 0
+    stamp = 0
+    timestamp_first = False
+    stamps_seen = 0
+    names: list[str] = []
+    positions: list[float] = []
+    velocities: list[float] = []
+    pos_off: list[int] = []
+    vel_off: list[int] = []
+    plain = True
+    seen_joint = False
+    nan = math.nan
+    while pos < n:
+        tag, pos = _varint(data, pos)
+        field, wire = tag >> 3, tag & 7
+        if field == 1 and wire == 2:
+            ln, pos = _varint(data, pos)
+            stamp = _parse_timestamp(data, pos, pos + ln)
+            pos += ln
+            stamps_seen += 1
+            timestamp_first = not seen_joint
+        elif field == 2 and wire == 2:
+            seen_joint = True
+            ln, pos = _varint(data, pos)
+            end = pos + ln
+            name, p, v, po, vo = "", nan, None, None, None
+            while pos < end:
+                t, pos = _varint(data, pos)
+                f, w = t >> 3, t & 7
+                if f == 1 and w == 2:
+                    sl, pos = _varint(data, pos)
+                    name = data[pos:pos + sl].decode("utf-8")
+                    pos += sl
+                elif f == 2 and w == 1:
+                    po = pos
+                    p = float(np.frombuffer(data, _F64, 1, pos)[0])
+                    pos += 8
+                elif f == 3 and w == 1:
+                    vo = pos
+                    v = float(np.frombuffer(data, _F64, 1, pos)[0])
+                    pos += 8
+                else:
+                    pos = _skip(data, pos, w)
+                    plain = False
+            if pos != end:
+                raise ValueError("malformed joint entry")
+            names.append(name)
+            positions.append(p)
+            velocities.append(nan if v is None else v)
+            pos_off.append(-1 if po is None else po)
+            vel_off.append(-1 if vo is None else vo)
+            if po is None or not name:
+                plain = False
+        else:
+            pos = _skip(data, pos, wire)
+            plain = False
+    if pos != n:
+        raise ValueError("truncated JointStates message")
+    has_vel = [o >= 0 for o in vel_off]
+    any_vel = any(has_vel)
+    if any_vel and not all(has_vel):
+        plain = False
+    return (stamp, names, positions, velocities if any_vel else None, pos_off, vel_off if any_vel else None,
+            plain and timestamp_first and stamps_seen == 1)

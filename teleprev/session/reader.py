@@ -1,0 +1,451 @@
+"""Reads a recorded session back: metadata, topics, messages decoded into teleprev payloads, episodes.
+
+Messages come in log_time order (ties in file order), chunk by chunk, so memory stays bounded by a
+chunk. A file cut short by a crash has no summary: opening it raises SessionError pointing at
+`teleprev recover`.
+"""
+
+from __future__ import annotations
+
+import mmap
+import os
+from dataclasses import dataclass
+from functools import cached_property
+from pathlib import Path
+from typing import Iterable, Iterator
+
+import numpy as np
+
+from teleprev.errors import SessionError
+from teleprev.messages import Event, Logged
+from teleprev.session import mcap_records as mr
+from teleprev.session.codec import decoder_for
+from teleprev.session.topics import EPISODE
+
+_END = 1 << 64
+_I64_END = (1 << 63) - 1  # log times beyond int64 (year 2262) are not expected
+_HEAD_BYTES = np.arange(23)  # a message record's opcode, length, channel, sequence and log time
+
+
+@dataclass(frozen=True, slots=True)
+class TopicInfo:
+    topic: str
+    schema: str
+    message_encoding: str
+    message_count: int
+    first_ns: int | None  # log time of the first and last message (None without messages)
+    last_ns: int | None
+
+
+@dataclass(frozen=True, slots=True)
+class Episode:
+    """An episode as its /events/episode messages describe it; times are the events' stamp_ns.
+    `stop_ns` is None when the session ended (or was cut short) before the episode was stopped."""
+
+    index: int
+    task: str
+    start_ns: int
+    stop_ns: int | None
+    discarded: bool
+    outcome: str | None
+
+    @property
+    def duration_s(self) -> float | None:
+        return None if self.stop_ns is None else (self.stop_ns - self.start_ns) / 1e9
+
+
+class SessionReader:
+    def __init__(self, path: str | os.PathLike, *, verify_crc: bool = False):
+        """`verify_crc` checks each chunk's CRC as it is read (off by default, as in the mcap library:
+        the check costs more than decoding when chunks carry video)."""
+        self.path = Path(path)
+        self.verify_crc = verify_crc
+        where = str(self.path)
+        if not self.path.exists():
+            raise SessionError("no such session file", where)
+        if not self.path.is_file():
+            raise SessionError("not a file", where)
+        self.file_bytes = self.path.stat().st_size
+        if self.file_bytes == 0:
+            raise SessionError("empty file (the recording never started writing)", where)
+        self._f = open(self.path, "rb")
+        try:
+            if self._f.read(len(mr.MAGIC)) != mr.MAGIC:
+                raise SessionError("not an MCAP file (no MCAP magic at the start)", where)
+            try:
+                summary = mr.read_summary(self._f, self.file_bytes)
+            except mr.McapFormatError as exc:
+                raise SessionError(f"the file is cut short or damaged ({exc}); run `teleprev recover {where}` "
+                                   "to rewrite what it holds into a valid session", where) from None
+            if summary is None or (not summary.chunks and summary.statistics and summary.statistics.message_count):
+                summary = self._index_by_scan()  # written without a summary, or without chunk indexes
+            self._mm = mmap.mmap(self._f.fileno(), 0, access=mmap.ACCESS_READ)  # chunks are read without copies
+        except BaseException:
+            self._f.close()
+            raise
+        self._summary = summary
+        self._chunks = sorted(summary.chunks, key=lambda c: (c.start_ns, c.offset))
+        self._by_topic: dict[str, list[int]] = {}
+        for ch in summary.channels.values():
+            self._by_topic.setdefault(ch.topic, []).append(ch.id)
+
+    # --- file-level facts ---
+
+    @cached_property
+    def metadata(self) -> dict[str, dict[str, str]]:
+        """Metadata records by name (a later record of the same name updates an earlier one)."""
+        out: dict[str, dict[str, str]] = {}
+        for name, offset, _length in self._summary.metadata:
+            try:
+                body = mr.read_record(self._f, offset, mr.METADATA)
+                rec_name, data = mr.parse_metadata(body, 0, len(body))
+            except mr.McapFormatError as exc:
+                raise SessionError(f"metadata record {name!r} is damaged: {exc}", str(self.path)) from None
+            out.setdefault(rec_name, {}).update(data)
+        return out
+
+    @cached_property
+    def topics(self) -> dict[str, TopicInfo]:
+        counts = self._summary.statistics.channel_message_counts if self._summary.statistics else {}
+        out = {}
+        for topic, ids in sorted(self._by_topic.items()):
+            ch = self._summary.channels[ids[0]]
+            schema = self._summary.schemas.get(ch.schema_id)
+            times = self.log_times(topic)
+            n = sum(counts.get(i, 0) for i in ids) if counts else len(times)
+            out[topic] = TopicInfo(topic, schema.name if schema else "", ch.message_encoding, n,
+                                   int(times.min()) if len(times) else None, int(times.max()) if len(times) else None)
+        return out
+
+    @property
+    def start_ns(self) -> int | None:
+        return min((c.start_ns for c in self._chunks), default=None)
+
+    @property
+    def end_ns(self) -> int | None:
+        return max((c.end_ns for c in self._chunks), default=None)
+
+    @property
+    def duration_s(self) -> float:
+        return 0.0 if self.start_ns is None else (self.end_ns - self.start_ns) / 1e9
+
+    def log_times(self, topic: str) -> np.ndarray:
+        """Log times (int64 ns) of a topic's messages in file order, from the message indexes (no
+        decompression) when the file has them."""
+        per_channel = self._index_times
+        parts = [per_channel[i] for i in self._by_topic.get(topic, []) if i in per_channel]
+        if not parts:
+            return np.zeros(0, dtype=np.int64)
+        return np.concatenate(parts) if len(parts) > 1 else parts[0]
+
+    @cached_property
+    def _index_times(self) -> dict[int, np.ndarray]:
+        per_channel: dict[int, list[np.ndarray]] = {}
+        for chunk in sorted(self._chunks, key=lambda c: c.offset):
+            index = self._message_index(chunk)
+            if index is not None:
+                for ch, entries in index.items():
+                    per_channel.setdefault(ch, []).append(entries[:, 0].astype(np.int64))
+            else:  # no message index: read the chunk itself
+                times: dict[int, list[int]] = {}
+                for ch, t in self._chunk_messages(chunk):
+                    times.setdefault(ch, []).append(t)
+                for ch, ts in times.items():
+                    per_channel.setdefault(ch, []).append(np.array(ts, dtype=np.int64))
+        return {ch: np.concatenate(v) for ch, v in per_channel.items()}
+
+    def _message_index(self, chunk: mr.ChunkIndex) -> dict[int, np.ndarray] | None:
+        """The chunk's message indexes: channel -> (n, 2) uint64 [log_time, record offset in the
+        chunk], or None when the file has none for this chunk."""
+        if not (chunk.message_index_length and chunk.message_index_offsets):
+            return None
+        start = min(chunk.message_index_offsets.values())
+        out = {}
+        try:
+            block = mr.read_exact(self._f, start, chunk.message_index_length)
+            for op, b, e in mr.iter_records(block):
+                if op == mr.MESSAGE_INDEX:
+                    ch, entries = mr.parse_message_index(block[b:e])
+                    out[ch] = entries
+        except mr.McapFormatError as exc:
+            raise SessionError(f"message index of the chunk at byte {chunk.offset} is damaged: {exc}",
+                               str(self.path)) from None
+        return out
+
+    # --- messages ---
+
+    def messages(
+        self, topics: Iterable[str] | None = None, start_ns: int | None = None, end_ns: int | None = None,
+    ) -> Iterator[Logged]:
+        """Messages with start_ns <= log_time < end_ns, in log_time order, decoded into teleprev
+        payloads. With `topics` None, every topic whose schema teleprev reads."""
+        decoders, names = self._decoders(topics)
+        lo = 0 if start_ns is None else int(start_ns)
+        hi = _END if end_ns is None else int(end_ns)
+        wanted = frozenset(decoders)
+        group: list = []
+        group_end = -1
+        for chunk in self._chunks:
+            if chunk.end_ns < lo or chunk.start_ns >= hi:
+                continue
+            if chunk.message_index_offsets and wanted.isdisjoint(chunk.message_index_offsets):
+                continue
+            if group and chunk.start_ns >= group_end:
+                yield from self._decode_group(group, decoders, names, lo, hi, wanted)
+                group = []
+            group.append(chunk)
+            group_end = max(group_end, chunk.end_ns) if len(group) > 1 else chunk.end_ns
+        if group:
+            yield from self._decode_group(group, decoders, names, lo, hi, wanted)
+
+    def _decoders(self, topics: Iterable[str] | None):
+        decoders, names = {}, {}
+        if topics is None:
+            ids = [i for ids in self._by_topic.values() for i in ids]
+            strict = False
+        else:
+            if isinstance(topics, str):
+                topics = [topics]
+            ids = []
+            for t in topics:
+                if t not in self._by_topic:
+                    raise SessionError(f"no topic {t!r} in this session (topics: {', '.join(sorted(self._by_topic))})",
+                                       str(self.path))
+                ids.extend(self._by_topic[t])
+            strict = True
+        for i in ids:
+            ch = self._summary.channels[i]
+            schema = self._summary.schemas.get(ch.schema_id)
+            try:
+                if schema is None:
+                    raise ValueError("channel has no schema")
+                decoders[i] = decoder_for(schema.name, schema.encoding, schema.data, ch.message_encoding)
+            except ValueError as exc:
+                if strict:
+                    raise SessionError(f"topic {ch.topic}: {exc}", str(self.path)) from None
+                continue
+            names[i] = ch.topic
+        return decoders, names
+
+    def _decode_group(self, group, decoders, names, lo, hi, wanted) -> Iterator[Logged]:
+        if len(group) == 1:
+            yield from self._decode_chunk(group[0], decoders, names, lo, hi, wanted)
+            return
+        # Chunks overlapping in time: merge them (a stable sort keeps file order for equal times).
+        merged = [m for c in sorted(group, key=lambda c: c.offset)
+                  for m in self._decode_chunk(c, decoders, names, lo, hi, wanted)]
+        merged.sort(key=_logged_time)
+        yield from merged
+
+    def _decode_chunk(self, chunk: mr.ChunkIndex, decoders, names, lo: int, hi: int, wanted) -> list[Logged]:
+        """The chunk's messages on `wanted` channels in [lo, hi), decoded, in log time order (file
+        order for equal times). Each channel's messages are decoded together (see
+        JointStatesDecoder.batch)."""
+        buf = self._chunk_records(chunk)
+        located = self._locate_indexed(chunk, buf, wanted, lo, hi)
+        if located is None:
+            located = self._locate_sequential(chunk, buf, wanted, lo, hi)
+        per_channel, order = located
+        decoded = {ch: self._decode_all(decoders[ch], datas, names[ch], ch, order)
+                   for ch, datas in per_channel.items()}
+        return [Logged(names[c], t, decoded[c][k]) for c, k, t in order]
+
+    def _locate_indexed(self, chunk, buf: bytes, wanted, lo: int, hi: int):
+        """Per channel, the wanted messages' bytes, and the (channel, index, log time) order, found
+        through the message index with numpy; None when the chunk has no usable index (then the chunk
+        is parsed record by record). Every index entry is checked against the record it points at."""
+        index = self._message_index(chunk)
+        if index is None:
+            return None
+        sel = [(ch, e) for ch, e in index.items() if ch in wanted]
+        if not sel:
+            return {}, []
+        entries = np.concatenate([e for _, e in sel]).astype(np.int64)
+        chans = np.concatenate([np.full(len(e), ch, dtype=np.int64) for ch, e in sel])
+        ks = np.concatenate([np.arange(len(e)) for _, e in sel])
+        times, offs = entries[:, 0], entries[:, 1]
+        keep = None
+        if lo > 0 or hi < _I64_END:
+            keep = (times >= min(lo, _I64_END)) & (times < min(hi, _I64_END))
+        if keep is not None:
+            times, offs, chans = times[keep], offs[keep], chans[keep]
+        n = len(buf)
+        if len(offs) and (offs.min() < 0 or offs.max() + 9 + 22 > n):
+            return None
+        a = np.frombuffer(buf, np.uint8)
+        head = a[offs[:, None] + _HEAD_BYTES]  # opcode, length (8), channel (2), sequence (4), log time (8)
+        lengths = np.ascontiguousarray(head[:, 1:9]).view("<u8")[:, 0].astype(np.int64)
+        channel = np.ascontiguousarray(head[:, 9:11]).view("<u2")[:, 0]
+        logged = np.ascontiguousarray(head[:, 15:23]).view("<u8")[:, 0].astype(np.int64)
+        ends = offs + 9 + lengths
+        if not ((head[:, 0] == mr.MESSAGE).all() and (lengths >= 22).all() and (ends <= n).all()
+                and (channel == chans).all() and (logged == times).all()):
+            return None
+        starts = (offs + 31).tolist()
+        ends_l = ends.tolist()
+        chans_l = chans.tolist()
+        per_channel: dict[int, list[bytes]] = {ch: [] for ch, _ in sel}
+        for c, s0, e0 in zip(chans_l, starts, ends_l):
+            per_channel[c].append(buf[s0:e0])
+        if keep is not None:  # renumber within each channel after filtering
+            ks = np.concatenate([np.arange(int((chans == ch).sum())) for ch, _ in sel])
+        ordering = np.lexsort((offs, times))
+        order = list(zip(chans[ordering].tolist(), ks[ordering].tolist(), times[ordering].tolist()))
+        return {c: d for c, d in per_channel.items() if d}, order
+
+    def _locate_sequential(self, chunk, buf: bytes, wanted, lo: int, hi: int):
+        per_channel: dict[int, list[bytes]] = {}
+        order: list[tuple[int, int, int]] = []  # (channel, index in that channel's list, log time)
+        head = mr.MESSAGE_HEADER.unpack_from
+        for op, b, e in self._records(chunk, buf):
+            if op == mr.MESSAGE:
+                ch, _seq, t, _pub = head(buf, b)
+                if ch in wanted and lo <= t < hi:
+                    datas = per_channel.get(ch)
+                    if datas is None:
+                        datas = per_channel[ch] = []
+                    order.append((ch, len(datas), t))
+                    datas.append(buf[b + 22:e])
+        order.sort(key=_third)  # stable: file order for equal times
+        return per_channel, order
+
+    def _records(self, chunk, buf: bytes):
+        try:
+            for op, b, e in mr.iter_records(buf):
+                if op == mr.MESSAGE and e - b < 22:
+                    raise mr.McapFormatError("message record too short", b - 9)
+                yield op, b, e
+        except mr.McapFormatError as exc:
+            raise SessionError(f"chunk at byte {chunk.offset} holds a malformed record: {exc}",
+                               str(self.path)) from None
+
+    def _decode_all(self, decoder, datas: list[bytes], topic: str, channel: int, order) -> list:
+        batch = getattr(decoder, "batch", None)
+        try:
+            return batch(datas) if batch is not None else [decoder(d) for d in datas]
+        except (ValueError, IndexError, TypeError, KeyError):
+            pass
+        times = [t for _, t in sorted((k, t) for c, k, t in order if c == channel)]
+        for data, t in zip(datas, times):  # find the message that does not decode
+            try:
+                decoder(data)
+            except (ValueError, IndexError, TypeError, KeyError) as exc:
+                raise SessionError(f"message on {topic} at log time {t} does not decode: {exc}",
+                                   str(self.path)) from None
+        raise SessionError(f"messages on {topic} do not decode", str(self.path))
+
+    def _chunk_records(self, chunk: mr.ChunkIndex) -> bytes:
+        try:
+            body = mr.record_at(self._mm, chunk.offset, mr.CHUNK)
+            return mr.decompress(mr.parse_chunk(body, 0, len(body)), check_crc=self.verify_crc)
+        except mr.McapFormatError as exc:
+            raise SessionError(f"chunk at byte {chunk.offset} is damaged: {exc}", str(self.path)) from None
+
+    def _chunk_messages(self, chunk: mr.ChunkIndex) -> list[tuple[int, int]]:
+        """(channel, log_time) of every message in the chunk, in file order."""
+        buf = self._chunk_records(chunk)
+        head = mr.MESSAGE_HEADER.unpack_from
+        return [head(buf, b)[0:3:2] for op, b, e in self._records(chunk, buf) if op == mr.MESSAGE]
+
+    # --- episodes ---
+
+    def episodes(self) -> list[Episode]:
+        """Episodes from /events/episode: start, stop, discard and outcome events by episode index."""
+        if EPISODE not in self._by_topic:
+            return []
+        found: dict[int, dict] = {}
+        for msg in self.messages([EPISODE]):
+            ev = msg.payload
+            if not isinstance(ev, Event):
+                raise SessionError(f"{EPISODE} holds {type(ev).__name__} messages, expected episode events",
+                                   str(self.path))
+            kind, index = ev.data.get("event"), ev.data.get("episode")
+            where = f"{EPISODE} at log time {msg.log_time_ns}"
+            if not isinstance(index, int):
+                raise SessionError(f"{where}: episode index {index!r} is not an integer", str(self.path))
+            ep = found.get(index)
+            if kind == "start":
+                if ep is not None:
+                    raise SessionError(f"{where}: episode {index} started twice", str(self.path))
+                found[index] = {"index": index, "task": str(ev.data.get("task") or ""), "start_ns": ev.stamp_ns,
+                                "stop_ns": None, "discarded": False, "outcome": ev.data.get("outcome")}
+                continue
+            if ep is None:
+                raise SessionError(f"{where}: {kind!r} for episode {index}, which never started", str(self.path))
+            if kind == "stop":
+                ep["stop_ns"] = ev.stamp_ns
+            elif kind == "discard":
+                ep["discarded"] = True
+                if ep["stop_ns"] is None:
+                    ep["stop_ns"] = ev.stamp_ns
+            elif kind == "outcome":
+                ep["outcome"] = ev.data.get("outcome")
+            else:
+                raise SessionError(f"{where}: unknown episode event {kind!r}", str(self.path))
+            if ev.data.get("task") and not ep["task"]:
+                ep["task"] = str(ev.data["task"])
+        return [Episode(**found[i]) for i in sorted(found)]
+
+    # --- files without a summary section ---
+
+    def _index_by_scan(self) -> mr.SummarySection:
+        """Index a complete MCAP written without a summary by reading it through once."""
+        out = mr.SummarySection()
+        counts: dict[int, int] = {}
+        scan = mr.Scan(self._f, self.file_bytes)
+        for offset, op, body in scan.records():
+            try:
+                if op == mr.CHUNK:
+                    chunk = mr.parse_chunk(body, 0, len(body))
+                    buf = mr.decompress(chunk)
+                    for iop, b, e in mr.iter_records(buf):
+                        if iop == mr.SCHEMA:
+                            s = mr.parse_schema(buf, b, e)
+                            out.schemas[s.id] = s
+                        elif iop == mr.CHANNEL:
+                            c = mr.parse_channel(buf, b, e)
+                            out.channels[c.id] = c
+                        elif iop == mr.MESSAGE:
+                            cid = mr._U16.unpack_from(buf, b)[0]
+                            counts[cid] = counts.get(cid, 0) + 1
+                    out.chunks.append(mr.ChunkIndex(chunk.start_ns, chunk.end_ns, offset, 9 + len(body), {}, 0,
+                                                    chunk.compression))
+                elif op == mr.SCHEMA:
+                    s = mr.parse_schema(body, 0, len(body))
+                    out.schemas[s.id] = s
+                elif op == mr.CHANNEL:
+                    c = mr.parse_channel(body, 0, len(body))
+                    out.channels[c.id] = c
+                elif op == mr.MESSAGE:
+                    raise SessionError("messages outside chunks are not supported; run `teleprev recover` on it "
+                                       "to rewrite it chunked", str(self.path))
+                elif op == mr.METADATA:
+                    out.metadata.append((mr.parse_metadata(body, 0, len(body))[0], offset, 9 + len(body)))
+            except mr.McapFormatError as exc:
+                raise SessionError(f"record at byte {offset} is damaged: {exc}", str(self.path)) from None
+        if scan.stop != "footer":
+            raise SessionError(f"the file is cut short ({scan.stop}); run `teleprev recover {self.path}`",
+                               str(self.path))
+        out.statistics = mr.Statistics(sum(counts.values()), len(out.schemas), len(out.channels), 0,
+                                       len(out.metadata), len(out.chunks), 0, 0, counts)
+        return out
+
+    # --- lifecycle ---
+
+    def close(self) -> None:
+        self._mm.close()
+        self._f.close()
+
+    def __enter__(self) -> SessionReader:
+        return self
+
+    def __exit__(self, *exc) -> None:
+        self.close()
+
+
+def _third(entry) -> int:
+    return entry[2]
+
+
+def _logged_time(msg: Logged) -> int:
+    return msg.log_time_ns

@@ -1,0 +1,254 @@
+"""The session recorder: any number of producer threads, one bounded queue, one writer thread.
+
+`log()` never blocks and never raises for a full queue: the message is dropped and counted, so a slow
+disk cannot stall a device or the pipeline. Encoding, compression and file I/O all happen on the writer
+thread, which ends a chunk and flushes it to the OS every `flush_interval_s`, so a crash or a kill loses
+at most that much. At close, a "recorder" metadata record keeps every stream's counters in the file.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import queue
+import threading
+import time
+from dataclasses import dataclass, field, replace
+from pathlib import Path
+
+from teleprev.errors import SessionError
+from teleprev.messages import Logged
+from teleprev.session.writer import DEFAULT_CHUNK_SIZE, McapSessionWriter, check_metadata
+
+RECORDER_RECORD = "recorder"  # metadata record with the counters, written at close
+DEFAULT_QUEUE_SIZE = 4096
+POLL_S = 0.02  # how often the idle writer looks at the queue
+YIELD_EVERY = 16  # messages the writer encodes before letting producers have the GIL
+
+
+@dataclass(slots=True)
+class StreamStats:
+    """Per topic: messages handed to log(), written to the file, dropped because the queue was full,
+    rejected because they could not be encoded (errors), and encoded bytes written."""
+
+    received: int = 0
+    written: int = 0
+    dropped: int = 0
+    bytes: int = 0
+    errors: int = 0
+
+    def as_json(self) -> str:
+        return json.dumps({"received": self.received, "written": self.written, "dropped": self.dropped,
+                           "errors": self.errors, "bytes": self.bytes})
+
+
+@dataclass
+class RecordingSummary:
+    path: Path
+    streams: dict[str, StreamStats]
+    wall_s: float  # start() to close()
+    writer_cpu_s: float  # CPU time of the writer thread (encoding, compression, I/O)
+    max_queue_depth: int
+    file_bytes: int
+    errors: list[str] = field(default_factory=list)  # first rejection message per topic
+
+    @property
+    def written(self) -> int:
+        return sum(s.written for s in self.streams.values())
+
+    @property
+    def dropped(self) -> int:
+        return sum(s.dropped for s in self.streams.values())
+
+
+_STOP = object()
+
+
+class Recorder:
+    def __init__(
+        self,
+        path: str | os.PathLike,
+        metadata: dict[str, dict[str, str]] | None = None,
+        *,
+        queue_size: int = DEFAULT_QUEUE_SIZE,
+        flush_interval_s: float = 0.5,
+        chunk_size: int = DEFAULT_CHUNK_SIZE,
+        fsync: bool = True,
+    ):
+        if queue_size < 1:
+            raise ValueError("queue_size must be at least 1")
+        if not 0 < flush_interval_s <= 1.0:
+            raise ValueError("flush_interval_s must be in (0, 1] (sessions are flushed at least once a second)")
+        self.path = Path(path)
+        self.queue_size = queue_size
+        self.flush_interval_s = flush_interval_s
+        self._writer = McapSessionWriter(self.path, metadata, chunk_size=chunk_size, fsync=fsync)
+        self._queue: queue.SimpleQueue = queue.SimpleQueue()
+        self._lock = threading.Lock()
+        self._stats: dict[str, StreamStats] = {}
+        self._errors: dict[str, str] = {}
+        self._max_depth = 0
+        self._accepting = True
+        self._failure: BaseException | None = None
+        self._thread: threading.Thread | None = None
+        self._cpu_s = 0.0
+        self._t_start: float | None = None
+        self._summary: RecordingSummary | None = None
+
+    # --- producer side (any thread) ---
+
+    def log(self, msg: Logged) -> bool:
+        """Queue a message for writing; False when it was dropped (queue full, or recorder closed)."""
+        with self._lock:
+            st = self._stats.get(msg.topic)
+            if st is None:
+                st = self._stats[msg.topic] = StreamStats()
+            st.received += 1
+            q = self._queue
+            depth = q.qsize()
+            if depth >= self.queue_size or not self._accepting:
+                st.dropped += 1
+                return False
+            q.put(msg)
+            if depth >= self._max_depth:
+                self._max_depth = depth + 1
+            return True
+
+    def stats(self) -> dict[str, StreamStats]:
+        """A snapshot of the per-topic counters."""
+        with self._lock:
+            return {t: replace(s) for t, s in self._stats.items()}
+
+    @property
+    def writer_cpu_s(self) -> float:
+        """CPU seconds used by the writer thread so far (updated at every flush)."""
+        return self._cpu_s
+
+    @property
+    def max_queue_depth(self) -> int:
+        return self._max_depth
+
+    @property
+    def failure(self) -> BaseException | None:
+        """The I/O error that stopped the writer, if any (the file is then left for `teleprev recover`)."""
+        return self._failure
+
+    # --- lifecycle ---
+
+    def start(self) -> Recorder:
+        if self._thread is not None:
+            raise RuntimeError("recorder already started")
+        self._t_start = time.monotonic()
+        self._thread = threading.Thread(target=self._run, name="teleprev-recorder", daemon=True)
+        self._thread.start()
+        return self
+
+    def close(self, extra_metadata: dict[str, dict[str, str]] | None = None) -> RecordingSummary:
+        """Stop accepting messages, write everything queued, the counters and `extra_metadata`, and
+        complete the file. Raises SessionError if the writer failed (what it flushed stays readable
+        with `teleprev recover`)."""
+        if self._summary is not None:
+            return self._summary
+        for name, rec in (extra_metadata or {}).items():
+            check_metadata(name, rec)  # before stopping anything: a bad record must not cost the file
+        with self._lock:
+            self._accepting = False
+        if self._thread is None:
+            self.start()
+        self._queue.put(_STOP)
+        self._thread.join()
+        if self._failure is None:
+            try:
+                self._writer.flush()  # the last chunk first, so the counters follow every message
+                for name, rec in (extra_metadata or {}).items():
+                    self._writer.add_metadata(name, rec)
+                self._writer.add_metadata(RECORDER_RECORD, self._counters_record())
+                self._writer.close()
+            except OSError as exc:
+                self._failure = exc
+        if self._failure is not None:
+            self._writer.abort()
+            raise SessionError(f"recording failed: {self._failure}; run `teleprev recover {self.path}` "
+                               "to keep what was flushed", str(self.path))
+        with self._lock:
+            streams = {t: replace(s) for t, s in self._stats.items()}
+        self._summary = RecordingSummary(
+            self.path, streams, time.monotonic() - self._t_start, self._cpu_s, self._max_depth,
+            self.path.stat().st_size, [f"{t}: {m}" for t, m in self._errors.items()],
+        )
+        return self._summary
+
+    def __enter__(self) -> Recorder:
+        if self._thread is None:
+            self.start()
+        return self
+
+    def __exit__(self, *exc) -> None:
+        self.close()
+
+    def _counters_record(self) -> dict[str, str]:
+        with self._lock:
+            rec = {topic: s.as_json() for topic, s in sorted(self._stats.items())}
+        rec.update({
+            "queue_size": str(self.queue_size),
+            "flush_interval_s": str(self.flush_interval_s),
+            "max_queue_depth": str(self._max_depth),
+            "writer_cpu_s": f"{self._cpu_s:.3f}",
+            "wall_s": f"{time.monotonic() - self._t_start:.3f}",
+        })
+        for topic, message in self._errors.items():
+            rec[f"error {topic}"] = message
+        return rec
+
+    # --- writer thread ---
+
+    def _run(self) -> None:
+        # The writer wakes every POLL_S and drains the queue, instead of waking for every message: a
+        # thread wake-up per message costs more CPU than encoding it. Within a drain it lets go of the
+        # GIL every YIELD_EVERY messages, so that producers calling log() are not held up for long.
+        writer, get, stats = self._writer, self._queue.get_nowait, self._stats
+        interval = self.flush_interval_s
+        next_flush = time.monotonic() + interval
+        sleep, monotonic = time.sleep, time.monotonic
+        try:
+            while True:
+                stop = False
+                n = 0
+                while True:
+                    try:
+                        msg = get()
+                    except queue.Empty:
+                        break
+                    if msg is _STOP:
+                        stop = True
+                        break
+                    try:
+                        size = writer.write(msg)
+                    except (ValueError, TypeError, OverflowError) as exc:
+                        st = stats[msg.topic]
+                        st.errors += 1
+                        self._errors.setdefault(msg.topic, f"{type(exc).__name__}: {exc}")
+                    else:
+                        st = stats[msg.topic]
+                        st.written += 1
+                        st.bytes += size
+                    n += 1
+                    if n % YIELD_EVERY == 0:
+                        sleep(0)
+                    if n % 256 == 0 and monotonic() >= next_flush:
+                        break  # a long backlog still gets flushed on time
+                if stop:
+                    break
+                now = monotonic()
+                if now >= next_flush:
+                    writer.flush()
+                    self._cpu_s = time.thread_time()
+                    next_flush = now + interval
+                elif n == 0 or n % 256:
+                    sleep(min(POLL_S, max(0.0, next_flush - now)))
+        except OSError as exc:
+            self._failure = exc
+            with self._lock:
+                self._accepting = False
+        finally:
+            self._cpu_s = time.thread_time()

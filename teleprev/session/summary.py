@@ -1,0 +1,138 @@
+"""The facts `teleprev info` prints about a session: streams, rates, gaps, drops, device events, episodes.
+
+Rates and gaps come from the message indexes (log times only, nothing decompressed), drops from the
+recorder's metadata record (absent in a file rewritten by `teleprev recover`: the recorder never closed).
+"""
+
+from __future__ import annotations
+
+import json
+import os
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from teleprev.errors import SessionError
+from teleprev.messages import Event
+from teleprev.session.reader import Episode, SessionReader
+from teleprev.session.recorder import RECORDER_RECORD
+from teleprev.session.topics import DEVICE_EVENT
+
+GAP_FACTOR = 3.0  # a gap is an interval longer than this many median periods
+
+
+@dataclass
+class StreamSummary:
+    topic: str
+    schema: str
+    count: int
+    rate_hz: float | None  # (count - 1) / (last - first); None with fewer than two messages
+    first_ns: int | None
+    last_ns: int | None
+    max_gap_s: float | None  # largest interval between consecutive messages
+    gaps: int  # intervals longer than GAP_FACTOR x the median interval
+    backwards: int  # log times that went back from the previous message (0 for a monotonic stream)
+    received: int | None = None  # from the recorder's counters, when the file has them
+    dropped: int | None = None
+    errors: int | None = None
+
+
+@dataclass
+class DeviceEventInfo:
+    log_time_ns: int
+    device: str
+    event: str
+    message: str
+
+
+@dataclass
+class SessionSummary:
+    path: Path
+    file_bytes: int
+    start_ns: int | None
+    end_ns: int | None
+    message_count: int
+    streams: list[StreamSummary]
+    episodes: list[Episode]
+    device_events: list[DeviceEventInfo]
+    metadata: dict[str, dict[str, str]]
+    has_recorder_counters: bool
+    recovered: bool  # rewritten by `teleprev recover`
+    dropped: int | None = None
+    recorder_errors: list[str] = field(default_factory=list)
+
+    @property
+    def duration_s(self) -> float:
+        return 0.0 if self.start_ns is None else (self.end_ns - self.start_ns) / 1e9
+
+    def to_json(self) -> dict:
+        from dataclasses import asdict
+
+        out = asdict(self)
+        out["path"] = str(self.path)
+        out["duration_s"] = self.duration_s
+        return out
+
+
+def interval_stats(times: np.ndarray) -> tuple[float | None, int, int]:
+    """(largest interval in s, intervals > GAP_FACTOR x median, backward steps) of log times in file order."""
+    if len(times) < 2:
+        return None, 0, 0
+    d = np.diff(times)
+    backwards = int((d < 0).sum())
+    ordered = np.diff(np.sort(times))
+    median = float(np.median(ordered))
+    gaps = int((ordered > GAP_FACTOR * median).sum()) if median > 0 else 0
+    return float(ordered.max()) / 1e9, gaps, backwards
+
+
+def summarize(path: str | os.PathLike) -> SessionSummary:
+    with SessionReader(path) as reader:
+        meta = reader.metadata
+        counters = meta.get(RECORDER_RECORD, {})
+        streams = []
+        for topic, info in reader.topics.items():
+            times = reader.log_times(topic)
+            max_gap, gaps, backwards = interval_stats(times)
+            rate = None
+            if info.message_count >= 2 and info.last_ns > info.first_ns:
+                rate = (info.message_count - 1) / ((info.last_ns - info.first_ns) / 1e9)
+            s = StreamSummary(topic, info.schema, info.message_count, rate, info.first_ns, info.last_ns, max_gap,
+                              gaps, backwards)
+            if topic in counters:
+                c = _counters(counters[topic], reader.path, topic)
+                s.received, s.dropped, s.errors = c.get("received"), c.get("dropped"), c.get("errors")
+            streams.append(s)
+        # Topics the recorder saw but never wrote (everything dropped or rejected) still show up.
+        for key, value in counters.items():
+            if key.startswith("/") and key not in reader.topics:
+                c = _counters(value, reader.path, key)
+                streams.append(StreamSummary(key, "", 0, None, None, None, None, 0, 0, c.get("received"),
+                                             c.get("dropped"), c.get("errors")))
+        device_events = []
+        if DEVICE_EVENT in reader.topics:
+            for msg in reader.messages([DEVICE_EVENT]):
+                ev = msg.payload
+                if isinstance(ev, Event):
+                    d = ev.data
+                    device_events.append(DeviceEventInfo(msg.log_time_ns, str(d.get("device", "")),
+                                                         str(d.get("event", "")), str(d.get("message", ""))))
+        has_counters = bool(counters)
+        return SessionSummary(
+            reader.path, reader.file_bytes, reader.start_ns, reader.end_ns,
+            sum(s.count for s in streams), streams, reader.episodes(), device_events, meta, has_counters,
+            "recover" in meta,
+            sum(s.dropped or 0 for s in streams) if has_counters else None,
+            [f"{k[6:]}: {v}" for k, v in counters.items() if k.startswith("error ")],
+        )
+
+
+def _counters(value: str, path: Path, topic: str) -> dict[str, int]:
+    try:
+        c = json.loads(value)
+        if not isinstance(c, dict):
+            raise ValueError("not an object")
+        return {k: int(v) for k, v in c.items()}
+    except (ValueError, TypeError) as exc:
+        raise SessionError(f"recorder counters for {topic} are malformed ({exc}): {value!r}", str(path)) from None

@@ -1,0 +1,297 @@
+"""vmc.suit / vmc.glove: real OSC bundles sent over UDP loopback from another socket."""
+
+from __future__ import annotations
+
+import socket
+import time
+
+import numpy as np
+import pytest
+from pythonosc.osc_bundle_builder import IMMEDIATELY, OscBundleBuilder
+from pythonosc.osc_message_builder import OscMessageBuilder
+from pythonosc.udp_client import SimpleUDPClient
+
+from devices.base import DeviceContext
+from devices.runner import DeviceRunner
+from devices.vmc import VmcGlove, VmcSuit
+from devices.vmc.plugins import BODY_POSE_NAMES, VmcSettings, VmcSuitSettings
+from teleprev.human.smplx import JOINT_INDEX, angles_from_hand_pose, hand_pose_from_values
+from teleprev.robot.transforms import axis_angle_to_matrix, matrix_to_quat, quat_from_axis_angle, quat_to_matrix
+from teleprev.session import topics
+from teleprev.session.clock import SessionClock
+
+
+def free_port() -> int:
+    with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as s:
+        s.bind(("127.0.0.1", 0))
+        return s.getsockname()[1]
+
+
+def msg(address: str, *args, types: str | None = None):
+    b = OscMessageBuilder(address=address)
+    for i, a in enumerate(args):
+        b.add_arg(a, types[i] if types else None)
+    return b.build()
+
+
+def bone(name: str, pos=(0.0, 0.0, 0.0), quat=(0.0, 0.0, 0.0, 1.0), address="/VMC/Ext/Bone/Pos"):
+    return msg(address, name, *[float(v) for v in pos], *[float(v) for v in quat])
+
+
+def bundle(*messages):
+    b = OscBundleBuilder(IMMEDIATELY)
+    for m in messages:
+        b.add_content(m)
+    return b.build()
+
+
+def unity_quat(axis, angle):
+    """A Unity rotation of `angle` about the Unity-frame `axis` (x y z w)."""
+    axis = np.asarray(axis, dtype=float)
+    return quat_from_axis_angle(axis / np.linalg.norm(axis) * angle)
+
+
+@pytest.fixture
+def context():
+    return DeviceContext(SessionClock())
+
+
+def read_until(device, n, timeout=2.0):
+    out, deadline = [], time.monotonic() + timeout
+    while len(out) < n and time.monotonic() < deadline:
+        out.extend(device.read(0.05))
+    return out
+
+
+def test_index_flexion_sent_over_osc_comes_out_as_the_same_flexion(context):
+    port = free_port()
+    glove = VmcGlove("g", VmcSettings(port=port), context)
+    glove.connect()
+    try:
+        client = SimpleUDPClient("127.0.0.1", port)
+        flex = {"RightIndexProximal": 0.7, "RightMiddleIntermediate": 1.1, "RightLittleDistal": 0.4}
+        # Curling towards the palm in Unity: the finger (+x in T-pose) turns towards the palm (-y),
+        # i.e. a negative turn about Unity z. Check that geometry first, so the test cannot agree
+        # with a sign mistake in the plugin.
+        q = unity_quat([0, 0, 1], -0.7)
+        tip = quat_to_matrix(q) @ np.array([1.0, 0.0, 0.0])
+        assert tip[1] < 0  # towards the palm
+        abd = 0.2  # index abduction towards the thumb (+z in Unity, forward in T-pose)
+        q_index = unity_quat([0, 1, 0], -abd)  # turning +x towards +z is about -y in Unity's math
+        assert (quat_to_matrix(q_index) @ [1.0, 0, 0])[2] > 0
+        q_index_both = quat_to_matrix(q_index) @ quat_to_matrix(q)
+        msgs = [bone("RightIndexProximal", (0.03, 0, 0), matrix_to_quat(q_index_both))]
+        msgs += [bone(n, (0.03, 0, 0), unity_quat([0, 0, 1], -f)) for n, f in flex.items() if n != "RightIndexProximal"]
+        client.send(bundle(*msgs))
+        samples = read_until(glove, 1)
+        assert len(samples) == 1 and samples[0].topic == "/glove/g/hand"
+        js = samples[0].payload
+        pose = hand_pose_from_values(js.names, js.positions)
+        flexion, abduction = angles_from_hand_pose(pose)
+        assert flexion[JOINT_INDEX["index1"]] == pytest.approx(0.7, abs=1e-6)
+        assert abduction[JOINT_INDEX["index1"]] == pytest.approx(abd, abs=1e-6)
+        assert flexion[JOINT_INDEX["middle2"]] == pytest.approx(1.1, abs=1e-6)
+        assert flexion[JOINT_INDEX["pinky3"]] == pytest.approx(0.4, abs=1e-6)  # Little -> pinky
+        untouched = [j for j in JOINT_INDEX if j not in ("index1", "middle2", "pinky3")]
+        assert np.allclose(pose[[JOINT_INDEX[j] for j in untouched]], 0.0)
+        # Geometrically: SMPL-X's finger (-x) under the output rotation is Unity's curled finger, mirrored.
+        r = axis_angle_to_matrix(pose[JOINT_INDEX["middle2"]])
+        unity_tip = quat_to_matrix(unity_quat([0, 0, 1], -1.1)) @ [1.0, 0, 0]
+        assert np.allclose(r @ [-1.0, 0, 0], np.diag([-1.0, 1, 1]) @ unity_tip)
+    finally:
+        glove.disconnect()
+
+
+def arm_messages(root_pos=(0, 0, 0), root_quat=(0, 0, 0, 1), elbow_quat=(0, 0, 0, 1), t=None):
+    msgs = [
+        bone("root", root_pos, root_quat, address="/VMC/Ext/Root/Pos"),
+        bone("Hips", (0, 0.9, 0)),
+        bone("Spine", (0, 0.1, 0)),
+        bone("Chest", (0, 0.15, 0)),
+        bone("RightShoulder", (0.02, 0.2, 0)),
+        bone("RightUpperArm", (0.1, 0, 0)),
+        bone("RightLowerArm", (0.3, 0, 0), elbow_quat),
+        bone("RightHand", (0.25, 0, 0)),
+    ]
+    if t is not None:
+        msgs.append(msg("/VMC/Ext/T", t, types="d"))
+    return msgs
+
+
+def arm_frame(**kw):
+    return bundle(*arm_messages(**kw))
+
+
+def test_suit_wrist_chains_root_and_bones_into_the_suit_frame(context):
+    port = free_port()
+    suit = VmcSuit("s", VmcSuitSettings(port=port), context)
+    suit.connect()
+    try:
+        client = SimpleUDPClient("127.0.0.1", port)
+        # T-pose, avatar at the origin facing Unity +z: the right hand is 0.67 m to the right (+x),
+        # 1.35 m up; in the suit frame right is -y and up is +z.
+        client.send(arm_frame())
+        pose = read_until(suit, 1)[0].payload
+        assert pose.frame_id == "suit"
+        assert np.allclose(pose.position, [0.0, -0.67, 1.35])
+        r = pose.matrix()[:3, :3]
+        assert np.allclose(r @ [-1.0, 0, 0], [0, -1, 0])  # fingers: the operator's right
+        assert np.allclose(r @ [0, -1.0, 0], [0, 0, -1])  # palm down
+        assert np.allclose(r @ [0, 0, 1.0], [1, 0, 0])  # thumb forward
+
+        # Forearm turned forward (Unity +x -> +z is a -90 degree turn about Unity y), avatar moved 1 m
+        # forward (Unity +z): hand 0.25 m in front of the elbow, fingers forward.
+        client.send(arm_frame(root_pos=(0, 0, 1.0), elbow_quat=unity_quat([0, 1, 0], -np.pi / 2)))
+        pose = read_until(suit, 1)[0].payload
+        assert np.allclose(pose.position, [1.25, -0.42, 1.35])
+        r = pose.matrix()[:3, :3]
+        assert np.allclose(r @ [-1.0, 0, 0], [1, 0, 0])
+
+        # The avatar turned to face Unity +x (a +90 degree turn about Unity y): its right is now Unity -z,
+        # which is the suit's -x.
+        client.send(arm_frame(root_quat=unity_quat([0, 1, 0], np.pi / 2)))
+        pose = read_until(suit, 1)[0].payload
+        assert np.allclose(pose.position, [-0.67, 0.0, 1.35])
+    finally:
+        suit.disconnect()
+
+
+def test_suit_body_joints_and_device_time(context):
+    port = free_port()
+    suit = VmcSuit("s", VmcSuitSettings(port=port, body=True), context)
+    assert [s.topic for s in suit.streams()] == ["/suit/s/wrist", "/suit/s/body"]
+    suit.connect()
+    try:
+        client = SimpleUDPClient("127.0.0.1", port)
+        elbow = unity_quat([0, 1, 0], -0.5)
+        client.send(arm_frame(elbow_quat=elbow, t=1000.0))
+        first = read_until(suit, 2)
+        time.sleep(0.05)  # sent 50 ms later but claims 7.8125 ms: device time decides the spacing
+        client.send(arm_frame(elbow_quat=elbow, t=1000.0078125))
+        second = read_until(suit, 2)
+        body = {s.topic: s.payload for s in first}["/suit/s/body"]
+        assert body.names == BODY_POSE_NAMES
+        values = body.as_dict()
+        # D R D: a turn about Unity y becomes the opposite turn about SMPL-X y.
+        assert values["right_elbow.y"] == pytest.approx(0.5) and values["right_elbow.x"] == pytest.approx(0.0)
+        assert values["left_knee.x"] == 0.0
+        assert second[0].payload.stamp_ns - first[0].payload.stamp_ns == 7_812_500
+        assert first[0].payload.stamp_ns <= context.clock.now_ns()
+    finally:
+        suit.disconnect()
+
+
+def test_garbage_is_counted_and_skipped_without_stopping_the_stream(context):
+    port = free_port()
+    glove = VmcGlove("g", VmcSettings(port=port), context)
+    glove.connect()
+    sender = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+    try:
+        good = bone("RightIndexProximal", (0.03, 0, 0), unity_quat([0, 0, 1], -0.3))
+        sender.sendto(b"\x00\x01garbage that is not OSC", ("127.0.0.1", port))
+        sender.sendto(b"#bundle\x00" + b"\xff" * 11, ("127.0.0.1", port))  # a truncated bundle
+        sender.sendto(bundle(bone("RightPinkyProximal", (0, 0, 0), (0, 0, 0, 1))).dgram, ("127.0.0.1", port))
+        sender.sendto(bundle(bone("RightRingProximal", (0, 0, 0), (0, 0, float("nan"), 1))).dgram, ("127.0.0.1", port))
+        sender.sendto(bundle(msg("/VMC/Ext/Bone/Pos", "RightRingDistal", "x", 1.0)).dgram, ("127.0.0.1", port))
+        # garbage next to a good bone in one bundle: the good bone still counts
+        sender.sendto(bundle(bone("NoSuchBone"), bone("RightMiddleProximal", (0, 0, 0), (float("inf"), 0, 0, 1)), good).dgram,
+                      ("127.0.0.1", port))
+        samples = read_until(glove, 1)
+        assert len(samples) == 1
+        pose = hand_pose_from_values(samples[0].payload.names, samples[0].payload.positions)
+        assert np.isfinite(pose).all()
+        assert angles_from_hand_pose(pose)[0][0] == pytest.approx(0.3)
+        deadline = time.monotonic() + 1.0
+        while glove.counters()["malformed_packets"] < 2 and time.monotonic() < deadline:
+            time.sleep(0.01)
+        assert glove.counters() == {"malformed_packets": 2, "malformed_messages": 1, "unknown_bones": 2, "non_finite": 2}
+        sender.sendto(bundle(good).dgram, ("127.0.0.1", port))
+        assert len(read_until(glove, 1)) == 1  # still streaming
+    finally:
+        sender.close()
+        glove.disconnect()
+
+
+def test_suit_and_glove_share_one_port_and_the_runner_reports_skipped_garbage():
+    clock = SessionClock()
+    context = DeviceContext(clock)
+    port = free_port()
+    suit = VmcSuit("s", VmcSuitSettings(port=port), context)
+    glove = VmcGlove("g", VmcSettings(port=port), context)
+    got: list = []
+    runners = [DeviceRunner(d, lambda s, t: got.append(s), clock, reconnect_s=0.1) for d in (suit, glove)]
+    for r in runners:
+        r.start()
+    client = SimpleUDPClient("127.0.0.1", port)
+    raw = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+    try:
+        deadline = time.monotonic() + 2.0
+        while not all(r.connected for r in runners) and time.monotonic() < deadline:
+            time.sleep(0.01)
+        for k in range(30):
+            fingers = bone("RightIndexProximal", (0.03, 0, 0), unity_quat([0, 0, 1], -0.01 * k))
+            client.send(bundle(*arm_messages(), fingers))
+            if k == 10:
+                raw.sendto(b"not osc", ("127.0.0.1", port))
+            time.sleep(0.01)
+        time.sleep(1.2)  # the runner turns counters into events once a second
+        client.send(arm_frame())
+        time.sleep(0.1)
+    finally:
+        raw.close()
+        for r in runners:
+            r.stop()
+    by_topic = {}
+    for s in got:
+        by_topic.setdefault(s.topic, []).append(s.payload)
+    assert len(by_topic["/suit/s/wrist"]) == 31
+    assert len(by_topic["/glove/g/hand"]) == 30
+    events = [e.data for e in by_topic[topics.DEVICE_EVENT]]
+    assert {(e["device"], e["event"]) for e in events} >= {("s", "connected"), ("g", "connected"), ("s", "error"), ("g", "error")}
+    assert any("1 malformed packets" in e["message"] for e in events if e["event"] == "error")
+    assert runners[1].stats().skipped["malformed_packets"] == 1
+    assert suit.context.shared == {}  # the last one out closed the shared socket
+
+
+def test_timeout_turns_silence_into_a_fault_naming_the_port(context):
+    from teleprev.errors import DeviceError
+
+    port = free_port()
+    glove = VmcGlove("g", VmcSettings(port=port, timeout_s=0.2), context)
+    glove.connect()
+    try:
+        t0 = time.monotonic()
+        with pytest.raises(DeviceError, match=f"no VMC frames on UDP 127.0.0.1:{port} for 0.2 s"):
+            while time.monotonic() - t0 < 2.0:
+                glove.read(0.05)
+        assert 0.2 <= time.monotonic() - t0 < 0.6
+    finally:
+        glove.disconnect()
+
+
+def test_port_in_use_is_a_clear_device_error(context):
+    from teleprev.errors import DeviceError
+
+    with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as taken:
+        taken.bind(("127.0.0.1", 0))
+        port = taken.getsockname()[1]
+        glove = VmcGlove("g", VmcSettings(port=port), context)
+        with pytest.raises(DeviceError, match=f"127.0.0.1:{port}"):
+            glove.connect()
+        glove.disconnect()
+
+
+def test_settings_are_checked_when_the_rig_loads(tmp_path):
+    from teleprev.errors import ConfigError
+    from teleprev.rig import load_rig
+
+    rig = tmp_path / "rig.toml"
+    rig.write_text('[devices.suit]\nplugin = "vmc.suit"\nhost = "localhost-ish"\n')
+    with pytest.raises(ConfigError, match=r"\[devices.suit\].*host must be an IPv4 address"):
+        load_rig(rig)
+    rig.write_text('[devices.suit]\nplugin = "vmc.suit"\nport = 70000\n')
+    with pytest.raises(ConfigError, match="port must be 0..65535"):
+        load_rig(rig)
+    rig.write_text('[devices.suit]\nplugin = "vmc.suit"\nbody = true\nport = 39540\n')
+    entry = load_rig(rig).devices["suit"]
+    assert entry.settings.host == "127.0.0.1" and entry.settings.body and entry.kind == "suit"

@@ -1,0 +1,230 @@
+"""xarm.arm through a test double at the XArmLink interface, and SdkXArmLink against a stand-in XArmAPI."""
+
+from __future__ import annotations
+
+import sys
+import time
+
+import numpy as np
+import pytest
+
+from devices.base import DeviceContext
+from devices.runner import DeviceRunner
+from devices.xarm import SdkXArmLink, XArm, XArmSettings
+from teleprev.errors import ConfigError, DeviceError
+from teleprev.messages import JointSample
+from teleprev.session.clock import SessionClock
+
+HOME = [0.0, -0.27, -0.11, 0.0, -0.85, -1.571]
+NAMES = tuple(f"joint{i}" for i in range(1, 7))
+
+
+class LinkDouble:
+    """Records every call; `unplugged` makes every call fail as a lost connection would."""
+
+    def __init__(self, angles=HOME, extra=(0.0,)):
+        self.calls: list[tuple] = []
+        self.angles = list(angles) + list(extra)  # the SDK reports 7 values for a 6-joint arm
+        self.unplugged = False
+
+    def _call(self, *call):
+        if self.unplugged:
+            raise DeviceError("connection lost", "xArm double")
+        self.calls.append(call)
+
+    def connect(self):
+        self._call("connect")
+
+    def enable_servo_mode(self):
+        self._call("enable_servo_mode")
+
+    def joint_angles(self):
+        self._call("joint_angles")
+        return self.angles[:6]
+
+    def servo_angle_j(self, angles):
+        self._call("servo_angle_j", tuple(angles))
+
+    def disconnect(self):
+        self.calls.append(("disconnect",))
+
+
+def arm(link, **kw):
+    return XArm("arm", XArmSettings(host="10.0.0.2", **kw), DeviceContext(SessionClock()), link=link)
+
+
+def cmd(values, names=NAMES):
+    return JointSample(0, tuple(names), np.array(values, dtype=float))
+
+
+def test_connect_enables_servo_mode_and_reads_state():
+    link = LinkDouble()
+    a = arm(link)
+    a.connect()
+    assert [c[0] for c in link.calls] == ["connect", "enable_servo_mode", "joint_angles"]
+    samples = a.read(0.1)
+    assert samples[0].topic == "/arm/arm/state"
+    assert samples[0].payload.names == NAMES and np.allclose(samples[0].payload.positions, HOME)
+    a.disconnect()
+    a.disconnect()  # safe twice
+    assert [c[0] for c in link.calls].count("disconnect") == 1
+
+
+def test_commands_are_checked_then_streamed_in_radians():
+    link = LinkDouble()
+    a = arm(link)
+    a.connect()
+    target = np.array(HOME) + 0.05
+    a.send(cmd(target))
+    assert link.calls[-1] == ("servo_angle_j", tuple(target))
+    # a partial command keeps the other joints at the previous target
+    a.send(cmd([0.1], names=["joint1"]))
+    assert link.calls[-1][1] == (0.1, *target[1:])
+    sent = len(link.calls)
+    bad = [
+        (cmd([np.nan] + HOME[1:]), "non-finite positions for joint1"),
+        (cmd(HOME[:2] + [0.25] + HOME[3:]), r"joint3=0.2500 not in \[-3.1102, 0.1920\]"),  # xArm6 J3 upper limit
+        (cmd([0.1 + 0.3] + list(target[1:])), "joint1 would jump 0.300 rad"),
+        (cmd([0.0], names=["joint9"]), "unknown joints"),
+    ]
+    for command, message in bad:
+        with pytest.raises(DeviceError, match=message):
+            a.send(command)
+    assert len(link.calls) == sent  # nothing refused reached the controller
+    assert a.counters() == {"refused_commands": 4}
+
+
+def test_state_is_polled_at_no_more_than_the_rate():
+    link = LinkDouble()
+    a = arm(link, rate_hz=50.0)
+    a.connect()
+    t0 = time.monotonic()
+    n = 0
+    while time.monotonic() - t0 < 0.3:
+        n += len(a.read(0.02))
+    assert 13 <= n <= 17
+
+
+def test_a_lost_connection_is_a_device_error_and_the_runner_reconnects():
+    link = LinkDouble()
+    a = arm(link)
+    events = []
+    clock = a.context.clock
+    runner = DeviceRunner(a, lambda s, t: events.append(s), clock, reconnect_s=0.05)
+    runner.start()
+    time.sleep(0.15)
+    link.unplugged = True
+    with pytest.raises(DeviceError):
+        deadline = time.monotonic() + 1
+        while time.monotonic() < deadline:
+            a.send(cmd(HOME))
+            time.sleep(0.01)
+    time.sleep(0.2)
+    link.unplugged = False
+    time.sleep(0.2)
+    runner.stop()
+    kinds = [s.payload.data["event"] for s in events if s.topic == "/events/device"]
+    assert kinds[:3] == ["connected", "error", "disconnected"] and "connected" in kinds[3:]
+    assert runner.stats().connects == 2
+    assert [c[0] for c in link.calls].count("enable_servo_mode") == 2  # servo mode again after reconnecting
+
+
+def test_seven_joints_need_a_seven_joint_urdf():
+    with pytest.raises(ConfigError, match="has no joints joint7"):
+        XArm("arm", XArmSettings(host="10.0.0.2", dof=7), DeviceContext(SessionClock()), link=LinkDouble())
+    ctx = DeviceContext(SessionClock(), robot="xarm7")
+    a = XArm("arm", XArmSettings(host="10.0.0.2", dof=7), ctx, link=LinkDouble(angles=[0.0] * 7, extra=()))
+    assert a.joint_names[-1] == "joint7"
+
+
+def test_settings_errors_name_the_table(tmp_path):
+    from teleprev.rig import load_rig
+
+    rig = tmp_path / "rig.toml"
+    rig.write_text('[devices.arm]\nplugin = "xarm.arm"\n')
+    with pytest.raises(ConfigError, match=r"rig.toml \[devices.arm\]: host is required"):
+        load_rig(rig)
+    rig.write_text('[devices.arm]\nplugin = "xarm.arm"\nhost = "10.0.0.2"\nrate_hz = 250.0\n')
+    with pytest.raises(ConfigError, match=r"rate_hz must be in \(0, 100\]"):
+        load_rig(rig)
+
+
+class FakeXArmAPI:
+    """Stands in for xarm.wrapper.XArmAPI: same call names and return codes."""
+
+    instances: list = []
+    axis = 6
+
+    def __init__(self, port, is_radian=False, do_not_open=False):
+        self.port, self.is_radian, self.do_not_open = port, is_radian, do_not_open
+        self.connected = False
+        self.error_code = 0
+        self.calls = []
+        FakeXArmAPI.instances.append(self)
+
+    def connect(self):
+        self.connected = True
+
+    def disconnect(self):
+        self.connected = False
+
+    def motion_enable(self, enable=True, servo_id=None):
+        self.calls.append(("motion_enable", enable))
+        return 0
+
+    def set_mode(self, mode=0):
+        self.calls.append(("set_mode", mode))
+        return 0
+
+    def set_state(self, state=0):
+        self.calls.append(("set_state", state))
+        return 0
+
+    def get_servo_angle(self, servo_id=None, is_radian=None):
+        return 0, HOME + [0.0]
+
+    def set_servo_angle_j(self, angles, speed=None, mvacc=None, mvtime=None, is_radian=None):
+        self.calls.append(("set_servo_angle_j", tuple(angles), is_radian))
+        return 1 if angles[0] > 3 else 0
+
+
+def test_sdk_link_sets_servo_mode_in_order_and_uses_radians():
+    link = SdkXArmLink("10.0.0.2", 6, api_factory=FakeXArmAPI)
+    link.connect()
+    api = link.api
+    assert api.port == "10.0.0.2" and api.is_radian
+    link.enable_servo_mode()
+    assert api.calls == [("motion_enable", True), ("set_mode", 1), ("set_state", 0)]
+    assert link.joint_angles() == HOME
+    link.servo_angle_j([0.1] * 6)
+    assert api.calls[-1] == ("set_servo_angle_j", (0.1,) * 6, True)
+    with pytest.raises(DeviceError, match="set_servo_angle_j returned code 1"):
+        link.servo_angle_j([3.5] * 6)
+    api.connected = False
+    with pytest.raises(DeviceError, match="connection lost"):
+        link.joint_angles()
+
+
+def test_sdk_link_checks_the_arm_has_the_configured_joints():
+    class SevenAxis(FakeXArmAPI):
+        axis = 7
+
+    with pytest.raises(DeviceError, match="7-joint arm but the rig says dof = 6"):
+        SdkXArmLink("10.0.0.2", 6, api_factory=SevenAxis).connect()
+    assert not FakeXArmAPI.instances[-1].connected
+
+
+def test_sdk_link_refuses_to_clear_a_latched_controller_error():
+    link = SdkXArmLink("10.0.0.2", 6, api_factory=FakeXArmAPI)
+    link.connect()
+    link.api.error_code = 31
+    with pytest.raises(DeviceError, match="error code 31"):
+        link.enable_servo_mode()
+    assert link.api.calls == []
+
+
+def test_missing_sdk_is_a_clear_error(monkeypatch):
+    monkeypatch.setitem(sys.modules, "xarm", None)  # as if xarm-python-sdk were not installed
+    monkeypatch.setitem(sys.modules, "xarm.wrapper", None)
+    with pytest.raises(DeviceError, match=r"uv sync --extra xarm"):
+        SdkXArmLink("10.0.0.2", 6).connect()
