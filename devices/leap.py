@@ -17,18 +17,14 @@ through DynamixelBus, a five-call interface; SdkDynamixelBus is the real one.
 from __future__ import annotations
 
 import math
-import threading
-import time
 from dataclasses import dataclass
 from typing import ClassVar, Protocol, Sequence
 
 import numpy as np
 
-from devices._limits import JointLimits
-from devices.base import Actuator, StreamSpec
+from devices.polled import JointLimits, PolledActuator
 from teleprev.errors import DeviceError
-from teleprev.messages import JointSample, Sample
-from teleprev.session.topics import device_topic
+from teleprev.messages import JointSample
 
 # Control table (protocol 2.0, XC330/XM430 series): address, size in bytes.
 OPERATING_MODE = (11, 1)
@@ -155,7 +151,7 @@ class LeapSettings:
             raise ValueError(f"current_limit_ma must be 1..1000, got {self.current_limit_ma}")
 
 
-class LeapHand(Actuator):
+class LeapHand(PolledActuator):
     """JointSample of "0".."15" on /hand/<name>/state; send() writes goal positions."""
 
     kind = "hand"
@@ -168,18 +164,8 @@ class LeapHand(Actuator):
         self.where = f"device {name!r} (LEAP Hand on {settings.port})"
         self.joint_names = tuple(str(i) for i in MOTOR_IDS)
         robot = context.robot if _has_joint(context.robot, "0") else "leap_hand_right"
-        self.limits = JointLimits.from_urdf(robot, self.joint_names, f"[devices.{name}]")
-        self.topic = device_topic("hand", name, "state")
+        self._setup(JointLimits.from_urdf(robot, self.joint_names, f"[devices.{name}]"))
         self.bus: DynamixelBus = bus or SdkDynamixelBus(settings.port)
-        self.period_ns = int(round(1e9 / settings.rate_hz))
-        self._lock = threading.Lock()
-        self._connected = False
-        self._target: np.ndarray | None = None
-        self._refused = 0
-        self._next_ns = 0
-
-    def streams(self) -> list[StreamSpec]:
-        return [StreamSpec(self.topic, "joints", self.settings.rate_hz)]
 
     def connect(self) -> None:
         s = self.settings
@@ -197,16 +183,14 @@ class LeapHand(Actuator):
                 self.bus.write(ids, *POSITION_I_GAIN, [0] * 16)
                 self.bus.write(ids, *POSITION_D_GAIN, gains(s.kd))
                 self.bus.write(ids, *GOAL_CURRENT, [s.current_limit_ma] * 16)
-                q = self._positions()
+                q = self._poll()
                 # Hold where the hand is before torque comes on, so it does not jump to a stale goal.
                 self.bus.sync_write(ids, *GOAL_POSITION, ticks_from_angles(q).tolist())
                 self.bus.write(ids, *TORQUE_ENABLE, [1] * 16)
             except DeviceError:
                 self.bus.close()
                 raise
-            self._target = np.clip(q, self.limits.lower, self.limits.upper)
-            self._connected = True
-            self._next_ns = self.context.clock.now_ns()
+            self._opened(q)
 
     def disconnect(self) -> None:
         with self._lock:
@@ -214,41 +198,12 @@ class LeapHand(Actuator):
             if was:
                 self.bus.close()
 
-    def counters(self) -> dict[str, int]:
-        return {"refused_commands": self._refused}
-
-    def _positions(self) -> np.ndarray:
+    def _poll(self) -> np.ndarray:
         raw = self.bus.sync_read(list(MOTOR_IDS), *PRESENT_POSITION)
         return angles_from_ticks(np.array([signed32(raw[i]) for i in MOTOR_IDS]))
 
-    def read(self, timeout_s: float) -> list[Sample]:
-        clock = self.context.clock
-        wait = (self._next_ns - clock.now_ns()) / 1e9
-        if wait > timeout_s:
-            time.sleep(timeout_s)
-            return []
-        if wait > 0:
-            time.sleep(wait)
-        with self._lock:
-            if not self._connected:
-                raise DeviceError("not connected", self.where)
-            before = clock.now_ns()
-            q = self._positions()
-            after = clock.now_ns()
-        self._next_ns = max(self._next_ns + self.period_ns, after)
-        return [Sample(self.topic, JointSample((before + after) // 2, self.joint_names, q))]
-
-    def send(self, command: JointSample) -> None:
-        with self._lock:
-            if not self._connected:
-                raise DeviceError("not connected: command dropped", self.where)
-            try:
-                target = self.limits.target(command, self._target, self.where)
-            except DeviceError:
-                self._refused += 1
-                raise
-            self.bus.sync_write(list(MOTOR_IDS), *GOAL_POSITION, ticks_from_angles(target).tolist())
-            self._target = target
+    def _write(self, target: np.ndarray) -> None:
+        self.bus.sync_write(list(MOTOR_IDS), *GOAL_POSITION, ticks_from_angles(target).tolist())
 
 
 def _has_joint(robot: str, joint: str) -> bool:

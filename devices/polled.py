@@ -1,0 +1,133 @@
+"""What the real actuators (xarm.arm, leap.hand) share: state polled over a request/reply link, and
+every command checked again before it leaves the host.
+
+The pipeline's command guard already keeps commands inside the joint limits; JointLimits is the second
+line (defense in depth): a command that names unknown joints, has a non-finite value or lies outside
+the URDF's limits is refused with a DeviceError, counted, and never sent.
+"""
+
+from __future__ import annotations
+
+import threading
+import time
+from dataclasses import dataclass
+
+import numpy as np
+
+from devices.base import Actuator, StreamSpec
+from teleprev.errors import ConfigError, DeviceError
+from teleprev.messages import JointSample, Sample
+from teleprev.session.topics import device_topic
+
+_TOLERANCE = 1e-9  # rad: round-off of a command computed exactly at a limit
+
+
+@dataclass
+class JointLimits:
+    names: tuple[str, ...]
+    lower: np.ndarray
+    upper: np.ndarray
+
+    @classmethod
+    def from_urdf(cls, robot: str, names: tuple[str, ...], where: str) -> JointLimits:
+        from teleprev.robot.model import load_robot
+
+        model = load_robot(robot)
+        missing = [n for n in names if n not in model.joint_index]
+        if missing:
+            raise ConfigError(f"robot {model.name!r} has no joints {', '.join(missing)} "
+                              f"(its joints: {', '.join(model.joint_names)})", where)
+        idx = model.indices(names)
+        return cls(names, model.lower[idx].copy(), model.upper[idx].copy())
+
+    def target(self, command: JointSample, previous: np.ndarray, where: str) -> np.ndarray:
+        """The full joint vector the command asks for (joints it leaves out keep `previous`), or a
+        DeviceError saying why it is refused."""
+        index = {n: i for i, n in enumerate(self.names)}
+        unknown = [n for n in command.names if n not in index]
+        if unknown:
+            raise DeviceError(f"command refused: unknown joints {unknown} (expected {', '.join(self.names)})", where)
+        positions = np.asarray(command.positions, dtype=float)
+        if positions.shape != (len(command.names),):
+            raise DeviceError(f"command refused: {positions.shape} positions for {len(command.names)} names", where)
+        if not np.all(np.isfinite(positions)):
+            bad = [n for n, v in zip(command.names, positions) if not np.isfinite(v)]
+            raise DeviceError(f"command refused: non-finite positions for {', '.join(bad)}", where)
+        target = np.array(previous, dtype=float)
+        target[[index[n] for n in command.names]] = positions
+        outside = (target < self.lower - _TOLERANCE) | (target > self.upper + _TOLERANCE)
+        if outside.any():
+            detail = "; ".join(f"{n}={v:.4f} not in [{lo:.4f}, {hi:.4f}]" for n, v, lo, hi, o in
+                               zip(self.names, target, self.lower, self.upper, outside) if o)
+            raise DeviceError(f"command refused: outside the joint limits: {detail}", where)
+        return target
+
+
+class PolledActuator(Actuator):
+    """An actuator whose joints are polled at `settings.rate_hz` and whose commands are checked twice.
+
+    Subclasses call `_setup(limits)` in __init__, implement `_poll()` (the joint positions now, on the
+    caller's lock), `_write(target)` (send a full, checked target) and connect/disconnect (calling
+    `_opened(q)` once the device answers); `_refuse(target)` may refuse more than the limits do.
+    """
+
+    def _setup(self, limits: JointLimits) -> None:
+        self.limits = limits
+        self.topic = device_topic(self.kind, self.name, "state")
+        self.period_ns = int(round(1e9 / self.settings.rate_hz))
+        self._lock = threading.Lock()
+        self._connected = False
+        self._target: np.ndarray | None = None
+        self._refused = 0
+        self._next_ns = 0
+
+    def _poll(self) -> np.ndarray:
+        raise NotImplementedError
+
+    def _write(self, target: np.ndarray) -> None:
+        raise NotImplementedError
+
+    def _refuse(self, target: np.ndarray) -> None:
+        """Raise DeviceError to refuse a target the limits allow (default: refuse nothing more)."""
+
+    def _opened(self, q: np.ndarray) -> None:
+        self._target = np.clip(q, self.limits.lower, self.limits.upper)  # the first command is checked against it
+        self._connected = True
+        self._next_ns = self.context.clock.now_ns()
+
+    def streams(self) -> list[StreamSpec]:
+        return [StreamSpec(self.topic, "joints", self.settings.rate_hz)]
+
+    def counters(self) -> dict[str, int]:
+        return {"refused_commands": self._refused}
+
+    def read(self, timeout_s: float) -> list[Sample]:
+        clock = self.context.clock
+        wait = (self._next_ns - clock.now_ns()) / 1e9
+        if wait > timeout_s:
+            time.sleep(timeout_s)
+            return []
+        if wait > 0:
+            time.sleep(wait)
+        with self._lock:
+            if not self._connected:
+                raise DeviceError("not connected", self.where)
+            before = clock.now_ns()
+            q = self._poll()
+            after = clock.now_ns()
+        self._next_ns = max(self._next_ns + self.period_ns, after)
+        # The device sampled somewhere between request and reply: take the middle.
+        return [Sample(self.topic, JointSample((before + after) // 2, self.joint_names, q))]
+
+    def send(self, command: JointSample) -> None:
+        with self._lock:
+            if not self._connected:
+                raise DeviceError("not connected: command dropped", self.where)
+            try:
+                target = self.limits.target(command, self._target, self.where)
+                self._refuse(target)
+            except DeviceError:
+                self._refused += 1
+                raise
+            self._write(target)
+            self._target = target
