@@ -45,6 +45,7 @@ def percentile(values, q: float) -> float:
 def report(title: str, figures: dict, targets: dict | None = None, as_json: bool = False) -> None:
     """Print the figures as a table (with the issue's target where there is one), then JSON if asked."""
     from rich.console import Console
+    from rich.markup import escape
     from rich.table import Table
 
     targets = targets or {}
@@ -54,7 +55,7 @@ def report(title: str, figures: dict, targets: dict | None = None, as_json: bool
     table.add_column("target")
     for key, value in figures.items():
         shown = f"{value:.4g}" if isinstance(value, float) else str(value)
-        table.add_row(key, shown, targets.get(key, ""))
+        table.add_row(escape(key), escape(shown), escape(targets.get(key, "")))
     Console(stderr=as_json).print(table)
     if as_json:
         print(json.dumps(figures))

@@ -83,7 +83,9 @@ def test_many_producer_threads(tmp_path):
         for topic, ks in accepted.items():
             st = summary.streams[topic]
             assert st.received == 3000 and st.written == len(ks) and st.written + st.dropped == 3000
-            assert [m.payload.positions[0] for m in reader.messages([topic])] == ks
+            # a producer whose every message met a full queue has no channel in the file at all
+            in_file = [m.payload.positions[0] for m in reader.messages([topic])] if topic in reader.topics else []
+            assert in_file == ks
 
 
 def test_bad_messages_are_counted_not_fatal(tmp_path):

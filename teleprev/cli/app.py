@@ -11,8 +11,9 @@ import sys
 import typer
 
 from teleprev import __version__
-from teleprev.cli import devices as devices_cli
 from teleprev.cli import calibrate as calibrate_cli
+from teleprev.cli import devices as devices_cli
+from teleprev.cli import export as export_cli
 from teleprev.cli import record as record_cli
 from teleprev.cli import replay as replay_cli
 from teleprev.cli import robot
@@ -22,6 +23,7 @@ app = typer.Typer(
     name="teleprev",
     help="Teleoperation with preview: collect safe, synchronized robot demonstrations from a mocap glove and suit.",
     no_args_is_help=True,
+    add_completion=False,
     rich_markup_mode="rich",
     pretty_exceptions_enable=False,
     context_settings={"help_option_names": ["-h", "--help"]},
@@ -41,6 +43,7 @@ SESSIONS = "Sessions"
 
 app.command("info", rich_help_panel=SESSIONS)(session_cli.info)
 app.command("recover", rich_help_panel=SESSIONS)(session_cli.recover)
+app.command("export", rich_help_panel=SESSIONS)(export_cli.export)
 app.command("replay", rich_help_panel=SESSIONS)(replay_cli.replay)
 app.command("eval", rich_help_panel=SESSIONS)(replay_cli.eval_)
 

@@ -35,6 +35,7 @@ def record(
     from teleprev.session.run import run_interactive, run_script, print_summary
 
     console = Console()
+    preview = preview and console.is_terminal  # a redrawn screen in a log file is noise: headless there
     options = RecordOptions(
         out=out or default_session_path(task), rig=rig, models=models, task=task,
         operator=operator, participant=participant, condition=condition, practice=practice,

@@ -23,6 +23,7 @@ from teleprev.session.codec import decoder_for
 from teleprev.session.topics import EPISODE
 
 _END = 1 << 64
+_RELEASE_CHUNKS = 8  # chunks (4 MiB each by default) read between two release_pages calls
 _I64_END = (1 << 63) - 1  # log times beyond int64 (year 2262) are not expected
 _HEAD_BYTES = np.arange(23)  # a message record's opcode, length, channel, sequence and log time
 
@@ -185,6 +186,7 @@ class SessionReader:
         wanted = frozenset(decoders)
         group: list = []
         group_end = -1
+        decoded = 0
         for chunk in self._chunks:
             if chunk.end_ns < lo or chunk.start_ns >= hi:
                 continue
@@ -192,6 +194,10 @@ class SessionReader:
                 continue
             if group and chunk.start_ns >= group_end:
                 yield from self._decode_group(group, decoders, names, lo, hi, wanted)
+                decoded += len(group)
+                if decoded >= _RELEASE_CHUNKS:
+                    decoded = 0
+                    self.release_pages()
                 group = []
             group.append(chunk)
             group_end = max(group_end, chunk.end_ns) if len(group) > 1 else chunk.end_ns
@@ -431,6 +437,18 @@ class SessionReader:
         return out
 
     # --- lifecycle ---
+
+    def release_pages(self) -> None:
+        """Drop the file's pages from this process's resident set (they stay in the kernel's page cache).
+
+        The whole file is memory-mapped, so every page read would otherwise stay resident until the
+        reader closes and the process would grow with the session's length; messages() calls this every
+        few chunks, so long sessions read in flat memory."""
+        if hasattr(mmap, "MADV_DONTNEED"):
+            try:
+                self._mm.madvise(mmap.MADV_DONTNEED)
+            except (OSError, ValueError):  # closed, or refused: only memory accounting is at stake
+                pass
 
     def close(self) -> None:
         self._mm.close()

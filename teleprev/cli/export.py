@@ -1,0 +1,165 @@
+"""`teleprev export SESSION... --repo-id NAME`: recorded sessions into a LeRobot dataset (v3.0).
+
+Only typer and the standard library at import time: lerobot (about 10 s to import) and numpy load inside
+the command.
+"""
+
+from __future__ import annotations
+
+from contextlib import contextmanager
+from pathlib import Path
+from typing import List, Optional
+
+import typer
+
+DEFAULT_ROOT = Path("datasets") / "out"  # beside sessions/, where `teleprev record` writes by default
+
+
+def export(
+    sessions: List[Path] = typer.Argument(..., help="Session files (.mcap), exported in this order.", show_default=False),
+    repo_id: str = typer.Option(..., "--repo-id", help="Dataset name, e.g. lab/pick_place.", show_default=False),
+    root: Optional[Path] = typer.Option(None, "--root", help="Dataset folder (default: ./datasets/out/<repo-id>).",
+                                        show_default=False),
+    fps: int = typer.Option(0, "--fps", help="Frames per second (default: the recipe's, else the reference camera's rate)."),
+    recipe: str = typer.Option("default", "--recipe", help="Recipe file, or the name of one in datasets/ (default, with_glove)."),
+    append: bool = typer.Option(False, "--append", help="Add the sessions to an existing dataset (LeRobot's resume)."),
+    include_discarded: bool = typer.Option(False, "--include-discarded", help="Export episodes the operator discarded too."),
+    workers: int = typer.Option(1, "--workers", "-j", help="Export sessions in this many processes, then merge them."),
+    codec: Optional[str] = typer.Option(None, "--codec", help="Video codec: h264, hevc or av1 (default: the recipe's, h264).",
+                                        show_default=False),
+    crf: Optional[int] = typer.Option(None, "--crf", help="Video quality: lower is better and larger (h264 default 23).",
+                                      show_default=False),
+    preset: Optional[str] = typer.Option(None, "--preset", help="Encoder preset (x264: ultrafast..veryslow; av1: 0..13).",
+                                         show_default=False),
+    gop: Optional[int] = typer.Option(None, "--gop", help="Keyframe interval (default 2: fast random access in training).",
+                                      show_default=False),
+    streaming: Optional[bool] = typer.Option(None, "--streaming/--no-streaming",
+                                             help="Encode while frames arrive (default), or write PNGs and encode after.",
+                                             show_default=False),
+    encoder: Optional[str] = typer.Option(None, "--encoder", help="Streaming encoder: teleprev (fast, default) or lerobot.",
+                                          show_default=False),
+    on_gap: Optional[str] = typer.Option(None, "--on-gap", help="A stream gap inside an episode: split it, drop it, or fail.",
+                                         show_default=False),
+    max_gap_ms: Optional[float] = typer.Option(None, "--max-gap-ms", help="Longest silence of a stream that is not a gap.",
+                                               show_default=False),
+    as_json: bool = typer.Option(False, "--json", help="Print the summary as one JSON object instead of a table."),
+) -> None:
+    """Export recorded sessions to a LeRobot dataset: one LeRobot episode per recorded episode, features
+    from a recipe, frames at an even rate aligned to a camera, videos encoded while they stream."""
+    from dataclasses import replace
+
+    from rich.console import Console
+
+    from teleprev.errors import ConfigError
+    from teleprev.export.recipe import load_recipe
+    from teleprev.export.run import ExportOptions, export as run_export, with_video
+
+    if workers < 1:
+        raise ConfigError(f"--workers must be at least 1, got {workers}")
+    the_recipe = load_recipe(recipe)
+    overrides = {k: v for k, v in (("on_gap", on_gap), ("max_gap_ms", max_gap_ms)) if v is not None}
+    if overrides:
+        if on_gap is not None and on_gap not in ("split", "drop", "fail"):
+            raise ConfigError(f"--on-gap must be split, drop or fail, got {on_gap!r}")
+        try:
+            the_recipe = replace(the_recipe, export=replace(the_recipe.export, **overrides))
+        except ValueError as exc:
+            raise ConfigError(str(exc), "--max-gap-ms") from None
+    video = with_video(the_recipe, codec=codec, crf=crf, preset=preset, gop=gop, streaming=streaming, encoder=encoder)
+    target = root if root is not None else DEFAULT_ROOT / repo_id
+    options = ExportOptions(list(sessions), repo_id, target, the_recipe, fps=fps, append=append,
+                            include_discarded=include_discarded, workers=workers, video=video)
+    console = Console(stderr=as_json)
+    with _stop_on_sigterm(), _Bars(console) as bars:
+        report = run_export(options, bars)
+    if as_json:
+        import json
+
+        typer.echo(json.dumps(_as_json(report)))
+        return
+    from teleprev.export.report import summary_table
+
+    console.print(summary_table(report))
+    console.print(f"[green]done:[/] {report.total_episodes} episodes, {report.total_frames} frames in {report.root} "
+                  f"(video: {video.describe()})", highlight=False)
+
+
+@contextmanager
+def _stop_on_sigterm():
+    """While exporting, a `kill` stops the export like Ctrl-C does: the staging folder is removed on
+    the way out."""
+    import signal
+
+    def stop(signum, frame):
+        raise KeyboardInterrupt
+
+    previous = signal.signal(signal.SIGTERM, stop)
+    try:
+        yield
+    finally:
+        signal.signal(signal.SIGTERM, previous)
+
+
+class _Bars:
+    """Rich progress bars: one per session (episodes) and one for the episode being written (frames)."""
+
+    def __init__(self, console):
+        from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn, TimeRemainingColumn
+
+        self.progress = Progress(TextColumn("{task.description}"), BarColumn(), MofNCompleteColumn(),
+                                 TimeElapsedColumn(), TimeRemainingColumn(), console=console, transient=False)
+        self.sessions: dict[str, int] = {}
+        self.totals: dict[str, int] = {}
+        self.episodes: dict[str, int] = {}
+        self.phase: tuple[int, str] | None = None
+
+    def __enter__(self):
+        self.progress.__enter__()
+        return self
+
+    def __exit__(self, *exc):
+        self.progress.__exit__(*exc)
+
+    def __call__(self, ev) -> None:
+        p = self.progress
+        name = Path(ev.session).name
+        if ev.kind == "phase":
+            if self.phase is not None:
+                p.update(self.phase[0], completed=1, description=f"{self.phase[1]}: done")
+            self.phase = (p.add_task(f"{ev.session}...", total=1), ev.session) if ev.session else None
+        elif ev.kind == "session":
+            self.sessions[ev.session] = p.add_task(f"[bold]{name}[/] episodes", total=max(1, ev.total))
+            self.totals[ev.session] = max(1, ev.total)
+        elif ev.kind == "episode":
+            self._end_episode(ev.session)
+            self.episodes[ev.session] = p.add_task(f"  {name} episode {ev.episode} frames", total=ev.total)
+        elif ev.kind == "frames" and ev.session in self.episodes:
+            p.advance(self.episodes[ev.session], ev.count)
+        elif ev.kind == "episode_done":
+            self._end_episode(ev.session)
+            p.advance(self.sessions[ev.session], 1)
+        elif ev.kind == "session_done" and ev.session in self.sessions:
+            p.update(self.sessions[ev.session], completed=self.totals[ev.session])
+
+    def _end_episode(self, session: str) -> None:
+        task = self.episodes.pop(session, None)
+        if task is not None:
+            self.progress.remove_task(task)
+
+
+def _as_json(report) -> dict:
+    return {
+        "root": str(report.root), "repo_id": report.repo_id, "fps": report.fps,
+        "episodes": report.episodes, "frames": report.frames, "duration_s": round(report.duration_s, 3),
+        "total_episodes": report.total_episodes, "total_frames": report.total_frames,
+        "wall_s": round(report.wall_s, 3), "realtime_x": round(report.realtime_x, 2),
+        "max_align_err_ms": round(report.align_err_ms, 3), "size_bytes": report.size_bytes,
+        "sessions": [{
+            "session": s.session, "source_episodes": s.source_episodes, "episodes": s.lerobot_episodes,
+            "frames": s.frames, "duration_s": round(s.duration_s, 3), "notes": s.notes,
+            "dropped": {e.index: e.dropped for e in s.episodes if e.dropped},
+            "split": {e.index: e.gaps for e in s.episodes if e.pieces > 1},
+            "align_err_ms": round(s.align_err_ms, 3), "image_err_ms": round(s.image_err_ms, 3),
+            "held_frames": sum(e.held_frames for e in s.episodes),
+        } for s in report.sessions],
+    }

@@ -1,0 +1,126 @@
+"""What an export did, per episode and session, and the summary table the CLI prints at the end."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from pathlib import Path
+
+
+@dataclass
+class EpisodeReport:
+    session: str
+    index: int
+    task: str
+    pieces: int = 0  # LeRobot episodes made from it (more than one: split at gaps)
+    frames: int = 0
+    duration_s: float = 0.0
+    dropped: str = ""  # why it was left out, "" when exported
+    gaps: list[str] = field(default_factory=list)
+    notes: list[str] = field(default_factory=list)
+    trimmed_s: float = 0.0
+    held_frames: int = 0  # frames whose reference camera image is the previous one (a dropped camera frame)
+    align_err_ms: float = 0.0  # worst distance between a frame's time and its state/action samples
+    image_err_ms: float = 0.0  # worst distance between a frame's grid time and its camera frame (or a hold's age)
+
+
+@dataclass
+class SessionReport:
+    session: str
+    source_episodes: int
+    episodes: list[EpisodeReport] = field(default_factory=list)
+    notes: list[str] = field(default_factory=list)
+
+    @property
+    def exported(self) -> list[EpisodeReport]:
+        return [e for e in self.episodes if not e.dropped]
+
+    @property
+    def frames(self) -> int:
+        return sum(e.frames for e in self.episodes)
+
+    @property
+    def duration_s(self) -> float:
+        return sum(e.duration_s for e in self.episodes)
+
+    @property
+    def lerobot_episodes(self) -> int:
+        return sum(e.pieces for e in self.episodes)
+
+    @property
+    def align_err_ms(self) -> float:
+        return max((e.align_err_ms for e in self.exported), default=0.0)
+
+    @property
+    def image_err_ms(self) -> float:
+        return max((e.image_err_ms for e in self.exported), default=0.0)
+
+
+@dataclass
+class ExportReport:
+    root: Path
+    repo_id: str
+    fps: int
+    sessions: list[SessionReport]
+    wall_s: float = 0.0
+    size_bytes: int = 0
+    total_episodes: int = 0  # in the dataset after the export (appending: with the earlier ones)
+    total_frames: int = 0
+
+    @property
+    def frames(self) -> int:
+        return sum(s.frames for s in self.sessions)
+
+    @property
+    def duration_s(self) -> float:
+        return sum(s.duration_s for s in self.sessions)
+
+    @property
+    def episodes(self) -> int:
+        return sum(s.lerobot_episodes for s in self.sessions)
+
+    @property
+    def align_err_ms(self) -> float:
+        return max((s.align_err_ms for s in self.sessions), default=0.0)
+
+    @property
+    def realtime_x(self) -> float:
+        return self.duration_s / self.wall_s if self.wall_s > 0 else 0.0
+
+
+def folder_size(root: Path) -> int:
+    return sum(p.stat().st_size for p in Path(root).rglob("*") if p.is_file())
+
+
+def summary_table(report: ExportReport):
+    """A rich Table: one row per session, totals last."""
+    from rich.table import Table
+
+    table = Table(title=f"{report.repo_id} -> {report.root}", title_justify="left")
+    for name, justify in (("session", "left"), ("recorded", "right"), ("episodes", "right"), ("frames", "right"), ("duration", "right"),
+                          ("dropped / split / trimmed", "left"), ("align err", "right"), ("held", "right")):
+        table.add_column(name, justify=justify)
+    for s in report.sessions:
+        dropped = [f"ep {e.index}: {e.dropped}" for e in s.episodes if e.dropped]
+        split = [f"ep {e.index}: split in {e.pieces} ({'; '.join(e.gaps)})" for e in s.episodes if e.pieces > 1]
+        trimmed = [f"ep {e.index}: {n}" for e in s.episodes if not e.dropped for n in e.notes]
+        table.add_row(
+            Path(s.session).name,
+            str(s.source_episodes),
+            str(s.lerobot_episodes),
+            str(s.frames),
+            f"{s.duration_s:.1f} s",
+            "\n".join(dropped + split + trimmed + s.notes) or "-",
+            f"{s.align_err_ms:.1f} ms",
+            str(sum(e.held_frames for e in s.episodes)),
+        )
+    table.add_section()
+    table.add_row(
+        "total", str(sum(s.source_episodes for s in report.sessions)), str(report.episodes), str(report.frames),
+        f"{report.duration_s:.1f} s",
+        f"{report.total_episodes} episodes in the dataset, {report.size_bytes / 1e6:.1f} MB",
+        f"{report.align_err_ms:.1f} ms", "",
+    )
+    table.caption = (f"recorded: episodes in the session; episodes: LeRobot episodes made of them. {report.fps} fps; exported {report.duration_s:.1f} s of recording in {report.wall_s:.1f} s "
+                     f"({report.realtime_x:.1f}x real time); align err: worst distance between a frame's time and "
+                     "the state/action samples used for it")
+    return table

@@ -1,0 +1,187 @@
+"""An export from start to end: check every session and the target first, build the dataset in a
+staging folder (in this process, or in workers whose parts are merged), finalize, move it into place.
+
+Any failure, Ctrl-C included, removes the staging folder: the target is either the complete new (or
+appended) dataset or exactly what it was before.
+"""
+
+from __future__ import annotations
+
+import os
+import time
+from dataclasses import dataclass, replace
+from pathlib import Path
+
+from teleprev.errors import ConfigError, SessionError
+from teleprev.export import dataset as D
+from teleprev.export.recipe import Recipe
+from teleprev.export.report import ExportReport, SessionReport, folder_size
+from teleprev.export.session import ExportSettings, Progress, Reporter, SessionSource, no_progress, export_session
+from teleprev.export.video import VideoSettings
+
+
+@dataclass
+class ExportOptions:
+    sessions: list[Path]
+    repo_id: str
+    root: Path
+    recipe: Recipe
+    fps: int = 0  # 0: the recipe's, else the reference camera's rate (appending: the dataset's)
+    append: bool = False
+    include_discarded: bool = False
+    workers: int = 1
+    video: VideoSettings | None = None  # None: the recipe's
+
+
+def export(options: ExportOptions, report: Reporter = no_progress) -> ExportReport:
+    started = time.perf_counter()
+    os.environ.setdefault("HF_HUB_OFFLINE", "1")  # an export is local: lerobot must never reach for the Hub
+    target = Path(options.root)
+    video = options.video or options.recipe.video
+    if not options.sessions:
+        raise ConfigError("no session files given")
+    if target.exists() and not options.append and (not target.is_dir() or any(target.iterdir())):
+        raise ConfigError("already exists; pass --append to add these sessions to it, or choose another --root", str(target))
+    info = None
+    fps = options.fps
+    if options.append:
+        if not target.exists():
+            raise ConfigError("--append: there is no dataset here to append to", str(target))
+        info = D.read_info(target)
+        fps = fps or int(info.get("fps", 0))
+
+    sources = _open_all(options, fps)
+    try:
+        first = sources[0]
+        fps = first.dataset_fps()
+        features = first.lerobot_features()
+        robot = first.robot_type
+        for s in sources[1:]:
+            _check_same(s, first, features, fps, robot)
+        if info is not None:
+            D.check_compatible(info, features, fps, robot, video, str(target))
+    except BaseException:
+        for s in sources:
+            s.close()
+        raise
+
+    settings = ExportSettings(fps, options.include_discarded)
+    staging = D.Staging(target)
+    try:
+        if options.workers > 1 and len(sources) > 1:
+            for s in sources:
+                s.close()  # workers open their own readers
+            reports = _parallel(options, staging, features, robot, fps, settings, video, report)
+        else:
+            reports = _sequential(options, sources, staging, features, robot, fps, settings, video, report)
+        _refuse_empty(reports)
+        totals = D.read_info(staging.dataset)
+        staging.commit()
+    except BaseException:
+        staging.abort()
+        raise
+    finally:
+        for s in sources:
+            s.close()
+    out = ExportReport(target, options.repo_id, fps, reports)
+    out.total_episodes = int(totals.get("total_episodes", 0))
+    out.total_frames = int(totals.get("total_frames", 0))
+    out.size_bytes = folder_size(target)
+    out.wall_s = time.perf_counter() - started
+    return out
+
+
+def _open_all(options: ExportOptions, fps: int) -> list[SessionSource]:
+    sources: list[SessionSource] = []
+    try:
+        for path in options.sessions:
+            sources.append(SessionSource(Path(path), options.recipe, fps))
+    except BaseException:
+        for s in sources:
+            s.close()
+        raise
+    return sources
+
+
+def _check_same(s: SessionSource, first: SessionSource, features: dict, fps: int, robot: str) -> None:
+    where = str(s.path)
+    if s.robot_type != robot:
+        raise SessionError(f"recorded with robot {s.robot_type!r}, but {first.path.name} with {robot!r}: one dataset "
+                           "holds one robot", where)
+    theirs = s.lerobot_features()
+    for name, spec in features.items():
+        other = theirs.get(name)
+        if other != spec:
+            got = "nothing" if other is None else f"{other['dtype']} {list(other['shape'])} {other['names']}"
+            raise SessionError(f"feature {name!r} would be {got}, but {first.path.name} gives "
+                               f"{spec['dtype']} {list(spec['shape'])} {spec['names']}", where)
+    extra = sorted(set(theirs) - set(features))
+    if extra:
+        raise SessionError(f"has features {extra} that {first.path.name} lacks", where)
+    s.fps = s.fps or fps
+    if s.dataset_fps() != fps:
+        raise SessionError(f"would export at {s.dataset_fps()} fps, {first.path.name} at {fps}; pass --fps", where)
+
+
+def _sequential(options, sources, staging, features, robot, fps, settings, video, report) -> list[SessionReport]:
+    ds = None
+    try:
+        report(Progress("phase", "loading lerobot"))
+        if options.append:
+            D.stage_copy(Path(options.root), staging.dataset)
+            ds = D.resume(options.repo_id, staging.dataset, video)
+        else:
+            ds = D.create(options.repo_id, staging.dataset, fps, features, robot, video)
+        report(Progress("phase", ""))
+        reports = [export_session(s, ds, settings, report) for s in sources]
+        _refuse_empty(reports)
+        report(Progress("phase", "finalizing"))
+        ds.finalize()
+        report(Progress("phase", ""))
+        return reports
+    except BaseException:
+        D.close_failed(ds)
+        raise
+
+
+def _parallel(options, staging, features, robot, fps, settings, video, report) -> list[SessionReport]:
+    from teleprev.export.parallel import Job, export_parallel, merge
+
+    paths = [Path(p) for p in options.sessions]
+    parts = [staging.part(i) for i in range(len(paths))]
+    job = Job(options.repo_id, options.recipe, fps, features, robot, settings, video)
+    report(Progress("phase", f"starting {min(options.workers, len(paths))} workers (lerobot loads once)"))
+    reports = export_parallel(paths, parts, job, options.workers, report)
+    _refuse_empty(reports)
+    used = [part for part, rep in zip(parts, reports) if rep.lerobot_episodes]
+    report(Progress("phase", f"merging {len(used)} parts with lerobot's aggregate_datasets"))
+    merge(used, options.repo_id, staging.dataset, Path(options.root) if options.append else None)
+    report(Progress("phase", ""))
+    return reports
+
+
+def _refuse_empty(reports: list[SessionReport]) -> None:
+    if any(r.lerobot_episodes for r in reports):
+        return
+    why = [f"{Path(r.session).name} episode {e.index}: {e.dropped}" for r in reports for e in r.episodes if e.dropped]
+    why += [f"{Path(r.session).name}: {n}" for r in reports for n in r.notes]
+    raise SessionError("no episode could be exported" + (": " + "; ".join(why) if why else ""))
+
+
+def with_video(recipe: Recipe, **changes) -> VideoSettings:
+    """The recipe's video settings with the given fields replaced (None values are ignored); a new
+    codec without a preset or crf gets that codec's defaults."""
+    from teleprev.export.video import CODEC_DEFAULTS
+
+    changes = {k: v for k, v in changes.items() if v is not None}
+    codec = changes.get("codec")
+    if codec in CODEC_DEFAULTS and codec != recipe.video.codec:
+        preset, crf, threads = CODEC_DEFAULTS[codec]
+        changes.setdefault("preset", preset)
+        changes.setdefault("crf", crf)
+        changes.setdefault("threads", threads)
+    try:
+        return replace(recipe.video, **changes)
+    except ValueError as exc:
+        raise ConfigError(str(exc), "video settings") from None
+
