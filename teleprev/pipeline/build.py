@@ -33,7 +33,10 @@ def build_pipeline(rig: Rig, models: str | Path | None = None, calibration: Cali
     cfg = rig.pipeline
     calibration = calibration if calibration is not None else rig_calibration(rig)
     robot = load_robot(rig.rig.robot)
-    ik = ArmIK(robot, cfg.tcp_link or TCP_LINKS[rig.rig.end_effector])
+    # Tracking: a bounded number of iterations and no cold-start retry, so an unreachable target costs a
+    # bounded step; the best effort within the limits is flagged and the next step continues from it.
+    ik = ArmIK(robot, cfg.tcp_link or TCP_LINKS[rig.rig.end_effector], position_tolerance=cfg.ik_position_tolerance,
+               rotation_tolerance=cfg.ik_rotation_tolerance, max_iterations=cfg.ik_iterations, retry=False)
     arm_speed = np.minimum(ik.chain.velocity_limit, cfg.arm_speed)
     max_dt = cfg.max_command_dt_ms / 1000.0
     arm_guard = JointGuard(ik.chain.lower, ik.chain.upper, arm_speed, max_dt)

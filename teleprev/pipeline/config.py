@@ -17,6 +17,9 @@ class PipelineConfig:
     hand_speed: float = 6.0  # rad/s cap on hand command steps (the URDF's limit is 8.48)
     engage_speed_frac: float = 0.5  # fraction of the caps used while ramping to the preview on engage
     max_command_dt_ms: float = 25.0  # a gap between commands longer than this still allows only this much motion
+    ik_iterations: int = 10  # per step; tracking continues from a best effort within limits next step
+    ik_position_tolerance: float = 1e-3  # metres: well under a human wrist's tremor
+    ik_rotation_tolerance: float = 1e-2  # radians
     gripper_joint: str = "index1"  # SMPL-X joint whose flexion drives a parallel-jaw or vacuum gripper
     gripper_closed_flexion: float = 1.2  # flexion (rad) at which the gripper is fully closed
     vacuum_on_flexion: float = 0.9  # hysteresis: vacuum switches on above this flexion ...

@@ -48,6 +48,7 @@ class PipelineState:
     anchor: Anchor | None = None
     arm_q: np.ndarray | None = None  # last IK solution: the previewed arm target
     arm_q_before: np.ndarray | None = None  # the one before: with arm_q, a constant-velocity IK warm start
+    arm_solved_ns: int = -1  # stamp of the wrist sample arm_q solves, when it converged (else -1)
     effector_q: np.ndarray | None = None  # last effector target (collision-free for a hand)
     arm_cmd: np.ndarray | None = None  # last commands sent (execute mode)
     effector_cmd: np.ndarray | None = None
@@ -142,7 +143,8 @@ class Pipeline:
             return state, ""
         if mode == "preview":
             # Re-anchor at the next step: the preview starts again from where the robot is.
-            return replace(state, mode="preview", anchor=None, arm_q=None, arm_q_before=None, arm_cmd=None, effector_cmd=None, engaging=False), ""
+            return replace(state, mode="preview", anchor=None, arm_q=None, arm_q_before=None, arm_solved_ns=-1,
+                           arm_cmd=None, effector_cmd=None, engaging=False), ""
         if mode != "execute":
             return state, f"unknown mode {mode!r}"
         arm_q = self.measured(inputs.arm, self.arm_names)
@@ -172,13 +174,18 @@ class Pipeline:
 
         wrist = self._wrist(inputs, flags)
         anchor, arm_q, arm_q_before, arm_fresh = state.anchor, state.arm_q, state.arm_q_before, False
+        solved_ns = state.arm_solved_ns
         measured_arm = self.measured(inputs.arm, self.arm_names)
         if wrist is not None and anchor is None:
             if measured_arm is None:
                 flags.append("no_arm_state")
             else:
                 anchor = self.arm.anchor(wrist, measured_arm)
-        if wrist is not None and anchor is not None:
+        if wrist is not None and anchor is not None and inputs.wrist.stamp_ns == solved_ns and state.anchor is anchor:
+            # The suit runs at half the glove's rate: this wrist sample was solved, and converged, last step.
+            arm_fresh = True
+            report["ik_converged"] = True
+        elif wrist is not None and anchor is not None:
             start = arm_q if arm_q is not None else measured_arm
             if arm_q is not None and arm_q_before is not None:
                 # Tracking a smooth motion: extrapolating the last two solutions usually lands within
@@ -187,13 +194,15 @@ class Pipeline:
             if start is not None:
                 ik, clipped = self.arm.solve(anchor, wrist, start)
                 arm_q_before, arm_q, arm_fresh = arm_q, ik.q, True
+                solved_ns = inputs.wrist.stamp_ns if ik.converged else -1
                 report["ik_converged"] = ik.converged
                 if not ik.converged:
                     flags.append("ik_not_converged")
                 if clipped:
                     flags.append("workspace_clipped")
 
-        new = replace(state, step=state.step + 1, anchor=anchor, arm_q=arm_q, arm_q_before=arm_q_before, effector_q=effector_q)
+        new = replace(state, step=state.step + 1, anchor=anchor, arm_q=arm_q, arm_q_before=arm_q_before,
+                      arm_solved_ns=solved_ns, effector_q=effector_q)
         arm_cmd = eff_cmd = None
         if state.mode == "execute":
             dt = (inputs.t_ns - state.cmd_ns) / 1e9 if state.cmd_ns is not None else 0.0

@@ -11,6 +11,7 @@ from teleprev.robot.transforms import rotation_error
 
 
 _EYE6 = np.eye(6)
+_STALL = 0.98  # an iteration that leaves more than this fraction of the error has stalled
 
 
 @dataclass(frozen=True)
@@ -40,6 +41,7 @@ class ArmIK:
         max_iterations: int = 60,
         damping: float = 1e-6,
         max_step: float = 0.4,
+        retry: bool = True,
     ):
         full = model.chain_to(tip)
         self.joint_names = full.joint_names
@@ -57,10 +59,12 @@ class ArmIK:
         self.max_iterations = max_iterations
         self.damping = damping
         self.max_step = max_step
+        self.retry = retry  # a second, short-stepped try from the start when the first does not converge
         self._tip_index = self.chain.link_index[last.child]
         self._joint_links = np.array([self.chain.link_index[j.child] for j in self.chain.joints])
         self._axes = np.array([j.axis for j in self.chain.joints])
         self._revolute = np.array([j.type != "prismatic" for j in self.chain.joints])
+        self._all_revolute = bool(self._revolute.all())
 
     def pose(self, q: np.ndarray) -> np.ndarray:
         """The TCP pose (4x4) for arm joints q."""
@@ -70,17 +74,19 @@ class ArmIK:
         frames = world[self._joint_links]
         axes = (frames[:, :3, :3] @ self._axes[:, :, None])[:, :, 0]
         lever = tcp[:3, 3] - frames[:, :3, 3]
-        jac = np.zeros((6, len(axes)))
+        jac = np.empty((6, len(axes)))
         ax, ay, az = axes.T
         lx, ly, lz = lever.T
-        cross = np.stack([ay * lz - az * ly, az * lx - ax * lz, ax * ly - ay * lx])  # np.cross is slow on small arrays
-        jac[:3] = np.where(self._revolute, cross, axes.T)
+        # revolute: linear part axis x lever (written out: np.cross is slow on small arrays); prismatic: axis
+        jac[0], jac[1], jac[2] = ay * lz - az * ly, az * lx - ax * lz, ax * ly - ay * lx
+        if not self._all_revolute:
+            jac[:3] = np.where(self._revolute, jac[:3], axes.T)
         jac[3:] = (axes * self._revolute[:, None]).T
         return jac
 
     def solve(self, target: np.ndarray, q_start: np.ndarray) -> IkResult:
         result = self._solve(target, q_start, self.max_step)
-        if not result.converged:
+        if not result.converged and self.retry:
             # A long first step can land a joint on its limit in a local minimum; short steps from the
             # start follow the error down more faithfully (rare, so the common case stays fast).
             retry = self._solve(target, q_start, self.max_step / 8)
@@ -92,6 +98,7 @@ class ArmIK:
         q = self.chain.clip(np.asarray(q_start, dtype=float))
         eye = _EYE6
         pos_err = rot_err = np.inf
+        last = np.inf
         for it in range(self.max_iterations + 1):
             world = self.chain.fk(q).world
             tcp = world[self._tip_index] @ self.tcp
@@ -100,8 +107,11 @@ class ArmIK:
             pos_err, rot_err = float(e_pos @ e_pos) ** 0.5, float(e_rot @ e_rot) ** 0.5
             if pos_err <= self.position_tolerance and rot_err <= self.rotation_tolerance:
                 return IkResult(q, True, it, pos_err, rot_err)
-            if it == self.max_iterations:
+            # Stalled (a joint pinned at its limit, an unreachable target): more iterations won't help.
+            progress = pos_err / self.position_tolerance + rot_err / self.rotation_tolerance
+            if it == self.max_iterations or progress > _STALL * last:
                 break
+            last = progress
             jac = self._jacobian(world, tcp)
             err = np.concatenate([e_pos, e_rot])
             # Damping grows with the error, so far targets take careful steps near singularities while

@@ -1,0 +1,117 @@
+"""`teleprev record` end to end on the default (LEAP) sim rig: what reaches the robot, and the screen."""
+
+import io
+import subprocess
+import sys
+
+import numpy as np
+import pytest
+from rich.console import Console
+
+from sessions import record_sim
+from teleprev.robot.collision import SelfCollisionChecker
+from teleprev.robot.model import load_robot
+from teleprev.session import topics
+from teleprev.session.reader import SessionReader
+
+
+class CountingPort:
+    """A test double at the ActuatorPort interface: counts and keeps what the loop sends."""
+
+    def __init__(self, port):
+        self.port, self.sent = port, []
+
+    def send(self, command):
+        self.sent.append(command)
+        return self.port.send(command)
+
+
+def test_a_whole_session_in_preview_sends_no_motion_command(tmp_path):
+    from teleprev.session.recording import RecordOptions, Recording
+    import time
+
+    rec = Recording(RecordOptions(out=tmp_path / "p.mcap"))
+    doubles = {k: CountingPort(p) for k, p in rec.loop.actuators.items()}
+    rec.loop.actuators = doubles
+    rec.start()
+    rec.loop.control("start", task="pick_place")
+    time.sleep(3.0)
+    rec.stop()
+    assert all(d.sent == [] for d in doubles.values())
+    reader = SessionReader(tmp_path / "p.mcap")
+    assert topics.COMMAND_ARM not in reader.topics and topics.COMMAND_HAND not in reader.topics
+    assert reader.topics[topics.CORRECTED].message_count > 300  # the pipeline ran all along
+
+
+@pytest.fixture(scope="module")
+def executed(tmp_path_factory):
+    path = tmp_path_factory.mktemp("rec") / "leap.mcap"
+    record_sim(path, "sim.toml", seconds=6.0, episodes=1, engage_after=1.0, task="pick_place")
+    return path
+
+
+def test_executed_commands_stay_within_speed_limits_and_never_collide(executed):
+    reader = SessionReader(executed)
+    hand = load_robot("leap_hand_right")
+    robot = load_robot("xarm6_leap_hand")
+    for topic, model, cap in ((topics.COMMAND_ARM, robot, 2.14), (topics.COMMAND_HAND, hand, 6.0)):
+        msgs = [m.payload for m in reader.messages([topic])]
+        assert len(msgs) > 200, topic
+        q = np.array([m.positions for m in msgs])
+        t = np.array([m.stamp_ns for m in msgs])
+        idx = model.indices(msgs[0].names)
+        assert np.all(q >= model.lower[idx] - 1e-12) and np.all(q <= model.upper[idx] + 1e-12)
+        speed = np.abs(np.diff(q, axis=0)) / (np.diff(t) / 1e9)[:, None]
+        assert speed.max() <= cap + 1e-9, (topic, speed.max())
+    hand_q = np.array([m.payload.positions for m in reader.messages([topics.COMMAND_HAND])])
+    assert not SelfCollisionChecker(hand).pair_matrix(hand_q).any()  # exact check of every hand command
+
+
+def test_unattended_record_cli_writes_every_stream(tmp_path):
+    out = tmp_path / "cli.mcap"
+    run = subprocess.run(
+        [sys.executable, "-m", "teleprev.cli.app", "record", "--out", str(out), "--duration", "4", "--episodes", "2",
+         "--engage-after", "1", "--task", "pour"], capture_output=True, text=True, timeout=120,
+    )
+    assert run.returncode == 0, run.stderr
+    reader = SessionReader(out)
+    have = set(reader.topics)
+    for needed in ("/glove/glove/hand", "/suit/suit/wrist", "/camera/cam_front/image", "/arm/arm/state", "/hand/hand/state",
+                   topics.RETARGETED, topics.CORRECTED, topics.ARM_TARGET, topics.COMMAND_ARM, topics.COMMAND_HAND,
+                   topics.MODE, topics.EPISODE, topics.TF, topics.STEP_REPORT):
+        assert needed in have, needed
+    episodes = reader.episodes()
+    assert [e.task for e in episodes] == ["pour", "pour"]
+    modes = [m.payload.data["mode"] for m in reader.messages([topics.MODE])]
+    assert modes == ["execute", "preview", "execute", "preview"]
+
+
+def test_the_terminal_preview_shows_the_mode_and_the_robot(executed):
+    from teleprev.session.recording import RecordOptions, Recording
+    from teleprev.session.run import make_dashboard
+    import time
+
+    rec = Recording(RecordOptions(out=executed.parent / "screen.mcap"))
+    rec.start()
+    try:
+        rec.loop.control("start", task="hang")
+        time.sleep(1.2)
+        console = Console(file=io.StringIO(), width=140, height=44, record=True)
+        dash = make_dashboard(rec, "side")
+        console.print(dash.render(rec.loop.snapshot, rec.device_rows(), 140, 44, rec.clock.now_ns()))
+        preview_text = console.export_text()
+        rec.loop.control("mode", mode="execute")
+        time.sleep(0.5)
+        console = Console(file=io.StringIO(), width=140, height=44, record=True)
+        console.print(dash.render(rec.loop.snapshot, rec.device_rows(), 140, 44, rec.clock.now_ns()))
+        execute_text = console.export_text()
+        small = Console(file=io.StringIO(), width=50, height=14, record=True)
+        small.print(dash.render(rec.loop.snapshot, rec.device_rows(), 50, 14, rec.clock.now_ns()))
+        small_text = small.export_text()
+    finally:
+        rec.stop()
+    assert "PREVIEW" in preview_text and "EXECUTE" in execute_text
+    braille = sum(0x2801 <= ord(c) <= 0x28FF for c in preview_text)
+    assert braille > 200  # the robot is drawn
+    assert "episode 0" in preview_text and "[hang]" in preview_text and "glove" in preview_text
+    assert "EXECUTE" in small_text and sum(0x2801 <= ord(c) <= 0x28FF for c in small_text) == 0  # status only
