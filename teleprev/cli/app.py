@@ -18,6 +18,7 @@ from teleprev.cli import record as record_cli
 from teleprev.cli import replay as replay_cli
 from teleprev.cli import robot
 from teleprev.cli import session as session_cli
+from teleprev.cli import study as study_cli
 
 app = typer.Typer(
     name="teleprev",
@@ -46,6 +47,11 @@ app.command("recover", rich_help_panel=SESSIONS)(session_cli.recover)
 app.command("export", rich_help_panel=SESSIONS)(export_cli.export)
 app.command("replay", rich_help_panel=SESSIONS)(replay_cli.replay)
 app.command("eval", rich_help_panel=SESSIONS)(replay_cli.eval_)
+
+STUDY = "User studies"
+
+app.command("survey", rich_help_panel=STUDY)(study_cli.survey)
+app.command("study", rich_help_panel=STUDY)(study_cli.study)
 
 
 def _version(value: bool) -> None:
