@@ -67,10 +67,6 @@ class StepResult:
     report: dict = field(default_factory=dict)
 
 
-def _stale(stamp_ns: int, t_ns: int, stale_ns: int) -> bool:
-    return t_ns - stamp_ns > stale_ns
-
-
 class Pipeline:
     def __init__(self, cfg: PipelineConfig, arm: ArmRetargeter, arm_guard: JointGuard, effector):
         self.cfg = cfg
@@ -82,13 +78,19 @@ class Pipeline:
         self._stale_ns = int(cfg.stale_ms * 1e6)
 
     # ---- inputs --------------------------------------------------------------------------------
+    def _fresh(self, sample, device: str, t_ns: int, flags: list[str]) -> bool:
+        """Present and not older than the stale limit; else flagged "no_<device>" or "<device>_stale"."""
+        if sample is None:
+            flags.append(f"no_{device}")
+            return False
+        if t_ns - sample.stamp_ns > self._stale_ns:
+            flags.append(f"{device}_stale")
+            return False
+        return True
+
     def _finger_angles(self, inputs: StepInputs, flags: list[str]) -> tuple[np.ndarray, np.ndarray] | None:
         s = inputs.hand
-        if s is None:
-            flags.append("no_glove")
-            return None
-        if _stale(s.stamp_ns, inputs.t_ns, self._stale_ns):
-            flags.append("glove_stale")
+        if not self._fresh(s, "glove", inputs.t_ns, flags):
             return None
         try:
             pose = hand_pose_from_values(s.names, s.positions)
@@ -109,11 +111,7 @@ class Pipeline:
 
     def _wrist(self, inputs: StepInputs, flags: list[str]) -> np.ndarray | None:
         s = inputs.wrist
-        if s is None:
-            flags.append("no_suit")
-            return None
-        if _stale(s.stamp_ns, inputs.t_ns, self._stale_ns):
-            flags.append("suit_stale")
+        if not self._fresh(s, "suit", inputs.t_ns, flags):
             return None
         p, q = np.asarray(s.position, dtype=float), np.asarray(s.orientation, dtype=float)
         if not (np.isfinite(p).all() and np.isfinite(q).all()):

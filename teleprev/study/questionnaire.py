@@ -5,16 +5,17 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 VERSION = "telepreview-table-iv"
+SCALE = ("1", "2", "3", "4", "5")
 
 
 @dataclass(frozen=True)
 class Question:
     key: str
     label: str  # short name for tables and plots
-    text: str
+    text: str  # the paper's wording
     low: str  # the anchor of 1
     high: str  # the anchor of 5
-    higher_is_better: bool = False
+    higher_is_better: bool = False  # every item but perceived success: higher means more workload
 
 
 QUESTIONS: tuple[Question, ...] = (
@@ -28,9 +29,10 @@ QUESTIONS: tuple[Question, ...] = (
 KEYS = tuple(q.key for q in QUESTIONS)
 
 
-def parse_answer(text: str) -> int:
-    """A Likert answer: an integer from 1 to 5, or ValueError saying what is wrong."""
+def parse_answer(text: str, question: Question | None = None) -> int:
+    """A Likert answer: exactly one of the digits 1-5, or ValueError saying what is expected."""
     value = text.strip()
-    if not value.isdigit() or not 1 <= int(value) <= 5:
-        raise ValueError(f"{text.strip()!r} is not an answer: type a whole number from 1 to 5")
+    if value not in SCALE:
+        anchors = f" (1 = {question.low}, 5 = {question.high})" if question else ""
+        raise ValueError(f"{value!r} is not an answer: type a whole number from 1 to 5{anchors}")
     return int(value)

@@ -1,99 +1,44 @@
-"""What a user study measures, from recorded sessions.
+"""Aggregating a study: per (condition, end effector), and the paper's Table III.
 
-Per session: participant, condition, end effector, task, whether it was practice and, if so, the
-practice time (from the practice start to the participant's "ready" key); every episode's execution time
-(start to stop) and outcome (y/f keys); the questionnaire, if answered. Missing data stays missing
-(None), never zero.
+Per group (an input condition on an end effector, as in the paper's appendix D):
+- per task (the episode's task label): execution time of successful, kept (not discarded) episodes of
+  non-practice sessions, start to stop, mean ± sample std (n-1) over episodes; success rate over the kept
+  episodes marked y/f (unmarked ones are counted apart, not as failures);
+- practice time over the group's practice sessions with a ready key;
+- each Likert dimension over the group's surveys (one per condition, whatever task it followed).
+A summary of no values is missing (None), never zero; a std of one value is missing too.
 
-Aggregated per (condition, end effector): execution time of successful, kept episodes (mean, std, n),
-success rate over episodes with an outcome, practice time, and each Likert dimension.
-
-Conditions map to Table III's columns by their text: "w/ preview", "with preview" -> with preview;
-"w/o preview", "without preview", "no preview" -> without preview (case and spacing ignored); other
-conditions (e.g. "baseline") appear in the tables but not in Table III. `--with-preview` /
-`--without-preview` name the conditions explicitly.
+Table III (per task: end effector x w/o preview, w/ preview, improvement = w/ - w/o) needs to know which
+conditions are "w/ preview" and which "w/o preview". A condition's text, lower-cased with everything but
+letters, digits and "/" removed, maps to
+    w/ preview:  "w/preview", "wpreview", "withpreview", "preview", "previewon"
+    w/o preview: "w/opreview", "wopreview", "withoutpreview", "nopreview", "previewoff"
+so "W/ Preview", "with preview" and "w/o  preview" all match. Other conditions (e.g. "baseline") are in
+the per-group table but not in Table III. `--with-preview TEXT` / `--without-preview TEXT` name a column's
+conditions explicitly (case and surrounding spaces ignored) and replace the automatic match for that
+column. Conditions mapping to the same column are pooled.
 """
 
 from __future__ import annotations
 
 import re
 from dataclasses import dataclass, field
-from pathlib import Path
 
 import numpy as np
 
-from teleprev.session import topics
-from teleprev.session.reader import SessionReader
-from teleprev.study import survey
+from teleprev.errors import ConfigError
+from teleprev.study.facts import SessionFacts
 from teleprev.study.questionnaire import KEYS
 
-
-@dataclass(frozen=True)
-class EpisodeFacts:
-    index: int
-    task: str
-    duration_s: float | None
-    outcome: str | None
-    discarded: bool
-
-
-@dataclass(frozen=True)
-class SessionFacts:
-    path: Path
-    participant: str
-    condition: str
-    end_effector: str
-    task: str
-    practice: bool
-    practice_time_s: float | None
-    episodes: tuple[EpisodeFacts, ...]
-    answers: dict[str, int] | None
-
-
-def session_facts(path: str | Path) -> SessionFacts:
-    path = Path(path)
-    reader = SessionReader(path)
-    meta = reader.metadata
-    s = meta.get("session", {})
-    practice = s.get("practice", "false") == "true"
-    practice_time = None
-    if practice and topics.OPERATOR in reader.topics:
-        start = ready = None
-        for msg in reader.messages([topics.OPERATOR]):
-            event = msg.payload.data.get("event")
-            if event == "practice_start" and start is None:
-                start = msg.payload.stamp_ns
-            elif event == "ready" and ready is None:
-                ready = msg.payload.stamp_ns
-        if ready is not None:
-            practice_time = (ready - (start if start is not None else reader.start_ns)) / 1e9
-    episodes = tuple(EpisodeFacts(e.index, e.task, e.duration_s, e.outcome, e.discarded) for e in reader.episodes())
-    return SessionFacts(
-        path, s.get("participant", ""), s.get("condition", ""), s.get("end_effector", meta.get("rig", {}).get("end_effector", "")),
-        s.get("task", ""), practice, practice_time, episodes, survey.load(path, meta),
-    )
-
-
-def preview_column(condition: str, with_label: str | None = None, without_label: str | None = None) -> str | None:
-    """"with" / "without" (preview) for Table III, or None for any other condition."""
-    if with_label is not None and condition == with_label:
-        return "with"
-    if without_label is not None and condition == without_label:
-        return "without"
-    key = re.sub(r"[^a-z/]", "", condition.lower())
-    if key in ("w/opreview", "withoutpreview", "nopreview", "wopreview"):
-        return "without"
-    if key in ("w/preview", "withpreview", "preview", "wpreview"):
-        return "with"
-    return None
+WITH, WITHOUT = "with", "without"
+_AUTO = {WITH: {"w/preview", "wpreview", "withpreview", "preview", "previewon"},
+         WITHOUT: {"w/opreview", "wopreview", "withoutpreview", "nopreview", "previewoff"}}
 
 
 @dataclass(frozen=True)
 class Summary:
-    """mean, std (population-free: sample std with n-1, 0 for one value), n; None when n == 0."""
-
     mean: float | None
-    std: float | None
+    std: float | None  # sample std (n-1); None for fewer than two values
     n: int
 
     @classmethod
@@ -101,10 +46,23 @@ class Summary:
         v = np.asarray([x for x in values if x is not None], dtype=float)
         if len(v) == 0:
             return cls(None, None, 0)
-        return cls(float(v.mean()), float(v.std(ddof=1)) if len(v) > 1 else 0.0, len(v))
+        return cls(float(v.mean()), float(v.std(ddof=1)) if len(v) > 1 else None, len(v))
 
     def text(self, digits: int = 1) -> str:
-        return "n/a" if self.mean is None else f"{self.mean:.{digits}f} ± {self.std:.{digits}f}"
+        """Like the paper: "23.6 ± 4.7"; "n/a" when missing."""
+        if self.mean is None:
+            return "n/a"
+        std = "n/a" if self.std is None else f"{self.std:.{digits}f}"
+        return f"{self.mean:.{digits}f} ± {std}"
+
+
+@dataclass(frozen=True)
+class TaskStats:
+    task: str
+    execution_time_s: Summary  # successful, kept episodes
+    success_rate: float | None  # over kept episodes with an outcome
+    judged: int  # kept episodes marked success or failure
+    unmarked: int  # kept episodes without an outcome: in neither execution time nor success rate
 
 
 @dataclass(frozen=True)
@@ -112,50 +70,112 @@ class Group:
     condition: str
     end_effector: str
     sessions: int
-    execution_time_s: Summary  # successful, kept episodes
-    success_rate: float | None  # over kept episodes with an outcome
-    episodes_with_outcome: int
-    practice_time_s: Summary
-    likert: dict[str, Summary] = field(default_factory=dict)
+    participants: int
+    tasks: dict[str, TaskStats]  # by task, in the order they first appear; empty without episodes
+    practice_sessions: int
+    practice_time_s: Summary  # practice sessions with a ready key
     surveys: int = 0
+    not_surveyed: int = 0  # non-practice sessions without a survey
+    likert: dict[str, Summary] = field(default_factory=dict)
+
+
+def _kept(sessions: list[SessionFacts], task: str | None = None):
+    """Kept episodes of non-practice sessions, with their task (the episode's label, else the session's)."""
+    out = []
+    for s in sessions:
+        if not s.practice:
+            out += [(e.task or s.task, e) for e in s.episodes if not e.discarded]
+    return [(t, e) for t, e in out if task is None or t == task]
+
+
+def _task_stats(task: str, episodes) -> TaskStats:
+    judged = [e for e in episodes if e.outcome in ("success", "failure")]
+    success = [e for e in judged if e.outcome == "success"]
+    return TaskStats(task, Summary.of(e.duration_s for e in success), len(success) / len(judged) if judged else None,
+                     len(judged), len(episodes) - len(judged))
 
 
 def group(sessions: list[SessionFacts], task: str | None = None) -> list[Group]:
-    """Per (condition, end effector), in the order they first appear."""
-    keys = list(dict.fromkeys((s.condition, s.end_effector) for s in sessions))
+    """One Group per (condition, end effector), in the order they first appear; `task` keeps one task's episodes."""
     out = []
-    for condition, ee in keys:
+    for condition, ee in dict.fromkeys((s.condition, s.end_effector) for s in sessions):
         members = [s for s in sessions if (s.condition, s.end_effector) == (condition, ee)]
-        kept = [e for s in members if not s.practice for e in s.episodes if not e.discarded and (task is None or e.task == task)]
-        judged = [e for e in kept if e.outcome in ("success", "failure")]
-        success = [e for e in judged if e.outcome == "success"]
+        kept = _kept(members, task)
+        tasks = {t: _task_stats(t, [e for u, e in kept if u == t]) for t in dict.fromkeys(t for t, _ in kept)}
+        practice = [s for s in members if s.practice]
         surveyed = [s.answers for s in members if s.answers is not None]
         out.append(Group(
-            condition, ee, len(members),
-            Summary.of(e.duration_s for e in success),
-            len(success) / len(judged) if judged else None, len(judged),
-            Summary.of(s.practice_time_s for s in members if s.practice),
-            {k: Summary.of(a[k] for a in surveyed) for k in KEYS}, len(surveyed),
+            condition, ee, sessions=len(members), participants=len({s.participant for s in members}), tasks=tasks,
+            practice_sessions=len(practice), practice_time_s=Summary.of(s.practice_time_s for s in practice),
+            surveys=len(surveyed), not_surveyed=sum(s.answers is None and not s.practice for s in members),
+            likert={k: Summary.of(a[k] for a in surveyed) for k in KEYS},
         ))
     return out
 
 
+def _norm(text: str) -> str:
+    return re.sub(r"[^a-z0-9/]", "", text.lower())
+
+
+@dataclass(frozen=True)
+class ColumnMap:
+    """Which conditions are Table III's "w/ preview" and "w/o preview" columns."""
+
+    with_preview: tuple[str, ...] = ()  # explicit condition texts; empty: automatic match
+    without_preview: tuple[str, ...] = ()
+
+    def __post_init__(self):
+        both = {c.strip().lower() for c in self.with_preview} & {c.strip().lower() for c in self.without_preview}
+        if both:
+            raise ConfigError(f"condition {sorted(both)[0]!r} is named both --with-preview and --without-preview", "teleprev study")
+
+    def column(self, condition: str) -> str | None:
+        c = condition.strip().lower()
+        explicit = {WITH: {x.strip().lower() for x in self.with_preview}, WITHOUT: {x.strip().lower() for x in self.without_preview}}
+        for col in (WITH, WITHOUT):
+            if c in explicit[col]:
+                return col
+        for col in (WITH, WITHOUT):
+            if not explicit[col] and _norm(condition) in _AUTO[col]:
+                return col
+        return None
+
+
+def preview_column(condition: str) -> str | None:
+    """"with" / "without" (preview) by the automatic match, or None for any other condition."""
+    return ColumnMap().column(condition)
+
+
 @dataclass(frozen=True)
 class TableIIIRow:
+    task: str
     end_effector: str
     without: Summary
     with_: Summary
-    improvement_s: float | None  # with - without (negative: faster with preview)
+    improvement_s: float | None  # with - without: negative when faster with preview
 
 
-def table_iii(groups: list[Group], with_label: str | None = None, without_label: str | None = None) -> list[TableIIIRow]:
+def table_iii(sessions: list[SessionFacts], columns: ColumnMap = ColumnMap(), task: str | None = None) -> list[TableIIIRow]:
+    """A row per (task, end effector) with episodes in either preview column."""
+    placed: dict[tuple[str, str], dict[str, list]] = {}  # (task, end effector) -> column -> episodes
+    for s in sessions:
+        col = columns.column(s.condition)
+        if col is not None:
+            for t, e in _kept([s], task):
+                placed.setdefault((t, s.end_effector), {WITH: [], WITHOUT: []})[col].append(e)
     rows = []
-    for ee in dict.fromkeys(g.end_effector for g in groups):
-        cols = {preview_column(g.condition, with_label, without_label): g for g in groups if g.end_effector == ee}
-        if "with" not in cols and "without" not in cols:
-            continue
-        wo = cols["without"].execution_time_s if "without" in cols else Summary(None, None, 0)
-        w = cols["with"].execution_time_s if "with" in cols else Summary(None, None, 0)
+    for (t, ee), cols in placed.items():
+        w, wo = (_task_stats(t, cols[c]).execution_time_s for c in (WITH, WITHOUT))
         improvement = w.mean - wo.mean if w.mean is not None and wo.mean is not None else None
-        rows.append(TableIIIRow(ee, wo, w, improvement))
+        rows.append(TableIIIRow(t, ee, wo, w, improvement))
     return rows
+
+
+def pooled_conditions(sessions: list[SessionFacts], columns: ColumnMap) -> dict[str, list[str]]:
+    """For the report: which condition texts went into each Table III column."""
+    out: dict[str, list[str]] = {WITHOUT: [], WITH: []}
+    for c in dict.fromkeys(s.condition for s in sessions):
+        col = columns.column(c)
+        if col:
+            out[col].append(c)
+    return out
