@@ -12,6 +12,7 @@ import typer
 
 from teleprev import __version__
 from teleprev.cli import calibrate as calibrate_cli
+from teleprev.cli import collision
 from teleprev.cli import devices as devices_cli
 from teleprev.cli import export as export_cli
 from teleprev.cli import record as record_cli
@@ -39,6 +40,7 @@ app.command("calibrate", rich_help_panel=COLLECT)(calibrate_cli.calibrate)
 app.add_typer(devices_cli.app, name="devices", rich_help_panel=COLLECT)
 
 app.add_typer(robot.app, name="robot", rich_help_panel=MODELS)
+app.add_typer(collision.app, name="collision", rich_help_panel=MODELS)
 
 SESSIONS = "Sessions"
 

@@ -1,0 +1,188 @@
+"""The runtime Corrector: whatever comes in, a collision-free configuration within the limits goes out.
+
+    input free (exact check)            -> the input, untouched
+    else the CCN proposes p; the smallest fraction of the correction (in quarters) that the CPN predicts
+    free is checked exactly; if it collides, p itself is
+                                        -> the first of those that is free                action "ccn"
+    else                                -> fallback                                       action "fallback"
+        1. the CCN's correction, lengthened up to twice: the first point the CPN predicts free, checked
+           exactly (the direction is usually right and the step a little short)
+        2. a few gradient-projection steps on the CPN from the proposal, then one exact check
+        3. points on the segment from the proposal to a safe anchor (the previous output if it is
+           free, else the open hand), nearest the proposal first, those the CPN predicts free; each
+           checked exactly, at most `segment_checks` of them
+        4. the anchor itself, which is collision-free
+
+Taking as little of the CCN's correction as the checker allows keeps the output next to the input where
+the input only just collides, so a smooth input trajectory entering or leaving collision gives a smooth
+output (the full proposal would jump by the CCN's safety margin), and it lowers the deviation.
+Every answer has passed the exact checker (the anchor was checked when it became the anchor), so no
+path returns a colliding configuration. Numpy only: this runs in every pipeline step.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from teleprev.errors import ModelError
+from teleprev.noncollision.mlp import CCN, CPN, file_sha256, load_model
+from teleprev.noncollision.projection import ProjectionSettings, descend
+from teleprev.robot.collision import SelfCollisionChecker
+from teleprev.robot.model import RobotModel
+
+ACTIONS = ("untouched", "ccn", "fallback")
+
+
+@dataclass(frozen=True)
+class Correction:
+    q: np.ndarray  # collision-free (exact check) and within limits, always
+    action: str  # "untouched" | "ccn" | "fallback"
+    colliding_links: tuple[str, ...]  # links that collided in the input (empty if untouched)
+    deviation: float  # max |q_out - q_in| in rad
+
+
+@dataclass(frozen=True)
+class CorrectorSettings:
+    shorten_levels: int = 2  # CPN bisection levels along the correction (0: always the full CCN proposal)
+    projection_steps: int = 8
+    segment_points: int = 16
+    segment_checks: int = 3
+    projection: ProjectionSettings = ProjectionSettings()
+
+
+def find_models(models_dir: Path, model: RobotModel) -> tuple[Path, Path]:
+    """The CPN and CCN files in `models_dir` made for this robot (by the `robot` name in their metadata)."""
+    from safetensors import safe_open
+
+    models_dir = Path(models_dir)
+    if not models_dir.is_dir():
+        raise ModelError("no such models folder", str(models_dir))
+    found: dict[str, list[Path]] = {"cpn": [], "ccn": []}
+    others = []
+    for path in sorted(models_dir.glob("c[cp]n_*.safetensors")):
+        kind = path.name[:3]
+        try:
+            with safe_open(str(path), framework="numpy") as f:
+                robot = (f.metadata() or {}).get("robot")
+        except Exception:
+            robot = None  # unreadable: load_model below says why, if it is the one we need
+            found[kind].append(path)
+            continue
+        (found[kind] if robot == model.name else others).append(path)
+    for kind in ("cpn", "ccn"):
+        if not found[kind]:
+            seen = f" (found only {', '.join(p.name for p in others)})" if others else ""
+            raise ModelError(
+                f"no {kind.upper()} for robot {model.name!r}{seen}; train one with `teleprev collision train-{kind}`",
+                str(models_dir),
+            )
+        if len(found[kind]) > 1:
+            raise ModelError(
+                f"several {kind.upper()} files for robot {model.name!r}: {', '.join(p.name for p in found[kind])}; keep one",
+                str(models_dir),
+            )
+    return found["cpn"][0], found["ccn"][0]
+
+
+class Corrector:
+    def __init__(self, model: RobotModel, checker: SelfCollisionChecker, cpn: CPN, ccn: CCN,
+                 settings: CorrectorSettings = CorrectorSettings()):
+        self.model = model
+        self.checker = checker
+        self.cpn = cpn
+        self.ccn = ccn
+        self.settings = settings
+        self.neutral = model.neutral()
+        if checker.collides(self.neutral):
+            raise ModelError("the neutral (open) hand is in self-collision, so there is no safe fallback pose", str(model.urdf_path))
+        s = np.linspace(0.0, 1.0, settings.segment_points + 1)[1:]
+        self._segment = s[:, None]
+        self._extend = np.linspace(1.0, 2.0, 9)[1:, None]
+
+    @classmethod
+    def load(cls, models_dir: Path | None, model: RobotModel, checker: SelfCollisionChecker | None = None) -> "Corrector":
+        """The CPN and CCN for `model` from `models_dir` (None: the shipped models/ folder)."""
+        from teleprev.paths import data_dir
+
+        checker = checker if checker is not None else SelfCollisionChecker(model)
+        cpn_path, ccn_path = find_models(Path(models_dir) if models_dir is not None else data_dir("models"), model)
+        cpn = CPN(load_model(cpn_path, "cpn", model, checker.link_names))
+        ccn_net = load_model(ccn_path, "ccn", model)
+        trained_with = (ccn_net.info.training or {}).get("cpn", {}).get("sha256")
+        if trained_with is not None and trained_with != file_sha256(cpn_path):
+            raise ModelError(
+                f"trained against another CPN than {cpn_path.name}; retrain the CCN (`teleprev collision train-ccn`)",
+                str(ccn_path),
+            )
+        corrector = cls(model, checker, cpn, CCN(ccn_net, model.lower, model.upper))
+        corrector.files = {"cpn": cpn_path, "ccn": ccn_path}
+        return corrector
+
+    def model_files(self) -> dict[str, Path]:
+        """The weight files loaded (a session records their hashes, eval compares them)."""
+        return dict(getattr(self, "files", {}))
+
+    # ---- the pipeline's call ----------------------------------------------------------------------
+    def correct(self, q: np.ndarray, previous: np.ndarray | None = None) -> Correction:
+        q_in = np.asarray(q, dtype=float)
+        if q_in.shape != self.model.lower.shape or not np.isfinite(q_in).all():
+            raise ValueError(f"expected {len(self.model.lower)} finite joint values, got {np.array2string(q_in, precision=3)}")
+        q0 = self.model.clip(q_in)
+        report = self.checker.check(q0)
+        if not report.colliding:
+            return Correction(q0, "untouched", (), float(np.abs(q0 - q_in).max()))
+        links = tuple(report.colliding_links(self.checker.link_names))
+        proposal = self.ccn(q0)
+        shorter = self._shortest_predicted_free(q0, proposal)
+        if shorter is not None and not self.checker.collides(shorter):
+            return Correction(shorter, "ccn", links, float(np.abs(shorter - q_in).max()))
+        if not self.checker.collides(proposal):
+            return Correction(proposal, "ccn", links, float(np.abs(proposal - q_in).max()))
+        out = self._fallback(q0, proposal, previous)
+        return Correction(out, "fallback", links, float(np.abs(out - q_in).max()))
+
+    def _shortest_predicted_free(self, q0: np.ndarray, proposal: np.ndarray) -> np.ndarray | None:
+        """The smallest fraction k / 2**shorten_levels of the correction the CPN predicts free, by bisection
+        (one CPN call per level: a batch of points costs as much per point as single calls)."""
+        lo, hi = 0, 2 ** self.settings.shorten_levels  # in units of 1 / 2**levels; hi: the full proposal
+        delta = proposal - q0
+        while hi - lo > 1:
+            mid = (lo + hi) // 2
+            if self.cpn.predicts_free(q0 + (mid / 2 ** self.settings.shorten_levels) * delta):
+                hi = mid
+            else:
+                lo = mid
+        return None if hi == 2 ** self.settings.shorten_levels else q0 + (hi / 2 ** self.settings.shorten_levels) * delta
+
+    # ---- fallback -------------------------------------------------------------------------------
+    def _anchor(self, previous: np.ndarray | None) -> np.ndarray:
+        if previous is not None:
+            prev = np.asarray(previous, dtype=float)
+            if (prev.shape == self.neutral.shape and np.all(np.isfinite(prev)) and self.model.within_limits(prev)
+                    and not self.checker.collides(prev)):
+                return prev
+        return self.neutral
+
+    def _fallback(self, q0: np.ndarray, proposal: np.ndarray, previous: np.ndarray | None) -> np.ndarray:
+        s = self.settings
+        longer = self.model.clip(q0 + self._extend * (proposal - q0))
+        free = np.flatnonzero(self.cpn.predicts_free(longer))
+        if len(free) and not self.checker.collides(longer[free[0]]):
+            return longer[free[0]]
+        q = proposal
+        for _ in range(s.projection_steps):
+            q, free = descend(self.cpn, self.model, q, q0, s.projection)
+            if free:
+                break
+        if not self.checker.collides(q):
+            return q
+        anchor = self._anchor(previous)
+        points = proposal + self._segment * (anchor - proposal)
+        candidates = np.flatnonzero(self.cpn.predicts_free(points[:-1]))
+        for k in candidates[: s.segment_checks]:
+            if not self.checker.collides(points[k]):
+                return points[k]
+        return anchor
