@@ -18,7 +18,7 @@ teleprev info "$out/demo.mcap"
 echo "== 3/5 export to a LeRobot dataset"
 teleprev export "$out/demo.mcap" --repo-id local/teleprev_demo --root datasets/out/teleprev_demo
 
-echo "== 4/5 replay the first episode to the simulated robot at 2x"
+echo "== 4/5 replay the first episode to the simulated robot, asking for 2x (teleprev slows down where 2x would break a speed limit)"
 teleprev replay "$out/demo.mcap" --episode 0 --to sim --speed 2 --engage-after 0.5 --no-preview
 
 echo "== 5/5 re-run the pipeline on the recording: metrics, and bit-identical reproduction"

@@ -77,9 +77,11 @@ def export(
 
         typer.echo(json.dumps(_as_json(report)))
         return
-    from teleprev.export.report import summary_table
+    from teleprev.export.report import export_notes, summary_table
 
     console.print(summary_table(report))
+    for line in export_notes(report):
+        console.print(line, highlight=False)
     console.print(f"[green]done:[/] {report.total_episodes} episodes, {report.total_frames} frames in {report.root} "
                   f"(video: {video.describe()})", highlight=False)
 

@@ -92,35 +92,45 @@ def folder_size(root: Path) -> int:
 
 
 def summary_table(report: ExportReport):
-    """A rich Table: one row per session, totals last."""
+    """A rich Table: one row per session, totals last. What was left out, split or trimmed is listed
+    under it (`export_notes`), so the table stays narrow enough for an 80-column terminal."""
     from rich.table import Table
 
     table = Table(title=f"{report.repo_id} -> {report.root}", title_justify="left")
-    for name, justify in (("session", "left"), ("recorded", "right"), ("episodes", "right"), ("frames", "right"), ("duration", "right"),
-                          ("dropped / split / trimmed", "left"), ("align err", "right"), ("held", "right")):
+    for name, justify in (("session", "left"), ("recorded", "right"), ("episodes", "right"), ("frames", "right"),
+                          ("duration", "right"), ("align err", "right"), ("held", "right"), ("notes", "right")):
         table.add_column(name, justify=justify)
     for s in report.sessions:
-        dropped = [f"ep {e.index}: {e.dropped}" for e in s.episodes if e.dropped]
-        split = [f"ep {e.index}: split in {e.pieces} ({'; '.join(e.gaps)})" for e in s.episodes if e.pieces > 1]
-        trimmed = [f"ep {e.index}: {n}" for e in s.episodes if not e.dropped for n in e.notes]
         table.add_row(
             Path(s.session).name,
             str(s.source_episodes),
             str(s.lerobot_episodes),
             str(s.frames),
             f"{s.duration_s:.1f} s",
-            "\n".join(dropped + split + trimmed + s.notes) or "-",
             f"{s.align_err_ms:.1f} ms",
             str(sum(e.held_frames for e in s.episodes)),
+            str(len(_session_notes(s))),
         )
     table.add_section()
     table.add_row(
         "total", str(sum(s.source_episodes for s in report.sessions)), str(report.episodes), str(report.frames),
-        f"{report.duration_s:.1f} s",
-        f"{report.total_episodes} episodes in the dataset, {report.size_bytes / 1e6:.1f} MB",
-        f"{report.align_err_ms:.1f} ms", "",
+        f"{report.duration_s:.1f} s", f"{report.align_err_ms:.1f} ms", "", "",
     )
-    table.caption = (f"recorded: episodes in the session; episodes: LeRobot episodes made of them. {report.fps} fps; exported {report.duration_s:.1f} s of recording in {report.wall_s:.1f} s "
-                     f"({report.realtime_x:.1f}x real time); align err: worst distance between a frame's time and "
-                     "the state/action samples used for it")
+    table.caption = (f"recorded: episodes in the session; episodes: LeRobot episodes made of them; {report.fps} fps; "
+                     f"align err: worst distance between a frame's time and the state/action samples used for it")
     return table
+
+
+def _session_notes(s: SessionReport) -> list[str]:
+    dropped = [f"ep {e.index} left out: {e.dropped}" for e in s.episodes if e.dropped]
+    split = [f"ep {e.index} split in {e.pieces} ({'; '.join(e.gaps)})" for e in s.episodes if e.pieces > 1]
+    trimmed = [f"ep {e.index}: {n}" for e in s.episodes if not e.dropped for n in e.notes]
+    return dropped + split + trimmed + s.notes
+
+
+def export_notes(report: ExportReport) -> list[str]:
+    """One line per episode that was left out, split or trimmed, and the export's totals."""
+    lines = [f"{Path(s.session).name} {note}" for s in report.sessions for note in _session_notes(s)]
+    lines.append(f"exported {report.duration_s:.1f} s of recording in {report.wall_s:.1f} s ({report.realtime_x:.1f}x real time); "
+                 f"the dataset now holds {report.total_episodes} episodes, {report.size_bytes / 1e6:.1f} MB")
+    return lines
