@@ -44,8 +44,7 @@ def export(
                                                show_default=False),
     as_json: bool = typer.Option(False, "--json", help="Print the summary as one JSON object instead of a table."),
 ) -> None:
-    """Export recorded sessions to a LeRobot dataset: one LeRobot episode per recorded episode, features
-    from a recipe, frames at an even rate aligned to a camera, videos encoded while they stream."""
+    """Export recorded sessions to a LeRobot dataset, one LeRobot episode per recorded episode."""
     from dataclasses import replace
 
     from rich.console import Console
@@ -154,7 +153,7 @@ def _as_json(report) -> dict:
         "root": str(report.root), "repo_id": report.repo_id, "fps": report.fps,
         "episodes": report.episodes, "frames": report.frames, "duration_s": round(report.duration_s, 3),
         "total_episodes": report.total_episodes, "total_frames": report.total_frames,
-        "wall_s": round(report.wall_s, 3), "realtime_x": round(report.realtime_x, 2),
+        "wall_s": round(report.wall_s, 3), "startup_s": round(report.startup_s, 3), "realtime_x": round(report.realtime_x, 2),
         "max_align_err_ms": round(report.align_err_ms, 3), "size_bytes": report.size_bytes,
         "sessions": [{
             "session": s.session, "source_episodes": s.source_episodes, "episodes": s.lerobot_episodes,

@@ -62,6 +62,7 @@ class ExportReport:
     fps: int
     sessions: list[SessionReport]
     wall_s: float = 0.0
+    startup_s: float = 0.0  # of wall_s, loading lerobot (once per process)
     size_bytes: int = 0
     total_episodes: int = 0  # in the dataset after the export (appending: with the earlier ones)
     total_frames: int = 0
@@ -97,9 +98,10 @@ def summary_table(report: ExportReport):
     from rich.table import Table
 
     table = Table(title=f"{report.repo_id} -> {report.root}", title_justify="left")
-    for name, justify in (("session", "left"), ("recorded", "right"), ("episodes", "right"), ("frames", "right"),
-                          ("duration", "right"), ("align err", "right"), ("held", "right"), ("notes", "right")):
-        table.add_column(name, justify=justify)
+    longest = max((len(Path(s.session).name) for s in report.sessions), default=0)
+    table.add_column("session", min_width=min(longest, 10))
+    for name in ("rec.", "episodes", "frames", "duration", "align err", "held", "notes"):
+        table.add_column(name, justify="right")
     for s in report.sessions:
         table.add_row(
             Path(s.session).name,
@@ -116,7 +118,7 @@ def summary_table(report: ExportReport):
         "total", str(sum(s.source_episodes for s in report.sessions)), str(report.episodes), str(report.frames),
         f"{report.duration_s:.1f} s", f"{report.align_err_ms:.1f} ms", "", "",
     )
-    table.caption = (f"recorded: episodes in the session; episodes: LeRobot episodes made of them; {report.fps} fps; "
+    table.caption = (f"rec.: episodes recorded in the session; episodes: LeRobot episodes made of them; {report.fps} fps; "
                      f"align err: worst distance between a frame's time and the state/action samples used for it")
     return table
 
@@ -131,6 +133,10 @@ def _session_notes(s: SessionReport) -> list[str]:
 def export_notes(report: ExportReport) -> list[str]:
     """One line per episode that was left out, split or trimmed, and the export's totals."""
     lines = [f"{Path(s.session).name} {note}" for s in report.sessions for note in _session_notes(s)]
-    lines.append(f"exported {report.duration_s:.1f} s of recording in {report.wall_s:.1f} s ({report.realtime_x:.1f}x real time); "
+    speed = f"{report.realtime_x:.1f}x real time"
+    if report.startup_s >= 0.1 * report.wall_s:
+        working = max(report.wall_s - report.startup_s, 1e-9)
+        speed += f"; {report.startup_s:.1f} s of it loading lerobot, {report.duration_s / working:.1f}x without"
+    lines.append(f"exported {report.duration_s:.1f} s of recording in {report.wall_s:.1f} s ({speed}); "
                  f"the dataset now holds {report.total_episodes} episodes, {report.size_bytes / 1e6:.1f} MB")
     return lines
