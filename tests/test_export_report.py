@@ -18,9 +18,9 @@ def test_export_summary_fits_80_columns_and_lists_what_was_left_out():
     console.print(summary_table(report))
     lines = console.export_text().splitlines()
     header = next(line for line in lines if "session" in line)
-    assert header.rstrip().endswith("notes ┃")  # the last column is whole: nothing cropped at 80 columns
+    assert header.rstrip().endswith("held ┃")  # the last column is whole: nothing cropped at 80 columns
     row = next(line for line in lines if line.startswith("│ s.mcap"))
-    assert row.rstrip().endswith("│") and row.split("│")[-2].strip() == "2"  # two notes, each listed below the table
+    assert [c.strip() for c in row.split("│")[2:5]] == ["2", "1", "1"]  # recorded, dropped, exported
     notes = export_notes(report)
     assert "s.mcap ep 1 left out: discarded by the operator" in notes
     assert any(n.startswith("s.mcap ep 0: left out 3 frames") for n in notes)

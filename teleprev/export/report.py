@@ -93,33 +93,32 @@ def folder_size(root: Path) -> int:
 
 
 def summary_table(report: ExportReport):
-    """A rich Table: one row per session, totals last. What was left out, split or trimmed is listed
-    under it (`export_notes`), so the table stays narrow enough for an 80-column terminal."""
+    """A rich Table: one row per session, totals last. Which episodes were left out, split or trimmed,
+    and why, is listed under it (`export_notes`), so the table stays narrow enough for 80 columns."""
     from rich.table import Table
 
-    table = Table(title=f"{report.repo_id} -> {report.root}", title_justify="left")
+    table = Table(title=f"{report.repo_id} -> {report.root} ({report.size_bytes / 1e6:.1f} MB)", title_justify="left")
     longest = max((len(Path(s.session).name) for s in report.sessions), default=0)
-    table.add_column("session", min_width=min(longest, 10))
-    for name in ("rec.", "episodes", "frames", "duration", "align err", "held", "notes"):
+    table.add_column("session", min_width=min(longest, 9))
+    for name in ("rec.", "dropped", "episodes", "frames", "duration", "align err", "held"):
         table.add_column(name, justify="right")
+
+    def dropped(s: SessionReport) -> int:
+        return sum(1 for e in s.episodes if e.dropped)
+
     for s in report.sessions:
         table.add_row(
-            Path(s.session).name,
-            str(s.source_episodes),
-            str(s.lerobot_episodes),
-            str(s.frames),
-            f"{s.duration_s:.1f} s",
-            f"{s.align_err_ms:.1f} ms",
-            str(sum(e.held_frames for e in s.episodes)),
-            str(len(_session_notes(s))),
+            Path(s.session).name, str(s.source_episodes), str(dropped(s)), str(s.lerobot_episodes), str(s.frames),
+            f"{s.duration_s:.1f} s", f"{s.align_err_ms:.1f} ms", str(sum(e.held_frames for e in s.episodes)),
         )
     table.add_section()
     table.add_row(
-        "total", str(sum(s.source_episodes for s in report.sessions)), str(report.episodes), str(report.frames),
-        f"{report.duration_s:.1f} s", f"{report.align_err_ms:.1f} ms", "", "",
+        "total", str(sum(s.source_episodes for s in report.sessions)), str(sum(dropped(s) for s in report.sessions)),
+        str(report.episodes), str(report.frames), f"{report.duration_s:.1f} s", f"{report.align_err_ms:.1f} ms", "",
     )
-    table.caption = (f"rec.: episodes recorded in the session; episodes: LeRobot episodes made of them; {report.fps} fps; "
-                     f"align err: worst distance between a frame's time and the state/action samples used for it")
+    table.caption = (f"rec.: episodes recorded; dropped: left out; episodes: LeRobot episodes made of the rest (more where "
+                     f"a gap split one); {report.fps} fps; align err: worst distance between a frame's time and the "
+                     "state/action samples used for it; held: frames whose camera image is the previous one")
     return table
 
 
