@@ -1,3 +1,4 @@
+import teleprev  # noqa: F401  first: it pins the numeric platform before numpy loads
 import numpy as np
 import pytest
 

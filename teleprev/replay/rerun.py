@@ -15,6 +15,7 @@ from pathlib import Path
 
 import numpy as np
 
+from teleprev import numeric_platform
 from teleprev.errors import SessionError
 from teleprev.messages import Event, JointSample
 from teleprev.pipeline.build import build_pipeline, rig_calibration
@@ -133,6 +134,10 @@ def rerun_session(path: str | Path, models: str | Path | None = None, rig_path: 
     extra = {k: len(set(recorded_by_stamp[k]) - set(t.tolist())) for k in RECORDED_OUTPUTS}
     if any(extra.values()):
         notes.append(f"recorded outputs at times the re-run never stepped: { {k: v for k, v in extra.items() if v} }")
+    recorded_platform = meta.get("session", {}).get("numeric_platform")
+    if recorded_platform and recorded_platform != numeric_platform.describe():
+        notes.append(f"recorded on numeric platform {recorded_platform!r}, re-run on {numeric_platform.describe()!r}: "
+                     "the last bits may differ")
     return Rerun(
         path, t, np.array(mode), np.array(action), np.array(latency, dtype=np.int64), flags, arm_names, eff_names,
         rerun, recorded, reader.episodes(), meta, _models_match(meta, pipeline), rig_source, reader.duration_s, n_inputs,

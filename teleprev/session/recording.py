@@ -18,7 +18,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 from devices.base import DeviceContext
-from teleprev import __version__
+from teleprev import __version__, numeric_platform
 from teleprev.errors import ConfigError
 from teleprev.pipeline.build import build_pipeline, rig_calibration
 from teleprev.pipeline.driver import InputTopics, PipelineDriver
@@ -97,7 +97,8 @@ class Recording:
             "calibration": {"path": str(cal_path or ""), "toml": cal_path.read_text() if cal_path else ""},
             "session": {"operator": o.operator or rig.rig.operator, "task": self.task, "participant": o.participant or rig.rig.participant,
                         "condition": o.condition or rig.rig.condition, "end_effector": rig.rig.end_effector,
-                        "practice": "true" if o.practice else "false", "software_version": __version__},
+                        "practice": "true" if o.practice else "false", "software_version": __version__,
+                        "numeric_platform": numeric_platform.describe()},
         }
         corrector = getattr(self.pipeline.effector, "corrector", None)
         if corrector is not None and hasattr(corrector, "model_files"):
