@@ -17,7 +17,7 @@ import numpy as np  # noqa: E402
 
 def smooth_trajectory(ik, q0: np.ndarray, steps: int, rate_hz: float = 120.0) -> list[np.ndarray]:
     """A smooth 6-D path: a 15 cm Lissajous in position and +-0.3 rad swings in orientation."""
-    from teleprev.robot.transforms import axis_angle_to_matrix
+    from teleprev.transforms import axis_angle_to_matrix
 
     home = ik.pose(q0)
     out = []

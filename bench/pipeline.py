@@ -26,7 +26,7 @@ TASKS = ("pick_place", "hang", "pour", "box_rotation", "cup_stack")
 
 def operator_inputs(task: str, seconds: float, seed: int = 0):
     """(t_ns, glove sample, suit sample or None) at 120 Hz; the suit updates every second glove sample."""
-    from devices.sim.operator import SimOperator
+    from teleprev_devices.sim.operator import SimOperator
     from teleprev.human.smplx import HAND_POSE_NAMES, hand_pose_from_angles
     from teleprev.messages import JointSample, PoseSample
 
@@ -45,7 +45,7 @@ def operator_inputs(task: str, seconds: float, seed: int = 0):
 
 def step_timing(seconds: float) -> dict:
     from teleprev.messages import JointSample
-    from teleprev.pipeline.build import build_pipeline
+    from teleprev.live.build import build_pipeline
     from teleprev.pipeline.step import PipelineState, StepInputs
     from teleprev.rig import load_rig
 
@@ -90,12 +90,12 @@ def preview_rate(seconds: float) -> dict:
     from rich.console import Console
 
     from teleprev.session.reader import SessionReader
-    from teleprev.session.recording import RecordOptions, Recording
-    from teleprev.session.run import run_script
+    from teleprev.live.session import RecordOptions, LiveSession
+    from teleprev.live.run import run_script
 
     with tempfile.TemporaryDirectory() as tmp:
         out = Path(tmp) / "preview.mcap"
-        rec = Recording(RecordOptions(out=out))
+        rec = LiveSession(RecordOptions(out=out))
         console = Console(file=io.StringIO(), width=120, height=40, force_terminal=True, color_system="truecolor")
         rec.start()
         try:

@@ -70,7 +70,7 @@ def reference_streams(seed: int = 0) -> list[Stream]:
     from teleprev.human.smplx import BODY_JOINTS, HAND_POSE_NAMES
     from teleprev.messages import Event, ImageSample, JointSample, PoseSample, Transform, TransformsSample
     from teleprev.robot.model import load_robot
-    from teleprev.session import topics as T
+    from teleprev import topics as T
 
     rng = np.random.default_rng(seed)
     robot = load_robot("xarm6_leap_hand")
@@ -177,7 +177,7 @@ def run_load(recorder, streams: list[Stream], clock, multiple: float, seconds: f
 
 
 def record_reference(path: Path, streams, seconds: float, queue_size: int, multiple: float = 1.0):
-    from teleprev.session.clock import SessionClock
+    from teleprev.clock import SessionClock
     from teleprev.session.recorder import Recorder
 
     clock = SessionClock()
@@ -189,7 +189,7 @@ def record_reference(path: Path, streams, seconds: float, queue_size: int, multi
 
 def child(path: str) -> None:
     """Recorder at the reference load until killed (for recover_lost_s)."""
-    from teleprev.session.clock import SessionClock
+    from teleprev.clock import SessionClock
     from teleprev.session.recorder import Recorder
 
     streams = reference_streams()
@@ -281,11 +281,11 @@ def sync_error(tmp: Path, seconds: float) -> dict:
 
     from teleprev.rig import default_rig_path
     from teleprev.session.reader import SessionReader
-    from teleprev.session.recording import RecordOptions, Recording
-    from teleprev.session.topics import parse_device_topic
+    from teleprev.live.session import RecordOptions, LiveSession
+    from teleprev.topics import parse_device_topic
 
     path = tmp / "sync.mcap"
-    rec = Recording(RecordOptions(out=path, rig=default_rig_path().parent / "sim_gripper.toml"))
+    rec = LiveSession(RecordOptions(out=path, rig=default_rig_path().parent / "sim_gripper.toml"))
     rec.start()
     rec.loop.control("start", task="pick_place")
     _time.sleep(seconds)

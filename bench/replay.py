@@ -25,12 +25,12 @@ def main() -> None:
     args = p.parse_args()
     seconds = 10.0 if args.quick else 30.0
 
-    from teleprev.replay.evaluate import evaluate
-    from teleprev.session.recording import RecordOptions, Recording
+    from teleprev.evaluation.evaluate import evaluate
+    from teleprev.live.session import RecordOptions, LiveSession
 
     with tempfile.TemporaryDirectory() as tmp:
         path = Path(tmp) / "bench.mcap"
-        rec = Recording(RecordOptions(out=path, rig=args.rig))
+        rec = LiveSession(RecordOptions(out=path, rig=args.rig))
         rec.start()
         try:
             for _ in range(2):

@@ -46,7 +46,7 @@ class PoseSample:
     orientation: np.ndarray
 
     def matrix(self) -> np.ndarray:
-        from teleprev.robot.transforms import quat_to_matrix
+        from teleprev.transforms import quat_to_matrix
 
         t = np.eye(4)
         t[:3, :3] = quat_to_matrix(self.orientation)

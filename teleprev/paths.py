@@ -1,4 +1,4 @@
-"""Where the shipped data folders (urdf/, models/, datasets/) are.
+"""Where the shipped data folders (urdf/, models/, rigs/, datasets/recipes/) are.
 
 In a source checkout (the README's install) they sit beside the package; a wheel carries them inside it.
 """

@@ -12,7 +12,7 @@
 
 Everything is checked when the file is loaded, before any device opens: unknown keys, wrong types,
 unknown plugins and missing devices are ConfigErrors that name the file, the table and the key.
-The default rig (devices/rigs/sim.toml) is all simulated devices.
+The default rig (rigs/sim.toml) is all simulated devices.
 """
 
 from __future__ import annotations
@@ -80,7 +80,7 @@ class Rig:
 
 
 def default_rig_path() -> Path:
-    return data_dir("devices") / "rigs" / "sim.toml"
+    return data_dir("rigs") / "sim.toml"
 
 
 def load_rig(path: str | Path | None = None) -> Rig:
@@ -100,8 +100,8 @@ def load_rig_text(text: str, where: str, path: Path | None = None) -> Rig:
 
 
 def parse_rig(data: dict, path: Path | None, where: str | None = None) -> Rig:
-    from devices.base import KINDS
-    from devices.registry import load_plugin
+    from teleprev.devices.contract import KINDS
+    from teleprev.devices.registry import load_plugin
 
     where = where or str(path)
     unknown = sorted(set(data) - {"rig", "pipeline", "devices"})

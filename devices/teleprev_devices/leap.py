@@ -22,7 +22,7 @@ from typing import ClassVar, Protocol, Sequence
 
 import numpy as np
 
-from devices.polled import JointLimits, PolledActuator
+from teleprev.devices.polled import JointLimits, PolledActuator
 from teleprev.errors import DeviceError
 from teleprev.messages import JointSample
 

@@ -20,10 +20,10 @@ import time
 from dataclasses import dataclass
 from pathlib import Path
 
-from devices.base import Device, StreamSpec
+from teleprev.devices.contract import Device, StreamSpec
 from teleprev.errors import DeviceError
 from teleprev.messages import ImageSample, Sample
-from teleprev.session.topics import device_topic
+from teleprev.topics import device_topic
 
 _DEFAULT_FPS = 30.0
 

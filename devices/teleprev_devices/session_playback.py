@@ -25,10 +25,10 @@ from typing import ClassVar, Iterator
 
 import numpy as np
 
-from devices.base import Actuator, Device, StreamSpec
+from teleprev.devices.contract import Actuator, Device, StreamSpec
 from teleprev.errors import ConfigError, DeviceError, SessionError
 from teleprev.messages import ImageSample, JointSample, Logged, Sample
-from teleprev.session.topics import device_topic, parse_device_topic
+from teleprev.topics import device_topic, parse_device_topic
 
 _PAYLOAD = {"hand": "joints", "body": "joints", "wrist": "pose", "image": "image", "state": "joints"}
 

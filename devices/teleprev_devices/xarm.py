@@ -20,7 +20,7 @@ from typing import Callable, ClassVar, Protocol
 
 import numpy as np
 
-from devices.polled import JointLimits, PolledActuator
+from teleprev.devices.polled import JointLimits, PolledActuator
 from teleprev.errors import DeviceError
 from teleprev.messages import JointSample
 

@@ -27,15 +27,15 @@ def calibrate(
     import numpy as np
     from rich.console import Console
 
-    from devices.base import DeviceContext
-    from devices.runner import DeviceRunner
+    from teleprev.devices.contract import DeviceContext
+    from teleprev.devices.runner import DeviceRunner
     from teleprev.errors import DeviceError
     from teleprev.human.smplx import hand_pose_from_values
     from teleprev.messages import JointSample, PoseSample
-    from teleprev.retarget.calibrate import calibrate as compute
+    from teleprev.retarget.calibration_fit import calibrate as compute
     from teleprev.retarget.calibration import write_calibration
     from teleprev.rig import load_rig
-    from teleprev.session.clock import SessionClock
+    from teleprev.clock import SessionClock
 
     console = Console()
     r = load_rig(rig)

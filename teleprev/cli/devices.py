@@ -18,7 +18,7 @@ def list_plugins() -> None:
     from rich.console import Console
     from rich.table import Table
 
-    from devices.registry import available
+    from teleprev.devices.registry import available
 
     table = Table(title="device plugins", title_justify="left")
     for col in ("plugin", "kind", "module", "status"):
@@ -50,12 +50,12 @@ def check(
     from rich.console import Console
     from rich.table import Table
 
-    from devices.base import DeviceContext
-    from devices.runner import DeviceRunner
+    from teleprev.devices.contract import DeviceContext
+    from teleprev.devices.runner import DeviceRunner
     from teleprev.errors import TeleprevError
     from teleprev.rig import default_rig_path, load_rig
-    from teleprev.session import topics
-    from teleprev.session.clock import SessionClock
+    from teleprev import topics
+    from teleprev.clock import SessionClock
 
     console = Console()
     loaded = load_rig(rig or default_rig_path())

@@ -21,7 +21,7 @@ def export(
     root: Optional[Path] = typer.Option(None, "--root", help="Dataset folder (default: ./datasets/out/<repo-id>).",
                                         show_default=False),
     fps: int = typer.Option(0, "--fps", help="Frames per second (default: the recipe's, else the reference camera's rate)."),
-    recipe: str = typer.Option("default", "--recipe", help="Recipe file, or the name of one in datasets/ (default, with_glove)."),
+    recipe: str = typer.Option("default", "--recipe", help="Recipe file, or the name of one in datasets/recipes/ (default, with_glove)."),
     append: bool = typer.Option(False, "--append", help="Add the sessions to an existing dataset (LeRobot's resume)."),
     include_discarded: bool = typer.Option(False, "--include-discarded", help="Export episodes the operator discarded too."),
     workers: int = typer.Option(1, "--workers", "-j", help="Export sessions in this many processes, then merge them."),

@@ -31,8 +31,8 @@ def record(
     """Record a session: devices, pipeline, preview and execute, episodes, all into one MCAP file."""
     from rich.console import Console
 
-    from teleprev.session.recording import RecordOptions, Recording, default_session_path
-    from teleprev.session.run import run_interactive, run_script, print_summary
+    from teleprev.live.session import RecordOptions, LiveSession, default_session_path
+    from teleprev.live.run import run_interactive, run_script, print_summary
 
     console = Console()
     preview = preview and console.is_terminal  # a redrawn screen in a log file is noise: headless there
@@ -40,7 +40,7 @@ def record(
         out=out or default_session_path(task), rig=rig, models=models, task=task,
         operator=operator, participant=participant, condition=condition, practice=practice,
     )
-    recording = Recording(options)
+    recording = LiveSession(options)
     try:
         recording.start()
         if duration is not None:

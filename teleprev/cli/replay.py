@@ -21,7 +21,7 @@ def replay(
     """Play a session's commands back, on screen and optionally to the simulated or a real robot."""
     from rich.console import Console
 
-    from teleprev.replay.live import play
+    from teleprev.live.playback import play
 
     if to not in ("preview", "sim", "arm"):
         raise typer.BadParameter("--to must be preview, sim or arm")
@@ -34,14 +34,14 @@ def eval_(
     config: Optional[Path] = typer.Option(None, "--config", help="Rig file to evaluate with (default: the rig recorded in each session)."),
     out: Optional[Path] = typer.Option(None, "--out", "-o", help="Write the report as JSON here (for CI and as a later baseline)."),
     baseline: Optional[Path] = typer.Option(None, "--baseline", help="An earlier report: exit 1 if a metric regressed past its tolerance."),
-    tolerances: Optional[Path] = typer.Option(None, "--tolerances", help="Tolerances TOML (default: teleprev/replay/tolerances.toml)."),
+    tolerances: Optional[Path] = typer.Option(None, "--tolerances", help="Tolerances TOML (default: teleprev/evaluation/tolerances.toml)."),
     plots: Optional[Path] = typer.Option(None, "--plots", help="Write a PNG per episode (recorded vs re-run joints) into this folder."),
 ) -> None:
     """Re-run the pipeline on recorded raw streams, measure it, and catch regressions."""
     from rich.console import Console
 
-    from teleprev.replay.evaluate import evaluate
-    from teleprev.replay.report import load_tolerances, print_report, read_report, write_report
+    from teleprev.evaluation.evaluate import evaluate
+    from teleprev.evaluation.report import load_tolerances, print_report, read_report, write_report
 
     console = Console()
     result = evaluate(
@@ -54,7 +54,7 @@ def eval_(
         write_report(result.report, out)
         console.print(f"report written to {out}")
     if plots:
-        from teleprev.replay.plots import plot_episodes
+        from teleprev.evaluation.plots import plot_episodes
 
         written = [p for r in result.reruns for p in plot_episodes(r, plots)]
         console.print(f"{len(written)} plot(s) written to {plots}")

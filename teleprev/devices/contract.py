@@ -22,7 +22,7 @@ from pathlib import Path
 from typing import Any, Callable, ClassVar
 
 from teleprev.messages import JointSample, Sample
-from teleprev.session.clock import SessionClock
+from teleprev.clock import SessionClock
 
 KINDS = ("glove", "suit", "camera", "arm", "hand")
 

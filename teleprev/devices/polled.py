@@ -14,10 +14,10 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from devices.base import Actuator, StreamSpec
+from teleprev.devices.contract import Actuator, StreamSpec
 from teleprev.errors import ConfigError, DeviceError
 from teleprev.messages import JointSample, Sample
-from teleprev.session.topics import device_topic
+from teleprev.topics import device_topic
 
 _TOLERANCE = 1e-9  # rad: round-off of a command computed exactly at a limit
 

@@ -24,11 +24,11 @@ from typing import Callable
 
 import numpy as np
 
-from devices.base import Actuator, Device
+from teleprev.devices.contract import Actuator, Device
 from teleprev.errors import DeviceError
 from teleprev.messages import Event, JointSample, Sample
-from teleprev.session import topics
-from teleprev.session.clock import SessionClock
+from teleprev import topics
+from teleprev.clock import SessionClock
 
 Sink = Callable[[Sample, int], None]
 

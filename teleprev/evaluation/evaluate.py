@@ -5,9 +5,9 @@ from __future__ import annotations
 from dataclasses import dataclass
 from pathlib import Path
 
-from teleprev.replay.metrics import session_metrics
-from teleprev.replay.report import Regression, Tolerances, compare, default_tolerances, make_report
-from teleprev.replay.rerun import Rerun, rerun_session
+from teleprev.evaluation.metrics import session_metrics
+from teleprev.evaluation.report import Regression, Tolerances, compare, default_tolerances, make_report
+from teleprev.evaluation.reproduce import Rerun, rerun_session
 
 
 @dataclass

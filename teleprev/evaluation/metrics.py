@@ -18,8 +18,8 @@ import json
 
 import numpy as np
 
-from teleprev.replay.rerun import Rerun
-from teleprev.session import topics
+from teleprev.evaluation.reproduce import Rerun
+from teleprev import topics
 
 HOLD_FLAGS = {"glove_stale", "glove_invalid", "glove_out_of_range", "suit_stale", "suit_invalid", "suit_out_of_range"}
 

@@ -6,8 +6,8 @@ from pathlib import Path
 
 import numpy as np
 
-from teleprev.replay.rerun import Rerun
-from teleprev.session import topics
+from teleprev.evaluation.reproduce import Rerun
+from teleprev import topics
 
 
 def plot_episodes(r: Rerun, out_dir: str | Path, max_joints: int = 8) -> list[Path]:

@@ -18,11 +18,11 @@ import numpy as np
 from teleprev import numeric_platform
 from teleprev.errors import SessionError
 from teleprev.messages import Event, JointSample
-from teleprev.pipeline.build import build_pipeline, rig_calibration
+from teleprev.live.build import build_pipeline, rig_calibration
 from teleprev.pipeline.driver import InputTopics, PipelineDriver
 from teleprev.retarget.calibration import load_calibration_text
 from teleprev.rig import load_rig, load_rig_text
-from teleprev.session import topics
+from teleprev import topics
 from teleprev.session.reader import Episode, SessionReader
 
 RECORDED_OUTPUTS = (topics.RETARGETED, topics.CORRECTED, topics.ARM_TARGET, topics.COMMAND_ARM, topics.COMMAND_HAND)

@@ -1,6 +1,6 @@
 """Export recorded sessions to LeRobot datasets (v3.0), written with lerobot's own LeRobotDataset API.
 
-    recipe.py     which recorded streams become which features (TOML in datasets/), resolved by role
+    recipe.py     which recorded streams become which features (TOML in datasets/recipes/), resolved by role
     streams.py    one episode's streams read from a session into arrays (the camera frames stay on disk)
     timeline.py   the frame times and which sample of each stream every frame uses (no future for
                   observations), gaps, splits and the alignment error

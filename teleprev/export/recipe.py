@@ -1,4 +1,4 @@
-"""Export recipes (TOML, in datasets/): which recorded streams become which LeRobot features.
+"""Export recipes (TOML, in datasets/recipes/): which recorded streams become which LeRobot features.
 
     [export]
     fps = 0                       # frames per second; 0: the reference camera's rate (30 without camera)
@@ -43,7 +43,7 @@ from teleprev.config import from_table, read_toml
 from teleprev.errors import ConfigError, SessionError
 from teleprev.export.video import VideoSettings
 from teleprev.paths import data_dir
-from teleprev.session import topics as T
+from teleprev import topics as T
 
 JOINTS, POSE, IMAGE = "foxglove.JointStates", "foxglove.PoseInFrame", "foxglove.CompressedImage"
 POSE_NAMES = ("x", "y", "z", "qx", "qy", "qz", "qw")  # a pose as 7 values: position, quaternion x y z w
@@ -119,11 +119,11 @@ class Recipe:
 
 
 def recipes_dir() -> Path:
-    return data_dir("datasets")
+    return data_dir("datasets") / "recipes"
 
 
 def load_recipe(which: str | Path | None = None) -> Recipe:
-    """A recipe file, or the name of one in datasets/ ("default", "with_glove"); None: the default."""
+    """A recipe file, or the name of one in datasets/recipes/ ("default", "with_glove"); None: the default."""
     path = Path(which) if which else recipes_dir() / "default.toml"
     if not path.is_file() and which and path.suffix == "" and len(path.parts) == 1:
         path = recipes_dir() / f"{which}.toml"

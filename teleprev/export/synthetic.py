@@ -18,7 +18,7 @@ import numpy as np
 
 from teleprev.messages import Event, ImageSample, JointSample, Logged, PoseSample
 from teleprev.rig import END_EFFECTOR_JOINTS
-from teleprev.session import topics as T
+from teleprev import topics as T
 
 ARM_JOINTS = tuple(f"joint{i}" for i in range(1, 7))
 GLOVE_JOINTS = tuple(f"{j}.{a}" for j in ("index1", "index2", "index3", "middle1", "middle2", "middle3", "pinky1",

@@ -21,12 +21,12 @@ from typing import Any, Callable
 
 import numpy as np
 
-from devices.base import Actuator, Device
+from teleprev.devices.contract import Actuator, Device
 from teleprev.messages import Event, JointSample, Logged, PoseSample, Sample
 from teleprev.pipeline.driver import PipelineDriver
-from teleprev.session import topics
-from teleprev.session.clock import SessionClock
-from teleprev.session.episodes import EpisodeTracker
+from teleprev import topics
+from teleprev.clock import SessionClock
+from teleprev.live.episodes import EpisodeTracker
 
 _STOP = object()
 

@@ -11,18 +11,18 @@ from rich.console import Console, Group
 from rich.live import Live
 from rich.text import Text
 
-from devices.base import DeviceContext
+from teleprev.devices.contract import DeviceContext
 from teleprev.errors import ConfigError
 from teleprev.messages import JointSample
-from teleprev.pipeline.build import build_pipeline, rig_calibration
+from teleprev.live.build import build_pipeline, rig_calibration
 from teleprev.preview.keys import KeyReader
 from teleprev.preview.robot_view import Layer, RobotView
-from teleprev.replay.player import Player, load_playback, safe_speed, validate
+from teleprev.live.player import Player, load_playback, safe_speed, validate
 from teleprev.rig import load_rig, load_rig_text
 from teleprev.robot.model import load_robot
-from teleprev.session.clock import SessionClock
+from teleprev.clock import SessionClock
 from teleprev.session.reader import SessionReader
-from teleprev.session.run import ROBOT_BOUNDS
+from teleprev.live.run import ROBOT_BOUNDS
 
 
 class StateTap:
@@ -46,8 +46,8 @@ def _recorded_rig(session: Path):
 
 def build_player(session: Path, episode, speed: float, to: str, rig_path=None):
     """The player and what it drives; returns (player, runners, tap, rig, message)."""
-    from devices.registry import load_plugin
-    from devices.runner import DeviceRunner
+    from teleprev.devices.registry import load_plugin
+    from teleprev.devices.runner import DeviceRunner
 
     rig = load_rig(rig_path) if rig_path else _recorded_rig(session)
     pipeline = build_pipeline(rig, calibration=rig_calibration(rig) if rig_path else None)

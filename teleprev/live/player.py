@@ -21,7 +21,7 @@ import numpy as np
 from teleprev.errors import SessionError
 from teleprev.messages import JointSample
 from teleprev.pipeline.guard import JointGuard
-from teleprev.session import topics
+from teleprev import topics
 from teleprev.session.reader import SessionReader
 
 

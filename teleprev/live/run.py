@@ -1,4 +1,4 @@
-"""Driving a Recording: from the keyboard with the terminal preview, or from a script (unattended).
+"""Driving a LiveSession: from the keyboard with the terminal preview, or from a script (unattended).
 
 The preview redraws on the main thread while the session loop runs on its own; the redraw rate is
 measured and kept in `PreviewStats` so the pipeline benchmark can report it.
@@ -16,7 +16,7 @@ from teleprev.preview.dashboard import Dashboard
 from teleprev.preview.keys import KeyReader
 from teleprev.preview.robot_view import RobotView
 from teleprev.robot.model import load_robot
-from teleprev.session.recording import Recording
+from teleprev.live.session import LiveSession
 
 # Fixed view bounds (metres) that hold an xArm's workspace, so the picture does not rescale.
 ROBOT_BOUNDS = {"front": (-0.75, 0.75, -0.1, 1.0), "side": (-0.35, 0.95, -0.1, 1.0), "top": (-0.75, 0.75, -0.35, 0.95)}
@@ -33,7 +33,7 @@ class PreviewStats:
         return self.frames / elapsed if elapsed > 0 else 0.0
 
 
-def make_dashboard(recording: Recording, view: str) -> Dashboard:
+def make_dashboard(recording: LiveSession, view: str) -> Dashboard:
     hand_view = None
     if recording.rig.rig.end_effector == "leap_hand":
         hand_view = RobotView(load_robot("leap_hand_right"), "side")
@@ -43,7 +43,7 @@ def make_dashboard(recording: Recording, view: str) -> Dashboard:
     )
 
 
-def handle_key(recording: Recording, key: str, quit_flag: list) -> None:
+def handle_key(recording: LiveSession, key: str, quit_flag: list) -> None:
     loop = recording.loop
     if key == " ":
         loop.control("mode", mode="preview" if loop.snapshot.mode == "execute" else "execute")
@@ -63,12 +63,12 @@ def handle_key(recording: Recording, key: str, quit_flag: list) -> None:
         quit_flag.append(True)
 
 
-def _frame(dashboard: Dashboard, recording: Recording, console: Console):
+def _frame(dashboard: Dashboard, recording: LiveSession, console: Console):
     size = console.size
     return dashboard.render(recording.loop.snapshot, recording.device_rows(), size.width, size.height, recording.clock.now_ns())
 
 
-def run_interactive(recording: Recording, console: Console, view: str, fps: float, show: bool = True) -> PreviewStats:
+def run_interactive(recording: LiveSession, console: Console, view: str, fps: float, show: bool = True) -> PreviewStats:
     stats = PreviewStats()
     quit_flag: list = []
     dashboard = make_dashboard(recording, view) if show else None
@@ -87,7 +87,7 @@ def run_interactive(recording: Recording, console: Console, view: str, fps: floa
     return stats
 
 
-def run_script(recording: Recording, duration: float, episodes: int, engage_after: float | None,
+def run_script(recording: LiveSession, duration: float, episodes: int, engage_after: float | None,
                console: Console | None = None, view: str = "side", fps: float = 25.0) -> PreviewStats:
     """Unattended: `episodes` episodes filling `duration` seconds, each engaging after `engage_after` s."""
     stats = PreviewStats()
@@ -128,7 +128,7 @@ def run_script(recording: Recording, duration: float, episodes: int, engage_afte
     return stats
 
 
-def print_summary(console: Console, recording: Recording, summary) -> None:
+def print_summary(console: Console, recording: LiveSession, summary) -> None:
     from rich.table import Table
 
     table = Table(title=f"session {recording.options.out}", title_justify="left")

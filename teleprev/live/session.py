@@ -1,6 +1,6 @@
 """A recording in progress: the rig's devices, the pipeline, the session loop and the recorder, wired.
 
-    with Recording(options) as rec:      # opens devices, starts threads
+    with LiveSession(options) as rec:      # opens devices, starts threads
         rec.loop.control("start", task="pour")
         ...
     rec.summary                          # counts, drops, where the file is
@@ -17,18 +17,18 @@ import json
 from dataclasses import dataclass, field
 from pathlib import Path
 
-from devices.base import DeviceContext
+from teleprev.devices.contract import DeviceContext
 from teleprev import __version__, numeric_platform
 from teleprev.errors import ConfigError
-from teleprev.pipeline.build import build_pipeline, rig_calibration
+from teleprev.live.build import build_pipeline, rig_calibration
 from teleprev.pipeline.driver import InputTopics, PipelineDriver
 from teleprev.preview.dashboard import DeviceRow
 from teleprev.rig import Rig, load_rig
 from teleprev.robot.frames import FramePublisher
 from teleprev.robot.model import load_robot
-from teleprev.session import topics
-from teleprev.session.clock import SessionClock
-from teleprev.session.loop import SessionLoop
+from teleprev import topics
+from teleprev.clock import SessionClock
+from teleprev.live.loop import SessionLoop
 
 
 @dataclass
@@ -53,9 +53,9 @@ def _sha256(path: Path) -> str:
     return hashlib.sha256(path.read_bytes()).hexdigest() if path.is_file() else ""
 
 
-class Recording:
+class LiveSession:
     def __init__(self, options: RecordOptions):
-        from devices.runner import ActuatorPort, DeviceRunner
+        from teleprev.devices.runner import ActuatorPort, DeviceRunner
         from teleprev.session.recorder import Recorder
 
         self.options = options
@@ -109,7 +109,7 @@ class Recording:
         meta["study"] = {"survey_sidecar": Path(o.out).with_suffix(".survey.json").name}
         return meta
 
-    def start(self) -> "Recording":
+    def start(self) -> "LiveSession":
         self.recorder.start()
         self.loop.start()
         for runner in self.runners.values():
@@ -130,7 +130,7 @@ class Recording:
         self.summary = self.recorder.close(extra)
         return self.summary
 
-    def __enter__(self) -> "Recording":
+    def __enter__(self) -> "LiveSession":
         return self.start()
 
     def __exit__(self, *exc) -> None:

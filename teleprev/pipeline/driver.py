@@ -14,7 +14,7 @@ import numpy as np
 
 from teleprev.messages import Event, JointSample, Logged, PoseSample
 from teleprev.pipeline.step import Pipeline, PipelineState, StepInputs, StepResult
-from teleprev.session import topics
+from teleprev import topics
 
 
 @dataclass(frozen=True)

@@ -16,7 +16,7 @@ from rich.table import Table
 from rich.text import Text
 
 from teleprev.preview.robot_view import Layer, RobotView
-from teleprev.session.loop import LoopSnapshot
+from teleprev.live.loop import LoopSnapshot
 
 KEYS = "[b]space[/] preview/execute   [b]s[/] start episode   [b]n[/] next episode   [b]d[/] discard   [b]y[/]/[b]f[/] success/failure   [b]r[/] ready   [b]q[/] quit"
 PREVIEW_STYLE = "bold black on yellow"

@@ -6,7 +6,7 @@ import numpy as np
 
 from teleprev.messages import Transform, TransformsSample
 from teleprev.robot.model import RobotModel
-from teleprev.robot.transforms import matrix_to_quat
+from teleprev.transforms import matrix_to_quat
 
 
 class FramePublisher:

@@ -7,7 +7,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from teleprev.robot.model import RobotModel
-from teleprev.robot.transforms import rotation_error
+from teleprev.transforms import rotation_error
 
 
 _EYE6 = np.eye(6)

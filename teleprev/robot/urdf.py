@@ -14,7 +14,7 @@ from pathlib import Path
 import numpy as np
 
 from teleprev.errors import UrdfError
-from teleprev.robot.transforms import make_transform, rpy_to_matrix
+from teleprev.transforms import make_transform, rpy_to_matrix
 
 ACTUATED_TYPES = ("revolute", "continuous", "prismatic")
 JOINT_TYPES = ACTUATED_TYPES + ("fixed",)

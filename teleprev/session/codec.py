@@ -25,7 +25,7 @@ from typing import Callable
 import numpy as np
 
 from teleprev.messages import Event, ImageSample, JointSample, Payload, PoseSample, Transform, TransformsSample
-from teleprev.session.topics import EVENT_SCHEMAS
+from teleprev.topics import EVENT_SCHEMAS
 
 JOINT_STATES = "foxglove.JointStates"
 POSE_IN_FRAME = "foxglove.PoseInFrame"

@@ -18,9 +18,9 @@ import numpy as np
 
 from teleprev.errors import SessionError
 from teleprev.messages import Event, Logged
-from teleprev.session import mcap_records as mr
+from teleprev.session import records as mr
 from teleprev.session.codec import decoder_for
-from teleprev.session.topics import EPISODE
+from teleprev.topics import EPISODE
 
 _END = 1 << 64
 _RELEASE_CHUNKS = 8  # chunks (4 MiB each by default) read between two release_pages calls

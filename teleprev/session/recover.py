@@ -13,7 +13,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 from teleprev.errors import SessionError
-from teleprev.session import mcap_records as mr
+from teleprev.session import records as mr
 
 RECOVER_RECORD = "recover"  # metadata record describing what was recovered
 

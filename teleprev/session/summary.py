@@ -17,7 +17,7 @@ from teleprev.errors import SessionError
 from teleprev.messages import Event
 from teleprev.session.reader import Episode, SessionReader
 from teleprev.session.recorder import RECORDER_RECORD
-from teleprev.session.topics import DEVICE_EVENT
+from teleprev.topics import DEVICE_EVENT
 
 GAP_FACTOR = 3.0  # a gap is an interval longer than this many median periods
 

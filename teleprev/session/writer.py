@@ -17,7 +17,7 @@ from teleprev import __version__
 from teleprev.errors import SessionError
 from teleprev.messages import Event, Logged, Payload
 from teleprev.session.codec import encode, schema_for
-from teleprev.session.topics import FORMAT_VERSION
+from teleprev.topics import FORMAT_VERSION
 
 DEFAULT_CHUNK_SIZE = 4 * 1024 * 1024
 TELEPREV_RECORD = "teleprev"  # metadata record written at open: format and software versions

@@ -12,7 +12,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 from pathlib import Path
 
-from teleprev.session import topics
+from teleprev import topics
 from teleprev.session.reader import SessionReader
 from teleprev.study import survey
 

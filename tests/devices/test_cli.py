@@ -33,7 +33,7 @@ def test_list_shows_every_plugin_with_kind_module_and_missing_extras():
     for name, kind in (("vmc.suit", "suit"), ("vmc.glove", "glove"), ("opencv.camera", "camera"), ("replay.hand", "hand"),
                        ("sim.glove", "glove")):
         assert kind in lines[name] and "ok" in lines[name]
-    assert "devices.vmc:VmcSuit" in lines["vmc.suit"]
+    assert "teleprev_devices.vmc:VmcSuit" in lines["vmc.suit"]
     import importlib.util
 
     for name, extra, module in (("xarm.arm", "xarm", "xarm"), ("leap.hand", "leap", "dynamixel_sdk")):

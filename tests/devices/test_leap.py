@@ -11,13 +11,13 @@ import types
 import numpy as np
 import pytest
 
-from devices.base import DeviceContext
-from devices.leap import (
+from teleprev.devices.contract import DeviceContext
+from teleprev_devices.leap import (
     GOAL_POSITION, LeapHand, LeapSettings, SdkDynamixelBus, angles_from_ticks, signed32, ticks_from_angles,
 )
 from teleprev.errors import ConfigError, DeviceError
 from teleprev.messages import JointSample
-from teleprev.session.clock import SessionClock
+from teleprev.clock import SessionClock
 
 NAMES = tuple(str(i) for i in range(16))
 

@@ -8,12 +8,12 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from devices.base import Actuator, Device, DeviceContext, StreamSpec
-from devices.runner import ActuatorPort, DeviceRunner, default_gap_s
+from teleprev.devices.contract import Actuator, Device, DeviceContext, StreamSpec
+from teleprev.devices.runner import ActuatorPort, DeviceRunner, default_gap_s
 from teleprev.errors import DeviceError
 from teleprev.messages import Event, JointSample, Sample
-from teleprev.session import topics
-from teleprev.session.clock import SessionClock
+from teleprev import topics
+from teleprev.clock import SessionClock
 
 
 @dataclass
@@ -244,7 +244,7 @@ def test_events_carry_the_device_event_schema():
 
 
 def test_a_device_dying_mid_session_leaves_a_gap_event_in_the_file_and_the_others_complete(tmp_path):
-    from teleprev.session.loop import SessionLoop
+    from teleprev.live.loop import SessionLoop
     from teleprev.session.reader import SessionReader
     from teleprev.session.recorder import Recorder
 

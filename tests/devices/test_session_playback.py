@@ -7,12 +7,12 @@ import time
 import numpy as np
 import pytest
 
-from devices.base import DeviceContext
-from devices.replay import ReplayArm, ReplayGlove, ReplaySettings, ReplaySuit
+from teleprev.devices.contract import DeviceContext
+from teleprev_devices.session_playback import ReplayArm, ReplayGlove, ReplaySettings, ReplaySuit
 from teleprev.errors import ConfigError
 from teleprev.human.smplx import HAND_POSE_NAMES
 from teleprev.messages import JointSample, Logged, PoseSample
-from teleprev.session.clock import SessionClock
+from teleprev.clock import SessionClock
 
 T0 = 1_700_000_000_000_000_000
 PERIOD = 10_000_000  # 100 Hz

@@ -5,14 +5,14 @@ import time
 import numpy as np
 import pytest
 
-from devices.base import DeviceContext
-from devices.sim.arm import ArmSettings, SimArm
-from devices.sim.follow import JointFollower
-from devices.sim.hand import HandSettings, SimHand
-from devices.sim.world import shared_world
+from teleprev.devices.contract import DeviceContext
+from teleprev_devices.sim.arm import ArmSettings, SimArm
+from teleprev_devices.sim.follow import JointFollower
+from teleprev_devices.sim.hand import HandSettings, SimHand
+from teleprev_devices.sim.world import shared_world
 from teleprev.errors import ConfigError, DeviceError
 from teleprev.messages import JointSample
-from teleprev.session.clock import SessionClock
+from teleprev.clock import SessionClock
 
 LEAP = tuple(str(i) for i in range(16))
 

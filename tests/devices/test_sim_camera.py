@@ -4,12 +4,12 @@ import cv2
 import numpy as np
 import pytest
 
-from devices.base import DeviceContext
-from devices.sim.camera import CameraSettings, SimCamera
-from devices.sim.world import shared_world
+from teleprev.devices.contract import DeviceContext
+from teleprev_devices.sim.camera import CameraSettings, SimCamera
+from teleprev_devices.sim.world import shared_world
 from teleprev.robot.geometry import BOX_EDGES, BOX_FACES, RobotShapes, robot_geometry
 from teleprev.robot.model import load_robot
-from teleprev.session.clock import SessionClock
+from teleprev.clock import SessionClock
 
 ARM = tuple(f"joint{i}" for i in range(1, 7))
 HOME = np.array([0.0, -0.27, -0.11, 0.0, -0.85, -1.571])
@@ -123,9 +123,9 @@ def test_geometry_is_the_urdf_primitives_at_the_configuration():
 
 
 def test_an_object_the_hand_closes_on_moves_with_it_and_drops_when_released():
-    from devices.sim.world import GRASP_POINT, SimWorld
+    from teleprev_devices.sim.world import GRASP_POINT, SimWorld
     from teleprev.robot.ik import ArmIK
-    from teleprev.robot.transforms import make_transform
+    from teleprev.transforms import make_transform
 
     world = SimWorld("xarm6_leap_hand", "leap_hand")
     world.set_home(dict(zip(ARM, HOME)))

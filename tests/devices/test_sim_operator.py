@@ -3,8 +3,8 @@
 import numpy as np
 import pytest
 
-from devices.sim.operator import SimOperator
-from devices.sim.tasks import TASKS
+from teleprev_devices.sim.operator import SimOperator
+from teleprev_devices.sim.tasks import TASKS
 from teleprev.human.smplx import angles_from_hand_pose, hand_pose_from_angles
 from teleprev.retarget.hand import LeapRetargeter
 

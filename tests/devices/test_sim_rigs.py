@@ -2,10 +2,10 @@
 
 import pytest
 
-from devices.base import DeviceContext
+from teleprev.devices.contract import DeviceContext
 from teleprev.errors import ConfigError
 from teleprev.rig import default_rig_path, load_rig
-from teleprev.session.clock import SessionClock
+from teleprev.clock import SessionClock
 
 
 @pytest.mark.parametrize(

@@ -11,14 +11,14 @@ from pythonosc.osc_bundle_builder import IMMEDIATELY, OscBundleBuilder
 from pythonosc.osc_message_builder import OscMessageBuilder
 from pythonosc.udp_client import SimpleUDPClient
 
-from devices.base import DeviceContext
-from devices.runner import DeviceRunner
-from devices.vmc import VmcGlove, VmcSuit
-from devices.vmc.plugins import BODY_POSE_NAMES, VmcSettings, VmcSuitSettings
+from teleprev.devices.contract import DeviceContext
+from teleprev.devices.runner import DeviceRunner
+from teleprev_devices.vmc import VmcGlove, VmcSuit
+from teleprev_devices.vmc.plugins import BODY_POSE_NAMES, VmcSettings, VmcSuitSettings
 from teleprev.human.smplx import JOINT_INDEX, angles_from_hand_pose, hand_pose_from_values
-from teleprev.robot.transforms import axis_angle_to_matrix, matrix_to_quat, quat_from_axis_angle, quat_to_matrix
-from teleprev.session import topics
-from teleprev.session.clock import SessionClock
+from teleprev.transforms import axis_angle_to_matrix, matrix_to_quat, quat_from_axis_angle, quat_to_matrix
+from teleprev import topics
+from teleprev.clock import SessionClock
 
 
 def free_port() -> int:

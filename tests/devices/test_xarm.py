@@ -8,12 +8,12 @@ import time
 import numpy as np
 import pytest
 
-from devices.base import DeviceContext
-from devices.runner import DeviceRunner
-from devices.xarm import SdkXArmLink, XArm, XArmSettings
+from teleprev.devices.contract import DeviceContext
+from teleprev.devices.runner import DeviceRunner
+from teleprev_devices.xarm import SdkXArmLink, XArm, XArmSettings
 from teleprev.errors import ConfigError, DeviceError
 from teleprev.messages import JointSample
-from teleprev.session.clock import SessionClock
+from teleprev.clock import SessionClock
 
 HOME = [0.0, -0.27, -0.11, 0.0, -0.85, -1.571]
 NAMES = tuple(f"joint{i}" for i in range(1, 7))

@@ -7,9 +7,9 @@ import sys
 import numpy as np
 import pytest
 
-from sessions import record_sim
-from teleprev.replay.evaluate import evaluate
-from teleprev.replay.report import Tolerance, Tolerances, compare
+from tests.helpers.sessions import record_sim
+from teleprev.evaluation.evaluate import evaluate
+from teleprev.evaluation.report import Tolerance, Tolerances, compare
 
 
 @pytest.fixture(scope="module")
@@ -73,7 +73,7 @@ def test_compare_names_each_metric_and_how_far_it_moved():
 
 
 def test_plots_are_written_per_episode(gripper_session, tmp_path):
-    from teleprev.replay.plots import plot_episodes
+    from teleprev.evaluation.plots import plot_episodes
 
     result = evaluate([gripper_session])
     paths = plot_episodes(result.reruns[0], tmp_path)

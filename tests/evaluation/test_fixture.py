@@ -9,10 +9,10 @@ from pathlib import Path
 import numpy as np
 
 from teleprev.messages import ImageSample, JointSample, TransformsSample
-from teleprev.replay.evaluate import evaluate
+from teleprev.evaluation.evaluate import evaluate
 from teleprev.session.reader import SessionReader
 
-FIXTURE = Path(__file__).parent / "fixtures" / "sim_v1.mcap"
+FIXTURE = Path(__file__).parents[1] / "fixtures" / "sim_v1.mcap"
 
 
 def test_every_stream_of_the_old_session_decodes():

@@ -7,7 +7,7 @@ import numpy as np
 from teleprev.human.smplx import HAND_POSE_NAMES, hand_pose_from_angles
 from teleprev.messages import JointSample, PoseSample
 from teleprev.pipeline.step import StepInputs
-from teleprev.robot.transforms import axis_angle_to_matrix, matrix_to_quat
+from teleprev.transforms import axis_angle_to_matrix, matrix_to_quat
 
 RATE_HZ = 120.0
 ARM_HOME = np.array([0.0, -0.5, -0.6, 0.0, 1.1, 0.0])

@@ -1,4 +1,4 @@
-"""Recording real sim sessions for tests (the whole path: sim devices, loop, pipeline, recorder)."""
+"""LiveSession real sim sessions for tests (the whole path: sim devices, loop, pipeline, recorder)."""
 
 from __future__ import annotations
 
@@ -6,15 +6,15 @@ import time
 from pathlib import Path
 
 from teleprev.rig import default_rig_path
-from teleprev.session.recording import RecordOptions, Recording
+from teleprev.live.session import RecordOptions, LiveSession
 
 RIGS = default_rig_path().parent
 
 
 def record_sim(out: Path, rig: str = "sim.toml", seconds: float = 3.0, episodes: int = 1, engage_after: float | None = 1.0,
-               task: str = "pick_place", **options) -> Recording:
+               task: str = "pick_place", **options) -> LiveSession:
     """Record `episodes` episodes of `seconds` each; engage `engage_after` s into each (None: preview only)."""
-    rec = Recording(RecordOptions(out=out, rig=RIGS / rig, task=task, **options))
+    rec = LiveSession(RecordOptions(out=out, rig=RIGS / rig, task=task, **options))
     rec.start()
     try:
         for _ in range(episodes):

@@ -6,9 +6,9 @@ import time
 import numpy as np
 import pytest
 
-from sessions import record_sim
-from teleprev.replay.live import build_player
-from teleprev.replay.player import load_playback, safe_speed
+from tests.helpers.sessions import record_sim
+from teleprev.live.playback import build_player
+from teleprev.live.player import load_playback, safe_speed
 
 
 @pytest.fixture(scope="module")

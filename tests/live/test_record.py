@@ -8,10 +8,10 @@ import numpy as np
 import pytest
 from rich.console import Console
 
-from sessions import record_sim
+from tests.helpers.sessions import record_sim
 from teleprev.robot.collision import SelfCollisionChecker
 from teleprev.robot.model import load_robot
-from teleprev.session import topics
+from teleprev import topics
 from teleprev.session.reader import SessionReader
 
 
@@ -27,10 +27,10 @@ class CountingPort:
 
 
 def test_a_whole_session_in_preview_sends_no_motion_command(tmp_path):
-    from teleprev.session.recording import RecordOptions, Recording
+    from teleprev.live.session import RecordOptions, LiveSession
     import time
 
-    rec = Recording(RecordOptions(out=tmp_path / "p.mcap"))
+    rec = LiveSession(RecordOptions(out=tmp_path / "p.mcap"))
     doubles = {k: CountingPort(p) for k, p in rec.loop.actuators.items()}
     rec.loop.actuators = doubles
     rec.start()
@@ -87,11 +87,11 @@ def test_unattended_record_cli_writes_every_stream(tmp_path):
 
 
 def test_the_terminal_preview_shows_the_mode_and_the_robot(executed):
-    from teleprev.session.recording import RecordOptions, Recording
-    from teleprev.session.run import make_dashboard
+    from teleprev.live.session import RecordOptions, LiveSession
+    from teleprev.live.run import make_dashboard
     import time
 
-    rec = Recording(RecordOptions(out=executed.parent / "screen.mcap"))
+    rec = LiveSession(RecordOptions(out=executed.parent / "screen.mcap"))
     rec.start()
     try:
         rec.loop.control("start", task="hang")

@@ -5,8 +5,8 @@ import dataclasses
 import numpy as np
 import pytest
 
-from pipeline_inputs import inputs
-from teleprev.pipeline.build import build_pipeline
+from tests.helpers.pipeline_inputs import inputs
+from teleprev.live.build import build_pipeline
 from teleprev.pipeline.config import PipelineConfig
 from teleprev.pipeline.step import PipelineState
 from teleprev.rig import Rig, RigSection

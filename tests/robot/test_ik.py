@@ -3,7 +3,7 @@
 import numpy as np
 
 from teleprev.robot.ik import ArmIK
-from teleprev.robot.transforms import rotation_error
+from teleprev.transforms import rotation_error
 
 
 def test_reaches_random_reachable_targets_within_limits(xarm6, rng):

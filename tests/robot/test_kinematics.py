@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from teleprev.robot.model import load_robot
-from teleprev.robot.transforms import make_transform, rpy_to_matrix
+from teleprev.transforms import make_transform, rpy_to_matrix
 
 
 @pytest.mark.parametrize("name", ["leap_hand_right", "xarm6", "xarm7", "xarm6_leap_hand"])

@@ -15,7 +15,7 @@ from typer.testing import CliRunner
 from teleprev.cli.app import app
 from teleprev.errors import SessionError
 from teleprev.messages import Event, JointSample, Logged
-from teleprev.session import topics as T
+from teleprev import topics as T
 from teleprev.session.reader import Episode, SessionReader
 from teleprev.session.recorder import Recorder
 from teleprev.session.summary import summarize

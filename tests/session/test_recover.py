@@ -25,7 +25,7 @@ CHILD = textwrap.dedent("""
     import sys, time
     import numpy as np
     from teleprev.messages import ImageSample, JointSample, Logged
-    from teleprev.session.clock import SessionClock
+    from teleprev.clock import SessionClock
     from teleprev.session.recorder import Recorder
 
     clock = SessionClock()

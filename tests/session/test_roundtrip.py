@@ -11,7 +11,7 @@ import pytest
 from teleprev import __version__
 from teleprev.errors import SessionError
 from teleprev.messages import Event, ImageSample, JointSample, Logged, PoseSample, Transform, TransformsSample
-from teleprev.session import topics as T
+from teleprev import topics as T
 from teleprev.session.codec import JointStatesDecoder, encode
 from teleprev.session.reader import SessionReader
 from teleprev.session.writer import McapSessionWriter

@@ -9,12 +9,12 @@ import sys
 import time
 
 import pytest
-from sessions import RIGS
-from test_study_stats import scripted
+from tests.helpers.sessions import RIGS
+from tests.helpers.study_sessions import scripted
 
 from teleprev.errors import ConfigError, SessionError
 from teleprev.messages import Event, Logged
-from teleprev.session.recording import RecordOptions, Recording
+from teleprev.live.session import RecordOptions, LiveSession
 from teleprev.session.writer import McapSessionWriter
 from teleprev.study import survey
 from teleprev.study.facts import session_facts
@@ -142,12 +142,12 @@ def test_sessions_without_the_study_record_use_the_stem(tmp_path):
 def test_a_study_of_real_sim_recordings(tmp_path):
     """The whole path: record --practice with the ready key, record episodes marked y/f, survey, study."""
     common = dict(rig=RIGS / "sim.toml", task="pick_place", participant="p9", condition="w/ preview")
-    practice = Recording(RecordOptions(out=tmp_path / "practice.mcap", practice=True, **common)).start()
+    practice = LiveSession(RecordOptions(out=tmp_path / "practice.mcap", practice=True, **common)).start()
     time.sleep(0.6)
     practice.loop.control("operator", event="ready")
     practice.stop()
 
-    rec = Recording(RecordOptions(out=tmp_path / "trial.mcap", **common)).start()
+    rec = LiveSession(RecordOptions(out=tmp_path / "trial.mcap", **common)).start()
     for success in (True, False):
         rec.loop.control("start", task="pick_place")
         time.sleep(0.4)

@@ -1,6 +1,6 @@
 """Simulated devices: an operator performing the paper's five tasks (glove and suit streams), a camera
 that renders the scene with the robot in it, and a kinematic arm and hand. The default rig
-(devices/rigs/sim.toml) is made of them, so teleprev runs on any machine.
+(rigs/sim.toml) is made of them, so teleprev runs on any machine.
 
     operator.py  the person (tasks.py: task scripts, grasps.py: hand shapes)
     world.py     robot state and task objects shared by the devices of a rig

@@ -7,10 +7,10 @@ from collections import deque
 
 import numpy as np
 
-from devices.base import Actuator, StreamSpec
-from devices.sim.device import SimDevice
-from devices.sim.follow import JointFollower
-from devices.sim.world import shared_world
+from teleprev.devices.contract import Actuator, StreamSpec
+from teleprev_devices.sim.device import SimDevice
+from teleprev_devices.sim.follow import JointFollower
+from teleprev_devices.sim.world import shared_world
 from teleprev.errors import DeviceError
 from teleprev.messages import JointSample
 

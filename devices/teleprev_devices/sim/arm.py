@@ -8,10 +8,10 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from devices.sim.actuator import SimActuator
-from devices.sim.device import TimingSettings
-from devices.sim.world import DEFAULT_HOME
-from teleprev.session.topics import device_topic
+from teleprev_devices.sim.actuator import SimActuator
+from teleprev_devices.sim.device import TimingSettings
+from teleprev_devices.sim.world import DEFAULT_HOME
+from teleprev.topics import device_topic
 
 _ARM_JOINT = re.compile(r"joint\d+$")
 

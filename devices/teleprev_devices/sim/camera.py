@@ -7,13 +7,13 @@ from typing import Literal
 
 import cv2
 
-from devices.base import StreamSpec
-from devices.sim.device import SimDevice, TimingSettings
-from devices.sim.render import VIEWS, SceneRenderer
-from devices.sim.world import shared_world
+from teleprev.devices.contract import StreamSpec
+from teleprev_devices.sim.device import SimDevice, TimingSettings
+from teleprev_devices.sim.render import VIEWS, SceneRenderer
+from teleprev_devices.sim.world import shared_world
 from teleprev.errors import DeviceError
 from teleprev.messages import ImageSample
-from teleprev.session.topics import device_topic
+from teleprev.topics import device_topic
 
 
 @dataclass

@@ -19,7 +19,7 @@ from pathlib import Path
 import numpy as np
 
 from teleprev.errors import ConfigError
-from teleprev.session.clock import SessionClock
+from teleprev.clock import SessionClock
 
 
 class DeviceClock:
@@ -134,6 +134,6 @@ class TruthLog:
 
 def shared_truth(shared: dict) -> TruthLog:
     """The rig's TruthLog, created on first use."""
-    from devices.sim.shared import get_or_create
+    from teleprev_devices.sim.shared import get_or_create
 
     return get_or_create(shared, "sim.truth", TruthLog)

@@ -17,11 +17,11 @@ from typing import Any, ClassVar
 
 import numpy as np
 
-from devices.base import Device
-from devices.sim.clock import DeviceClock, Transport, TruthLog, TruthRecord, shared_truth
+from teleprev.devices.contract import Device
+from teleprev_devices.sim.clock import DeviceClock, Transport, TruthLog, TruthRecord, shared_truth
 from teleprev.errors import ConfigError, DeviceError
 from teleprev.messages import Sample
-from teleprev.session.clock import ClockSync
+from teleprev.clock import ClockSync
 
 _HANDSHAKE = 4  # hello packets exchanged at connect, so ClockSync has an offset before the first sample
 _MAX_BACKLOG_NS = 500_000_000  # acquisitions older than this when read() comes round are dropped

@@ -8,10 +8,10 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from devices.sim.actuator import SimActuator
-from devices.sim.device import TimingSettings
+from teleprev_devices.sim.actuator import SimActuator
+from teleprev_devices.sim.device import TimingSettings
 from teleprev.rig import END_EFFECTOR_JOINTS
-from teleprev.session.topics import device_topic
+from teleprev.topics import device_topic
 
 
 @dataclass

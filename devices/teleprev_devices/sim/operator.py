@@ -42,10 +42,10 @@ from typing import Literal
 
 import numpy as np
 
-from devices.sim import grasps
-from devices.sim.tasks import SCRIPTS, TASKS, SceneObject, Script
+from teleprev_devices.sim import grasps
+from teleprev_devices.sim.tasks import SCRIPTS, TASKS, SceneObject, Script
 from teleprev.human.smplx import hand_pose_from_angles
-from teleprev.robot.transforms import matrix_to_quat, rpy_to_matrix
+from teleprev.transforms import matrix_to_quat, rpy_to_matrix
 
 REST_WRIST = np.array([0.30, -0.15, 1.00])
 # Palm left (+y), thumb up (+z), fingers forward (+x), as columns of the SMPL-X hand frame's axes
@@ -338,7 +338,7 @@ def task_mode(task_setting: str) -> tuple[str, str]:
 def shared_operator(context, device: str, seed: int, task_setting: str) -> SimOperator:
     """The rig's one operator, so that glove and suit stream the same person. Created by the first sim
     device that asks; a second device asking for another seed or task is a configuration error."""
-    from devices.sim.shared import get_or_create
+    from teleprev_devices.sim.shared import get_or_create
     from teleprev.errors import ConfigError
 
     task, mode = task_mode(task_setting)

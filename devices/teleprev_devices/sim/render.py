@@ -13,11 +13,11 @@ from dataclasses import dataclass
 import cv2
 import numpy as np
 
-from devices.sim.tasks import SceneObject
-from devices.sim.world import TABLE, PlacedObject
+from teleprev_devices.sim.tasks import SceneObject
+from teleprev_devices.sim.world import TABLE, PlacedObject
 from teleprev.robot.geometry import BOX_CORNER_SIGNS, BOX_FACE_NORMALS, BOX_FACES, RobotShapes
 from teleprev.robot.model import RobotModel
-from teleprev.robot.transforms import make_transform, rpy_to_matrix
+from teleprev.transforms import make_transform, rpy_to_matrix
 
 _SHIFT = 4  # sub-pixel bits for cv2 polygon coordinates
 _SCALE = 1 << _SHIFT

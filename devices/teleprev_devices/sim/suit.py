@@ -6,12 +6,12 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from devices.base import StreamSpec
-from devices.sim.device import NoiseBlock, SimDevice, TimingSettings
-from devices.sim.operator import shared_operator, task_mode
+from teleprev.devices.contract import StreamSpec
+from teleprev_devices.sim.device import NoiseBlock, SimDevice, TimingSettings
+from teleprev_devices.sim.operator import shared_operator, task_mode
 from teleprev.messages import PoseSample
-from teleprev.robot.transforms import matrix_to_quat, rpy_to_matrix
-from teleprev.session.topics import device_topic
+from teleprev.transforms import matrix_to_quat, rpy_to_matrix
+from teleprev.topics import device_topic
 
 
 @dataclass

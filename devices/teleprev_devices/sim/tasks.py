@@ -14,7 +14,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from devices.sim import grasps
+from teleprev_devices.sim import grasps
 
 TABLE_Z = -0.30
 TASKS = ("pick_place", "hang", "pour", "box_rotation", "cup_stack")

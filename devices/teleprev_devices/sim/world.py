@@ -16,10 +16,10 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from devices.sim.shared import get_or_create
-from devices.sim.tasks import TABLE_Z, SCRIPTS, SceneObject
+from teleprev_devices.sim.shared import get_or_create
+from teleprev_devices.sim.tasks import TABLE_Z, SCRIPTS, SceneObject
 from teleprev.robot.model import RobotModel, load_robot
-from teleprev.robot.transforms import make_transform, rpy_to_matrix
+from teleprev.transforms import make_transform, rpy_to_matrix
 
 # SimArm's default home: the palm (TCP) forward at about (0.40, 0, 0.30) m, fingers 20 degrees down.
 DEFAULT_HOME = (0.0, -0.27, -0.11, 0.0, -0.85, -1.571)

@@ -1,5 +1,5 @@
 """VMC protocol (OSC over UDP) receiver plugins: vmc.suit and vmc.glove."""
 
-from devices.vmc.plugins import VmcGlove, VmcSuit
+from teleprev_devices.vmc.plugins import VmcGlove, VmcSuit
 
 __all__ = ["VmcGlove", "VmcSuit"]

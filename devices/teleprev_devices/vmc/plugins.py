@@ -14,14 +14,14 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from devices.base import Device, StreamSpec
-from devices.vmc import unity
-from devices.vmc.receiver import Frame, VmcReceiver, acquire, release
+from teleprev.devices.contract import Device, StreamSpec
+from teleprev_devices.vmc import unity
+from teleprev_devices.vmc.receiver import Frame, VmcReceiver, acquire, release
 from teleprev.errors import DeviceError
 from teleprev.human.smplx import BODY_JOINTS, HAND_POSE_NAMES
 from teleprev.messages import JointSample, PoseSample, Sample
-from teleprev.robot.transforms import quat_multiply
-from teleprev.session.topics import device_topic
+from teleprev.transforms import quat_multiply
+from teleprev.topics import device_topic
 
 BODY_POSE_NAMES: tuple[str, ...] = tuple(f"{j}.{c}" for j in BODY_JOINTS for c in "xyz")
 _IDENTITY = np.array([0.0, 0.0, 0.0, 1.0])

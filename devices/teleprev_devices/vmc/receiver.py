@@ -19,9 +19,9 @@ from dataclasses import dataclass
 import numpy as np
 from pythonosc.osc_packet import OscPacket
 
-from devices.vmc.unity import KNOWN_BONES
+from teleprev_devices.vmc.unity import KNOWN_BONES
 from teleprev.errors import DeviceError
-from teleprev.session.clock import ClockSync, SessionClock
+from teleprev.clock import ClockSync, SessionClock
 
 _MAX_DATAGRAM = 65535
 _QUEUE = 256  # frames kept per subscriber that is not reading fast enough

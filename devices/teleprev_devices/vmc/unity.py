@@ -29,7 +29,7 @@ from __future__ import annotations
 import numpy as np
 
 from teleprev.human.smplx import BODY_JOINTS, HAND_JOINTS
-from teleprev.robot.transforms import matrix_to_quat, quat_to_axis_angle, quat_to_matrix
+from teleprev.transforms import matrix_to_quat, quat_to_axis_angle, quat_to_matrix
 
 # UnityEngine.HumanBodyBones, in enum order.
 HUMAN_BODY_BONES: tuple[str, ...] = (
