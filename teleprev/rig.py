@@ -19,21 +19,22 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, Literal
+from typing import Any
 
+from teleprev.clock import SessionClock
 from teleprev.config import from_table, read_toml
+from teleprev.devices.contract import KINDS, DeviceContext
+from teleprev.devices.registry import load_plugin
 from teleprev.errors import ConfigError
 from teleprev.paths import data_dir
 from teleprev.pipeline.config import PipelineConfig
-
-END_EFFECTOR_JOINTS = {"leap_hand": tuple(str(i) for i in range(16)), "parallel_gripper": ("gripper",), "vacuum": ("vacuum",)}
-
+from teleprev.robot.effectors import EffectorName, EndEffector, end_effector
 
 @dataclass(frozen=True)
 class RigSection:
     name: str = "sim"
     robot: str = "xarm6_leap_hand"  # URDF (name in urdf/ or path) of arm + end effector
-    end_effector: Literal["leap_hand", "parallel_gripper", "vacuum"] = "leap_hand"
+    end_effector: EffectorName = "leap_hand"  # a row of teleprev/robot/effectors.py
     calibration: str = ""  # calibration TOML (teleprev calibrate writes one); empty: defaults
     models: str = ""  # folder with CPN/CCN weights; empty: the shipped models/
     operator: str = ""
@@ -73,6 +74,14 @@ class Rig:
             where = str(self.path) if self.path else "rig"
             raise ConfigError(f"the rig has no {' and no '.join(missing)} device (add a [devices.<name>] table)", where)
 
+    @property
+    def effector(self) -> EndEffector:
+        return end_effector(self.rig.end_effector)
+
+    def device_context(self, clock: SessionClock) -> DeviceContext:
+        """What every device of this rig is opened with: the clock, the rig's folder, robot and end effector."""
+        return DeviceContext(clock, self.dir, {}, self.rig.robot, self.rig.end_effector)
+
     def resolve(self, relative: str) -> Path:
         """A path from the rig file, relative to the rig file's folder."""
         p = Path(relative)
@@ -100,9 +109,6 @@ def load_rig_text(text: str, where: str, path: Path | None = None) -> Rig:
 
 
 def parse_rig(data: dict, path: Path | None, where: str | None = None) -> Rig:
-    from teleprev.devices.contract import KINDS
-    from teleprev.devices.registry import load_plugin
-
     where = where or str(path)
     unknown = sorted(set(data) - {"rig", "pipeline", "devices"})
     if unknown:

@@ -27,7 +27,6 @@ def calibrate(
     import numpy as np
     from rich.console import Console
 
-    from teleprev.devices.contract import DeviceContext
     from teleprev.devices.runner import DeviceRunner
     from teleprev.errors import DeviceError
     from teleprev.human.smplx import hand_pose_from_values
@@ -41,7 +40,7 @@ def calibrate(
     r = load_rig(rig)
     r.require("glove", "suit")
     clock = SessionClock()
-    context = DeviceContext(clock, r.dir, {}, r.rig.robot, r.rig.end_effector)
+    context = r.device_context(clock)
     glove, suit = r.of_kind("glove")[0], r.of_kind("suit")[0]
     devices = [e.cls(e.name, e.settings, context) for e in (glove, suit)]
     samples: dict[str, list] = {"hand": [], "wrist": []}

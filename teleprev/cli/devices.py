@@ -50,7 +50,6 @@ def check(
     from rich.console import Console
     from rich.table import Table
 
-    from teleprev.devices.contract import DeviceContext
     from teleprev.devices.runner import DeviceRunner
     from teleprev.errors import TeleprevError
     from teleprev.rig import default_rig_path, load_rig
@@ -60,7 +59,7 @@ def check(
     console = Console()
     loaded = load_rig(rig or default_rig_path())
     clock = SessionClock()
-    context = DeviceContext(clock, loaded.dir, {}, loaded.rig.robot, loaded.rig.end_effector)
+    context = loaded.device_context(clock)
     events: list[dict] = []
 
     def sink(sample, receive_ns: int) -> None:

@@ -22,6 +22,7 @@ from pathlib import Path
 from typing import Any, Callable, ClassVar
 
 from teleprev.messages import JointSample, Sample
+from teleprev.robot.effectors import EndEffector, end_effector
 from teleprev.clock import SessionClock
 
 KINDS = ("glove", "suit", "camera", "arm", "hand")
@@ -47,6 +48,11 @@ class DeviceContext:
     end_effector: str = "leap_hand"
     # Called with the task label whenever an episode starts (a simulated operator switches task on it).
     task_listeners: list[Callable[[str], None]] = field(default_factory=list)
+
+    @property
+    def effector(self) -> EndEffector:
+        """The end effector's row of the one table (joints, TCP link, grasp point)."""
+        return end_effector(self.end_effector)
 
 
 @dataclass

@@ -17,7 +17,7 @@ from pathlib import Path
 import numpy as np
 
 from teleprev.messages import Event, ImageSample, JointSample, Logged, PoseSample
-from teleprev.rig import END_EFFECTOR_JOINTS
+from teleprev.robot.effectors import end_effector
 from teleprev import topics as T
 
 ARM_JOINTS = tuple(f"joint{i}" for i in range(1, 7))
@@ -184,8 +184,8 @@ def write_session(path: str | Path, spec: SyntheticSession) -> Path:
 
     rng = np.random.default_rng(spec.seed)
     ee = spec.end_effector
-    ee_names = END_EFFECTOR_JOINTS[ee]
-    robot = {"leap_hand": "xarm6_leap_hand", "parallel_gripper": "xarm6_gripper", "vacuum": "xarm6_vacuum"}[ee]
+    ee_names = end_effector(ee).joints
+    robot = end_effector(ee).robot
     inputs = {"hand": T.device_topic("glove", "glove", "hand"), "wrist": T.device_topic("suit", "suit", "wrist"),
               "arm": T.device_topic("arm", "arm", "state"), "effector": T.device_topic("hand", "hand", "state")}
     metadata = {

@@ -15,8 +15,6 @@ from teleprev.rig import Rig
 from teleprev.robot.ik import ArmIK
 from teleprev.robot.model import load_robot
 
-TCP_LINKS = {"leap_hand": "palm_lower", "parallel_gripper": "gripper_tcp", "vacuum": "vacuum_tcp"}
-HAND_URDF = "leap_hand_right"
 
 
 def rig_calibration(rig: Rig) -> Calibration:
@@ -35,7 +33,7 @@ def build_pipeline(rig: Rig, models: str | Path | None = None, calibration: Cali
     robot = load_robot(rig.rig.robot)
     # Tracking: a bounded number of iterations and no cold-start retry, so an unreachable target costs a
     # bounded step; the best effort within the limits is flagged and the next step continues from it.
-    ik = ArmIK(robot, cfg.tcp_link or TCP_LINKS[rig.rig.end_effector], position_tolerance=cfg.ik_position_tolerance,
+    ik = ArmIK(robot, cfg.tcp_link or rig.effector.tcp_link, position_tolerance=cfg.ik_position_tolerance,
                rotation_tolerance=cfg.ik_rotation_tolerance, max_iterations=cfg.ik_iterations, retry=False)
     arm_speed = np.minimum(ik.chain.velocity_limit, cfg.arm_speed)
     max_dt = cfg.max_command_dt_ms / 1000.0
@@ -44,7 +42,7 @@ def build_pipeline(rig: Rig, models: str | Path | None = None, calibration: Cali
     if rig.rig.end_effector == "leap_hand":
         from teleprev.noncollision.corrector import Corrector
 
-        hand = load_robot(HAND_URDF)
+        hand = load_robot(rig.effector.hand_urdf)
         corrector = Corrector.load(models_dir(rig, models), hand)
         effector = LeapEffector(hand, corrector, cfg, max_dt, calibration.leap_map())
     elif rig.rig.end_effector == "parallel_gripper":

@@ -11,7 +11,6 @@ from rich.console import Console, Group
 from rich.live import Live
 from rich.text import Text
 
-from teleprev.devices.contract import DeviceContext
 from teleprev.errors import ConfigError
 from teleprev.messages import JointSample
 from teleprev.live.build import build_pipeline, rig_calibration
@@ -58,7 +57,7 @@ def build_player(session: Path, episode, speed: float, to: str, rig_path=None):
     clock = SessionClock()
     actuators, runners, tap = {}, [], StateTap()
     if to != "preview":
-        context = DeviceContext(clock, rig.dir, {}, rig.rig.robot, rig.rig.end_effector)
+        context = rig.device_context(clock)
         if to == "sim":
             entries = {"arm": load_plugin("sim.arm"), "hand": load_plugin("sim.hand")}
             devices = {kind: cls(f"replay_{kind}", cls.Settings(), context) for kind, cls in entries.items()}

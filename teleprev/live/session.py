@@ -17,7 +17,6 @@ import json
 from dataclasses import dataclass, field
 from pathlib import Path
 
-from teleprev.devices.contract import DeviceContext
 from teleprev import __version__, numeric_platform
 from teleprev.errors import ConfigError
 from teleprev.live.build import build_pipeline, rig_calibration
@@ -67,7 +66,7 @@ class LiveSession:
         if out.exists():
             raise ConfigError("a session with this name exists already; choose another --out", str(out))
         self.clock = SessionClock()
-        self.context = DeviceContext(self.clock, rig.dir, {}, rig.rig.robot, rig.rig.end_effector)
+        self.context = rig.device_context(self.clock)
         self.devices = {name: entry.cls(name, entry.settings, self.context) for name, entry in rig.devices.items()}
         first = {kind: rig.of_kind(kind)[0].name for kind in ("glove", "suit", "arm", "hand")}
         self.pipeline = build_pipeline(rig, options.models)

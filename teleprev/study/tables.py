@@ -8,12 +8,16 @@ from pathlib import Path
 from rich.console import Console
 from rich.table import Table
 
+from teleprev.robot.effectors import EFFECTORS
 from teleprev.study.questionnaire import QUESTIONS
 from teleprev.study.stats import Group, Summary, TableIIIRow
 
-EE_NAMES = {"leap_hand": "LeapHand (16-DoF)", "parallel_gripper": "Parallel-jaw Gripper (1-DoF)", "vacuum": "Vacuum Gripper (binary)"}
 BETTER = "higher is better"
 WORSE = "higher = more workload"
+
+
+def _title(end_effector: str) -> str:
+    return EFFECTORS[end_effector].title if end_effector in EFFECTORS else end_effector
 
 
 def group_labels(groups: list[Group], sep: str = " · ") -> list[str]:
@@ -69,7 +73,7 @@ def print_tables(console: Console, groups: list[Group], rows: list[TableIIIRow],
             t3.add_column(col, justify="left" if col == "End-Effector" else "right")
         for r in rows:
             if r.task == task:
-                t3.add_row(EE_NAMES.get(r.end_effector, r.end_effector), r.without.text(), r.with_.text(), improvement_text(r))
+                t3.add_row(_title(r.end_effector), r.without.text(), r.with_.text(), improvement_text(r))
         console.print(t3)
     console.print(f"w/o preview: {', '.join(map(repr, pooled['without'])) or 'none'};  "
                   f"w/ preview: {', '.join(map(repr, pooled['with'])) or 'none'}", highlight=False)
@@ -119,7 +123,7 @@ def write_table_iii_markdown(out: Path, rows: list[TableIIIRow]) -> Path:
     for task in dict.fromkeys(r.task for r in rows):
         lines += [f"Average execution time (s){f', task {task}' if task else ''}", "",
                   "| End-Effector | w/o Preview | w/ Preview | Improvement |", "|---|---|---|---|"]
-        lines += [f"| {EE_NAMES.get(r.end_effector, r.end_effector)} | {r.without.text()} | {r.with_.text()} | {improvement_text(r)} |"
+        lines += [f"| {_title(r.end_effector)} | {r.without.text()} | {r.with_.text()} | {improvement_text(r)} |"
                   for r in rows if r.task == task]
         lines.append("")
     path = out / "table_iii.md"

@@ -123,7 +123,8 @@ def test_geometry_is_the_urdf_primitives_at_the_configuration():
 
 
 def test_an_object_the_hand_closes_on_moves_with_it_and_drops_when_released():
-    from teleprev_devices.sim.world import GRASP_POINT, SimWorld
+    from teleprev.robot.effectors import EFFECTORS
+    from teleprev_devices.sim.world import SimWorld
     from teleprev.robot.ik import ArmIK
     from teleprev.transforms import make_transform
 
@@ -131,7 +132,7 @@ def test_an_object_the_hand_closes_on_moves_with_it_and_drops_when_released():
     world.set_home(dict(zip(ARM, HOME)))
     model = world.model
     (cup,) = [o for o in world.scene(0) if o.spec.name == "cup"]
-    link, offset = GRASP_POINT["leap_hand"]
+    link, offset = EFFECTORS["leap_hand"].grasp_link, np.array(EFFECTORS["leap_hand"].grasp_offset)
     ik = ArmIK(model, link, tcp=make_transform(translation=offset))
     home_pose = ik.pose(HOME)
     result = ik.solve(make_transform(home_pose[:3, :3], cup.pose[:3, 3]), HOME)

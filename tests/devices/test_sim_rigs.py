@@ -2,7 +2,6 @@
 
 import pytest
 
-from teleprev.devices.contract import DeviceContext
 from teleprev.errors import ConfigError
 from teleprev.rig import default_rig_path, load_rig
 from teleprev.clock import SessionClock
@@ -22,7 +21,7 @@ def test_rig_loads_and_builds_its_devices(name, robot, end_effector, hand_joints
     assert {d.kind: d.plugin for d in rig.devices.values()} == {
         "glove": "sim.glove", "suit": "sim.suit", "camera": "sim.camera", "arm": "sim.arm", "hand": "sim.hand"}
     rig.require("glove", "suit", "camera", "arm", "hand")
-    ctx = DeviceContext(clock=SessionClock(), rig_dir=rig.dir, robot=rig.rig.robot, end_effector=rig.rig.end_effector)
+    ctx = rig.device_context(SessionClock())
     devices = {n: e.cls(n, e.settings, ctx) for n, e in rig.devices.items()}
     topics = {n: [s.topic for s in d.streams()] for n, d in devices.items()}
     assert topics == {"glove": ["/glove/glove/hand"], "suit": ["/suit/suit/wrist"], "cam_front": ["/camera/cam_front/image"],

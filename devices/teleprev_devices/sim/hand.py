@@ -10,7 +10,7 @@ import numpy as np
 
 from teleprev_devices.sim.actuator import SimActuator
 from teleprev_devices.sim.device import TimingSettings
-from teleprev.rig import END_EFFECTOR_JOINTS
+from teleprev.errors import ConfigError
 from teleprev.topics import device_topic
 
 
@@ -40,11 +40,12 @@ class SimHand(SimActuator):
     def __init__(self, name, settings, context):
         super().__init__(name, settings, context)
         model = self.world.model
-        ee = context.end_effector
-        if ee not in END_EFFECTOR_JOINTS:
-            raise self.bad_setting(None, f"unknown end effector {ee!r} (expected {', '.join(END_EFFECTOR_JOINTS)})")
-        self.end_effector = ee
-        self.joint_names = END_EFFECTOR_JOINTS[ee]
+        try:
+            effector = context.effector
+        except ConfigError as exc:
+            raise self.bad_setting(None, exc.message) from None
+        ee = self.end_effector = effector.name
+        self.joint_names = effector.joints
         if ee == "vacuum":
             # A switch, not a URDF joint: a 0..1 level ramps over 2 x switch_ms and the state flips half way.
             self.lower, self.upper = np.zeros(1), np.ones(1)

@@ -18,6 +18,7 @@ import numpy as np
 
 from teleprev_devices.sim.shared import get_or_create
 from teleprev_devices.sim.tasks import TABLE_Z, SCRIPTS, SceneObject
+from teleprev.robot.effectors import EFFECTORS
 from teleprev.robot.model import RobotModel, load_robot
 from teleprev.transforms import make_transform, rpy_to_matrix
 
@@ -26,14 +27,6 @@ DEFAULT_HOME = (0.0, -0.27, -0.11, 0.0, -0.85, -1.571)
 DEFAULT_ANCHOR = np.array([0.405, 0.0, 0.30])  # that TCP, in the robot base frame
 TABLE = SceneObject("table", "box", (1.2, 1.3, 0.04), (0.30, 0.0, -0.02), 0.0, (95, 120, 150), False)
 
-# The points that close on objects, per end effector: (link, offset in the link frame); for the LEAP
-# Hand the palm (power grasps) and, in _grasp_points, the pinch between the thumb and index tips.
-GRASP_POINT = {
-    "leap_hand": ("palm_lower", np.array([-0.03, -0.035, -0.05])),
-    "parallel_gripper": ("gripper_tcp", np.zeros(3)),
-    "vacuum": ("vacuum_tcp", np.zeros(3)),
-}
-TCP_LINK = {"leap_hand": "palm_lower", "parallel_gripper": "gripper_tcp", "vacuum": "vacuum_tcp"}
 _GRASP_REACH = 0.09  # metres between the grasp point and an object's centre for a grasp to hold it
 
 
@@ -55,7 +48,12 @@ class SimWorld:
                                                      if f"joint{i + 1}" in self.model.joint_index}, self.model.neutral()))
         self.vacuum_on = False
         self.anchor = DEFAULT_ANCHOR.copy()
-        self._grasp_link, self._grasp_offset = GRASP_POINT.get(end_effector, (None, None))
+        # The point that closes on objects (the end-effector table's grasp point); for the LEAP Hand also,
+        # in _reach_points, the pinch between the thumb and index tips.
+        effector = EFFECTORS.get(end_effector)
+        self._tcp_link = effector.tcp_link if effector else None
+        self._grasp_link = effector.grasp_link if effector else None
+        self._grasp_offset = np.array(effector.grasp_offset) if effector else None
         if self._grasp_link not in self.model.link_index:
             self._grasp_link = None
         self._episode: tuple | None = None
@@ -77,7 +75,7 @@ class SimWorld:
 
     def set_home(self, q_arm: dict[str, float]) -> None:
         """Place the task scene relative to the TCP at the arm's home pose."""
-        tcp = TCP_LINK.get(self.end_effector)
+        tcp = self._tcp_link
         if tcp in self.model.link_index:
             q = self.model.vector(q_arm, self.model.neutral())
             with self._lock:
