@@ -18,6 +18,8 @@ from typing import Any, Union
 
 import numpy as np
 
+from teleprev.transforms import quat_to_matrix
+
 
 @dataclass(frozen=True, slots=True)
 class JointSample:
@@ -46,8 +48,6 @@ class PoseSample:
     orientation: np.ndarray
 
     def matrix(self) -> np.ndarray:
-        from teleprev.transforms import quat_to_matrix
-
         t = np.eye(4)
         t[:3, :3] = quat_to_matrix(self.orientation)
         t[:3, 3] = self.position

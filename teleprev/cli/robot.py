@@ -107,7 +107,8 @@ def exclusions(
     from rich.console import Console
     from rich.progress import Progress
 
-    from teleprev.robot.exclusions import compute_exclusions, write_exclusions
+    from teleprev.robot.exclusion_search import compute_exclusions
+    from teleprev.robot.exclusions import write_exclusions
     from teleprev.robot.model import load_robot
 
     model = load_robot(urdf)

@@ -21,7 +21,7 @@ from teleprev import __version__, numeric_platform
 from teleprev.errors import ConfigError
 from teleprev.live.build import build_pipeline, rig_calibration
 from teleprev.pipeline.driver import InputTopics, PipelineDriver
-from teleprev.preview.dashboard import DeviceRow
+from teleprev.live.device_rows import DeviceRow
 from teleprev.rig import Rig, load_rig
 from teleprev.robot.frames import FramePublisher
 from teleprev.robot.model import load_robot

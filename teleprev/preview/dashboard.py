@@ -6,7 +6,7 @@ shrink, then go, and the banner, episode and device table stay.
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from typing import TYPE_CHECKING
 
 import numpy as np
 from rich.console import Group, RenderableType
@@ -16,7 +16,10 @@ from rich.table import Table
 from rich.text import Text
 
 from teleprev.preview.robot_view import Layer, RobotView
-from teleprev.live.loop import LoopSnapshot
+
+if TYPE_CHECKING:  # the preview renders what the live session hands it; it never imports the live session
+    from teleprev.live.device_rows import DeviceRow
+    from teleprev.live.loop import LoopSnapshot
 
 KEYS = "[b]space[/] preview/execute   [b]s[/] start episode   [b]n[/] next episode   [b]d[/] discard   [b]y[/]/[b]f[/] success/failure   [b]r[/] ready   [b]q[/] quit"
 PREVIEW_STYLE = "bold black on yellow"
@@ -24,18 +27,6 @@ EXECUTE_STYLE = "bold white on red"
 REAL_STYLE = "grey70"
 PREVIEW_ROBOT_STYLE = "cyan"
 FIXED_STYLE = "bold magenta"
-
-
-@dataclass(frozen=True)
-class DeviceRow:
-    name: str
-    kind: str
-    state: str  # ok | gap | error | connecting
-    rate_hz: float
-    nominal_hz: float
-    latency_ms: float
-    dropped: int
-    errors: int
 
 
 def mode_banner(mode: str, width: int) -> Text:

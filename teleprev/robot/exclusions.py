@@ -12,7 +12,6 @@ import tomllib
 from dataclasses import dataclass
 from pathlib import Path
 
-import numpy as np
 
 from teleprev.errors import UrdfError
 from teleprev.robot.model import RobotModel
@@ -82,26 +81,6 @@ def load_exclusions(model: RobotModel) -> Exclusions:
                 raise UrdfError(f"unknown link {link!r}", where)
         pairs.append(ExcludedPair((links[0], links[1]), str(entry.get("reason", ""))))
     return Exclusions(tuple(pairs), data.get("urdf_sha256"), int(data.get("samples", 0)))
-
-
-def compute_exclusions(model: RobotModel, samples: int, seed: int = 0, progress=None) -> Exclusions:
-    """Adjacent pairs, plus pairs found in contact in every one of `samples` uniform configurations."""
-    from teleprev.robot.collision import SelfCollisionChecker
-
-    adjacent = adjacent_pairs(model)
-    checker = SelfCollisionChecker(model, Exclusions(tuple(ExcludedPair(p, "adjacent") for p in adjacent)))
-    rng = np.random.default_rng(seed)
-    always = np.ones(len(checker.link_pairs), dtype=bool)
-    done = 0
-    while done < samples:
-        n = min(2000, samples - done)
-        always &= checker.pair_matrix(model.sample_uniform(n, rng)).all(axis=0)
-        done += n
-        if progress:
-            progress(n)
-    pairs = [ExcludedPair(p, "adjacent") for p in adjacent]
-    pairs += [ExcludedPair(p, "always") for p, a in zip(checker.link_pairs, always) if a and samples > 0]
-    return Exclusions(tuple(pairs), model.urdf_sha256, samples)
 
 
 def write_exclusions(model: RobotModel, exclusions: Exclusions) -> Path:

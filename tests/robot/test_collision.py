@@ -5,7 +5,8 @@ import numpy as np
 import pytest
 
 from teleprev.robot.collision import SelfCollisionChecker
-from teleprev.robot.exclusions import compute_exclusions, exclusions_path, load_exclusions
+from teleprev.robot.exclusion_search import compute_exclusions
+from teleprev.robot.exclusions import exclusions_path, load_exclusions
 
 INDEX = {"palm_lower", "mcp_joint", "pip", "dip", "fingertip"}
 MIDDLE = {"mcp_joint_2", "pip_2", "dip_2", "fingertip_2"}

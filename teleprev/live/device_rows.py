@@ -1,0 +1,17 @@
+"""One line of the terminal preview's device table: a device's runner stats and the loop's drops for it."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+
+@dataclass(frozen=True)
+class DeviceRow:
+    name: str
+    kind: str
+    state: str  # ok | gap | error | connecting
+    rate_hz: float
+    nominal_hz: float
+    latency_ms: float
+    dropped: int
+    errors: int
