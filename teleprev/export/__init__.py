@@ -4,7 +4,8 @@
     streams.py    one episode's streams read from a session into arrays (the camera frames stay on disk)
     timeline.py   the frame times and which sample of each stream every frame uses (no future for
                   observations), gaps, splits and the alignment error
-    video.py      video settings and the streaming encoder the dataset writes its videos with
+    video.py      video settings (codec, quality, threads): no lerobot import
+    lerobot_video.py  the streaming encoder the dataset writes its videos with (imports lerobot; loaded lazily)
     dataset.py    the LeRobotDataset being written: staged in a temporary folder, moved into place
     session.py    one session through the timeline into the dataset, episode by episode
     parallel.py   several sessions in worker processes, merged with lerobot's aggregation

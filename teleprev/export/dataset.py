@@ -156,24 +156,24 @@ def _embed_images_unless_noop(embed):
 
 def create(repo_id: str, root: Path, fps: int, features: dict, robot_type: str, video: VideoSettings):
     """A new dataset in write mode at `root` (which must not exist)."""
-    from teleprev.export.video import dataset_class
+    from teleprev.export.lerobot_video import TeleprevDataset, encoder_config
 
     prepare_lerobot()
-    return dataset_class(video).create(
+    return TeleprevDataset.for_settings(video).create(
         repo_id=repo_id, fps=fps, features=features, root=root, robot_type=robot_type, use_videos=True,
-        video_backend="pyav", streaming_encoding=video.streaming, rgb_encoder=video.encoder_config(),
+        video_backend="pyav", streaming_encoding=video.streaming, rgb_encoder=encoder_config(video),
         encoder_threads=video.encoder_threads, encoder_queue_maxsize=video.queue,
     )
 
 
 def resume(repo_id: str, root: Path, video: VideoSettings):
     """An existing dataset at `root`, in write mode for more episodes."""
-    from teleprev.export.video import dataset_class
+    from teleprev.export.lerobot_video import TeleprevDataset, encoder_config
 
     prepare_lerobot()
-    return dataset_class(video).resume(
+    return TeleprevDataset.for_settings(video).resume(
         repo_id, root=root, video_backend="pyav", streaming_encoding=video.streaming,
-        rgb_encoder=video.encoder_config(), encoder_threads=video.encoder_threads, encoder_queue_maxsize=video.queue,
+        rgb_encoder=encoder_config(video), encoder_threads=video.encoder_threads, encoder_queue_maxsize=video.queue,
     )
 
 

@@ -23,7 +23,7 @@ from teleprev.export.session import ExportSettings, Progress, Reporter
 from teleprev.export.video import VideoSettings
 
 _PRELOAD = ["lerobot.datasets.lerobot_dataset", "lerobot.datasets.video_utils", "lerobot.datasets.aggregate",
-            "teleprev.export.session", "teleprev.export.dataset", "cv2"]
+            "teleprev.export.session", "teleprev.export.dataset", "teleprev.export.lerobot_video", "cv2"]
 
 
 @dataclass(frozen=True)
