@@ -180,12 +180,13 @@ def test_compiled_fk_matches_the_numpy_fk(name, rng):
 
 
 # ---- compile cost stays off the start-up path ---------------------------------------------------
-def test_importing_compiles_nothing():
+def test_importing_compiles_nothing_and_needs_no_fcl():
     code = (
+        "import sys\n"
         "import teleprev.robot.compiled_collision\n"
         "from numba.core.registry import CPUDispatcher\n"
         "from teleprev.robot import kernels\n"
-        "print(sorted(n for n, f in vars(kernels).items() if isinstance(f, CPUDispatcher) and f.signatures))\n"
+        "print(sorted(n for n, f in vars(kernels).items() if isinstance(f, CPUDispatcher) and f.signatures), 'fcl' in sys.modules)\n"
     )
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True).stdout.strip()
-    assert out == "[]"
+    assert out == "[] False"
