@@ -9,28 +9,14 @@ configuration) come from the exclusion file next to the URDF (see exclusions.py)
 
 from __future__ import annotations
 
-from dataclasses import dataclass
-
 import fcl
 import numpy as np
 
+from teleprev.robot.collision_report import CollisionReport
 from teleprev.robot.exclusions import Exclusions, load_exclusions
 from teleprev.robot.model import RobotModel
 
 _SAT_GAP = 1e-9  # a box pair counts as separated only when some axis separates it by more than this
-
-
-@dataclass(frozen=True)
-class CollisionReport:
-    labels: np.ndarray  # bool per checked link (SelfCollisionChecker.link_names)
-    pairs: tuple[tuple[str, str], ...]  # colliding link pairs
-
-    @property
-    def colliding(self) -> bool:
-        return bool(self.pairs)
-
-    def colliding_links(self, link_names) -> list[str]:
-        return [n for n, hit in zip(link_names, self.labels) if hit]
 
 
 def _fcl_geometry(kind: str, size: tuple[float, ...]):

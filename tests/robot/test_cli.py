@@ -18,7 +18,7 @@ def test_help_and_version_answer():
 
 
 def test_help_imports_no_heavy_libraries():
-    code = "import sys; import teleprev.cli.app; print(sorted(m for m in ('numpy','torch','lerobot','cv2') if m in sys.modules))"
+    code = "import sys; import teleprev.cli.app; print(sorted(m for m in ('numpy','torch','lerobot','cv2','numba') if m in sys.modules))"
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True).stdout.strip()
     assert out == "[]"
 

@@ -1,0 +1,137 @@
+"""Exact self-collision of an all-box robot in compiled code: a drop-in for SelfCollisionChecker.
+
+Same link names, checked link pairs (and their order), exclusions, method names and return types as
+the fcl-based teleprev.robot.collision.SelfCollisionChecker, so swapping one for the other is a
+one-line change. The arithmetic (FK, box poses, bounding spheres, the separating-axis test) is in
+teleprev.robot.kernels. A pair counts as colliding unless its boxes are apart by more than `margin`
+(kernels.MARGIN, 1 nm) along a separating axis or their bounding spheres are: against FCL it can only
+err towards "colliding", and only for boxes within nanometres of touching.
+
+Importing this module compiles nothing; the first call of each kernel compiles it (seconds) unless the
+on-disk cache has it, which `warm()` (run by scripts/setup.sh) makes sure of.
+"""
+
+from __future__ import annotations
+
+import itertools
+
+import numpy as np
+
+from teleprev.errors import UrdfError
+from teleprev.robot import kernels
+from teleprev.robot.collision_report import CollisionReport
+from teleprev.robot.compiled_kinematics import CompiledKinematics
+from teleprev.robot.exclusions import Exclusions, load_exclusions
+from teleprev.robot.model import RobotModel
+
+_CORNERS = np.array(list(itertools.product((-1.0, 1.0), repeat=3)))
+
+
+class CompiledSelfCollisionChecker:
+    """Self-collision of one robot model whose collision geometry is all boxes.
+
+    `link_names` are the links with collision geometry (the m labels of a configuration), in model order;
+    `link_pairs` the checked link pairs. A negative `margin` reports only pairs that overlap deeper than
+    -margin (tests use it to bracket FCL's answer from below).
+    """
+
+    def __init__(self, model: RobotModel, exclusions: Exclusions | None = None, margin: float = kernels.MARGIN):
+        self.model = model
+        self.exclusions = exclusions if exclusions is not None else load_exclusions(model)
+        self.margin = float(margin)
+        self.kinematics = CompiledKinematics(model)
+        self.link_names = tuple(n for n in model.link_names if model.links[n].collisions)
+        link_pos = {n: i for i, n in enumerate(self.link_names)}
+
+        shape_link, local, size, sphere = [], [], [], []
+        for name in self.link_names:
+            corners = []
+            for shape in model.links[name].collisions:
+                if shape.kind != "box":
+                    raise UrdfError(
+                        f"the compiled self-collision check handles boxes only; link {name!r} has a {shape.kind}",
+                        str(model.urdf_path),
+                    )
+                half = np.array(shape.size, dtype=float) / 2
+                shape_link.append(link_pos[name])
+                local.append(shape.origin[:3])
+                size.append([*half, np.linalg.norm(half)])
+                corners.append(shape.origin[:3, 3] + (_CORNERS * half) @ shape.origin[:3, :3].T)
+            corners = np.concatenate(corners)
+            centre = (corners.min(axis=0) + corners.max(axis=0)) / 2
+            sphere.append([*centre, np.linalg.norm(corners - centre, axis=1).max()])
+        self._shape_link = np.array([model.link_index[self.link_names[i]] for i in shape_link], dtype=np.int64)
+        self._shape_local = np.ascontiguousarray(local, dtype=np.float64).reshape(-1, 3, 4)
+        self._shape_size = np.array(size, dtype=np.float64).reshape(-1, 4)
+        self._spheres = np.array(sphere, dtype=np.float64).reshape(-1, 4)
+        # Per checked link: its model link and its run of boxes (boxes were gathered link by link).
+        shape_link = np.array(shape_link, dtype=np.int64)
+        self._links = np.array(
+            [(model.link_index[n], np.searchsorted(shape_link, k), np.searchsorted(shape_link, k, side="right"))
+             for k, n in enumerate(self.link_names)], dtype=np.int64,
+        ).reshape(-1, 3)
+
+        # Checked link pairs in SelfCollisionChecker's order.
+        excluded = self.exclusions.pair_set()
+        self.link_pairs: tuple[tuple[str, str], ...] = tuple(
+            (a, b)
+            for i, a in enumerate(self.link_names)
+            for b in self.link_names[i + 1:]
+            if frozenset((a, b)) not in excluded
+        )
+        self._pairs = np.array([(link_pos[a], link_pos[b]) for a, b in self.link_pairs], dtype=np.int64).reshape(-1, 2)
+
+    # The kernels' collision tables, in their argument order.
+    def _tables(self):
+        return self._shape_link, self._shape_local, self._shape_size, self._links, self._spheres, self._pairs
+
+    @staticmethod
+    def _q(q) -> np.ndarray:
+        return np.ascontiguousarray(q, dtype=np.float64)
+
+    # ---- public (SelfCollisionChecker's API) ---------------------------------------------------
+    def check(self, q: np.ndarray) -> CollisionReport:
+        """All colliding link pairs and the per-link labels of one configuration."""
+        hits, labels = kernels.check(self._q(q), *self.kinematics.tables, *self._tables(), self.margin, False)
+        pairs = tuple(self.link_pairs[i] for i in np.flatnonzero(hits)) if labels.any() else ()
+        return CollisionReport(labels, pairs)
+
+    def collides(self, q: np.ndarray) -> bool:
+        """Whether one configuration is in self-collision; stops at the first contact."""
+        return bool(kernels.collides(self._q(q), *self.kinematics.tables, *self._tables(), self.margin))
+
+    def pair_matrix(self, q: np.ndarray, world: np.ndarray | None = None) -> np.ndarray:
+        """(N, len(link_pairs)) bool: which checked link pairs collide, for a batch of configurations.
+
+        `world` may pass link transforms (N, L, 4, 4) already computed.
+        """
+        if world is not None:
+            world = np.ascontiguousarray(world, dtype=np.float64).reshape(-1, *world.shape[-3:])
+            return kernels.pair_matrix_world(world, *self._tables(), self.margin)
+        q = np.atleast_2d(self._q(q))
+        return kernels.pair_matrix(q, *self.kinematics.tables, *self._tables(), self.margin)
+
+    def labels(self, q: np.ndarray, world: np.ndarray | None = None) -> np.ndarray:
+        """(N, m) bool per-link labels for a batch of configurations."""
+        return self.labels_from_pairs(self.pair_matrix(q, world))
+
+    def labels_from_pairs(self, pairs: np.ndarray) -> np.ndarray:
+        labels = np.zeros((len(pairs), len(self.link_names)), dtype=bool)
+        for side in (0, 1):
+            np.logical_or.at(labels, (slice(None), self._pairs[:, side]), pairs)
+        return labels
+
+
+def warm(robot: str = "leap_hand_right") -> None:
+    """Compile every kernel the checker and the compiled FK call into numba's on-disk cache (or load it)."""
+    from teleprev.robot.model import load_robot
+
+    model = load_robot(robot)
+    checker = CompiledSelfCollisionChecker(model)
+    q = model.neutral()
+    checker.check(q)
+    checker.collides(q)
+    qs = np.stack([q, q])
+    checker.pair_matrix(qs)
+    checker.pair_matrix(qs, checker.kinematics.world(qs))
+    checker.kinematics.world(q)

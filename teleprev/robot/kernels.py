@@ -1,0 +1,288 @@
+"""Compiled (numba) kernels for the per-step robot arithmetic: forward kinematics of a joint tree and
+the exact self-collision test of box geometry.
+
+Kernels take arrays and numbers only; CompiledKinematics and CompiledSelfCollisionChecker build the
+tables from a RobotModel. Each kernel compiles on its first call and is cached on disk (numba
+`cache=True`), never at import: `teleprev.robot.compiled_collision.warm()`, run by scripts/setup.sh,
+fills the cache so that no record or eval pays the compile.
+
+All kernels live in this one file on purpose: numba invalidates a cached kernel when its own source
+file changes, not when a kernel it calls in another file does.
+
+Box-box test: the separating-axis theorem, exact for two boxes with 15 candidate axes (3 face normals
+of each box and the 9 cross products of their edges). A pair counts as apart only when some axis
+separates it by more than `margin`; `MARGIN` (1 nm) makes every rounding difference against another
+implementation (FCL) fall on the "colliding" side. Cross products of nearly parallel edges are close to
+zero vectors, where rounding alone could make 0 > 0 true; padding |R| by `_PAD` keeps such an axis from
+ever separating a pair that the face axes do not (it can only err towards "colliding").
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from numba import njit
+
+MARGIN = 1e-9  # metres: boxes closer than this along every axis count as touching
+_PAD = 1e-12  # added to |R| for the edge-edge axes (see the module docstring)
+
+# Joint kinds in the FK table.
+FIXED, REVOLUTE, PRISMATIC = 0, 1, 2
+
+
+# ---- forward kinematics ------------------------------------------------------------------------
+@njit(cache=True)
+def fk_into(q, link_int, link_num, link_terms, world):
+    """Link transforms (L, 4, 4) of one configuration into `world`.
+
+    Links are in parent-first order, row 0 is the root. link_int (L, 3): parent, joint-vector index of
+    the driving joint, kind. link_num (L, 2): multiplier and offset on that joint's value (mimic joints).
+    link_terms (L, 4, 3, 4): the top three rows of the joint origin and of the three terms whose
+    weighted sum gives the local transform: origin + sin(a) k1 + (1 - cos(a)) k2 + d slide.
+    """
+    n = link_int.shape[0]
+    for r in range(4):
+        for c in range(4):
+            world[0, r, c] = 1.0 if r == c else 0.0
+    local = np.empty((3, 4))
+    for i in range(1, n):
+        kind = link_int[i, 2]
+        s = 0.0
+        c1 = 0.0
+        d = 0.0
+        if kind != FIXED:
+            v = q[link_int[i, 1]] * link_num[i, 0] + link_num[i, 1]
+            if kind == REVOLUTE:
+                s = np.sin(v)
+                c1 = 1.0 - np.cos(v)
+            else:
+                d = v
+        for r in range(3):
+            for c in range(4):
+                local[r, c] = (link_terms[i, 0, r, c] + s * link_terms[i, 1, r, c] + c1 * link_terms[i, 2, r, c]
+                               + d * link_terms[i, 3, r, c])
+        p = link_int[i, 0]
+        for r in range(3):
+            for c in range(4):
+                acc = world[p, r, 0] * local[0, c] + world[p, r, 1] * local[1, c] + world[p, r, 2] * local[2, c]
+                world[i, r, c] = acc + world[p, r, 3] if c == 3 else acc
+        world[i, 3, 0] = 0.0
+        world[i, 3, 1] = 0.0
+        world[i, 3, 2] = 0.0
+        world[i, 3, 3] = 1.0
+
+
+@njit(cache=True)
+def fk(q, link_int, link_num, link_terms):
+    world = np.empty((link_int.shape[0], 4, 4))
+    fk_into(q, link_int, link_num, link_terms, world)
+    return world
+
+
+@njit(cache=True)
+def fk_batch(qs, link_int, link_num, link_terms):
+    world = np.empty((qs.shape[0], link_int.shape[0], 4, 4))
+    for k in range(qs.shape[0]):
+        fk_into(qs[k], link_int, link_num, link_terms, world[k])
+    return world
+
+
+# ---- boxes -------------------------------------------------------------------------------------
+@njit(cache=True, inline="always")
+def _place(world, link, local, out, k):
+    """out[k] (3, 4) = world[link] @ local (3, 4): a rigid transform's top rows."""
+    for r in range(3):
+        w0, w1, w2 = world[link, r, 0], world[link, r, 1], world[link, r, 2]
+        out[k, r, 0] = w0 * local[0, 0] + w1 * local[1, 0] + w2 * local[2, 0]
+        out[k, r, 1] = w0 * local[0, 1] + w1 * local[1, 1] + w2 * local[2, 1]
+        out[k, r, 2] = w0 * local[0, 2] + w1 * local[1, 2] + w2 * local[2, 2]
+        out[k, r, 3] = w0 * local[0, 3] + w1 * local[1, 3] + w2 * local[2, 3] + world[link, r, 3]
+
+
+@njit(cache=True, inline="always")
+def _edge_apart(tx, rx, ty, ry, reach, margin):
+    """One edge-edge axis: the unnormalised axis has length |(rx, ry)|, so the margin scales with it."""
+    return abs(tx * rx - ty * ry) - reach > margin * np.sqrt(rx * rx + ry * ry)
+
+
+@njit(cache=True, inline="always")
+def boxes_apart(boxes, a, b, size, margin):
+    """Whether boxes a and b are separated by more than `margin` along one of the 15 SAT axes.
+
+    boxes (S, 3, 4): poses (columns 0-2 the box axes in the world, column 3 the centre); size (S, 4):
+    half extents first. In box a's frame: rij = a_i . b_j, t = offset of b's centre; pij = |rij| + _PAD.
+    Written out in scalars: with loops and scratch arrays the test costs several times more.
+    """
+    ha0, ha1, ha2 = size[a, 0], size[a, 1], size[a, 2]
+    hb0, hb1, hb2 = size[b, 0], size[b, 1], size[b, 2]
+    d0 = boxes[b, 0, 3] - boxes[a, 0, 3]
+    d1 = boxes[b, 1, 3] - boxes[a, 1, 3]
+    d2 = boxes[b, 2, 3] - boxes[a, 2, 3]
+    a00, a10, a20 = boxes[a, 0, 0], boxes[a, 1, 0], boxes[a, 2, 0]
+    a01, a11, a21 = boxes[a, 0, 1], boxes[a, 1, 1], boxes[a, 2, 1]
+    a02, a12, a22 = boxes[a, 0, 2], boxes[a, 1, 2], boxes[a, 2, 2]
+    b00, b10, b20 = boxes[b, 0, 0], boxes[b, 1, 0], boxes[b, 2, 0]
+    b01, b11, b21 = boxes[b, 0, 1], boxes[b, 1, 1], boxes[b, 2, 1]
+    b02, b12, b22 = boxes[b, 0, 2], boxes[b, 1, 2], boxes[b, 2, 2]
+
+    # a's face normals, one row of R at a time so that an early exit skips the rest
+    t0 = a00 * d0 + a10 * d1 + a20 * d2
+    r00 = a00 * b00 + a10 * b10 + a20 * b20
+    r01 = a00 * b01 + a10 * b11 + a20 * b21
+    r02 = a00 * b02 + a10 * b12 + a20 * b22
+    q00, q01, q02 = abs(r00), abs(r01), abs(r02)
+    if abs(t0) - (ha0 + hb0 * q00 + hb1 * q01 + hb2 * q02) > margin:
+        return True
+    t1 = a01 * d0 + a11 * d1 + a21 * d2
+    r10 = a01 * b00 + a11 * b10 + a21 * b20
+    r11 = a01 * b01 + a11 * b11 + a21 * b21
+    r12 = a01 * b02 + a11 * b12 + a21 * b22
+    q10, q11, q12 = abs(r10), abs(r11), abs(r12)
+    if abs(t1) - (ha1 + hb0 * q10 + hb1 * q11 + hb2 * q12) > margin:
+        return True
+    t2 = a02 * d0 + a12 * d1 + a22 * d2
+    r20 = a02 * b00 + a12 * b10 + a22 * b20
+    r21 = a02 * b01 + a12 * b11 + a22 * b21
+    r22 = a02 * b02 + a12 * b12 + a22 * b22
+    q20, q21, q22 = abs(r20), abs(r21), abs(r22)
+    if abs(t2) - (ha2 + hb0 * q20 + hb1 * q21 + hb2 * q22) > margin:
+        return True
+
+    # b's face normals
+    if abs(t0 * r00 + t1 * r10 + t2 * r20) - (ha0 * q00 + ha1 * q10 + ha2 * q20 + hb0) > margin:
+        return True
+    if abs(t0 * r01 + t1 * r11 + t2 * r21) - (ha0 * q01 + ha1 * q11 + ha2 * q21 + hb1) > margin:
+        return True
+    if abs(t0 * r02 + t1 * r12 + t2 * r22) - (ha0 * q02 + ha1 * q12 + ha2 * q22 + hb2) > margin:
+        return True
+
+    # a_i x b_j: distance |t_i2 r_i1j - t_i1 r_i2j| (i1, i2 the next two axes after i, cyclically)
+    p00, p01, p02 = q00 + _PAD, q01 + _PAD, q02 + _PAD
+    p10, p11, p12 = q10 + _PAD, q11 + _PAD, q12 + _PAD
+    p20, p21, p22 = q20 + _PAD, q21 + _PAD, q22 + _PAD
+    if _edge_apart(t2, r10, t1, r20, ha1 * p20 + ha2 * p10 + hb1 * p02 + hb2 * p01, margin):
+        return True
+    if _edge_apart(t2, r11, t1, r21, ha1 * p21 + ha2 * p11 + hb2 * p00 + hb0 * p02, margin):
+        return True
+    if _edge_apart(t2, r12, t1, r22, ha1 * p22 + ha2 * p12 + hb0 * p01 + hb1 * p00, margin):
+        return True
+    if _edge_apart(t0, r20, t2, r00, ha2 * p00 + ha0 * p20 + hb1 * p12 + hb2 * p11, margin):
+        return True
+    if _edge_apart(t0, r21, t2, r01, ha2 * p01 + ha0 * p21 + hb2 * p10 + hb0 * p12, margin):
+        return True
+    if _edge_apart(t0, r22, t2, r02, ha2 * p02 + ha0 * p22 + hb0 * p11 + hb1 * p10, margin):
+        return True
+    if _edge_apart(t1, r00, t0, r10, ha0 * p10 + ha1 * p00 + hb1 * p22 + hb2 * p21, margin):
+        return True
+    if _edge_apart(t1, r01, t0, r11, ha0 * p11 + ha1 * p01 + hb2 * p20 + hb0 * p22, margin):
+        return True
+    return _edge_apart(t1, r02, t0, r12, ha0 * p12 + ha1 * p02 + hb0 * p21 + hb1 * p20, margin)
+
+
+# ---- self-collision ----------------------------------------------------------------------------
+@njit(cache=True, inline="always")
+def _apart2(x, y, reach):
+    """Whether two points (3-vectors) are further apart than reach (reach >= 0)."""
+    dx = x[0] - y[0]
+    dy = x[1] - y[1]
+    dz = x[2] - y[2]
+    return dx * dx + dy * dy + dz * dz > reach * reach
+
+
+@njit(cache=True)
+def self_collision_into(world, shape_link, shape_local, shape_size, links, spheres, pairs, margin, first_only,
+                        hits, labels):
+    """Colliding checked-link pairs of one configuration into hits (P,) and labels (m,); returns their count.
+
+    world (L, 4, 4): link transforms. Boxes (S of them, grouped by checked link): shape_link (S,) the
+    model link, shape_local (S, 3, 4) the pose in that link, shape_size (S, 4) half extents and
+    bounding-sphere radius. Checked links: links (m, 3) the model link and the range [start, stop) of
+    its boxes, spheres (m, 4) a bounding sphere of those boxes (centre in the link frame, radius).
+    pairs (P, 2): the checked link pairs. With first_only it stops at the first colliding pair.
+    Bounding spheres cull first: link against link, box against the other link, box against box.
+    """
+    n_shapes = shape_link.shape[0]
+    boxes = np.empty((n_shapes, 3, 4))
+    for k in range(n_shapes):
+        _place(world, shape_link[k], shape_local[k], boxes, k)
+    n_links = links.shape[0]
+    centres = np.empty((n_links, 3))
+    for k in range(n_links):
+        w = links[k, 0]
+        for r in range(3):
+            centres[k, r] = (world[w, r, 0] * spheres[k, 0] + world[w, r, 1] * spheres[k, 1]
+                             + world[w, r, 2] * spheres[k, 2] + world[w, r, 3])
+    count = 0
+    for p in range(pairs.shape[0]):
+        la = pairs[p, 0]
+        lb = pairs[p, 1]
+        if _apart2(centres[la], centres[lb], spheres[la, 3] + spheres[lb, 3] + margin):
+            continue
+        hit = False
+        for a in range(links[la, 1], links[la, 2]):
+            if _apart2(boxes[a, :, 3], centres[lb], shape_size[a, 3] + spheres[lb, 3] + margin):
+                continue
+            for b in range(links[lb, 1], links[lb, 2]):
+                if _apart2(boxes[a, :, 3], boxes[b, :, 3], shape_size[a, 3] + shape_size[b, 3] + margin):
+                    continue
+                if not boxes_apart(boxes, a, b, shape_size, margin):
+                    hit = True
+                    break
+            if hit:
+                break
+        if hit:
+            hits[p] = True
+            labels[la] = True
+            labels[lb] = True
+            count += 1
+            if first_only:
+                break
+    return count
+
+
+@njit(cache=True)
+def check(q, link_int, link_num, link_terms, shape_link, shape_local, shape_size, links, spheres, pairs, margin,
+          first_only):
+    """FK, then self_collision_into: (hits (P,), labels (m,)) of one configuration."""
+    world = fk(q, link_int, link_num, link_terms)
+    hits = np.zeros(pairs.shape[0], dtype=np.bool_)
+    labels = np.zeros(links.shape[0], dtype=np.bool_)
+    self_collision_into(world, shape_link, shape_local, shape_size, links, spheres, pairs, margin, first_only,
+                        hits, labels)
+    return hits, labels
+
+
+@njit(cache=True)
+def collides(q, link_int, link_num, link_terms, shape_link, shape_local, shape_size, links, spheres, pairs, margin):
+    """Whether one configuration collides, stopping at the first contact."""
+    world = fk(q, link_int, link_num, link_terms)
+    hits = np.zeros(pairs.shape[0], dtype=np.bool_)
+    labels = np.zeros(links.shape[0], dtype=np.bool_)
+    return self_collision_into(world, shape_link, shape_local, shape_size, links, spheres, pairs, margin, True,
+                               hits, labels) > 0
+
+
+@njit(cache=True)
+def pair_matrix_world(world, shape_link, shape_local, shape_size, links, spheres, pairs, margin):
+    """(N, P) colliding pairs of a batch given its link transforms (N, L, 4, 4)."""
+    n = world.shape[0]
+    hits = np.zeros((n, pairs.shape[0]), dtype=np.bool_)
+    labels = np.zeros(links.shape[0], dtype=np.bool_)
+    for k in range(n):
+        self_collision_into(world[k], shape_link, shape_local, shape_size, links, spheres, pairs, margin, False,
+                            hits[k], labels)
+    return hits
+
+
+@njit(cache=True)
+def pair_matrix(qs, link_int, link_num, link_terms, shape_link, shape_local, shape_size, links, spheres, pairs,
+                margin):
+    """(N, P) colliding pairs of a batch of configurations (N, n)."""
+    n = qs.shape[0]
+    world = np.empty((link_int.shape[0], 4, 4))
+    hits = np.zeros((n, pairs.shape[0]), dtype=np.bool_)
+    labels = np.zeros(links.shape[0], dtype=np.bool_)
+    for k in range(n):
+        fk_into(qs[k], link_int, link_num, link_terms, world)
+        self_collision_into(world, shape_link, shape_local, shape_size, links, spheres, pairs, margin, False,
+                            hits[k], labels)
+    return hits
