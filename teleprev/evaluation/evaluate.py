@@ -23,12 +23,13 @@ def evaluate(sessions: list[str | Path], models=None, rig=None, baseline: dict |
     from teleprev.robot.model import load_robot
 
     results, reruns = [], []
-    checker = None
+    checkers: dict[str, SelfCollisionChecker] = {}  # by hand URDF: sessions may come from different rigs
     for path in sessions:
         r = rerun_session(path, models, rig)
-        if checker is None and len(r.effector_names) == 16:
-            checker = SelfCollisionChecker(load_robot("leap_hand_right"))
-        m = session_metrics(r, checker if len(r.effector_names) == 16 else None)
+        hand = r.effector.hand_urdf
+        if r.effector.self_colliding and hand not in checkers:
+            checkers[hand] = SelfCollisionChecker(load_robot(hand))
+        m = session_metrics(r, checkers[hand] if r.effector.self_colliding else None)
         facts = {
             "bit_identical": bool(m["overall"].get("reproduced", False)),
             "models": {True: "as recorded", False: "different from the recording", None: "unknown"}[r.models_match],

@@ -20,8 +20,10 @@ from teleprev.errors import SessionError
 from teleprev.messages import Event, JointSample
 from teleprev.live.build import build_pipeline, rig_calibration
 from teleprev.pipeline.driver import InputTopics, PipelineDriver
+from teleprev.pipeline.step import Pipeline
 from teleprev.retarget.calibration import load_calibration_text
 from teleprev.rig import load_rig, load_rig_text
+from teleprev.robot.effectors import EndEffector
 from teleprev import topics
 from teleprev.session.reader import Episode, SessionReader
 
@@ -41,6 +43,7 @@ class Rerun:
     flags: list[list[str]]
     arm_names: tuple[str, ...]
     effector_names: tuple[str, ...]
+    effector: EndEffector  # the end effector re-run (its row of the table)
     rerun: dict[str, np.ndarray]  # topic -> (steps, joints)
     recorded: dict[str, np.ndarray]
     episodes: list[Episode]
@@ -66,15 +69,12 @@ def _pipeline_for(reader: SessionReader, path: Path, models, rig_path):
     return build_pipeline(rig, models, calibration), "recorded in the session"
 
 
-def _models_match(meta: dict, pipeline) -> bool | None:
+def _models_match(meta: dict, pipeline: Pipeline) -> bool | None:
+    now = pipeline.model_hashes()
+    if now is None:
+        return True  # the pipeline runs no models
     recorded = meta.get("models")
-    corrector = getattr(pipeline.effector, "corrector", None)
-    if not recorded or corrector is None or not hasattr(corrector, "model_files"):
-        return None if corrector is not None else True
-    import hashlib
-
-    now = {name: hashlib.sha256(Path(p).read_bytes()).hexdigest() for name, p in corrector.model_files().items()}
-    return now == recorded
+    return now == recorded if recorded else None
 
 
 def rerun_session(path: str | Path, models: str | Path | None = None, rig_path: str | Path | None = None) -> Rerun:
@@ -140,6 +140,7 @@ def rerun_session(path: str | Path, models: str | Path | None = None, rig_path: 
                      "the last bits may differ")
     return Rerun(
         path, t, np.array(mode), np.array(action), np.array(latency, dtype=np.int64), flags, arm_names, eff_names,
-        rerun, recorded, reader.episodes(), meta, _models_match(meta, pipeline), rig_source, reader.duration_s, n_inputs,
+        pipeline.effector.spec, rerun, recorded, reader.episodes(), meta, _models_match(meta, pipeline), rig_source,
+        reader.duration_s, n_inputs,
         time.perf_counter() - started, notes,
     )

@@ -6,15 +6,15 @@ from pathlib import Path
 
 import numpy as np
 
-from teleprev.pipeline.effectors import GripperEffector, LeapEffector, VacuumEffector
+from teleprev.pipeline.config import PipelineConfig
+from teleprev.pipeline.effectors import Effector, GripperEffector, LeapEffector, VacuumEffector
 from teleprev.pipeline.guard import JointGuard
 from teleprev.pipeline.step import Pipeline
 from teleprev.retarget.arm import ArmRetargeter
 from teleprev.retarget.calibration import Calibration, load_calibration
 from teleprev.rig import Rig
 from teleprev.robot.ik import ArmIK
-from teleprev.robot.model import load_robot
-
+from teleprev.robot.model import RobotModel, load_robot
 
 
 def rig_calibration(rig: Rig) -> Calibration:
@@ -39,14 +39,19 @@ def build_pipeline(rig: Rig, models: str | Path | None = None, calibration: Cali
     max_dt = cfg.max_command_dt_ms / 1000.0
     arm_guard = JointGuard(ik.chain.lower, ik.chain.upper, arm_speed, max_dt)
     arm = ArmRetargeter(ik, cfg.wrist_scale, cfg.workspace_min, cfg.workspace_max, calibration.suit_to_robot())
-    if rig.rig.end_effector == "leap_hand":
+    return Pipeline(cfg, arm, arm_guard, build_effector(rig, robot, cfg, max_dt, calibration, models))
+
+
+def build_effector(rig: Rig, robot: RobotModel, cfg: PipelineConfig, max_dt: float, calibration: Calibration,
+                   models: str | Path | None = None) -> Effector:
+    """The pipeline's side of the rig's end effector, chosen by its row of the table."""
+    spec = rig.effector
+    if spec.self_colliding:
         from teleprev.noncollision.corrector import Corrector
 
-        hand = load_robot(rig.effector.hand_urdf)
+        hand = load_robot(spec.hand_urdf)
         corrector = Corrector.load(models_dir(rig, models), hand)
-        effector = LeapEffector(hand, corrector, cfg, max_dt, calibration.leap_map())
-    elif rig.rig.end_effector == "parallel_gripper":
-        effector = GripperEffector(robot, cfg, max_dt)
-    else:
-        effector = VacuumEffector(cfg, max_dt)
-    return Pipeline(cfg, arm, arm_guard, effector)
+        return LeapEffector(spec, hand, corrector, cfg, max_dt, calibration.leap_map())
+    if spec.is_switch:
+        return VacuumEffector(spec, cfg, max_dt)
+    return GripperEffector(spec, robot, cfg, max_dt)

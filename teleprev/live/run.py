@@ -35,8 +35,8 @@ class PreviewStats:
 
 def make_dashboard(recording: LiveSession, view: str) -> Dashboard:
     hand_view = None
-    if recording.rig.rig.end_effector == "leap_hand":
-        hand_view = RobotView(load_robot("leap_hand_right"), "side")
+    if recording.rig.effector.hand_urdf:
+        hand_view = RobotView(load_robot(recording.rig.effector.hand_urdf), "side")
     return Dashboard(
         RobotView(recording.robot, view, ROBOT_BOUNDS.get(view)), hand_view,
         recording.pipeline.arm_names, recording.pipeline.effector_names, recording.robot,

@@ -12,7 +12,6 @@
 from __future__ import annotations
 
 import datetime as _dt
-import hashlib
 import json
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -46,10 +45,6 @@ class RecordOptions:
 def default_session_path(task: str) -> Path:
     stamp = _dt.datetime.now().strftime("%Y%m%d_%H%M%S")
     return Path("sessions") / f"{stamp}_{task or 'session'}.mcap"
-
-
-def _sha256(path: Path) -> str:
-    return hashlib.sha256(path.read_bytes()).hexdigest() if path.is_file() else ""
 
 
 class LiveSession:
@@ -99,9 +94,9 @@ class LiveSession:
                         "practice": "true" if o.practice else "false", "software_version": __version__,
                         "numeric_platform": numeric_platform.describe()},
         }
-        corrector = getattr(self.pipeline.effector, "corrector", None)
-        if corrector is not None and hasattr(corrector, "model_files"):
-            meta["models"] = {name: _sha256(Path(p)) for name, p in corrector.model_files().items()}
+        hashes = self.pipeline.model_hashes()
+        if hashes is not None:
+            meta["models"] = hashes
         meta["pipeline"] = {"inputs": json.dumps(self.driver.topics.__dict__)}
         # The post-condition questionnaire is answered after the file is closed: it goes in a sidecar
         # next to the session, which the session names here so that nothing recorded is rewritten.

@@ -89,12 +89,13 @@ def find_models(models_dir: Path, model: RobotModel) -> tuple[Path, Path]:
 
 class Corrector:
     def __init__(self, model: RobotModel, checker: SelfCollisionChecker, cpn: CPN, ccn: CCN,
-                 settings: CorrectorSettings = CorrectorSettings()):
+                 settings: CorrectorSettings = CorrectorSettings(), files: dict[str, Path] | None = None):
         self.model = model
         self.checker = checker
         self.cpn = cpn
         self.ccn = ccn
         self.settings = settings
+        self.files = dict(files or {})  # the weight files by role ("cpn", "ccn"), when loaded from files
         self.neutral = model.neutral()
         if checker.collides(self.neutral):
             raise ModelError("the neutral (open) hand is in self-collision, so there is no safe fallback pose", str(model.urdf_path))
@@ -117,13 +118,11 @@ class Corrector:
                 f"trained against another CPN than {cpn_path.name}; retrain the CCN (`teleprev collision train-ccn`)",
                 str(ccn_path),
             )
-        corrector = cls(model, checker, cpn, CCN(ccn_net, model.lower, model.upper))
-        corrector.files = {"cpn": cpn_path, "ccn": ccn_path}
-        return corrector
+        return cls(model, checker, cpn, CCN(ccn_net, model.lower, model.upper), files={"cpn": cpn_path, "ccn": ccn_path})
 
-    def model_files(self) -> dict[str, Path]:
-        """The weight files loaded (a session records their hashes, eval compares them)."""
-        return dict(getattr(self, "files", {}))
+    def model_hashes(self) -> dict[str, str]:
+        """{role: sha256} of the weight files loaded (a session records them, eval compares them)."""
+        return {role: file_sha256(path) for role, path in self.files.items()}
 
     # ---- the pipeline's call ----------------------------------------------------------------------
     def correct(self, q: np.ndarray, previous: np.ndarray | None = None) -> Correction:

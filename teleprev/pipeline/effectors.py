@@ -1,22 +1,30 @@
 """End effectors as the pipeline sees them: joint names, a target from the hand pose, and a guard.
 
-    leap_hand         16 joints, joint-to-joint retargeting, then the Corrector (never in self-collision)
-    parallel_gripper  "gripper": jaw opening in metres, from one finger's flexion
-    vacuum            "vacuum": 0 or 1, thresholds with hysteresis on that finger's flexion
+Each carries its row of the end-effector table (teleprev/robot/effectors.py) as `spec`:
+    LeapEffector     the LEAP Hand: joint-to-joint retargeting, then the Corrector (never in self-collision)
+    GripperEffector  a parallel gripper: jaw opening in metres, from one finger's flexion
+    VacuumEffector   a switch: 0 or 1, thresholds with hysteresis on that finger's flexion
 """
 
 from __future__ import annotations
 
+from abc import ABC, abstractmethod
 from dataclasses import dataclass
+from typing import TYPE_CHECKING
 
 import numpy as np
 
+from teleprev.errors import UrdfError
+from teleprev.human.smplx import JOINT_INDEX
 from teleprev.pipeline.config import PipelineConfig
 from teleprev.pipeline.guard import JointGuard
-from teleprev.human.smplx import JOINT_INDEX
 from teleprev.retarget.end_effector import GripperMap, VacuumMap
 from teleprev.retarget.hand import JointMap, LeapRetargeter
+from teleprev.robot.effectors import EndEffector
 from teleprev.robot.model import RobotModel
+
+if TYPE_CHECKING:  # loading the Corrector's module is left to the rigs that have one
+    from teleprev.noncollision.corrector import Corrector
 
 
 @dataclass(frozen=True)
@@ -28,12 +36,29 @@ class EffectorTarget:
     deviation: float = 0.0
 
 
-class LeapEffector:
-    kind = "leap_hand"
+class Effector(ABC):
+    """What the pipeline needs of an end effector."""
 
-    def __init__(self, hand: RobotModel, corrector, cfg: PipelineConfig, max_dt: float, mapping: dict[str, JointMap] | None = None):
+    spec: EndEffector  # its row of the end-effector table
+    names: tuple[str, ...]  # its joints, in the order of targets and commands
+    guard: JointGuard
+    corrector: Corrector | None = None  # only a hand that can collide with itself has one
+
+    @abstractmethod
+    def target(self, flexion: np.ndarray, abduction: np.ndarray, previous: np.ndarray | None) -> EffectorTarget:
+        """The target for this hand pose; `previous` is the last target (None before the first)."""
+
+
+class LeapEffector(Effector):
+    def __init__(self, spec: EndEffector, hand: RobotModel, corrector: Corrector, cfg: PipelineConfig, max_dt: float,
+                 mapping: dict[str, JointMap] | None = None):
+        # the Corrector and the guard work in the URDF's joint order, which the table's must therefore be
+        if hand.joint_names != spec.joints:
+            raise UrdfError(f"the {spec.name!r} row of the end-effector table names joints {list(spec.joints)}, "
+                              f"the URDF has {list(hand.joint_names)}", str(hand.urdf_path))
+        self.spec = spec
         self.model = hand
-        self.names = hand.joint_names
+        self.names = spec.joints
         self.retarget = LeapRetargeter(hand, mapping)
         self.corrector = corrector
         speed = np.minimum(hand.velocity_limit, cfg.hand_speed)
@@ -45,12 +70,11 @@ class LeapEffector:
         return EffectorTarget(q, c.q, c.action, tuple(c.colliding_links), float(c.deviation))
 
 
-class GripperEffector:
-    kind = "parallel_gripper"
-
-    def __init__(self, robot: RobotModel, cfg: PipelineConfig, max_dt: float):
-        i = robot.joint_index["gripper"]
-        self.names = ("gripper",)
+class GripperEffector(Effector):
+    def __init__(self, spec: EndEffector, robot: RobotModel, cfg: PipelineConfig, max_dt: float):
+        self.spec = spec
+        self.names = spec.joints
+        i = int(robot.indices(spec.joints)[0])
         self.joint = JOINT_INDEX[cfg.gripper_joint]
         self.map = GripperMap(float(robot.upper[i]), cfg.gripper_closed_flexion)
         speed = np.array([robot.velocity_limit[i]])
@@ -61,11 +85,10 @@ class GripperEffector:
         return EffectorTarget(q, q, "untouched")
 
 
-class VacuumEffector:
-    kind = "vacuum"
-
-    def __init__(self, cfg: PipelineConfig, max_dt: float):
-        self.names = ("vacuum",)
+class VacuumEffector(Effector):
+    def __init__(self, spec: EndEffector, cfg: PipelineConfig, max_dt: float):
+        self.spec = spec
+        self.names = spec.joints
         self.joint = JOINT_INDEX[cfg.gripper_joint]
         self.map = VacuumMap(cfg.vacuum_on_flexion, cfg.vacuum_off_flexion)
         self.guard = JointGuard(np.zeros(1), np.ones(1), np.array([np.inf]), max_dt)  # a switch: no speed to cap

@@ -20,6 +20,7 @@ import numpy as np
 from teleprev.human.smplx import angles_from_hand_pose, hand_pose_from_values
 from teleprev.messages import JointSample, PoseSample
 from teleprev.pipeline.config import PipelineConfig
+from teleprev.pipeline.effectors import Effector
 from teleprev.pipeline.guard import JointGuard
 from teleprev.retarget.arm import Anchor, ArmRetargeter
 
@@ -68,7 +69,7 @@ class StepResult:
 
 
 class Pipeline:
-    def __init__(self, cfg: PipelineConfig, arm: ArmRetargeter, arm_guard: JointGuard, effector):
+    def __init__(self, cfg: PipelineConfig, arm: ArmRetargeter, arm_guard: JointGuard, effector: Effector):
         self.cfg = cfg
         self.arm = arm
         self.arm_names = arm.ik.joint_names
@@ -76,6 +77,12 @@ class Pipeline:
         self.effector = effector
         self.effector_names = effector.names
         self._stale_ns = int(cfg.stale_ms * 1e6)
+
+    def model_hashes(self) -> dict[str, str] | None:
+        """{role: sha256} of the model files the pipeline runs (a session records them, eval compares);
+        None when it runs none (an end effector without a Corrector)."""
+        corrector = self.effector.corrector
+        return None if corrector is None else corrector.model_hashes()
 
     # ---- inputs --------------------------------------------------------------------------------
     def _fresh(self, sample, device: str, t_ns: int, flags: list[str]) -> bool:
