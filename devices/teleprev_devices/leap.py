@@ -18,13 +18,11 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
-from typing import ClassVar, Protocol, Sequence
+from typing import Protocol, Sequence
 
 import numpy as np
 
-from teleprev.devices.polled import JointLimits, PolledActuator
-from teleprev.errors import DeviceError
-from teleprev.messages import JointSample
+from teleprev.devices import DeviceContext, DeviceError, PolledActuator
 
 # Control table (protocol 2.0, XC330/XM430 series): address, size in bytes.
 OPERATING_MODE = (11, 1)
@@ -68,14 +66,6 @@ class DynamixelBus(Protocol):
     def close(self) -> None: ...
 
 
-def _import_dynamixel_sdk():
-    try:
-        import dynamixel_sdk
-    except ImportError:
-        raise DeviceError("dynamixel-sdk is not installed; install the extra: `uv sync --extra leap`", "leap.hand") from None
-    return dynamixel_sdk
-
-
 class SdkDynamixelBus:
     """DynamixelBus over dynamixel_sdk (PortHandler, PacketHandler 2.0, GroupSyncRead/Write)."""
 
@@ -87,7 +77,7 @@ class SdkDynamixelBus:
         self.port = None
 
     def open(self) -> None:
-        sdk = self._sdk or _import_dynamixel_sdk()
+        sdk = self._sdk or LeapHand.import_sdk()
         self._sdk = sdk
         self.port = sdk.PortHandler(self.port_name)
         self.packet = sdk.PacketHandler(2.0)
@@ -151,52 +141,39 @@ class LeapSettings:
             raise ValueError(f"current_limit_ma must be 1..1000, got {self.current_limit_ma}")
 
 
-class LeapHand(PolledActuator):
+class LeapHand(PolledActuator[LeapSettings], kind="hand", sdk_module="dynamixel_sdk", extra="leap"):
     """JointSample of "0".."15" on /hand/<name>/state; send() writes goal positions."""
 
-    kind = "hand"
-    Settings = LeapSettings
-    extra: ClassVar[str] = "leap"
-    sdk_module: ClassVar[str] = "dynamixel_sdk"
-
-    def __init__(self, name, settings: LeapSettings, context, bus: DynamixelBus | None = None):
-        super().__init__(name, settings, context)
-        self.where = f"device {name!r} (LEAP Hand on {settings.port})"
-        self.joint_names = tuple(str(i) for i in MOTOR_IDS)
-        robot = context.robot if _has_joint(context.robot, "0") else "leap_hand_right"
-        self._setup(JointLimits.from_urdf(robot, self.joint_names, f"[devices.{name}]"))
+    def __init__(self, name: str, settings: LeapSettings, context: DeviceContext, bus: DynamixelBus | None = None):
+        robot = context.robot if _has_joint(context.robot, "0") else "leap_hand_right"  # the hand alone otherwise
+        super().__init__(name, settings, context, robot, tuple(str(i) for i in MOTOR_IDS),
+                         where=f"device {name!r} (LEAP Hand on {settings.port})")
         self.bus: DynamixelBus = bus or SdkDynamixelBus(settings.port)
 
-    def connect(self) -> None:
+    def _open(self) -> None:
+        self.bus.open()
+
+    def _start(self) -> np.ndarray:
         s = self.settings
         ids = list(MOTOR_IDS)
 
         def gains(g: int) -> list[int]:
             return [round(0.75 * g) if i in SIDE_TO_SIDE else g for i in ids]
 
-        with self._lock:
-            self.bus.open()
-            try:
-                self.bus.write(ids, *TORQUE_ENABLE, [0] * 16)  # the operating mode only changes with torque off
-                self.bus.write(ids, *OPERATING_MODE, [CURRENT_BASED_POSITION] * 16)
-                self.bus.write(ids, *POSITION_P_GAIN, gains(s.kp))
-                self.bus.write(ids, *POSITION_I_GAIN, [0] * 16)
-                self.bus.write(ids, *POSITION_D_GAIN, gains(s.kd))
-                self.bus.write(ids, *GOAL_CURRENT, [s.current_limit_ma] * 16)
-                q = self._poll()
-                # Hold where the hand is before torque comes on, so it does not jump to a stale goal.
-                self.bus.sync_write(ids, *GOAL_POSITION, ticks_from_angles(q).tolist())
-                self.bus.write(ids, *TORQUE_ENABLE, [1] * 16)
-            except DeviceError:
-                self.bus.close()
-                raise
-            self._opened(q)
+        self.bus.write(ids, *TORQUE_ENABLE, [0] * 16)  # the operating mode only changes with torque off
+        self.bus.write(ids, *OPERATING_MODE, [CURRENT_BASED_POSITION] * 16)
+        self.bus.write(ids, *POSITION_P_GAIN, gains(s.kp))
+        self.bus.write(ids, *POSITION_I_GAIN, [0] * 16)
+        self.bus.write(ids, *POSITION_D_GAIN, gains(s.kd))
+        self.bus.write(ids, *GOAL_CURRENT, [s.current_limit_ma] * 16)
+        q = self._poll()
+        # Hold where the hand is before torque comes on, so it does not jump to a stale goal.
+        self.bus.sync_write(ids, *GOAL_POSITION, ticks_from_angles(q).tolist())
+        self.bus.write(ids, *TORQUE_ENABLE, [1] * 16)
+        return q
 
-    def disconnect(self) -> None:
-        with self._lock:
-            was, self._connected = self._connected, False
-            if was:
-                self.bus.close()
+    def _close(self) -> None:
+        self.bus.close()
 
     def _poll(self) -> np.ndarray:
         raw = self.bus.sync_read(list(MOTOR_IDS), *PRESENT_POSITION)
@@ -207,7 +184,7 @@ class LeapHand(PolledActuator):
 
 
 def _has_joint(robot: str, joint: str) -> bool:
-    from teleprev.robot.model import load_robot
+    from teleprev.devices import load_robot
 
     try:
         return joint in load_robot(robot).joint_index

@@ -20,10 +20,7 @@ import time
 from dataclasses import dataclass
 from pathlib import Path
 
-from teleprev.devices.contract import Device, StreamSpec
-from teleprev.errors import DeviceError
-from teleprev.messages import ImageSample, Sample
-from teleprev.topics import device_topic
+from teleprev.devices import Device, DeviceContext, DeviceError, ImageSample, Sample, StreamSpec, wait_until_due
 
 _DEFAULT_FPS = 30.0
 
@@ -50,15 +47,12 @@ class OpenCVSettings:
             raise ValueError(f"jpeg_quality must be 1..100, got {self.jpeg_quality}")
 
 
-class OpenCVCamera(Device):
+class OpenCVCamera(Device[OpenCVSettings], kind="camera"):
     """ImageSample (JPEG) on /camera/<name>/image, frame_id = the device name."""
 
-    kind = "camera"
-    Settings = OpenCVSettings
-
-    def __init__(self, name, settings, context):
+    def __init__(self, name: str, settings: OpenCVSettings, context: DeviceContext):
         super().__init__(name, settings, context)
-        self.topic = device_topic("camera", name, "image")
+        self.image_topic = self.topic("image")
         src = settings.source
         self.is_camera = isinstance(src, int)
         self.is_url = isinstance(src, str) and "://" in src
@@ -69,7 +63,7 @@ class OpenCVCamera(Device):
         self._failed_reads = 0
 
     def streams(self) -> list[StreamSpec]:
-        return [StreamSpec(self.topic, "image", self.settings.fps or self._file_fps() or _DEFAULT_FPS)]
+        return [StreamSpec(self.image_topic, "image", self.settings.fps or self._file_fps() or _DEFAULT_FPS)]
 
     def _file_fps(self) -> float:
         if self.path is None or not self.path.is_file():
@@ -120,12 +114,8 @@ class OpenCVCamera(Device):
             if self._ended:
                 time.sleep(timeout_s)
                 return []
-            wait = (self._next_ns - clock.now_ns()) / 1e9
-            if wait > timeout_s:
-                time.sleep(timeout_s)
+            if not wait_until_due(clock, self._next_ns, timeout_s):
                 return []
-            if wait > 0:
-                time.sleep(wait)
         ok, frame = self._cap.read()
         stamp = self._next_ns if self.period_ns else clock.now_ns()
         if not ok or frame is None:
@@ -135,7 +125,7 @@ class OpenCVCamera(Device):
             # Pace from the due time, not from when we got here, so the file keeps its rate; after a
             # long stall start again from now rather than bursting to catch up.
             self._next_ns = max(self._next_ns + self.period_ns, clock.now_ns() - 5 * self.period_ns)
-        return [Sample(self.topic, ImageSample(stamp, self.name, self._encode(frame), "jpeg"))]
+        return [Sample(self.image_topic, ImageSample(stamp, self.name, self._encode(frame), "jpeg"))]
 
     def _no_frame(self) -> list[Sample]:
         import cv2

@@ -21,14 +21,14 @@ import dataclasses
 import time
 from dataclasses import dataclass
 from pathlib import Path
-from typing import ClassVar, Iterator
+from typing import Iterator
 
 import numpy as np
 
-from teleprev.devices.contract import Actuator, Device, StreamSpec
-from teleprev.errors import ConfigError, DeviceError, SessionError
-from teleprev.messages import ImageSample, JointSample, Logged, Sample
-from teleprev.topics import device_topic, parse_device_topic
+from teleprev.devices import (
+    Actuator, ConfigError, Device, DeviceContext, DeviceError, ImageSample, JointSample, Logged, Sample, SessionError,
+    StreamSpec, parse_device_topic,
+)
 
 _PAYLOAD = {"hand": "joints", "body": "joints", "wrist": "pose", "image": "image", "state": "joints"}
 
@@ -60,12 +60,13 @@ class _Plan:
     joint_names: tuple[str, ...]
 
 
-def _plan(kind: str, name: str, s: ReplaySettings, rig_dir: Path) -> _Plan:
-    from teleprev.session.reader import SessionReader
+def _plan(device: _Replay) -> _Plan:
+    from teleprev.devices import SessionReader
 
-    where = f"[devices.{name}]"
+    kind, s = device.kind, device.settings
+    where = f"[devices.{device.name}]"
     path = Path(s.session).expanduser()
-    path = path if path.is_absolute() else Path(rig_dir) / path
+    path = path if path.is_absolute() else Path(device.context.rig_dir) / path
     try:
         with SessionReader(path) as reader:
             recorded = {t: info for t, info in reader.topics.items() if info.message_count > 0}
@@ -89,7 +90,7 @@ def _plan(kind: str, name: str, s: ReplaySettings, rig_dir: Path) -> _Plan:
                     raise ConfigError(f"{path} has {len(devices) or 'no'} {kind} devices ({', '.join(devices)}): "
                                       "say which with device = \"...\"", where)
                 chosen = sorted(t for t, p in mine.items() if p[1] == source)
-            sources = {t: device_topic(kind, name, mine[t][2]) for t in chosen}
+            sources = {t: device.topic(mine[t][2]) for t in chosen}
             infos = [recorded[t] for t in chosen]
             first, last = min(i.first_ns for i in infos), max(i.last_ns for i in infos)
             rates = {}
@@ -107,12 +108,10 @@ def _plan(kind: str, name: str, s: ReplaySettings, rig_dir: Path) -> _Plan:
     return _Plan(path, sources, rates, first, last, joint_names)
 
 
-class _Replay(Device):
-    Settings = ReplaySettings
-
-    def __init__(self, name, settings: ReplaySettings, context):
+class _Replay(Device[ReplaySettings]):
+    def __init__(self, name: str, settings: ReplaySettings, context: DeviceContext):
         super().__init__(name, settings, context)
-        self.plan = _plan(self.kind, name, settings, context.rig_dir)
+        self.plan = _plan(self)
         self.where = f"device {name!r} (replay of {self.plan.path.name})"
         self._reader = None
         self._messages: Iterator[Logged] | None = None
@@ -124,7 +123,7 @@ class _Replay(Device):
         return [StreamSpec(t, _PAYLOAD.get(t.rsplit("/", 1)[-1], "joints"), r) for t, r in self.plan.rates.items()]
 
     def connect(self) -> None:
-        from teleprev.session.reader import SessionReader
+        from teleprev.devices import SessionReader
 
         try:
             self._reader = SessionReader(self.plan.path)
@@ -191,8 +190,8 @@ class _Replay(Device):
         return dataclasses.replace(payload, stamp_ns=stamp)
 
 
-class _ReplayActuator(_Replay, Actuator):
-    def __init__(self, name, settings, context):
+class _ReplayActuator(_Replay, Actuator[ReplaySettings]):
+    def __init__(self, name: str, settings: ReplaySettings, context: DeviceContext):
         super().__init__(name, settings, context)
         self.joint_names = self.plan.joint_names
         self.commands = 0
@@ -203,22 +202,22 @@ class _ReplayActuator(_Replay, Actuator):
         self.commands += 1
 
 
-class ReplayGlove(_Replay):
-    kind: ClassVar[str] = "glove"
+class ReplayGlove(_Replay, kind="glove"):
+    """replay.glove: a recorded glove's hand pose."""
 
 
-class ReplaySuit(_Replay):
-    kind: ClassVar[str] = "suit"
+class ReplaySuit(_Replay, kind="suit"):
+    """replay.suit: a recorded suit's wrist (and body, if recorded)."""
 
 
-class ReplayCamera(_Replay):
-    kind: ClassVar[str] = "camera"
+class ReplayCamera(_Replay, kind="camera"):
+    """replay.camera: a recorded camera's images."""
 
 
-class ReplayArm(_ReplayActuator):
-    kind: ClassVar[str] = "arm"
+class ReplayArm(_ReplayActuator, kind="arm"):
+    """replay.arm: a recorded arm's joint state; commands are counted."""
 
 
-class ReplayHand(_ReplayActuator):
-    kind: ClassVar[str] = "hand"
+class ReplayHand(_ReplayActuator, kind="hand"):
+    """replay.hand: a recorded end effector's joint state; commands are counted."""
 

@@ -16,13 +16,11 @@ limits, and at most max_step_rad from the previous target (refused and counted o
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import Callable, ClassVar, Protocol
+from typing import Callable, Protocol
 
 import numpy as np
 
-from teleprev.devices.polled import JointLimits, PolledActuator
-from teleprev.errors import DeviceError
-from teleprev.messages import JointSample
+from teleprev.devices import DeviceContext, DeviceError, PolledActuator
 
 
 class XArmLink(Protocol):
@@ -33,14 +31,6 @@ class XArmLink(Protocol):
     def joint_angles(self) -> list[float]: ...  # radians, joint1.. (at least dof values)
     def servo_angle_j(self, angles: list[float]) -> None: ...  # radians, dof values
     def disconnect(self) -> None: ...
-
-
-def _import_xarm_api():
-    try:
-        from xarm.wrapper import XArmAPI
-    except ImportError:
-        raise DeviceError("xarm-python-sdk is not installed; install the extra: `uv sync --extra xarm`", "xarm.arm") from None
-    return XArmAPI
 
 
 class SdkXArmLink:
@@ -58,7 +48,7 @@ class SdkXArmLink:
             raise DeviceError(f"{call} returned code {code} (controller error {getattr(self.api, 'error_code', '?')})", self.where)
 
     def connect(self) -> None:
-        factory = self._factory or _import_xarm_api()
+        factory = self._factory or XArm.import_sdk("xarm.wrapper").XArmAPI
         try:
             self.api = factory(self.host, is_radian=True, do_not_open=True)
             self.api.connect()
@@ -117,37 +107,23 @@ class XArmSettings:
             raise ValueError(f"max_step_rad must be in (0, 0.5], got {self.max_step_rad}")
 
 
-class XArm(PolledActuator):
+class XArm(PolledActuator[XArmSettings], kind="arm", sdk_module="xarm", extra="xarm"):
     """JointSample of joint1..jointN on /arm/<name>/state; send() streams servo targets."""
 
-    kind = "arm"
-    Settings = XArmSettings
-    extra: ClassVar[str] = "xarm"
-    sdk_module: ClassVar[str] = "xarm"
-
-    def __init__(self, name, settings: XArmSettings, context, link: XArmLink | None = None):
-        super().__init__(name, settings, context)
-        self.where = f"device {name!r} (xArm {settings.host})"
-        self.joint_names = tuple(f"joint{i}" for i in range(1, settings.dof + 1))
-        self._setup(JointLimits.from_urdf(context.robot, self.joint_names, f"[devices.{name}]"))
+    def __init__(self, name: str, settings: XArmSettings, context: DeviceContext, link: XArmLink | None = None):
+        super().__init__(name, settings, context, context.robot, tuple(f"joint{i}" for i in range(1, settings.dof + 1)),
+                         where=f"device {name!r} (xArm {settings.host})")
         self.link: XArmLink = link or SdkXArmLink(settings.host, settings.dof)
 
-    def connect(self) -> None:
-        with self._lock:
-            self.link.connect()
-            try:
-                self.link.enable_servo_mode()
-                q = self._poll()
-            except DeviceError:
-                self.link.disconnect()
-                raise
-            self._opened(q)
+    def _open(self) -> None:
+        self.link.connect()
 
-    def disconnect(self) -> None:
-        with self._lock:
-            was, self._connected = self._connected, False
-            if was:
-                self.link.disconnect()
+    def _start(self) -> np.ndarray:
+        self.link.enable_servo_mode()
+        return self._poll()
+
+    def _close(self) -> None:
+        self.link.disconnect()
 
     def _poll(self) -> np.ndarray:
         q = np.asarray(self.link.joint_angles(), dtype=float)

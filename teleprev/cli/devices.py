@@ -13,12 +13,10 @@ app = typer.Typer(help="Device plugins: list what is installed, check a rig's de
 @app.command("list")
 def list_plugins() -> None:
     """Installed plugins (the `teleprev.devices` entry points): kind, module, and whether they load."""
-    import importlib.util
-
     from rich.console import Console
     from rich.table import Table
 
-    from teleprev.devices.registry import available
+    from teleprev.devices import Device, available
 
     table = Table(title="device plugins", title_justify="left")
     for col in ("plugin", "kind", "module", "status"):
@@ -29,9 +27,10 @@ def list_plugins() -> None:
         except Exception as exc:
             table.add_row(name, "?", ep.value, f"[red]cannot load: {type(exc).__name__}: {exc}[/]")
             continue
-        sdk, extra = getattr(cls, "sdk_module", ""), getattr(cls, "extra", "")
-        if sdk and importlib.util.find_spec(sdk) is None:
-            status = f"[yellow]needs the '{extra}' extra[/] (uv sync --extra {extra})"
+        if not (isinstance(cls, type) and issubclass(cls, Device)):
+            status = "[red]not a teleprev.devices.Device[/]"
+        elif not cls.sdk_installed():
+            status = f"[yellow]needs the '{cls.extra}' extra[/] (uv sync --extra {cls.extra})"
         else:
             status = "[green]ok[/]"
         table.add_row(name, getattr(cls, "kind", "?"), ep.value, status)
@@ -43,18 +42,19 @@ def check(
     rig: Optional[Path] = typer.Argument(None, help="Rig file (TOML); default: the all-sim rig."),
     seconds: float = typer.Option(3.0, "--seconds", "-s", min=0.1, help="How long to read from every device."),
 ) -> None:
-    """Open every device of a rig, read for a few seconds, and print rates, latency and errors."""
+    """Open every device of a rig, read for a few seconds, and print rates, latency and errors ("lost":
+    samples and events the reader could not hand on)."""
     import time
 
     from rich import box
     from rich.console import Console
     from rich.table import Table
 
-    from teleprev.devices.runner import DeviceRunner
-    from teleprev.errors import TeleprevError
-    from teleprev.rig import default_rig_path, load_rig
     from teleprev import topics
     from teleprev.clock import SessionClock
+    from teleprev.devices import DeviceRunner
+    from teleprev.errors import TeleprevError
+    from teleprev.rig import default_rig_path, load_rig
 
     console = Console()
     loaded = load_rig(rig or default_rig_path())
@@ -85,14 +85,15 @@ def check(
 
     table = Table(title=f"rig {loaded.path}", title_justify="left", box=box.SIMPLE_HEAD, pad_edge=False)
     for col, just in (("device", "left"), ("plugin", "left"), ("kind", "left"), ("state", "left"), ("msgs", "right"),
-                      ("Hz/nominal", "right"), ("latency ms\nmed/max", "right"), ("errors", "right")):
+                      ("Hz/nominal", "right"), ("latency ms\nmed/max", "right"), ("errors", "right"),
+                      ("lost", "right")):
         table.add_column(col, justify=just, no_wrap=True)
     table.add_column("last error", overflow="fold", min_width=10)
     bad = 0
     for name, entry in loaded.devices.items():
         if name in failed:
             bad += 1
-            table.add_row(name, entry.plugin, entry.kind, "[bold red]not opened[/]", "0", "", "", "1", failed[name])
+            table.add_row(name, entry.plugin, entry.kind, "[bold red]not opened[/]", "0", "", "", "1", "", failed[name])
             continue
         s = stats[name]
         healthy = s.received > 0 and s.state == "ok"
@@ -104,6 +105,7 @@ def check(
             f"{'[yellow]' if slow else ''}{s.rate_hz:.1f}/{s.nominal_hz:g}{'[/]' if slow else ''}",
             f"{s.latency_ms:.1f}/{s.latency_max_ms:.1f}" if s.received else "",
             f"{'[red]' if s.errors else ''}{s.errors}{'[/]' if s.errors else ''}",
+            f"{'[red]' if s.sink_errors else ''}{s.sink_errors}{'[/]' if s.sink_errors else ''}",
             s.last_error or _skipped(s.skipped),
         )
     console.print(table)

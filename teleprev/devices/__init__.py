@@ -1,10 +1,69 @@
-"""The device plugin API: everything a plugin author needs, importable from this one module.
+"""The device plugin API: everything a plugin needs from teleprev, importable from this one module.
 
     from teleprev.devices import Device, DeviceContext, StreamSpec, JointSample, DeviceError
 
-See the README's "Writing a device plugin" for a complete plugin, its entry point and its test.
+A plugin (devices/teleprev_devices, or a third party's) imports nothing else of teleprev. See the
+README's "Writing a device plugin" for a complete plugin, its entry point and its test.
+
+The robot model, its geometry and the session reader are imported on first use, so that
+`import teleprev.devices` stays light.
 """
 
+from __future__ import annotations
+
+import importlib
+from typing import TYPE_CHECKING, Any
+
+from teleprev import transforms
+from teleprev.clock import ClockSync, SessionClock
 from teleprev.devices.contract import KINDS, Actuator, Device, DeviceContext, NoSettings, StreamSpec
-from teleprev.devices.registry import available, load_plugin
-from teleprev.devices.runner import ActuatorPort, DeviceRunner, RunnerStats
+from teleprev.devices.pacing import wait_until_due
+from teleprev.devices.polled import JointLimits, PolledActuator, PolledSettings
+from teleprev.devices.registry import GROUP, available, load_plugin
+from teleprev.devices.runner import ActuatorPort, DeviceRunner, RunnerStats, Sink, default_gap_s
+from teleprev.errors import ConfigError, DeviceError, SessionError, TeleprevError
+from teleprev.human import smplx
+from teleprev.messages import Event, ImageSample, JointSample, Logged, PoseSample, Sample
+from teleprev.robot.effectors import EFFECTORS, EndEffector, end_effector
+from teleprev.topics import KIND_TOPICS, device_topic, parse_device_topic
+
+if TYPE_CHECKING:
+    from teleprev.robot import geometry as robot_geometry
+    from teleprev.robot.model import RobotModel, load_robot
+    from teleprev.session.reader import SessionReader
+
+# name -> (module, attribute; "" for the module itself)
+_LAZY = {
+    "RobotModel": ("teleprev.robot.model", "RobotModel"),
+    "load_robot": ("teleprev.robot.model", "load_robot"),
+    "robot_geometry": ("teleprev.robot.geometry", ""),  # link shapes, for drawing the robot
+    "SessionReader": ("teleprev.session.reader", "SessionReader"),
+}
+
+
+def __getattr__(name: str) -> Any:
+    if name not in _LAZY:
+        raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
+    module, attribute = _LAZY[name]
+    value = importlib.import_module(module)
+    if attribute:
+        value = getattr(value, attribute)
+    globals()[name] = value
+    return value
+
+
+__all__ = [
+    # the contract
+    "KINDS", "Actuator", "Device", "DeviceContext", "NoSettings", "StreamSpec", "wait_until_due",
+    "JointLimits", "PolledActuator", "PolledSettings",
+    # running and finding plugins
+    "ActuatorPort", "DeviceRunner", "RunnerStats", "Sink", "default_gap_s", "GROUP", "available", "load_plugin",
+    # samples, time and topics
+    "Event", "ImageSample", "JointSample", "Logged", "PoseSample", "Sample",
+    "ClockSync", "SessionClock", "KIND_TOPICS", "device_topic", "parse_device_topic",
+    # errors
+    "ConfigError", "DeviceError", "SessionError", "TeleprevError",
+    # what built-in plugins use: SMPL-X names, rotations, the robot, the end-effector table, recorded sessions
+    "smplx", "transforms", "EFFECTORS", "EndEffector", "end_effector",
+    "RobotModel", "load_robot", "robot_geometry", "SessionReader",
+]

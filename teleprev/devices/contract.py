@@ -16,14 +16,20 @@ tries to reconnect.
 
 from __future__ import annotations
 
+import importlib
+import importlib.util
+import typing
 from abc import ABC, abstractmethod
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, Callable, ClassVar
+from types import ModuleType
+from typing import Any, Callable, ClassVar, Generic, TypeVar
 
+from teleprev.clock import SessionClock
+from teleprev.errors import DeviceError
 from teleprev.messages import JointSample, Sample
 from teleprev.robot.effectors import EndEffector, end_effector
-from teleprev.clock import SessionClock
+from teleprev.topics import device_topic
 
 KINDS = ("glove", "suit", "camera", "arm", "hand")
 
@@ -60,16 +66,61 @@ class NoSettings:
     pass
 
 
-class Device(ABC):
-    """A source of timestamped samples. Subclasses set `kind` and `Settings` (a dataclass)."""
+S = TypeVar("S")
 
-    kind: ClassVar[str]
-    Settings: ClassVar[type] = NoSettings
 
-    def __init__(self, name: str, settings: Any, context: DeviceContext):
+class Device(ABC, Generic[S]):
+    """A source of timestamped samples, configured by the dataclass S that the rig's [devices.<name>]
+    table is read into. A plugin names its kind, and the optional SDK its hardware needs, as it subclasses:
+
+        class MyGlove(Device[MyGloveSettings], kind="glove"): ...
+        class MyArm(Actuator[MyArmSettings], kind="arm", sdk_module="myarm_sdk", extra="myarm"): ...
+    """
+
+    kind: ClassVar[str]  # one of KINDS
+    Settings: ClassVar[type] = NoSettings  # S itself (a ClassVar cannot name a type variable)
+    sdk_module: ClassVar[str] = ""  # the SDK's top-level module, e.g. "xarm"; "": no optional SDK
+    extra: ClassVar[str] = ""  # the extra that installs it: `uv sync --extra <extra>`
+
+    def __init_subclass__(cls, kind: str = "", sdk_module: str = "", extra: str = "", **kwargs: Any):
+        super().__init_subclass__(**kwargs)
+        for key, value in (("kind", kind), ("sdk_module", sdk_module), ("extra", extra)):
+            if value:
+                setattr(cls, key, value)
+        if "Settings" not in cls.__dict__:  # the S of `Device[S]`, or of a generic plugin base's `[S]`
+            for base in cls.__dict__.get("__orig_bases__", ()):
+                origin, args = typing.get_origin(base), typing.get_args(base)
+                if isinstance(origin, type) and issubclass(origin, Device) and args and isinstance(args[0], type):
+                    cls.Settings = args[0]
+
+    def __init__(self, name: str, settings: S, context: DeviceContext):
         self.name = name
-        self.settings = settings
+        self.settings: S = settings
         self.context = context
+
+    def topic(self, stream: str) -> str:
+        """This device's topic for `stream`, e.g. topic("hand") == "/glove/<name>/hand" on a glove."""
+        return device_topic(self.kind, self.name, stream)
+
+    @classmethod
+    def sdk_installed(cls) -> bool:
+        """Whether the optional SDK can be imported (True for a plugin that needs none)."""
+        if not cls.sdk_module:
+            return True
+        try:
+            return importlib.util.find_spec(cls.sdk_module) is not None
+        except (ImportError, ValueError):  # ValueError: a module set to None in sys.modules
+            return False
+
+    @classmethod
+    def import_sdk(cls, module: str = "") -> ModuleType:
+        """The optional SDK's `module` (default: sdk_module), or a DeviceError saying which extra installs it."""
+        name = module or cls.sdk_module
+        try:
+            return importlib.import_module(name)
+        except ImportError:
+            raise DeviceError(f"cannot import {name}: the SDK is not installed; install the extra: "
+                              f"`uv sync --extra {cls.extra}`", f"{cls.kind} plugin {cls.__name__}") from None
 
     @abstractmethod
     def streams(self) -> list[StreamSpec]:
@@ -95,7 +146,7 @@ class Device(ABC):
         return {}
 
 
-class Actuator(Device):
+class Actuator(Device[S]):
     """An arm or an end effector: state in through read(), position commands out through send().
 
     Commands reaching send() are already inside the joint limits, under the velocity limits and (for a

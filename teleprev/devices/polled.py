@@ -9,15 +9,16 @@ the URDF's limits is refused with a DeviceError, counted, and never sent.
 from __future__ import annotations
 
 import threading
-import time
+from abc import abstractmethod
 from dataclasses import dataclass
+from typing import Protocol, TypeVar
 
 import numpy as np
 
-from teleprev.devices.contract import Actuator, StreamSpec
+from teleprev.devices.contract import Actuator, DeviceContext, StreamSpec
+from teleprev.devices.pacing import wait_until_due
 from teleprev.errors import ConfigError, DeviceError
 from teleprev.messages import JointSample, Sample
-from teleprev.topics import device_topic
 
 _TOLERANCE = 1e-9  # rad: round-off of a command computed exactly at a limit
 
@@ -63,52 +64,86 @@ class JointLimits:
         return target
 
 
-class PolledActuator(Actuator):
-    """An actuator whose joints are polled at `settings.rate_hz` and whose commands are checked twice.
+class PolledSettings(Protocol):
+    rate_hz: float  # how often the state is polled
 
-    Subclasses call `_setup(limits)` in __init__, implement `_poll()` (the joint positions now, on the
-    caller's lock), `_write(target)` (send a full, checked target) and connect/disconnect (calling
-    `_opened(q)` once the device answers); `_refuse(target)` may refuse more than the limits do.
+
+P = TypeVar("P", bound=PolledSettings)
+
+
+class PolledActuator(Actuator[P]):
+    """An actuator whose `joints` (joints of the URDF `robot`, which gives their limits) are polled at
+    `settings.rate_hz` on /<kind>/<name>/state and whose commands are checked twice.
+
+    Subclasses implement the five calls below, which run under the actuator's lock, and may refuse more
+    than the limits do in `_refuse(target)`.
     """
 
-    def _setup(self, limits: JointLimits) -> None:
-        self.limits = limits
-        self.topic = device_topic(self.kind, self.name, "state")
-        self.period_ns = int(round(1e9 / self.settings.rate_hz))
+    def __init__(self, name: str, settings: P, context: DeviceContext, robot: str, joints: tuple[str, ...],
+                 where: str):
+        super().__init__(name, settings, context)
+        self.limits = JointLimits.from_urdf(robot, joints, f"[devices.{name}]")
+        self.joint_names = joints
+        self.where = where  # names the device in errors, e.g. "device 'arm' (xArm 192.168.1.185)"
+        self.state_topic = self.topic("state")
+        self.period_ns = int(round(1e9 / settings.rate_hz))
         self._lock = threading.Lock()
         self._connected = False
         self._target: np.ndarray | None = None
         self._refused = 0
         self._next_ns = 0
 
-    def _poll(self) -> np.ndarray:
-        raise NotImplementedError
+    @abstractmethod
+    def _open(self) -> None:
+        """Open the link (DeviceError if it cannot be opened)."""
 
+    @abstractmethod
+    def _start(self) -> np.ndarray:
+        """Make the open device ready for commands; its joint positions then."""
+
+    @abstractmethod
+    def _close(self) -> None:
+        """Close the link."""
+
+    @abstractmethod
+    def _poll(self) -> np.ndarray:
+        """The joint positions now."""
+
+    @abstractmethod
     def _write(self, target: np.ndarray) -> None:
-        raise NotImplementedError
+        """Send a full target that passed every check."""
 
     def _refuse(self, target: np.ndarray) -> None:
         """Raise DeviceError to refuse a target the limits allow (default: refuse nothing more)."""
 
-    def _opened(self, q: np.ndarray) -> None:
-        self._target = np.clip(q, self.limits.lower, self.limits.upper)  # the first command is checked against it
-        self._connected = True
-        self._next_ns = self.context.clock.now_ns()
+    def connect(self) -> None:
+        with self._lock:
+            self._open()
+            try:
+                q = self._start()
+            except DeviceError:
+                self._close()
+                raise
+            self._target = np.clip(q, self.limits.lower, self.limits.upper)  # the first command is checked against it
+            self._connected = True
+            self._next_ns = self.context.clock.now_ns()
+
+    def disconnect(self) -> None:
+        with self._lock:
+            was, self._connected = self._connected, False
+            if was:
+                self._close()
 
     def streams(self) -> list[StreamSpec]:
-        return [StreamSpec(self.topic, "joints", self.settings.rate_hz)]
+        return [StreamSpec(self.state_topic, "joints", self.settings.rate_hz)]
 
     def counters(self) -> dict[str, int]:
         return {"refused_commands": self._refused}
 
     def read(self, timeout_s: float) -> list[Sample]:
         clock = self.context.clock
-        wait = (self._next_ns - clock.now_ns()) / 1e9
-        if wait > timeout_s:
-            time.sleep(timeout_s)
+        if not wait_until_due(clock, self._next_ns, timeout_s):
             return []
-        if wait > 0:
-            time.sleep(wait)
         with self._lock:
             if not self._connected:
                 raise DeviceError("not connected", self.where)
@@ -117,7 +152,7 @@ class PolledActuator(Actuator):
             after = clock.now_ns()
         self._next_ns = max(self._next_ns + self.period_ns, after)
         # The device sampled somewhere between request and reply: take the middle.
-        return [Sample(self.topic, JointSample((before + after) // 2, self.joint_names, q))]
+        return [Sample(self.state_topic, JointSample((before + after) // 2, self.joint_names, q))]
 
     def send(self, command: JointSample) -> None:
         with self._lock:

@@ -59,6 +59,7 @@ class RunnerStats:
     last_error: str
     connects: int
     gaps: int
+    sink_errors: int  # samples and events the sink raised on (lost to the session)
     skipped: dict[str, int] = field(default_factory=dict)  # the device's own counters (malformed, NaN, ...)
     topics: dict[str, int] = field(default_factory=dict)  # samples per topic
 
@@ -197,7 +198,8 @@ class DeviceRunner:
             try:
                 self.sink(sample, now)
             except Exception:
-                self._sink_errors += 1
+                with self._lock:
+                    self._sink_errors += 1
         with self._lock:
             self._received += len(samples)
             self._last_receive = now
@@ -255,7 +257,8 @@ class DeviceRunner:
         try:
             self.sink(Sample(topics.DEVICE_EVENT, Event(now, "teleprev.DeviceEvent", data)), now)
         except Exception:
-            self._sink_errors += 1
+            with self._lock:
+                self._sink_errors += 1
 
     # ---- what the CLI and the preview show --------------------------------------------------------
     def stats(self) -> RunnerStats:
@@ -279,6 +282,7 @@ class DeviceRunner:
                 last_error=self._last_error,
                 connects=self._connects,
                 gaps=self._gaps,
+                sink_errors=self._sink_errors,
                 skipped=skipped,
                 topics=dict(self._per_topic),
             )

@@ -175,6 +175,24 @@ def test_a_plugin_bug_in_read_does_not_end_the_thread():
     assert runner.stats().received > 10 and not runner.is_alive()
 
 
+def test_what_the_sink_refuses_is_counted_in_the_stats_and_the_device_keeps_streaming():
+    clock, kept, offered = SessionClock(), Collector(), []
+
+    def sink(sample, receive_ns):
+        offered.append(sample)
+        if len(offered) % 2:
+            raise RuntimeError("queue full")  # every other sample or event
+        kept(sample, receive_ns)
+
+    (a,), (runner,) = make(["a"], clock, sink)
+    runner.start()
+    time.sleep(0.3)
+    runner.stop()
+    stats = runner.stats()
+    assert stats.sink_errors == len(offered) - len(kept.items) > 5 and len(kept.times(a.topic)) > 5
+    assert stats.state == "stopped" and stats.errors == 0 and stats.gaps == 0
+
+
 def test_a_device_that_never_opens_is_reported_once_and_stops_promptly():
     clock, sink = SessionClock(), Collector()
     (a,), (runner,) = make(["a"], clock, sink, reconnect_s=0.05)

@@ -5,5 +5,5 @@ that renders the scene with the robot in it, and a kinematic arm and hand. The d
     operator.py  the person (tasks.py: task scripts, grasps.py: hand shapes)
     world.py     robot state and task objects shared by the devices of a rig
     device.py    pacing, device clock, transport delay, ClockSync, ground truth (clock.py)
-    glove.py suit.py camera.py (render.py) arm.py hand.py (follow.py)   the plugins
+    glove.py suit.py (operated.py) camera.py (render.py) arm.py hand.py (actuator.py, follow.py)   the plugins
 """

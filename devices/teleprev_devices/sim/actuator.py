@@ -4,22 +4,32 @@ from __future__ import annotations
 
 import threading
 from collections import deque
+from dataclasses import dataclass
+from typing import TypeVar
 
 import numpy as np
 
-from teleprev.devices.contract import Actuator, StreamSpec
-from teleprev_devices.sim.device import SimDevice
+from teleprev.devices import Actuator, DeviceContext, DeviceError, JointSample
+from teleprev_devices.sim.device import SimDevice, TimingSettings
 from teleprev_devices.sim.follow import JointFollower
 from teleprev_devices.sim.world import shared_world
-from teleprev.errors import DeviceError
-from teleprev.messages import JointSample
 
 
-class SimActuator(SimDevice, Actuator):
-    """Subclasses set, in __init__ after this one: joint_names, topic, home, lower, upper, max_velocity,
-    max_acceleration. A command takes effect from the first state step after it was received."""
+@dataclass
+class ActuatorSettings(TimingSettings):
+    home: tuple[float, ...] = ()  # starting positions, one per joint
+    max_velocity: float = 0.0  # for every joint; 0: the URDF's velocity limits
 
-    def __init__(self, name, settings, context):
+
+A = TypeVar("A", bound=ActuatorSettings)
+
+
+class SimActuator(SimDevice[A], Actuator[A], stream="state", payload="joints"):
+    """Joint state on /<kind>/<name>/state. Subclasses set, in __init__ after this one: joint_names,
+    lower, upper and max_velocity (`use_urdf_joints` sets all four), home and max_acceleration. A command
+    takes effect from the first state step after it was received."""
+
+    def __init__(self, name: str, settings: A, context: DeviceContext):
         super().__init__(name, settings, context)
         self.world = shared_world(context)
         self.max_acceleration: float = np.inf
@@ -36,16 +46,19 @@ class SimActuator(SimDevice, Actuator):
             raise self.bad_setting("home", "outside the joint limits: " + "; ".join(outside))
         return np.asarray(home, dtype=float)
 
-    def velocity_caps(self, urdf_velocity: np.ndarray, setting: float) -> np.ndarray:
-        """The URDF's limits, or the `max_velocity` setting where it is given (never above the URDF)."""
-        if setting <= 0:
-            return urdf_velocity
-        if np.any(setting > urdf_velocity):
-            raise self.bad_setting("max_velocity", f"{setting:g} is above the URDF's limit ({urdf_velocity.min():g})")
-        return np.full_like(urdf_velocity, setting)
-
-    def streams(self) -> list[StreamSpec]:
-        return [StreamSpec(self.topic, "joints", self.settings.rate_hz)]
+    def use_urdf_joints(self, names: tuple[str, ...]) -> None:
+        """These joints of the robot model, with its limits; speed capped by the `max_velocity` setting
+        where it is given (never above the URDF's limit)."""
+        model = self.world.model
+        idx = model.indices(names)
+        self.joint_names = names
+        self.lower, self.upper = model.lower[idx], model.upper[idx]
+        self.max_velocity = urdf_velocity = model.velocity_limit[idx]
+        setting = self.settings.max_velocity
+        if setting > 0:
+            if np.any(setting > urdf_velocity):
+                raise self.bad_setting("max_velocity", f"{setting:g} is above the URDF's limit ({urdf_velocity.min():g})")
+            self.max_velocity = np.full_like(urdf_velocity, setting)
 
     def _open(self) -> None:
         self.follower = JointFollower(self.home, self.lower, self.upper, self.max_velocity, self.max_acceleration)
@@ -91,8 +104,8 @@ class SimActuator(SimDevice, Actuator):
     def state_velocities(self) -> np.ndarray:
         return self.follower.v.copy()
 
-    def _acquire(self, true_ns: int):
+    def _acquire(self, true_ns: int) -> JointSample:
         self._advance(true_ns)
         q = self.state_positions()
         self.world.set_joints(self.joint_names, q)
-        return [(self.topic, JointSample(0, self.joint_names, q, self.state_velocities()))]
+        return JointSample(0, self.joint_names, q, self.state_velocities())

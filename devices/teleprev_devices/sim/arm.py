@@ -4,25 +4,19 @@ limits and reports its joint state, like the real arm's 100 Hz report."""
 from __future__ import annotations
 
 import re
-from dataclasses import dataclass
 
 import numpy as np
 
-from teleprev_devices.sim.actuator import SimActuator
-from teleprev_devices.sim.device import TimingSettings
+from teleprev.devices import DeviceContext
+from teleprev_devices.sim.actuator import ActuatorSettings, SimActuator
+from teleprev_devices.sim.device import timing
 from teleprev_devices.sim.world import DEFAULT_HOME
-from teleprev.topics import device_topic
 
 _ARM_JOINT = re.compile(r"joint\d+$")
 
 
-@dataclass
-class ArmSettings(TimingSettings):
-    rate_hz: float = 100.0
-    latency_ms: float = 1.0
-    jitter_ms: float = 0.2
-    clock_offset_s: float = 52.0
-    clock_drift_ppm: float = 8.0
+@timing(rate_hz=100.0, latency_ms=1.0, jitter_ms=0.2, clock_offset_s=52.0, clock_drift_ppm=8.0)
+class ArmSettings(ActuatorSettings):
     home: tuple[float, ...] = DEFAULT_HOME  # joint1..: palm forward at about (0.40, 0, 0.30) m
     max_velocity: float = 0.0  # rad/s for every joint; 0: the URDF's velocity limits
     max_acceleration: float = 10.0  # rad/s^2 (the planners' value for the xArm)
@@ -34,24 +28,18 @@ class ArmSettings(TimingSettings):
                              f"got {self.max_velocity} and {self.max_acceleration}")
 
 
-class SimArm(SimActuator):
+class SimArm(SimActuator[ArmSettings], kind="arm"):
     """JointSample of joint1..jointN (positions and velocities) on /arm/<name>/state."""
 
-    kind = "arm"
-    Settings = ArmSettings
-
-    def __init__(self, name, settings, context):
+    def __init__(self, name: str, settings: ArmSettings, context: DeviceContext):
         super().__init__(name, settings, context)
         model = self.world.model
-        self.joint_names = tuple(n for n in model.joint_names if _ARM_JOINT.match(n))
-        if not self.joint_names:
+        joints = tuple(n for n in model.joint_names if _ARM_JOINT.match(n))
+        if not joints:
             raise self.bad_setting(None, f"robot {model.name!r} has no arm joints (joint1, joint2, ...)")
-        idx = model.indices(self.joint_names)
-        self.lower, self.upper = model.lower[idx], model.upper[idx]
+        self.use_urdf_joints(joints)
         self.home = self.check_home(np.array(settings.home, dtype=float))
-        self.max_velocity = self.velocity_caps(model.velocity_limit[idx], settings.max_velocity)
         self.max_acceleration = settings.max_acceleration
-        self.topic = device_topic("arm", name, "state")
 
     def _open(self) -> None:
         super()._open()

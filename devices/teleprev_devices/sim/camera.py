@@ -2,27 +2,19 @@
 
 from __future__ import annotations
 
-from dataclasses import dataclass
 from typing import Literal
 
 import cv2
 
-from teleprev.devices.contract import StreamSpec
-from teleprev_devices.sim.device import SimDevice, TimingSettings
+from teleprev.devices import DeviceContext, DeviceError, ImageSample
+from teleprev_devices.sim.device import SimDevice, TimingSettings, timing
 from teleprev_devices.sim.render import VIEWS, SceneRenderer
 from teleprev_devices.sim.world import shared_world
-from teleprev.errors import DeviceError
-from teleprev.messages import ImageSample
-from teleprev.topics import device_topic
 
 
-@dataclass
+# latency: exposure read-out + USB, more than a frame's render time
+@timing(rate_hz=30.0, latency_ms=20.0, jitter_ms=1.0, clock_offset_s=-42.0, clock_drift_ppm=-18.0)
 class CameraSettings(TimingSettings):
-    rate_hz: float = 30.0
-    latency_ms: float = 20.0  # exposure read-out + USB; more than a frame's render time
-    jitter_ms: float = 1.0
-    clock_offset_s: float = -42.0
-    clock_drift_ppm: float = -18.0
     width: int = 640
     height: int = 480
     view: Literal["front", "side", "top"] = "front"
@@ -45,32 +37,26 @@ class CameraSettings(TimingSettings):
             raise ValueError(f"view must be one of {', '.join(VIEWS)}, got {self.view!r}")
 
 
-class SimCamera(SimDevice):
+class SimCamera(SimDevice[CameraSettings], kind="camera", stream="image", payload="image"):
     """ImageSample (JPEG) on /camera/<name>/image, frame_id = the device name."""
 
-    kind = "camera"
-    Settings = CameraSettings
     acquire_on_time = True  # the picture shows the world at the moment of exposure
 
-    def __init__(self, name, settings, context):
+    def __init__(self, name: str, settings: CameraSettings, context: DeviceContext):
         super().__init__(name, settings, context)
         self.world = shared_world(context)
-        self.topic = device_topic("camera", name, "image")
-
-    def streams(self) -> list[StreamSpec]:
-        return [StreamSpec(self.topic, "image", self.settings.rate_hz)]
 
     def _open(self) -> None:
         s = self.settings
         self.renderer = SceneRenderer(self.world.model, s.width, s.height, s.view, s.fov_deg, s.noise, s.seed)
 
-    def _acquire(self, true_ns: int):
+    def _acquire(self, true_ns: int) -> ImageSample:
         q = self.world.joints()
         img = self.renderer.render(q, self.world.scene(true_ns, q), self._label(true_ns))
         ok, buf = cv2.imencode(".jpg", img, [cv2.IMWRITE_JPEG_QUALITY, self.settings.jpeg_quality])
         if not ok:
             raise DeviceError("JPEG encoding failed", f"device {self.name!r}")
-        return [(self.topic, ImageSample(0, self.name, buf.tobytes(), "jpeg"))]
+        return ImageSample(0, self.name, buf.tobytes(), "jpeg")
 
     def _label(self, true_ns: int) -> str:
         if not self.settings.label:

@@ -18,8 +18,7 @@ from pathlib import Path
 
 import numpy as np
 
-from teleprev.errors import ConfigError
-from teleprev.clock import SessionClock
+from teleprev.devices import ConfigError, SessionClock
 
 
 class DeviceClock:

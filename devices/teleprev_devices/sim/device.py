@@ -11,17 +11,15 @@ from __future__ import annotations
 import dataclasses
 import time
 import zlib
+from abc import abstractmethod
 from collections import deque
 from dataclasses import dataclass
-from typing import Any, ClassVar
+from typing import Any, Callable, ClassVar, TypeVar
 
 import numpy as np
 
-from teleprev.devices.contract import Device
+from teleprev.devices import ClockSync, ConfigError, Device, DeviceContext, DeviceError, Sample, StreamSpec
 from teleprev_devices.sim.clock import DeviceClock, Transport, TruthLog, TruthRecord, shared_truth
-from teleprev.errors import ConfigError, DeviceError
-from teleprev.messages import Sample
-from teleprev.clock import ClockSync
 
 _HANDSHAKE = 4  # hello packets exchanged at connect, so ClockSync has an offset before the first sample
 _MAX_BACKLOG_NS = 500_000_000  # acquisitions older than this when read() comes round are dropped
@@ -48,6 +46,25 @@ class TimingSettings:
             raise ValueError(f"clock_drift_ppm must be within ±1000, got {self.clock_drift_ppm}")
 
 
+T = TypeVar("T", bound=TimingSettings)
+
+
+def timing(rate_hz: float, latency_ms: float, jitter_ms: float, clock_offset_s: float,
+           clock_drift_ppm: float) -> Callable[[type[T]], type[T]]:
+    """Makes a TimingSettings subclass a dataclass whose timing keys default to this device's values."""
+    defaults = {"rate_hz": rate_hz, "latency_ms": latency_ms, "jitter_ms": jitter_ms,
+                "clock_offset_s": clock_offset_s, "clock_drift_ppm": clock_drift_ppm}
+
+    def apply(cls: type[T]) -> type[T]:
+        # Re-annotating an inherited field gives it a new default and keeps its place in the field order.
+        cls.__annotations__ = {**{key: "float" for key in defaults}, **cls.__dict__.get("__annotations__", {})}
+        for key, value in defaults.items():
+            setattr(cls, key, value)
+        return dataclass(cls)
+
+    return apply
+
+
 class NoiseBlock:
     """Gaussian sensor noise of `dims` values per sample, drawn a block of samples at a time."""
 
@@ -66,17 +83,26 @@ class _Pending:
     true_ns: int
     device_ns: int
     arrive_ns: int
-    samples: list[tuple[str, Any]] | None = None
+    payload: Any = None  # acquired once true_ns has come
 
 
-class SimDevice(Device):
-    """Base of the sim plugins. Subclasses implement `_acquire(true_ns)`: the (topic, payload) pairs
-    acquired at that session time (payload stamps are replaced on delivery)."""
+class SimDevice(Device[T]):
+    """Base of the sim plugins: one stream at settings.rate_hz, named as they subclass, e.g.
+    `class SimGlove(..., kind="glove", stream="hand", payload="joints")`. Subclasses implement
+    `_acquire(true_ns)`: the payload acquired at that session time (its stamp is replaced on delivery)."""
 
+    stream: ClassVar[str]  # e.g. "hand": /<kind>/<name>/hand
+    payload: ClassVar[str]  # "joints", "pose" or "image"
     acquire_on_time: ClassVar[bool] = False  # wake up at acquisition time (a camera renders "now")
 
-    def __init__(self, name: str, settings: TimingSettings, context):
+    def __init_subclass__(cls, stream: str = "", payload: str = "", **kwargs: Any):
+        super().__init_subclass__(**kwargs)
+        if stream:
+            cls.stream, cls.payload = stream, payload
+
+    def __init__(self, name: str, settings: T, context: DeviceContext):
         super().__init__(name, settings, context)
+        self.stream_topic = self.topic(self.stream)
         self.period_ns = int(round(1e9 / settings.rate_hz))
         self.truth: TruthLog = shared_truth(context.shared)
         if settings.truth_log:
@@ -88,8 +114,11 @@ class SimDevice(Device):
     def where(self, key: str | None = None) -> str:
         return f"[devices.{self.name}]" + (f".{key}" if key else "")
 
-    def bad_setting(self, key: str, message: str) -> ConfigError:
+    def bad_setting(self, key: str | None, message: str) -> ConfigError:
         return ConfigError(message, self.where(key))
+
+    def streams(self) -> list[StreamSpec]:
+        return [StreamSpec(self.stream_topic, self.payload, self.settings.rate_hz)]
 
     # ---- the device's own clock ----------------------------------------------------------------
     def connect(self) -> None:
@@ -147,26 +176,26 @@ class SimDevice(Device):
             for p in self._pending:
                 if p.true_ns > now:
                     break
-                if p.samples is None:
-                    p.samples = self._acquire(p.true_ns)
+                if p.payload is None:
+                    p.payload = self._acquire(p.true_ns)
             out: list[Sample] = []
             # `now` is when this pass woke up: what had arrived by then was received then (making the
             # payloads is the simulator's own work, not part of the transport).
-            while self._pending and self._pending[0].arrive_ns <= now and self._pending[0].samples is not None:
+            while self._pending and self._pending[0].arrive_ns <= now and self._pending[0].payload is not None:
                 p = self._pending.popleft()
                 receive = now
                 stamp = self.sync.observe(p.device_ns, receive)
-                for topic, payload in p.samples:
-                    out.append(Sample(topic, dataclasses.replace(payload, stamp_ns=stamp)))
-                    self.truth.add(TruthRecord(topic, stamp, p.true_ns, p.device_ns, receive))
+                out.append(Sample(self.stream_topic, dataclasses.replace(p.payload, stamp_ns=stamp)))
+                self.truth.add(TruthRecord(self.stream_topic, stamp, p.true_ns, p.device_ns, receive))
             if out:
                 return out
             wake = self._pending[0].arrive_ns
             if self.acquire_on_time:
-                wake = min(wake, next(p.true_ns for p in self._pending if p.samples is None))
+                wake = min(wake, next(p.true_ns for p in self._pending if p.payload is None))
             if now >= deadline:
                 return []
             self._sleep_until(min(wake, deadline))
 
-    def _acquire(self, true_ns: int) -> list[tuple[str, Any]]:
-        raise NotImplementedError
+    @abstractmethod
+    def _acquire(self, true_ns: int) -> Any:
+        """The payload (a JointSample, PoseSample or ImageSample) acquired at session time true_ns."""

@@ -13,7 +13,7 @@ from typing import Callable
 
 import numpy as np
 
-from teleprev.human.smplx import JOINT_INDEX
+from teleprev.devices import smplx
 
 HandAngles = np.ndarray  # (30,): flexion of the 15 SMPL-X hand joints, then their abduction
 
@@ -23,9 +23,9 @@ def _hand(fingers: dict[str, tuple[float, float, float]], spread: dict[str, floa
     out = np.zeros(30)
     for finger, flex in (*fingers.items(), ("thumb", thumb)):
         for i, v in enumerate(flex, start=1):
-            out[JOINT_INDEX[f"{finger}{i}"]] = v
+            out[smplx.JOINT_INDEX[f"{finger}{i}"]] = v
     for finger, a in (*spread.items(), ("thumb", thumb_abduction)):
-        out[15 + JOINT_INDEX[f"{finger}1"]] = a
+        out[15 + smplx.JOINT_INDEX[f"{finger}1"]] = a
     return out
 
 

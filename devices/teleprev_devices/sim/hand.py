@@ -4,23 +4,16 @@ its speed limits and reporting its state."""
 
 from __future__ import annotations
 
-from dataclasses import dataclass
-
 import numpy as np
 
-from teleprev_devices.sim.actuator import SimActuator
-from teleprev_devices.sim.device import TimingSettings
-from teleprev.errors import ConfigError
-from teleprev.topics import device_topic
+from teleprev.devices import ConfigError, DeviceContext
+from teleprev_devices.sim.actuator import ActuatorSettings, SimActuator
+from teleprev_devices.sim.device import timing
 
 
-@dataclass
-class HandSettings(TimingSettings):
-    rate_hz: float = 90.0  # the LEAP Hand's position read-out tops out around 90 Hz
-    latency_ms: float = 1.5
-    jitter_ms: float = 0.3
-    clock_offset_s: float = 77.7
-    clock_drift_ppm: float = -6.0
+# rate: the LEAP Hand's position read-out tops out around 90 Hz
+@timing(rate_hz=90.0, latency_ms=1.5, jitter_ms=0.3, clock_offset_s=77.7, clock_drift_ppm=-6.0)
+class HandSettings(ActuatorSettings):
     home: tuple[float, ...] = ()  # starting positions; empty: open (LEAP all zeros, gripper 0.085 m, vacuum off)
     max_velocity: float = 0.0  # rad/s (m/s for the gripper) for every joint; 0: the URDF's velocity limits
     switch_ms: float = 60.0  # vacuum: time for the suction to build up or release
@@ -31,13 +24,10 @@ class HandSettings(TimingSettings):
             raise ValueError(f"max_velocity must be >= 0 and switch_ms > 0, got {self.max_velocity} and {self.switch_ms}")
 
 
-class SimHand(SimActuator):
+class SimHand(SimActuator[HandSettings], kind="hand"):
     """JointSample of the end effector's joints on /hand/<name>/state (context.end_effector decides which)."""
 
-    kind = "hand"
-    Settings = HandSettings
-
-    def __init__(self, name, settings, context):
+    def __init__(self, name: str, settings: HandSettings, context: DeviceContext):
         super().__init__(name, settings, context)
         model = self.world.model
         try:
@@ -56,12 +46,10 @@ class SimHand(SimActuator):
             if missing:
                 raise self.bad_setting(None, f"robot {model.name!r} has no joints {missing} for end effector "
                                              f"{ee!r}; check [rig] robot and end_effector")
-            idx = model.indices(self.joint_names)
-            self.lower, self.upper = model.lower[idx], model.upper[idx]
-            self.max_velocity = self.velocity_caps(model.velocity_limit[idx], settings.max_velocity)
-            default_home = np.clip(np.zeros(len(idx)), self.lower, self.upper) if ee == "leap_hand" else self.upper.copy()
+            self.use_urdf_joints(self.joint_names)
+            default_home = (np.clip(np.zeros(len(self.joint_names)), self.lower, self.upper) if ee == "leap_hand"
+                            else self.upper.copy())
         self.home = self.check_home(np.array(settings.home, dtype=float) if settings.home else default_home)
-        self.topic = device_topic("hand", name, "state")
 
     def state_positions(self) -> np.ndarray:
         if self.end_effector == "vacuum":

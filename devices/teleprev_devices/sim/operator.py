@@ -44,13 +44,12 @@ import numpy as np
 
 from teleprev_devices.sim import grasps
 from teleprev_devices.sim.tasks import SCRIPTS, TASKS, SceneObject, Script
-from teleprev.human.smplx import hand_pose_from_angles
-from teleprev.transforms import matrix_to_quat, rpy_to_matrix
+from teleprev.devices import ConfigError, smplx, transforms
 
 REST_WRIST = np.array([0.30, -0.15, 1.00])
 # Palm left (+y), thumb up (+z), fingers forward (+x), as columns of the SMPL-X hand frame's axes
 # (fingers -x, palm -y, thumb +z), then tilted 20 degrees down about the world y axis.
-REST_ROTATION = rpy_to_matrix(0.0, np.deg2rad(20.0), 0.0) @ np.diag([-1.0, -1.0, 1.0])
+REST_ROTATION = transforms.rpy_to_matrix(0.0, np.deg2rad(20.0), 0.0) @ np.diag([-1.0, -1.0, 1.0])
 _KEEP_EPISODES = 6
 
 
@@ -72,11 +71,11 @@ class OperatorState:
 
     @property
     def wrist_quaternion(self) -> np.ndarray:
-        return matrix_to_quat(self.wrist_rotation)
+        return transforms.matrix_to_quat(self.wrist_rotation)
 
     @property
     def hand_pose(self) -> np.ndarray:
-        return hand_pose_from_angles(self.flexion, self.abduction)
+        return smplx.hand_pose_from_angles(self.flexion, self.abduction)
 
 
 class _Track:
@@ -293,7 +292,7 @@ class SimOperator:
             phase = ep.phase_names[max(phase_i, 0)]
         position = REST_WRIST + w[:3] + self._wrist_tremor(t)
         rpy = w[3:] + self._rot_tremor(t)
-        rotation = rpy_to_matrix(*rpy) @ REST_ROTATION
+        rotation = transforms.rpy_to_matrix(*rpy) @ REST_ROTATION
         angles = h + self._finger_tremor(t)
         return OperatorState(t, ep.index, ep.task, phase, position, rotation, angles[:15], angles[15:])
 
@@ -339,7 +338,6 @@ def shared_operator(context, device: str, seed: int, task_setting: str) -> SimOp
     """The rig's one operator, so that glove and suit stream the same person. Created by the first sim
     device that asks; a second device asking for another seed or task is a configuration error."""
     from teleprev_devices.sim.shared import get_or_create
-    from teleprev.errors import ConfigError
 
     task, mode = task_mode(task_setting)
 

@@ -13,11 +13,8 @@ from dataclasses import dataclass
 import cv2
 import numpy as np
 
-from teleprev_devices.sim.tasks import SceneObject
-from teleprev_devices.sim.world import TABLE, PlacedObject
-from teleprev.robot.geometry import BOX_CORNER_SIGNS, BOX_FACE_NORMALS, BOX_FACES, RobotShapes
-from teleprev.robot.model import RobotModel
-from teleprev.transforms import make_transform, rpy_to_matrix
+from teleprev_devices.sim.world import TABLE, PlacedObject, yaw_pose
+from teleprev.devices import RobotModel, robot_geometry
 
 _SHIFT = 4  # sub-pixel bits for cv2 polygon coordinates
 _SCALE = 1 << _SHIFT
@@ -31,7 +28,10 @@ HAND_COLOUR = (48, 48, 52)
 TIP_COLOUR = (225, 225, 225)
 TOOL_COLOUR = (128, 120, 118)
 _EDGE = (60, 60, 60)
-_FACES = np.array(BOX_FACES)
+_FACES = np.array(robot_geometry.BOX_FACES)
+_CORNER_SIGNS = robot_geometry.BOX_CORNER_SIGNS
+_FACE_NORMALS = robot_geometry.BOX_FACE_NORMALS
+_TABLE_POSE = yaw_pose(TABLE.yaw, TABLE.centre)
 
 
 @dataclass(frozen=True)
@@ -93,7 +93,7 @@ class SceneRenderer:
     def __init__(self, model: RobotModel, width: int = 640, height: int = 480, view: str = "front",
                  fov_deg: float = 60.0, noise: float = 2.0, seed: int = 0):
         self.camera = Pinhole(width, height, fov_deg, VIEWS[view])
-        self.shapes = RobotShapes(model, "visual")
+        self.shapes = robot_geometry.RobotShapes(model, "visual")
         self.width, self.height = width, height
         arm = {j.child for j in model.joints if j.name.startswith("joint")} | {model.desc.root}
         colours = []
@@ -123,7 +123,7 @@ class SceneRenderer:
         top, bottom = np.array([205, 200, 192.0]), np.array([150, 146, 140.0])
         img = np.ascontiguousarray(np.broadcast_to(top + (bottom - top) * ramp, (h, w, 3)).astype(np.uint8))
         items: list = []
-        self._box_items(items, np.array([_object_pose(TABLE)]), np.array([TABLE.size]), np.array([TABLE.colour], float))
+        self._box_items(items, np.array([_TABLE_POSE]), np.array([TABLE.size]), np.array([TABLE.colour], float))
         self._paint(img, items)
         return img
 
@@ -133,10 +133,10 @@ class SceneRenderer:
             return
         rot = poses[:, :3, :3]
         centres = poses[:, :3, 3]
-        corners = centres[:, None, :] + (sizes[:, None, :] / 2 * BOX_CORNER_SIGNS) @ np.swapaxes(rot, -1, -2)
+        corners = centres[:, None, :] + (sizes[:, None, :] / 2 * _CORNER_SIGNS) @ np.swapaxes(rot, -1, -2)
         uv, z = self.camera.project(corners)
-        normals = BOX_FACE_NORMALS @ np.swapaxes(rot, -1, -2)  # (B, 6, 3)
-        face_centres = centres[:, None, :] + normals * (sizes[:, None, :] / 2 * np.abs(BOX_FACE_NORMALS)).sum(-1, keepdims=True)
+        normals = _FACE_NORMALS @ np.swapaxes(rot, -1, -2)  # (B, 6, 3)
+        face_centres = centres[:, None, :] + normals * (sizes[:, None, :] / 2 * np.abs(_FACE_NORMALS)).sum(-1, keepdims=True)
         facing = np.einsum("bfi,bfi->bf", normals, self.camera.eye - face_centres) > 0
         shades = _shade(colours[:, None, :], normals)
         depth = np.linalg.norm(centres - self.camera.eye, axis=1).tolist()
@@ -249,7 +249,3 @@ def _perp_light(axis: np.ndarray) -> np.ndarray:
     """The direction across a cylinder's axis that faces the light most (for its side shade)."""
     p = _LIGHT - (axis @ _LIGHT)[:, None] * axis
     return p / np.maximum(np.linalg.norm(p, axis=1, keepdims=True), 1e-9)
-
-
-def _object_pose(o: SceneObject) -> np.ndarray:
-    return make_transform(rpy_to_matrix(0.0, 0.0, o.yaw), o.centre)

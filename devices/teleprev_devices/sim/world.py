@@ -18,9 +18,7 @@ import numpy as np
 
 from teleprev_devices.sim.shared import get_or_create
 from teleprev_devices.sim.tasks import TABLE_Z, SCRIPTS, SceneObject
-from teleprev.robot.effectors import EFFECTORS
-from teleprev.robot.model import RobotModel, load_robot
-from teleprev.transforms import make_transform, rpy_to_matrix
+from teleprev.devices import EFFECTORS, RobotModel, load_robot, transforms
 
 # SimArm's default home: the palm (TCP) forward at about (0.40, 0, 0.30) m, fingers 20 degrees down.
 DEFAULT_HOME = (0.0, -0.27, -0.11, 0.0, -0.85, -1.571)
@@ -28,6 +26,11 @@ DEFAULT_ANCHOR = np.array([0.405, 0.0, 0.30])  # that TCP, in the robot base fra
 TABLE = SceneObject("table", "box", (1.2, 1.3, 0.04), (0.30, 0.0, -0.02), 0.0, (95, 120, 150), False)
 
 _GRASP_REACH = 0.09  # metres between the grasp point and an object's centre for a grasp to hold it
+
+
+def yaw_pose(yaw: float, centre) -> np.ndarray:
+    """A 4x4 pose standing upright at `centre`, turned `yaw` about z."""
+    return transforms.make_transform(transforms.rpy_to_matrix(0.0, 0.0, yaw), centre)
 
 
 @dataclass
@@ -87,7 +90,7 @@ class SimWorld:
         if self._grasp_link is None:
             return None
         m = self.model.fk(q).matrix(self._grasp_link)
-        return m @ make_transform(translation=self._grasp_offset)
+        return m @ transforms.make_transform(translation=self._grasp_offset)
 
     def _reach_points(self, q: np.ndarray, grip: np.ndarray) -> list[np.ndarray]:
         points = [grip[:3, 3]]
@@ -110,7 +113,7 @@ class SimWorld:
         placed = []
         for o in objects:
             centre = np.array([self.anchor[0] + o.centre[0], self.anchor[1] + o.centre[1], o.centre[2] - TABLE_Z])
-            placed.append(PlacedObject(o, make_transform(rpy_to_matrix(0.0, 0.0, o.yaw), centre)))
+            placed.append(PlacedObject(o, yaw_pose(o.yaw, centre)))
         return placed
 
     def _scene_source(self, now_ns: int) -> tuple[tuple, tuple[SceneObject, ...]]:
@@ -158,7 +161,7 @@ class SimWorld:
             if np.linalg.norm(peg.pose[:3, 3] - obj.pose[:3, 3]) < _GRASP_REACH:
                 # Let go next to the peg: it hangs from it, long side down.
                 hang = peg.pose[:3, 3] - [0.0, 0.0, obj.spec.size[0] / 2 - 0.01]
-                obj.pose = make_transform(rpy_to_matrix(0.0, np.pi / 2, 0.0), hang)
+                obj.pose = transforms.make_transform(transforms.rpy_to_matrix(0.0, np.pi / 2, 0.0), hang)
                 return
         # Onto whatever it is above (a stacked cup rests on the one below), else the table.
         floor = 0.0
@@ -167,7 +170,7 @@ class SimWorld:
                 continue
             if np.linalg.norm(other.pose[:2, 3] - obj.pose[:2, 3]) < other.spec.size[0]:
                 floor = max(floor, other.pose[2, 3] + other.spec.size[1] / 2 - 0.07)
-        obj.pose = make_transform(rpy_to_matrix(0.0, 0.0, yaw), [obj.pose[0, 3], obj.pose[1, 3], floor + height / 2])
+        obj.pose = yaw_pose(yaw, [obj.pose[0, 3], obj.pose[1, 3], floor + height / 2])
 
 
 def shared_world(context) -> SimWorld:

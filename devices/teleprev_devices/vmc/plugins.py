@@ -10,21 +10,22 @@ the socket; both plugins on one host and port share one receiver (one sender, tw
 from __future__ import annotations
 
 import ipaddress
+from abc import abstractmethod
 from dataclasses import dataclass
+from typing import TypeVar
 
 import numpy as np
 
-from teleprev.devices.contract import Device, StreamSpec
+from teleprev.devices import (
+    Device, DeviceContext, DeviceError, JointSample, PoseSample, Sample, StreamSpec, smplx, transforms,
+)
 from teleprev_devices.vmc import unity
 from teleprev_devices.vmc.receiver import Frame, VmcReceiver, acquire, release
-from teleprev.errors import DeviceError
-from teleprev.human.smplx import BODY_JOINTS, HAND_POSE_NAMES
-from teleprev.messages import JointSample, PoseSample, Sample
-from teleprev.transforms import quat_multiply
-from teleprev.topics import device_topic
 
-BODY_POSE_NAMES: tuple[str, ...] = tuple(f"{j}.{c}" for j in BODY_JOINTS for c in "xyz")
+BODY_POSE_NAMES: tuple[str, ...] = tuple(f"{j}.{c}" for j in smplx.BODY_JOINTS for c in "xyz")
 _IDENTITY = np.array([0.0, 0.0, 0.0, 1.0])
+_ARM_CHAIN = frozenset(unity.RIGHT_ARM_CHAIN) | {""}  # a frame updating any of these moves the wrist
+_FINGERS = frozenset(unity.RIGHT_HAND_BONES)
 
 
 @dataclass
@@ -52,8 +53,11 @@ class VmcSuitSettings(VmcSettings):
     body: bool = False  # also publish the SMPL-X body joints on /suit/<name>/body
 
 
-class _VmcDevice(Device):
-    def __init__(self, name, settings, context):
+V = TypeVar("V", bound=VmcSettings)
+
+
+class _VmcDevice(Device[V]):
+    def __init__(self, name: str, settings: V, context: DeviceContext):
         super().__init__(name, settings, context)
         self._receiver: VmcReceiver | None = None
         self._sub = None
@@ -97,22 +101,19 @@ class _VmcDevice(Device):
             raise DeviceError(f"no VMC frames on UDP {s.host}:{s.port} for {limit:g} s "
                               "(is the sender running and sending to this address?)", f"device {self.name!r}")
 
+    @abstractmethod
     def convert(self, frame: Frame) -> list[Sample]:
-        raise NotImplementedError
+        """The samples one frame of the sender gives this device."""
 
 
-class VmcSuit(_VmcDevice):
+class VmcSuit(_VmcDevice[VmcSuitSettings], kind="suit"):
     """The right wrist (PoseSample, frame "suit") on /suit/<name>/wrist; with body = true also the SMPL-X
     body joints' local rotations (JointSample, "<joint>.x|y|z") on /suit/<name>/body."""
 
-    kind = "suit"
-    Settings = VmcSuitSettings
-
-    def __init__(self, name, settings, context):
+    def __init__(self, name: str, settings: VmcSuitSettings, context: DeviceContext):
         super().__init__(name, settings, context)
-        self.wrist_topic = device_topic("suit", name, "wrist")
-        self.body_topic = device_topic("suit", name, "body")
-        self._chain = frozenset(unity.RIGHT_ARM_CHAIN) | {""}
+        self.wrist_topic = self.topic("wrist")
+        self.body_topic = self.topic("body")
 
     def streams(self) -> list[StreamSpec]:
         out = [StreamSpec(self.wrist_topic, "pose", self.settings.rate_hz)]
@@ -123,31 +124,23 @@ class VmcSuit(_VmcDevice):
     def convert(self, frame: Frame) -> list[Sample]:
         out = []
         bones = frame.bones
-        if not frame.updated.isdisjoint(self._chain) and unity.RIGHT_ARM_REQUIRED <= bones.keys():
+        if not frame.updated.isdisjoint(_ARM_CHAIN) and unity.RIGHT_ARM_REQUIRED <= bones.keys():
             out.append(Sample(self.wrist_topic, wrist_pose(bones, frame.stamp_ns)))
         if self.settings.body and "Hips" in bones:
             out.append(Sample(self.body_topic, JointSample(frame.stamp_ns, BODY_POSE_NAMES, body_pose(bones))))
         return out
 
 
-class VmcGlove(_VmcDevice):
+class VmcGlove(_VmcDevice[VmcSettings], kind="glove"):
     """The right hand's finger bones as the SMPL-X hand pose (45 values) on /glove/<name>/hand."""
 
-    kind = "glove"
-    Settings = VmcSettings
-
-    def __init__(self, name, settings, context):
-        super().__init__(name, settings, context)
-        self.topic = device_topic("glove", name, "hand")
-        self._fingers = frozenset(unity.RIGHT_HAND_BONES)
-
     def streams(self) -> list[StreamSpec]:
-        return [StreamSpec(self.topic, "joints", self.settings.rate_hz)]
+        return [StreamSpec(self.topic("hand"), "joints", self.settings.rate_hz)]
 
     def convert(self, frame: Frame) -> list[Sample]:
-        if frame.updated.isdisjoint(self._fingers):
+        if frame.updated.isdisjoint(_FINGERS):
             return []
-        return [Sample(self.topic, JointSample(frame.stamp_ns, HAND_POSE_NAMES, hand_pose(frame.bones)))]
+        return [Sample(self.topic("hand"), JointSample(frame.stamp_ns, smplx.HAND_POSE_NAMES, hand_pose(frame.bones)))]
 
 
 def _rotations(bones: dict, names: tuple[str, ...]) -> np.ndarray:
@@ -165,7 +158,7 @@ def body_pose(bones: dict) -> np.ndarray:
     quats = _rotations(bones, unity.BODY_BONES)
     root = bones.get("")
     if root is not None:
-        quats[0] = quat_multiply(root.rotation, quats[0])
+        quats[0] = transforms.quat_multiply(root.rotation, quats[0])
     return unity.local_rotations_to_smplx(quats).reshape(-1)
 
 

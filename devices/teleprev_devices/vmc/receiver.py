@@ -20,8 +20,7 @@ import numpy as np
 from pythonosc.osc_packet import OscPacket
 
 from teleprev_devices.vmc.unity import KNOWN_BONES
-from teleprev.errors import DeviceError
-from teleprev.clock import ClockSync, SessionClock
+from teleprev.devices import ClockSync, DeviceError, SessionClock
 
 _MAX_DATAGRAM = 65535
 _QUEUE = 256  # frames kept per subscriber that is not reading fast enough

@@ -28,8 +28,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from teleprev.human.smplx import BODY_JOINTS, HAND_JOINTS
-from teleprev.transforms import matrix_to_quat, quat_to_axis_angle, quat_to_matrix
+from teleprev.devices import smplx, transforms
 
 # UnityEngine.HumanBodyBones, in enum order.
 HUMAN_BODY_BONES: tuple[str, ...] = (
@@ -51,10 +50,10 @@ RIGHT_ARM_REQUIRED = frozenset({"Hips", "Spine", "RightUpperArm", "RightLowerArm
 
 _FINGER_BONE = {"index": "Index", "middle": "Middle", "pinky": "Little", "ring": "Ring", "thumb": "Thumb"}
 _PART = {"1": "Proximal", "2": "Intermediate", "3": "Distal"}
-# SMPL-X hand joint -> Unity bone, in HAND_JOINTS order (index1 <- RightIndexProximal, ...).
-RIGHT_HAND_BONES: tuple[str, ...] = tuple(f"Right{_FINGER_BONE[j[:-1]]}{_PART[j[-1]]}" for j in HAND_JOINTS)
+# SMPL-X hand joint -> Unity bone, in smplx.HAND_JOINTS order (index1 <- RightIndexProximal, ...).
+RIGHT_HAND_BONES: tuple[str, ...] = tuple(f"Right{_FINGER_BONE[j[:-1]]}{_PART[j[-1]]}" for j in smplx.HAND_JOINTS)
 
-# SMPL-X body joint -> Unity bone, in BODY_JOINTS order; pelvis is the global orientation (root * Hips).
+# SMPL-X body joint -> Unity bone, in smplx.BODY_JOINTS order; pelvis is the global orientation (root * Hips).
 BODY_BONES: tuple[str, ...] = tuple({
     "pelvis": "Hips", "left_hip": "LeftUpperLeg", "right_hip": "RightUpperLeg", "spine1": "Spine",
     "left_knee": "LeftLowerLeg", "right_knee": "RightLowerLeg", "spine2": "Chest", "left_ankle": "LeftFoot",
@@ -62,7 +61,7 @@ BODY_BONES: tuple[str, ...] = tuple({
     "neck": "Neck", "left_collar": "LeftShoulder", "right_collar": "RightShoulder", "head": "Head",
     "left_shoulder": "LeftUpperArm", "right_shoulder": "RightUpperArm", "left_elbow": "LeftLowerArm",
     "right_elbow": "RightLowerArm", "left_wrist": "LeftHand", "right_wrist": "RightHand",
-}[j] for j in BODY_JOINTS)
+}[j] for j in smplx.BODY_JOINTS)
 
 D = np.diag([-1.0, 1.0, 1.0])
 C = np.array([[0.0, 0.0, 1.0], [-1.0, 0.0, 0.0], [0.0, 1.0, 0.0]])
@@ -71,12 +70,12 @@ _D_QUAT = np.array([1.0, -1.0, -1.0, 1.0])  # D R D on a quaternion x y z w
 
 def local_rotations_to_smplx(quats: np.ndarray) -> np.ndarray:
     """Unity local rotations (..., 4) x y z w -> SMPL-X axis-angle (..., 3): D R D."""
-    return quat_to_axis_angle(np.asarray(quats, dtype=float) * _D_QUAT)
+    return transforms.quat_to_axis_angle(np.asarray(quats, dtype=float) * _D_QUAT)
 
 
 def transform(position: np.ndarray, quat: np.ndarray) -> np.ndarray:
     t = np.eye(4)
-    t[:3, :3] = quat_to_matrix(quat)
+    t[:3, :3] = transforms.quat_to_matrix(quat)
     t[:3, 3] = position
     return t
 
@@ -91,4 +90,4 @@ def chain(root: np.ndarray, locals_: list[np.ndarray]) -> np.ndarray:
 
 def wrist_in_suit(world_unity: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """(position (3,), quaternion x y z w) of the SMPL-X right-hand frame in the suit frame."""
-    return C @ world_unity[:3, 3], matrix_to_quat(C @ world_unity[:3, :3] @ D)
+    return C @ world_unity[:3, 3], transforms.matrix_to_quat(C @ world_unity[:3, :3] @ D)
