@@ -13,5 +13,6 @@ class DeviceRow:
     rate_hz: float
     nominal_hz: float
     latency_ms: float
-    dropped: int
+    dropped: int  # samples the session loop's queue had no room for
+    lost: int  # samples the device's runner could not hand to the loop (the sink raised)
     errors: int

@@ -137,5 +137,6 @@ class LiveSession:
             s = runner.stats()
             prefix = f"/{self.devices[name].kind}/{name}/"
             dropped = sum(n for topic, n in self.loop.stats.dropped.items() if topic.startswith(prefix))
-            rows.append(DeviceRow(name, self.devices[name].kind, s.state, s.rate_hz, s.nominal_hz, s.latency_ms, dropped, s.errors))
+            rows.append(DeviceRow(name, self.devices[name].kind, s.state, s.rate_hz, s.nominal_hz, s.latency_ms, dropped,
+                                  s.sink_errors, s.errors))
         return rows

@@ -53,7 +53,7 @@ def episode_line(snap: LoopSnapshot, now_ns: int) -> Text:
 
 def device_table(rows: list[DeviceRow]) -> Table:
     table = Table(expand=True, box=None, padding=(0, 1))
-    for col, just in (("device", "left"), ("kind", "left"), ("state", "left"), ("rate", "right"), ("latency", "right"), ("drops", "right"), ("errors", "right")):
+    for col, just in (("device", "left"), ("kind", "left"), ("state", "left"), ("rate", "right"), ("latency", "right"), ("drops", "right"), ("lost", "right"), ("errors", "right")):
         table.add_column(col, justify=just, no_wrap=True)
     for r in rows:
         state_style = {"ok": "green", "gap": "bold yellow", "error": "bold red"}.get(r.state, "dim")
@@ -61,7 +61,8 @@ def device_table(rows: list[DeviceRow]) -> Table:
         table.add_row(
             r.name, r.kind, Text(r.state, style=state_style),
             Text(f"{r.rate_hz:6.1f}/{r.nominal_hz:g} Hz", style="yellow" if slow else ""),
-            f"{r.latency_ms:5.1f} ms", Text(str(r.dropped), style="red" if r.dropped else ""), Text(str(r.errors), style="red" if r.errors else ""),
+            f"{r.latency_ms:5.1f} ms", Text(str(r.dropped), style="red" if r.dropped else ""),
+            Text(str(r.lost), style="red" if r.lost else ""), Text(str(r.errors), style="red" if r.errors else ""),
         )
     return table
 
