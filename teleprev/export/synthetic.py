@@ -73,13 +73,15 @@ def arm_q(t_s: np.ndarray | float) -> np.ndarray:
     return 0.3 * np.sin(2 * np.pi * 0.2 * t + np.arange(6)) + np.array([0.0, -0.27, -0.11, 0.0, -0.85, -1.571])
 
 
-def effector_q(end_effector: str, t_s: np.ndarray | float) -> np.ndarray:
+def effector_q(name: str, t_s: np.ndarray | float) -> np.ndarray:
+    """A smooth motion of the end effector's joints: hand joints waving, a jaw opening and closing, a switch."""
     t = np.asarray(t_s, dtype=float)[..., None]
-    if end_effector == "leap_hand":
-        return 0.6 + 0.5 * np.sin(2 * np.pi * 0.5 * t + np.arange(16) / 3)
-    if end_effector == "parallel_gripper":
+    spec = end_effector(name)
+    if spec.is_switch:
+        return (np.sin(2 * np.pi * 0.25 * t) > 0).astype(float)
+    if len(spec.joints) == 1:  # a jaw, opening in metres
         return 0.0425 + 0.04 * np.sin(2 * np.pi * 0.3 * t)
-    return (np.sin(2 * np.pi * 0.25 * t) > 0).astype(float)
+    return 0.6 + 0.5 * np.sin(2 * np.pi * 0.5 * t + np.arange(len(spec.joints)) / 3)
 
 
 def glove_q(t_s: np.ndarray | float) -> np.ndarray:
