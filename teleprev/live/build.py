@@ -6,13 +6,18 @@ from pathlib import Path
 
 import numpy as np
 
+from teleprev.errors import ConfigError
 from teleprev.pipeline.effectors import GripperEffector, LeapEffector, VacuumEffector
 from teleprev.pipeline.guard import JointGuard
+from teleprev.pipeline.motion import Motion
 from teleprev.pipeline.step import Pipeline
+from teleprev.pipeline.swept import SweptCheck
+from teleprev.pipeline.trajectory import ArmGenerator, HandLimiter
 from teleprev.retarget.arm import ArmRetargeter
 from teleprev.retarget.calibration import Calibration, load_calibration
 from teleprev.rig import Rig
 from teleprev.robot.ik import ArmIK
+from teleprev.robot.limits import arm_limits, effector_limits
 from teleprev.robot.model import load_robot
 
 
@@ -27,7 +32,54 @@ def models_dir(rig: Rig, override: str | Path | None = None) -> Path | None:
     return rig.resolve(rig.rig.models) if rig.rig.models else None
 
 
-def build_pipeline(rig: Rig, models: str | Path | None = None, calibration: Calibration | None = None) -> Pipeline:
+def _where(rig: Rig, key: str) -> str:
+    return f"{rig.path or 'rig'} [pipeline].{key}"
+
+
+def _limit(rig: Rig, key: str, default: float | None, what: str) -> float:
+    """The rig's value for `key`, else the robot table's; a ConfigError naming the key when neither has one."""
+    value = getattr(rig.pipeline, key)
+    if value is None:
+        value = default
+    if value is None:
+        raise ConfigError(f"no {what} for robot {rig.rig.robot!r} in teleprev/robot/limits.py: set {key} in the rig",
+                          _where(rig, key))
+    return float(value)
+
+
+def _capped_speed(rig: Rig, key: str, urdf_velocity: np.ndarray) -> np.ndarray:
+    value = getattr(rig.pipeline, key)
+    if value > urdf_velocity.min() + 1e-12:
+        raise ConfigError(f"{value:g} rad/s is looser than the URDF's velocity limit ({urdf_velocity.min():g} rad/s)",
+                          _where(rig, key))
+    return np.minimum(urdf_velocity, value)
+
+
+def build_motion(rig: Rig, ik: ArmIK, arm_speed: np.ndarray, effector) -> Motion:
+    """The arm's jerk-limited generator and the hand's acceleration cap and swept check, from the robot
+    table (teleprev/robot/limits.py) and the rig's [pipeline] keys."""
+    cfg = rig.pipeline
+    table = arm_limits(rig.rig.robot)
+    n = len(arm_speed)
+    accel = _limit(rig, "arm_acceleration", table.acceleration if table else None, "arm acceleration limit")
+    jerk = _limit(rig, "arm_jerk", table.jerk if table else None, "arm jerk limit")
+    arm = ArmGenerator(ik.chain.lower, ik.chain.upper, arm_speed, np.full(n, accel), np.full(n, jerk))
+    hand = swept = None
+    row = effector_limits(rig.rig.end_effector)
+    if row is None or row.acceleration is not None:
+        g = effector.guard
+        hand_accel = _limit(rig, "hand_acceleration", row.acceleration if row else None, "hand acceleration limit")
+        hand = HandLimiter(g.lower, g.upper, g.speed, np.full(len(g.lower), hand_accel))
+    if getattr(effector, "corrector", None) is not None:
+        clearance = cfg.hand_clearance_mm if cfg.hand_clearance_mm is not None else (row.clearance_mm if row else 0.0)
+        swept = SweptCheck(effector.model, effector.corrector.checker, clearance / 1000.0)
+    return Motion(arm, hand, swept, feedforward=cfg.arm_feedforward, idle_after_ns=int(cfg.max_command_dt_ms * 1e6))
+
+
+def build_pipeline(rig: Rig, models: str | Path | None = None, calibration: Calibration | None = None,
+                   motion: bool = True) -> Pipeline:
+    """`motion`: acceleration and jerk limits on the commands (teleprev/pipeline/motion.py); sessions
+    recorded before them (format version 1) are re-run with motion=False."""
     cfg = rig.pipeline
     calibration = calibration if calibration is not None else rig_calibration(rig)
     robot = load_robot(rig.rig.robot)
@@ -35,7 +87,7 @@ def build_pipeline(rig: Rig, models: str | Path | None = None, calibration: Cali
     # bounded step; the best effort within the limits is flagged and the next step continues from it.
     ik = ArmIK(robot, cfg.tcp_link or rig.effector.tcp_link, position_tolerance=cfg.ik_position_tolerance,
                rotation_tolerance=cfg.ik_rotation_tolerance, max_iterations=cfg.ik_iterations, retry=False)
-    arm_speed = np.minimum(ik.chain.velocity_limit, cfg.arm_speed)
+    arm_speed = _capped_speed(rig, "arm_speed", ik.chain.velocity_limit) if motion else np.minimum(ik.chain.velocity_limit, cfg.arm_speed)
     max_dt = cfg.max_command_dt_ms / 1000.0
     arm_guard = JointGuard(ik.chain.lower, ik.chain.upper, arm_speed, max_dt)
     arm = ArmRetargeter(ik, cfg.wrist_scale, cfg.workspace_min, cfg.workspace_max, calibration.suit_to_robot())
@@ -44,9 +96,11 @@ def build_pipeline(rig: Rig, models: str | Path | None = None, calibration: Cali
 
         hand = load_robot(rig.effector.hand_urdf)
         corrector = Corrector.load(models_dir(rig, models), hand)
+        if motion:
+            _capped_speed(rig, "hand_speed", hand.velocity_limit)
         effector = LeapEffector(hand, corrector, cfg, max_dt, calibration.leap_map())
     elif rig.rig.end_effector == "parallel_gripper":
         effector = GripperEffector(robot, cfg, max_dt)
     else:
         effector = VacuumEffector(cfg, max_dt)
-    return Pipeline(cfg, arm, arm_guard, effector)
+    return Pipeline(cfg, arm, arm_guard, effector, build_motion(rig, ik, arm_speed, effector) if motion else None)
