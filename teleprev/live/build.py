@@ -17,6 +17,7 @@ from teleprev.retarget.arm import ArmRetargeter
 from teleprev.retarget.calibration import Calibration, load_calibration
 from teleprev.rig import Rig
 from teleprev.robot.ik import ArmIK
+from teleprev.robot.collision import SelfCollisionChecker
 from teleprev.robot.limits import arm_limits, effector_limits
 from teleprev.robot.model import load_robot
 
@@ -55,7 +56,12 @@ def _capped_speed(rig: Rig, key: str, urdf_velocity: np.ndarray) -> np.ndarray:
     return np.minimum(urdf_velocity, value)
 
 
-def build_motion(rig: Rig, ik: ArmIK, arm_speed: np.ndarray, effector) -> Motion:
+def hand_clearance_m(rig: Rig) -> float:
+    cfg, row = rig.pipeline, effector_limits(rig.rig.end_effector)
+    return (cfg.hand_clearance_mm if cfg.hand_clearance_mm is not None else (row.clearance_mm if row else 0.0)) / 1000.0
+
+
+def build_motion(rig: Rig, ik: ArmIK, arm_speed: np.ndarray, effector, swept: SweptCheck | None = None) -> Motion:
     """The arm's jerk-limited generator and the hand's acceleration cap and swept check, from the robot
     table (teleprev/robot/limits.py) and the rig's [pipeline] keys."""
     cfg = rig.pipeline
@@ -64,15 +70,12 @@ def build_motion(rig: Rig, ik: ArmIK, arm_speed: np.ndarray, effector) -> Motion
     accel = _limit(rig, "arm_acceleration", table.acceleration if table else None, "arm acceleration limit")
     jerk = _limit(rig, "arm_jerk", table.jerk if table else None, "arm jerk limit")
     arm = ArmGenerator(ik.chain.lower, ik.chain.upper, arm_speed, np.full(n, accel), np.full(n, jerk))
-    hand = swept = None
+    hand = None
     row = effector_limits(rig.rig.end_effector)
     if row is None or row.acceleration is not None:
         g = effector.guard
         hand_accel = _limit(rig, "hand_acceleration", row.acceleration if row else None, "hand acceleration limit")
         hand = HandLimiter(g.lower, g.upper, g.speed, np.full(len(g.lower), hand_accel))
-    if getattr(effector, "corrector", None) is not None:
-        clearance = cfg.hand_clearance_mm if cfg.hand_clearance_mm is not None else (row.clearance_mm if row else 0.0)
-        swept = SweptCheck(effector.model, effector.corrector.checker, clearance / 1000.0)
     return Motion(arm, hand, swept, feedforward=cfg.arm_feedforward, idle_after_ns=int(cfg.max_command_dt_ms * 1e6))
 
 
@@ -81,6 +84,7 @@ def build_pipeline(rig: Rig, models: str | Path | None = None, calibration: Cali
     """`motion`: acceleration and jerk limits on the commands (teleprev/pipeline/motion.py); sessions
     recorded before them (format version 1) are re-run with motion=False."""
     cfg = rig.pipeline
+    swept = None
     calibration = calibration if calibration is not None else rig_calibration(rig)
     robot = load_robot(rig.rig.robot)
     # Tracking: a bounded number of iterations and no cold-start retry, so an unreachable target costs a
@@ -95,7 +99,13 @@ def build_pipeline(rig: Rig, models: str | Path | None = None, calibration: Cali
         from teleprev.noncollision.corrector import Corrector
 
         hand = load_robot(rig.effector.hand_urdf)
-        corrector = Corrector.load(models_dir(rig, models), hand)
+        checker = None
+        if motion:
+            # The clearance is part of "collision-free" from the Corrector on: its exact check runs on the
+            # hand's shapes grown by half the margin, so targets keep it, and the guard checks the motion.
+            swept = SweptCheck(hand, SelfCollisionChecker(hand), hand_clearance_m(rig))
+            checker = swept.grown
+        corrector = Corrector.load(models_dir(rig, models), hand, checker)
         if motion:
             _capped_speed(rig, "hand_speed", hand.velocity_limit)
         effector = LeapEffector(hand, corrector, cfg, max_dt, calibration.leap_map())
@@ -103,4 +113,4 @@ def build_pipeline(rig: Rig, models: str | Path | None = None, calibration: Cali
         effector = GripperEffector(robot, cfg, max_dt)
     else:
         effector = VacuumEffector(cfg, max_dt)
-    return Pipeline(cfg, arm, arm_guard, effector, build_motion(rig, ik, arm_speed, effector) if motion else None)
+    return Pipeline(cfg, arm, arm_guard, effector, build_motion(rig, ik, arm_speed, effector, swept) if motion else None)

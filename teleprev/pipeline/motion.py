@@ -86,7 +86,8 @@ class Motion:
         arm_q = np.clip(arm_q, p.arm_guard.lower, p.arm_guard.upper)
         eff_q = np.clip(eff_q, p.effector.guard.lower, p.effector.guard.upper)
         if not p.effector.guard.valid(eff_q):
-            return state, "the end effector's measured state is not a valid command (self-collision?)"
+            return state, ("the end effector's measured state is not a valid command (self-collision, or closer "
+                           "than the clearance margin?)")
         m = MotionState(arm=JointMotion.rest(arm_q), hand_v=np.zeros_like(eff_q) if self.hand is not None else None)
         return replace(state, mode="execute", arm_cmd=arm_q, effector_cmd=eff_q, cmd_ns=inputs.t_ns, engaging=True,
                        motion=m), ""
@@ -164,8 +165,9 @@ class Motion:
                 eff_cmd, hand_v = self.hand.stop(last, hand_v, dt, m.dt)
                 if executing:
                     flags.append("hand_stopping")
-            if self.swept is not None and not self.swept.segment_free(last, eff_cmd):
-                eff_cmd, hand_v = self._avoid(last, hand_v, eff_cmd, dt, m.dt, flags)
+            if self.swept is not None and not (self.swept.segment_free(last, eff_cmd)
+                                               and self.swept.segment_free(eff_cmd, self._stop_point(eff_cmd, hand_v))):
+                eff_cmd, hand_v = self._avoid(last, m.hand_v, dt, m.dt, flags)
             if not np.any(eff_cmd != last):
                 hand_v = np.zeros_like(hand_v)
 
@@ -186,7 +188,13 @@ class Motion:
             flags.append("engaging")
         return replace(new, arm_cmd=a, effector_cmd=e, cmd_ns=inputs.t_ns, engaging=engaging, motion=m), arm_cmd, eff_cmd
 
-    def _avoid(self, last, v, cmd, dt, dt_before, flags):
+    def _stop_point(self, q, v):
+        """Where braking at the cap from q at v would end: a command is taken only if that way is free too,
+        so that the hand can always brake in time instead of stopping short."""
+        h = self.hand
+        return np.minimum(np.maximum(q + v * np.abs(v) / (2.0 * h.acceleration), h.lower), h.upper)
+
+    def _avoid(self, last, v, dt, dt_before, flags):
         """The capped step's segment would come too close to a collision: brake as hard as allowed, and
         only if even that segment is not free, stop short on the segment (safety before smoothness)."""
         braked, bv = self.hand.stop(last, v, dt, dt_before)
