@@ -114,3 +114,37 @@ def build_pipeline(rig: Rig, models: str | Path | None = None, calibration: Cali
     else:
         effector = VacuumEffector(cfg, max_dt)
     return Pipeline(cfg, arm, arm_guard, effector, build_motion(rig, ik, arm_speed, effector, swept) if motion else None)
+
+
+def motion_limits(rig: Rig) -> dict[str, dict]:
+    """The limits a rig's commands must keep, per side ("arm", "hand"): joint names, position limits,
+    velocity, acceleration, jerk (arm), and for a hand with self-collision its exact checker and the
+    link-motion bound (teleprev/pipeline/swept.py). `teleprev audit` measures sessions against these."""
+    from teleprev.pipeline.swept import reach_table
+
+    cfg = rig.pipeline
+    robot = load_robot(rig.rig.robot)
+    ik = ArmIK(robot, cfg.tcp_link or rig.effector.tcp_link)
+    table = arm_limits(rig.rig.robot)
+    arm = {"names": ik.chain.joint_names, "lower": ik.chain.lower, "upper": ik.chain.upper,
+           "velocity": _capped_speed(rig, "arm_speed", ik.chain.velocity_limit),
+           "acceleration": _limit(rig, "arm_acceleration", table.acceleration if table else None, "arm acceleration limit"),
+           "jerk": _limit(rig, "arm_jerk", table.jerk if table else None, "arm jerk limit")}
+    effector, row = rig.effector, effector_limits(rig.rig.end_effector)
+    accel = 0.0
+    if row is None or row.acceleration is not None:
+        accel = _limit(rig, "hand_acceleration", row.acceleration if row else None, "hand acceleration limit")
+    if effector.hand_urdf:
+        model = load_robot(effector.hand_urdf)
+        checker = SelfCollisionChecker(model)
+        hand = {"names": model.joint_names, "lower": model.lower, "upper": model.upper,
+                "velocity": _capped_speed(rig, "hand_speed", model.velocity_limit), "acceleration": accel,
+                "checker": checker, "reach": reach_table(model, checker.link_names)}
+    elif effector.is_switch:
+        hand = {"names": effector.joints, "lower": np.zeros(1), "upper": np.ones(1), "velocity": np.array([np.inf]),
+                "acceleration": 0.0}
+    else:
+        idx = robot.indices(effector.joints)
+        hand = {"names": effector.joints, "lower": robot.lower[idx], "upper": robot.upper[idx],
+                "velocity": robot.velocity_limit[idx], "acceleration": accel}
+    return {"arm": arm, "hand": hand}

@@ -21,9 +21,12 @@ import numpy as np
 
 from teleprev.pipeline.trajectory import ArmGenerator, HandLimiter, JointMotion
 
-ENGAGED_TOL = 5e-3  # rad (m for a gripper): the engage ramp is over once the commands are this close
+ENGAGED_TOL = 0.02  # rad (m for a gripper): the engage ramp is over once the commands come this close to the
+# targets (a human wrist often moves the target faster than the ramp's half speed, so a tight tolerance never ends it)
 FEEDFORWARD_MAX_GAP_NS = 100_000_000  # wrist samples further apart than this give no velocity estimate
 EXTRAPOLATE_MAX_NS = 50_000_000
+RESUME_GAP_NS = 60_000_000  # commands further apart than this: the arm has stopped at the last one (sim.arm agrees)
+RESUME_STEP_S = 0.01  # the first step after such a pause (the sim arm's state period)
 FEEDFORWARD_TAU_NS = 30e6  # smoothing of the target velocity estimate (IK jitters by its tolerance)
 
 
@@ -127,6 +130,9 @@ class Motion:
         """
         m = state.motion
         executing = state.mode == "execute"
+        if m is not None and not executing and m.moving and inputs.t_ns - state.cmd_ns > RESUME_GAP_NS:
+            # Braking after a switch to preview, but stalled past the resume gap: the arm stands already.
+            return replace(new, motion=None, arm_cmd=None, effector_cmd=None), None, None
         if m is None or not (executing or m.moving):
             return replace(new, motion=None) if m is not None else new, None, None
         if not executing:
@@ -134,6 +140,15 @@ class Motion:
             flags.append("stopping")
         dt = (inputs.t_ns - state.cmd_ns) / 1e9
         frac = p.cfg.engage_speed_frac if state.engaging else 1.0
+        if inputs.t_ns - state.cmd_ns > RESUME_GAP_NS and m.moving:
+            # No command went out for this long (the process stalled): a servo-mode arm has stood at the
+            # last command meanwhile, so carry on from rest there, not from where the motion would be.
+            m = replace(m, arm=JointMotion.rest(state.arm_cmd), hand_v=None if m.hand_v is None else np.zeros_like(m.hand_v),
+                        dt=0.0)
+            dt = RESUME_STEP_S  # the new start: at rest one short step ago, not at the last command's time
+            flags.append("commands_resumed")
+            if not (executing or m.moving):
+                return replace(new, motion=None, arm_cmd=None, effector_cmd=None, cmd_ns=inputs.t_ns), None, None
 
         arm_cmd = None
         arm, arm_reached = m.arm, arm_target is None

@@ -62,59 +62,73 @@ class ArmGenerator:
         self._position, self._velocity_interface = ControlInterface.Position, ControlInterface.Velocity
         self._inp.max_acceleration = self.acceleration.tolist()
         self._inp.max_jerk = self.jerk.tolist()
+        self._inp.target_position = [0.0] * n  # every target is planned in its own frame: at the origin, at rest
+        self._inp.target_velocity = [0.0] * n
+        self._inp.target_acceleration = [0.0] * n
         # Each joint on its own time-optimal profile: tracking a moving target, not a straight joint path.
         self._inp.synchronization = Synchronization.No
         self._zero = [0.0] * n
-        self._zero_v = np.zeros(n)
+        self._lower, self._upper = self.lower.tolist(), self.upper.tolist()
+        self._velocity, self._acceleration = self.velocity.tolist(), self.acceleration.tolist()
 
-    def _run(self, s: JointMotion, dt: float, velocity: np.ndarray, target: np.ndarray | None,
-             target_v: np.ndarray | None) -> tuple[JointMotion, float] | None:
+    def _run(self, s: JointMotion, dt: float, velocity: list[float], target: list[float] | None,
+             target_v: list[float] | None) -> tuple[JointMotion, float] | None:
         """`dt` seconds along the time-optimal profile to `target`, moving at constant `target_v`, or (no
         target) to rest; and the profile's duration. A moving target is planned in its own frame (where
         it stands still, and the velocity limits shift by its velocity), so the profile meets it rather
-        than the point where it was."""
+        than the point where it was. Plain floats: per-element numpy calls would cost more than ruckig."""
         inp = self._inp
-        tv = self._zero_v if target_v is None else target_v
-        inp.current_velocity = (s.v - tv).tolist()
+        tv = self._zero if target_v is None else target_v
+        cv, vmax, vmin, cp, base = [], [], [], [], []
+        for q, v, w, m, g in zip(s.q.tolist(), s.v.tolist(), tv, velocity, target if target is not None else tv):
+            cv.append(v - w)
+            vmax.append(m - w)
+            vmin.append(-m - w)
+            if target is None:
+                base.append(q + w * dt)
+            else:
+                # `target` is where the target is dt from now; it was at target - tv * dt when s was.
+                cp.append(q - (g - w * dt))
+        inp.current_velocity = cv
         inp.current_acceleration = s.a.tolist()
-        inp.max_velocity = (velocity - tv).tolist()
-        inp.min_velocity = (-velocity - tv).tolist()
-        inp.target_acceleration = self._zero
-        inp.target_velocity = self._zero
+        inp.max_velocity = vmax
+        inp.min_velocity = vmin
         if target is None:
             inp.control_interface = self._velocity_interface
             inp.current_position = self._zero
-            inp.target_position = self._zero
         else:
             inp.control_interface = self._position
-            # `target` is where the target is dt from now; it was at target - tv * dt when s was.
-            inp.current_position = (s.q - (target - tv * dt)).tolist()
-            inp.target_position = self._zero
+            inp.current_position = cp
+            base = target
         if self._otg.calculate(inp, self._traj).value < 0:  # an error result: invalid input or no solution
             return None
-        q, v, a = self._traj.at_time(max(dt, 0.0))
-        base = s.q + tv * dt if target is None else target
-        return JointMotion(base + np.array(q), tv + np.array(v), np.array(a)), self._traj.duration
+        q, v, a = self._traj.at_time(dt if dt > 0.0 else 0.0)
+        return (JointMotion(np.array([b + x for b, x in zip(base, q)]), np.array([w + x for w, x in zip(tv, v)]), np.array(a)),
+                self._traj.duration)
 
     def track(self, s: JointMotion, target: np.ndarray, target_v: np.ndarray | None, dt: float,
               speed_frac: float = 1.0) -> tuple[JointMotion, bool]:
         """The motion `dt` seconds on, heading for `target` (met moving at `target_v`, or at rest), and
         whether it gets there within those `dt` seconds."""
-        velocity = self.velocity * speed_frac
-        target = np.minimum(np.maximum(target, self.lower), self.upper)
+        velocity = self._velocity if speed_frac == 1.0 else [m * speed_frac for m in self._velocity]
+        target = [lo if g < lo else hi if g > hi else g for g, lo, hi in zip(target.tolist(), self._lower, self._upper)]
+        tv = None
         if target_v is not None:
-            target_v = np.clip(target_v, -0.9 * velocity, 0.9 * velocity)
-            # No feed-forward towards a joint limit the joint could not stop before.
-            room = np.where(target_v > 0, self.upper - target, target - self.lower)
-            target_v = np.where(target_v * target_v > self.acceleration * room, 0.0, target_v)
-        out = self._run(s, dt, velocity, target, target_v)
+            tv = []
+            for w, g, m, lo, hi, acc in zip(target_v.tolist(), target, velocity, self._lower, self._upper, self._acceleration):
+                cap = 0.9 * m
+                w = -cap if w < -cap else cap if w > cap else w
+                # No feed-forward towards a joint limit the joint could not stop before.
+                room = hi - g if w > 0 else g - lo
+                tv.append(0.0 if w * w > acc * room else w)
+        out = self._run(s, dt, velocity, target, tv)
         if out is None:
             return self.stop(s, dt), False
         return out[0], out[1] <= dt
 
     def stop(self, s: JointMotion, dt: float) -> JointMotion:
         """A controlled stop: velocity and acceleration brought to zero within the limits."""
-        out = self._run(s, dt, np.maximum(self.velocity, np.abs(s.v)), None, None)
+        out = self._run(s, dt, np.maximum(self.velocity, np.abs(s.v)).tolist(), None, None)
         if out is None:  # cannot happen with positive limits; hold rather than guess
             return JointMotion.rest(s.q)
         out = out[0]

@@ -207,3 +207,17 @@ def test_a_robot_missing_from_the_table_needs_the_limits_in_the_rig(monkeypatch)
     with pytest.raises(ConfigError, match=r"arm_acceleration"):
         build_pipeline(_rig())
     build_pipeline(_rig(arm_acceleration=5.0, arm_jerk=200.0))  # with the keys it builds
+
+
+def test_after_a_stall_the_commands_start_again_from_rest_at_the_last_one(pipeline):
+    p = pipeline
+    state, results = run(p, 300, engage_at=100)
+    assert not state.motion.arm.at_rest
+    last = state.arm_cmd.copy()
+    # no step for 120 ms (the process stalled): a servo-mode arm stood at the last command meanwhile
+    _, more = run(p, 200, state=state, make=lambda k: inputs(315 + k, p.arm_names, p.effector_names, [0.05]))
+    assert "commands_resumed" in more[0][1].report["flags"]
+    t, q = commands(more)
+    assert np.abs(q[0] - last).max() < 1e-4  # from rest at the last command, not 120 ms further on
+    # within the limits from rest: two samples of the arm standing there first
+    assert_within(np.r_[t[0] - 2 * 10**7, t[0] - 10**7, t], np.vstack([last, last, q]), 2.14, ARM.acceleration, ARM.jerk)

@@ -47,7 +47,7 @@ class ArmSettings(TimingSettings):
 
 
 FAULT_TOLERANCE = 0.10  # a command over the acceleration or jerk limit by more than this faults
-STREAM_GAP_NS = 100_000_000  # commands further apart than this start a new stream (from the arm at rest)
+STREAM_GAP_NS = 60_000_000  # commands further apart than this start a new stream (from the arm as it is: at rest)
 
 
 class SimArm(SimActuator):
