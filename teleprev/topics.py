@@ -26,7 +26,10 @@ Events:
 
 from __future__ import annotations
 
-FORMAT_VERSION = 1  # session layout version, written to the "teleprev" metadata record
+FORMAT_VERSION = 2  # session layout version, written to the "teleprev" metadata record
+# Format 2: commands go through the motion limits (teleprev/pipeline/motion.py); idle steps may command
+# between trigger samples; a ModeSwitch with reason "estop" stops commanding at once.
+MOTION_FORMAT_VERSION = 2
 
 TF = "/tf"
 RETARGETED = "/pipeline/retargeted"

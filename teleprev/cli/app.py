@@ -49,6 +49,7 @@ app.command("recover", rich_help_panel=SESSIONS)(session_cli.recover)
 app.command("export", rich_help_panel=SESSIONS)(export_cli.export)
 app.command("replay", rich_help_panel=SESSIONS)(replay_cli.replay)
 app.command("eval", rich_help_panel=SESSIONS)(replay_cli.eval_)
+app.command("audit", rich_help_panel=SESSIONS)(replay_cli.audit)
 
 STUDY = "User studies"
 

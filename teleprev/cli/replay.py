@@ -60,3 +60,25 @@ def eval_(
         console.print(f"{len(written)} plot(s) written to {plots}")
     if result.regressions:
         raise typer.Exit(1)
+
+
+def audit(
+    sessions: list[Path] = typer.Argument(..., help="Session files (.mcap)."),
+    config: Optional[Path] = typer.Option(None, "--config", help="Rig whose limits apply (default: the rig recorded in each session)."),
+    json_out: Optional[Path] = typer.Option(None, "--json", help="Write the audit as JSON here."),
+) -> None:
+    """Check every command stream against the robot's limits: position, speed, acceleration, jerk, and
+    (for a hand) end-point and swept self-collision. Exits 1 on any violation."""
+    from rich.console import Console
+
+    from teleprev.evaluation.audit import audit_session, print_report, write_json
+
+    console = Console()
+    reports = [audit_session(s, config) for s in sessions]
+    for r in reports:
+        print_report(r, console)
+    if json_out:
+        write_json(reports, json_out)
+        console.print(f"audit written to {json_out}")
+    if not all(r.ok for r in reports):
+        raise typer.Exit(1)

@@ -62,7 +62,8 @@ def step_metrics(r: Rerun, rows: np.ndarray, hand_collides: np.ndarray | None) -
     action = r.corrector[rows]
     corrected = action != "held"
     retargeted, fixed = r.rerun[topics.RETARGETED][rows], r.rerun[topics.CORRECTED][rows]
-    dev = np.nanmax(np.abs(fixed - retargeted), axis=1) if retargeted.shape[1] else np.zeros(n)
+    stepped = ~np.isnan(retargeted).all(axis=1) if retargeted.shape[1] else np.zeros(n, dtype=bool)  # idle steps retarget nothing
+    dev = np.nanmax(np.abs(fixed[stepped] - retargeted[stepped]), axis=1) if stepped.any() else np.zeros(0)
     dev = dev[~np.isnan(dev)]
     out["collision_before_frac"] = float(np.isin(action, ("ccn", "fallback")).sum() / max(corrected.sum(), 1))
     if hand_collides is not None:

@@ -56,17 +56,27 @@ class Rerun:
     notes: list[str] = field(default_factory=list)
 
 
+def recorded_with_motion(meta: dict) -> bool:
+    """Whether the session's commands went through the motion limits (format 2 on); older sessions are
+    re-run as they were recorded, with the speed caps alone."""
+    try:
+        return int(meta.get("teleprev", {}).get("format_version", topics.FORMAT_VERSION)) >= topics.MOTION_FORMAT_VERSION
+    except ValueError:
+        return True
+
+
 def _pipeline_for(reader: SessionReader, path: Path, models, rig_path):
     meta = reader.metadata
+    motion = recorded_with_motion(meta)
     if rig_path:
         rig = load_rig(rig_path)
-        return build_pipeline(rig, models, rig_calibration(rig)), f"rig file {rig_path}"
+        return build_pipeline(rig, models, rig_calibration(rig), motion=motion), f"rig file {rig_path}"
     if "rig" not in meta or not meta["rig"].get("toml"):
         raise SessionError("the session does not carry its rig (metadata 'rig'); pass --config RIG", str(path))
     recorded_path = meta["rig"].get("path") or None
     rig = load_rig_text(meta["rig"]["toml"], f"{path}: recorded rig", Path(recorded_path) if recorded_path else None)
     calibration = load_calibration_text(meta.get("calibration", {}).get("toml", ""), f"{path}: recorded calibration")
-    return build_pipeline(rig, models, calibration), "recorded in the session"
+    return build_pipeline(rig, models, calibration, motion=motion), "recorded in the session"
 
 
 def _models_match(meta: dict, pipeline: Pipeline) -> bool | None:

@@ -218,7 +218,9 @@ class SessionLoop:
             if refused:
                 message = f"cannot switch to {mode}: {refused}"
             else:
-                self._log(Logged(topics.MODE, t, Event(t, "teleprev.ModeSwitch", {"mode": mode, "reason": data.get("reason", "key")})))
+                # An e-stop is recorded as a switch to preview for the reason "estop" (a replay repeats it).
+                switch = {"mode": "preview", "reason": "estop"} if mode == "estop" else {"mode": mode, "reason": data.get("reason", "key")}
+                self._log(Logged(topics.MODE, t, Event(t, "teleprev.ModeSwitch", switch)))
         elif action in ("start", "stop", "discard", "outcome"):
             tracker = self.episodes
             if action == "start":

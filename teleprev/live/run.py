@@ -47,6 +47,8 @@ def handle_key(recording: LiveSession, key: str, quit_flag: list) -> None:
     loop = recording.loop
     if key == " ":
         loop.control("mode", mode="preview" if loop.snapshot.mode == "execute" else "execute")
+    elif key == "x":  # e-stop: teleprev sends nothing more at once; the controller stops the robot itself
+        loop.control("mode", mode="estop", reason="estop")
     elif key == "s":
         loop.control("start", task=recording.task)
     elif key == "n":

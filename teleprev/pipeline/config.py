@@ -25,3 +25,17 @@ class PipelineConfig:
     vacuum_on_flexion: float = 0.9  # hysteresis: vacuum switches on above this flexion ...
     vacuum_off_flexion: float = 0.6  # ... and off below this one
     tf_rate_hz: float = 30.0  # robot link frames on /tf
+    # Motion limits of the commands (teleprev/robot/limits.py has the defaults; leave a key out to use them).
+    arm_acceleration: float | None = None  # rad/s^2 per arm joint
+    arm_jerk: float | None = None  # rad/s^3 per arm joint
+    arm_feedforward: bool = True  # track the target's own velocity (less lag); false: plan to rest at each target
+    hand_acceleration: float | None = None  # rad/s^2 per hand joint (m/s^2 for a gripper)
+    hand_clearance_mm: float | None = None  # distance kept between the hand's links along each command segment
+
+    def __post_init__(self):
+        for key in ("arm_speed", "hand_speed", "arm_acceleration", "arm_jerk", "hand_acceleration"):
+            value = getattr(self, key)
+            if value is not None and not 0 < value < float("inf"):
+                raise ValueError(f"{key} must be a positive, finite number, got {value!r}")
+        if self.hand_clearance_mm is not None and not 0 <= self.hand_clearance_mm < 20:
+            raise ValueError(f"hand_clearance_mm must be in [0, 20), got {self.hand_clearance_mm!r}")

@@ -67,22 +67,28 @@ class PipelineDriver:
 
     def feed(self, msg: Logged) -> Outputs:
         """One logged sample, in log-time order."""
-        out = Outputs()
         payload = msg.payload
         if msg.topic in (self.topics.hand, self.topics.wrist, self.topics.arm, self.topics.effector):
             if isinstance(payload, (JointSample, PoseSample)):
                 self.latest[msg.topic] = payload
         elif msg.topic == topics.MODE and isinstance(payload, Event):
             # A recorded switch: it was accepted live, and the same state accepts it again.
-            self.request_mode(payload.data.get("mode", ""), msg.log_time_ns)
-            return out
+            mode = "estop" if payload.data.get("reason") == "estop" else payload.data.get("mode", "")
+            self.request_mode(mode, msg.log_time_ns)
+            return Outputs()
+        if msg.topic == self.topics.arm and self.pipeline.motion is not None:
+            # The trigger device may have gone quiet with the commands still moving: the arm's state
+            # samples keep the clock going so that the commands brake to rest instead of freezing.
+            result = self.pipeline.idle_step(self.state, self._inputs(msg.log_time_ns))
+            return self._outputs(result, msg.log_time_ns) if result is not None else Outputs()
         if msg.topic != self.topics.hand:
-            return out
-        result = self.pipeline.step(self.state, self._inputs(msg.log_time_ns))
+            return Outputs()
+        return self._outputs(self.pipeline.step(self.state, self._inputs(msg.log_time_ns)), msg.log_time_ns)
+
+    def _outputs(self, result: StepResult, t: int) -> Outputs:
         self.state = result.state
         self.last_result = result
-        out.result = result
-        t = msg.log_time_ns
+        out = Outputs(result=result)
         eff_names = self.pipeline.effector_names
         arm_names = self.pipeline.arm_names
         if result.retargeted is not None:

@@ -8,12 +8,15 @@ same outputs bit for bit, which is what lets `teleprev eval` re-run recorded ses
 mode it computes everything and commands nothing; switching to execute starts an engage ramp from the
 robot's measured joints to the previewed target at a fraction of the speed caps, after which the robot
 follows at the full caps. Inputs that are missing, stale, non-finite or implausible hold the last valid
-target and are flagged; nothing computed from them is sent.
+target and are flagged; nothing computed from them is sent. With a Motion (teleprev/pipeline/motion.py,
+sessions of format 2 on) the commands also keep to acceleration and jerk limits and brake to rest
+instead of freezing; its state is PipelineState.motion.
 """
 
 from __future__ import annotations
 
 from dataclasses import dataclass, field, replace
+from typing import Any
 
 import numpy as np
 
@@ -22,6 +25,7 @@ from teleprev.messages import JointSample, PoseSample
 from teleprev.pipeline.config import PipelineConfig
 from teleprev.pipeline.effectors import Effector
 from teleprev.pipeline.guard import JointGuard
+from teleprev.pipeline.motion import Motion
 from teleprev.retarget.arm import Anchor, ArmRetargeter
 
 # Human plausibility limits: beyond these a glove or suit is broken, not bending.
@@ -55,6 +59,7 @@ class PipelineState:
     effector_cmd: np.ndarray | None = None
     cmd_ns: int | None = None
     engaging: bool = False
+    motion: Any = None  # teleprev.pipeline.motion.MotionState, when the pipeline has a Motion
 
 
 @dataclass(frozen=True)
@@ -69,8 +74,10 @@ class StepResult:
 
 
 class Pipeline:
-    def __init__(self, cfg: PipelineConfig, arm: ArmRetargeter, arm_guard: JointGuard, effector: Effector):
+    def __init__(self, cfg: PipelineConfig, arm: ArmRetargeter, arm_guard: JointGuard, effector: Effector,
+                 motion: Motion | None = None):
         self.cfg = cfg
+        self.motion = motion  # teleprev.pipeline.motion.Motion: limits on acceleration and jerk (None: speed caps only)
         self.arm = arm
         self.arm_names = arm.ik.joint_names
         self.arm_guard = arm_guard
@@ -143,7 +150,9 @@ class Pipeline:
 
     # ---- mode ----------------------------------------------------------------------------------
     def set_mode(self, state: PipelineState, mode: str, inputs: StepInputs) -> tuple[PipelineState, str]:
-        """Switch preview/execute; returns the new state and "" or why the switch was refused."""
+        """Switch preview/execute (or "estop"); returns the new state and "" or why the switch was refused."""
+        if self.motion is not None:
+            return self.motion.set_mode(self, state, mode, inputs)
         if mode == state.mode:
             return state, ""
         if mode == "preview":
@@ -209,7 +218,10 @@ class Pipeline:
         new = replace(state, step=state.step + 1, anchor=anchor, arm_q=arm_q, arm_q_before=arm_q_before,
                       arm_solved_ns=solved_ns, effector_q=effector_q)
         arm_cmd = eff_cmd = None
-        if state.mode == "execute":
+        if self.motion is not None:
+            new, arm_cmd, eff_cmd = self.motion.commands(self, state, new, inputs, arm_q if arm_fresh else None,
+                                                         effector_q if angles is not None else None, flags)
+        elif state.mode == "execute":
             dt = (inputs.t_ns - state.cmd_ns) / 1e9 if state.cmd_ns is not None else 0.0
             frac = self.cfg.engage_speed_frac if state.engaging else 1.0
             if arm_fresh:
@@ -227,3 +239,10 @@ class Pipeline:
                 flags.append("engaging")
         report["flags"] = flags
         return StepResult(new, retargeted, corrected, arm_q if arm_fresh else None, arm_cmd, eff_cmd, report)
+
+    def idle_step(self, state: PipelineState, inputs: StepInputs) -> StepResult | None:
+        """Between trigger samples: a step that only brakes moving commands, when no step came for a while."""
+        if self.motion is None or not self.motion.idle_due(state, inputs.t_ns):
+            return None
+        new, arm_cmd, eff_cmd, report = self.motion.idle(self, state, inputs)
+        return StepResult(new, None, None, None, arm_cmd, eff_cmd, report)

@@ -21,7 +21,7 @@ if TYPE_CHECKING:  # the preview renders what the live session hands it; it neve
     from teleprev.live.device_rows import DeviceRow
     from teleprev.live.loop import LoopSnapshot
 
-KEYS = "[b]space[/] preview/execute   [b]s[/] start episode   [b]n[/] next episode   [b]d[/] discard   [b]y[/]/[b]f[/] success/failure   [b]r[/] ready   [b]q[/] quit"
+KEYS = "[b]space[/] preview/execute   [b]x[/] e-stop   [b]s[/] start episode   [b]n[/] next episode   [b]d[/] discard   [b]y[/]/[b]f[/] success/failure   [b]r[/] ready   [b]q[/] quit"
 PREVIEW_STYLE = "bold black on yellow"
 EXECUTE_STYLE = "bold white on red"
 REAL_STYLE = "grey70"

@@ -1,4 +1,7 @@
-"""The pure pipeline step: preview sends nothing, execute ramps and follows within limits, bad input holds."""
+"""The pure pipeline step: preview sends nothing, execute ramps and follows within limits, bad input holds.
+
+These run the speed-capped pipeline that sessions of format 1 were recorded with (motion=False);
+tests/pipeline/test_motion.py covers the acceleration and jerk limits of newer sessions."""
 
 import dataclasses
 
@@ -18,7 +21,7 @@ def _rig(end_effector: str, robot: str, **pipeline) -> Rig:
 
 @pytest.fixture(scope="module")
 def gripper_pipeline():
-    return build_pipeline(_rig("parallel_gripper", "xarm6_parallel_gripper"))
+    return build_pipeline(_rig("parallel_gripper", "xarm6_parallel_gripper"), motion=False)
 
 
 def _run(p, steps, engage_at=None, state=None, make=None):
@@ -118,7 +121,7 @@ def test_the_step_is_deterministic(gripper_pipeline):
 
 
 def test_vacuum_switches_with_hysteresis_in_the_pipeline():
-    p = build_pipeline(_rig("vacuum", "xarm6_vacuum"))
+    p = build_pipeline(_rig("vacuum", "xarm6_vacuum"), motion=False)
     flex = [0.0, 0.5, 1.0, 0.8, 0.7, 0.5, 0.8, 1.0]
     state, on = PipelineState(), []
     for k, f in enumerate(flex):

@@ -61,7 +61,9 @@ class SimActuator(SimDevice[A], Actuator[A], stream="state", payload="joints"):
             self.max_velocity = np.full_like(urdf_velocity, setting)
 
     def _open(self) -> None:
-        self.follower = JointFollower(self.home, self.lower, self.upper, self.max_velocity, self.max_acceleration)
+        # A reconnect finds the joints where they were (a real arm or hand does not jump home).
+        start = self.follower.q if getattr(self, "follower", None) is not None else self.home
+        self.follower = JointFollower(start, self.lower, self.upper, self.max_velocity, self.max_acceleration)
         self._index = {n: i for i, n in enumerate(self.joint_names)}
         self._stepped_ns: int | None = None
         with self._lock:

@@ -1,0 +1,240 @@
+"""Between the guarded targets and the robot: motion the hardware can follow, and how it stops.
+
+    execute, target fresh     arm: jerk-limited generator towards the target; hand: acceleration cap,
+                              each command segment checked for self-collision with a clearance margin
+    execute, target missing   that side brakes to rest within its limits, then holds (no commands)
+    switch to preview         both brake to rest within their limits (flag "stopping"), then nothing is sent
+    no pipeline step for a    the driver runs `idle` steps on the arm's state samples, which brake the same
+    while (trigger device     way: a servo-mode xArm holds its last target, so stopping the commands
+    quiet)                    would be an instant freeze
+    e-stop                    nothing more is sent at all: the controller stops the robot itself
+
+The motion state (MotionState) lives in PipelineState, so the step stays a pure function.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, replace
+
+import numpy as np
+
+from teleprev.pipeline.trajectory import ArmGenerator, HandLimiter, JointMotion
+
+ENGAGED_TOL = 0.02  # rad (m for a gripper): the engage ramp is over once the commands come this close to the
+# targets (a human wrist often moves the target faster than the ramp's half speed, so a tight tolerance never ends it)
+FEEDFORWARD_MAX_GAP_NS = 100_000_000  # wrist samples further apart than this give no velocity estimate
+EXTRAPOLATE_MAX_NS = 50_000_000
+RESUME_GAP_NS = 60_000_000  # commands further apart than this: the arm has stopped at the last one (sim.arm agrees)
+RESUME_STEP_S = 0.01  # the first step after such a pause (the sim arm's state period)
+FEEDFORWARD_TAU_NS = 30e6  # smoothing of the target velocity estimate (IK jitters by its tolerance)
+
+
+@dataclass(frozen=True)
+class MotionState:
+    arm: JointMotion | None = None  # the arm commands' position, velocity, acceleration
+    hand_v: np.ndarray | None = None  # velocity of the last hand command (None: not limited / at rest)
+    dt: float = 0.0  # seconds between the last two commands (0: none yet)
+    target_ns: int = -1  # stamp of the wrist sample behind the current arm target
+    target_q: np.ndarray | None = None
+    target_v: np.ndarray | None = None  # its velocity, from the last two wrist samples
+    stopping: bool = False  # braking to rest after a switch to preview
+    hand_target: np.ndarray | None = None  # the last hand target, and its smoothed velocity
+    hand_target_v: np.ndarray | None = None
+    idle: bool = False  # the last command came from an idle step
+
+    @property
+    def moving(self) -> bool:
+        arm = self.arm is not None and not self.arm.at_rest
+        hand = self.hand_v is not None and bool(np.any(self.hand_v != 0.0))
+        return arm or hand
+
+
+class Motion:
+    """The arm generator and (for a LEAP Hand or a gripper) the hand limiter and swept check."""
+
+    def __init__(self, arm: ArmGenerator, hand: HandLimiter | None, swept=None, feedforward: bool = True,
+                 idle_after_ns: int = 25_000_000):
+        self.arm = arm
+        self.hand = hand
+        self.swept = swept  # teleprev.pipeline.swept.SweptCheck or None
+        self.feedforward = feedforward
+        self.idle_after_ns = idle_after_ns
+        self.feedforward_tau_ns = FEEDFORWARD_TAU_NS
+
+    # ---- mode ----------------------------------------------------------------------------------
+    def set_mode(self, p, state, mode: str, inputs):
+        if mode == state.mode and mode != "estop":
+            return state, ""
+        reset = dict(anchor=None, arm_q=None, arm_q_before=None, arm_solved_ns=-1, engaging=False)
+        if mode == "estop":
+            # The controller's own immediate stop: teleprev sends nothing more.
+            return replace(state, mode="preview", arm_cmd=None, effector_cmd=None, motion=None, **reset), ""
+        if mode == "preview":
+            m = state.motion
+            if m is None or not m.moving:
+                return replace(state, mode="preview", arm_cmd=None, effector_cmd=None, motion=None, **reset), ""
+            return replace(state, mode="preview", motion=replace(m, stopping=True), **reset), ""
+        if mode != "execute":
+            return state, f"unknown mode {mode!r}"
+        arm_q = p.measured(inputs.arm, p.arm_names)
+        eff_q = p.measured(inputs.effector, p.effector_names)
+        if arm_q is None or eff_q is None:
+            return state, "no measured state from the arm or the end effector"
+        if state.arm_q is None or state.effector_q is None:
+            return state, "nothing previewed yet (waiting for glove and suit)"
+        if state.motion is not None and state.arm_cmd is not None:
+            # Still braking from the last execute: carry on from where the commands are.
+            return replace(state, mode="execute", motion=replace(state.motion, stopping=False), engaging=True), ""
+        arm_q = np.clip(arm_q, p.arm_guard.lower, p.arm_guard.upper)
+        eff_q = np.clip(eff_q, p.effector.guard.lower, p.effector.guard.upper)
+        if not p.effector.guard.valid(eff_q):
+            return state, ("the end effector's measured state is not a valid command (self-collision, or closer "
+                           "than the clearance margin?)")
+        m = MotionState(arm=JointMotion.rest(arm_q), hand_v=np.zeros_like(eff_q) if self.hand is not None else None)
+        return replace(state, mode="execute", arm_cmd=arm_q, effector_cmd=eff_q, cmd_ns=inputs.t_ns, engaging=True,
+                       motion=m), ""
+
+    # ---- commands ------------------------------------------------------------------------------
+    def _feedforward(self, m: MotionState, inputs, arm_target: np.ndarray):
+        """The target's velocity from the last two wrist samples, and the target moved on to now."""
+        stamp = inputs.wrist.stamp_ns
+        target_v = m.target_v
+        if stamp != m.target_ns:
+            gap = stamp - m.target_ns
+            if m.target_q is not None and 0 < gap <= FEEDFORWARD_MAX_GAP_NS:
+                # IK targets jitter by its tolerance from sample to sample: smooth the estimate.
+                raw = (arm_target - m.target_q) / (gap / 1e9)
+                keep = math.exp(-gap / self.feedforward_tau_ns)
+                target_v = raw if m.target_v is None else keep * m.target_v + (1.0 - keep) * raw
+            else:
+                target_v = np.zeros_like(arm_target)
+            m = replace(m, target_ns=stamp, target_q=arm_target, target_v=target_v)
+        ahead = min(max(inputs.t_ns - stamp, 0), EXTRAPOLATE_MAX_NS) / 1e9
+        return m, arm_target + target_v * ahead, target_v
+
+    def _hand_feedforward(self, m: MotionState, target: np.ndarray, dt: float):
+        tv = m.hand_target_v
+        if m.hand_target is not None and 0 < dt <= FEEDFORWARD_MAX_GAP_NS / 1e9:
+            raw = (target - m.hand_target) / dt
+            keep = math.exp(-dt * 1e9 / self.feedforward_tau_ns)
+            tv = raw if tv is None else keep * tv + (1.0 - keep) * raw
+        else:
+            tv = np.zeros_like(target)
+        return replace(m, hand_target=target, hand_target_v=tv), tv
+
+    def commands(self, p, state, new, inputs, arm_target, effector_target, flags):
+        """(new state, arm command or None, effector command or None) for one step.
+
+        `arm_target` / `effector_target`: this step's fresh targets, or None where the input was unusable.
+        """
+        m = state.motion
+        executing = state.mode == "execute"
+        if m is not None and not executing and m.moving and inputs.t_ns - state.cmd_ns > RESUME_GAP_NS:
+            # Braking after a switch to preview, but stalled past the resume gap: the arm stands already.
+            return replace(new, motion=None, arm_cmd=None, effector_cmd=None), None, None
+        if m is None or not (executing or m.moving):
+            return replace(new, motion=None) if m is not None else new, None, None
+        if not executing:
+            arm_target = effector_target = None
+            flags.append("stopping")
+        dt = (inputs.t_ns - state.cmd_ns) / 1e9
+        frac = p.cfg.engage_speed_frac if state.engaging else 1.0
+        if inputs.t_ns - state.cmd_ns > RESUME_GAP_NS and m.moving:
+            # No command went out for this long (the process stalled): a servo-mode arm has stood at the
+            # last command meanwhile, so carry on from rest there, not from where the motion would be.
+            m = replace(m, arm=JointMotion.rest(state.arm_cmd), hand_v=None if m.hand_v is None else np.zeros_like(m.hand_v),
+                        dt=0.0)
+            dt = RESUME_STEP_S  # the new start: at rest one short step ago, not at the last command's time
+            flags.append("commands_resumed")
+            if not (executing or m.moving):
+                return replace(new, motion=None, arm_cmd=None, effector_cmd=None, cmd_ns=inputs.t_ns), None, None
+
+        arm_cmd = None
+        arm, arm_reached = m.arm, arm_target is None
+        if arm_target is not None:
+            target_v = None
+            if self.feedforward:
+                m, arm_target, target_v = self._feedforward(m, inputs, arm_target)
+            arm, arm_reached = self.arm.track(arm, arm_target, target_v, dt, frac)
+            arm_reached = arm_reached or float(np.max(np.abs(arm.q - arm_target))) < ENGAGED_TOL
+            arm_cmd = arm.q
+        elif not arm.at_rest:
+            arm = self.arm.stop(arm, dt)
+            arm_cmd = arm.q
+            if executing:
+                flags.append("arm_stopping")
+
+        eff_cmd, hand_v = None, m.hand_v
+        if self.hand is None:
+            if effector_target is not None:
+                eff_cmd = p.effector.guard.step(state.effector_cmd, effector_target, dt, frac, target_valid=True)
+        elif effector_target is not None or np.any(hand_v != 0.0):
+            last = state.effector_cmd
+            if effector_target is not None:
+                tv = None
+                if self.feedforward:
+                    m, tv = self._hand_feedforward(m, effector_target, dt)
+                eff_cmd, hand_v = self.hand.track(last, hand_v, effector_target, tv, dt, m.dt, frac)
+            else:
+                eff_cmd, hand_v = self.hand.stop(last, hand_v, dt, m.dt)
+                if executing:
+                    flags.append("hand_stopping")
+            if self.swept is not None and not (self.swept.segment_free(last, eff_cmd)
+                                               and self.swept.segment_free(eff_cmd, self._stop_point(eff_cmd, hand_v))):
+                eff_cmd, hand_v = self._avoid(last, m.hand_v, dt, m.dt, flags)
+            if not np.any(eff_cmd != last):
+                hand_v = np.zeros_like(hand_v)
+
+        if arm_cmd is None and eff_cmd is None:
+            return replace(new, motion=replace(m, arm=arm, hand_v=hand_v)), None, None
+        a = arm_cmd if arm_cmd is not None else state.arm_cmd
+        e = eff_cmd if eff_cmd is not None else state.effector_cmd
+        # The engage ramp is over once the arm's generator meets its target within a step (or is within
+        # the tolerance of it) and the hand is within the tolerance of its target.
+        engaging = state.engaging and executing and not (
+            arm_reached and new.effector_q is not None and np.max(np.abs(e - new.effector_q)) < ENGAGED_TOL
+        )
+        m = replace(m, arm=arm, hand_v=hand_v, dt=dt, idle=False)
+        if not executing and not m.moving:
+            # Stopped after a switch to preview: forget the commands, as a switch at rest does.
+            return replace(new, motion=None, arm_cmd=None, effector_cmd=None, cmd_ns=inputs.t_ns), arm_cmd, eff_cmd
+        if state.engaging and executing:
+            flags.append("engaging")
+        return replace(new, arm_cmd=a, effector_cmd=e, cmd_ns=inputs.t_ns, engaging=engaging, motion=m), arm_cmd, eff_cmd
+
+    def _stop_point(self, q, v):
+        """Where braking at the cap from q at v would end: a command is taken only if that way is free too,
+        so that the hand can always brake in time instead of stopping short."""
+        h = self.hand
+        return np.minimum(np.maximum(q + v * np.abs(v) / (2.0 * h.acceleration), h.lower), h.upper)
+
+    def _avoid(self, last, v, dt, dt_before, flags):
+        """The capped step's segment would come too close to a collision: brake as hard as allowed, and
+        only if even that segment is not free, stop short on the segment (safety before smoothness)."""
+        braked, bv = self.hand.stop(last, v, dt, dt_before)
+        if self.swept.segment_free(last, braked):
+            flags.append("hand_swept_braked")
+            return braked, bv
+        flags.append("hand_swept_stopped")
+        q = self.swept.last_free_on_segment(last, braked)
+        return q, (q - last) / dt if dt > 0 else np.zeros_like(v)
+
+    # ---- idle ----------------------------------------------------------------------------------
+    def idle_due(self, state, t_ns: int) -> bool:
+        """No pipeline step for a while, and the commands are still moving: time for an idle step."""
+        m = state.motion
+        return (m is not None and m.moving and state.cmd_ns is not None
+                and (m.idle or t_ns - state.cmd_ns > self.idle_after_ns))
+
+    def idle(self, p, state, inputs):
+        """A step without new targets (the trigger device went quiet): brake to rest within the limits.
+        Returns (new state, arm command, effector command, step report)."""
+        flags = ["idle_stop"]
+        new = replace(state, step=state.step + 1)
+        new, arm_cmd, eff_cmd = self.commands(p, state, new, inputs, None, None, flags)
+        if new.motion is not None:
+            new = replace(new, motion=replace(new.motion, idle=True))
+        report = {"step": state.step, "mode": state.mode, "corrector": "held", "colliding_links": [],
+                  "deviation_rad": 0.0, "flags": flags}
+        return new, arm_cmd, eff_cmd, report
