@@ -1,6 +1,7 @@
 #!/usr/bin/env bash
 # Set up teleprev in .venv: finds Python 3.12 (pyenv's or one on PATH), installs uv if missing,
 # and installs the locked dependencies (uv.lock) with the project in editable mode.
+# Arguments go to `uv sync`: `bash scripts/setup.sh --extra ray` adds an optional extra (test.sh does).
 set -euo pipefail
 cd "$(dirname "$0")/.."
 
@@ -24,7 +25,7 @@ if ! "$PY" -m uv --version >/dev/null 2>&1; then
   echo "installing uv for $PY" >&2
   "$PY" -m pip install --quiet --disable-pip-version-check uv
 fi
-"$PY" -m uv sync --frozen --python "$PY" --quiet
+"$PY" -m uv sync --frozen --python "$PY" --quiet "$@"
 # Compile the numba kernels (teleprev/robot/kernels.py) into their on-disk cache now, so that no
 # record or eval pays the few seconds of compiling; `teleprev --help` never loads them.
 .venv/bin/python -c 'from teleprev.robot.compiled_collision import warm; warm()'

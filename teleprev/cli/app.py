@@ -70,12 +70,28 @@ def _root(
     """teleprev: teleoperation with preview for robot-learning data collection."""
 
 
+def ray_address_default(argv: list[str]) -> list[str]:
+    """`--ray [ADDRESS]`: typer has no option whose value may be left out, so `--ray` alone, or followed
+    by something that is not a Ray address (a session, a folder, a glob, another option), becomes
+    `--ray=local` (start a local instance). Addresses are "local", "auto" and anything with a colon
+    (HOST:PORT, ray://HOST:PORT)."""
+    out = []
+    for k, arg in enumerate(argv):
+        if arg == "--ray":
+            following = argv[k + 1] if k + 1 < len(argv) else ""
+            if not (following in ("local", "auto") or (":" in following and not following.startswith("-"))):
+                out.append("--ray=local")
+                continue
+        out.append(arg)
+    return out
+
+
 def main() -> None:
     """Entry point: user-facing errors print one clear line instead of a traceback."""
     from teleprev.errors import TeleprevError
 
     try:
-        app()
+        app(args=ray_address_default(sys.argv[1:]))
     except TeleprevError as exc:
         from rich.console import Console
         from rich.markup import escape

@@ -16,7 +16,8 @@ DEFAULT_ROOT = Path("datasets") / "out"  # beside sessions/, where `teleprev rec
 
 
 def export(
-    sessions: List[Path] = typer.Argument(..., help="Session files (.mcap), exported in this order.", show_default=False),
+    sessions: List[str] = typer.Argument(..., help="Session files (.mcap), folders of them or globs ('sessions/*.mcap'), "
+                                         "exported in this order.", show_default=False),
     repo_id: str = typer.Option(..., "--repo-id", help="Dataset name, e.g. lab/pick_place.", show_default=False),
     root: Optional[Path] = typer.Option(None, "--root", help="Dataset folder (default: ./datasets/out/<repo-id>).",
                                         show_default=False),
@@ -25,6 +26,10 @@ def export(
     append: bool = typer.Option(False, "--append", help="Add the sessions to an existing dataset (LeRobot's resume)."),
     include_discarded: bool = typer.Option(False, "--include-discarded", help="Export episodes the operator discarded too."),
     workers: int = typer.Option(1, "--workers", "-j", help="Export sessions in this many processes, then merge them."),
+    ray: Optional[str] = typer.Option(None, "--ray", metavar="[ADDRESS]",
+                                      help="Run the sessions on Ray: alone, start a local instance (with -j CPUs, default "
+                                           "all); auto, HOST:PORT or ray://HOST:PORT: join that cluster. Needs `uv sync "
+                                           "--extra ray`.", show_default=False),
     codec: Optional[str] = typer.Option(None, "--codec", help="Video codec: h264, hevc or av1 (default: the recipe's, h264).",
                                         show_default=False),
     crf: Optional[int] = typer.Option(None, "--crf", help="Video quality: lower is better and larger (h264 default 23).",
@@ -49,12 +54,14 @@ def export(
 
     from rich.console import Console
 
+    from teleprev.corpus.sessions import resolve_sessions
     from teleprev.errors import ConfigError
     from teleprev.export.recipe import load_recipe
     from teleprev.export.run import ExportOptions, export as run_export, with_video
 
     if workers < 1:
         raise ConfigError(f"--workers must be at least 1, got {workers}")
+    paths = resolve_sessions(sessions)
     the_recipe = load_recipe(recipe)
     overrides = {k: v for k, v in (("on_gap", on_gap), ("max_gap_ms", max_gap_ms)) if v is not None}
     if overrides:
@@ -66,8 +73,8 @@ def export(
             raise ConfigError(str(exc), "--max-gap-ms") from None
     video = with_video(the_recipe, codec=codec, crf=crf, preset=preset, gop=gop, streaming=streaming, encoder=encoder)
     target = root if root is not None else DEFAULT_ROOT / repo_id
-    options = ExportOptions(list(sessions), repo_id, target, the_recipe, fps=fps, append=append,
-                            include_discarded=include_discarded, workers=workers, video=video)
+    options = ExportOptions(paths, repo_id, target, the_recipe, fps=fps, append=append,
+                            include_discarded=include_discarded, workers=workers, video=video, ray=ray)
     console = Console(stderr=as_json)
     with _stop_on_sigterm(), _Bars(console) as bars:
         report = run_export(options, bars)
@@ -75,14 +82,16 @@ def export(
         import json
 
         typer.echo(json.dumps(_as_json(report)))
-        return
-    from teleprev.export.report import export_notes, summary_table
+    else:
+        from teleprev.export.report import export_notes, summary_table
 
-    console.print(summary_table(report))
-    for line in export_notes(report):
-        console.print(line, highlight=False)
-    console.print(f"[green]done:[/] {report.total_episodes} episodes, {report.total_frames} frames in {report.root} "
-                  f"(video: {video.describe()})", highlight=False)
+        console.print(summary_table(report))
+        for line in export_notes(report):
+            console.print(line, highlight=False)
+        console.print(f"[green]done:[/] {report.total_episodes} episodes, {report.total_frames} frames in {report.root} "
+                      f"(video: {video.describe()})", highlight=False)
+    if report.failed:
+        raise typer.Exit(1)  # the rest is in the dataset; a script must still notice
 
 
 @contextmanager
@@ -154,7 +163,7 @@ def _as_json(report) -> dict:
         "episodes": report.episodes, "frames": report.frames, "duration_s": round(report.duration_s, 3),
         "total_episodes": report.total_episodes, "total_frames": report.total_frames,
         "wall_s": round(report.wall_s, 3), "startup_s": round(report.startup_s, 3), "realtime_x": round(report.realtime_x, 2),
-        "max_align_err_ms": round(report.align_err_ms, 3), "size_bytes": report.size_bytes,
+        "max_align_err_ms": round(report.align_err_ms, 3), "size_bytes": report.size_bytes, "failed": report.failed,
         "sessions": [{
             "session": s.session, "source_episodes": s.source_episodes, "episodes": s.lerobot_episodes,
             "frames": s.frames, "duration_s": round(s.duration_s, 3), "notes": s.notes,

@@ -29,36 +29,58 @@ def replay(
 
 
 def eval_(
-    sessions: list[Path] = typer.Argument(..., help="Session files (.mcap)."),
+    sessions: list[str] = typer.Argument(..., help="Session files (.mcap), folders of them or globs ('sessions/*.mcap')."),
     models: Optional[Path] = typer.Option(None, "--models", help="CPN/CCN weights to evaluate (default: the shipped models)."),
     config: Optional[Path] = typer.Option(None, "--config", help="Rig file to evaluate with (default: the rig recorded in each session)."),
     out: Optional[Path] = typer.Option(None, "--out", "-o", help="Write the report as JSON here (for CI and as a later baseline)."),
     baseline: Optional[Path] = typer.Option(None, "--baseline", help="An earlier report: exit 1 if a metric regressed past its tolerance."),
     tolerances: Optional[Path] = typer.Option(None, "--tolerances", help="Tolerances TOML (default: teleprev/evaluation/tolerances.toml)."),
-    plots: Optional[Path] = typer.Option(None, "--plots", help="Write a PNG per episode (recorded vs re-run joints) into this folder."),
+    plots: Optional[Path] = typer.Option(None, "--plots", help="Write a PNG per episode (recorded vs re-run joints), and corpus.png for many sessions, into this folder."),
+    workers: int = typer.Option(1, "--workers", "-j", min=1, help="Re-run sessions in this many processes."),
+    ray: Optional[str] = typer.Option(None, "--ray", metavar="[ADDRESS]",
+                                      help="Run the sessions on Ray: alone, start a local instance (with -j CPUs, default "
+                                           "all); auto, HOST:PORT or ray://HOST:PORT: join that cluster. Needs `uv sync "
+                                           "--extra ray`.", show_default=False),
+    rows: int = typer.Option(30, "--rows", help="Sessions shown in the table of a corpus (the worst; the report has all)."),
 ) -> None:
-    """Re-run the pipeline on recorded raw streams, measure it, and catch regressions."""
+    """Re-run the pipeline on recorded raw streams, measure it, and catch regressions; exits 1 on a
+    regression or a session that could not be evaluated."""
     from rich.console import Console
 
-    from teleprev.evaluation.evaluate import evaluate
+    from teleprev.corpus.sessions import resolve_sessions
     from teleprev.evaluation.report import load_tolerances, print_report, read_report, write_report
 
+    paths = resolve_sessions(sessions)
     console = Console()
-    result = evaluate(
-        sessions, models, config,
-        baseline=read_report(baseline) if baseline else None,
-        tolerances=load_tolerances(tolerances) if tolerances else None,
-    )
-    print_report(console, result.report, result.regressions)
+    executor = None
+    if ray is not None or (workers > 1 and len(paths) > 1):
+        from teleprev.corpus.executor import make_executor
+        from teleprev.evaluation.corpus import PRELOAD
+
+        executor = make_executor(workers, ray, PRELOAD)
+    from teleprev.evaluation.corpus import evaluate_corpus, print_corpus
+
+    try:
+        with _SessionBar(console, len(paths)) as bar:
+            result = evaluate_corpus(
+                paths, models, config,
+                baseline=read_report(baseline) if baseline else None,
+                tolerances=load_tolerances(tolerances) if tolerances else None,
+                executor=executor, plots=plots, on_done=bar,
+            )
+    finally:
+        if executor is not None:
+            executor.close()
+    if len(paths) == 1 and not result.failed:
+        print_report(console, result.report, result.regressions)  # one session: every metric, per episode
+    else:
+        print_corpus(console, result, rows)
     if out:
         write_report(result.report, out)
         console.print(f"report written to {out}")
     if plots:
-        from teleprev.evaluation.plots import plot_episodes
-
-        written = [p for r in result.reruns for p in plot_episodes(r, plots)]
-        console.print(f"{len(written)} plot(s) written to {plots}")
-    if result.regressions:
+        console.print(f"{len(result.plots)} plot(s) written to {plots}")
+    if result.regressions or result.failed:
         raise typer.Exit(1)
 
 
@@ -82,3 +104,26 @@ def audit(
         console.print(f"audit written to {json_out}")
     if not all(r.ok for r in reports):
         raise typer.Exit(1)
+
+
+class _SessionBar:
+    """A transient bar of sessions evaluated (a corpus can take a while); nothing for one session."""
+
+    def __init__(self, console, total: int):
+        from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn
+
+        self.total = total
+        self.progress = Progress(TextColumn("evaluating"), BarColumn(), MofNCompleteColumn(), TimeElapsedColumn(),
+                                 console=console, transient=True, disable=total < 2)
+        self.task = None
+
+    def __enter__(self):
+        self.progress.__enter__()
+        self.task = self.progress.add_task("sessions", total=self.total)
+        return self
+
+    def __exit__(self, *exc):
+        self.progress.__exit__(*exc)
+
+    def __call__(self, outcome) -> None:
+        self.progress.advance(self.task)

@@ -66,6 +66,7 @@ class ExportReport:
     size_bytes: int = 0
     total_episodes: int = 0  # in the dataset after the export (appending: with the earlier ones)
     total_frames: int = 0
+    failed: dict[str, str] = field(default_factory=dict)  # session -> why it was left out (its task failed)
 
     @property
     def frames(self) -> int:
@@ -138,4 +139,9 @@ def export_notes(report: ExportReport) -> list[str]:
         speed += f"; {report.startup_s:.1f} s of it loading lerobot, {report.duration_s / working:.1f}x without"
     lines.append(f"exported {report.duration_s:.1f} s of recording in {report.wall_s:.1f} s ({speed}); "
                  f"the dataset now holds {report.total_episodes} episodes, {report.size_bytes / 1e6:.1f} MB")
+    if report.failed:
+        lines.append(f"[red]{len(report.failed)} session(s) failed and were left out[/] (export them again with --append):")
+        from rich.markup import escape
+
+        lines += [f"  [red]{escape(why)}[/]" for why in report.failed.values()]
     return lines

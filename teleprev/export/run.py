@@ -1,8 +1,11 @@
 """An export from start to end: check every session and the target first, build the dataset in a
-staging folder (in this process, or in workers whose parts are merged), finalize, move it into place.
+staging folder (in this process, or as one task per session whose parts are merged), finalize, move it
+into place.
 
-Any failure, Ctrl-C included, removes the staging folder: the target is either the complete new (or
-appended) dataset or exactly what it was before.
+In this process, any failure, Ctrl-C included, removes the staging folder: the target is either the
+complete new (or appended) dataset or exactly what it was before. With workers (`workers` > 1 or
+`ray`), each session is a task of its own: one that fails, or whose worker dies twice, is listed in the
+report's `failed` and the others are merged; only when every session fails does the export fail.
 """
 
 from __future__ import annotations
@@ -31,6 +34,7 @@ class ExportOptions:
     include_discarded: bool = False
     workers: int = 1
     video: VideoSettings | None = None  # None: the recipe's
+    ray: str | None = None  # run the sessions on Ray: "local" (a new local instance), "auto", "HOST:PORT"
 
 
 def export(options: ExportOptions, report: Reporter = no_progress) -> ExportReport:
@@ -68,17 +72,19 @@ def export(options: ExportOptions, report: Reporter = no_progress) -> ExportRepo
     settings = ExportSettings(fps, options.include_discarded)
     staging = D.Staging(target)
     try:
-        startup = time.perf_counter()  # after the checks, so bad input is refused without waiting for it
-        report(Progress("phase", "loading lerobot"))
-        import lerobot.datasets.lerobot_dataset  # noqa: F401  (seconds, once per process: reported apart)
-
-        report(Progress("phase", ""))
-        startup = time.perf_counter() - startup
-        if options.workers > 1 and len(sources) > 1:
+        failed: dict[str, str] = {}
+        startup = 0.0
+        if options.ray is not None or (options.workers > 1 and len(sources) > 1):
             for s in sources:
-                s.close()  # workers open their own readers
-            reports = _parallel(options, staging, features, robot, fps, settings, video, report)
+                s.close()  # workers open their own readers (and import lerobot themselves, once each)
+            reports = _parallel(options, staging, features, robot, fps, settings, video, report, failed)
         else:
+            startup = time.perf_counter()  # after the checks, so bad input is refused without waiting for it
+            report(Progress("phase", "loading lerobot"))
+            import lerobot.datasets.lerobot_dataset  # noqa: F401  (seconds, once per process: reported apart)
+
+            report(Progress("phase", ""))
+            startup = time.perf_counter() - startup
             reports = _sequential(options, sources, staging, features, robot, fps, settings, video, report)
         _refuse_empty(reports)
         totals = D.read_info(staging.dataset)
@@ -89,7 +95,7 @@ def export(options: ExportOptions, report: Reporter = no_progress) -> ExportRepo
     finally:
         for s in sources:
             s.close()
-    out = ExportReport(target, options.repo_id, fps, reports)
+    out = ExportReport(target, options.repo_id, fps, reports, failed=failed)
     out.total_episodes = int(totals.get("total_episodes", 0))
     out.total_frames = int(totals.get("total_frames", 0))
     out.size_bytes = folder_size(target)
@@ -151,20 +157,34 @@ def _sequential(options, sources, staging, features, robot, fps, settings, video
         raise
 
 
-def _parallel(options, staging, features, robot, fps, settings, video, report) -> list[SessionReport]:
-    from teleprev.export.parallel import Job, export_parallel, merge
+def _parallel(options, staging, features, robot, fps, settings, video, report, failed) -> list[SessionReport]:
+    from teleprev.corpus.executor import make_executor
+    from teleprev.export.parallel import PRELOAD, Job, export_parallel, merge
 
     paths = [Path(p) for p in options.sessions]
     parts = [staging.part(i) for i in range(len(paths))]
     job = Job(options.repo_id, options.recipe, fps, features, robot, settings, video)
-    report(Progress("phase", f"starting {min(options.workers, len(paths))} workers (lerobot loads once)"))
-    reports = export_parallel(paths, parts, job, options.workers, report)
-    _refuse_empty(reports)
-    used = [part for part, rep in zip(parts, reports) if rep.lerobot_episodes]
-    report(Progress("phase", f"merging {len(used)} parts with lerobot's aggregate_datasets"))
-    merge(used, options.repo_id, staging.dataset, Path(options.root) if options.append else None)
-    report(Progress("phase", ""))
+    where = "a Ray cluster" if options.ray is not None else f"{min(options.workers, len(paths))} workers"
+    report(Progress("phase", f"starting {where} (lerobot loads once per worker)"))
+    executor = make_executor(options.workers, options.ray, PRELOAD)
+    try:
+        outcomes = export_parallel(paths, parts, job, executor, report)
+        reports = [o.value for o in outcomes if o.ok]
+        if not reports:
+            raise next(o for o in outcomes if not o.ok).exception()  # nothing to merge: the first failure says why
+        failed.update({str(paths[o.index]): _failure(o) for o in outcomes if not o.ok})
+        _refuse_empty(reports)
+        used = [parts[o.index] for o in outcomes if o.ok and o.value.lerobot_episodes]
+        report(Progress("phase", f"merging {len(used)} parts with lerobot's aggregate_datasets"))
+        merge(executor, used, options.repo_id, staging.dataset, Path(options.root) if options.append else None)
+        report(Progress("phase", ""))
+    finally:
+        executor.close()
     return reports
+
+
+def _failure(outcome) -> str:
+    return str(outcome.exception())
 
 
 def _refuse_empty(reports: list[SessionReport]) -> None:

@@ -30,3 +30,11 @@ def record_sim(out: Path, rig: str = "sim.toml", seconds: float = 3.0, episodes:
     finally:
         rec.stop()
     return rec
+
+
+def record_corpus(folder: Path, names: str = "abc", seconds: float = 2.0) -> Path:
+    """A folder of short sim sessions (one episode each, engaged half a second in), named <name>.mcap."""
+    folder.mkdir(parents=True, exist_ok=True)
+    for name in names:
+        record_sim(folder / f"{name}.mcap", seconds=seconds, engage_after=0.5)
+    return folder
