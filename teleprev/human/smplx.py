@@ -8,7 +8,7 @@ Convention (right hand, SMPL-X rest pose): the fingers point along -x, the palm 
 side is +z. Each joint has a joint frame B in which abduction is a rotation about y (positive towards the
 thumb) and flexion a rotation about z (positive curls towards the palm); the local rotation is
     R = B @ Ry(abduction) @ Rz(flexion) @ B.T
-and angles_from_hand_pose inverts it (any twist about the bone is ignored). For the four fingers B is the
+and angles_from_hand_pose inverts it (a twist about the bone, R = ... Rx(twist), is taken off first). For the four fingers B is the
 identity; the thumb's frame is the finger frame turned 60 degrees about y, so the thumb points out and
 forwards and curls across the palm.
 """
@@ -73,9 +73,14 @@ def hand_pose_from_angles(flexion: np.ndarray, abduction: np.ndarray) -> np.ndar
 def angles_from_hand_pose(pose: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """(flexion, abduction) angles (..., 15) from an axis-angle hand pose (..., 15, 3).
 
-    With M = B.T R B = Ry(abduction) Rz(flexion): flexion = atan2(M10, M11), abduction = atan2(M02, M22).
-    Only those four entries are computed, from M's quaternion: R's quaternion with its vector part turned
-    by B.T (a rotation about y). Written column by column because it runs on every pipeline step.
+    In the joint frame, M = B.T R B = Ry(abduction) Rz(flexion) Rx(twist): the bone (along x) points
+    where abduction and flexion put it, and twist turns the segment about its own bone. IMU gloves report
+    full segment orientations, so twist is real there and must not leak into abduction: the twist is
+    taken off first (the solution of the two that is nearest zero, so flexion may pass 90 degrees), then
+    flexion = atan2(M10, M11), abduction = atan2(M02, M22). Twists below TWIST_NOISE are float noise of a
+    twist-free pose and are left alone, so such poses give exactly the angles they always gave (recorded
+    sessions reproduce bit for bit). Everything is computed from M's quaternion: R's quaternion with its
+    vector part turned by B.T (a rotation about y), column by column because it runs on every step.
     """
     v = np.asarray(pose, dtype=float)
     vx, vy, vz = v[..., 0], v[..., 1], v[..., 2]
@@ -86,9 +91,27 @@ def angles_from_hand_pose(pose: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     x0, y, z0 = vx * scale, vy * scale, vz * scale
     x = _FRAME_COS * x0 - _FRAME_SIN * z0
     z = _FRAME_SIN * x0 + _FRAME_COS * z0
+    w, x, y, z = _untwist(w, x, y, z)
     flexion = np.arctan2(2.0 * (x * y + z * w), 1.0 - 2.0 * (x * x + z * z))
     abduction = np.arctan2(2.0 * (x * z + y * w), 1.0 - 2.0 * (x * x + y * y))
     return flexion, abduction
+
+
+TWIST_NOISE = 1e-9  # rad
+
+
+def _untwist(w, x, y, z):
+    """The quaternion of M Rx(-twist) for M = Ry(a) Rz(f) Rx(twist) given as (w, x, y, z)."""
+    m11 = 1.0 - 2.0 * (x * x + z * z)
+    m12 = 2.0 * (y * z - x * w)
+    twist = np.arctan2(-m12, m11)
+    # twist and twist +- pi describe the same bone direction (flexion f or pi - f): take the smaller twist
+    twist = np.where(twist > 0.5 * np.pi, twist - np.pi, np.where(twist < -0.5 * np.pi, twist + np.pi, twist))
+    if not np.any(np.abs(twist) > TWIST_NOISE):
+        return w, x, y, z
+    twist = np.where(np.abs(twist) > TWIST_NOISE, twist, 0.0)
+    c, s = np.cos(0.5 * twist), np.sin(0.5 * twist)
+    return w * c + x * s, x * c - w * s, y * c - z * s, z * c + y * s
 
 
 @functools.lru_cache(maxsize=64)
