@@ -12,7 +12,7 @@ from __future__ import annotations
 import fcl
 import numpy as np
 
-from teleprev.robot.collision_report import CollisionReport
+from teleprev.robot.collision_report import CollisionReport, link_labels
 from teleprev.robot.exclusions import Exclusions, load_exclusions
 from teleprev.robot.model import RobotModel
 
@@ -199,7 +199,4 @@ class SelfCollisionChecker:
         return self.labels_from_pairs(self.pair_matrix(q, world))
 
     def labels_from_pairs(self, pairs: np.ndarray) -> np.ndarray:
-        labels = np.zeros((len(pairs), len(self.link_names)), dtype=bool)
-        for side in (0, 1):
-            np.logical_or.at(labels, (slice(None), self._pair_links[:, side]), pairs)
-        return labels
+        return link_labels(pairs, self._pair_links, len(self.link_names))

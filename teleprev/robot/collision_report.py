@@ -18,3 +18,12 @@ class CollisionReport:
 
     def colliding_links(self, link_names) -> list[str]:
         return [n for n, hit in zip(link_names, self.labels) if hit]
+
+
+def link_labels(pairs: np.ndarray, pair_links: np.ndarray, n_links: int) -> np.ndarray:
+    """(N, n_links) bool: a link is labelled colliding when any pair it belongs to collides.
+    `pairs` is (N, P) bool over the checked pairs, `pair_links` (P, 2) their link indices."""
+    labels = np.zeros((len(pairs), n_links), dtype=bool)
+    for side in (0, 1):
+        np.logical_or.at(labels, (slice(None), pair_links[:, side]), pairs)
+    return labels

@@ -19,7 +19,7 @@ import numpy as np
 
 from teleprev.errors import UrdfError
 from teleprev.robot import kernels
-from teleprev.robot.collision_report import CollisionReport
+from teleprev.robot.collision_report import CollisionReport, link_labels
 from teleprev.robot.compiled_kinematics import CompiledKinematics
 from teleprev.robot.exclusions import Exclusions, load_exclusions
 from teleprev.robot.model import RobotModel
@@ -116,10 +116,7 @@ class CompiledSelfCollisionChecker:
         return self.labels_from_pairs(self.pair_matrix(q, world))
 
     def labels_from_pairs(self, pairs: np.ndarray) -> np.ndarray:
-        labels = np.zeros((len(pairs), len(self.link_names)), dtype=bool)
-        for side in (0, 1):
-            np.logical_or.at(labels, (slice(None), self._pairs[:, side]), pairs)
-        return labels
+        return link_labels(pairs, self._pairs, len(self.link_names))
 
 
 def warm(robot: str = "leap_hand_right") -> None:

@@ -1,7 +1,6 @@
 """Export of a corpus in worker processes when one session's worker dies: retried once, then left out
 and named, the other sessions merged in session order into a dataset that lerobot loads back."""
 
-import os
 
 import pytest
 
@@ -10,19 +9,6 @@ from teleprev.errors import SessionError
 from teleprev.export.recipe import load_recipe
 from teleprev.export.run import ExportOptions, export
 from teleprev.export.synthetic import EpisodeSpec, SyntheticSession, write_session
-
-
-@pytest.fixture(scope="module", autouse=True)
-def _local_only(tmp_path_factory):
-    old = {k: os.environ.get(k) for k in ("HF_HUB_OFFLINE", "HF_DATASETS_CACHE")}
-    os.environ["HF_HUB_OFFLINE"] = "1"
-    os.environ["HF_DATASETS_CACHE"] = str(tmp_path_factory.mktemp("hf_cache"))
-    yield
-    for k, v in old.items():
-        if v is None:
-            os.environ.pop(k, None)
-        else:
-            os.environ[k] = v
 
 
 @pytest.fixture(scope="module")

@@ -8,7 +8,6 @@ is, hence its time; the state must be the latest recorded sample at or before th
 the first command sent at or after it.
 """
 
-import os
 import re
 import shutil
 from pathlib import Path
@@ -30,24 +29,6 @@ FPS = 30
 CAM = "observation.images.cam_front"
 ARM = "/arm/arm/state"
 HAND = "/hand/hand/state"
-
-
-@pytest.fixture(scope="module", autouse=True)
-def _local_only(tmp_path_factory):
-    """No network, and the datasets library's cache in a temporary folder."""
-    cache = tmp_path_factory.mktemp("hf_cache")
-    old = {k: os.environ.get(k) for k in ("HF_HUB_OFFLINE", "HF_DATASETS_CACHE")}
-    os.environ["HF_HUB_OFFLINE"] = "1"
-    os.environ["HF_DATASETS_CACHE"] = str(cache)
-    import datasets
-
-    datasets.config.HF_DATASETS_CACHE = cache
-    yield
-    for k, v in old.items():
-        if v is None:
-            os.environ.pop(k, None)
-        else:
-            os.environ[k] = v
 
 
 @pytest.fixture(scope="module")
