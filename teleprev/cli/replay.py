@@ -17,15 +17,29 @@ def replay(
     engage_after: Optional[float] = typer.Option(None, "--engage-after", help="Engage automatically after this many seconds (else press space)."),
     view: str = typer.Option("side", "--view", help="Robot view: front, side or top."),
     preview: bool = typer.Option(True, "--preview/--no-preview", help="Show the terminal preview."),
+    smooth: bool = typer.Option(False, "--smooth", help="Send the commands as the pipeline's jerk-limited generator re-commands them (needed with --to arm for a session that fails `teleprev audit`)."),
 ) -> None:
-    """Play a session's commands back, on screen and optionally to the simulated or a real robot."""
+    """Play a session's commands back, on screen and optionally to the simulated or a real robot.
+    A real robot (--to arm) gets only a session that passes `teleprev audit`, or one played --smooth."""
     from rich.console import Console
 
     from teleprev.live.playback import play
 
     if to not in ("preview", "sim", "arm"):
         raise typer.BadParameter("--to must be preview, sim or arm")
-    play(session, episode, speed, to, rig, engage_after, Console(), view, preview)
+    console = Console()
+    if to == "arm" and not smooth:
+        from teleprev.evaluation.audit import audit_session
+
+        report = audit_session(session, rig)
+        if not report.ok:
+            reasons = "; ".join(f"{s.topic}: {v}" for s in report.streams for v in s.violations)
+            if report.hand_state_colliding:
+                reasons += f"; measured hand state in self-collision {report.hand_state_colliding}x"
+            console.print(f"[red]not replaying {session} to the robot: it fails the audit[/] ({reasons}). "
+                          "Add --smooth to send it through the jerk-limited generator instead.")
+            raise typer.Exit(1)
+    play(session, episode, speed, to, rig, engage_after, console, view, preview, smooth)
 
 
 def eval_(
@@ -85,18 +99,19 @@ def eval_(
 
 
 def audit(
-    sessions: list[Path] = typer.Argument(..., help="Session files (.mcap)."),
-    config: Optional[Path] = typer.Option(None, "--config", help="Rig whose limits apply (default: the rig recorded in each session)."),
+    sessions: list[Path] = typer.Argument(..., help="Session files (.mcap) or LeRobot dataset folders (their `action` column)."),
+    config: Optional[Path] = typer.Option(None, "--config", help="Rig whose limits apply (default: the rig recorded in each session; required for a dataset)."),
     json_out: Optional[Path] = typer.Option(None, "--json", help="Write the audit as JSON here."),
 ) -> None:
-    """Check every command stream against the robot's limits: position, speed, acceleration, jerk, and
-    (for a hand) end-point and swept self-collision. Exits 1 on any violation."""
+    """Check every command stream of a session, or a dataset's actions, against the robot's limits:
+    position, speed, acceleration, jerk, and (for a hand) end-point and swept self-collision. Exits 1 on
+    any violation."""
     from rich.console import Console
 
-    from teleprev.evaluation.audit import audit_session, print_report, write_json
+    from teleprev.evaluation.audit import audit_path, print_report, write_json
 
     console = Console()
-    reports = [audit_session(s, config) for s in sessions]
+    reports = [audit_path(s, config) for s in sessions]
     for r in reports:
         print_report(r, console)
     if json_out:

@@ -1,4 +1,5 @@
-"""`teleprev audit`: does a recorded session's command stream keep to what the robot can follow?
+"""`teleprev audit`: does a recorded session's command stream, or a LeRobot dataset's `action` column,
+keep to what the robot can follow?
 
 For each command stream (/command/arm, /command/hand) against the limits of the session's rig (the
 rig's [pipeline] keys, else teleprev/robot/limits.py and the URDF):
@@ -12,7 +13,8 @@ rig's [pipeline] keys, else teleprev/robot/limits.py and the URDF):
 
 and, for the hand's measured state, how many samples were in self-collision. Ratios are measured /
 limit: above 1 is a violation (a tolerance of 1e-6 absorbs rounding). Runs of commands more than
-RUN_GAP_S apart are measured separately (a new engage starts from rest).
+RUN_GAP_S apart are measured separately (a new engage starts from rest). A dataset's actions are taken
+as commands sent at its frames' timestamps, each episode on its own.
 """
 
 from __future__ import annotations
@@ -24,6 +26,7 @@ from pathlib import Path
 import numpy as np
 
 from teleprev import topics
+from teleprev.pipeline.derivatives import divided_differences
 from teleprev.errors import SessionError
 
 RUN_GAP_S = 0.06  # as the pipeline's RESUME_GAP_NS: after a pause this long, commands start again from rest
@@ -71,25 +74,16 @@ class AuditReport:
     streams: list[StreamAudit] = field(default_factory=list)
     hand_state_samples: int = 0
     hand_state_colliding: int | None = None
+    note: str = ""
 
     @property
     def ok(self) -> bool:
         return not any(s.violations for s in self.streams) and not self.hand_state_colliding
 
     def as_dict(self) -> dict:
-        return {"session": self.session, "ok": self.ok, "hand_state_samples": self.hand_state_samples,
+        return {"session": self.session, "ok": self.ok, "note": self.note, "hand_state_samples": self.hand_state_samples,
                 "hand_state_colliding": self.hand_state_colliding,
                 "streams": [{**asdict(s), "ratios": s.ratios, "violations": s.violations} for s in self.streams]}
-
-
-def divided_differences(t_ns: np.ndarray, q: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Speed, acceleration and jerk (1!, 2!, 3! times the divided differences) of samples q at stamps t_ns."""
-    t_ns = np.asarray(t_ns, dtype=np.int64)
-    t = (t_ns - t_ns[0]) / 1e9  # difference integer nanoseconds first: epoch seconds lose ~1e-7 s in float64
-    v = np.diff(q, axis=0) / np.diff(t)[:, None]
-    f2 = np.diff(v, axis=0) / (t[2:] - t[:-2])[:, None]
-    f3 = np.diff(f2, axis=0) / (t[3:] - t[:-3])[:, None]
-    return v, 2.0 * f2, 6.0 * f3
 
 
 def _runs(t_ns: np.ndarray) -> list[slice]:
@@ -133,36 +127,44 @@ def _joint_samples(reader, topic: str) -> tuple[np.ndarray, np.ndarray, tuple[st
             msgs[0].names)
 
 
+def recorded_rig(path: Path, meta: dict, rig_path: str | Path | None):
+    """The rig whose limits apply: `rig_path`, else the one the session carries in its metadata."""
+    from teleprev.rig import load_rig, load_rig_text
+
+    if rig_path:
+        return load_rig(rig_path)
+    if meta.get("rig", {}).get("toml"):
+        recorded = meta["rig"].get("path") or None
+        return load_rig_text(meta["rig"]["toml"], f"{path}: recorded rig", Path(recorded) if recorded else None)
+    raise SessionError("the session does not carry its rig (metadata 'rig'); pass --config RIG", str(path))
+
+
+def audit_stream(topic: str, side: str, limits: dict, t_ns: np.ndarray, q: np.ndarray | None) -> StreamAudit:
+    """One command stream (stamps, positions in the order of limits[side]['names']) against its limits."""
+    lim = limits[side]
+    audit = StreamAudit(topic, speed_limit=float(lim["velocity"].min()), accel_limit=float(lim["acceleration"]),
+                        jerk_limit=lim.get("jerk"))
+    if len(t_ns):
+        _measure(audit, t_ns, q, lim["lower"], lim["upper"])
+        if side == "hand" and lim.get("checker") is not None:
+            audit.colliding = int(lim["checker"].pair_matrix(q).any(axis=1).sum())
+            audit.swept_colliding = sum(swept_colliding(lim["checker"], lim["reach"], q[run]) for run in _runs(t_ns))
+    return audit
+
+
 def audit_session(path: str | Path, rig_path: str | Path | None = None) -> AuditReport:
     from teleprev.live.build import motion_limits
-    from teleprev.rig import load_rig, load_rig_text
     from teleprev.session.reader import SessionReader
 
     path = Path(path)
     reader = SessionReader(path)
-    meta = reader.metadata
-    if rig_path:
-        rig = load_rig(rig_path)
-    elif meta.get("rig", {}).get("toml"):
-        recorded = meta["rig"].get("path") or None
-        rig = load_rig_text(meta["rig"]["toml"], f"{path}: recorded rig", Path(recorded) if recorded else None)
-    else:
-        raise SessionError("the session does not carry its rig (metadata 'rig'); pass --config RIG", str(path))
-    limits = motion_limits(rig)
+    limits = motion_limits(recorded_rig(path, reader.metadata, rig_path))
     report = AuditReport(str(path))
     for topic, side in ((topics.COMMAND_ARM, "arm"), (topics.COMMAND_HAND, "hand")):
         t, q, names = _joint_samples(reader, topic) if topic in reader.topics else (np.zeros(0, np.int64), None, ())
-        lim = limits[side]
-        audit = StreamAudit(topic, speed_limit=float(lim["velocity"].min()), accel_limit=float(lim["acceleration"]),
-                            jerk_limit=lim.get("jerk"))
-        if len(t):
-            if names != lim["names"]:
-                raise SessionError(f"{topic} commands joints {names}, the rig's robot has {lim['names']}", str(path))
-            _measure(audit, t, q, lim["lower"], lim["upper"])
-            if side == "hand" and lim.get("checker") is not None:
-                audit.colliding = int(lim["checker"].pair_matrix(q).any(axis=1).sum())
-                audit.swept_colliding = sum(swept_colliding(lim["checker"], lim["reach"], q[run]) for run in _runs(t))
-        report.streams.append(audit)
+        if len(t) and names != limits[side]["names"]:
+            raise SessionError(f"{topic} commands joints {names}, the rig's robot has {limits[side]['names']}", str(path))
+        report.streams.append(audit_stream(topic, side, limits, t, q))
     hand_limits = limits["hand"]
     state_topics = [tp for tp in reader.topics if tp.startswith("/hand/") and tp.endswith("/state")]
     if state_topics and hand_limits.get("checker") is not None:
@@ -170,6 +172,102 @@ def audit_session(path: str | Path, rig_path: str | Path | None = None) -> Audit
         report.hand_state_samples = len(q)
         report.hand_state_colliding = int(hand_limits["checker"].pair_matrix(q).any(axis=1).sum()) if len(q) else 0
     return report
+
+
+def is_dataset(path: Path) -> bool:
+    return (Path(path) / "meta" / "info.json").is_file()
+
+
+def _action_columns(names: list[str], joints: tuple[str, ...], prefix: str) -> list[int] | None:
+    """Where each joint sits among the action's names: "<prefix>.<joint>" (teleprev's exports), else
+    "<anything>.<joint>" or "<joint>" met exactly once; None if a joint is not found."""
+    out = []
+    for j in joints:
+        exact = [i for i, n in enumerate(names) if n == f"{prefix}.{j}"]
+        loose = [i for i, n in enumerate(names) if n == j or n.endswith("." + j)]
+        found = exact or (loose if len(loose) == 1 else [])
+        if not found:
+            return None
+        out.append(found[0])
+    return out
+
+
+def audit_dataset(root: str | Path, rig_path: str | Path | None) -> AuditReport:
+    """The `action` column of a LeRobot dataset (teleprev's or anyone's), per episode, as commands sent at
+    the frames' timestamps, against a rig's limits. Joints are matched by name ("arm.joint1" or "joint1");
+    when no name matches and the action has exactly the rig's arm + end-effector joints, by position."""
+    import pyarrow.parquet as pq
+
+    from teleprev.live.build import motion_limits
+    from teleprev.rig import load_rig
+
+    root = Path(root)
+    where = str(root / "meta" / "info.json")
+    if rig_path is None:
+        raise SessionError("a dataset does not carry its rig: pass --config RIG (the robot whose limits apply)", str(root))
+    limits = motion_limits(load_rig(rig_path))
+    try:
+        info = json.loads((root / "meta" / "info.json").read_text())
+        feature = info["features"]["action"]
+    except (OSError, ValueError, KeyError) as e:
+        raise SessionError(f"not a LeRobot dataset with an 'action' feature ({type(e).__name__}: {e})", where) from None
+    names = feature.get("names")
+    if isinstance(names, dict):  # older datasets: {"motors": [...]}
+        names = next(iter(names.values()), None)
+    names = [str(n) for n in names] if names else [f"action.{i}" for i in range(int(feature["shape"][0]))]
+    arm_names, hand_names = limits["arm"]["names"], limits["hand"]["names"]
+    arm_cols = _action_columns(names, arm_names, "arm")
+    hand_cols = _action_columns(names, hand_names, "hand")
+    note = ""
+    if arm_cols is None or hand_cols is None:
+        if len(names) != len(arm_names) + len(hand_names):
+            raise SessionError(f"the action's {len(names)} names {names[:8]}{'...' if len(names) > 8 else ''} do not "
+                               f"name the rig's joints ({len(arm_names)} arm: {list(arm_names)}; {len(hand_names)} "
+                               f"end effector), and their number differs, so they cannot be matched by position", where)
+        arm_cols, hand_cols = list(range(len(arm_names))), list(range(len(arm_names), len(names)))
+        note = "joints matched by position (the action's names are not the rig's)"
+    files = sorted((root / "data").rglob("*.parquet"))
+    if not files:
+        raise SessionError("no data/*.parquet files", str(root))
+    table = {"episode_index": [], "timestamp": [], "action": []}
+    for f in files:
+        try:
+            part = pq.read_table(f, columns=list(table)).to_pydict()
+        except Exception as e:  # pyarrow raises many kinds for a damaged or foreign file
+            raise SessionError(f"cannot read the columns episode_index, timestamp, action ({e})", str(f)) from None
+        for k in table:
+            table[k].extend(part[k])
+    episodes = np.asarray(table["episode_index"], dtype=np.int64)
+    stamps = np.round(np.asarray(table["timestamp"], dtype=float) * 1e9).astype(np.int64)
+    action = np.asarray(table["action"], dtype=float)
+    report = AuditReport(str(root), note=note)
+    arm = StreamAudit("action[arm]")
+    hand = StreamAudit("action[end effector]")
+    for ep in np.unique(episodes):
+        rows = np.flatnonzero(episodes == ep)
+        rows = rows[np.argsort(stamps[rows], kind="stable")]
+        t = stamps[rows] + int(ep) * 3_600_000_000_000  # episodes an hour apart: never one run
+        merge(arm, audit_stream("action[arm]", "arm", limits, t, action[rows][:, arm_cols]))
+        merge(hand, audit_stream("action[end effector]", "hand", limits, t, action[rows][:, hand_cols]))
+    report.streams = [arm, hand]
+    return report
+
+
+def merge(total: StreamAudit, part: StreamAudit) -> None:
+    """Fold one episode's audit into the stream's total (maxima and counts)."""
+    total.commands += part.commands
+    total.position_outside += part.position_outside
+    total.speed_max, total.speed_limit = max(total.speed_max, part.speed_max), part.speed_limit
+    total.accel_max, total.accel_limit = max(total.accel_max, part.accel_max), part.accel_limit
+    total.jerk_max, total.jerk_limit = max(total.jerk_max, part.jerk_max), part.jerk_limit
+    if part.colliding is not None:
+        total.colliding = (total.colliding or 0) + part.colliding
+        total.swept_colliding = (total.swept_colliding or 0) + part.swept_colliding
+
+
+def audit_path(path: str | Path, rig_path: str | Path | None = None) -> AuditReport:
+    """A session file or a LeRobot dataset folder."""
+    return audit_dataset(path, rig_path) if is_dataset(Path(path)) else audit_session(path, rig_path)
 
 
 def print_report(report: AuditReport, console) -> None:
@@ -193,6 +291,8 @@ def print_report(report: AuditReport, console) -> None:
             table.add_row("in self-collision", str(s.colliding), "0", "")
             table.add_row("segments through a self-collision", str(s.swept_colliding), "0", "")
         console.print(table)
+    if report.note:
+        console.print(f"[yellow]{report.note}[/]")
     if report.hand_state_colliding is not None:
         console.print(f"measured hand state in self-collision: {report.hand_state_colliding} of {report.hand_state_samples} samples")
     console.print("[green]audit passed[/]" if report.ok else "[red]audit failed[/]: " + "; ".join(

@@ -11,12 +11,12 @@ from rich.console import Console, Group
 from rich.live import Live
 from rich.text import Text
 
-from teleprev.errors import ConfigError
+from teleprev.errors import ConfigError, DeviceError
 from teleprev.messages import JointSample
 from teleprev.live.build import build_pipeline, rig_calibration
 from teleprev.preview.keys import KeyReader
 from teleprev.preview.robot_view import Layer, RobotView
-from teleprev.live.player import Player, load_playback, safe_speed, validate
+from teleprev.live.player import Player, load_playback, safe_speed, smooth, validate
 from teleprev.rig import load_rig, load_rig_text
 from teleprev.robot.model import load_robot
 from teleprev.clock import SessionClock
@@ -43,8 +43,9 @@ def _recorded_rig(session: Path):
     return load_rig_text(text, f"{session}: recorded rig", Path(meta["rig"].get("path") or session))
 
 
-def build_player(session: Path, episode, speed: float, to: str, rig_path=None):
-    """The player and what it drives; returns (player, runners, tap, rig, message)."""
+def build_player(session: Path, episode, speed: float, to: str, rig_path=None, smoothed: bool = False):
+    """The player and what it drives; returns (player, runners, tap, rig, message). `smoothed`: play the
+    sequence as the pipeline's generator re-commands it (teleprev.live.player.smooth)."""
     from teleprev.devices.registry import load_plugin
     from teleprev.devices.runner import DeviceRunner
 
@@ -52,8 +53,13 @@ def build_player(session: Path, episode, speed: float, to: str, rig_path=None):
     pipeline = build_pipeline(rig, calibration=rig_calibration(rig) if rig_path else None)
     eff_guard = pipeline.effector.guard
     playback = validate(load_playback(session, episode), pipeline.arm_guard, eff_guard)
-    effective = safe_speed(playback, pipeline.arm_guard.speed, eff_guard.speed, speed)
-    message = "" if effective >= speed else f"playing at {effective:.2f}x: {speed:g}x would exceed a joint's speed limit"
+    if smoothed:
+        if pipeline.motion is None:
+            raise ConfigError("--smooth needs the rig's motion limits, and this rig has none", str(rig.path or session))
+        playback = smooth(playback, pipeline.motion)
+    effective = safe_speed(playback, pipeline.arm_guard.speed, eff_guard.speed, speed, pipeline.motion)
+    message = "" if effective >= speed else (f"playing at {effective:.2f}x: {speed:g}x would exceed a joint's speed, "
+                                             "acceleration or jerk limit")
     clock = SessionClock()
     actuators, runners, tap = {}, [], StateTap()
     if to != "preview":
@@ -76,12 +82,14 @@ def build_player(session: Path, episode, speed: float, to: str, rig_path=None):
         pick = lambda s, names: np.array([s.positions[s.names.index(n)] for n in names])
         return pick(arm, playback.arm_names), pick(hand, playback.effector_names)
 
-    player = Player(playback, effective, actuators, pipeline.arm_guard, eff_guard, measured, rig.pipeline.engage_speed_frac)
+    player = Player(playback, effective, actuators, pipeline.arm_guard, eff_guard, measured, rig.pipeline.engage_speed_frac,
+                    motion=pipeline.motion, clock=clock)
     return player, runners, tap, rig, message
 
 
-def play(session: Path, episode, speed: float, to: str, rig_path, engage_after, console: Console, view: str, show: bool) -> None:
-    player, runners, tap, rig, message = build_player(session, episode, speed, to, rig_path)
+def play(session: Path, episode, speed: float, to: str, rig_path, engage_after, console: Console, view: str, show: bool,
+         smoothed: bool = False) -> None:
+    player, runners, tap, rig, message = build_player(session, episode, speed, to, rig_path, smoothed)
     for r in runners:
         r.start()
     thread = threading.Thread(target=player.run, daemon=True)
@@ -125,3 +133,5 @@ def play(session: Path, episode, speed: float, to: str, rig_path, engage_after, 
             r.stop()
     sent = sum(1 for phase, _, _ in player.state.sent if phase == "playing")
     console.print(f"played {len(p.t_ns)} steps at {player.speed:.2f}x to {to}; {sent} commands sent" + (f"; {message}" if message else ""))
+    if player.state.message:  # the robot refused a command or went away: playback stopped there
+        raise DeviceError(f"playback stopped: {player.state.message}")

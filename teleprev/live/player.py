@@ -18,9 +18,11 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from teleprev.errors import SessionError
+from teleprev.errors import DeviceError, SessionError
 from teleprev.messages import JointSample
+from teleprev.pipeline.derivatives import divided_differences
 from teleprev.pipeline.guard import JointGuard
+from teleprev.pipeline.trajectory import JointMotion
 from teleprev import topics
 from teleprev.session.reader import SessionReader
 
@@ -86,8 +88,11 @@ def validate(p: Playback, arm_guard: JointGuard, effector_guard: JointGuard) -> 
     return Playback(p.t_ns, arm, eff, p.arm_names, p.effector_names, p.source, adjusted)
 
 
-def safe_speed(p: Playback, arm_caps: np.ndarray, effector_caps: np.ndarray, requested: float) -> float:
-    """The largest speed up to `requested` at which no step exceeds a joint's speed cap in wall time."""
+def safe_speed(p: Playback, arm_caps: np.ndarray, effector_caps: np.ndarray, requested: float,
+               motion=None) -> float:
+    """The largest speed up to `requested` at which no step exceeds a joint's speed cap in wall time, and
+    (with the pipeline's Motion) no acceleration or jerk exceeds the generator's limits: played X times
+    faster, speeds scale by X, accelerations by X^2 and jerks by X^3."""
     if len(p.t_ns) < 2:
         return requested
     dt = np.diff(p.t_ns) / 1e9
@@ -97,7 +102,60 @@ def safe_speed(p: Playback, arm_caps: np.ndarray, effector_caps: np.ndarray, req
         with np.errstate(divide="ignore", invalid="ignore"):
             r = caps[None, :] * dt[:, None] / step  # speed multiple each step allows
         ratios.append(np.nanmin(np.where(np.isfinite(r), r, np.inf)) if step.size else np.inf)
+    if motion is not None and len(p.t_ns) >= 4:
+        _, acc, jerk = divided_differences(p.t_ns, p.arm)
+        ratios.append(_power_room(motion.arm.acceleration, acc, 2))
+        ratios.append(_power_room(motion.arm.jerk, jerk, 3))
+        if motion.hand is not None:
+            ratios.append(_power_room(motion.hand.acceleration, divided_differences(p.t_ns, p.effector)[1], 2))
     return float(min(requested, *ratios))
+
+
+def _power_room(limit: np.ndarray, measured: np.ndarray, power: int) -> float:
+    """The speed multiple X at which measured * X**power stays within the limit."""
+    peak = np.abs(measured).max(axis=0) if measured.size else np.zeros_like(limit)
+    with np.errstate(divide="ignore"):
+        room = (np.asarray(limit) / peak) ** (1.0 / power)
+    return float(np.min(np.where(peak > 0, room, np.inf)))
+
+
+def smooth(p: Playback, motion) -> Playback:
+    """The played sequence as the pipeline's own generator would command it (`replay --smooth`): the
+    arm jerk-limited, the hand acceleration-capped along segments that keep the clearance, from rest at
+    the first command, meeting each recorded command as a moving target, and braking to rest at the last."""
+    arm_gen, hand = motion.arm, motion.hand
+    s = JointMotion.rest(p.arm[0])
+    e, ev = p.effector[0].copy(), np.zeros_like(p.effector[0])
+    t, arm, eff = [int(p.t_ns[0])], [s.q], [e]
+    dt_before, flags = 0.0, []
+
+    def step(dt, target_a, tv_a, target_e, tv_e):
+        nonlocal s, e, ev, dt_before
+        s = arm_gen.track(s, target_a, tv_a, dt)[0] if target_a is not None else arm_gen.stop(s, dt)
+        if hand is not None:
+            e, ev = motion.hand_step(e, ev, target_e, tv_e, dt, dt_before, 1.0, flags)
+        elif target_e is not None:
+            e = target_e
+        dt_before = dt
+        t.append(t[-1] + int(round(dt * 1e9)))
+        arm.append(s.q)
+        eff.append(e)
+
+    for k in range(1, len(p.t_ns)):
+        dt = (p.t_ns[k] - p.t_ns[k - 1]) / 1e9
+        if dt <= 0:
+            continue
+        step(dt, p.arm[k], (p.arm[k] - p.arm[k - 1]) / dt, p.effector[k], (p.effector[k] - p.effector[k - 1]) / dt)
+    period = float(np.median(np.diff(p.t_ns))) / 1e9 if len(p.t_ns) > 1 else 1 / 120
+    for _ in range(int(SETTLE_S / period)):  # then come to rest on the last command
+        if s.at_rest and not np.any(ev) and np.allclose(s.q, p.arm[-1], atol=1e-9) and np.allclose(e, p.effector[-1], atol=1e-9):
+            break
+        step(period, p.arm[-1], None, p.effector[-1], None)
+    return Playback(np.array(t, dtype=np.int64), np.array(arm), np.array(eff), p.arm_names, p.effector_names,
+                    f"{p.source}, smoothed", len(t))
+
+
+SETTLE_S = 30.0  # the longest a smoothed sequence may take to come to rest after its last command
 
 
 @dataclass
@@ -113,8 +171,10 @@ class Player:
     current (arm, effector) joints for the engage ramp."""
 
     def __init__(self, playback: Playback, speed: float, actuators: dict, arm_guard: JointGuard, effector_guard: JointGuard,
-                 measured=None, engage_speed_frac: float = 0.5, rate_hz: float = 120.0):
+                 measured=None, engage_speed_frac: float = 0.5, rate_hz: float = 120.0, motion=None, clock=None):
         self.p = playback
+        self.motion = motion  # teleprev.pipeline.motion.Motion: the engage ramp keeps its limits
+        self.clock = clock  # stamps the commands with the time they are sent (a robot runs them then)
         self.speed = speed
         self.actuators = actuators
         self.arm_guard, self.effector_guard = arm_guard, effector_guard
@@ -132,11 +192,19 @@ class Player:
     def stop(self) -> None:
         self._stop.set()
 
+    def _now_ns(self) -> int:
+        return self.clock.now_ns() if self.clock is not None else time.perf_counter_ns()
+
     def _send(self, arm: np.ndarray, eff: np.ndarray, t_ns: int) -> None:
         for kind, names, q in (("arm", self.p.arm_names, arm), ("hand", self.p.effector_names, eff)):
             device = self.actuators.get(kind)
             if device is not None:
-                device.send(JointSample(t_ns, names, q))
+                try:
+                    device.send(JointSample(t_ns, names, q))
+                except DeviceError as e:  # a controller fault, an unplugged robot: stop playing, say why
+                    self.state.message = str(e)
+                    self._stop.set()
+                    return
             self.state.sent.append((self.state.mode, kind, q))
 
     def run(self) -> PlayerState:
@@ -150,13 +218,15 @@ class Player:
             return self.state
         self.state.mode = "playing"
         start, t0 = time.perf_counter(), self.p.t_ns[0]
+        start_ns = self._now_ns() + int(self.period * 1e9)
         for k in range(len(self.p.t_ns)):
             if self._stop.is_set():
                 break
             due = (self.p.t_ns[k] - t0) / 1e9 / self.speed
             time.sleep(max(0.0, due - (time.perf_counter() - start)))
             self.state.index = k
-            self._send(self.p.arm[k], self.p.effector[k], int(self.p.t_ns[k]))
+            # stamped with when it is meant to run at this speed: what the robot's timing will be
+            self._send(self.p.arm[k], self.p.effector[k], start_ns + int(round(due * 1e9)))
         self.state.mode = "done"
         return self.state
 
@@ -176,11 +246,35 @@ class Player:
         arm, eff = measured
         arm = np.clip(arm, self.arm_guard.lower, self.arm_guard.upper)
         target_a, target_e = self.p.arm[0], self.p.effector[0]
+        if self.motion is not None:
+            return self._limited_ramp(arm, eff, target_a, target_e)
+        t_ns = self._now_ns()
         while not self._stop.is_set():
             if np.max(np.abs(arm - target_a)) < 1e-9 and np.max(np.abs(eff - target_e)) < 1e-9:
                 return True
             arm = self.arm_guard.step(arm, target_a, self.period, self.engage_speed_frac)
             eff = self.effector_guard.step(eff, target_e, self.period, self.engage_speed_frac, target_valid=True)
-            self._send(arm, eff, 0)
+            t_ns += int(self.period * 1e9)
+            self._send(arm, eff, t_ns)
+            time.sleep(self.period)
+        return False
+
+    def _limited_ramp(self, arm, eff, target_a, target_e) -> bool:
+        """The ramp through the pipeline's generator: from rest where the robot is to rest at the first
+        command, at the engage fraction of the speed caps and within the acceleration and jerk limits."""
+        m, frac, flags = self.motion, self.engage_speed_frac, []
+        s, ev, dt = JointMotion.rest(arm), np.zeros_like(eff), self.period
+        t_ns = self._now_ns()
+        while not self._stop.is_set():
+            if s.at_rest and not np.any(ev) and np.max(np.abs(s.q - target_a)) < 1e-9 and np.max(np.abs(eff - target_e)) < 1e-9:
+                time.sleep(self.period)  # at rest on the first command: the next command starts from rest
+                return True
+            s = m.arm.track(s, target_a, None, dt, frac)[0]
+            if m.hand is not None:
+                eff, ev = m.hand_step(eff, ev, target_e, None, dt, dt, frac, flags)
+            else:
+                eff = self.effector_guard.step(eff, target_e, dt, frac, target_valid=True)
+            t_ns += int(dt * 1e9)
+            self._send(s.q, eff, t_ns)
             time.sleep(self.period)
         return False

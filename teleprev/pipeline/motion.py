@@ -171,20 +171,12 @@ class Motion:
                 eff_cmd = p.effector.guard.step(state.effector_cmd, effector_target, dt, frac, target_valid=True)
         elif effector_target is not None or np.any(hand_v != 0.0):
             last = state.effector_cmd
-            if effector_target is not None:
-                tv = None
-                if self.feedforward:
-                    m, tv = self._hand_feedforward(m, effector_target, dt)
-                eff_cmd, hand_v = self.hand.track(last, hand_v, effector_target, tv, dt, m.dt, frac)
-            else:
-                eff_cmd, hand_v = self.hand.stop(last, hand_v, dt, m.dt)
-                if executing:
-                    flags.append("hand_stopping")
-            if self.swept is not None and not (self.swept.segment_free(last, eff_cmd)
-                                               and self.swept.segment_free(eff_cmd, self._stop_point(eff_cmd, hand_v))):
-                eff_cmd, hand_v = self._avoid(last, m.hand_v, dt, m.dt, flags)
-            if not np.any(eff_cmd != last):
-                hand_v = np.zeros_like(hand_v)
+            tv = None
+            if effector_target is not None and self.feedforward:
+                m, tv = self._hand_feedforward(m, effector_target, dt)
+            if effector_target is None and executing:
+                flags.append("hand_stopping")
+            eff_cmd, hand_v = self.hand_step(last, hand_v, effector_target, tv, dt, m.dt, frac, flags)
 
         if arm_cmd is None and eff_cmd is None:
             return replace(new, motion=replace(m, arm=arm, hand_v=hand_v)), None, None
@@ -202,6 +194,20 @@ class Motion:
         if state.engaging and executing:
             flags.append("engaging")
         return replace(new, arm_cmd=a, effector_cmd=e, cmd_ns=inputs.t_ns, engaging=engaging, motion=m), arm_cmd, eff_cmd
+
+    def hand_step(self, last, v, target, target_v, dt, dt_before, frac, flags):
+        """(command, velocity) one step of dt from hand command `last` moving at v: towards `target`
+        (None: brake), within the acceleration cap, and only along a segment that keeps the clearance."""
+        if target is not None:
+            cmd, cmd_v = self.hand.track(last, v, target, target_v, dt, dt_before, frac)
+        else:
+            cmd, cmd_v = self.hand.stop(last, v, dt, dt_before)
+        if self.swept is not None and not (self.swept.segment_free(last, cmd)
+                                           and self.swept.segment_free(cmd, self._stop_point(cmd, cmd_v))):
+            cmd, cmd_v = self._avoid(last, v, dt, dt_before, flags)
+        if not np.any(cmd != last):
+            cmd_v = np.zeros_like(cmd_v)
+        return cmd, cmd_v
 
     def _stop_point(self, q, v):
         """Where braking at the cap from q at v would end: a command is taken only if that way is free too,
