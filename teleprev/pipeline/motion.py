@@ -140,15 +140,18 @@ class Motion:
             flags.append("stopping")
         dt = (inputs.t_ns - state.cmd_ns) / 1e9
         frac = p.cfg.engage_speed_frac if state.engaging else 1.0
-        if inputs.t_ns - state.cmd_ns > RESUME_GAP_NS and m.moving:
-            # No command went out for this long (the process stalled): a servo-mode arm has stood at the
-            # last command meanwhile, so carry on from rest there, not from where the motion would be.
-            m = replace(m, arm=JointMotion.rest(state.arm_cmd), hand_v=None if m.hand_v is None else np.zeros_like(m.hand_v),
-                        dt=0.0)
-            dt = RESUME_STEP_S  # the new start: at rest one short step ago, not at the last command's time
-            flags.append("commands_resumed")
-            if not (executing or m.moving):
-                return replace(new, motion=None, arm_cmd=None, effector_cmd=None, cmd_ns=inputs.t_ns), None, None
+        if inputs.t_ns - state.cmd_ns > RESUME_GAP_NS:
+            if m.moving:
+                # No command went out for this long (the process stalled): a servo-mode arm has stood at the
+                # last command meanwhile, so carry on from rest there, not from where the motion would be.
+                m = replace(m, arm=JointMotion.rest(state.arm_cmd),
+                            hand_v=None if m.hand_v is None else np.zeros_like(m.hand_v), dt=0.0)
+                flags.append("commands_resumed")
+                if not (executing or m.moving):
+                    return replace(new, motion=None, arm_cmd=None, effector_cmd=None, cmd_ns=inputs.t_ns), None, None
+            # Moving or not, the next command starts from rest one short step ago, not at the last
+            # command's time: after a pause the arm (and sim.arm) take a command as the start of a new stream.
+            dt = RESUME_STEP_S
 
         arm_cmd = None
         arm, arm_reached = m.arm, arm_target is None

@@ -221,3 +221,18 @@ def test_after_a_stall_the_commands_start_again_from_rest_at_the_last_one(pipeli
     assert np.abs(q[0] - last).max() < 1e-4  # from rest at the last command, not 120 ms further on
     # within the limits from rest: two samples of the arm standing there first
     assert_within(np.r_[t[0] - 2 * 10**7, t[0] - 10**7, t], np.vstack([last, last, q]), 2.14, ARM.acceleration, ARM.jerk)
+
+
+def test_after_a_stall_with_an_idle_step_first_the_next_command_still_starts_from_rest(pipeline):
+    """The stall is met first by an idle step (an arm state sample), which finds the commands stood at
+    rest and sends nothing; the next glove step must still start one short step from rest, not plan
+    over the whole pause (a jump the sim arm, like the controller, faults on)."""
+    p = pipeline
+    state, results = run(p, 300, engage_at=100)
+    last, last_t = state.arm_cmd.copy(), results[-1][0].t_ns
+    idle = p.idle_step(state, dataclasses.replace(inputs(300, p.arm_names, p.effector_names, [0.05]), t_ns=last_t + 107_000_000))
+    assert idle is not None and "commands_resumed" in idle.report["flags"] and idle.arm_command is None
+    _, more = run(p, 100, state=idle.state, make=lambda k: inputs(314 + k, p.arm_names, p.effector_names, [0.05]))
+    t, q = commands(more)
+    assert np.abs(q[0] - last).max() < 1e-4
+    assert_within(np.r_[t[0] - 2 * 10**7, t[0] - 10**7, t], np.vstack([last, last, q]), 2.14, ARM.acceleration, ARM.jerk)
