@@ -16,7 +16,7 @@ from teleprev.messages import JointSample
 from teleprev.live.build import build_pipeline, rig_calibration
 from teleprev.preview.keys import KeyReader
 from teleprev.preview.robot_view import Layer, RobotView
-from teleprev.live.player import Player, load_playback, safe_speed, smooth, validate
+from teleprev.live.player import ROUNDING, Player, load_playback, safe_speed, smooth, validate
 from teleprev.rig import load_rig, load_rig_text
 from teleprev.robot.model import load_robot
 from teleprev.clock import SessionClock
@@ -56,8 +56,14 @@ def build_player(session: Path, episode, speed: float, to: str, rig_path=None, s
     if smoothed:
         if pipeline.motion is None:
             raise ConfigError("--smooth needs the rig's motion limits, and this rig has none", str(rig.path or session))
-        playback = smooth(playback, pipeline.motion)
-    effective = safe_speed(playback, pipeline.arm_guard.speed, eff_guard.speed, speed, pipeline.motion)
+        playback, effective = smooth(playback, pipeline.motion, speed), speed  # generated for this speed
+    else:
+        effective = safe_speed(playback, pipeline.arm_guard.speed, eff_guard.speed, speed, pipeline.motion)
+        if to != "preview" and pipeline.motion is not None and effective < min(speed, 1.0) - ROUNDING:
+            # Slower than recorded, the recorded commands' pauses stretch past what a servo arm rides through.
+            raise ConfigError(f"the recorded commands can be played to a robot at {effective:.2f}x at most (their "
+                              "acceleration or jerk), and slower than 1x a servo arm would stop between them: "
+                              "add --smooth to re-command them through the jerk-limited generator", str(session))
     message = "" if effective >= speed else (f"playing at {effective:.2f}x: {speed:g}x would exceed a joint's speed, "
                                              "acceleration or jerk limit")
     clock = SessionClock()

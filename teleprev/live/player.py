@@ -12,6 +12,7 @@ the robot from where it is to the first command at a fraction of the caps, then 
 
 from __future__ import annotations
 
+import copy
 import threading
 import time
 from dataclasses import dataclass, field
@@ -22,6 +23,7 @@ from teleprev.errors import DeviceError, SessionError
 from teleprev.messages import JointSample
 from teleprev.pipeline.derivatives import divided_differences
 from teleprev.pipeline.guard import JointGuard
+from teleprev.pipeline.motion import RESUME_GAP_NS
 from teleprev.pipeline.trajectory import JointMotion
 from teleprev import topics
 from teleprev.session.reader import SessionReader
@@ -36,6 +38,13 @@ class Playback:
     effector_names: tuple[str, ...]
     source: str  # "commands" or "targets"
     adjusted: int = 0  # steps the guards had to change
+    arm_sent: np.ndarray | None = None  # per step: was the arm commanded then (None: at every step)
+    effector_sent: np.ndarray | None = None
+
+    def sent(self, side: str) -> np.ndarray:
+        """Boolean per step: the steps at which this side ("arm" or "effector") gets a command."""
+        mask = self.arm_sent if side == "arm" else self.effector_sent
+        return np.ones(len(self.t_ns), dtype=bool) if mask is None else mask
 
 
 def _stream(reader: SessionReader, topic: str, lo: int, hi: int) -> tuple[dict[int, np.ndarray], tuple[str, ...]]:
@@ -72,20 +81,38 @@ def load_playback(path, episode: int | None = None) -> Playback:
         last_a, last_e = arm.get(s, last_a), eff.get(s, last_e)
         a.append(last_a)
         e.append(last_e)
-    return Playback(np.array(stamps, dtype=np.int64), np.array(a), np.array(e), tuple(arm_names), tuple(eff_names), source)
+    # Each side is sent at its own recorded stamps only: a held value at the other side's stamps would be
+    # a stop-and-go that no robot should follow.
+    return Playback(np.array(stamps, dtype=np.int64), np.array(a), np.array(e), tuple(arm_names), tuple(eff_names), source,
+                    arm_sent=np.array([s in arm for s in stamps]), effector_sent=np.array([s in eff for s in stamps]))
 
 
 def validate(p: Playback, arm_guard: JointGuard, effector_guard: JointGuard) -> Playback:
-    """The sequence as the guards pass it in the recording's time (unchanged when it was valid)."""
-    arm, eff = p.arm.copy(), p.effector.copy()
-    adjusted = 0
-    for k in range(1, len(p.t_ns)):
-        dt = (p.t_ns[k] - p.t_ns[k - 1]) / 1e9
-        a = arm_guard.step(arm[k - 1], p.arm[k], dt)
-        e = effector_guard.step(eff[k - 1], p.effector[k], dt, target_valid=effector_guard.valid(p.effector[k]))
-        adjusted += not (np.array_equal(a, p.arm[k]) and np.array_equal(e, p.effector[k]))
-        arm[k], eff[k] = a, e
-    return Playback(p.t_ns, arm, eff, p.arm_names, p.effector_names, p.source, adjusted)
+    """The sequence as the guards pass it in the recording's time (unchanged when it was valid), each side
+    over its own commands (a step between them is as long as it was when recorded)."""
+    out, adjusted = {}, np.zeros(len(p.t_ns), dtype=bool)
+    for side, q, guard in (("arm", p.arm, arm_guard), ("effector", p.effector, effector_guard)):
+        # A recorded step may span up to a resume gap (a late step the generator planned over); the live
+        # guard's shorter max_dt is for unsteady input, not for commands that were sent.
+        guard = copy.copy(guard)
+        guard.max_dt = max(guard.max_dt, RESUME_GAP_NS / 1e9)
+        q_out, sent = q.copy(), p.sent(side)
+        last = None
+        for k in range(len(p.t_ns)):
+            if sent[k] and last is not None:
+                dt = (p.t_ns[k] - p.t_ns[last]) / 1e9
+                if side == "arm":
+                    q_out[k] = guard.step(q_out[last], q[k], dt)
+                else:
+                    q_out[k] = guard.step(q_out[last], q[k], dt, target_valid=guard.valid(q[k]))
+                adjusted[k] |= not np.array_equal(q_out[k], q[k])
+            elif not sent[k] and last is not None:
+                q_out[k] = q_out[last]  # held where this side was not commanded (shown, not sent)
+            if sent[k]:
+                last = k
+        out[side] = q_out
+    return Playback(p.t_ns, out["arm"], out["effector"], p.arm_names, p.effector_names, p.source, int(adjusted.sum()),
+                    p.arm_sent, p.effector_sent)
 
 
 def safe_speed(p: Playback, arm_caps: np.ndarray, effector_caps: np.ndarray, requested: float,
@@ -102,13 +129,24 @@ def safe_speed(p: Playback, arm_caps: np.ndarray, effector_caps: np.ndarray, req
         with np.errstate(divide="ignore", invalid="ignore"):
             r = caps[None, :] * dt[:, None] / step  # speed multiple each step allows
         ratios.append(np.nanmin(np.where(np.isfinite(r), r, np.inf)) if step.size else np.inf)
-    if motion is not None and len(p.t_ns) >= 4:
-        _, acc, jerk = divided_differences(p.t_ns, p.arm)
-        ratios.append(_power_room(motion.arm.acceleration, acc, 2))
-        ratios.append(_power_room(motion.arm.jerk, jerk, 3))
-        if motion.hand is not None:
-            ratios.append(_power_room(motion.hand.acceleration, divided_differences(p.t_ns, p.effector)[1], 2))
-    return float(min(requested, *ratios))
+    if motion is not None:
+        for side, q, sent in (("arm", p.arm, p.sent("arm")), ("hand", p.effector, p.sent("effector"))):
+            t = p.t_ns[sent]
+            breaks = np.flatnonzero(np.diff(t) > RESUME_GAP_NS) + 1
+            if len(breaks):  # played faster, a pause between runs must stay a pause (the arm stood there)
+                ratios.append(float(np.diff(t)[breaks - 1].min()) / RESUME_GAP_NS)
+            for run in np.split(np.flatnonzero(sent), breaks):  # each run starts from rest: measured alone
+                if side == "arm" and len(run) >= 4:
+                    _, acc, jerk = divided_differences(p.t_ns[run], q[run])
+                    ratios.append(_power_room(motion.arm.acceleration, acc, 2))
+                    ratios.append(_power_room(motion.arm.jerk, jerk, 3))
+                elif side == "hand" and motion.hand is not None and len(run) >= 3:
+                    ratios.append(_power_room(motion.hand.acceleration, divided_differences(p.t_ns[run], q[run])[1], 2))
+    speed = float(min(requested, *ratios))
+    return min(requested, 1.0) if requested >= 1.0 and speed >= 1.0 - ROUNDING else speed
+
+
+ROUNDING = 1e-6  # a recording at its limits measures 1 +- rounding: that is 1x
 
 
 def _power_room(limit: np.ndarray, measured: np.ndarray, power: int) -> float:
@@ -119,38 +157,49 @@ def _power_room(limit: np.ndarray, measured: np.ndarray, power: int) -> float:
     return float(np.min(np.where(peak > 0, room, np.inf)))
 
 
-def smooth(p: Playback, motion) -> Playback:
-    """The played sequence as the pipeline's own generator would command it (`replay --smooth`): the
-    arm jerk-limited, the hand acceleration-capped along segments that keep the clearance, from rest at
-    the first command, meeting each recorded command as a moving target, and braking to rest at the last."""
+def smooth(p: Playback, motion, speed: float = 1.0, max_step_s: float = 1 / 120) -> Playback:
+    """The played sequence as the pipeline's own generator would command it (`replay --smooth`), in the
+    time it is played at `speed`: the arm jerk-limited, the hand acceleration-capped along segments that
+    keep the clearance, from rest at the first command, meeting each recorded command as a moving target
+    (at most `max_step_s` apart, so no pause is long enough for a servo arm to stand), braking to rest at
+    the last. Stamps stay in the recording's time (played time x speed), as the Player expects."""
     arm_gen, hand = motion.arm, motion.hand
     s = JointMotion.rest(p.arm[0])
     e, ev = p.effector[0].copy(), np.zeros_like(p.effector[0])
-    t, arm, eff = [int(p.t_ns[0])], [s.q], [e]
-    dt_before, flags = 0.0, []
+    t0 = int(p.t_ns[0])
+    t, arm, eff = [t0], [s.q], [e]
+    played, dt_before, flags = 0.0, 0.0, []
 
     def step(dt, target_a, tv_a, target_e, tv_e):
-        nonlocal s, e, ev, dt_before
-        s = arm_gen.track(s, target_a, tv_a, dt)[0] if target_a is not None else arm_gen.stop(s, dt)
+        nonlocal s, e, ev, dt_before, played
+        s = arm_gen.track(s, target_a, tv_a, dt)[0]
         if hand is not None:
             e, ev = motion.hand_step(e, ev, target_e, tv_e, dt, dt_before, 1.0, flags)
-        elif target_e is not None:
+        else:
             e = target_e
         dt_before = dt
-        t.append(t[-1] + int(round(dt * 1e9)))
+        played += dt
+        t.append(t0 + int(round(played * speed * 1e9)))
         arm.append(s.q)
         eff.append(e)
 
+    arm_sent, eff_sent = p.sent("arm"), p.sent("effector")
     for k in range(1, len(p.t_ns)):
-        dt = (p.t_ns[k] - p.t_ns[k - 1]) / 1e9
-        if dt <= 0:
+        span = (p.t_ns[k] - p.t_ns[k - 1]) / 1e9 / speed  # played seconds to this command
+        if span <= 0:
             continue
-        step(dt, p.arm[k], (p.arm[k] - p.arm[k - 1]) / dt, p.effector[k], (p.effector[k] - p.effector[k - 1]) / dt)
-    period = float(np.median(np.diff(p.t_ns))) / 1e9 if len(p.t_ns) > 1 else 1 / 120
-    for _ in range(int(SETTLE_S / period)):  # then come to rest on the last command
+        va = (p.arm[k] - p.arm[k - 1]) / span if arm_sent[k] and arm_sent[k - 1] else None
+        ve = (p.effector[k] - p.effector[k - 1]) / span if eff_sent[k] and eff_sent[k - 1] else None
+        n = max(1, int(np.ceil(span / max_step_s - 1e-9)))
+        for i in range(1, n + 1):
+            # where the recorded command stream (linear between commands) is at this sub-step
+            f = i / n
+            step(span / n, p.arm[k - 1] + f * (p.arm[k] - p.arm[k - 1]), va,
+                 p.effector[k - 1] + f * (p.effector[k] - p.effector[k - 1]), ve)
+    for _ in range(int(SETTLE_S / max_step_s)):  # then come to rest on the last command
         if s.at_rest and not np.any(ev) and np.allclose(s.q, p.arm[-1], atol=1e-9) and np.allclose(e, p.effector[-1], atol=1e-9):
             break
-        step(period, p.arm[-1], None, p.effector[-1], None)
+        step(max_step_s, p.arm[-1], None, p.effector[-1], None)
     return Playback(np.array(t, dtype=np.int64), np.array(arm), np.array(eff), p.arm_names, p.effector_names,
                     f"{p.source}, smoothed", len(t))
 
@@ -195,8 +244,10 @@ class Player:
     def _now_ns(self) -> int:
         return self.clock.now_ns() if self.clock is not None else time.perf_counter_ns()
 
-    def _send(self, arm: np.ndarray, eff: np.ndarray, t_ns: int) -> None:
-        for kind, names, q in (("arm", self.p.arm_names, arm), ("hand", self.p.effector_names, eff)):
+    def _send(self, arm: np.ndarray, eff: np.ndarray, t_ns: int, to_arm: bool = True, to_hand: bool = True) -> None:
+        for kind, names, q, due in (("arm", self.p.arm_names, arm, to_arm), ("hand", self.p.effector_names, eff, to_hand)):
+            if not due:
+                continue
             device = self.actuators.get(kind)
             if device is not None:
                 try:
@@ -219,6 +270,7 @@ class Player:
         self.state.mode = "playing"
         start, t0 = time.perf_counter(), self.p.t_ns[0]
         start_ns = self._now_ns() + int(self.period * 1e9)
+        arm_sent, eff_sent = self.p.sent("arm"), self.p.sent("effector")
         for k in range(len(self.p.t_ns)):
             if self._stop.is_set():
                 break
@@ -226,7 +278,7 @@ class Player:
             time.sleep(max(0.0, due - (time.perf_counter() - start)))
             self.state.index = k
             # stamped with when it is meant to run at this speed: what the robot's timing will be
-            self._send(self.p.arm[k], self.p.effector[k], start_ns + int(round(due * 1e9)))
+            self._send(self.p.arm[k], self.p.effector[k], start_ns + int(round(due * 1e9)), arm_sent[k], eff_sent[k])
         self.state.mode = "done"
         return self.state
 
@@ -265,10 +317,7 @@ class Player:
         m, frac, flags = self.motion, self.engage_speed_frac, []
         s, ev, dt = JointMotion.rest(arm), np.zeros_like(eff), self.period
         t_ns = self._now_ns()
-        while not self._stop.is_set():
-            if s.at_rest and not np.any(ev) and np.max(np.abs(s.q - target_a)) < 1e-9 and np.max(np.abs(eff - target_e)) < 1e-9:
-                time.sleep(self.period)  # at rest on the first command: the next command starts from rest
-                return True
+        while not self._stop.is_set():  # at least one command: the robot holds where it is told to
             s = m.arm.track(s, target_a, None, dt, frac)[0]
             if m.hand is not None:
                 eff, ev = m.hand_step(eff, ev, target_e, None, dt, dt, frac, flags)
@@ -277,4 +326,6 @@ class Player:
             t_ns += int(dt * 1e9)
             self._send(s.q, eff, t_ns)
             time.sleep(self.period)
+            if s.at_rest and not np.any(ev) and np.max(np.abs(s.q - target_a)) < 1e-9 and np.max(np.abs(eff - target_e)) < 1e-9:
+                return True  # at rest on the first command: the played commands start from rest there
         return False

@@ -8,18 +8,19 @@ import threading
 from pathlib import Path
 
 import numpy as np
+import pytest
 
+from teleprev.errors import ConfigError
+from teleprev.live import playback
 from teleprev.live.playback import build_player
 from teleprev.pipeline.derivatives import divided_differences
 
 FIXTURE = Path(__file__).parents[1] / "fixtures" / "sim_v1.mcap"  # format 1: speed caps only, fails the audit
 
 
-def _play_to_sim_arm(smoothed: bool, force_speed: float | None = None):
+def _play_to_sim_arm(smoothed: bool):
     """Play episode 0 of the fixture to the rig's robot (the sim arm, which faults like an xArm would)."""
     player, runners, tap, rig, message = build_player(FIXTURE, 0, 1.0, "arm", smoothed=smoothed)
-    if force_speed is not None:
-        player.speed = force_speed
     arm = player.actuators["arm"]
     sent, original = [], arm.send
     arm.send = lambda cmd: (sent.append((cmd.stamp_ns, cmd.positions.copy())), original(cmd))[1]
@@ -42,12 +43,16 @@ def test_the_cli_refuses_to_send_a_session_that_fails_the_audit_to_the_robot():
     assert "fails the audit" in said and "--smooth" in said and "accel" in said
 
 
-def test_played_faster_than_its_accelerations_allow_the_sim_arm_faults():
-    player, *_ = build_player(FIXTURE, 0, 1.0, "arm")
-    assert player.speed < 0.2  # the recording's accelerations are ~50x the limit: played at most 1/sqrt(50) as fast
-    player, arm, _ = _play_to_sim_arm(smoothed=False, force_speed=1.0)
+def test_unsmoothed_it_could_only_be_played_slower_than_recorded_so_it_is_refused():
+    with pytest.raises(ConfigError, match="--smooth"):
+        build_player(FIXTURE, 0, 1.0, "arm")  # ~50x the acceleration limit: 1/sqrt(50) x at most
+
+
+def test_played_anyway_the_sim_arm_faults_and_the_player_stops_saying_why(monkeypatch):
+    monkeypatch.setattr(playback, "safe_speed", lambda *args, **kw: 1.0)  # what replay did before the limits
+    player, arm, _ = _play_to_sim_arm(smoothed=False)
     assert arm.fault  # what a servo-mode xArm does with speed-capped commands at their own pace
-    assert "controller fault" in player.state.message  # the player stopped and says why
+    assert "controller fault" in player.state.message
 
 
 def test_smoothed_the_sim_arm_follows_within_the_limits():
@@ -66,3 +71,38 @@ def test_smoothed_the_sim_arm_follows_within_the_limits():
     assert np.allclose(q[-1], player.p.arm[-1], atol=1e-6)
     assert np.abs(q[-1] - q[-2]).max() <= limits.acceleration.max() * ((t[-1] - t[-2]) / 1e9) ** 2
     assert player.state.message == ""
+
+
+def test_smoothed_at_half_speed_is_generated_for_the_played_time():
+    player, runners, tap, rig, message = build_player(FIXTURE, 1, 0.5, "arm", smoothed=True)
+    assert player.speed == 0.5
+    p = player.p
+    played_ns = np.diff(p.t_ns) / 0.5  # what the Player waits between commands at this speed
+    assert played_ns.max() <= 1e9 / 120 + 1  # no pause a servo arm would stand through
+    # in played time (integer ns differences first); stamps are whole ns, which divided differences on
+    # 4 ms steps amplify to ~1e-5 of the limit
+    _, acc, jerk = divided_differences((p.t_ns - p.t_ns[0]) * 2, p.arm)
+    assert np.abs(acc).max() <= player.motion.arm.acceleration.max() * (1 + 1e-4)
+    assert np.abs(jerk).max() <= player.motion.arm.jerk.max() * (1 + 1e-3)
+
+
+def test_a_fresh_recording_replays_to_the_sim_robot_without_a_fault(tmp_path):
+    from tests.helpers.sessions import record_sim
+
+    session = tmp_path / "s.mcap"
+    record_sim(session, "sim.toml", seconds=3.0, engage_after=0.8)
+    player, runners, tap, rig, message = build_player(session, 0, 2.0, "sim")
+    assert player.speed == 1.0  # recorded at the limits: 2x would break them
+    hand_steps = int(player.p.sent("effector").sum())
+    arm = player.actuators["arm"]
+    for r in runners:
+        r.start()
+    player.engage()
+    thread = threading.Thread(target=player.run)
+    thread.start()
+    thread.join(60)
+    for r in runners:
+        r.stop()
+    assert arm.fault == "" and player.state.message == ""
+    played_hand = sum(1 for phase, kind, _ in player.state.sent if phase == "playing" and kind == "hand")
+    assert played_hand == hand_steps  # each side at its own recorded stamps, nothing held in between
