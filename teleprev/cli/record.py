@@ -50,3 +50,5 @@ def record(
     finally:
         summary = recording.stop()
     print_summary(console, recording, summary)
+    if recording.loop.stats.device_failures:
+        raise typer.Exit(1)  # a device failed during the session: the summary above says which

@@ -78,6 +78,10 @@ def info(
         head.add_row("dropped", f"[{style}]{s.dropped}[/]")
     else:
         head.add_row("dropped", "[yellow]unknown[/] (no recorder counters: the recorder did not close the file)")
+    failures = s.device_failures
+    if failures:
+        head.add_row("failed devices", "[bold red]" + ", ".join(f"{d} ({n}x)" for d, n in sorted(failures.items()))
+                     + "[/] (see device events)")
     console.print(head)
 
     table = Table(title="streams", title_justify="left", box=box.SIMPLE_HEAD, pad_edge=False)

@@ -145,3 +145,7 @@ def print_summary(console: Console, recording: LiveSession, summary) -> None:
         f"episodes: {recording.loop.episodes.index + 1}   commands sent: {sum(recording.loop.stats.commands_sent.values())}"
         f"   dropped before recording: {loop_drops}   file: {recording.options.out}"
     )
+    for name, n in sorted(recording.loop.stats.device_failures.items()):
+        last = recording.runners[name].stats().last_error if name in recording.runners else ""
+        console.print(f"[bold red]device {name} failed[/] {n} time(s) (last: {last}); "
+                      "see `teleprev info` for when", highlight=False)

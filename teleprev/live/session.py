@@ -120,7 +120,8 @@ class LiveSession:
         self.loop.stop()
         stats = self.loop.stats
         extra = {"loop": {"dropped": json.dumps(dict(stats.dropped)), "commands_sent": json.dumps(dict(stats.commands_sent)),
-                          "command_errors": json.dumps(dict(stats.command_errors))}}
+                          "command_errors": json.dumps(dict(stats.command_errors)),
+                          "device_failures": json.dumps(dict(stats.device_failures))}}
         self.summary = self.recorder.close(extra)
         return self.summary
 

@@ -66,12 +66,23 @@ class SessionSummary:
     def duration_s(self) -> float:
         return 0.0 if self.start_ns is None else (self.end_ns - self.start_ns) / 1e9
 
+    @property
+    def device_failures(self) -> dict[str, int]:
+        """Failures (connect or read raised: "error" events) per device; skipped input is not one
+        (older sessions reported it as an "error" whose message starts with "skipped")."""
+        out: dict[str, int] = {}
+        for e in self.device_events:
+            if e.event == "error" and not e.message.startswith("skipped "):
+                out[e.device] = out.get(e.device, 0) + 1
+        return out
+
     def to_json(self) -> dict:
         from dataclasses import asdict
 
         out = asdict(self)
         out["path"] = str(self.path)
         out["duration_s"] = self.duration_s
+        out["device_failures"] = self.device_failures
         return out
 
 

@@ -7,8 +7,6 @@ import time
 
 import numpy as np
 import pytest
-from pythonosc.osc_bundle_builder import IMMEDIATELY, OscBundleBuilder
-from pythonosc.osc_message_builder import OscMessageBuilder
 from pythonosc.udp_client import SimpleUDPClient
 
 from teleprev.devices.contract import DeviceContext
@@ -16,39 +14,10 @@ from teleprev.devices.runner import DeviceRunner
 from teleprev_devices.vmc import VmcGlove, VmcSuit
 from teleprev_devices.vmc.plugins import BODY_POSE_NAMES, VmcSettings, VmcSuitSettings
 from teleprev.human.smplx import JOINT_INDEX, angles_from_hand_pose, hand_pose_from_values
-from teleprev.transforms import axis_angle_to_matrix, matrix_to_quat, quat_from_axis_angle, quat_to_matrix
+from teleprev.transforms import axis_angle_to_matrix, matrix_to_quat, quat_to_matrix
+from tests.helpers.vmc import arm_frame, arm_messages, bone, bundle, free_port, msg, unity_quat
 from teleprev import topics
 from teleprev.clock import SessionClock
-
-
-def free_port() -> int:
-    with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as s:
-        s.bind(("127.0.0.1", 0))
-        return s.getsockname()[1]
-
-
-def msg(address: str, *args, types: str | None = None):
-    b = OscMessageBuilder(address=address)
-    for i, a in enumerate(args):
-        b.add_arg(a, types[i] if types else None)
-    return b.build()
-
-
-def bone(name: str, pos=(0.0, 0.0, 0.0), quat=(0.0, 0.0, 0.0, 1.0), address="/VMC/Ext/Bone/Pos"):
-    return msg(address, name, *[float(v) for v in pos], *[float(v) for v in quat])
-
-
-def bundle(*messages):
-    b = OscBundleBuilder(IMMEDIATELY)
-    for m in messages:
-        b.add_content(m)
-    return b.build()
-
-
-def unity_quat(axis, angle):
-    """A Unity rotation of `angle` about the Unity-frame `axis` (x y z w)."""
-    axis = np.asarray(axis, dtype=float)
-    return quat_from_axis_angle(axis / np.linalg.norm(axis) * angle)
 
 
 @pytest.fixture
@@ -100,26 +69,6 @@ def test_index_flexion_sent_over_osc_comes_out_as_the_same_flexion(context):
         assert np.allclose(r @ [-1.0, 0, 0], np.diag([-1.0, 1, 1]) @ unity_tip)
     finally:
         glove.disconnect()
-
-
-def arm_messages(root_pos=(0, 0, 0), root_quat=(0, 0, 0, 1), elbow_quat=(0, 0, 0, 1), t=None):
-    msgs = [
-        bone("root", root_pos, root_quat, address="/VMC/Ext/Root/Pos"),
-        bone("Hips", (0, 0.9, 0)),
-        bone("Spine", (0, 0.1, 0)),
-        bone("Chest", (0, 0.15, 0)),
-        bone("RightShoulder", (0.02, 0.2, 0)),
-        bone("RightUpperArm", (0.1, 0, 0)),
-        bone("RightLowerArm", (0.3, 0, 0), elbow_quat),
-        bone("RightHand", (0.25, 0, 0)),
-    ]
-    if t is not None:
-        msgs.append(msg("/VMC/Ext/T", t, types="d"))
-    return msgs
-
-
-def arm_frame(**kw):
-    return bundle(*arm_messages(**kw))
 
 
 def test_suit_wrist_chains_root_and_bones_into_the_suit_frame(context):
@@ -204,7 +153,8 @@ def test_garbage_is_counted_and_skipped_without_stopping_the_stream(context):
         deadline = time.monotonic() + 1.0
         while glove.counters()["malformed_packets"] < 2 and time.monotonic() < deadline:
             time.sleep(0.01)
-        assert glove.counters() == {"malformed_packets": 2, "malformed_messages": 1, "unknown_bones": 2, "non_finite": 2}
+        assert {k: v for k, v in glove.counters().items() if v} == {
+            "malformed_packets": 2, "malformed_messages": 1, "unknown_bones": 2, "non_finite": 2}
         sender.sendto(bundle(good).dgram, ("127.0.0.1", port))
         assert len(read_until(glove, 1)) == 1  # still streaming
     finally:
@@ -247,8 +197,9 @@ def test_suit_and_glove_share_one_port_and_the_runner_reports_skipped_garbage():
     assert len(by_topic["/suit/s/wrist"]) == 31
     assert len(by_topic["/glove/g/hand"]) == 30
     events = [e.data for e in by_topic[topics.DEVICE_EVENT]]
-    assert {(e["device"], e["event"]) for e in events} >= {("s", "connected"), ("g", "connected"), ("s", "error"), ("g", "error")}
-    assert any("1 malformed packets" in e["message"] for e in events if e["event"] == "error")
+    assert {(e["device"], e["event"]) for e in events} >= {("s", "connected"), ("g", "connected"), ("s", "skipped"), ("g", "skipped")}
+    assert any("1 malformed packets" in e["message"] for e in events if e["event"] == "skipped")
+    assert not [e for e in events if e["event"] == "error"]  # skipped input is no failure
     assert runners[1].stats().skipped["malformed_packets"] == 1
     assert suit.context.shared == {}  # the last one out closed the shared socket
 
@@ -295,3 +246,81 @@ def test_settings_are_checked_when_the_rig_loads(tmp_path):
     rig.write_text('[devices.suit]\nplugin = "vmc.suit"\nbody = true\nport = 39540\n')
     entry = load_rig(rig).devices["suit"]
     assert entry.settings.host == "127.0.0.1" and entry.settings.body and entry.kind == "suit"
+
+
+def wait_counter(device, key, n, timeout=2.0):
+    deadline = time.monotonic() + timeout
+    while device.counters().get(key, 0) < n and time.monotonic() < deadline:
+        time.sleep(0.01)
+    return device.counters()
+
+
+def test_out_of_range_and_non_unit_packets_are_counted_and_skipped_and_the_receiver_lives_on(context):
+    """/VMC/Ext/T = 1e300 once ended the receiving thread (OverflowError); a 1e300 quaternion became NaN."""
+    port = free_port()
+    glove = VmcGlove("g", VmcSettings(port=port), context)
+    glove.connect()
+    sender = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+    good = bone("RightIndexProximal", (0.03, 0, 0), unity_quat([0, 0, 1], -0.3))
+    try:
+        sender.sendto(bundle(good, msg("/VMC/Ext/T", 1e300, types="d")).dgram, ("127.0.0.1", port))
+        sender.sendto(bundle(bone("RightIndexProximal", (0.03, 0, 0), (1e300, 0, 0, 1), double=True),
+                             msg("/VMC/Ext/T", 1.0, types="d")).dgram, ("127.0.0.1", port))
+        sender.sendto(bundle(bone("RightIndexProximal", (0.03, 0, 0), (0.5, 0, 0, 0.5))).dgram, ("127.0.0.1", port))
+        sender.sendto(bundle(bone("RightIndexProximal", (1e300, 0, 0), double=True)).dgram, ("127.0.0.1", port))
+        counters = wait_counter(glove, "non_unit_rotations", 2)
+        assert counters["out_of_range"] == 2 and counters["non_unit_rotations"] == 2
+        assert glove.read(0.05) == []  # nothing of those four reached the device
+        assert glove._receiver._thread.is_alive() and not glove._receiver.failure
+        sender.sendto(bundle(good, msg("/VMC/Ext/T", 2.0, types="d")).dgram, ("127.0.0.1", port))
+        samples = read_until(glove, 1)
+        assert len(samples) == 1 and np.isfinite(samples[0].payload.positions).all()
+    finally:
+        sender.close()
+        glove.disconnect()
+
+
+def test_a_datagram_that_makes_the_parser_raise_is_counted_and_the_next_one_is_read(context, monkeypatch):
+    port = free_port()
+    glove = VmcGlove("g", VmcSettings(port=port), context)
+    glove.connect()
+    receiver = glove._receiver
+    parse = receiver.parse
+    monkeypatch.setattr(receiver, "parse", lambda data, t: parse(data, t) if data != b"boom" else 1 / 0)
+    sender = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+    try:
+        sender.sendto(b"boom", ("127.0.0.1", port))
+        assert wait_counter(glove, "failed_packets", 1)["failed_packets"] == 1
+        sender.sendto(bundle(bone("RightIndexProximal", (0.03, 0, 0))).dgram, ("127.0.0.1", port))
+        assert len(read_until(glove, 1)) == 1 and receiver._thread.is_alive()
+    finally:
+        sender.close()
+        glove.disconnect()
+
+
+def test_a_clock_outlier_is_counted_and_recorded_as_an_event():
+    clock = SessionClock()
+    port = free_port()
+    glove = VmcGlove("g", VmcSettings(port=port), DeviceContext(clock))
+    got: list = []
+    runner = DeviceRunner(glove, lambda s, t: got.append(s), clock).start()
+    sender = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+    try:
+        deadline = time.monotonic() + 2.0
+        while not runner.connected and time.monotonic() < deadline:
+            time.sleep(0.01)
+        for k in range(12):  # 10 ms apart in sender time; the eighth claims to be 5 s in the future
+            t = 50.0 + 0.01 * k + (5.0 if k == 7 else 0.0)
+            sender.sendto(bundle(bone("RightIndexProximal", (0.03, 0, 0)), msg("/VMC/Ext/T", t, types="d")).dgram,
+                          ("127.0.0.1", port))
+            time.sleep(0.01)
+        time.sleep(0.1)
+    finally:
+        runner.stop()
+        sender.close()
+    events = [s.payload.data for s in got if s.topic == topics.DEVICE_EVENT]
+    assert any(e["event"] == "skipped" and "1 clock outliers" in e["message"] for e in events), events
+    hands = [s.payload.stamp_ns for s in got if s.topic == "/glove/g/hand"]
+    assert len(hands) == 12
+    kept = np.array(hands[:7] + hands[8:])  # the others keep the offset: 10 ms apart, the outlier's gap aside
+    assert np.allclose(np.diff(kept), [10e6] * 6 + [20e6] + [10e6] * 3, atol=1)

@@ -4,8 +4,11 @@ A datagram is one frame (senders put a frame in one bundle). The receiver keeps 
 every bone (a sender may split the skeleton over several bundles), and hands each subscriber a Frame:
 what this datagram updated plus the whole skeleton as known so far. Garbage never stops it: datagrams
 that do not parse, VMC messages with wrong arguments, unknown bone names and non-finite numbers are
-counted and skipped. /VMC/Ext/T (sender time, seconds) stamps the frame through ClockSync; without it
-the receive time does.
+counted and skipped, and so are out-of-range values (a sender time or position no clock or room can
+have), rotations that are not unit quaternions, and anything else a datagram makes the parser raise: the
+receiving thread never ends on input. /VMC/Ext/T (sender time, seconds) stamps the frame through
+ClockSync; without it the receive time does. A stamp ClockSync rejects as an outlier is counted too
+(`clock_outliers`), so that the runner records it as an event.
 """
 
 from __future__ import annotations
@@ -25,6 +28,9 @@ from teleprev.devices import ClockSync, DeviceError, SessionClock
 _MAX_DATAGRAM = 65535
 _QUEUE = 256  # frames kept per subscriber that is not reading fast enough
 _RESYNC_NS = 1_000_000_000  # sender time going back this much: the sender restarted, start ClockSync over
+MAX_SENDER_TIME_S = 1e10  # |/VMC/Ext/T| beyond this (317 years) is no clock
+MAX_POSITION_M = 1000.0  # a bone or root further than this from the origin is no motion capture
+UNIT_TOLERANCE = 1e-2  # |q| may differ from 1 by this much (float32 senders round); beyond it: not a rotation
 
 ROOT = "/VMC/Ext/Root/Pos"
 BONE = "/VMC/Ext/Bone/Pos"
@@ -53,10 +59,16 @@ class Counters:
     malformed_messages: int = 0  # a VMC address with the wrong arguments
     unknown_bones: int = 0
     non_finite: int = 0
+    out_of_range: int = 0  # a sender time or a position beyond any real one
+    non_unit_rotations: int = 0  # a quaternion whose norm is not 1
+    failed_packets: int = 0  # datagrams whose handling raised anything else (counted, skipped)
+    clock_outliers: int = 0  # sender times ClockSync rejected (mapped with its current offset)
 
     def errors(self) -> dict[str, int]:
         return {"malformed_packets": self.malformed_packets, "malformed_messages": self.malformed_messages,
-                "unknown_bones": self.unknown_bones, "non_finite": self.non_finite}
+                "unknown_bones": self.unknown_bones, "non_finite": self.non_finite, "out_of_range": self.out_of_range,
+                "non_unit_rotations": self.non_unit_rotations, "failed_packets": self.failed_packets,
+                "clock_outliers": self.clock_outliers}
 
 
 class _Subscriber:
@@ -74,6 +86,7 @@ class VmcReceiver:
         self._lock = threading.Lock()
         self._bones: dict[str, BonePose] = {}
         self._sync = ClockSync()
+        self._outliers_before = 0  # clock outliers of the ClockSyncs replaced after a sender restart
         self._last_device_ns: int | None = None
         self._stop = threading.Event()
         self.failure = ""  # set when the socket broke; subscribers then raise
@@ -117,18 +130,26 @@ class VmcReceiver:
 
     # ---- the receiving thread --------------------------------------------------------------------
     def _run(self) -> None:
-        while not self._stop.is_set():
-            try:
-                data = self._sock.recv(_MAX_DATAGRAM)
-            except socket.timeout:
-                continue
-            except OSError as exc:
-                if not self._stop.is_set():
-                    self._fail(f"socket error: {exc}")
-                return
-            frame = self.parse(data, self.clock.now_ns())
-            if frame is not None:
-                self._publish(frame)
+        try:
+            while not self._stop.is_set():
+                try:
+                    data = self._sock.recv(_MAX_DATAGRAM)
+                except socket.timeout:
+                    continue
+                except OSError as exc:
+                    if not self._stop.is_set():
+                        self._fail(f"socket error: {exc}")
+                    return
+                try:
+                    frame = self.parse(data, self.clock.now_ns())
+                except Exception:  # whatever a datagram does to the parser, the next one is read
+                    self.counters.failed_packets += 1
+                    continue
+                if frame is not None:
+                    self._publish(frame)
+        except BaseException as exc:  # a bug here: the devices must hear of it (they raise, the runner reopens)
+            self._fail(f"receiver thread ended: {type(exc).__name__}: {exc}")
+            raise
 
     def _fail(self, message: str) -> None:
         self.failure = message
@@ -157,6 +178,7 @@ class VmcReceiver:
             return None
         updated: dict[str, BonePose] = {}
         device_ns = None
+        bad_time = False  # a frame whose sender time is unusable is skipped whole: no stamp can be trusted
         for msg in messages:
             address, params = msg.address, msg.params
             if address in (ROOT, BONE):
@@ -164,21 +186,29 @@ class VmcReceiver:
                 if pose is not None:
                     updated[pose[0]] = pose[1]
             elif address == TIME:
+                bad_time = True
                 if len(params) < 1 or not isinstance(params[0], (int, float)) or isinstance(params[0], bool):
                     c.malformed_messages += 1
                 elif not math.isfinite(params[0]):
                     c.non_finite += 1
+                elif abs(params[0]) > MAX_SENDER_TIME_S:
+                    c.out_of_range += 1
                 else:
+                    bad_time = False
                     device_ns = int(round(float(params[0]) * 1e9))
             # every other VMC address (/VMC/Ext/OK, blend shapes, camera, ...) is not needed here
-        if not updated:
+        if not updated or bad_time:
             return None
         stamp = receive_ns
         if device_ns is not None:
             if self._last_device_ns is not None and device_ns < self._last_device_ns - _RESYNC_NS:
+                self._outliers_before += self._sync.rejected
                 self._sync = ClockSync()
-            self._last_device_ns = device_ns
+            rejected = self._sync.rejected
             stamp = self._sync.observe(device_ns, receive_ns)
+            if self._sync.rejected == rejected:  # an outlier is no sign of a sender restart either
+                self._last_device_ns = device_ns
+            c.clock_outliers = self._outliers_before + self._sync.rejected
         self._bones.update(updated)
         c.frames += 1
         return Frame(receive_ns, stamp, frozenset(updated), dict(self._bones))
@@ -197,12 +227,14 @@ class VmcReceiver:
         if not np.all(np.isfinite(values)):
             c.non_finite += 1
             return None
-        q = values[3:]
-        norm = float(np.linalg.norm(q))
-        if norm < 1e-6:
-            c.malformed_messages += 1  # a zero quaternion is no rotation
+        if np.max(np.abs(values[:3])) > MAX_POSITION_M:
+            c.out_of_range += 1
             return None
-        return ("" if address == ROOT else name), BonePose(values[:3], q / norm)
+        q = values[3:]
+        if np.max(np.abs(q)) > 2.0 or abs(float(np.linalg.norm(q)) - 1.0) > UNIT_TOLERANCE:
+            c.non_unit_rotations += 1  # (the first test keeps the norm itself from overflowing)
+            return None
+        return ("" if address == ROOT else name), BonePose(values[:3], q / np.linalg.norm(q))
 
 
 _SHARED_LOCK = threading.Lock()

@@ -1,0 +1,83 @@
+"""A VMC glove and suit (real OSC bundles over loopback UDP) driving a recorded session: bad packets are
+counted and skipped without ending anything, and a device that fails stops the robot and fails the run."""
+
+from __future__ import annotations
+
+import subprocess
+import sys
+import time
+
+import numpy as np
+
+from teleprev import topics
+from teleprev.live.session import LiveSession, RecordOptions
+from teleprev.session.reader import SessionReader
+from teleprev.session.summary import summarize
+from tests.helpers.vmc import VmcSender, bone, bundle, free_port, msg, rig_text
+
+GLOVE, SUIT = "/glove/glove/hand", "/suit/suit/wrist"
+
+
+def device_events(path):
+    return [m.payload.data for m in SessionReader(path).messages([topics.DEVICE_EVENT])]
+
+
+def test_bad_bundles_are_counted_and_skipped_and_the_glove_and_suit_keep_recording(tmp_path):
+    port = free_port()
+    rig = tmp_path / "vmc.toml"
+    rig.write_text(rig_text(port))
+    sender = VmcSender(port)
+    rec = LiveSession(RecordOptions(out=tmp_path / "s.mcap", rig=rig))
+    rec.start()
+    try:
+        sender.start(rate_hz=60.0)
+        time.sleep(0.5)
+        finger = bone("RightIndexProximal", (0.03, 0, 0), (1e300, 0, 0, 1), double=True)
+        sender.inject(bundle(finger, msg("/VMC/Ext/T", 1e300, types="d")).dgram)  # once ended the receiver
+        sender.inject(bundle(finger).dgram)  # once recorded as NaN
+        sender.inject(b"#bundle\x00\xff\xff")
+        time.sleep(1.5)
+        sender.stop()
+        time.sleep(0.3)
+    finally:
+        summary = rec.stop()
+    path = tmp_path / "s.mcap"
+    reader = SessionReader(path)
+    glove = np.array([m.payload.positions for m in reader.messages([GLOVE])])
+    assert np.isfinite(glove).all()
+    assert len(glove) == sender.sent == reader.topics[SUIT].message_count  # every good frame, nothing lost
+    events = device_events(path)
+    assert not [e for e in events if e["event"] == "error"], events
+    skipped = " ".join(e["message"] for e in events if e["event"] == "skipped" and e["device"] == "glove")
+    assert "1 out of range" in skipped and "2 non unit rotations" in skipped and "1 malformed packets" in skipped
+    assert summarize(path).device_failures == {} and not rec.loop.stats.device_failures
+    assert summary is not None
+
+
+def test_a_glove_that_dies_mid_session_stops_the_robot_and_fails_the_record(tmp_path):
+    port = free_port()
+    rig = tmp_path / "vmc.toml"
+    rig.write_text(rig_text(port, glove_timeout_s=0.3))  # silence for 0.3 s is a fault of the glove
+    out = tmp_path / "s.mcap"
+    sender = VmcSender(port).start(rate_hz=60.0, seconds=2.5)
+    proc = subprocess.run(
+        [sys.executable, "-m", "teleprev.cli.app", "record", str(rig), "--out", str(out), "--duration", "4",
+         "--engage-after", "1", "--no-preview"], capture_output=True, text=True, timeout=120)
+    sender.stop()
+    assert proc.returncode == 1, proc.stdout + proc.stderr
+    assert "device glove failed" in proc.stdout and "no VMC frames" in proc.stdout
+    reader = SessionReader(out)
+    modes = [(m.log_time_ns, m.payload.data) for m in reader.messages([topics.MODE])]
+    stop_at = next(t for t, d in modes if d.get("reason") == "device glove failed")
+    assert [d["mode"] for _, d in modes][:2] == ["execute", "preview"]
+    failed_at = next(m.log_time_ns for m in reader.messages([topics.DEVICE_EVENT])
+                     if m.payload.data["event"] == "error" and m.payload.data["device"] == "glove")
+    assert failed_at <= stop_at
+    for topic in (topics.COMMAND_ARM, topics.COMMAND_HAND):  # at rest, and nothing sent after the stop
+        sent = [(m.log_time_ns, m.payload.positions) for m in reader.messages([topic])]
+        assert len(sent) > 5 and np.array_equal(sent[-1][1], sent[-2][1]), topic
+        assert sent[-1][0] < stop_at + 0.5e9, topic
+    s = summarize(out)
+    assert list(s.device_failures) == ["glove"]
+    info = subprocess.run([sys.executable, "-m", "teleprev.cli.app", "info", str(out)], capture_output=True, text=True)
+    assert "failed devices" in info.stdout and f"glove ({s.device_failures['glove']}x)" in info.stdout
