@@ -40,6 +40,7 @@ class RecordOptions:
     condition: str = ""
     practice: bool = False
     queue_size: int = 8192
+    connect_timeout_s: float = 5.0  # unattended: every device must have sent something by then
 
 
 def default_session_path(task: str) -> Path:
@@ -131,6 +132,26 @@ class LiveSession:
     def __exit__(self, *exc) -> None:
         if self.summary is None:
             self.stop()
+
+    def wait_connected(self, timeout_s: float | None = None) -> list[str]:
+        """Wait until every device has sent something; what is wrong with each that has not, after timeout_s
+        (default: the options' connect_timeout_s), naming the device, what was tried and what happened."""
+        import time
+
+        timeout_s = self.options.connect_timeout_s if timeout_s is None else timeout_s
+        deadline = time.monotonic() + timeout_s
+        while True:
+            silent = {name: r.stats() for name, r in self.runners.items() if r.stats().last_receive_ns is None}
+            if not silent or time.monotonic() >= deadline:
+                break
+            time.sleep(0.02)
+        problems = []
+        for name, s in silent.items():
+            device, plugin = self.devices[name], self.rig.devices[name].plugin
+            tried = device.endpoint() or "it"
+            what = f"connect failed: {s.last_error}" if s.connects == 0 else "no packets"
+            problems.append(f"device {name!r} ({plugin}) sent nothing within {timeout_s:g} s: tried {tried}, {what}")
+        return problems
 
     def device_rows(self) -> list[DeviceRow]:
         rows = []

@@ -81,3 +81,23 @@ def test_a_glove_that_dies_mid_session_stops_the_robot_and_fails_the_record(tmp_
     assert list(s.device_failures) == ["glove"]
     info = subprocess.run([sys.executable, "-m", "teleprev.cli.app", "info", str(out)], capture_output=True, text=True)
     assert "failed devices" in info.stdout and f"glove ({s.device_failures['glove']}x)" in info.stdout
+
+
+def test_headless_record_whose_devices_never_connect_fails_within_the_connect_timeout(tmp_path):
+    port = free_port()  # nobody sends here
+    rig = tmp_path / "vmc.toml"
+    rig.write_text(rig_text(port).replace('plugin = "sim.hand"', 'plugin = "leap.hand"\nport = "/dev/no-such-u2d2"'))
+    out = tmp_path / "s.mcap"
+    t0 = time.monotonic()
+    proc = subprocess.run(
+        [sys.executable, "-m", "teleprev.cli.app", "record", str(rig), "--out", str(out), "--duration", "60",
+         "--connect-timeout", "1", "--no-preview"], capture_output=True, text=True, timeout=120)
+    took = time.monotonic() - t0
+    assert proc.returncode == 1, proc.stdout + proc.stderr
+    err = " ".join(proc.stderr.split())
+    assert f"device 'glove' (vmc.glove) sent nothing within 1 s: tried UDP 127.0.0.1:{port}, no packets" in err
+    assert f"device 'suit' (vmc.suit) sent nothing within 1 s: tried UDP 127.0.0.1:{port}, no packets" in err
+    assert "device 'hand' (leap.hand) sent nothing within 1 s: tried serial /dev/no-such-u2d2, connect failed:" in err
+    assert "arm" not in err  # the sim arm connected
+    assert took < 30  # start-up, one second of waiting, and closing the file; not the 60 s asked for
+    assert out.exists() and SessionReader(out).topics  # what was recorded (device events) is kept

@@ -75,6 +75,9 @@ class _VmcDevice(Device[V]):
             receiver.unsubscribe(self._sub)
             release(self.context.shared, receiver)
 
+    def endpoint(self) -> str:
+        return f"UDP {self.settings.host}:{self.settings.port}"
+
     def counters(self) -> dict[str, int]:
         return self._receiver.counters.errors() if self._receiver is not None else {}
 
