@@ -42,7 +42,7 @@ def info(
     as_json: bool = typer.Option(False, "--json", help="Print the facts as one JSON object instead of tables."),
 ) -> None:
     """Print a session's streams (count, rate, gaps, drops), device events, episodes and duration."""
-    from teleprev.session.summary import GAP_FACTOR, summarize
+    from teleprev.session.summary import GAP_FACTOR, PREVIEW_ONLY, summarize
 
     s = summarize(session)
     if as_json:
@@ -78,6 +78,8 @@ def info(
         head.add_row("dropped", f"[{style}]{s.dropped}[/]")
     else:
         head.add_row("dropped", "[yellow]unknown[/] (no recorder counters: the recorder did not close the file)")
+    if s.preview_only:
+        head.add_row("commands", f"[yellow]none[/]: {PREVIEW_ONLY}")
     failures = s.device_failures
     if failures:
         head.add_row("failed devices", "[bold red]" + ", ".join(f"{d} ({n}x)" for d, n in sorted(failures.items()))

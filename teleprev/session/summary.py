@@ -17,9 +17,16 @@ from teleprev.errors import SessionError
 from teleprev.messages import Event
 from teleprev.session.reader import Episode, SessionReader
 from teleprev.session.recorder import RECORDER_RECORD
-from teleprev.topics import DEVICE_EVENT
+from teleprev.topics import COMMAND_ARM, COMMAND_HAND, DEVICE_EVENT
 
 GAP_FACTOR = 3.0  # a gap is an interval longer than this many median periods
+PREVIEW_ONLY = ("the robot was never engaged: the whole session ran in PREVIEW, so no command was sent or recorded "
+                "and there are no actions to export (record with --engage-after SECONDS, or press space to execute)")
+
+
+def is_preview_only(session_topics) -> bool:
+    """Whether a recorded session holds no command at all (the robot was never engaged)."""
+    return COMMAND_ARM not in session_topics and COMMAND_HAND not in session_topics
 
 
 @dataclass
@@ -67,6 +74,10 @@ class SessionSummary:
         return 0.0 if self.start_ns is None else (self.end_ns - self.start_ns) / 1e9
 
     @property
+    def preview_only(self) -> bool:
+        return is_preview_only({st.topic for st in self.streams if st.count})
+
+    @property
     def device_failures(self) -> dict[str, int]:
         """Failures (connect or read raised: "error" events) per device; skipped input is not one
         (older sessions reported it as an "error" whose message starts with "skipped")."""
@@ -83,6 +94,7 @@ class SessionSummary:
         out["path"] = str(self.path)
         out["duration_s"] = self.duration_s
         out["device_failures"] = self.device_failures
+        out["preview_only"] = self.preview_only
         return out
 
 
