@@ -324,3 +324,42 @@ def test_a_clock_outlier_is_counted_and_recorded_as_an_event():
     assert len(hands) == 12
     kept = np.array(hands[:7] + hands[8:])  # the others keep the offset: 10 ms apart, the outlier's gap aside
     assert np.allclose(np.diff(kept), [10e6] * 6 + [20e6] + [10e6] * 3, atol=1)
+
+
+def test_only_allowed_senders_get_through_and_the_others_are_counted(context):
+    port = free_port()
+    glove = VmcGlove("g", VmcSettings(port=port, allow=("127.0.0.2",)), context)
+    assert VmcSettings().host == "127.0.0.1"  # listeners stay on loopback unless told otherwise
+    glove.connect()
+    allowed, other = socket.socket(socket.AF_INET, socket.SOCK_DGRAM), socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+    allowed.bind(("127.0.0.2", 0))
+    other.bind(("127.0.0.1", 0))
+    frame = bundle(bone("RightIndexProximal", (0.03, 0, 0), unity_quat([0, 0, 1], -0.3))).dgram
+    try:
+        for _ in range(3):
+            other.sendto(frame, ("127.0.0.1", port))
+        assert wait_counter(glove, "disallowed_senders", 3)["disallowed_senders"] == 3
+        assert glove.read(0.05) == []
+        allowed.sendto(frame, ("127.0.0.1", port))
+        assert len(read_until(glove, 1)) == 1
+        # a second device on the same socket must accept the same senders
+        from teleprev.errors import DeviceError
+
+        suit = VmcSuit("s", VmcSuitSettings(port=port), context)
+        with pytest.raises(DeviceError, match=r"allow different senders"):
+            suit.connect()
+        suit.disconnect()
+    finally:
+        allowed.close()
+        other.close()
+        glove.disconnect()
+
+
+def test_a_bad_allow_entry_is_a_rig_error(tmp_path):
+    from teleprev.errors import ConfigError
+    from teleprev.rig import load_rig
+
+    rig = tmp_path / "rig.toml"
+    rig.write_text('[devices.glove]\nplugin = "vmc.glove"\nallow = ["192.168.1.300"]\n')
+    with pytest.raises(ConfigError, match=r"rig.toml \[devices.glove\]: allow: '192.168.1.300' is not an IPv4 address"):
+        load_rig(rig)

@@ -13,6 +13,7 @@ ClockSync; without it the receive time does. A stamp ClockSync rejects as an out
 
 from __future__ import annotations
 
+import ipaddress
 import math
 import socket
 import threading
@@ -62,13 +63,14 @@ class Counters:
     out_of_range: int = 0  # a sender time or a position beyond any real one
     non_unit_rotations: int = 0  # a quaternion whose norm is not 1
     failed_packets: int = 0  # datagrams whose handling raised anything else (counted, skipped)
+    disallowed_senders: int = 0  # datagrams from an address the allow list leaves out
     clock_outliers: int = 0  # sender times ClockSync rejected (mapped with its current offset)
 
     def errors(self) -> dict[str, int]:
         return {"malformed_packets": self.malformed_packets, "malformed_messages": self.malformed_messages,
                 "unknown_bones": self.unknown_bones, "non_finite": self.non_finite, "out_of_range": self.out_of_range,
                 "non_unit_rotations": self.non_unit_rotations, "failed_packets": self.failed_packets,
-                "clock_outliers": self.clock_outliers}
+                "clock_outliers": self.clock_outliers, "disallowed_senders": self.disallowed_senders}
 
 
 class _Subscriber:
@@ -78,8 +80,11 @@ class _Subscriber:
 
 
 class VmcReceiver:
-    def __init__(self, host: str, port: int, clock: SessionClock):
+    def __init__(self, host: str, port: int, clock: SessionClock, allow: tuple[str, ...] = ()):
+        """`allow`: the sender addresses or networks ("192.168.1.7", "10.0.0.0/24") accepted; empty: any."""
         self.host, self.port, self.clock = host, port, clock
+        self.allow = tuple(allow)
+        self._allowed = tuple(ipaddress.IPv4Network(a, strict=False) for a in allow)
         self.counters = Counters()
         self.where = f"VMC receiver {self.host}:{self.port}"
         self._subs: list[_Subscriber] = []
@@ -133,13 +138,16 @@ class VmcReceiver:
         try:
             while not self._stop.is_set():
                 try:
-                    data = self._sock.recv(_MAX_DATAGRAM)
+                    data, sender = self._sock.recvfrom(_MAX_DATAGRAM)
                 except socket.timeout:
                     continue
                 except OSError as exc:
                     if not self._stop.is_set():
                         self._fail(f"socket error: {exc}")
                     return
+                if self._allowed and not any(ipaddress.IPv4Address(sender[0]) in net for net in self._allowed):
+                    self.counters.disallowed_senders += 1
+                    continue
                 try:
                     frame = self.parse(data, self.clock.now_ns())
                 except Exception:  # whatever a datagram does to the parser, the next one is read
@@ -240,7 +248,7 @@ class VmcReceiver:
 _SHARED_LOCK = threading.Lock()
 
 
-def acquire(shared: dict, host: str, port: int, clock: SessionClock) -> VmcReceiver:
+def acquire(shared: dict, host: str, port: int, clock: SessionClock, allow: tuple[str, ...] = ()) -> VmcReceiver:
     """The receiver for (host, port), opened by the first plugin that asks (kept in context.shared)."""
     with _SHARED_LOCK:
         key = ("vmc", host, port)
@@ -248,8 +256,12 @@ def acquire(shared: dict, host: str, port: int, clock: SessionClock) -> VmcRecei
         if entry is not None and entry[0].failure:  # its socket broke: open a fresh one
             entry[0].close()
             entry = None
+        if entry is not None and entry[0].allow != tuple(allow):
+            raise DeviceError(f"the devices on UDP {host}:{port} share one socket but allow different senders "
+                              f"({list(entry[0].allow)} and {list(allow)}); give them the same allow list",
+                              entry[0].where)
         if entry is None:
-            entry = shared[key] = [VmcReceiver(host, port, clock), 0]
+            entry = shared[key] = [VmcReceiver(host, port, clock, allow), 0]
         entry[1] += 1
         return entry[0]
 
