@@ -13,7 +13,8 @@ devices keep recording. Events:
     recovered      samples again after a gap; since_ns = the gap's since_ns
     skipped        input the device or the runner counted and skipped since the last such event (at most
                    one a second): the device's counters() and samples with non-finite values or a
-                   non-unit quaternion, which never reach the session ("invalid_samples")
+                   non-unit quaternion, which never reach the session ("invalid_samples"); counters
+                   named "lost_..." are input lost before it was read ("lost 40 to socket overruns")
 """
 
 from __future__ import annotations
@@ -76,6 +77,18 @@ class RunnerStats:
     sink_errors: int  # samples and events the sink raised on (lost to the session)
     skipped: dict[str, int] = field(default_factory=dict)  # the device's own counters (malformed, NaN, ...)
     topics: dict[str, int] = field(default_factory=dict)  # samples per topic
+
+    @property
+    def lost_input(self) -> int:
+        return lost_input(self.skipped)
+
+
+def lost_input(counters: dict[str, int]) -> int:
+    """Input a device knows it lost before reading it, from its "lost_" counters: a sequence gap and a
+    socket overrun may be the same frame, so the larger of the two, plus what its queue pushed out."""
+    return (max(counters.get("lost_socket_overruns", 0), counters.get("lost_sequence_gaps", 0))
+            + sum(v for k, v in counters.items()
+                  if k.startswith("lost_") and k not in ("lost_socket_overruns", "lost_sequence_gaps")))
 
 
 class DeviceRunner:
@@ -280,8 +293,9 @@ class DeviceRunner:
         new = {k: v - self._counters_reported.get(k, 0) for k, v in current.items() if v > self._counters_reported.get(k, 0)}
         if new:
             self._counters_reported = current
-            detail = ", ".join(f"{v} {k.replace('_', ' ')}" for k, v in sorted(new.items()))
-            self._emit("skipped", now, f"skipped {detail}")
+            lost = ", ".join(f"{v} to {k[5:].replace('_', ' ')}" for k, v in sorted(new.items()) if k.startswith("lost_"))
+            skipped = ", ".join(f"{v} {k.replace('_', ' ')}" for k, v in sorted(new.items()) if not k.startswith("lost_"))
+            self._emit("skipped", now, "; ".join(p for p in (lost and f"lost {lost}", skipped and f"skipped {skipped}") if p))
 
     def _emit(self, event: str, now: int, message: str = "", since_ns: int | None = None) -> None:
         data = {"device": self.name, "event": event, "message": message}
@@ -306,7 +320,7 @@ class DeviceRunner:
                 kind=self.device.kind,
                 state=self._state,
                 received=self._received,
-                errors=self._faults + sum(skipped.values()),
+                errors=self._faults + sum(v for k, v in skipped.items() if not k.startswith("lost_")),
                 rate_hz=rate,
                 nominal_hz=self.nominal_hz,
                 latency_ms=statistics.median(lat) / 1e6 if lat else 0.0,

@@ -141,10 +141,12 @@ def print_summary(console: Console, recording: LiveSession, summary) -> None:
     for topic, s in sorted(summary.streams.items()):
         table.add_row(topic, str(s.written), str(s.dropped))
     console.print(table)
-    loop_drops = sum(recording.loop.stats.dropped.values())
+    counts = recording.device_counts()
+    lost = {name: c["lost_input"] + c["loop_dropped"] + c["sink_errors"] for name, c in counts.items()}
+    detail = ", ".join(f"{name} {n}" for name, n in sorted(lost.items()) if n)
     console.print(
         f"episodes: {recording.loop.episodes.index + 1}   commands sent: {sum(recording.loop.stats.commands_sent.values())}"
-        f"   dropped before recording: {loop_drops}   file: {recording.options.out}"
+        f"   lost before recording: {sum(lost.values())}{f' ({detail})' if detail else ''}   file: {recording.options.out}"
     )
     if not sum(recording.loop.stats.commands_sent.values()):
         console.print(f"[yellow]preview only:[/] {PREVIEW_ONLY}", highlight=False)

@@ -122,7 +122,8 @@ class LiveSession:
         stats = self.loop.stats
         extra = {"loop": {"dropped": json.dumps(dict(stats.dropped)), "commands_sent": json.dumps(dict(stats.commands_sent)),
                           "command_errors": json.dumps(dict(stats.command_errors)),
-                          "device_failures": json.dumps(dict(stats.device_failures))}}
+                          "device_failures": json.dumps(dict(stats.device_failures))},
+                 "devices": {name: json.dumps(counts) for name, counts in self.device_counts().items()}}
         self.summary = self.recorder.close(extra)
         return self.summary
 
@@ -160,5 +161,16 @@ class LiveSession:
             prefix = f"/{self.devices[name].kind}/{name}/"
             dropped = sum(n for topic, n in self.loop.stats.dropped.items() if topic.startswith(prefix))
             rows.append(DeviceRow(name, self.devices[name].kind, s.state, s.rate_hz, s.nominal_hz, s.latency_ms, dropped,
-                                  s.sink_errors, s.errors))
+                                  s.sink_errors, s.errors, s.lost_input))
         return rows
+
+    def device_counts(self) -> dict[str, dict[str, int]]:
+        """Per device, what it delivered and every count of what it lost or skipped (for the file's metadata)."""
+        out = {}
+        for name, runner in self.runners.items():
+            s = runner.stats()
+            prefix = f"/{self.devices[name].kind}/{name}/"
+            out[name] = {"received": s.received, **s.skipped, "lost_input": s.lost_input,
+                         "loop_dropped": sum(n for t, n in self.loop.stats.dropped.items() if t.startswith(prefix)),
+                         "sink_errors": s.sink_errors, "failures": self.loop.stats.device_failures.get(name, 0)}
+        return out

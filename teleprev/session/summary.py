@@ -68,6 +68,9 @@ class SessionSummary:
     recovered: bool  # rewritten by `teleprev recover`
     dropped: int | None = None
     recorder_errors: list[str] = field(default_factory=list)
+    # Per device (the "devices" metadata record a live session writes when it closes): samples received,
+    # the device's lost_/skipped counters, lost_input (their total), loop_dropped, sink_errors, failures.
+    device_counts: dict[str, dict[str, int]] = field(default_factory=dict)
 
     @property
     def duration_s(self) -> float:
@@ -148,6 +151,7 @@ def summarize(path: str | os.PathLike) -> SessionSummary:
             "recover" in meta,
             sum(s.dropped or 0 for s in streams) if has_counters else None,
             [f"{k[6:]}: {v}" for k, v in counters.items() if k.startswith("error ")],
+            {name: _counters(value, reader.path, f"device {name}") for name, value in meta.get("devices", {}).items()},
         )
 
 

@@ -363,3 +363,45 @@ def test_a_bad_allow_entry_is_a_rig_error(tmp_path):
     rig.write_text('[devices.glove]\nplugin = "vmc.glove"\nallow = ["192.168.1.300"]\n')
     with pytest.raises(ConfigError, match=r"rig.toml \[devices.glove\]: allow: '192.168.1.300' is not an IPv4 address"):
         load_rig(rig)
+
+
+def test_frames_missing_from_the_sender_time_are_counted_as_sequence_gaps(context):
+    from tests.helpers.vmc import VmcSender
+
+    port = free_port()
+    glove = VmcGlove("g", VmcSettings(port=port), context)
+    glove.connect()
+    sender = VmcSender(port)
+    try:
+        start = time.monotonic()
+        for k in range(60):  # 200 Hz; frames 20, 21 and 45 are lost on the way (never arrive)
+            if k not in (20, 21, 45):
+                sender.send(sender.frame(k, 200.0))
+            time.sleep(max(0.0, start + (k + 1) / 200 - time.monotonic()))
+        assert len(read_until(glove, 57)) == 57
+        counters = glove.counters()
+        assert counters["lost_sequence_gaps"] == 3 and counters["lost_socket_overruns"] == 0
+        assert counters["clock_outliers"] == 0 and counters["lost_queue_overflow"] == 0
+    finally:
+        sender.stop()
+        glove.disconnect()
+
+
+def test_frames_the_device_did_not_read_in_time_are_counted_as_queue_overflow(context):
+    from teleprev_devices.vmc import receiver as vmc_receiver
+
+    port = free_port()
+    glove = VmcGlove("g", VmcSettings(port=port), context)
+    glove.connect()
+    sender = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+    try:
+        for k in range(vmc_receiver._QUEUE + 10):  # nobody reads meanwhile
+            sender.sendto(bundle(bone("RightIndexProximal", (0.03, 0, 0))).dgram, ("127.0.0.1", port))
+            if k % 50 == 0:
+                time.sleep(0.02)  # (kept under the socket's own buffer)
+        time.sleep(0.2)
+        assert glove.counters()["lost_queue_overflow"] == 10
+        assert len(glove.read(0.05)) == vmc_receiver._QUEUE
+    finally:
+        sender.close()
+        glove.disconnect()

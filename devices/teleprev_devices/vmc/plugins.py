@@ -88,7 +88,10 @@ class _VmcDevice(Device[V]):
         return f"UDP {self.settings.host}:{self.settings.port}"
 
     def counters(self) -> dict[str, int]:
-        return self._receiver.counters.errors() if self._receiver is not None else {}
+        receiver, sub = self._receiver, self._sub
+        if receiver is None or sub is None:
+            return {}
+        return {**receiver.counters.errors(), "lost_queue_overflow": sub.overflow}
 
     def read(self, timeout_s: float) -> list[Sample]:
         receiver = self._receiver

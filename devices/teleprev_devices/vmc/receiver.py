@@ -16,6 +16,9 @@ from __future__ import annotations
 import ipaddress
 import math
 import socket
+import statistics
+import struct
+import sys
 import threading
 from collections import deque
 from dataclasses import dataclass
@@ -27,6 +30,12 @@ from teleprev_devices.vmc.unity import KNOWN_BONES
 from teleprev.devices import ClockSync, DeviceError, SessionClock
 
 _MAX_DATAGRAM = 65535
+# Linux reports the datagrams its receive buffer had no room for (a running total) with each datagram
+# received once this option is on (socket(7)); Python does not name the constant.
+SO_RXQ_OVFL = getattr(socket, "SO_RXQ_OVFL", 40 if sys.platform.startswith("linux") else None)
+_ANCILLARY = socket.CMSG_SPACE(4)
+_PERIOD_WINDOW = 32  # sender-time steps the sender's frame period is the median of
+_PERIOD_MIN_STEPS = 8  # steps seen before gaps in the sender time are counted as lost frames
 _QUEUE = 256  # frames kept per subscriber that is not reading fast enough
 _RESYNC_NS = 1_000_000_000  # sender time going back this much: the sender restarted, start ClockSync over
 MAX_SENDER_TIME_S = 1e10  # |/VMC/Ext/T| beyond this (317 years) is no clock
@@ -64,19 +73,24 @@ class Counters:
     non_unit_rotations: int = 0  # a quaternion whose norm is not 1
     failed_packets: int = 0  # datagrams whose handling raised anything else (counted, skipped)
     disallowed_senders: int = 0  # datagrams from an address the allow list leaves out
+    # Lost before they were read ("lost_" counters: input that never arrived, not input refused):
+    lost_socket_overruns: int = 0  # datagrams the kernel dropped, the receive buffer being full (Linux)
+    lost_sequence_gaps: int = 0  # frames missing from /VMC/Ext/T's steps (the network, or the buffer)
     clock_outliers: int = 0  # sender times ClockSync rejected (mapped with its current offset)
 
     def errors(self) -> dict[str, int]:
         return {"malformed_packets": self.malformed_packets, "malformed_messages": self.malformed_messages,
                 "unknown_bones": self.unknown_bones, "non_finite": self.non_finite, "out_of_range": self.out_of_range,
                 "non_unit_rotations": self.non_unit_rotations, "failed_packets": self.failed_packets,
-                "clock_outliers": self.clock_outliers, "disallowed_senders": self.disallowed_senders}
+                "clock_outliers": self.clock_outliers, "disallowed_senders": self.disallowed_senders,
+                "lost_socket_overruns": self.lost_socket_overruns, "lost_sequence_gaps": self.lost_sequence_gaps}
 
 
 class _Subscriber:
     def __init__(self):
         self.frames: deque[Frame] = deque(maxlen=_QUEUE)
         self.ready = threading.Condition()
+        self.overflow = 0  # frames pushed out of the queue before the device read them
 
 
 class VmcReceiver:
@@ -93,6 +107,8 @@ class VmcReceiver:
         self._sync = ClockSync()
         self._outliers_before = 0  # clock outliers of the ClockSyncs replaced after a sender restart
         self._last_device_ns: int | None = None
+        self._steps: deque[int] = deque(maxlen=_PERIOD_WINDOW)  # recent positive sender-time steps
+        self._outliers_between = 0  # frames with a rejected sender time since the last accepted one
         self._stop = threading.Event()
         self.failure = ""  # set when the socket broke; subscribers then raise
         try:
@@ -101,6 +117,12 @@ class VmcReceiver:
         except OSError as exc:
             raise DeviceError(f"cannot listen on UDP {self.host}:{self.port} ({exc.strerror or exc}); "
                               "is another program using the port?", self.where) from None
+        self._overruns = SO_RXQ_OVFL is not None
+        if self._overruns:
+            try:
+                self._sock.setsockopt(socket.SOL_SOCKET, SO_RXQ_OVFL, 1)
+            except OSError:
+                self._overruns = False
         self._sock.settimeout(0.1)
         self._thread = threading.Thread(target=self._run, name=f"vmc-{self.port}", daemon=True)
         self._thread.start()
@@ -138,13 +160,17 @@ class VmcReceiver:
         try:
             while not self._stop.is_set():
                 try:
-                    data, sender = self._sock.recvfrom(_MAX_DATAGRAM)
+                    data, ancillary, _, sender = self._sock.recvmsg(_MAX_DATAGRAM, _ANCILLARY)
                 except socket.timeout:
                     continue
                 except OSError as exc:
                     if not self._stop.is_set():
                         self._fail(f"socket error: {exc}")
                     return
+                for level, kind, value in ancillary:
+                    if level == socket.SOL_SOCKET and kind == SO_RXQ_OVFL and len(value) >= 4:
+                        total = struct.unpack("=I", value[:4])[0]  # dropped since the socket opened
+                        self.counters.lost_socket_overruns = max(self.counters.lost_socket_overruns, total)
                 if self._allowed and not any(ipaddress.IPv4Address(sender[0]) in net for net in self._allowed):
                     self.counters.disallowed_senders += 1
                     continue
@@ -172,6 +198,8 @@ class VmcReceiver:
             subs = list(self._subs)
         for sub in subs:
             with sub.ready:
+                if len(sub.frames) == sub.frames.maxlen:
+                    sub.overflow += 1  # the oldest frame is pushed out unread
                 sub.frames.append(frame)
                 sub.ready.notify_all()
 
@@ -215,11 +243,29 @@ class VmcReceiver:
             rejected = self._sync.rejected
             stamp = self._sync.observe(device_ns, receive_ns)
             if self._sync.rejected == rejected:  # an outlier is no sign of a sender restart either
+                self._count_missing(device_ns)
                 self._last_device_ns = device_ns
+                self._outliers_between = 0
+            else:
+                self._outliers_between += 1  # received, so not missing, though its stamp is not used
             c.clock_outliers = self._outliers_before + self._sync.rejected
         self._bones.update(updated)
         c.frames += 1
         return Frame(receive_ns, stamp, frozenset(updated), dict(self._bones))
+
+    def _count_missing(self, device_ns: int) -> None:
+        """Frames missing between the last sender time and this one: a step of k sender periods (the
+        median step) lost k - 1 frames. Steps of 0 (a skeleton split over bundles) and backwards are none."""
+        last = self._last_device_ns
+        if last is None or device_ns <= last:
+            return
+        step = device_ns - last
+        if len(self._steps) >= _PERIOD_MIN_STEPS:
+            period = statistics.median(self._steps)
+            missing = round(step / period) - 1 - self._outliers_between
+            if missing > 0:
+                self.counters.lost_sequence_gaps += missing
+        self._steps.append(step)  # (a gap now and then does not move the median; a new frame rate does)
 
     def _bone(self, address: str, params: list) -> tuple[str, BonePose] | None:
         c = self.counters
