@@ -405,3 +405,46 @@ def test_frames_the_device_did_not_read_in_time_are_counted_as_queue_overflow(co
     finally:
         sender.close()
         glove.disconnect()
+
+
+def test_a_thousand_fuzzed_datagrams_never_stop_the_receiver_nor_reach_the_glove_as_nan(context):
+    from tests.helpers.vmc import VmcSender, fuzz_datagram
+
+    rng = np.random.default_rng(7)
+    port = free_port()
+    glove = VmcGlove("g", VmcSettings(port=port), context)
+    glove.connect()
+    sender = VmcSender(port)
+    got = []
+    try:
+        for k in range(1000):
+            sender.send(fuzz_datagram(rng, sender.frame(k, 60.0)) if k % 10 else sender.frame(k, 60.0))
+            if k % 20 == 0:
+                got.extend(glove.read(0.005))
+        time.sleep(0.2)
+        got.extend(glove.read(0.05))
+        assert glove._receiver._thread.is_alive() and not glove._receiver.failure
+        values = np.array([s.payload.positions for s in got])
+        assert len(values) >= 75 and np.isfinite(values).all()
+        counters = glove.counters()
+        assert sum(v for k, v in counters.items() if not k.startswith("lost_")) >= 750
+    finally:
+        sender.stop()
+        glove.disconnect()
+
+
+def test_an_unreadable_bundle_element_is_counted_not_logged(context, capfd):
+    port = free_port()
+    glove = VmcGlove("g", VmcSettings(port=port), context)
+    glove.connect()
+    sender = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+    try:
+        good = bundle(bone("RightIndexProximal", (0.03, 0, 0))).dgram
+        element = b"junk" * 4
+        sender.sendto(good + len(element).to_bytes(4, "big") + element, ("127.0.0.1", port))  # python-osc warns here
+        assert len(read_until(glove, 1)) == 1
+        assert glove.counters()["malformed_messages"] == 1
+        assert "Could not identify" not in capfd.readouterr().err
+    finally:
+        sender.close()
+        glove.disconnect()

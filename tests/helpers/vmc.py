@@ -138,3 +138,61 @@ class VmcSender:
         self._stop.set()
         self.join()
         self.sock.close()
+
+
+# ---- fuzzing: what a noisy sender, a broken one and a stranger on the port send ------------------------
+_BAD_NUMBERS = (float("nan"), float("inf"), -float("inf"), 1e300, -1e300, 1e39, 0.0)
+_BONES = ("RightIndexProximal", "RightHand", "Hips", "RightLittleDistal", "NoSuchBone", "", "rightindexproximal",
+          "RightIndexProximal\x00x", "\u00e9\u00e9")
+
+
+def _wrong_value(rng):
+    kind = rng.integers(6)
+    return (("s", "0.5"), ("i", int(rng.integers(-2**31, 2**31))), ("T", True), ("b", b"\x00\x01"),
+            ("N", None), ("d", float(rng.choice(_BAD_NUMBERS))))[kind]
+
+
+def fuzz_datagram(rng, good: bytes) -> bytes:
+    """One random or mutated datagram: byte flips, truncations, oversized ones, wrong types, NaN/inf/1e300,
+    wrong bone names, bad sender times, non-unit and zero quaternions, random bytes."""
+    kind = rng.integers(12)
+    if kind == 0:  # flipped bytes
+        data = bytearray(good)
+        for i in rng.integers(0, len(data), size=int(rng.integers(1, 16))):
+            data[i] = int(rng.integers(256))
+        return bytes(data)
+    if kind == 1:  # truncated
+        return good[: int(rng.integers(0, len(good)))]
+    if kind == 2:  # oversized: the frame and junk up to the largest UDP datagram
+        return good + rng.bytes(int(rng.integers(1000, 65507 - len(good))))
+    if kind == 3:  # random bytes, some starting like a bundle or a message
+        head = (b"#bundle\x00", b"/VMC/Ext/Bone/Pos\x00\x00\x00", b"")[int(rng.integers(3))]
+        return head + rng.bytes(int(rng.integers(0, 400)))
+    if kind == 4:  # a bad sender time
+        return bundle(*finger_messages(0.5), msg("/VMC/Ext/T", float(rng.choice(_BAD_NUMBERS)), types="d")).dgram
+    if kind == 5:  # a bone with a bad number (double precision, so 1e300 survives)
+        values = rng.normal(size=7)
+        values[int(rng.integers(7))] = float(rng.choice(_BAD_NUMBERS))
+        return bundle(bone("RightIndexProximal", values[:3], values[3:], double=True)).dgram
+    if kind == 6:  # wrong bone names
+        return bundle(bone(str(rng.choice(_BONES)), (0.03, 0, 0))).dgram
+    if kind == 7:  # wrong argument types
+        t, v = _wrong_value(rng)
+        args = ["RightIndexProximal", 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 1.0]
+        types = list("sfffffff")
+        k = int(rng.integers(8))
+        args[k], types[k] = v, t
+        return bundle(msg("/VMC/Ext/Bone/Pos", *args, types="".join(types))).dgram
+    if kind == 8:  # too few arguments, or none
+        n = int(rng.integers(0, 7))
+        return bundle(msg(str(rng.choice(["/VMC/Ext/Bone/Pos", "/VMC/Ext/Root/Pos", "/VMC/Ext/T"])),
+                          *(["RightHand"] + [0.0] * 7)[:n])).dgram
+    if kind == 9:  # non-unit or zero quaternions
+        q = rng.normal(size=4) * float(rng.choice([0.0, 1e-9, 0.5, 3.0, 1e30]))
+        return bundle(bone("RightMiddleProximal", (0.03, 0, 0), q, double=True)).dgram
+    if kind == 10:  # a whole arm with one huge or non-finite position
+        p = [float(rng.choice(_BAD_NUMBERS)), 0.0, 0.0]
+        root = bone("root", p, address="/VMC/Ext/Root/Pos", double=True)
+        return bundle(root, *arm_messages()[1:], msg("/VMC/Ext/T", 1.0, types="d")).dgram
+    return bundle(msg("/VMC/Ext/Bone/Pos", "RightHand", *rng.normal(size=7).tolist(), types="s" + "f" * 7),
+                  msg("/VMC/Ext/T", "noon", types="s")).dgram  # a bad time beside a good bone

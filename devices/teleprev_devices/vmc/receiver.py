@@ -14,6 +14,7 @@ ClockSync; without it the receive time does. A stamp ClockSync rejects as an out
 from __future__ import annotations
 
 import ipaddress
+import logging
 import math
 import socket
 import statistics
@@ -22,8 +23,10 @@ import sys
 import threading
 from collections import deque
 from dataclasses import dataclass
+from pathlib import Path
 
 import numpy as np
+import pythonosc
 from pythonosc.osc_packet import OscPacket
 
 from teleprev_devices.vmc.unity import KNOWN_BONES
@@ -207,11 +210,13 @@ class VmcReceiver:
         """Apply one datagram; a Frame if it carried any bone (None for garbage or other messages)."""
         c = self.counters
         c.datagrams += 1
+        warned = _OSC_WARNINGS.count()
         try:
             messages = [m.message for m in OscPacket(data).messages]
         except Exception:  # python-osc raises ParseError, and on some garbage IndexError/struct errors
             c.malformed_packets += 1
             return None
+        c.malformed_messages += _OSC_WARNINGS.count() - warned  # elements python-osc skipped
         updated: dict[str, BonePose] = {}
         device_ns = None
         bad_time = False  # a frame whose sender time is unusable is skipped whole: no stamp can be trusted
@@ -290,6 +295,29 @@ class VmcReceiver:
             return None
         return ("" if address == ROOT else name), BonePose(values[:3], q / np.linalg.norm(q))
 
+
+class _OscWarnings(logging.Filter):
+    """python-osc warns on the root logger, with the whole datagram, about every bundle element and type
+    tag it cannot read (and skips it): junk from a stranger would flood the terminal. Those warnings are
+    kept off the log and counted per thread, so the receiver counts the element as a malformed message."""
+
+    def __init__(self):
+        super().__init__()
+        self.local = threading.local()
+        self.package = str(Path(pythonosc.__file__).parent)
+
+    def filter(self, record: logging.LogRecord) -> bool:
+        if record.pathname.startswith(self.package):
+            self.local.count = self.count() + 1
+            return False
+        return True
+
+    def count(self) -> int:
+        return getattr(self.local, "count", 0)
+
+
+_OSC_WARNINGS = _OscWarnings()
+logging.getLogger().addFilter(_OSC_WARNINGS)
 
 _SHARED_LOCK = threading.Lock()
 
