@@ -29,6 +29,7 @@ from teleprev.errors import ConfigError
 from teleprev.paths import data_dir
 from teleprev.pipeline.config import PipelineConfig
 from teleprev.robot.effectors import EffectorName, EndEffector, end_effector
+from teleprev.robot.model import load_robot, resolve_urdf
 
 @dataclass(frozen=True)
 class RigSection:
@@ -93,18 +94,29 @@ def default_rig_path() -> Path:
 
 
 def load_rig(path: str | Path | None = None) -> Rig:
+    """A rig file, every key and value checked, the files it names included."""
     path = Path(path) if path else default_rig_path()
-    return parse_rig(read_toml(path), path)
+    rig = parse_rig(read_toml(path), path)
+    for key, what, exists in (("calibration", "file", Path.is_file), ("models", "folder", Path.is_dir)):
+        value = getattr(rig.rig, key)
+        if value and not exists(rig.resolve(value)):
+            raise ConfigError(f"no such {what} {str(rig.resolve(value))!r}", f"{path} [rig].{key}")
+    return rig
 
 
 def load_rig_text(text: str, where: str, path: Path | None = None) -> Rig:
-    """A rig from TOML text (e.g. the copy a session keeps in its metadata); `path` anchors relative paths."""
+    """A rig from TOML text (e.g. the copy a session keeps in its metadata); `path` anchors relative paths.
+
+    Rigs recorded before `[pipeline] trigger` was removed carry it; it never had an effect, so it is dropped.
+    """
     import tomllib
 
     try:
         data = tomllib.loads(text)
     except tomllib.TOMLDecodeError as exc:
         raise ConfigError(f"not valid TOML ({exc})", where) from None
+    if isinstance(data.get("pipeline"), dict):
+        data["pipeline"].pop("trigger", None)
     return parse_rig(data, path, where)
 
 
@@ -114,7 +126,11 @@ def parse_rig(data: dict, path: Path | None, where: str | None = None) -> Rig:
     if unknown:
         raise ConfigError(f"unknown table [{unknown[0]}] (expected [rig], [pipeline] and [devices.<name>])", where)
     rig = from_table(RigSection, data.get("rig", {}), f"{where} [rig]")
+    if isinstance(data.get("pipeline"), dict) and "trigger" in data["pipeline"]:
+        raise ConfigError("unknown key 'trigger': it was removed (a pipeline step runs on every glove sample); "
+                          "delete the line", f"{where} [pipeline]")
     pipeline = from_table(PipelineConfig, data.get("pipeline", {}), f"{where} [pipeline]")
+    _check_robot(rig, pipeline, where)
     devices_table = data.get("devices", {})
     if not isinstance(devices_table, dict) or not devices_table:
         raise ConfigError("no devices: add at least one [devices.<name>] table", where)
@@ -132,3 +148,12 @@ def parse_rig(data: dict, path: Path | None, where: str | None = None) -> Rig:
         settings = from_table(cls.Settings, settings_table, dwhere)
         devices[name] = DeviceEntry(name, table["plugin"], cls.kind, cls, settings)
     return Rig(path.resolve() if path else None, rig, pipeline, devices, data)
+
+
+def _check_robot(rig: RigSection, pipeline: PipelineConfig, where: str) -> None:
+    """The robot's URDF exists and has the link the wrist drives."""
+    urdf = resolve_urdf(rig.robot)
+    if not urdf.is_file():
+        raise ConfigError(f"no such robot {rig.robot!r} (a URDF path, or the name of one in urdf/)", f"{where} [rig].robot")
+    if pipeline.tcp_link and pipeline.tcp_link not in load_robot(urdf).links:
+        raise ConfigError(f"the robot {rig.robot!r} has no link {pipeline.tcp_link!r}", f"{where} [pipeline].tcp_link")

@@ -99,10 +99,10 @@ EVENT_SCHEMAS: dict[str, dict] = {
     ),
     "teleprev.DeviceEvent": _schema(
         "teleprev.DeviceEvent",
-        "A device stopped sending (gap), came back (recovered), or sent something unusable (error).",
+        "A device opened (connected), failed (error, disconnected), stopped sending (gap), came back (recovered), or sent input that was counted and skipped (skipped).",
         {
             "device": _STR,
-            "event": {"type": "string", "enum": ["connected", "gap", "recovered", "error", "disconnected"]},
+            "event": {"type": "string", "enum": ["connected", "gap", "recovered", "error", "disconnected", "skipped"]},
             "message": _STR,
             "since_ns": _INT,
         },

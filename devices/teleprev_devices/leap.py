@@ -150,6 +150,9 @@ class LeapHand(PolledActuator[LeapSettings], kind="hand", sdk_module="dynamixel_
                          where=f"device {name!r} (LEAP Hand on {settings.port})")
         self.bus: DynamixelBus = bus or SdkDynamixelBus(settings.port)
 
+    def endpoint(self) -> str:
+        return f"serial {self.settings.port}"
+
     def _open(self) -> None:
         self.bus.open()
 

@@ -65,6 +65,9 @@ class OpenCVCamera(Device[OpenCVSettings], kind="camera"):
     def streams(self) -> list[StreamSpec]:
         return [StreamSpec(self.image_topic, "image", self.settings.fps or self._file_fps() or _DEFAULT_FPS)]
 
+    def endpoint(self) -> str:
+        return f"camera {self.settings.source}" if self.is_camera else str(self.settings.source)
+
     def _file_fps(self) -> float:
         if self.path is None or not self.path.is_file():
             return 0.0

@@ -115,6 +115,9 @@ class XArm(PolledActuator[XArmSettings], kind="arm", sdk_module="xarm", extra="x
                          where=f"device {name!r} (xArm {settings.host})")
         self.link: XArmLink = link or SdkXArmLink(settings.host, settings.dof)
 
+    def endpoint(self) -> str:
+        return f"xArm {self.settings.host}"
+
     def _open(self) -> None:
         self.link.connect()
 

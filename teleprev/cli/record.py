@@ -27,9 +27,12 @@ def record(
     participant: str = typer.Option("", "--participant", help="User-study participant id."),
     condition: str = typer.Option("", "--condition", help="User-study condition, e.g. 'w/ preview'."),
     practice: bool = typer.Option(False, "--practice", help="Mark the session as practice; press r when ready."),
+    connect_timeout: float = typer.Option(
+        5.0, "--connect-timeout", help="Unattended or headless: fail unless every device has sent something within this many seconds."),
 ) -> None:
     """Record a session: devices, pipeline, preview and execute, episodes, all into one MCAP file."""
     from rich.console import Console
+    from rich.markup import escape
 
     from teleprev.live.session import RecordOptions, LiveSession, default_session_path
     from teleprev.live.run import run_interactive, run_script, print_summary
@@ -39,14 +42,27 @@ def record(
     options = RecordOptions(
         out=out or default_session_path(task), rig=rig, models=models, task=task,
         operator=operator, participant=participant, condition=condition, practice=practice,
+        connect_timeout_s=connect_timeout,
     )
     recording = LiveSession(options)
+    unconnected: list[str] = []
     try:
         recording.start()
-        if duration is not None:
+        if duration is not None or not preview:  # nobody watches the device table: a dead rig must fail
+            unconnected = recording.wait_connected()
+        if unconnected:
+            pass
+        elif duration is not None:
             run_script(recording, duration, episodes, engage_after, console if preview else None, view, fps)
         else:
             run_interactive(recording, console, view, fps, show=preview)
     finally:
         summary = recording.stop()
     print_summary(console, recording, summary)
+    if unconnected:
+        errors = Console(stderr=True)
+        for line in unconnected:
+            errors.print(f"[bold red]error:[/] {escape(line)}", highlight=False, soft_wrap=True)
+        raise typer.Exit(1)
+    if recording.loop.stats.device_failures:
+        raise typer.Exit(1)  # a device failed during the session: the summary above says which

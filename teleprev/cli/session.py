@@ -37,12 +37,15 @@ def _print_table(console, table) -> None:
     console.print(table)
 
 
+_NOT_SKIPPED = ("received", "loop_dropped", "sink_errors", "failures")
+
+
 def info(
     session: Path = SESSION_ARG,
     as_json: bool = typer.Option(False, "--json", help="Print the facts as one JSON object instead of tables."),
 ) -> None:
     """Print a session's streams (count, rate, gaps, drops), device events, episodes and duration."""
-    from teleprev.session.summary import GAP_FACTOR, summarize
+    from teleprev.session.summary import GAP_FACTOR, PREVIEW_ONLY, summarize
 
     s = summarize(session)
     if as_json:
@@ -78,6 +81,16 @@ def info(
         head.add_row("dropped", f"[{style}]{s.dropped}[/]")
     else:
         head.add_row("dropped", "[yellow]unknown[/] (no recorder counters: the recorder did not close the file)")
+    if s.device_counts:
+        lost = {d: c.get("lost_input", 0) + c.get("loop_dropped", 0) + c.get("sink_errors", 0) for d, c in s.device_counts.items()}
+        detail = ", ".join(f"{d} {n}" for d, n in sorted(lost.items()) if n)
+        head.add_row("lost before recording", f"[bold red]{sum(lost.values())}[/] ({detail}; see devices)" if detail else "0")
+    if s.preview_only:
+        head.add_row("commands", f"[yellow]none[/]: {PREVIEW_ONLY}")
+    failures = s.device_failures
+    if failures:
+        head.add_row("failed devices", "[bold red]" + ", ".join(f"{d} ({n}x)" for d, n in sorted(failures.items()))
+                     + "[/] (see device events)")
     console.print(head)
 
     table = Table(title="streams", title_justify="left", box=box.SIMPLE_HEAD, pad_edge=False)
@@ -99,6 +112,22 @@ def info(
     _print_table(console, table)
     for line in s.recorder_errors:
         console.print(f"[red]rejected[/] {line}", highlight=False)
+
+    if s.device_counts:
+        dev = Table(title="devices", title_justify="left", box=box.SIMPLE_HEAD, pad_edge=False)
+        dev.add_column("device", no_wrap=True)
+        for col in ("received", "lost", "socket overruns", "sequence gaps", "queue overflow", "loop dropped",
+                    "skipped", "failures"):
+            dev.add_column(col, justify="right", no_wrap=True)
+        for name, c in sorted(s.device_counts.items()):
+            skipped = sum(v for k, v in c.items() if k not in _NOT_SKIPPED and not k.startswith("lost_"))
+            lost = c.get("lost_input", 0) + c.get("loop_dropped", 0) + c.get("sink_errors", 0)
+            dev.add_row(name, str(c.get("received", 0)), f"[bold red]{lost}[/]" if lost else "0",
+                        *(str(c.get(k, 0)) for k in ("lost_socket_overruns", "lost_sequence_gaps", "lost_queue_overflow",
+                                                     "loop_dropped")),
+                        f"[yellow]{skipped}[/]" if skipped else "0",
+                        f"[bold red]{c.get('failures', 0)}[/]" if c.get("failures") else "0")
+        _print_table(console, dev)
 
     if s.device_events:
         ev = Table(title="device events", title_justify="left", box=box.SIMPLE_HEAD, pad_edge=False)

@@ -140,6 +140,11 @@ class Device(ABC, Generic[S]):
     def disconnect(self) -> None:
         """Close the device; must be safe to call twice and after a failed connect."""
 
+    def endpoint(self) -> str:
+        """Where connect() reaches the hardware, for messages: e.g. "UDP 127.0.0.1:39539", "xArm
+        192.168.1.222", "serial /dev/ttyUSB0"; "" for a device without one (a simulation)."""
+        return ""
+
     def counters(self) -> dict[str, int]:
         """Running totals of input the device skipped (e.g. {"malformed_packets": 3}); the runner reports
         increases as error events and shows them. Must be cheap and safe to call from another thread."""

@@ -7,10 +7,14 @@ Whatever a device does (fails to open, raises from read(), goes quiet, sends gar
 runner: the runner records it as a teleprev.DeviceEvent on /events/device and keeps trying, so the other
 devices keep recording. Events:
     connected      the device opened
-    error          connect() or read() raised (message says what); also skipped garbage (counters())
+    error          connect() or read() raised (message says what): the device failed
     disconnected   the device was closed after an error; reconnect attempts follow every reconnect_s
     gap            no sample for gap_s; since_ns = receive time of the last sample (or of connecting)
     recovered      samples again after a gap; since_ns = the gap's since_ns
+    skipped        input the device or the runner counted and skipped since the last such event (at most
+                   one a second): the device's counters() and samples with non-finite values or a
+                   non-unit quaternion, which never reach the session ("invalid_samples"); counters
+                   named "lost_..." are input lost before it was read ("lost 40 to socket overruns")
 """
 
 from __future__ import annotations
@@ -26,7 +30,7 @@ import numpy as np
 
 from teleprev.devices.contract import Actuator, Device
 from teleprev.errors import DeviceError
-from teleprev.messages import Event, JointSample, Sample
+from teleprev.messages import Event, JointSample, PoseSample, Sample
 from teleprev import topics
 from teleprev.clock import SessionClock
 
@@ -35,6 +39,17 @@ Sink = Callable[[Sample, int], None]
 _LATENCY_WINDOW = 512  # samples the latency median/max are taken over
 _COUNTER_CHECK_NS = 1_000_000_000  # how often skipped-garbage counters are turned into error events
 _FIRST_SAMPLE_GRACE_S = 1.0  # a device just opened may take this long for its first sample
+
+
+def sample_is_valid(sample: Sample) -> bool:
+    """Finite joint values; a finite position and a unit quaternion for a pose. Other payloads pass."""
+    p = sample.payload
+    if isinstance(p, JointSample):
+        return bool(np.all(np.isfinite(np.asarray(p.positions, dtype=float))))
+    if isinstance(p, PoseSample):
+        q = np.asarray(p.orientation, dtype=float)
+        return bool(np.all(np.isfinite(p.position)) and np.all(np.isfinite(q)) and abs(float(q @ q) - 1.0) < 1e-6)
+    return True
 
 
 def default_gap_s(nominal_hz: float) -> float:
@@ -62,6 +77,18 @@ class RunnerStats:
     sink_errors: int  # samples and events the sink raised on (lost to the session)
     skipped: dict[str, int] = field(default_factory=dict)  # the device's own counters (malformed, NaN, ...)
     topics: dict[str, int] = field(default_factory=dict)  # samples per topic
+
+    @property
+    def lost_input(self) -> int:
+        return lost_input(self.skipped)
+
+
+def lost_input(counters: dict[str, int]) -> int:
+    """Input a device knows it lost before reading it, from its "lost_" counters: a sequence gap and a
+    socket overrun may be the same frame, so the larger of the two, plus what its queue pushed out."""
+    return (max(counters.get("lost_socket_overruns", 0), counters.get("lost_sequence_gaps", 0))
+            + sum(v for k, v in counters.items()
+                  if k.startswith("lost_") and k not in ("lost_socket_overruns", "lost_sequence_gaps")))
 
 
 class DeviceRunner:
@@ -108,6 +135,9 @@ class DeviceRunner:
         self._counters: dict[str, int] = {}
         self._counters_reported: dict[str, int] = {}
         self._counters_checked = 0
+        self._invalid = 0  # samples the plugin returned with NaN/inf or a non-unit quaternion
+        self._device_counts: dict[str, int] = {}  # device.counters() as last read
+        self._counter_base: dict[str, int] = {}  # totals from before the device last reset its counters
 
     @property
     def name(self) -> str:
@@ -146,6 +176,7 @@ class DeviceRunner:
                 self._check_gap(now)
                 self._check_counters(now)
         finally:
+            self._check_counters(self.clock.now_ns(), force=True)  # what was skipped since the last report
             self._close()
             with self._lock:
                 self._state = "stopped"
@@ -194,6 +225,13 @@ class DeviceRunner:
                 self._last_error = f"disconnect failed: {exc}"
 
     def _deliver(self, samples: list[Sample], now: int) -> None:
+        valid = [s for s in samples if sample_is_valid(s)]
+        if len(valid) < len(samples):
+            with self._lock:
+                self._invalid += len(samples) - len(valid)
+            samples = valid
+            if not samples:
+                return
         for sample in samples:
             try:
                 self.sink(sample, now)
@@ -233,22 +271,31 @@ class DeviceRunner:
         what = " since connecting" if self._last_receive is None else ""
         self._emit("gap", now, f"no data for {(now - since) / 1e9:.2f} s{what}", since_ns=since)
 
-    def _check_counters(self, now: int) -> None:
-        """Turn the device's skipped-garbage counters into an error event, at most once a second."""
-        if now - self._counters_checked < _COUNTER_CHECK_NS:
+    def _check_counters(self, now: int, force: bool = False) -> None:
+        """Turn the device's skipped-input counters into a "skipped" event, at most once a second."""
+        if not force and now - self._counters_checked < _COUNTER_CHECK_NS:
             return
         self._counters_checked = now
         try:
-            current = dict(self.device.counters())
+            raw = dict(self.device.counters())
         except Exception:
-            return
-        new = {k: v - self._counters_reported.get(k, 0) for k, v in current.items() if v > self._counters_reported.get(k, 0)}
+            raw = dict(self._device_counts)
+        for k, last in self._device_counts.items():  # a device reopened starts over: keep the totals running
+            if raw.get(k, 0) < last:
+                self._counter_base[k] = self._counter_base.get(k, 0) + last
+        self._device_counts = raw
+        current = {k: self._counter_base.get(k, 0) + raw.get(k, 0) for k in {*raw, *self._counter_base}}
+        current = {k: v for k, v in current.items() if v}
         with self._lock:
+            if self._invalid:
+                current["invalid_samples"] = self._invalid
             self._counters = current
+        new = {k: v - self._counters_reported.get(k, 0) for k, v in current.items() if v > self._counters_reported.get(k, 0)}
         if new:
             self._counters_reported = current
-            detail = ", ".join(f"{v} {k.replace('_', ' ')}" for k, v in sorted(new.items()))
-            self._emit("error", now, f"skipped {detail}")
+            lost = ", ".join(f"{v} to {k[5:].replace('_', ' ')}" for k, v in sorted(new.items()) if k.startswith("lost_"))
+            skipped = ", ".join(f"{v} {k.replace('_', ' ')}" for k, v in sorted(new.items()) if not k.startswith("lost_"))
+            self._emit("skipped", now, "; ".join(p for p in (lost and f"lost {lost}", skipped and f"skipped {skipped}") if p))
 
     def _emit(self, event: str, now: int, message: str = "", since_ns: int | None = None) -> None:
         data = {"device": self.name, "event": event, "message": message}
@@ -273,7 +320,7 @@ class DeviceRunner:
                 kind=self.device.kind,
                 state=self._state,
                 received=self._received,
-                errors=self._faults + sum(skipped.values()),
+                errors=self._faults + sum(v for k, v in skipped.items() if not k.startswith("lost_")),
                 rate_hz=rate,
                 nominal_hz=self.nominal_hz,
                 latency_ms=statistics.median(lat) / 1e6 if lat else 0.0,

@@ -43,6 +43,7 @@ from teleprev.config import from_table, read_toml
 from teleprev.errors import ConfigError, SessionError
 from teleprev.export.video import VideoSettings
 from teleprev.paths import data_dir
+from teleprev.session.summary import PREVIEW_ONLY, is_preview_only
 from teleprev import topics as T
 
 JOINTS, POSE, IMAGE = "foxglove.JointStates", "foxglove.PoseInFrame", "foxglove.CompressedImage"
@@ -236,7 +237,9 @@ def _sources(entry: str, schemas: dict[str, str], devices: dict[str, list[str]],
     role = ROLES[role_name]
     if role.topic:
         if role.topic not in schemas:
-            hint = " (commands are recorded only in execute mode)" if role.topic.startswith("/command/") else ""
+            hint = ""
+            if role.topic.startswith("/command/"):
+                hint = f": {PREVIEW_ONLY}" if is_preview_only(schemas) else " (commands are recorded only in execute mode)"
             raise SessionError(f"stream {entry!r} ({role.topic}) is not in this session{hint}", where)
         return [_checked(entry, role.topic, schemas, role.schema, role.prefix, where)]
     found = sorted(devices.get(f"{role.kind}/{role.stream}", []))

@@ -16,3 +16,4 @@ class DeviceRow:
     dropped: int  # samples the session loop's queue had no room for
     lost: int  # samples the device's runner could not hand to the loop (the sink raised)
     errors: int
+    lost_input: int = 0  # input lost before the device read it (socket overruns, sequence gaps, its queue)

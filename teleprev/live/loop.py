@@ -67,6 +67,7 @@ class LoopStats:
     commands_sent: Counter = field(default_factory=Counter)
     command_errors: Counter = field(default_factory=Counter)
     step_ns: list[int] = field(default_factory=list)  # pipeline step durations (bounded)
+    device_failures: Counter = field(default_factory=Counter)  # "error" device events, per device
 
 
 class SessionLoop:
@@ -159,6 +160,8 @@ class SessionLoop:
         counter.count += 1
         counter.last_ns = t
         counter.latency_ns = t - getattr(payload, "stamp_ns", t)
+        if sample.topic == topics.DEVICE_EVENT and payload.data.get("event") == "error":
+            self._device_failed(payload.data)
         if self.driver is None:
             return
         started = time.perf_counter_ns()
@@ -179,6 +182,17 @@ class SessionLoop:
             commands_sent=sum(self.stats.commands_sent.values()), dropped=sum(self.stats.dropped.values()),
         )
         self._publish_frames(t)
+
+    def _device_failed(self, data: dict) -> None:
+        """A device failed: count it, tell the operator and, in execute, go back to preview, which brakes
+        the commands to rest within their limits (a recorded mode switch, so a replay does the same)."""
+        name = str(data.get("device", ""))
+        self.stats.device_failures[name] += 1
+        message = f"device {name} failed: {data.get('message', '')}"
+        if self.driver is not None and self.driver.mode == "execute":
+            self._control("mode", {"mode": "preview", "reason": f"device {name} failed"})
+            message += "; the robot brakes to rest, back in PREVIEW"
+        self.snapshot = replace(self.snapshot, message=message)
 
     def _send(self, kind: str, command: JointSample | None) -> None:
         """Through an ActuatorPort: never raises; a device that is down or refuses is counted, not retried."""

@@ -17,6 +17,7 @@ from teleprev.preview.keys import KeyReader
 from teleprev.preview.robot_view import RobotView
 from teleprev.robot.model import load_robot
 from teleprev.live.session import LiveSession
+from teleprev.session.summary import PREVIEW_ONLY
 
 # Fixed view bounds (metres) that hold an xArm's workspace, so the picture does not rescale.
 ROBOT_BOUNDS = {"front": (-0.75, 0.75, -0.1, 1.0), "side": (-0.35, 0.95, -0.1, 1.0), "top": (-0.75, 0.75, -0.35, 0.95)}
@@ -140,8 +141,16 @@ def print_summary(console: Console, recording: LiveSession, summary) -> None:
     for topic, s in sorted(summary.streams.items()):
         table.add_row(topic, str(s.written), str(s.dropped))
     console.print(table)
-    loop_drops = sum(recording.loop.stats.dropped.values())
+    counts = recording.device_counts()
+    lost = {name: c["lost_input"] + c["loop_dropped"] + c["sink_errors"] for name, c in counts.items()}
+    detail = ", ".join(f"{name} {n}" for name, n in sorted(lost.items()) if n)
     console.print(
         f"episodes: {recording.loop.episodes.index + 1}   commands sent: {sum(recording.loop.stats.commands_sent.values())}"
-        f"   dropped before recording: {loop_drops}   file: {recording.options.out}"
+        f"   lost before recording: {sum(lost.values())}{f' ({detail})' if detail else ''}   file: {recording.options.out}"
     )
+    if not sum(recording.loop.stats.commands_sent.values()):
+        console.print(f"[yellow]preview only:[/] {PREVIEW_ONLY}", highlight=False)
+    for name, n in sorted(recording.loop.stats.device_failures.items()):
+        last = recording.runners[name].stats().last_error if name in recording.runners else ""
+        console.print(f"[bold red]device {name} failed[/] {n} time(s) (last: {last}); "
+                      "see `teleprev info` for when", highlight=False)

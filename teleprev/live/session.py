@@ -40,6 +40,7 @@ class RecordOptions:
     condition: str = ""
     practice: bool = False
     queue_size: int = 8192
+    connect_timeout_s: float = 5.0  # unattended: every device must have sent something by then
 
 
 def default_session_path(task: str) -> Path:
@@ -120,7 +121,9 @@ class LiveSession:
         self.loop.stop()
         stats = self.loop.stats
         extra = {"loop": {"dropped": json.dumps(dict(stats.dropped)), "commands_sent": json.dumps(dict(stats.commands_sent)),
-                          "command_errors": json.dumps(dict(stats.command_errors))}}
+                          "command_errors": json.dumps(dict(stats.command_errors)),
+                          "device_failures": json.dumps(dict(stats.device_failures))},
+                 "devices": {name: json.dumps(counts) for name, counts in self.device_counts().items()}}
         self.summary = self.recorder.close(extra)
         return self.summary
 
@@ -131,6 +134,26 @@ class LiveSession:
         if self.summary is None:
             self.stop()
 
+    def wait_connected(self, timeout_s: float | None = None) -> list[str]:
+        """Wait until every device has sent something; what is wrong with each that has not, after timeout_s
+        (default: the options' connect_timeout_s), naming the device, what was tried and what happened."""
+        import time
+
+        timeout_s = self.options.connect_timeout_s if timeout_s is None else timeout_s
+        deadline = time.monotonic() + timeout_s
+        while True:
+            silent = {name: r.stats() for name, r in self.runners.items() if r.stats().last_receive_ns is None}
+            if not silent or time.monotonic() >= deadline:
+                break
+            time.sleep(0.02)
+        problems = []
+        for name, s in silent.items():
+            device, plugin = self.devices[name], self.rig.devices[name].plugin
+            tried = device.endpoint() or "it"
+            what = f"connect failed: {s.last_error}" if s.connects == 0 else "no packets"
+            problems.append(f"device {name!r} ({plugin}) sent nothing within {timeout_s:g} s: tried {tried}, {what}")
+        return problems
+
     def device_rows(self) -> list[DeviceRow]:
         rows = []
         for name, runner in self.runners.items():
@@ -138,5 +161,16 @@ class LiveSession:
             prefix = f"/{self.devices[name].kind}/{name}/"
             dropped = sum(n for topic, n in self.loop.stats.dropped.items() if topic.startswith(prefix))
             rows.append(DeviceRow(name, self.devices[name].kind, s.state, s.rate_hz, s.nominal_hz, s.latency_ms, dropped,
-                                  s.sink_errors, s.errors))
+                                  s.sink_errors, s.errors, s.lost_input))
         return rows
+
+    def device_counts(self) -> dict[str, dict[str, int]]:
+        """Per device, what it delivered and every count of what it lost or skipped (for the file's metadata)."""
+        out = {}
+        for name, runner in self.runners.items():
+            s = runner.stats()
+            prefix = f"/{self.devices[name].kind}/{name}/"
+            out[name] = {"received": s.received, **s.skipped, "lost_input": s.lost_input,
+                         "loop_dropped": sum(n for t, n in self.loop.stats.dropped.items() if t.startswith(prefix)),
+                         "sink_errors": s.sink_errors, "failures": self.loop.stats.device_failures.get(name, 0)}
+        return out

@@ -1,13 +1,18 @@
-"""The [pipeline] table of a rig file: how human motion becomes robot commands."""
+"""The [pipeline] table of a rig file: how human motion becomes robot commands.
+
+A pipeline step runs on every glove sample (commands come at the glove's rate), and the arm's state
+samples brake the commands between them when the glove goes quiet; there is no other trigger.
+"""
 
 from __future__ import annotations
 
 from dataclasses import dataclass
 
+from teleprev.human.smplx import HAND_JOINTS
+
 
 @dataclass(frozen=True)
 class PipelineConfig:
-    trigger: str = "glove"  # the device whose samples trigger a pipeline step (pipeline outputs at its rate)
     wrist_scale: float = 1.0  # metres of robot motion per metre of wrist motion
     workspace_min: tuple[float, float, float] = (0.15, -0.45, 0.05)  # TCP box in the arm base frame, metres
     workspace_max: tuple[float, float, float] = (0.70, 0.45, 0.65)
@@ -33,6 +38,8 @@ class PipelineConfig:
     hand_clearance_mm: float | None = None  # distance kept between the hand's links along each command segment
 
     def __post_init__(self):
+        if self.gripper_joint not in HAND_JOINTS:
+            raise ValueError(f"gripper_joint must be an SMPL-X hand joint ({', '.join(HAND_JOINTS)}), got {self.gripper_joint!r}")
         for key in ("arm_speed", "hand_speed", "arm_acceleration", "arm_jerk", "hand_acceleration"):
             value = getattr(self, key)
             if value is not None and not 0 < value < float("inf"):

@@ -62,7 +62,8 @@ def device_table(rows: list[DeviceRow]) -> Table:
             r.name, r.kind, Text(r.state, style=state_style),
             Text(f"{r.rate_hz:6.1f}/{r.nominal_hz:g} Hz", style="yellow" if slow else ""),
             f"{r.latency_ms:5.1f} ms", Text(str(r.dropped), style="red" if r.dropped else ""),
-            Text(str(r.lost), style="red" if r.lost else ""), Text(str(r.errors), style="red" if r.errors else ""),
+            Text(str(r.lost + r.lost_input), style="red" if r.lost + r.lost_input else ""),
+            Text(str(r.errors), style="red" if r.errors else ""),
         )
     return table
 

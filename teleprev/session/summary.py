@@ -17,9 +17,16 @@ from teleprev.errors import SessionError
 from teleprev.messages import Event
 from teleprev.session.reader import Episode, SessionReader
 from teleprev.session.recorder import RECORDER_RECORD
-from teleprev.topics import DEVICE_EVENT
+from teleprev.topics import COMMAND_ARM, COMMAND_HAND, DEVICE_EVENT
 
 GAP_FACTOR = 3.0  # a gap is an interval longer than this many median periods
+PREVIEW_ONLY = ("the robot was never engaged: the whole session ran in PREVIEW, so no command was sent or recorded "
+                "and there are no actions to export (record with --engage-after SECONDS, or press space to execute)")
+
+
+def is_preview_only(session_topics) -> bool:
+    """Whether a recorded session holds no command at all (the robot was never engaged)."""
+    return COMMAND_ARM not in session_topics and COMMAND_HAND not in session_topics
 
 
 @dataclass
@@ -61,10 +68,27 @@ class SessionSummary:
     recovered: bool  # rewritten by `teleprev recover`
     dropped: int | None = None
     recorder_errors: list[str] = field(default_factory=list)
+    # Per device (the "devices" metadata record a live session writes when it closes): samples received,
+    # the device's lost_/skipped counters, lost_input (their total), loop_dropped, sink_errors, failures.
+    device_counts: dict[str, dict[str, int]] = field(default_factory=dict)
 
     @property
     def duration_s(self) -> float:
         return 0.0 if self.start_ns is None else (self.end_ns - self.start_ns) / 1e9
+
+    @property
+    def preview_only(self) -> bool:
+        return is_preview_only({st.topic for st in self.streams if st.count})
+
+    @property
+    def device_failures(self) -> dict[str, int]:
+        """Failures (connect or read raised: "error" events) per device; skipped input is not one
+        (older sessions reported it as an "error" whose message starts with "skipped")."""
+        out: dict[str, int] = {}
+        for e in self.device_events:
+            if e.event == "error" and not e.message.startswith("skipped "):
+                out[e.device] = out.get(e.device, 0) + 1
+        return out
 
     def to_json(self) -> dict:
         from dataclasses import asdict
@@ -72,6 +96,8 @@ class SessionSummary:
         out = asdict(self)
         out["path"] = str(self.path)
         out["duration_s"] = self.duration_s
+        out["device_failures"] = self.device_failures
+        out["preview_only"] = self.preview_only
         return out
 
 
@@ -125,6 +151,7 @@ def summarize(path: str | os.PathLike) -> SessionSummary:
             "recover" in meta,
             sum(s.dropped or 0 for s in streams) if has_counters else None,
             [f"{k[6:]}: {v}" for k, v in counters.items() if k.startswith("error ")],
+            {name: _counters(value, reader.path, f"device {name}") for name, value in meta.get("devices", {}).items()},
         )
 
 

@@ -106,6 +106,9 @@ def test_check_reports_a_device_that_cannot_open_and_keeps_the_others(tmp_path):
     assert cam[3] == "ok" and int(cam[4]) >= 8
 
 
+GLOVE = '[devices.glove]\nplugin = "sim.glove"\n'
+
+
 @pytest.mark.parametrize(
     "body, message",
     [
@@ -115,6 +118,16 @@ def test_check_reports_a_device_that_cannot_open_and_keeps_the_others(tmp_path):
         ('[devices.cam]\nsource = 0\n', r"rig.toml \[devices.cam\]: missing required key 'plugin'"),
         ('[devices.glove]\nplugin = "replay.glove"\n', r"rig.toml \[devices.glove\]: session is required"),
         ('[rig]\nname = "x"\n', r"rig.toml: no devices"),
+        # values, not only keys (issue 15 item 8)
+        ('[pipeline]\ntrigger = "suit"\n' + GLOVE, r"rig.toml \[pipeline\]: unknown key 'trigger': it was removed"),
+        ('[pipeline]\ntrigger = "glove"\n' + GLOVE, r"rig.toml \[pipeline\]: unknown key 'trigger'"),
+        ('[pipeline]\ngripper_joint = "index9"\n' + GLOVE, r"rig.toml \[pipeline\]: gripper_joint must be an SMPL-X hand joint"),
+        ('[pipeline]\ntcp_link = "palm"\n' + GLOVE, r"rig.toml \[pipeline\].tcp_link: the robot 'xarm6_leap_hand' has no link 'palm'"),
+        ('[rig]\nrobot = "xarm9"\n' + GLOVE, r"rig.toml \[rig\].robot: no such robot 'xarm9'"),
+        ('[rig]\nend_effector = "suction"\n' + GLOVE, r"rig.toml \[rig\].end_effector: expected one of"),
+        ('[rig]\ncalibration = "calib/none.toml"\n' + GLOVE, r"rig.toml \[rig\].calibration: no such file .*calib/none.toml"),
+        ('[rig]\nmodels = "no_models"\n' + GLOVE, r"rig.toml \[rig\].models: no such folder .*no_models"),
+        ('[devices.glove]\nplugin = "sim.glove"\ntask = "juggle"\n', r"rig.toml \[devices.glove\]: task must be"),
     ],
 )
 def test_rig_errors_name_the_file_table_and_key(tmp_path, body, message):
@@ -142,3 +155,11 @@ def test_cli_prints_rig_errors_as_one_line(tmp_path):
     assert result.returncode == 2
     assert "error:" in result.stderr and "[devices.suit]" in result.stderr and "host must be an IPv4 address" in result.stderr
     assert "Traceback" not in result.stderr
+
+
+def test_a_rig_recorded_with_the_removed_trigger_key_still_loads():
+    from teleprev.rig import default_rig_path, load_rig_text
+
+    text = default_rig_path().read_text().replace("[pipeline]\n", '[pipeline]\ntrigger = "glove"\n')
+    assert "trigger" in text
+    assert load_rig_text(text, "session.mcap: recorded rig").pipeline == load_rig(default_rig_path()).pipeline

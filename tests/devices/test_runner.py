@@ -294,3 +294,32 @@ def test_a_device_dying_mid_session_leaves_a_gap_event_in_the_file_and_the_other
     assert 0 <= a_logged[-1].log_time_ns - gap["since_ns"] < 1000
     assert len(b_logged) == b_received and b_received > 80  # every sample of b is in the file
     assert np.diff([m.log_time_ns for m in b_logged]).max() < 0.15e9
+
+
+class Faulty(Ticker):
+    """Every third sample carries a NaN; every fifth is a pose with a non-unit quaternion."""
+
+    def read(self, timeout_s):
+        from teleprev.messages import PoseSample
+
+        out = super().read(timeout_s)
+        self.n = getattr(self, "n", 0) + len(out)
+        if out and self.n % 3 == 0:
+            return [Sample(self.topic, JointSample(out[0].payload.stamp_ns, ("a",), np.array([np.nan])))]
+        if out and self.n % 5 == 0:
+            return [Sample(self.topic, PoseSample(out[0].payload.stamp_ns, "suit", np.zeros(3), np.array([0, 0, 1e3, 1.0])))]
+        return out
+
+
+def test_non_finite_and_non_unit_samples_stop_at_the_plugin_boundary_and_are_counted():
+    clock, sink = SessionClock(), Collector()
+    device = Faulty("a", TickerSettings(), DeviceContext(clock))
+    runner = DeviceRunner(device, sink, clock).start()
+    time.sleep(0.5)
+    runner.stop()
+    delivered = [s.payload for s, _ in sink.items if s.topic == device.topic]
+    assert delivered and all(np.isfinite(p.positions).all() for p in delivered)
+    bad = device.n // 3 + device.n // 5 - device.n // 15
+    assert runner.stats().skipped["invalid_samples"] == bad == device.n - len(delivered)
+    skipped = [e for e in sink.events("a") if e["event"] == "skipped"]
+    assert skipped and skipped[-1]["message"].startswith("skipped") and "invalid samples" in skipped[-1]["message"]

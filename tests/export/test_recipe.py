@@ -60,7 +60,7 @@ def test_roles_fit_any_rig_and_ask_for_a_name_when_ambiguous(tmp_path):
 def test_a_session_without_a_requested_stream_is_named(tmp_path):
     preview_only = {t: s for t, s in SIM_TOPICS.items() if not t.startswith("/command/")}
     with pytest.raises(SessionError, match=r"s.mcap: feature 'action': stream 'arm_command' \(/command/arm\) is not in "
-                                           r"this session \(commands are recorded only in execute mode\)"):
+                                           r"this session: the robot was never engaged: the whole session ran in PREVIEW"):
         resolve(load_recipe(), topics(preview_only), {}, "s.mcap")
     no_glove = {t: s for t, s in SIM_TOPICS.items() if not t.startswith("/glove/")}
     with pytest.raises(SessionError, match="'observation.glove': stream 'glove': this session has no glove device"):

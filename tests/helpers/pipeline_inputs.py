@@ -4,10 +4,10 @@ from __future__ import annotations
 
 import numpy as np
 
-from teleprev.human.smplx import HAND_POSE_NAMES, hand_pose_from_angles
+from teleprev.human.smplx import HAND_POSE_NAMES, JOINT_FRAMES, hand_pose_from_angles
 from teleprev.messages import JointSample, PoseSample
 from teleprev.pipeline.step import StepInputs
-from teleprev.transforms import axis_angle_to_matrix, matrix_to_quat
+from teleprev.transforms import axis_angle_to_matrix, matrix_to_axis_angle, matrix_to_quat
 
 RATE_HZ = 120.0
 ARM_HOME = np.array([0.0, -0.5, -0.6, 0.0, 1.1, 0.0])
@@ -31,3 +31,18 @@ def inputs(k: int, arm_names, effector_names, effector_q, flexion=None) -> StepI
         t, hand_sample(t, flexion), wrist_sample(t, k),
         JointSample(t, tuple(arm_names), ARM_HOME.copy()), JointSample(t, tuple(effector_names), np.asarray(effector_q, float)),
     )
+
+
+PROXIMAL = [0, 3, 6, 9, 12]  # index1, middle1, pinky1, ring1, thumb1
+
+
+def twisted(pose: np.ndarray, joints, twist: float) -> np.ndarray:
+    """The (15, 3) hand pose with each joint's segment turned by `twist` about its own bone (x in its joint
+    frame), as an IMU glove reports a finger rolling about itself."""
+    out = pose.copy()
+    c, s = np.cos(twist), np.sin(twist)
+    rx = np.array([[1.0, 0.0, 0.0], [0.0, c, -s], [0.0, s, c]])
+    for j in joints:
+        b = JOINT_FRAMES[j]
+        out[j] = matrix_to_axis_angle(axis_angle_to_matrix(pose[j]) @ b @ rx @ b.T)
+    return out

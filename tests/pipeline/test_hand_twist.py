@@ -2,21 +2,8 @@
 
 import numpy as np
 
-from teleprev.human.smplx import JOINT_FRAMES, angles_from_hand_pose, hand_pose_from_angles
-from teleprev.transforms import axis_angle_to_matrix, matrix_to_axis_angle
-
-PROXIMAL = [0, 3, 6, 9, 12]  # index1, middle1, pinky1, ring1, thumb1
-
-
-def twisted(pose: np.ndarray, joints, twist: float) -> np.ndarray:
-    """The pose with each joint's segment turned by `twist` about its own bone (x in its joint frame)."""
-    out = pose.copy()
-    c, s = np.cos(twist), np.sin(twist)
-    rx = np.array([[1.0, 0.0, 0.0], [0.0, c, -s], [0.0, s, c]])
-    for j in joints:
-        b = JOINT_FRAMES[j]
-        out[j] = matrix_to_axis_angle(axis_angle_to_matrix(pose[j]) @ b @ rx @ b.T)
-    return out
+from teleprev.human.smplx import angles_from_hand_pose, hand_pose_from_angles
+from tests.helpers.pipeline_inputs import PROXIMAL, twisted
 
 
 def test_twisting_each_proximal_bone_moves_no_abduction(rng):

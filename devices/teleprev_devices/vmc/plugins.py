@@ -5,6 +5,9 @@ the socket; both plugins on one host and port share one receiver (one sender, tw
     [devices.suit]             [devices.glove]
     plugin = "vmc.suit"        plugin = "vmc.glove"
     port = 39539               port = 39539
+
+They listen on 127.0.0.1 unless `host` says otherwise; `allow` limits the senders accepted (others are
+counted as disallowed_senders and dropped), and plugins sharing a port must list the same ones.
 """
 
 from __future__ import annotations
@@ -34,12 +37,18 @@ class VmcSettings:
     port: int = 39539  # VMC's usual receiving port
     rate_hz: float = 60.0  # the sender's frame rate (for the rate display and gap detection)
     timeout_s: float = 0.0  # > 0: no frame for this long is a fault (the runner reopens the socket); 0: only a gap
+    allow: tuple[str, ...] = ()  # senders accepted (addresses or networks, e.g. "192.168.1.7", "10.0.0.0/24"); empty: any
 
     def __post_init__(self):
         try:
             ipaddress.IPv4Address(self.host)
         except ValueError:
             raise ValueError(f"host must be an IPv4 address to listen on (e.g. 127.0.0.1), got {self.host!r}") from None
+        for a in self.allow:
+            try:
+                ipaddress.IPv4Network(a, strict=False)
+            except ValueError:
+                raise ValueError(f"allow: {a!r} is not an IPv4 address or network (e.g. 192.168.1.7 or 10.0.0.0/24)") from None
         if not 0 <= self.port <= 65535:
             raise ValueError(f"port must be 0..65535, got {self.port}")
         if not 0 < self.rate_hz <= 1000:
@@ -65,7 +74,7 @@ class _VmcDevice(Device[V]):
 
     def connect(self) -> None:
         s = self.settings
-        self._receiver = acquire(self.context.shared, s.host, s.port, self.context.clock)
+        self._receiver = acquire(self.context.shared, s.host, s.port, self.context.clock, s.allow)
         self._sub = self._receiver.subscribe()
         self._last_frame_ns = self.context.clock.now_ns()
 
@@ -75,8 +84,14 @@ class _VmcDevice(Device[V]):
             receiver.unsubscribe(self._sub)
             release(self.context.shared, receiver)
 
+    def endpoint(self) -> str:
+        return f"UDP {self.settings.host}:{self.settings.port}"
+
     def counters(self) -> dict[str, int]:
-        return self._receiver.counters.errors() if self._receiver is not None else {}
+        receiver, sub = self._receiver, self._sub
+        if receiver is None or sub is None:
+            return {}
+        return {**receiver.counters.errors(), "lost_queue_overflow": sub.overflow}
 
     def read(self, timeout_s: float) -> list[Sample]:
         receiver = self._receiver

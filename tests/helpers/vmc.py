@@ -1,0 +1,198 @@
+"""A VMC sender for tests and benchmarks: real OSC messages and bundles (python-osc) over real UDP.
+
+    sender = VmcSender(port).start(rate_hz=60)   # a glove + suit frame every 1/60 s, stamped with /VMC/Ext/T
+    ...; sender.stop(); sender.sent              # frames sent
+"""
+
+from __future__ import annotations
+
+import socket
+import threading
+import time
+
+import numpy as np
+from pythonosc.osc_bundle_builder import IMMEDIATELY, OscBundleBuilder
+from pythonosc.osc_message_builder import OscMessageBuilder
+
+from teleprev.transforms import quat_from_axis_angle
+
+FINGERS = ("Index", "Middle", "Ring", "Little", "Thumb")
+
+
+def free_port() -> int:
+    with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as s:
+        s.bind(("127.0.0.1", 0))
+        return s.getsockname()[1]
+
+
+def msg(address: str, *args, types: str | None = None):
+    b = OscMessageBuilder(address=address)
+    for i, a in enumerate(args):
+        b.add_arg(a, types[i] if types else None)
+    return b.build()
+
+
+def bone(name: str, pos=(0.0, 0.0, 0.0), quat=(0.0, 0.0, 0.0, 1.0), address="/VMC/Ext/Bone/Pos", double=False):
+    """A bone's message; float32 values as senders send them, or float64 (`double`) for values beyond float32."""
+    return msg(address, name, *[float(v) for v in pos], *[float(v) for v in quat], types="s" + ("d" if double else "f") * 7)
+
+
+def bundle(*messages):
+    b = OscBundleBuilder(IMMEDIATELY)
+    for m in messages:
+        b.add_content(m)
+    return b.build()
+
+
+def unity_quat(axis, angle):
+    """A Unity rotation of `angle` about the Unity-frame `axis` (x y z w)."""
+    axis = np.asarray(axis, dtype=float)
+    return quat_from_axis_angle(axis / np.linalg.norm(axis) * angle)
+
+
+def arm_messages(root_pos=(0, 0, 0), root_quat=(0, 0, 0, 1), elbow_quat=(0, 0, 0, 1), t=None):
+    msgs = [
+        bone("root", root_pos, root_quat, address="/VMC/Ext/Root/Pos"),
+        bone("Hips", (0, 0.9, 0)),
+        bone("Spine", (0, 0.1, 0)),
+        bone("Chest", (0, 0.15, 0)),
+        bone("RightShoulder", (0.02, 0.2, 0)),
+        bone("RightUpperArm", (0.1, 0, 0)),
+        bone("RightLowerArm", (0.3, 0, 0), elbow_quat),
+        bone("RightHand", (0.25, 0, 0)),
+    ]
+    if t is not None:
+        msgs.append(msg("/VMC/Ext/T", t, types="d"))
+    return msgs
+
+
+def arm_frame(**kw):
+    return bundle(*arm_messages(**kw))
+
+
+def finger_messages(flexion: float) -> list:
+    """Every right finger bone curled by `flexion` rad (a negative turn about Unity z)."""
+    q = unity_quat([0, 0, 1], -flexion)
+    return [bone(f"Right{f}{p}", (0.03, 0, 0), q) for f in FINGERS for p in ("Proximal", "Intermediate", "Distal")]
+
+
+def rig_text(port: int, glove_timeout_s: float = 0.0, allow: tuple[str, ...] = ()) -> str:
+    """A rig with a VMC glove and suit on `port` and the simulated arm and hand."""
+    allowed = f"allow = {list(allow)!r}\n".replace("'", '"') if allow else ""
+    return (
+        '[rig]\nname = "vmc"\n\n'
+        f'[devices.glove]\nplugin = "vmc.glove"\nport = {port}\ntimeout_s = {glove_timeout_s}\n{allowed}\n'
+        f'[devices.suit]\nplugin = "vmc.suit"\nport = {port}\n{allowed}\n'
+        '[devices.arm]\nplugin = "sim.arm"\n\n[devices.hand]\nplugin = "sim.hand"\n'
+    )
+
+
+class VmcSender:
+    """Sends a whole frame (arm chain, fingers, /VMC/Ext/T) every 1/rate_hz s from its own thread, the
+    fingers flexing slowly; `inject(datagram)` slips an extra datagram in before the next frame."""
+
+    def __init__(self, port: int, host: str = "127.0.0.1", source: str = "127.0.0.1"):
+        self.address = (host, port)
+        self.sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+        self.sock.bind((source, 0))
+        self.sent = 0
+        self._extra: list[bytes] = []
+        self._lock = threading.Lock()
+        self._stop = threading.Event()
+        self._thread: threading.Thread | None = None
+
+    def frame(self, k: int, rate_hz: float) -> bytes:
+        t = k / rate_hz
+        flex = 0.6 + 0.4 * np.sin(2 * np.pi * 0.5 * t)
+        return bundle(*arm_messages(t=100.0 + t), *finger_messages(flex)).dgram
+
+    def send(self, datagram: bytes) -> None:
+        self.sock.sendto(datagram, self.address)
+
+    def inject(self, datagram: bytes) -> None:
+        with self._lock:
+            self._extra.append(datagram)
+
+    def start(self, rate_hz: float = 60.0, seconds: float | None = None) -> "VmcSender":
+        self._thread = threading.Thread(target=self._run, args=(rate_hz, seconds), daemon=True)
+        self._thread.start()
+        return self
+
+    def _run(self, rate_hz: float, seconds: float | None) -> None:
+        start, k = time.monotonic(), 0
+        while not self._stop.is_set() and (seconds is None or k < seconds * rate_hz):
+            with self._lock:
+                extra, self._extra = self._extra, []
+            for d in extra:
+                self.send(d)
+            self.send(self.frame(k, rate_hz))
+            self.sent += 1
+            k += 1
+            self._stop.wait(max(0.0, start + k / rate_hz - time.monotonic()))
+
+    def join(self, timeout: float = 10.0) -> None:
+        if self._thread is not None:
+            self._thread.join(timeout)
+
+    def stop(self) -> None:
+        self._stop.set()
+        self.join()
+        self.sock.close()
+
+
+# ---- fuzzing: what a noisy sender, a broken one and a stranger on the port send ------------------------
+_BAD_NUMBERS = (float("nan"), float("inf"), -float("inf"), 1e300, -1e300, 1e39, 0.0)
+_BONES = ("RightIndexProximal", "RightHand", "Hips", "RightLittleDistal", "NoSuchBone", "", "rightindexproximal",
+          "RightIndexProximal\x00x", "\u00e9\u00e9")
+
+
+def _wrong_value(rng):
+    kind = rng.integers(6)
+    return (("s", "0.5"), ("i", int(rng.integers(-2**31, 2**31))), ("T", True), ("b", b"\x00\x01"),
+            ("N", None), ("d", float(rng.choice(_BAD_NUMBERS))))[kind]
+
+
+def fuzz_datagram(rng, good: bytes) -> bytes:
+    """One random or mutated datagram: byte flips, truncations, oversized ones, wrong types, NaN/inf/1e300,
+    wrong bone names, bad sender times, non-unit and zero quaternions, random bytes."""
+    kind = rng.integers(12)
+    if kind == 0:  # flipped bytes
+        data = bytearray(good)
+        for i in rng.integers(0, len(data), size=int(rng.integers(1, 16))):
+            data[i] = int(rng.integers(256))
+        return bytes(data)
+    if kind == 1:  # truncated
+        return good[: int(rng.integers(0, len(good)))]
+    if kind == 2:  # oversized: the frame and junk up to the largest UDP datagram
+        return good + rng.bytes(int(rng.integers(1000, 65507 - len(good))))
+    if kind == 3:  # random bytes, some starting like a bundle or a message
+        head = (b"#bundle\x00", b"/VMC/Ext/Bone/Pos\x00\x00\x00", b"")[int(rng.integers(3))]
+        return head + rng.bytes(int(rng.integers(0, 400)))
+    if kind == 4:  # a bad sender time
+        return bundle(*finger_messages(0.5), msg("/VMC/Ext/T", float(rng.choice(_BAD_NUMBERS)), types="d")).dgram
+    if kind == 5:  # a bone with a bad number (double precision, so 1e300 survives)
+        values = rng.normal(size=7)
+        values[int(rng.integers(7))] = float(rng.choice(_BAD_NUMBERS))
+        return bundle(bone("RightIndexProximal", values[:3], values[3:], double=True)).dgram
+    if kind == 6:  # wrong bone names
+        return bundle(bone(str(rng.choice(_BONES)), (0.03, 0, 0))).dgram
+    if kind == 7:  # wrong argument types
+        t, v = _wrong_value(rng)
+        args = ["RightIndexProximal", 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 1.0]
+        types = list("sfffffff")
+        k = int(rng.integers(8))
+        args[k], types[k] = v, t
+        return bundle(msg("/VMC/Ext/Bone/Pos", *args, types="".join(types))).dgram
+    if kind == 8:  # too few arguments, or none
+        n = int(rng.integers(0, 7))
+        return bundle(msg(str(rng.choice(["/VMC/Ext/Bone/Pos", "/VMC/Ext/Root/Pos", "/VMC/Ext/T"])),
+                          *(["RightHand"] + [0.0] * 7)[:n])).dgram
+    if kind == 9:  # non-unit or zero quaternions
+        q = rng.normal(size=4) * float(rng.choice([0.0, 1e-9, 0.5, 3.0, 1e30]))
+        return bundle(bone("RightMiddleProximal", (0.03, 0, 0), q, double=True)).dgram
+    if kind == 10:  # a whole arm with one huge or non-finite position
+        p = [float(rng.choice(_BAD_NUMBERS)), 0.0, 0.0]
+        root = bone("root", p, address="/VMC/Ext/Root/Pos", double=True)
+        return bundle(root, *arm_messages()[1:], msg("/VMC/Ext/T", 1.0, types="d")).dgram
+    return bundle(msg("/VMC/Ext/Bone/Pos", "RightHand", *rng.normal(size=7).tolist(), types="s" + "f" * 7),
+                  msg("/VMC/Ext/T", "noon", types="s")).dgram  # a bad time beside a good bone

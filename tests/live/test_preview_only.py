@@ -1,0 +1,37 @@
+"""A session recorded without ever engaging: record, info and export all say why it has no commands."""
+
+import subprocess
+import sys
+
+from teleprev.session.summary import PREVIEW_ONLY, summarize
+
+
+def cli(*args):
+    return subprocess.run([sys.executable, "-m", "teleprev.cli.app", *map(str, args)], capture_output=True, text=True,
+                          timeout=120)
+
+
+def test_a_preview_only_session_is_explained_by_record_info_and_export(tmp_path):
+    out = tmp_path / "p.mcap"
+    run = cli("record", "--out", out, "--duration", "1.5", "--no-preview")  # unattended, no --engage-after
+    assert run.returncode == 0, run.stderr
+    said = " ".join(run.stdout.split())
+    assert f"preview only: {PREVIEW_ONLY}" in said
+
+    assert summarize(out).preview_only
+    info = " ".join(cli("info", out).stdout.split())
+    assert f"commands none: {PREVIEW_ONLY}" in info
+
+    export = cli("export", out, "--repo-id", "lab/p", "--root", tmp_path / "ds")
+    assert export.returncode != 0
+    err = " ".join(export.stderr.split())
+    assert "is not in this session" in err and PREVIEW_ONLY in err
+    assert not (tmp_path / "ds").exists()
+
+
+def test_an_engaged_session_is_not_called_preview_only(tmp_path):
+    from tests.helpers.sessions import record_sim
+
+    out = tmp_path / "e.mcap"
+    record_sim(out, seconds=1.5, engage_after=0.5)
+    assert not summarize(out).preview_only
