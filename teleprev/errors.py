@@ -37,3 +37,19 @@ class SessionError(TeleprevError):
 
 class DeviceError(TeleprevError):
     """A device could not be opened, stopped sending or sent something unusable."""
+
+
+def describe_os_error(exc: BaseException) -> str:
+    """An I/O error in a few words: "no space left on device" rather than "[Errno 28] No space ...";
+    file-size limits (RLIMIT_FSIZE) read as what they are."""
+    import errno
+
+    code = getattr(exc, "errno", None)
+    if code == errno.ENOSPC:
+        return "no space left on device"
+    if code == errno.EFBIG:
+        return "file too large (a file-size limit was reached)"
+    if code == errno.EDQUOT:
+        return "disk quota exceeded"
+    text = getattr(exc, "strerror", None) or str(exc)
+    return text[:1].lower() + text[1:] if text else type(exc).__name__

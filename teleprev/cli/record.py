@@ -31,6 +31,7 @@ def record(
     """Record a session: devices, pipeline, preview and execute, episodes, all into one MCAP file."""
     from rich.console import Console
 
+    from teleprev.cli.signals import StopSignals
     from teleprev.live.session import RecordOptions, LiveSession, default_session_path
     from teleprev.live.run import run_interactive, run_script, print_summary
 
@@ -40,13 +41,20 @@ def record(
         out=out or default_session_path(task), rig=rig, models=models, task=task,
         operator=operator, participant=participant, condition=condition, practice=practice,
     )
-    recording = LiveSession(options)
-    try:
-        recording.start()
-        if duration is not None:
-            run_script(recording, duration, episodes, engage_after, console if preview else None, view, fps)
-        else:
-            run_interactive(recording, console, view, fps, show=preview)
-    finally:
-        summary = recording.stop()
+    with StopSignals() as signals:
+        recording = LiveSession(options)
+        try:
+            recording.start()
+            if duration is not None:
+                run_script(recording, duration, episodes, engage_after, console if preview else None, view, fps)
+            else:
+                run_interactive(recording, console, view, fps, show=preview)
+        except KeyboardInterrupt:
+            pass  # Ctrl-C, SIGTERM or SIGHUP: the session is finalized below all the same
+        finally:
+            with signals.finishing():  # a second signal must not cut the file's finalization short
+                summary = recording.stop()  # raises SessionError if the recording failed (exit 2)
     print_summary(console, recording, summary)
+    if signals.received is not None:
+        console.print(f"stopped by {signals.name}; {options.out} is complete", highlight=False)
+        raise typer.Exit(signals.exit_code)
