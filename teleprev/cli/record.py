@@ -54,7 +54,11 @@ def record(
         finally:
             with signals.finishing():  # a second signal must not cut the file's finalization short
                 summary = recording.stop()  # raises SessionError if the recording failed (exit 2)
-    print_summary(console, recording, summary)
+    try:
+        print_summary(console, recording, summary)
+        if signals.received is not None:
+            console.print(f"stopped by {signals.name}; {options.out} is complete", highlight=False)
+    except OSError:  # the terminal went away with the SIGHUP; the file is complete all the same
+        pass
     if signals.received is not None:
-        console.print(f"stopped by {signals.name}; {options.out} is complete", highlight=False)
         raise typer.Exit(signals.exit_code)
