@@ -107,3 +107,48 @@ def alive(pid: int) -> bool:
     except OSError:
         return False
     return stat.rsplit(")", 1)[1].split()[0] != "Z"
+
+
+def chunk_spans(path: Path) -> list[tuple[int, int, int, int]]:
+    """(offset, length, start_ns, end_ns) of every chunk record of a complete session, in file order."""
+    from teleprev.session.reader import SessionReader
+
+    with SessionReader(path) as reader:
+        return sorted((c.offset, c.length, c.start_ns, c.end_ns) for c in reader._chunks)
+
+
+def flip_byte(path: Path, offset: int, mask: int = 0xFF) -> None:
+    with open(path, "r+b") as f:
+        f.seek(offset)
+        b = f.read(1)
+        f.seek(offset)
+        f.write(bytes([b[0] ^ mask]))
+
+
+def damage_chunk(path: Path, index: int, where: float = 0.5) -> tuple[int, int]:
+    """Flip one byte inside the compressed records of the index-th chunk (in file order), `where` of the
+    way through them; returns the chunk's (start_ns, end_ns)."""
+    offset, length, start, end = chunk_spans(path)[index]
+    flip_byte(path, offset + 9 + 60 + int((length - 9 - 60) * where))  # past the chunk's header fields
+    return start, end
+
+
+def mcap_opens(path: Path) -> bool:
+    """What `mcap doctor` checks, with the mcap library's own readers: every record of the file in order
+    with chunk CRCs validated, then the summary and every message through the index."""
+    from mcap.reader import make_reader
+    from mcap.stream_reader import StreamReader
+
+    try:
+        with open(path, "rb") as f:
+            for _ in StreamReader(f, validate_crcs=True).records:
+                pass
+        with open(path, "rb") as f:
+            reader = make_reader(f, validate_crcs=True)
+            if reader.get_summary() is None:
+                return False
+            for _ in reader.iter_messages(log_time_order=False):
+                pass
+        return True
+    except Exception:
+        return False
