@@ -123,7 +123,9 @@ class _Bars:
     def __call__(self, ev) -> None:
         p = self.progress
         name = Path(ev.session).name
-        if ev.kind == "phase":
+        if ev.kind == "note":
+            p.console.print(ev.session, highlight=False, soft_wrap=True)
+        elif ev.kind == "phase":
             if self.phase is not None:
                 p.update(self.phase[0], completed=1, description=f"{self.phase[1]}: done")
             self.phase = (p.add_task(f"{ev.session}...", total=1), ev.session) if ev.session else None
@@ -154,6 +156,7 @@ def _as_json(report) -> dict:
         "total_episodes": report.total_episodes, "total_frames": report.total_frames,
         "wall_s": round(report.wall_s, 3), "startup_s": round(report.startup_s, 3), "realtime_x": round(report.realtime_x, 2),
         "max_align_err_ms": round(report.align_err_ms, 3), "size_bytes": report.size_bytes, "failed": report.failed,
+        "cleaned": report.cleaned,
         "sessions": [{
             "session": s.session, "source_episodes": s.source_episodes, "episodes": s.lerobot_episodes,
             "frames": s.frames, "duration_s": round(s.duration_s, 3), "notes": s.notes,

@@ -135,18 +135,14 @@ def _joint_samples(reader, topic: str) -> tuple[np.ndarray, np.ndarray, tuple[st
 
 def audit_session(path: str | Path, rig_path: str | Path | None = None) -> AuditReport:
     from teleprev.live.build import motion_limits
-    from teleprev.rig import load_rig, load_rig_text
+    from teleprev.rig import load_recorded_rig, load_rig
     from teleprev.session.reader import SessionReader
 
     path = Path(path)
     reader = SessionReader(path)
     meta = reader.metadata
-    if rig_path:
-        rig = load_rig(rig_path)
-    elif meta.get("rig", {}).get("toml"):
-        recorded = meta["rig"].get("path") or None
-        rig = load_rig_text(meta["rig"]["toml"], f"{path}: recorded rig", Path(recorded) if recorded else None)
-    else:
+    rig = load_rig(rig_path) if rig_path else load_recorded_rig(meta, path)
+    if rig is None:
         raise SessionError("the session does not carry its rig (metadata 'rig'); pass --config RIG", str(path))
     limits = motion_limits(rig)
     report = AuditReport(str(path))

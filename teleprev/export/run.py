@@ -19,6 +19,7 @@ from teleprev.errors import ConfigError, SessionError
 from teleprev.export import dataset as D
 from teleprev.export.recipe import Recipe
 from teleprev.export.report import ExportReport, SessionReport, folder_size
+from teleprev.export.swap import clean_stale
 from teleprev.export.session import ExportSettings, Progress, Reporter, SessionSource, no_progress, export_session
 from teleprev.export.video import VideoSettings
 
@@ -44,6 +45,9 @@ def export(options: ExportOptions, report: Reporter = no_progress) -> ExportRepo
     video = options.video or options.recipe.video
     if not options.sessions:
         raise ConfigError("no session files given")
+    cleaned = clean_stale(target.resolve())  # first: a swap a kill interrupted puts the old dataset back
+    for line in cleaned:
+        report(Progress("note", line))
     if target.exists() and not options.append and (not target.is_dir() or any(target.iterdir())):
         raise ConfigError("already exists; pass --append to add these sessions to it, or choose another --root", str(target))
     info = None
@@ -95,7 +99,7 @@ def export(options: ExportOptions, report: Reporter = no_progress) -> ExportRepo
     finally:
         for s in sources:
             s.close()
-    out = ExportReport(target, options.repo_id, fps, reports, failed=failed)
+    out = ExportReport(target, options.repo_id, fps, reports, failed=failed, cleaned=cleaned)
     out.total_episodes = int(totals.get("total_episodes", 0))
     out.total_frames = int(totals.get("total_frames", 0))
     out.size_bytes = folder_size(target)
