@@ -15,10 +15,11 @@ import time
 from dataclasses import dataclass, replace
 from pathlib import Path
 
-from teleprev.errors import ConfigError, SessionError
+from teleprev.errors import ConfigError, SessionError, out_of_space
 from teleprev.export import dataset as D
 from teleprev.export.recipe import Recipe
 from teleprev.export.report import ExportReport, SessionReport, folder_size
+from teleprev.export.space import space_error
 from teleprev.export.swap import clean_stale
 from teleprev.export.session import ExportSettings, Progress, Reporter, SessionSource, no_progress, export_session
 from teleprev.export.video import VideoSettings
@@ -93,8 +94,11 @@ def export(options: ExportOptions, report: Reporter = no_progress) -> ExportRepo
         _refuse_empty(reports)
         totals = D.read_info(staging.dataset)
         staging.commit()
-    except BaseException:
+    except BaseException as exc:
         staging.abort()
+        what = out_of_space(exc) if isinstance(exc, Exception) else ""
+        if what:
+            raise space_error(what, target, options.sessions, options.append) from None
         raise
     finally:
         for s in sources:

@@ -50,14 +50,14 @@ def test_a_full_disk_stops_the_robot_and_the_preview_says_why(tmp_path):
         snap = rec.loop.snapshot
         assert snap.mode == "preview", "the write failure never reached the session loop"
         assert reached_s < 3 * rec.recorder.flush_interval_s + 1.0  # the next flush fails, the loop hears at once
-        assert "no space left on device" in snap.message and "robot stopped" in snap.message
+        assert "no space left" in snap.message and "robot stopped" in snap.message
         time.sleep(1.5)  # braking to rest takes well under this
         rec.loop.control("mode", mode="execute")  # the operator tries to go on: refused
         time.sleep(0.3)
         assert rec.loop.snapshot.mode == "preview"
         assert "cannot switch to execute" in rec.loop.snapshot.message
     finally:
-        with pytest.raises(SessionError, match="no space left on device.*teleprev recover"):
+        with pytest.raises(SessionError, match="no space left.*teleprev recover"):
             rec.stop()
     arm = doubles["arm"].sent
     after = [(t, c) for t, c in arm if t > failed_at + reached_s]
@@ -80,6 +80,6 @@ def test_record_on_a_full_disk_exits_non_zero_with_one_line(tmp_path):
         assert not has_traceback(run.stdout + run.stderr)
         lines = [line for line in run.stderr.splitlines() if line.strip()]
         assert len(lines) == 1, run.stderr
-        assert ("no space left on device" in lines[0] or "file too large" in lines[0]) and "teleprev recover" in lines[0]
+        assert ("no space left" in lines[0] or "size limit" in lines[0]) and "teleprev recover" in lines[0]
         saved = recover(out, tmp_path / "saved.mcap")
     assert saved.messages.get("/glove/glove/hand", 0) > 20 and saved.span_s > 0.2
