@@ -365,6 +365,28 @@ class SessionReader:
         return (f"at byte {chunk.offset}, log time {(chunk.start_ns - t0) / 1e9:.3f}-"
                 f"{(chunk.end_ns - t0) / 1e9:.3f} s into the session")
 
+    def data_section_intact(self) -> bool | None:
+        """Whether the bytes before the summary still match the CRC the writer stored in the data-end
+        record (None when the file has none): reads the whole data section once."""
+        import struct
+        import zlib
+
+        try:
+            tail = mr.read_exact(self._f, self.file_bytes - mr.FOOTER_RECORD_SIZE - len(mr.MAGIC), mr.FOOTER_RECORD_SIZE)
+            summary_start = struct.unpack_from("<Q", tail, 9)[0]
+            end_at = (summary_start or self.file_bytes - mr.FOOTER_RECORD_SIZE - len(mr.MAGIC)) - 13
+            op, length, crc = struct.unpack("<BQI", mr.read_exact(self._f, end_at, 13))
+        except (mr.McapFormatError, struct.error):
+            return None
+        if op != mr.DATA_END or length != 4 or not crc:
+            return None
+        view = memoryview(self._mm)[:end_at]
+        try:
+            return zlib.crc32(view) == crc
+        finally:
+            view.release()
+            self.release_pages()
+
     def damaged_chunks(self) -> list[tuple[mr.ChunkIndex, str]]:
         """Every chunk that does not read back whole (CRC, compression, records), with why; reads the
         whole file once."""

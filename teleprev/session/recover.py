@@ -250,7 +250,7 @@ class _Source:
 def _copy(data, size: int, out, Writer, CompressionType) -> RecoverResult:
     from teleprev import __version__
 
-    w = Writer(out, compression=CompressionType.ZSTD)
+    w = Writer(out, compression=CompressionType.ZSTD, enable_data_crcs=True)
     w.start(profile="", library=f"teleprev/{__version__} recover")
     copier = _Copier(w)
     _known_channels(data, size, copier)

@@ -72,7 +72,9 @@ class McapSessionWriter:
             raise SessionError(f"cannot create the session file: {exc.strerror}", str(self.path)) from None
         self._fsync = fsync
         self.flushed_bytes = 0  # file size after the last successful flush: what abort() keeps
-        self._mcap = Writer(self._file, chunk_size=chunk_size, compression=kinds[compression])
+        # enable_data_crcs: the data section's CRC goes in the file's end, so `teleprev info` can tell a
+        # changed byte anywhere before the summary, not only inside a chunk
+        self._mcap = Writer(self._file, chunk_size=chunk_size, compression=kinds[compression], enable_data_crcs=True)
         self._mcap.start(profile="", library=f"teleprev/{__version__} {LIBRARY_IDENTIFIER}")
         self._schemas: dict[str, int] = {}
         self._channels: dict[str, _Channel] = {}

@@ -83,3 +83,23 @@ def test_recover_keeps_everything_but_the_damaged_chunk(session, tmp_path):
             assert all(start <= t <= end for t in lost), topic  # only the damaged chunk's messages
         assert saved.end_ns == clean.end_ns  # everything after the damage is there
     assert len(spans) > 3
+
+
+def test_a_changed_byte_outside_the_chunks_is_named_and_recover_loses_nothing(session, tmp_path):
+    import struct
+
+    data = session.read_bytes()
+    summary_start = struct.unpack_from("<Q", data, len(data) - 8 - 29 + 9)[0]
+    offset, length, _, _ = chunk_spans(session)[1]
+    for name, at, said in (("index", offset + length + 20, "outside the chunks"),  # the message index after a chunk
+                           ("summary", summary_start + 30, "summary CRC mismatch")):
+        path = _copy(session, tmp_path, f"{name}.mcap")
+        flip_byte(path, at, 0x04)
+        run = run_cli(["info", path])
+        line = _one_error_line(run)
+        assert run.returncode == 2 and said in line, line
+        out = tmp_path / f"{name}.saved.mcap"
+        run = run_cli(["recover", path, "-o", out])
+        assert run.returncode == 0, run.stderr
+        with SessionReader(session) as clean, SessionReader(out) as saved:
+            assert {t: i.message_count for t, i in saved.topics.items()} == {t: i.message_count for t, i in clean.topics.items()}
