@@ -37,3 +37,35 @@ class SessionError(TeleprevError):
 
 class DeviceError(TeleprevError):
     """A device could not be opened, stopped sending or sent something unusable."""
+
+
+def describe_os_error(exc: BaseException) -> str:
+    """An I/O error in a few words: "no space left on this device" rather than "[Errno 28] No space ..."."""
+    said = out_of_space(exc)
+    if said:
+        return said
+    text = getattr(exc, "strerror", None) or str(exc)
+    return text[:1].lower() + text[1:] if text else type(exc).__name__
+
+
+_SPACE_ERRNOS = {28: ("No space left on device", "no space left on this device"),
+                 27: ("File too large", "a file reached the size limit (ulimit -f)"),
+                 122: ("Disk quota exceeded", "the disk quota is exceeded")}
+
+
+def out_of_space(exc: BaseException | None) -> str:
+    """What ran out, when an error or one it was raised from is a full disk (ENOSPC), a file-size limit
+    (EFBIG) or a quota (EDQUOT), including errors a library re-raised as text (an encoder thread's
+    RuntimeError, a worker's failure message); "" otherwise."""
+    seen = set()
+    while exc is not None and id(exc) not in seen:
+        seen.add(id(exc))
+        code = getattr(exc, "errno", None)
+        if code in _SPACE_ERRNOS:
+            return _SPACE_ERRNOS[code][1]
+        text = str(exc)
+        for n, (strerror, said) in _SPACE_ERRNOS.items():
+            if f"[Errno {n}]" in text or strerror in text:
+                return said
+        exc = exc.__cause__ or exc.__context__
+    return ""

@@ -26,7 +26,7 @@ from teleprev.config import from_table, read_toml
 from teleprev.devices.contract import KINDS, DeviceContext
 from teleprev.devices.registry import load_plugin
 from teleprev.errors import ConfigError
-from teleprev.paths import data_dir
+from teleprev.paths import data_dir, inside
 from teleprev.pipeline.config import PipelineConfig
 from teleprev.robot.effectors import EffectorName, EndEffector, end_effector
 from teleprev.robot.model import load_robot, resolve_urdf
@@ -118,6 +118,27 @@ def load_rig_text(text: str, where: str, path: Path | None = None) -> Rig:
     if isinstance(data.get("pipeline"), dict):
         data["pipeline"].pop("trigger", None)
     return parse_rig(data, path, where)
+
+
+def load_recorded_rig(metadata: dict, session: Path) -> Rig | None:
+    """The rig a session carries in its metadata (None without one). Its contents are the session's, not
+    the user's: the rig is anchored at the session's own folder (never at the path the metadata names),
+    its calibration and models paths are refused if they lead out of that folder, and its robot must be
+    the name of a URDF in urdf/."""
+    text = metadata.get("rig", {}).get("toml")
+    if not text:
+        return None
+    session = Path(session)
+    where = f"{session}: recorded rig"
+    rig = load_rig_text(text, where, session.parent / f"{session.stem}.recorded-rig.toml")
+    for key in ("calibration", "models"):
+        value = getattr(rig.rig, key)
+        if value:
+            inside(session.parent, value, f"[rig] {key}", where)
+    if Path(rig.rig.robot).name != rig.rig.robot or rig.rig.robot in ("", ".", ".."):
+        raise ConfigError(f"[rig] robot {rig.rig.robot!r} is a path; a recorded rig may only name a URDF in urdf/ "
+                          "(pass --config RIG to use another)", where)
+    return rig
 
 
 def parse_rig(data: dict, path: Path | None, where: str | None = None) -> Rig:

@@ -6,7 +6,6 @@ the command.
 
 from __future__ import annotations
 
-from contextlib import contextmanager
 from pathlib import Path
 from typing import List, Optional
 
@@ -54,6 +53,7 @@ def export(
 
     from rich.console import Console
 
+    from teleprev.cli.signals import StopSignals
     from teleprev.corpus.sessions import resolve_sessions
     from teleprev.errors import ConfigError
     from teleprev.export.recipe import load_recipe
@@ -76,8 +76,14 @@ def export(
     options = ExportOptions(paths, repo_id, target, the_recipe, fps=fps, append=append,
                             include_discarded=include_discarded, workers=workers, video=video, ray=ray)
     console = Console(stderr=as_json)
-    with _stop_on_sigterm(), _Bars(console) as bars:
-        report = run_export(options, bars)
+    with StopSignals() as signals:  # SIGTERM / SIGHUP stop it like Ctrl-C: the staging folder goes
+        try:
+            with _Bars(console) as bars:
+                report = run_export(options, bars)
+        except KeyboardInterrupt:
+            Console(stderr=True).print(f"export stopped by {signals.name or 'SIGINT'}; {target} is as it was",
+                                       highlight=False, soft_wrap=True)
+            raise typer.Exit(signals.exit_code or 130) from None
     if as_json:
         import json
 
@@ -92,22 +98,6 @@ def export(
                       f"(video: {video.describe()})", highlight=False)
     if report.failed:
         raise typer.Exit(1)  # the rest is in the dataset; a script must still notice
-
-
-@contextmanager
-def _stop_on_sigterm():
-    """While exporting, a `kill` stops the export like Ctrl-C does: the staging folder is removed on
-    the way out."""
-    import signal
-
-    def stop(signum, frame):
-        raise KeyboardInterrupt
-
-    previous = signal.signal(signal.SIGTERM, stop)
-    try:
-        yield
-    finally:
-        signal.signal(signal.SIGTERM, previous)
 
 
 class _Bars:
@@ -133,7 +123,9 @@ class _Bars:
     def __call__(self, ev) -> None:
         p = self.progress
         name = Path(ev.session).name
-        if ev.kind == "phase":
+        if ev.kind == "note":
+            p.console.print(ev.session, highlight=False, soft_wrap=True)
+        elif ev.kind == "phase":
             if self.phase is not None:
                 p.update(self.phase[0], completed=1, description=f"{self.phase[1]}: done")
             self.phase = (p.add_task(f"{ev.session}...", total=1), ev.session) if ev.session else None
@@ -164,6 +156,7 @@ def _as_json(report) -> dict:
         "total_episodes": report.total_episodes, "total_frames": report.total_frames,
         "wall_s": round(report.wall_s, 3), "startup_s": round(report.startup_s, 3), "realtime_x": round(report.realtime_x, 2),
         "max_align_err_ms": round(report.align_err_ms, 3), "size_bytes": report.size_bytes, "failed": report.failed,
+        "cleaned": report.cleaned,
         "sessions": [{
             "session": s.session, "source_episodes": s.source_episodes, "episodes": s.lerobot_episodes,
             "frames": s.frames, "duration_s": round(s.duration_s, 3), "notes": s.notes,

@@ -34,6 +34,7 @@ def record(
     from rich.console import Console
     from rich.markup import escape
 
+    from teleprev.cli.signals import StopSignals
     from teleprev.live.session import RecordOptions, LiveSession, default_session_path
     from teleprev.live.run import run_interactive, run_script, print_summary
 
@@ -44,21 +45,32 @@ def record(
         operator=operator, participant=participant, condition=condition, practice=practice,
         connect_timeout_s=connect_timeout,
     )
-    recording = LiveSession(options)
     unconnected: list[str] = []
+    with StopSignals() as signals:
+        recording = LiveSession(options)
+        try:
+            recording.start()
+            if duration is not None or not preview:  # nobody watches the device table: a dead rig must fail
+                unconnected = recording.wait_connected()
+            if unconnected:
+                pass
+            elif duration is not None:
+                run_script(recording, duration, episodes, engage_after, console if preview else None, view, fps)
+            else:
+                run_interactive(recording, console, view, fps, show=preview)
+        except KeyboardInterrupt:
+            pass  # Ctrl-C, SIGTERM or SIGHUP: the session is finalized below all the same
+        finally:
+            with signals.finishing():  # a second signal must not cut the file's finalization short
+                summary = recording.stop()  # raises SessionError if the recording failed (exit 2)
     try:
-        recording.start()
-        if duration is not None or not preview:  # nobody watches the device table: a dead rig must fail
-            unconnected = recording.wait_connected()
-        if unconnected:
-            pass
-        elif duration is not None:
-            run_script(recording, duration, episodes, engage_after, console if preview else None, view, fps)
-        else:
-            run_interactive(recording, console, view, fps, show=preview)
-    finally:
-        summary = recording.stop()
-    print_summary(console, recording, summary)
+        print_summary(console, recording, summary)
+        if signals.received is not None:
+            console.print(f"stopped by {signals.name}; {options.out} is complete", highlight=False)
+    except OSError:  # the terminal went away with the SIGHUP; the file is complete all the same
+        pass
+    if signals.received is not None:
+        raise typer.Exit(signals.exit_code)
     if unconnected:
         errors = Console(stderr=True)
         for line in unconnected:

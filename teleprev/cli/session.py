@@ -75,7 +75,8 @@ def info(
         head.add_row("recorded by", f"teleprev {version} (format {fmt})")
     if s.recovered:
         rec = s.metadata["recover"]
-        head.add_row("recovered", f"[yellow]yes[/]: rewritten by `teleprev recover` ({rec.get('stop', '')})")
+        lost = f"; damaged and lost: bytes {rec['damaged']}" if rec.get("damaged") else ""
+        head.add_row("recovered", f"[yellow]yes[/]: rewritten by `teleprev recover` ({rec.get('stop', '')}{lost})")
     if s.has_recorder_counters:
         style = "bold red" if s.dropped else "green"
         head.add_row("dropped", f"[{style}]{s.dropped}[/]")
@@ -164,14 +165,27 @@ def recover(
 
     from teleprev.session.recover import recover as do_recover
 
-    r = do_recover(session, out)
+    from teleprev.cli.signals import StopSignals
+
+    with StopSignals() as signals:  # a signal removes the half-written output (the source is never touched)
+        try:
+            r = do_recover(session, out)
+        except KeyboardInterrupt:
+            Console(stderr=True).print(f"recover stopped by {signals.name or 'SIGINT'}; nothing was written",
+                                       highlight=False, soft_wrap=True)
+            raise typer.Exit(signals.exit_code or 130) from None
     console = Console()
     if r.complete:
         console.print(f"{r.src} was complete (it ends with its footer); rewrote it anyway.")
-    else:
+    elif r.stop != "footer":
         lost = r.source_bytes - r.valid_bytes
         console.print(f"read {r.src}: {r.valid_bytes} of {r.source_bytes} bytes make sense "
                       f"({lost} bytes at the end do not: {r.stop})", highlight=False)
+    for d in r.damaged:
+        console.print(f"[yellow]damaged[/] {d.describe(r.start_ns)}", highlight=False)
+    if r.unknown_channel:
+        console.print(f"[yellow]{r.unknown_channel} messages[/] whose channel was defined only in a damaged range "
+                      "could not be kept", highlight=False)
     table = Table(title=f"saved into {r.dst}", title_justify="left")
     table.add_column("topic")
     table.add_column("messages", justify="right")

@@ -97,9 +97,41 @@ def _ignore(event: Any) -> None:
 # -- local worker processes ------------------------------------------------------------------------
 
 
-def _serve(conn, fn: Callable, context: Any) -> None:
+def _die_with(parent_pid: int) -> None:
+    """A worker must never outlive the process that started it (it would go on writing into a staging
+    folder nobody will commit): the kernel kills it when its parent, the fork server, exits (the fork
+    server exits when the driver does), and a watchdog thread ends it if the driver itself is gone."""
+    import sys
+    import threading
+
+    if sys.platform.startswith("linux"):
+        try:
+            import ctypes
+
+            ctypes.CDLL(None, use_errno=True).prctl(1, signal.SIGKILL)  # PR_SET_PDEATHSIG
+        except (OSError, AttributeError):
+            pass
+
+    def watch() -> None:
+        while True:
+            try:
+                os.kill(parent_pid, 0)
+            except ProcessLookupError:
+                os._exit(1)
+            except PermissionError:
+                pass
+            if os.getppid() == 1:  # the fork server is gone (and so, with it, the driver)
+                os._exit(1)
+            time.sleep(0.2)
+
+    threading.Thread(target=watch, name="teleprev-parent-watch", daemon=True).start()
+
+
+def _serve(conn, fn: Callable, context: Any, parent_pid: int | None = None) -> None:
     """A local worker: run the tasks the parent sends until it sends None."""
     signal.signal(signal.SIGINT, signal.SIG_IGN)  # the parent handles Ctrl-C and stops the workers
+    if parent_pid is not None:
+        _die_with(parent_pid)
     while True:
         try:
             task = conn.recv()
@@ -159,7 +191,8 @@ class LocalExecutor:
 
         def start() -> _Slot:
             parent, child = ctx.Pipe()
-            proc = ctx.Process(target=_serve, args=(child, fn, context), name=f"teleprev-worker-{len(slots)}", daemon=True)
+            proc = ctx.Process(target=_serve, args=(child, fn, context, os.getpid()), name=f"teleprev-worker-{len(slots)}",
+                               daemon=True)
             proc.start()
             child.close()
             return _Slot(proc, parent)

@@ -129,14 +129,12 @@ def _joint_samples(reader, topic: str) -> tuple[np.ndarray, np.ndarray, tuple[st
 
 def recorded_rig(path: Path, meta: dict, rig_path: str | Path | None):
     """The rig whose limits apply: `rig_path`, else the one the session carries in its metadata."""
-    from teleprev.rig import load_rig, load_rig_text
+    from teleprev.rig import load_recorded_rig, load_rig
 
-    if rig_path:
-        return load_rig(rig_path)
-    if meta.get("rig", {}).get("toml"):
-        recorded = meta["rig"].get("path") or None
-        return load_rig_text(meta["rig"]["toml"], f"{path}: recorded rig", Path(recorded) if recorded else None)
-    raise SessionError("the session does not carry its rig (metadata 'rig'); pass --config RIG", str(path))
+    rig = load_rig(rig_path) if rig_path else load_recorded_rig(meta, path)
+    if rig is None:
+        raise SessionError("the session does not carry its rig (metadata 'rig'); pass --config RIG", str(path))
+    return rig
 
 
 def audit_stream(topic: str, side: str, limits: dict, t_ns: np.ndarray, q: np.ndarray | None) -> StreamAudit:

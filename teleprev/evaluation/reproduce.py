@@ -22,7 +22,7 @@ from teleprev.live.build import build_pipeline, rig_calibration
 from teleprev.pipeline.driver import InputTopics, PipelineDriver
 from teleprev.pipeline.step import Pipeline
 from teleprev.retarget.calibration import load_calibration_text
-from teleprev.rig import load_rig, load_rig_text
+from teleprev.rig import load_recorded_rig, load_rig
 from teleprev.robot.effectors import EndEffector
 from teleprev import topics
 from teleprev.session.reader import Episode, SessionReader
@@ -71,10 +71,9 @@ def _pipeline_for(reader: SessionReader, path: Path, models, rig_path):
     if rig_path:
         rig = load_rig(rig_path)
         return build_pipeline(rig, models, rig_calibration(rig), motion=motion), f"rig file {rig_path}"
-    if "rig" not in meta or not meta["rig"].get("toml"):
+    rig = load_recorded_rig(meta, path)
+    if rig is None:
         raise SessionError("the session does not carry its rig (metadata 'rig'); pass --config RIG", str(path))
-    recorded_path = meta["rig"].get("path") or None
-    rig = load_rig_text(meta["rig"]["toml"], f"{path}: recorded rig", Path(recorded_path) if recorded_path else None)
     calibration = load_calibration_text(meta.get("calibration", {}).get("toml", ""), f"{path}: recorded calibration")
     return build_pipeline(rig, models, calibration, motion=motion), "recorded in the session"
 

@@ -15,19 +15,22 @@ import tempfile
 from pathlib import Path
 
 from teleprev.errors import ConfigError
+from teleprev.export.swap import claim, replace_dir, staging_prefix
 from teleprev.export.video import VideoSettings
 
 INFO = Path("meta") / "info.json"
 
 
 class Staging:
-    """A temporary folder beside `target`; `commit` moves the built dataset into place."""
+    """A temporary folder beside `target`, marked as this process's; `commit` moves the built dataset
+    into place atomically (swap.py)."""
 
     def __init__(self, target: Path):
         self.target = Path(target).resolve()
         try:
             self.target.parent.mkdir(parents=True, exist_ok=True)
-            self.dir = Path(tempfile.mkdtemp(prefix=f".{self.target.name}.export-", dir=self.target.parent))
+            self.dir = Path(tempfile.mkdtemp(prefix=staging_prefix(self.target), dir=self.target.parent))
+            claim(self.dir)
         except OSError as exc:
             raise ConfigError(f"cannot create the export's working folder here: {exc.strerror}",
                               str(self.target.parent)) from None
@@ -38,15 +41,9 @@ class Staging:
 
     def commit(self) -> None:
         """Move the built dataset to the target; an existing target (appending, or an empty folder) is
-        replaced."""
+        replaced in one step."""
         if self.target.exists():
-            old = self.dir / "previous"
-            os.rename(self.target, old)
-            try:
-                os.rename(self.dataset, self.target)
-            except OSError:
-                os.rename(old, self.target)
-                raise
+            replace_dir(self.dataset, self.target, self.dir)
         else:
             os.rename(self.dataset, self.target)
         shutil.rmtree(self.dir, ignore_errors=True)

@@ -67,6 +67,7 @@ class ExportReport:
     total_episodes: int = 0  # in the dataset after the export (appending: with the earlier ones)
     total_frames: int = 0
     failed: dict[str, str] = field(default_factory=dict)  # session -> why it was left out (its task failed)
+    cleaned: list[str] = field(default_factory=list)  # what was cleaned up after earlier, killed exports
 
     @property
     def frames(self) -> int:

@@ -15,10 +15,12 @@ import time
 from dataclasses import dataclass, replace
 from pathlib import Path
 
-from teleprev.errors import ConfigError, SessionError
+from teleprev.errors import ConfigError, SessionError, out_of_space
 from teleprev.export import dataset as D
 from teleprev.export.recipe import Recipe
 from teleprev.export.report import ExportReport, SessionReport, folder_size
+from teleprev.export.space import space_error
+from teleprev.export.swap import clean_stale
 from teleprev.export.session import ExportSettings, Progress, Reporter, SessionSource, no_progress, export_session
 from teleprev.export.video import VideoSettings
 
@@ -44,6 +46,9 @@ def export(options: ExportOptions, report: Reporter = no_progress) -> ExportRepo
     video = options.video or options.recipe.video
     if not options.sessions:
         raise ConfigError("no session files given")
+    cleaned = clean_stale(target.resolve())  # first: a swap a kill interrupted puts the old dataset back
+    for line in cleaned:
+        report(Progress("note", line))
     if target.exists() and not options.append and (not target.is_dir() or any(target.iterdir())):
         raise ConfigError("already exists; pass --append to add these sessions to it, or choose another --root", str(target))
     info = None
@@ -89,13 +94,16 @@ def export(options: ExportOptions, report: Reporter = no_progress) -> ExportRepo
         _refuse_empty(reports)
         totals = D.read_info(staging.dataset)
         staging.commit()
-    except BaseException:
+    except BaseException as exc:
         staging.abort()
+        what = out_of_space(exc) if isinstance(exc, Exception) else ""
+        if what:
+            raise space_error(what, target, options.sessions, options.append) from None
         raise
     finally:
         for s in sources:
             s.close()
-    out = ExportReport(target, options.repo_id, fps, reports, failed=failed)
+    out = ExportReport(target, options.repo_id, fps, reports, failed=failed, cleaned=cleaned)
     out.total_episodes = int(totals.get("total_episodes", 0))
     out.total_frames = int(totals.get("total_frames", 0))
     out.size_bytes = folder_size(target)

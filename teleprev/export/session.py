@@ -29,7 +29,7 @@ MARGIN_NS = _NS  # read this much before and after an episode: the state just be
 class Progress:
     """What an export reports while it runs (the CLI draws bars from it)."""
 
-    kind: str  # "session" | "episode" | "frames" | "episode_done" | "session_done"
+    kind: str  # "session" | "episode" | "frames" | "episode_done" | "session_done" | "phase" | "note" (a line to print)
     session: str
     total: int = 0  # episodes of a session, frames of an episode
     count: int = 0  # frames written since the last report

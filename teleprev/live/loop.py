@@ -98,6 +98,7 @@ class SessionLoop:
         self._last_ns = 0
         self._last_tf_ns = 0
         self._thread: threading.Thread | None = None
+        self.halted = ""  # why the session may no longer execute (e.g. the recording failed)
 
     # ---- producers (any thread) ----------------------------------------------------------------
     def sink(self, sample: Sample, receive_ns: int) -> None:
@@ -109,7 +110,8 @@ class SessionLoop:
 
     def control(self, action: str, **data) -> None:
         """For the operator (keys) and scripts: 'mode' (mode=), 'start' (task=), 'stop', 'discard',
-        'outcome' (success=), 'operator' (event=, detail=). Controls are never dropped."""
+        'outcome' (success=), 'operator' (event=, detail=), 'halt' (why=: back to preview, which brakes
+        the robot to rest, and execute is refused from then on). Controls are never dropped."""
         self._queue.put((None, (action, data)))
 
     # ---- lifecycle -----------------------------------------------------------------------------
@@ -225,10 +227,16 @@ class SessionLoop:
     def _control(self, action: str, data: dict) -> None:
         now = self.clock.now_ns()
         message = ""
+        if action == "halt":
+            self.halted = data["why"]
+            action, data, message = "mode", {"mode": "preview", "reason": "halt"}, f"{self.halted}: robot stopped"
         if action == "mode":
             mode = data["mode"]
             t = self._stamp(now)
-            refused = self.driver.request_mode(mode, t) if self.driver else "no pipeline"
+            if self.halted and mode == "execute":
+                refused = self.halted
+            else:
+                refused = self.driver.request_mode(mode, t) if self.driver else "no pipeline"
             if refused:
                 message = f"cannot switch to {mode}: {refused}"
             else:

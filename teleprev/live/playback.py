@@ -17,7 +17,7 @@ from teleprev.live.build import build_pipeline, rig_calibration
 from teleprev.preview.keys import KeyReader
 from teleprev.preview.robot_view import Layer, RobotView
 from teleprev.live.player import ROUNDING, Player, load_playback, safe_speed, smooth, validate
-from teleprev.rig import load_rig, load_rig_text
+from teleprev.rig import load_recorded_rig, load_rig
 from teleprev.robot.model import load_robot
 from teleprev.clock import SessionClock
 from teleprev.session.reader import SessionReader
@@ -36,11 +36,11 @@ class StateTap:
 
 
 def _recorded_rig(session: Path):
-    meta = SessionReader(session).metadata
-    text = meta.get("rig", {}).get("toml")
-    if not text:
+    with SessionReader(session) as reader:
+        rig = load_recorded_rig(reader.metadata, session)
+    if rig is None:
         raise ConfigError("the session does not carry its rig; pass --rig", str(session))
-    return load_rig_text(text, f"{session}: recorded rig", Path(meta["rig"].get("path") or session))
+    return rig
 
 
 def build_player(session: Path, episode, speed: float, to: str, rig_path=None, smoothed: bool = False):
@@ -49,6 +49,9 @@ def build_player(session: Path, episode, speed: float, to: str, rig_path=None, s
     from teleprev.devices.registry import load_plugin
     from teleprev.devices.runner import DeviceRunner
 
+    if to == "arm" and not rig_path:  # the hardware to drive comes from the user, never from a file's contents
+        raise ConfigError("--to arm needs --rig RIG: the devices a session names are not opened from its metadata",
+                          str(session))
     rig = load_rig(rig_path) if rig_path else _recorded_rig(session)
     pipeline = build_pipeline(rig, calibration=rig_calibration(rig) if rig_path else None)
     eff_guard = pipeline.effector.guard

@@ -77,7 +77,7 @@ def run_interactive(recording: LiveSession, console: Console, view: str, fps: fl
     dashboard = make_dashboard(recording, view) if show else None
     with KeyReader(lambda k: handle_key(recording, k, quit_flag)):
         if dashboard is None:
-            while not quit_flag:
+            while not quit_flag and not recording.failure:  # nobody watches a screen: end at once
                 time.sleep(0.1)
             return stats
         with Live(console=console, auto_refresh=False, screen=console.is_terminal, transient=False) as live:
@@ -115,7 +115,7 @@ def run_script(recording: LiveSession, duration: float, episodes: int, engage_af
             while plan and plan[0][0] <= elapsed:
                 _, action, kwargs = plan.pop(0)
                 loop.control(action, **kwargs)
-            if elapsed >= duration and not plan:
+            if (elapsed >= duration and not plan) or recording.failure:
                 break
             if live:
                 t = time.perf_counter()

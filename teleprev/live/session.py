@@ -69,7 +69,7 @@ class LiveSession:
         self.driver = PipelineDriver(self.pipeline, InputTopics.for_devices(first["glove"], first["suit"], first["arm"], first["hand"]))
         self.robot = load_robot(rig.rig.robot)
         out.parent.mkdir(parents=True, exist_ok=True)
-        self.recorder = Recorder(out, self._metadata())
+        self.recorder = Recorder(out, self._metadata(), on_failure=self._recording_failed)
         self.loop = SessionLoop(
             self.clock, self.recorder.log, self.driver, frames=FramePublisher(self.robot),
             tf_period_ns=int(1e9 / rig.pipeline.tf_rate_hz), queue_size=options.queue_size, on_episode_start=self._episode_started,
@@ -77,6 +77,41 @@ class LiveSession:
         self.runners = {name: DeviceRunner(dev, self.loop.sink, self.clock) for name, dev in self.devices.items()}
         self.loop.actuators = {kind: ActuatorPort(self.devices[first[kind]], self.runners[first[kind]]) for kind in ("arm", "hand")}
         self.summary = None
+
+    def _recording_failed(self, exc: OSError) -> None:
+        """On the recorder's writer thread, the moment a write fails: the robot brakes to rest and the
+        preview says why; the session then ends (the caller sees `failure`) with a non-zero exit."""
+        from teleprev.errors import describe_os_error
+
+        self.loop.control("halt", why=f"recording failed ({describe_os_error(exc)})")
+
+    @property
+    def failure(self) -> str:
+        """Why this session cannot go on (the recording failed), or ""."""
+        exc = self.recorder.failure
+        if exc is None:
+            return ""
+        from teleprev.errors import describe_os_error
+
+        return f"recording failed ({describe_os_error(exc)})"
+
+    def settle(self, timeout_s: float = 3.0) -> bool:
+        """Back to preview (if not there) and wait until the commands have braked to rest, so that
+        stopping the devices never cuts a motion short; False if it did not settle in time."""
+        import time
+
+        start = time.monotonic()
+        asked = False
+        while time.monotonic() < start + timeout_s:
+            state = self.driver.state
+            if state.mode == "preview" and (state.motion is None or not state.motion.moving):
+                return True
+            if not asked and state.mode != "preview" and time.monotonic() > start + 0.25:
+                # no switch to preview was on its way (the caller's would have arrived by now): ask for one
+                self.loop.control("mode", mode="preview", reason="stop")
+                asked = True
+            time.sleep(0.01)
+        return False
 
     def _episode_started(self, task: str) -> None:
         for listener in self.context.task_listeners:
@@ -114,7 +149,9 @@ class LiveSession:
         return self
 
     def stop(self):
-        """Stop the devices, let the loop finish what is queued, close the file; returns its summary."""
+        """Brake to rest, stop the devices, let the loop finish what is queued, close the file; returns
+        its summary (raises SessionError if the recording failed: what was flushed stays recoverable)."""
+        self.settle()
         for runner in self.runners.values():
             runner.stop()
         self.loop.control("stop")

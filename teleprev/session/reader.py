@@ -56,9 +56,9 @@ class Episode:
 
 
 class SessionReader:
-    def __init__(self, path: str | os.PathLike, *, verify_crc: bool = False):
-        """`verify_crc` checks each chunk's CRC as it is read (off by default, as in the mcap library:
-        the check costs more than decoding when chunks carry video)."""
+    def __init__(self, path: str | os.PathLike, *, verify_crc: bool = True):
+        """Each chunk's CRC is checked as it is read (`verify_crc`), so that a damaged chunk is an error
+        naming its time range, never data passed on as if it were whole."""
         self.path = Path(path)
         self.verify_crc = verify_crc
         where = str(self.path)
@@ -342,10 +342,65 @@ class SessionReader:
 
     def _chunk_records(self, chunk: mr.ChunkIndex) -> bytes:
         try:
-            body = mr.record_at(self._mm, chunk.offset, mr.CHUNK)
-            return mr.decompress(mr.parse_chunk(body, 0, len(body)), check_crc=self.verify_crc)
+            return self._read_chunk(chunk)
         except mr.McapFormatError as exc:
-            raise SessionError(f"chunk at byte {chunk.offset} is damaged: {exc}", str(self.path)) from None
+            raise SessionError(f"the chunk {self.describe_chunk(chunk)} is damaged ({exc}); "
+                               f"`teleprev recover {self.path}` keeps everything else", str(self.path)) from None
+
+    def _read_chunk(self, chunk: mr.ChunkIndex) -> bytes:
+        body = parsed = None
+        try:
+            body = mr.record_at(self._mm, chunk.offset, mr.CHUNK)
+            parsed = mr.parse_chunk(body, 0, len(body))
+            return mr.decompress(parsed, check_crc=self.verify_crc)
+        finally:  # views into the mapping must go before close() can unmap it
+            if parsed is not None and isinstance(parsed.data, memoryview):
+                parsed.data.release()
+            if body is not None:
+                body.release()
+
+    def describe_chunk(self, chunk: mr.ChunkIndex) -> str:
+        """Where a chunk is, in the words a user needs: its log times from the session's start."""
+        t0 = self.start_ns or 0
+        return (f"at byte {chunk.offset}, log time {(chunk.start_ns - t0) / 1e9:.3f}-"
+                f"{(chunk.end_ns - t0) / 1e9:.3f} s into the session")
+
+    def data_section_intact(self) -> bool | None:
+        """Whether the bytes before the summary still match the CRC the writer stored in the data-end
+        record (None when the file has none): reads the whole data section once."""
+        import struct
+        import zlib
+
+        try:
+            tail = mr.read_exact(self._f, self.file_bytes - mr.FOOTER_RECORD_SIZE - len(mr.MAGIC), mr.FOOTER_RECORD_SIZE)
+            summary_start = struct.unpack_from("<Q", tail, 9)[0]
+            end_at = (summary_start or self.file_bytes - mr.FOOTER_RECORD_SIZE - len(mr.MAGIC)) - 13
+            op, length, crc = struct.unpack("<BQI", mr.read_exact(self._f, end_at, 13))
+        except (mr.McapFormatError, struct.error):
+            return None
+        if op != mr.DATA_END or length != 4 or not crc:
+            return None
+        view = memoryview(self._mm)[:end_at]
+        try:
+            return zlib.crc32(view) == crc
+        finally:
+            view.release()
+            self.release_pages()
+
+    def damaged_chunks(self) -> list[tuple[mr.ChunkIndex, str]]:
+        """Every chunk that does not read back whole (CRC, compression, records), with why; reads the
+        whole file once."""
+        out = []
+        for chunk in sorted(self._chunks, key=lambda c: c.offset):
+            try:
+                buf = self._read_chunk(chunk)
+                for op, b, e in mr.iter_records(buf):
+                    if op == mr.MESSAGE and e - b < 22:
+                        raise mr.McapFormatError("message record too short", b - 9)
+            except mr.McapFormatError as exc:
+                out.append((chunk, str(exc)))
+            self.release_pages()
+        return out
 
     def _chunk_messages(self, chunk: mr.ChunkIndex) -> list[tuple[int, int]]:
         """(channel, log_time) of every message in the chunk, in file order."""
@@ -451,7 +506,10 @@ class SessionReader:
                 pass
 
     def close(self) -> None:
-        self._mm.close()
+        try:
+            self._mm.close()
+        except BufferError:  # a view still held by an error on its way up: unmapped when that goes
+            pass
         self._f.close()
 
     def __enter__(self) -> SessionReader:

@@ -15,8 +15,9 @@ import threading
 import time
 from dataclasses import dataclass, field, replace
 from pathlib import Path
+from typing import Callable
 
-from teleprev.errors import SessionError
+from teleprev.errors import SessionError, describe_os_error
 from teleprev.messages import Logged
 from teleprev.session.writer import DEFAULT_CHUNK_SIZE, McapSessionWriter, check_metadata
 
@@ -74,7 +75,10 @@ class Recorder:
         flush_interval_s: float = 0.5,
         chunk_size: int = DEFAULT_CHUNK_SIZE,
         fsync: bool = True,
+        on_failure: Callable[[BaseException], None] | None = None,
     ):
+        """`on_failure(exc)` is called once, on the writer thread, the moment a write or flush fails (a full
+        disk, a dead drive): at most one flush interval after the data it could not write was logged."""
         if queue_size < 1:
             raise ValueError("queue_size must be at least 1")
         if not 0 < flush_interval_s <= 1.0:
@@ -90,6 +94,7 @@ class Recorder:
         self._max_depth = 0
         self._accepting = True
         self._failure: BaseException | None = None
+        self._on_failure = on_failure
         self._thread: threading.Thread | None = None
         self._cpu_s = 0.0
         self._t_start: float | None = None
@@ -168,8 +173,8 @@ class Recorder:
                 self._failure = exc
         if self._failure is not None:
             self._writer.abort()
-            raise SessionError(f"recording failed: {self._failure}; run `teleprev recover {self.path}` "
-                               "to keep what was flushed", str(self.path))
+            raise SessionError(f"recording failed: {describe_os_error(self._failure)}; what was flushed is kept: "
+                               f"run `teleprev recover {self.path}`", str(self.path))
         with self._lock:
             streams = {t: replace(s) for t, s in self._stats.items()}
         self._summary = RecordingSummary(
@@ -199,6 +204,16 @@ class Recorder:
         for topic, message in self._errors.items():
             rec[f"error {topic}"] = message
         return rec
+
+    def _fail(self, exc: OSError) -> None:
+        self._failure = exc
+        with self._lock:
+            self._accepting = False
+        if self._on_failure is not None:
+            try:
+                self._on_failure(exc)
+            except Exception:  # a listener's own error must not hide the write failure
+                pass
 
     # --- writer thread ---
 
@@ -247,8 +262,6 @@ class Recorder:
                 elif n == 0 or n % 256:
                     sleep(min(POLL_S, max(0.0, next_flush - now)))
         except OSError as exc:
-            self._failure = exc
-            with self._lock:
-                self._accepting = False
+            self._fail(exc)
         finally:
             self._cpu_s = time.thread_time()

@@ -289,13 +289,15 @@ def read_summary(f, size: int) -> SummarySection | None:
     tail = read_exact(f, size - FOOTER_RECORD_SIZE - len(MAGIC), FOOTER_RECORD_SIZE + len(MAGIC))
     if tail[-8:] != MAGIC or tail[0] != FOOTER:
         raise McapFormatError("no footer and closing magic at the end of the file")
-    summary_start, _summary_offset_start = struct.unpack_from("<QQ", tail, 9)
+    summary_start, _summary_offset_start, summary_crc = struct.unpack_from("<QQI", tail, 9)
     if summary_start == 0:
         return None
     footer_at = size - FOOTER_RECORD_SIZE - len(MAGIC)
     if not len(MAGIC) <= summary_start <= footer_at:
         raise McapFormatError(f"footer points at summary offset {summary_start} outside the file")
     buf = read_exact(f, summary_start, footer_at - summary_start)
+    if summary_crc and zlib.crc32(tail[:FOOTER_RECORD_SIZE - 4], zlib.crc32(buf)) != summary_crc:
+        raise McapFormatError("summary CRC mismatch (the index at the end of the file was changed)")
     out = SummarySection()
     for op, b, e in iter_records(buf):
         if op == SCHEMA:

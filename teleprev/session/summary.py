@@ -114,7 +114,19 @@ def interval_stats(times: np.ndarray) -> tuple[float | None, int, int]:
 
 
 def summarize(path: str | os.PathLike) -> SessionSummary:
+    """The session's facts; every chunk is read and CRC-checked first, and a damaged one is an error
+    naming its time range (`teleprev recover` keeps the rest)."""
     with SessionReader(path) as reader:
+        damaged = reader.damaged_chunks()
+        if damaged:
+            where = "; ".join(f"{reader.describe_chunk(c)} ({why})" for c, why in damaged[:3])
+            more = f" and {len(damaged) - 3} more" if len(damaged) > 3 else ""
+            raise SessionError(f"{len(damaged)} damaged chunk{'s' if len(damaged) > 1 else ''}: {where}{more}; "
+                               f"`teleprev recover {reader.path}` keeps everything else", str(reader.path))
+        if reader.data_section_intact() is False:
+            raise SessionError("bytes were changed outside the chunks (a message index or metadata record): the data "
+                               f"section's CRC does not match; `teleprev recover {reader.path}` rebuilds the file",
+                               str(reader.path))
         meta = reader.metadata
         counters = meta.get(RECORDER_RECORD, {})
         streams = []

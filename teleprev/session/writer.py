@@ -71,7 +71,10 @@ class McapSessionWriter:
         except OSError as exc:
             raise SessionError(f"cannot create the session file: {exc.strerror}", str(self.path)) from None
         self._fsync = fsync
-        self._mcap = Writer(self._file, chunk_size=chunk_size, compression=kinds[compression])
+        self.flushed_bytes = 0  # file size after the last successful flush: what abort() keeps
+        # enable_data_crcs: the data section's CRC goes in the file's end, so `teleprev info` can tell a
+        # changed byte anywhere before the summary, not only inside a chunk
+        self._mcap = Writer(self._file, chunk_size=chunk_size, compression=kinds[compression], enable_data_crcs=True)
         self._mcap.start(profile="", library=f"teleprev/{__version__} {LIBRARY_IDENTIFIER}")
         self._schemas: dict[str, int] = {}
         self._channels: dict[str, _Channel] = {}
@@ -123,8 +126,10 @@ class McapSessionWriter:
     def flush(self) -> None:
         """End the open chunk and push everything to the OS (and to the disk when fsync is on)."""
         self._mcap.flush()
+        self._file.flush()
         if self._fsync:
             os.fsync(self._file.fileno())
+        self.flushed_bytes = self._file.tell()
 
     def close(self) -> None:
         """Write the summary and index (a complete MCAP) and close the file."""
@@ -141,12 +146,18 @@ class McapSessionWriter:
 
     def abort(self) -> None:
         """Close the file without a summary, after an I/O error: what was flushed stays on disk for
-        `teleprev recover`."""
+        `teleprev recover`, and a record the error cut in half is taken off the end (which also gives
+        the space back on a full disk)."""
         if self.closed:
             return
         self.closed = True
         try:
             self._file.close()
+        except OSError:
+            pass
+        try:
+            if self.flushed_bytes and self.path.stat().st_size > self.flushed_bytes:
+                os.truncate(self.path, self.flushed_bytes)
         except OSError:
             pass
 

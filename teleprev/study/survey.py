@@ -1,7 +1,8 @@
 """Asking the questionnaire and keeping the answers with the session, without touching the recording.
 
-The answers go in a JSON sidecar next to the session, the one the session's metadata names
-(study.survey_sidecar; `<stem>.survey.json` for sessions recorded without it):
+The answers go in a JSON sidecar next to the session under a fixed name, `<stem>.survey.json`. The name
+is never taken from the session's contents (its metadata also names the sidecar, for people reading the
+file): a crafted session must not be able to point the write at another file.
 
     {"questionnaire": "telepreview-table-iv", "scale": [1, 5],
      "session": "x.mcap", "session_start_ns": 1700000000000000000,
@@ -47,14 +48,13 @@ def target(session: str | os.PathLike) -> Target:
     s = meta.get("session", {})
     fields = {k: s.get(k, "") for k in ("participant", "condition", "end_effector", "task", "practice")}
     fields["end_effector"] = fields["end_effector"] or meta.get("rig", {}).get("end_effector", "")
-    return Target(session, sidecar_path(session, meta), start_ns, fields)
+    return Target(session, sidecar_path(session), start_ns, fields)
 
 
-def sidecar_path(session: Path, metadata: dict) -> Path:
-    name = metadata.get("study", {}).get("survey_sidecar") or session.with_suffix(".survey.json").name
-    if Path(name).name != name:  # a name, never a path: the sidecar lives next to its session
-        raise SessionError(f"study.survey_sidecar {name!r} is not a plain file name", str(session))
-    return session.parent / name
+def sidecar_path(session: Path) -> Path:
+    """`<stem>.survey.json` beside the session: fixed, never read from the session's metadata."""
+    session = Path(session)
+    return session.with_name(f"{session.stem}.survey.json")
 
 
 def parse_answers(text: str) -> dict[str, int]:

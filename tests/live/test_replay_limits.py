@@ -16,11 +16,12 @@ from teleprev.live.playback import build_player
 from teleprev.pipeline.derivatives import divided_differences
 
 FIXTURE = Path(__file__).parents[1] / "fixtures" / "sim_v1.mcap"  # format 1: speed caps only, fails the audit
+SIM_RIG = Path(__file__).parents[2] / "rigs" / "sim.toml"  # its robot is the sim arm and hand
 
 
 def _play_to_sim_arm(smoothed: bool):
     """Play episode 0 of the fixture to the rig's robot (the sim arm, which faults like an xArm would)."""
-    player, runners, tap, rig, message = build_player(FIXTURE, 0, 1.0, "arm", smoothed=smoothed)
+    player, runners, tap, rig, message = build_player(FIXTURE, 0, 1.0, "arm", SIM_RIG, smoothed=smoothed)
     arm = player.actuators["arm"]
     sent, original = [], arm.send
     arm.send = lambda cmd: (sent.append((cmd.stamp_ns, cmd.positions.copy())), original(cmd))[1]
@@ -37,7 +38,7 @@ def _play_to_sim_arm(smoothed: bool):
 
 def test_the_cli_refuses_to_send_a_session_that_fails_the_audit_to_the_robot():
     run = subprocess.run([sys.executable, "-m", "teleprev.cli.app", "replay", str(FIXTURE), "--episode", "0", "--to", "arm",
-                          "--no-preview", "--engage-after", "0.1"], capture_output=True, text=True, timeout=120)
+                          "--rig", str(SIM_RIG), "--no-preview", "--engage-after", "0.1"], capture_output=True, text=True, timeout=120)
     assert run.returncode == 1, run.stdout + run.stderr
     said = " ".join(run.stdout.split())  # rich wraps lines
     assert "fails the audit" in said and "--smooth" in said and "accel" in said
@@ -45,7 +46,7 @@ def test_the_cli_refuses_to_send_a_session_that_fails_the_audit_to_the_robot():
 
 def test_unsmoothed_it_could_only_be_played_slower_than_recorded_so_it_is_refused():
     with pytest.raises(ConfigError, match="--smooth"):
-        build_player(FIXTURE, 0, 1.0, "arm")  # ~50x the acceleration limit: 1/sqrt(50) x at most
+        build_player(FIXTURE, 0, 1.0, "arm", SIM_RIG)  # ~50x the acceleration limit: 1/sqrt(50) x at most
 
 
 def test_played_anyway_the_sim_arm_faults_and_the_player_stops_saying_why(monkeypatch):
@@ -74,7 +75,7 @@ def test_smoothed_the_sim_arm_follows_within_the_limits():
 
 
 def test_smoothed_at_half_speed_is_generated_for_the_played_time():
-    player, runners, tap, rig, message = build_player(FIXTURE, 1, 0.5, "arm", smoothed=True)
+    player, runners, tap, rig, message = build_player(FIXTURE, 1, 0.5, "arm", SIM_RIG, smoothed=True)
     assert player.speed == 0.5
     p = player.p
     played_ns = np.diff(p.t_ns) / 0.5  # what the Player waits between commands at this speed

@@ -135,8 +135,60 @@ def test_zero_filled_tail_and_damaged_chunk(chunked, tmp_path):
     data[second.offset + second.length - 100] ^= 0xFF
     damaged.write_bytes(bytes(data))
     result = recover(damaged)
-    assert f"at byte {second.offset}" in result.stop and not result.complete
-    assert _raw_messages(result.dst) == full[:500]
+    assert result.stop == "footer" and not result.complete
+    (d,) = result.damaged  # only the damaged chunk is lost: the reading resynchronises after it
+    assert d.start == second.offset and d.end >= second.offset + second.length
+    assert (d.after_ns, d.before_ns) == (10_000 + 499, 10_000 + 1000)
+    assert _raw_messages(result.dst) == full[:500] + full[1000:]
+
+
+def _chunk_of(chunks, offset):
+    return next((c for c in chunks if c.offset <= offset < c.offset + c.length), None)
+
+
+def test_byte_flips_anywhere_lose_only_the_chunk_they_hit(chunked, tmp_path):
+    """A flipped byte in a chunk's header, length, opcode or data costs that chunk's messages and nothing
+    else; in the first chunk too (its channel records come back from the summary)."""
+    data = chunked.read_bytes()
+    full = _raw_messages(chunked)
+    with SessionReader(chunked) as reader:
+        chunks = sorted(reader._chunks, key=lambda c: c.offset)
+    first_end = chunks[-1].offset + chunks[-1].length
+    rng = np.random.default_rng(16)
+    offsets = [chunks[0].offset, chunks[0].offset + 3, chunks[2].offset + 9 + 20, chunks[3].offset + 12]
+    offsets += rng.integers(chunks[0].offset, first_end, 12).tolist()
+    for i, at in enumerate(offsets):
+        src = tmp_path / f"flip{i}.mcap"
+        bad = bytearray(data)
+        bad[at] ^= 1 << int(rng.integers(8))
+        src.write_bytes(bytes(bad))
+        result = recover(src)
+        got = {(t, lt) for t, lt, _ in _raw_messages(result.dst)}
+        hit = _chunk_of(chunks, at)
+        lost = {(t, lt) for t, lt, _ in full} - got
+        if hit is None:  # between chunks (a message index): nothing is lost
+            assert not lost, at
+            continue
+        assert all(hit.start_ns <= lt <= hit.end_ns for _, lt in lost), f"flip at {at} lost more than its chunk"
+        for d in result.damaged:
+            assert d.after_ns is None or d.after_ns < hit.start_ns
+            assert d.before_ns is None or d.before_ns > hit.end_ns
+
+
+def test_damage_and_a_cut_tail_together(chunked, tmp_path):
+    data = bytearray(chunked.read_bytes())
+    full = _raw_messages(chunked)
+    with SessionReader(chunked) as reader:
+        chunks = sorted(reader._chunks, key=lambda c: c.offset)
+    data[chunks[1].offset + 40] ^= 0x10
+    cut = chunks[5].offset + chunks[5].length // 2
+    src = tmp_path / "both.mcap"
+    src.write_bytes(bytes(data[:cut]))
+    result = recover(src)
+    assert len(result.damaged) == 1 and "cut off by the end of the file" in result.stop
+    got = _raw_messages(result.dst)
+    assert got[:500] == full[:500] and got[500:2000] == full[1000:2500]  # chunks 2-4 all there
+    assert got[2000:] == full[2500:2500 + len(got) - 2000]  # and what of chunk 5 decompresses
 
 
 def test_recover_refuses_bad_paths(chunked, tmp_path):

@@ -14,6 +14,7 @@ import zlib
 from abc import abstractmethod
 from collections import deque
 from dataclasses import dataclass
+from pathlib import PurePath
 from typing import Any, Callable, ClassVar, TypeVar
 
 import numpy as np
@@ -44,6 +45,9 @@ class TimingSettings:
             raise ValueError(f"latency_ms and jitter_ms must be >= 0, got {self.latency_ms} and {self.jitter_ms}")
         if abs(self.clock_drift_ppm) > 1000:
             raise ValueError(f"clock_drift_ppm must be within ±1000, got {self.clock_drift_ppm}")
+        log = PurePath(self.truth_log)
+        if self.truth_log and (log.is_absolute() or ".." in log.parts):  # a rig file never writes outside its folder
+            raise ValueError(f"truth_log must be a path inside the rig file's folder, got {self.truth_log!r}")
 
 
 T = TypeVar("T", bound=TimingSettings)

@@ -1,0 +1,85 @@
+"""A write failure during a recording (a full disk): the robot brakes to rest, the preview says why,
+what was flushed stays readable, and `teleprev record` exits non-zero with one line."""
+
+from __future__ import annotations
+
+import os
+import time
+
+import numpy as np
+import pytest
+
+from teleprev.errors import SessionError
+from teleprev.session.recover import recover
+from tests.helpers.faults import has_traceback, run_cli, small_disk
+
+
+class TimedPort:
+    """A test double at the ActuatorPort interface: keeps (monotonic time, command) of what the loop sends."""
+
+    def __init__(self, port):
+        self.port, self.sent = port, []
+
+    def send(self, command):
+        self.sent.append((time.monotonic(), command))
+        return self.port.send(command)
+
+
+def test_a_full_disk_stops_the_robot_and_the_preview_says_why(tmp_path):
+    from teleprev.live.session import LiveSession, RecordOptions
+
+    rec = LiveSession(RecordOptions(out=tmp_path / "full.mcap"))
+    doubles = {k: TimedPort(p) for k, p in rec.loop.actuators.items()}
+    rec.loop.actuators = doubles
+    rec.start()
+    try:
+        rec.loop.control("start", task="pick_place")
+        time.sleep(1.0)
+        rec.loop.control("mode", mode="execute")
+        time.sleep(1.0)
+        assert rec.loop.snapshot.mode == "execute"
+        # From here every write the recorder makes fails with ENOSPC, as on a disk that just filled up.
+        full = os.open("/dev/full", os.O_WRONLY)
+        os.dup2(full, rec.recorder._writer._file.fileno())
+        os.close(full)
+        failed_at = time.monotonic()
+        deadline = failed_at + 10
+        while rec.loop.snapshot.mode != "preview" and time.monotonic() < deadline:
+            time.sleep(0.01)
+        reached_s = time.monotonic() - failed_at
+        snap = rec.loop.snapshot
+        assert snap.mode == "preview", "the write failure never reached the session loop"
+        assert reached_s < 3 * rec.recorder.flush_interval_s + 1.0  # the next flush fails, the loop hears at once
+        assert "no space left" in snap.message and "robot stopped" in snap.message
+        time.sleep(1.5)  # braking to rest takes well under this
+        rec.loop.control("mode", mode="execute")  # the operator tries to go on: refused
+        time.sleep(0.3)
+        assert rec.loop.snapshot.mode == "preview"
+        assert "cannot switch to execute" in rec.loop.snapshot.message
+    finally:
+        with pytest.raises(SessionError, match="no space left.*teleprev recover"):
+            rec.stop()
+    arm = doubles["arm"].sent
+    after = [(t, c) for t, c in arm if t > failed_at + reached_s]
+    assert after, "the arm should brake under control, not be dropped"
+    last_t = arm[-1][0]
+    assert last_t < failed_at + reached_s + 1.5  # then nothing more is sent
+    (_, a), (_, b) = after[-2:]
+    speed = np.abs(np.asarray(b.positions) - np.asarray(a.positions)) / ((b.stamp_ns - a.stamp_ns) / 1e9)
+    assert speed.max() < 0.05  # at rest when the commands stop
+    saved = recover(tmp_path / "full.mcap")
+    assert saved.messages.get("/glove/glove/hand", 0) > 50  # what was flushed before the failure
+
+
+def test_record_on_a_full_disk_exits_non_zero_with_one_line(tmp_path):
+    with small_disk(tmp_path, 700_000) as (folder, preexec):
+        out = folder / "x.mcap"
+        run = run_cli(["record", "--duration", "30", "--no-preview", "--engage-after", "0.5", "-o", out],
+                      preexec_fn=preexec, timeout=90)
+        assert run.returncode == 2, run.stderr
+        assert not has_traceback(run.stdout + run.stderr)
+        lines = [line for line in run.stderr.splitlines() if line.strip()]
+        assert len(lines) == 1, run.stderr
+        assert ("no space left" in lines[0] or "size limit" in lines[0]) and "teleprev recover" in lines[0]
+        saved = recover(out, tmp_path / "saved.mcap")
+    assert saved.messages.get("/glove/glove/hand", 0) > 20 and saved.span_s > 0.2

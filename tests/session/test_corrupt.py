@@ -1,0 +1,105 @@
+"""Corrupt session files: a damaged chunk is one clear error naming its time range in export, eval and
+info (CRCs are checked on every read), and `recover` keeps everything but that chunk."""
+
+from __future__ import annotations
+
+import shutil
+
+import pytest
+
+from teleprev.session.reader import SessionReader
+from teleprev.session.records import parse_chunk
+from tests.helpers.faults import chunk_spans, damage_chunk, flip_byte, has_traceback, mcap_opens, run_cli
+from tests.helpers.sessions import record_sim
+
+
+@pytest.fixture(scope="module")
+def session(tmp_path_factory):
+    path = tmp_path_factory.mktemp("corrupt") / "clean.mcap"
+    record_sim(path, seconds=3.0, engage_after=0.5)
+    return path
+
+
+def _copy(session, tmp_path, name):
+    dst = tmp_path / name
+    shutil.copy(session, dst)
+    return dst
+
+
+def _one_error_line(run) -> str:
+    assert not has_traceback(run.stdout + run.stderr), run.stderr
+    lines = [line for line in run.stderr.splitlines() if line.strip()]
+    assert len(lines) == 1, run.stderr
+    return lines[0]
+
+
+def _zstd_breaking_flip(path, index):
+    """Flip a byte of the zstd frame of the index-th chunk so that it no longer decompresses."""
+    offset, length, start, end = chunk_spans(path)[index]
+    body = path.read_bytes()[offset + 9:offset + length]
+    data_at = offset + length - len(parse_chunk(body, 0, len(body)).data)
+    flip_byte(path, data_at + 8)
+    return start, end
+
+
+@pytest.mark.parametrize("damage", ["crc", "zstd"])
+def test_export_info_and_eval_name_the_damaged_chunk(session, tmp_path, damage):
+    path = _copy(session, tmp_path, f"{damage}.mcap")
+    n = len(chunk_spans(path))
+    start, end = (damage_chunk(path, n // 2) if damage == "crc" else _zstd_breaking_flip(path, n // 2))
+    with SessionReader(session) as clean:
+        t0 = clean.start_ns
+    span = f"log time {(start - t0) / 1e9:.3f}-{(end - t0) / 1e9:.3f} s"
+    why = "CRC mismatch" if damage == "crc" else "zstd chunk does not decompress"
+
+    root = tmp_path / "out"
+    run = run_cli(["export", path, "--repo-id", "lab/x", "--root", root], timeout=300)
+    line = _one_error_line(run)
+    assert run.returncode == 2 and span in line and why in line and "teleprev recover" in line
+    assert not root.exists() and not list(tmp_path.glob(".out.export-*"))
+
+    run = run_cli(["info", path])
+    line = _one_error_line(run)
+    assert run.returncode == 2 and span in line and why in line
+
+    run = run_cli(["eval", path, "--out", tmp_path / "report.json"], timeout=300)
+    assert run.returncode == 1 and not has_traceback(run.stdout + run.stderr)
+    assert span.split()[-2] in run.stdout.replace("\n", " ")  # the damaged range, in the failed-session list
+
+
+def test_recover_keeps_everything_but_the_damaged_chunk(session, tmp_path):
+    path = _copy(session, tmp_path, "flip.mcap")
+    spans = chunk_spans(path)
+    start, end = damage_chunk(path, 1)
+    out = tmp_path / "saved.mcap"
+    run = run_cli(["recover", path, "-o", out])
+    assert run.returncode == 0 and not has_traceback(run.stdout + run.stderr), run.stderr
+    assert "damaged" in run.stdout and "lost" in run.stdout
+    assert mcap_opens(out)
+    with SessionReader(session) as clean, SessionReader(out) as saved:
+        for topic, info in clean.topics.items():
+            kept = set(saved.log_times(topic).tolist()) if topic in saved.topics else set()
+            lost = set(clean.log_times(topic).tolist()) - kept
+            assert all(start <= t <= end for t in lost), topic  # only the damaged chunk's messages
+        assert saved.end_ns == clean.end_ns  # everything after the damage is there
+    assert len(spans) > 3
+
+
+def test_a_changed_byte_outside_the_chunks_is_named_and_recover_loses_nothing(session, tmp_path):
+    import struct
+
+    data = session.read_bytes()
+    summary_start = struct.unpack_from("<Q", data, len(data) - 8 - 29 + 9)[0]
+    offset, length, _, _ = chunk_spans(session)[1]
+    for name, at, said in (("index", offset + length + 20, "outside the chunks"),  # the message index after a chunk
+                           ("summary", summary_start + 30, "summary CRC mismatch")):
+        path = _copy(session, tmp_path, f"{name}.mcap")
+        flip_byte(path, at, 0x04)
+        run = run_cli(["info", path])
+        line = _one_error_line(run)
+        assert run.returncode == 2 and said in line, line
+        out = tmp_path / f"{name}.saved.mcap"
+        run = run_cli(["recover", path, "-o", out])
+        assert run.returncode == 0, run.stderr
+        with SessionReader(session) as clean, SessionReader(out) as saved:
+            assert {t: i.message_count for t, i in saved.topics.items()} == {t: i.message_count for t, i in clean.topics.items()}
