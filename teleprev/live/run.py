@@ -90,9 +90,13 @@ def run_interactive(recording: LiveSession, console: Console, view: str, fps: fl
     return stats
 
 
+ENGAGE_RETRY_S = 0.25
+
+
 def run_script(recording: LiveSession, duration: float, episodes: int, engage_after: float | None,
                console: Console | None = None, view: str = "side", fps: float = 25.0) -> PreviewStats:
-    """Unattended: `episodes` episodes filling `duration` seconds, each engaging after `engage_after` s."""
+    """Unattended: `episodes` episodes filling `duration` seconds, each engaging after `engage_after` s (asked
+    again every ENGAGE_RETRY_S while the pipeline refuses, until the episode's end)."""
     stats = PreviewStats()
     loop = recording.loop
     dashboard = make_dashboard(recording, view) if console is not None else None
@@ -109,12 +113,20 @@ def run_script(recording: LiveSession, duration: float, episodes: int, engage_af
         plan.append((t0 + length - 1e-3, "stop", {}))
     if live:
         live.start()
+    engage_until, asked = None, 0.0  # an engage the pipeline refused (e.g. nothing previewed yet) is asked again
     try:
         while True:
             elapsed = time.perf_counter() - start
             while plan and plan[0][0] <= elapsed:
                 _, action, kwargs = plan.pop(0)
                 loop.control(action, **kwargs)
+                if action == "mode":
+                    engage_until = plan[0][0] if kwargs["mode"] == "execute" and plan else None
+                    asked = elapsed
+            if engage_until is not None and loop.snapshot.mode != "execute" and elapsed < engage_until \
+                    and elapsed - asked >= ENGAGE_RETRY_S:
+                loop.control("mode", mode="execute", reason="script")
+                asked = elapsed
             if (elapsed >= duration and not plan) or recording.failure:
                 break
             if live:

@@ -21,8 +21,12 @@ def record_sim(out: Path, rig: str = "sim.toml", seconds: float = 3.0, episodes:
             rec.loop.control("start", task=task)
             if engage_after is not None:
                 time.sleep(engage_after)
+                end = time.monotonic() + seconds - engage_after
                 rec.loop.control("mode", mode="execute", reason="test")
-                time.sleep(seconds - engage_after)
+                while time.monotonic() < end:  # refused (e.g. nothing previewed yet under load): ask again
+                    time.sleep(min(0.25, max(0.0, end - time.monotonic())))
+                    if rec.loop.snapshot.mode != "execute" and time.monotonic() < end:
+                        rec.loop.control("mode", mode="execute", reason="test")
             else:
                 time.sleep(seconds)
             rec.loop.control("mode", mode="preview", reason="test")
