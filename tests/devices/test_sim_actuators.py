@@ -209,3 +209,26 @@ def test_follower_without_acceleration_limit_is_rate_limited_and_lands_exactly()
     for _ in range(400):
         f.step(0.01)
     assert np.array_equal(f.q, [3.0, 3.0])
+
+
+def test_after_a_pause_the_arm_stands_on_the_last_command_even_if_its_simulation_was_starved():
+    """A servo-mode arm runs each target at once, so after a pause of more than STREAM_GAP_NS it stands
+    on the last command. Its simulated state is stepped in read(); a process starved of CPU may not have
+    stepped it, so the arm must not take that stale (moving) state as the start of the next stream, and
+    a jump after the pause must still fault."""
+    ctx = context()
+    arm = SimArm("arm", ArmSettings(), ctx)
+    home = np.array(arm.settings.home)
+    arm.connect()
+    t0 = ctx.clock.now_ns() + 50_000_000
+    stream = smooth_stream(home, t0, 0.5)[:30]  # part way: still moving at the last command
+    for stamp, q in stream:
+        arm.send(JointSample(stamp, arm.joint_names, q))  # and no read(): the follower is never stepped
+    assert arm.fault == "" and not np.allclose(arm.follower.q, stream[-1][1])  # the simulation lags behind
+    last_t, last_q = stream[-1]
+    # 100 ms later, a command one short step from rest at the last command (what the pipeline sends)
+    arm.send(JointSample(last_t + 100_000_000, arm.joint_names, last_q + 0.5 * 5.0 * 0.01**2))
+    assert arm.fault == ""
+    arm.send(JointSample(last_t + 300_000_000, arm.joint_names, last_q + 0.05))  # a jump after a pause
+    assert "controller fault" in arm.fault
+    arm.disconnect()

@@ -70,8 +70,13 @@ class SimArm(SimActuator[ArmSettings], kind="arm"):
         """"" or the fault this command raises: acceleration and jerk by divided differences on the stamps."""
         h = self._history
         if not h or stamp_ns - h[-1][0] > STREAM_GAP_NS:
-            # A new stream starts from the arm as it is: extrapolated back at its velocity, one state period apart.
-            q, v = self.follower.q.copy(), self.follower.v.copy()
+            # A new stream starts from the arm as it is, extrapolated back at its velocity, one state period
+            # apart. After a pause that is at rest on the last command (servo mode ran it at once), whatever
+            # the simulated follower says: starved of CPU, its state can be that of the pause's start.
+            if h:
+                q, v = h[-1][1].copy(), np.zeros_like(h[-1][1])
+            else:
+                q, v = self.follower.q.copy(), self.follower.v.copy()
             h.clear()
             for k in (3, 2, 1):
                 h.append((stamp_ns - k * self.period_ns, q - v * (k - 1) * self.period_ns / 1e9))
