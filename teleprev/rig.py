@@ -128,16 +128,22 @@ def load_recorded_rig(metadata: dict, session: Path) -> Rig | None:
     text = metadata.get("rig", {}).get("toml")
     if not text:
         return None
+    import tomllib
+
     session = Path(session)
     where = f"{session}: recorded rig"
+    try:  # the robot is checked before the rig is loaded: loading opens the URDF it names
+        robot = tomllib.loads(text).get("rig", {}).get("robot", "")
+    except tomllib.TOMLDecodeError as e:
+        raise ConfigError(f"not valid TOML ({e})", where) from None
+    if not isinstance(robot, str) or Path(robot).name != robot or robot in (".", ".."):
+        raise ConfigError(f"[rig] robot {robot!r} is a path; a recorded rig may only name a URDF in urdf/ "
+                          "(pass --config RIG to use another)", where)
     rig = load_rig_text(text, where, session.parent / f"{session.stem}.recorded-rig.toml")
     for key in ("calibration", "models"):
         value = getattr(rig.rig, key)
         if value:
             inside(session.parent, value, f"[rig] {key}", where)
-    if Path(rig.rig.robot).name != rig.rig.robot or rig.rig.robot in ("", ".", ".."):
-        raise ConfigError(f"[rig] robot {rig.rig.robot!r} is a path; a recorded rig may only name a URDF in urdf/ "
-                          "(pass --config RIG to use another)", where)
     return rig
 
 
