@@ -171,8 +171,8 @@ class LocalExecutor:
         import multiprocessing as mp
 
         ctx = mp.get_context("forkserver")
-        if self.preload:
-            ctx.set_forkserver_preload(self.preload)  # takes effect when the server starts (once per process)
+        # takes effect when the server starts (once per process); the first module makes it die with us
+        ctx.set_forkserver_preload(["teleprev.corpus.server_deathsig", *self.preload])
         return ctx
 
     def map(self, fn: Callable, context: Any, items: list, labels: list[str] | None = None,
