@@ -72,7 +72,7 @@ def _fuzz_sender(port: int, n: int, rate: float, seed: int, ready, out) -> None:
     sender.stop()
 
 
-def _flood_sender(port: int, n: int, ready, go, out) -> None:
+def _flood_sender(port: int, n: int, ready, go, drained, out) -> None:
     sender = VmcSender(port)
     frames = [sender.frame(k, 60.0) for k in range(n + 1)]  # built first, so they go out back to back
     ready.set()
@@ -84,8 +84,9 @@ def _flood_sender(port: int, n: int, ready, go, out) -> None:
     for d in frames[40:n]:
         sender.send(d)
     elapsed = time.perf_counter() - t
-    time.sleep(1.0)
-    sender.send(frames[n])  # the next datagram read carries the kernel's count of what it dropped
+    out.put(("flooded", elapsed))
+    drained.wait()  # the receiver has read what the socket held
+    sender.send(frames[n])  # so this one arrives, carrying the kernel's count of what it dropped
     out.put((n + 1, elapsed))
     sender.stop()
 
@@ -93,10 +94,10 @@ def _flood_sender(port: int, n: int, ready, go, out) -> None:
 def _child(target, *args):
     ctx = multiprocessing.get_context("spawn")
     ready, out = ctx.Event(), ctx.Queue()
-    extra = (ctx.Event(),) if target is _flood_sender else ()
+    extra = (ctx.Event(), ctx.Event()) if target is _flood_sender else ()
     proc = ctx.Process(target=target, args=(*args, ready, *extra, out), daemon=True)
     proc.start()
-    return proc, ready, out, (extra[0] if extra else None)
+    return proc, ready, out, extra
 
 
 # ---- sessions ---------------------------------------------------------------------------------------
@@ -147,19 +148,32 @@ def fuzz(folder: Path, n: int, rate: float) -> dict:
     return {"sent": sent, "good": good, "seconds": seconds, "deaths": deaths, "non_finite": _non_finite(path),
             "glove_samples": SessionReader(path).topics[GLOVE].message_count,
             "skipped": sum(v for k, v in counts.items() if k not in ("received", "lost_input", "loop_dropped",
-                                                                    "sink_errors", "failures") and not k.startswith("lost_"))}
+                                                                    "sink_errors", "failures") and not k.startswith("lost_")),
+            "lost": counts.get("lost_input", 0) + counts.get("loop_dropped", 0), "counts": counts}
+
+
+def _wait_for_gap(runner, timeout_s: float = 30.0) -> None:
+    deadline = time.monotonic() + timeout_s
+    while runner.stats().state != "gap" and time.monotonic() < deadline:
+        time.sleep(0.05)
 
 
 def flood(folder: Path, n: int) -> dict:
     rec, port = _session(folder, "flood")
-    proc, ready, out, go = _child(_flood_sender, port, n)
+    proc, ready, out, (go, drained) = _child(_flood_sender, port, n)
     ready.wait(300)
     rec.start()
+    glove = rec.runners["glove"]
     try:
         rec.wait_connected(0.1)
         go.set()
-        sent, seconds = out.get(timeout=300)
-        time.sleep(1.5)  # the runner reads the devices' counters once a second
+        out.get(timeout=300)  # flooded
+        _wait_for_gap(glove)
+        drained.set()
+        sent, seconds = out.get(timeout=60)
+        time.sleep(0.5)
+        _wait_for_gap(glove)  # the last frame came in
+        time.sleep(1.1)  # the runner reads the devices' counters once a second
         dead = _dead_receivers(rec)
     finally:
         rec.stop()
@@ -272,7 +286,7 @@ def main() -> None:
 
     Console(stderr=args.json).print(
         f"fuzz: {f['sent']} datagrams ({f['good']} good frames) in {f['seconds']:.1f} s = {f['sent'] / f['seconds']:.0f}/s; "
-        f"glove samples recorded {f['glove_samples']}; skipped {f['skipped']}\n"
+        f"glove samples recorded {f['glove_samples']}; skipped {f['skipped']}; lost (counted) {f['lost']}\n"
         f"flood: {fl['sent']} frames ({fl['sent'] - 41} back to back in {fl['seconds'] * 1e3:.0f} ms), recorded "
         f"{fl['recorded']}, missing {fl['missing']}, counted {fl['counted']} (socket overruns {fl['overruns']}, "
         f"sequence gaps {fl['gaps']}, queue {fl['queue']}, loop {fl['loop']})\n"

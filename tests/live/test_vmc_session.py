@@ -153,9 +153,15 @@ def test_a_flood_loses_frames_and_every_lost_one_is_counted_per_device(tmp_path)
             time.sleep(0.005)
         for d in frames[40:-1]:
             sender.send(d)
-        time.sleep(1.0)
+        deadline = time.monotonic() + 10.0
+        while rec.runners["glove"].stats().state != "gap" and time.monotonic() < deadline:
+            time.sleep(0.05)  # the backlog drains, then the glove goes quiet
+        marker_ns = rec.clock.now_ns()
         sender.send(frames[-1])  # the next datagram read carries the kernel's count of what it dropped
-        time.sleep(1.2)  # the runner reads the device's counters once a second
+        deadline = time.monotonic() + 10.0
+        while (rec.runners["glove"].stats().last_receive_ns or 0) < marker_ns and time.monotonic() < deadline:
+            time.sleep(0.05)
+        time.sleep(1.1)  # the runner reads the device's counters once a second
         rows = {r.name: r for r in rec.device_rows()}
     finally:
         rec.stop()
