@@ -13,7 +13,7 @@ from teleprev import topics
 from teleprev.live.session import LiveSession, RecordOptions
 from teleprev.session.reader import SessionReader
 from teleprev.session.summary import summarize
-from tests.helpers.vmc import VmcSender, bone, bundle, free_port, msg, rig_text
+from tests.helpers.vmc import VmcSender, bone, bundle, finger_messages, free_port, msg, rig_text
 
 GLOVE, SUIT = "/glove/glove/hand", "/suit/suit/wrist"
 
@@ -36,6 +36,7 @@ def test_bad_bundles_are_counted_and_skipped_and_the_glove_and_suit_keep_recordi
         sender.inject(bundle(finger, msg("/VMC/Ext/T", 1e300, types="d")).dgram)  # once ended the receiver
         sender.inject(bundle(finger).dgram)  # once recorded as NaN
         sender.inject(b"#bundle\x00\xff\xff")
+        sender.inject(bundle(*finger_messages(0.5), msg("/VMC/Ext/T", 1e4, types="d")).dgram)  # a clock outlier
         time.sleep(1.5)
         sender.stop()
         time.sleep(0.3)
@@ -45,11 +46,13 @@ def test_bad_bundles_are_counted_and_skipped_and_the_glove_and_suit_keep_recordi
     reader = SessionReader(path)
     glove = np.array([m.payload.positions for m in reader.messages([GLOVE])])
     assert np.isfinite(glove).all()
-    assert len(glove) == sender.sent == reader.topics[SUIT].message_count  # every good frame, nothing lost
+    assert len(glove) == sender.sent + 1 and reader.topics[SUIT].message_count == sender.sent  # nothing lost
+    # (the outlier's fingers are used, stamped with the clock offset the sender's other frames agree on)
     events = device_events(path)
     assert not [e for e in events if e["event"] == "error"], events
     skipped = " ".join(e["message"] for e in events if e["event"] == "skipped" and e["device"] == "glove")
     assert "1 out of range" in skipped and "2 non unit rotations" in skipped and "1 malformed packets" in skipped
+    assert "1 clock outliers" in skipped  # recorded as an event (issue 15 item 6)
     assert summarize(path).device_failures == {} and not rec.loop.stats.device_failures
     assert summary is not None
 
