@@ -43,7 +43,7 @@ from teleprev import topics  # noqa: E402
 from teleprev.live.session import LiveSession, RecordOptions  # noqa: E402
 from teleprev.messages import JointSample, PoseSample  # noqa: E402
 from teleprev.session.reader import SessionReader  # noqa: E402
-from teleprev.session.summary import summarize  # noqa: E402
+from teleprev.session.summary import device_lost, summarize  # noqa: E402
 from tests.helpers.vmc import VmcSender, free_port, fuzz_datagram, rig_text  # noqa: E402
 
 GLOVE = "/glove/glove/hand"
@@ -149,7 +149,7 @@ def fuzz(folder: Path, n: int, rate: float) -> dict:
             "glove_samples": SessionReader(path).topics[GLOVE].message_count,
             "skipped": sum(v for k, v in counts.items() if k not in ("received", "lost_input", "loop_dropped",
                                                                     "sink_errors", "failures") and not k.startswith("lost_")),
-            "lost": counts.get("lost_input", 0) + counts.get("loop_dropped", 0), "counts": counts}
+            "lost": device_lost(counts)}
 
 
 def _wait_for_gap(runner, timeout_s: float = 30.0) -> None:
@@ -183,7 +183,7 @@ def flood(folder: Path, n: int) -> dict:
     c = s.device_counts["glove"]
     recorded = SessionReader(path).topics[GLOVE].message_count
     recorder_dropped = next((st.dropped or 0) + (st.errors or 0) for st in s.streams if st.topic == GLOVE)
-    counted = c.get("lost_input", 0) + c.get("loop_dropped", 0) + c.get("sink_errors", 0) + recorder_dropped
+    counted = device_lost(c) + recorder_dropped
     missing = sent - recorded
     return {"sent": sent, "seconds": seconds, "recorded": recorded, "missing": missing, "counted": counted,
             "overruns": c.get("lost_socket_overruns", 0), "gaps": c.get("lost_sequence_gaps", 0),

@@ -127,12 +127,11 @@ class VmcReceiver:
             self._sock.setsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF, receive_buffer_kb * 1024)
         except OSError:
             pass  # the system's default buffer then; overruns are still counted
-        self._overruns = SO_RXQ_OVFL is not None
-        if self._overruns:
+        if SO_RXQ_OVFL is not None:
             try:
                 self._sock.setsockopt(socket.SOL_SOCKET, SO_RXQ_OVFL, 1)
             except OSError:
-                self._overruns = False
+                pass  # no overrun count here; sequence gaps still show what went missing
         self._sock.settimeout(0.1)
         self._thread = threading.Thread(target=self._run, name=f"vmc-{self.port}", daemon=True)
         self._thread.start()
