@@ -5,7 +5,9 @@
 Every session is a LiveSession on a rig with a VMC glove and suit on one port and the simulated arm and
 hand (tests/helpers/vmc.py), recorded to a real MCAP file and read back. Senders run in another process.
 
-fuzz_packets                  datagrams sent in the fuzz session: random and mutated bundles (flipped
+fuzz_packets                  datagrams the receiver read in the fuzz session (the sender goes on until it
+                              has read --fuzz of them; what the kernel dropped meanwhile is counted as
+                              socket overruns and shown, not included): random and mutated bundles (flipped
                               bytes, truncated, oversized, random bytes, wrong types and argument counts,
                               NaN/inf/1e300 times, numbers and positions, wrong bone names, non-unit and
                               zero quaternions; tests/helpers/vmc.py fuzz_datagram), one good frame in ten,
@@ -52,23 +54,25 @@ GOOD_EVERY = 10  # one good frame among this many fuzz datagrams
 
 
 # ---- senders (child processes) -------------------------------------------------------------------
-def _fuzz_sender(port: int, n: int, rate: float, seed: int, ready, out) -> None:
+def _fuzz_sender(port: int, rate: float, seed: int, ready, go, stop, out) -> None:
     rng = np.random.default_rng(seed)
     sender = VmcSender(port)
     good_rate = rate / GOOD_EVERY  # the good frames' sender time advances in step with real time
     pool = [sender.frame(k, good_rate) for k in range(50)]  # what the mutations start from
     ready.set()
-    start, good = time.perf_counter(), 0
-    for i in range(n):
+    go.wait()
+    start, good, i = time.perf_counter(), 0, 0
+    while i % 100 or not stop.is_set():  # until the receiver has read enough
         if i % GOOD_EVERY == 0:
             sender.send(sender.frame(good, good_rate))
             good += 1
         else:
             sender.send(fuzz_datagram(rng, pool[i % len(pool)]))
-        wait = start + (i + 1) / rate - time.perf_counter()
+        i += 1
+        wait = start + i / rate - time.perf_counter()
         if wait > 0:
             time.sleep(wait)
-    out.put((n, good, time.perf_counter() - start))
+    out.put((i, good, time.perf_counter() - start))
     sender.stop()
 
 
@@ -94,7 +98,7 @@ def _flood_sender(port: int, n: int, ready, go, drained, out) -> None:
 def _child(target, *args):
     ctx = multiprocessing.get_context("spawn")
     ready, out = ctx.Event(), ctx.Queue()
-    extra = (ctx.Event(), ctx.Event()) if target is _flood_sender else ()
+    extra = (ctx.Event(), ctx.Event())  # flood: go, drained; fuzz: go, stop
     proc = ctx.Process(target=target, args=(*args, ready, *extra, out), daemon=True)
     proc.start()
     return proc, ready, out, extra
@@ -132,12 +136,20 @@ def _non_finite(path: Path) -> int:
 
 def fuzz(folder: Path, n: int, rate: float) -> dict:
     rec, port = _session(folder, "fuzz")
-    proc, ready, out, _ = _child(_fuzz_sender, port, n, rate, 15)
+    proc, ready, out, (go, stop) = _child(_fuzz_sender, port, rate, 15)
     ready.wait(60)
     rec.start()
     try:
-        sent, good, seconds = out.get(timeout=n / rate * 4 + 120)
+        rec.wait_connected(0.1)  # the socket is open
+        receiver = rec.devices["glove"]._receiver
+        go.set()
+        deadline = time.monotonic() + n / rate * 4 + 120
+        while receiver.counters.datagrams < n and time.monotonic() < deadline:
+            time.sleep(0.05)
+        stop.set()
+        sent, good, seconds = out.get(timeout=60)
         time.sleep(0.5)
+        read = receiver.counters.datagrams  # what reached the parser (the rest the kernel dropped, counted)
         dead = _dead_receivers(rec)
     finally:
         rec.stop()
@@ -145,7 +157,7 @@ def fuzz(folder: Path, n: int, rate: float) -> dict:
     path = folder / "fuzz.mcap"
     deaths = dead + _failures(path)
     counts = summarize(path).device_counts["glove"]
-    return {"sent": sent, "good": good, "seconds": seconds, "deaths": deaths, "non_finite": _non_finite(path),
+    return {"sent": sent, "read": read, "good": good, "seconds": seconds, "deaths": deaths, "non_finite": _non_finite(path),
             "glove_samples": SessionReader(path).topics[GLOVE].message_count,
             "skipped": sum(v for k, v in counts.items() if k not in ("received", "lost_input", "loop_dropped",
                                                                     "sink_errors", "failures") and not k.startswith("lost_")),
@@ -285,7 +297,8 @@ def main() -> None:
     from rich.console import Console
 
     Console(stderr=args.json).print(
-        f"fuzz: {f['sent']} datagrams ({f['good']} good frames) in {f['seconds']:.1f} s = {f['sent'] / f['seconds']:.0f}/s; "
+        f"fuzz: {f['sent']} datagrams sent ({f['good']} good frames) in {f['seconds']:.1f} s = {f['sent'] / f['seconds']:.0f}/s, "
+        f"{f['read']} read by the receiver; "
         f"glove samples recorded {f['glove_samples']}; skipped {f['skipped']}; lost (counted) {f['lost']}\n"
         f"flood: {fl['sent']} frames ({fl['sent'] - 41} back to back in {fl['seconds'] * 1e3:.0f} ms), recorded "
         f"{fl['recorded']}, missing {fl['missing']}, counted {fl['counted']} (socket overruns {fl['overruns']}, "
@@ -293,7 +306,7 @@ def main() -> None:
         f"recovery: {rc['n']} trials, median {rc['median_ms']:.2f} ms, p95 {rc['p95_ms']:.2f} ms\n"
         "(machine shared with other engineers: timings are noisy)", highlight=False)
     figures = {
-        "fuzz_packets": f["sent"],
+        "fuzz_packets": f["read"],
         "receiver_deaths": f["deaths"] + fl["deaths"] + rc["deaths"],
         "nan_recorded": f["non_finite"],
         "flood_drops_reported_frac": round(fl["frac"], 6),
