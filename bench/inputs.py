@@ -5,7 +5,9 @@
 Every session is a LiveSession on a rig with a VMC glove and suit on one port and the simulated arm and
 hand (tests/helpers/vmc.py), recorded to a real MCAP file and read back. Senders run in another process.
 
-fuzz_packets                  datagrams sent in the fuzz session: random and mutated bundles (flipped
+fuzz_packets                  datagrams the receiver read in the fuzz session (the sender goes on until it
+                              has read --fuzz of them; what the kernel dropped meanwhile is counted as
+                              socket overruns and shown, not included): random and mutated bundles (flipped
                               bytes, truncated, oversized, random bytes, wrong types and argument counts,
                               NaN/inf/1e300 times, numbers and positions, wrong bone names, non-unit and
                               zero quaternions; tests/helpers/vmc.py fuzz_datagram), one good frame in ten,
@@ -43,7 +45,7 @@ from teleprev import topics  # noqa: E402
 from teleprev.live.session import LiveSession, RecordOptions  # noqa: E402
 from teleprev.messages import JointSample, PoseSample  # noqa: E402
 from teleprev.session.reader import SessionReader  # noqa: E402
-from teleprev.session.summary import summarize  # noqa: E402
+from teleprev.session.summary import device_lost, summarize  # noqa: E402
 from tests.helpers.vmc import VmcSender, free_port, fuzz_datagram, rig_text  # noqa: E402
 
 GLOVE = "/glove/glove/hand"
@@ -52,27 +54,29 @@ GOOD_EVERY = 10  # one good frame among this many fuzz datagrams
 
 
 # ---- senders (child processes) -------------------------------------------------------------------
-def _fuzz_sender(port: int, n: int, rate: float, seed: int, ready, out) -> None:
+def _fuzz_sender(port: int, rate: float, seed: int, ready, go, stop, out) -> None:
     rng = np.random.default_rng(seed)
     sender = VmcSender(port)
     good_rate = rate / GOOD_EVERY  # the good frames' sender time advances in step with real time
     pool = [sender.frame(k, good_rate) for k in range(50)]  # what the mutations start from
     ready.set()
-    start, good = time.perf_counter(), 0
-    for i in range(n):
+    go.wait()
+    start, good, i = time.perf_counter(), 0, 0
+    while i % 100 or not stop.is_set():  # until the receiver has read enough
         if i % GOOD_EVERY == 0:
             sender.send(sender.frame(good, good_rate))
             good += 1
         else:
             sender.send(fuzz_datagram(rng, pool[i % len(pool)]))
-        wait = start + (i + 1) / rate - time.perf_counter()
+        i += 1
+        wait = start + i / rate - time.perf_counter()
         if wait > 0:
             time.sleep(wait)
-    out.put((n, good, time.perf_counter() - start))
+    out.put((i, good, time.perf_counter() - start))
     sender.stop()
 
 
-def _flood_sender(port: int, n: int, ready, go, out) -> None:
+def _flood_sender(port: int, n: int, ready, go, drained, out) -> None:
     sender = VmcSender(port)
     frames = [sender.frame(k, 60.0) for k in range(n + 1)]  # built first, so they go out back to back
     ready.set()
@@ -84,8 +88,9 @@ def _flood_sender(port: int, n: int, ready, go, out) -> None:
     for d in frames[40:n]:
         sender.send(d)
     elapsed = time.perf_counter() - t
-    time.sleep(1.0)
-    sender.send(frames[n])  # the next datagram read carries the kernel's count of what it dropped
+    out.put(("flooded", elapsed))
+    drained.wait()  # the receiver has read what the socket held
+    sender.send(frames[n])  # so this one arrives, carrying the kernel's count of what it dropped
     out.put((n + 1, elapsed))
     sender.stop()
 
@@ -93,10 +98,10 @@ def _flood_sender(port: int, n: int, ready, go, out) -> None:
 def _child(target, *args):
     ctx = multiprocessing.get_context("spawn")
     ready, out = ctx.Event(), ctx.Queue()
-    extra = (ctx.Event(),) if target is _flood_sender else ()
+    extra = (ctx.Event(), ctx.Event())  # flood: go, drained; fuzz: go, stop
     proc = ctx.Process(target=target, args=(*args, ready, *extra, out), daemon=True)
     proc.start()
-    return proc, ready, out, (extra[0] if extra else None)
+    return proc, ready, out, extra
 
 
 # ---- sessions ---------------------------------------------------------------------------------------
@@ -131,12 +136,20 @@ def _non_finite(path: Path) -> int:
 
 def fuzz(folder: Path, n: int, rate: float) -> dict:
     rec, port = _session(folder, "fuzz")
-    proc, ready, out, _ = _child(_fuzz_sender, port, n, rate, 15)
+    proc, ready, out, (go, stop) = _child(_fuzz_sender, port, rate, 15)
     ready.wait(60)
     rec.start()
     try:
-        sent, good, seconds = out.get(timeout=n / rate * 4 + 120)
+        rec.wait_connected(0.1)  # the socket is open
+        receiver = rec.devices["glove"]._receiver
+        go.set()
+        deadline = time.monotonic() + n / rate * 4 + 120
+        while receiver.counters.datagrams < n and time.monotonic() < deadline:
+            time.sleep(0.05)
+        stop.set()
+        sent, good, seconds = out.get(timeout=60)
         time.sleep(0.5)
+        read = receiver.counters.datagrams  # what reached the parser (the rest the kernel dropped, counted)
         dead = _dead_receivers(rec)
     finally:
         rec.stop()
@@ -144,22 +157,35 @@ def fuzz(folder: Path, n: int, rate: float) -> dict:
     path = folder / "fuzz.mcap"
     deaths = dead + _failures(path)
     counts = summarize(path).device_counts["glove"]
-    return {"sent": sent, "good": good, "seconds": seconds, "deaths": deaths, "non_finite": _non_finite(path),
+    return {"sent": sent, "read": read, "good": good, "seconds": seconds, "deaths": deaths, "non_finite": _non_finite(path),
             "glove_samples": SessionReader(path).topics[GLOVE].message_count,
             "skipped": sum(v for k, v in counts.items() if k not in ("received", "lost_input", "loop_dropped",
-                                                                    "sink_errors", "failures") and not k.startswith("lost_"))}
+                                                                    "sink_errors", "failures") and not k.startswith("lost_")),
+            "lost": device_lost(counts)}
+
+
+def _wait_for_gap(runner, timeout_s: float = 30.0) -> None:
+    deadline = time.monotonic() + timeout_s
+    while runner.stats().state != "gap" and time.monotonic() < deadline:
+        time.sleep(0.05)
 
 
 def flood(folder: Path, n: int) -> dict:
     rec, port = _session(folder, "flood")
-    proc, ready, out, go = _child(_flood_sender, port, n)
+    proc, ready, out, (go, drained) = _child(_flood_sender, port, n)
     ready.wait(300)
     rec.start()
+    glove = rec.runners["glove"]
     try:
         rec.wait_connected(0.1)
         go.set()
-        sent, seconds = out.get(timeout=300)
-        time.sleep(1.5)  # the runner reads the devices' counters once a second
+        out.get(timeout=300)  # flooded
+        _wait_for_gap(glove)
+        drained.set()
+        sent, seconds = out.get(timeout=60)
+        time.sleep(0.5)
+        _wait_for_gap(glove)  # the last frame came in
+        time.sleep(1.1)  # the runner reads the devices' counters once a second
         dead = _dead_receivers(rec)
     finally:
         rec.stop()
@@ -169,7 +195,7 @@ def flood(folder: Path, n: int) -> dict:
     c = s.device_counts["glove"]
     recorded = SessionReader(path).topics[GLOVE].message_count
     recorder_dropped = next((st.dropped or 0) + (st.errors or 0) for st in s.streams if st.topic == GLOVE)
-    counted = c.get("lost_input", 0) + c.get("loop_dropped", 0) + c.get("sink_errors", 0) + recorder_dropped
+    counted = device_lost(c) + recorder_dropped
     missing = sent - recorded
     return {"sent": sent, "seconds": seconds, "recorded": recorded, "missing": missing, "counted": counted,
             "overruns": c.get("lost_socket_overruns", 0), "gaps": c.get("lost_sequence_gaps", 0),
@@ -271,15 +297,16 @@ def main() -> None:
     from rich.console import Console
 
     Console(stderr=args.json).print(
-        f"fuzz: {f['sent']} datagrams ({f['good']} good frames) in {f['seconds']:.1f} s = {f['sent'] / f['seconds']:.0f}/s; "
-        f"glove samples recorded {f['glove_samples']}; skipped {f['skipped']}\n"
+        f"fuzz: {f['sent']} datagrams sent ({f['good']} good frames) in {f['seconds']:.1f} s = {f['sent'] / f['seconds']:.0f}/s, "
+        f"{f['read']} read by the receiver; "
+        f"glove samples recorded {f['glove_samples']}; skipped {f['skipped']}; lost (counted) {f['lost']}\n"
         f"flood: {fl['sent']} frames ({fl['sent'] - 41} back to back in {fl['seconds'] * 1e3:.0f} ms), recorded "
         f"{fl['recorded']}, missing {fl['missing']}, counted {fl['counted']} (socket overruns {fl['overruns']}, "
         f"sequence gaps {fl['gaps']}, queue {fl['queue']}, loop {fl['loop']})\n"
         f"recovery: {rc['n']} trials, median {rc['median_ms']:.2f} ms, p95 {rc['p95_ms']:.2f} ms\n"
         "(machine shared with other engineers: timings are noisy)", highlight=False)
     figures = {
-        "fuzz_packets": f["sent"],
+        "fuzz_packets": f["read"],
         "receiver_deaths": f["deaths"] + fl["deaths"] + rc["deaths"],
         "nan_recorded": f["non_finite"],
         "flood_drops_reported_frac": round(fl["frac"], 6),

@@ -52,11 +52,9 @@ def record(
             recording.start()
             if duration is not None or not preview:  # nobody watches the device table: a dead rig must fail
                 unconnected = recording.wait_connected()
-            if unconnected:
-                pass
-            elif duration is not None:
+            if not unconnected and duration is not None:
                 run_script(recording, duration, episodes, engage_after, console if preview else None, view, fps)
-            else:
+            elif not unconnected:
                 run_interactive(recording, console, view, fps, show=preview)
         except KeyboardInterrupt:
             pass  # Ctrl-C, SIGTERM or SIGHUP: the session is finalized below all the same

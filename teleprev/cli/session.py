@@ -45,7 +45,7 @@ def info(
     as_json: bool = typer.Option(False, "--json", help="Print the facts as one JSON object instead of tables."),
 ) -> None:
     """Print a session's streams (count, rate, gaps, drops), device events, episodes and duration."""
-    from teleprev.session.summary import GAP_FACTOR, PREVIEW_ONLY, summarize
+    from teleprev.session.summary import GAP_FACTOR, PREVIEW_ONLY, device_lost, summarize
 
     s = summarize(session)
     if as_json:
@@ -83,7 +83,7 @@ def info(
     else:
         head.add_row("dropped", "[yellow]unknown[/] (no recorder counters: the recorder did not close the file)")
     if s.device_counts:
-        lost = {d: c.get("lost_input", 0) + c.get("loop_dropped", 0) + c.get("sink_errors", 0) for d, c in s.device_counts.items()}
+        lost = {d: device_lost(c) for d, c in s.device_counts.items()}
         detail = ", ".join(f"{d} {n}" for d, n in sorted(lost.items()) if n)
         head.add_row("lost before recording", f"[bold red]{sum(lost.values())}[/] ({detail}; see devices)" if detail else "0")
     if s.preview_only:
@@ -122,7 +122,7 @@ def info(
             dev.add_column(col, justify="right", no_wrap=True)
         for name, c in sorted(s.device_counts.items()):
             skipped = sum(v for k, v in c.items() if k not in _NOT_SKIPPED and not k.startswith("lost_"))
-            lost = c.get("lost_input", 0) + c.get("loop_dropped", 0) + c.get("sink_errors", 0)
+            lost = device_lost(c)
             dev.add_row(name, str(c.get("received", 0)), f"[bold red]{lost}[/]" if lost else "0",
                         *(str(c.get(k, 0)) for k in ("lost_socket_overruns", "lost_sequence_gaps", "lost_queue_overflow",
                                                      "loop_dropped")),

@@ -146,8 +146,9 @@ class Device(ABC, Generic[S]):
         return ""
 
     def counters(self) -> dict[str, int]:
-        """Running totals of input the device skipped (e.g. {"malformed_packets": 3}); the runner reports
-        increases as error events and shows them. Must be cheap and safe to call from another thread."""
+        """Running totals of input the device skipped (e.g. {"malformed_packets": 3}) and, named "lost_...",
+        of input it knows it lost before reading it (e.g. {"lost_socket_overruns": 40}); the runner reports
+        increases as "skipped" events and shows them. Must be cheap and safe to call from another thread."""
         return {}
 
 

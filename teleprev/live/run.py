@@ -17,7 +17,7 @@ from teleprev.preview.keys import KeyReader
 from teleprev.preview.robot_view import RobotView
 from teleprev.robot.model import load_robot
 from teleprev.live.session import LiveSession
-from teleprev.session.summary import PREVIEW_ONLY
+from teleprev.session.summary import PREVIEW_ONLY, device_lost
 
 # Fixed view bounds (metres) that hold an xArm's workspace, so the picture does not rescale.
 ROBOT_BOUNDS = {"front": (-0.75, 0.75, -0.1, 1.0), "side": (-0.35, 0.95, -0.1, 1.0), "top": (-0.75, 0.75, -0.35, 0.95)}
@@ -154,7 +154,7 @@ def print_summary(console: Console, recording: LiveSession, summary) -> None:
         table.add_row(topic, str(s.written), str(s.dropped))
     console.print(table)
     counts = recording.device_counts()
-    lost = {name: c["lost_input"] + c["loop_dropped"] + c["sink_errors"] for name, c in counts.items()}
+    lost = {name: device_lost(c) for name, c in counts.items()}
     detail = ", ".join(f"{name} {n}" for name, n in sorted(lost.items()) if n)
     console.print(
         f"episodes: {recording.loop.episodes.index + 1}   commands sent: {sum(recording.loop.stats.commands_sent.values())}"

@@ -13,6 +13,7 @@ from __future__ import annotations
 
 import datetime as _dt
 import json
+import time
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -174,8 +175,6 @@ class LiveSession:
     def wait_connected(self, timeout_s: float | None = None) -> list[str]:
         """Wait until every device has sent something; what is wrong with each that has not, after timeout_s
         (default: the options' connect_timeout_s), naming the device, what was tried and what happened."""
-        import time
-
         timeout_s = self.options.connect_timeout_s if timeout_s is None else timeout_s
         deadline = time.monotonic() + timeout_s
         while True:
@@ -186,28 +185,30 @@ class LiveSession:
         problems = []
         for name, s in silent.items():
             device, plugin = self.devices[name], self.rig.devices[name].plugin
-            tried = device.endpoint() or "it"
+            tried = f"tried {device.endpoint()}, " if device.endpoint() else ""
             what = f"connect failed: {s.last_error}" if s.connects == 0 else "no packets"
-            problems.append(f"device {name!r} ({plugin}) sent nothing within {timeout_s:g} s: tried {tried}, {what}")
+            problems.append(f"device {name!r} ({plugin}) sent nothing within {timeout_s:g} s: {tried}{what}")
         return problems
 
     def device_rows(self) -> list[DeviceRow]:
         rows = []
         for name, runner in self.runners.items():
             s = runner.stats()
-            prefix = f"/{self.devices[name].kind}/{name}/"
-            dropped = sum(n for topic, n in self.loop.stats.dropped.items() if topic.startswith(prefix))
-            rows.append(DeviceRow(name, self.devices[name].kind, s.state, s.rate_hz, s.nominal_hz, s.latency_ms, dropped,
-                                  s.sink_errors, s.errors, s.lost_input))
+            rows.append(DeviceRow(name, self.devices[name].kind, s.state, s.rate_hz, s.nominal_hz, s.latency_ms,
+                                  self._loop_dropped(name), s.sink_errors, s.errors, s.lost_input))
         return rows
+
+    def _loop_dropped(self, name: str) -> int:
+        """Samples of this device the session loop's queue had no room for."""
+        prefix = f"/{self.devices[name].kind}/{name}/"
+        return sum(n for topic, n in self.loop.stats.dropped.items() if topic.startswith(prefix))
 
     def device_counts(self) -> dict[str, dict[str, int]]:
         """Per device, what it delivered and every count of what it lost or skipped (for the file's metadata)."""
         out = {}
         for name, runner in self.runners.items():
             s = runner.stats()
-            prefix = f"/{self.devices[name].kind}/{name}/"
             out[name] = {"received": s.received, **s.skipped, "lost_input": s.lost_input,
-                         "loop_dropped": sum(n for t, n in self.loop.stats.dropped.items() if t.startswith(prefix)),
-                         "sink_errors": s.sink_errors, "failures": self.loop.stats.device_failures.get(name, 0)}
+                         "loop_dropped": self._loop_dropped(name), "sink_errors": s.sink_errors,
+                         "failures": self.loop.stats.device_failures.get(name, 0)}
         return out

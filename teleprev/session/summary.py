@@ -24,6 +24,12 @@ PREVIEW_ONLY = ("the robot was never engaged: the whole session ran in PREVIEW, 
                 "and there are no actions to export (record with --engage-after SECONDS, or press space to execute)")
 
 
+def device_lost(counts: dict[str, int]) -> int:
+    """All a device lost before its samples were recorded, from its counts in the "devices" record: what it
+    knew it lost before reading it, what the session loop had no room for, what its runner could not hand on."""
+    return counts.get("lost_input", 0) + counts.get("loop_dropped", 0) + counts.get("sink_errors", 0)
+
+
 def is_preview_only(session_topics) -> bool:
     """Whether a recorded session holds no command at all (the robot was never engaged)."""
     return COMMAND_ARM not in session_topics and COMMAND_HAND not in session_topics

@@ -97,8 +97,11 @@ class _Subscriber:
 
 
 class VmcReceiver:
-    def __init__(self, host: str, port: int, clock: SessionClock, allow: tuple[str, ...] = ()):
-        """`allow`: the sender addresses or networks ("192.168.1.7", "10.0.0.0/24") accepted; empty: any."""
+    def __init__(self, host: str, port: int, clock: SessionClock, allow: tuple[str, ...] = (),
+                 receive_buffer_kb: int = 1024):
+        """`allow`: the sender addresses or networks ("192.168.1.7", "10.0.0.0/24") accepted; empty: any.
+        `receive_buffer_kb`: the socket's receive buffer asked for (the kernel caps it at
+        net.core.rmem_max): what a sender may get ahead of the receiving thread before datagrams are lost."""
         self.host, self.port, self.clock = host, port, clock
         self.allow = tuple(allow)
         self._allowed = tuple(ipaddress.IPv4Network(a, strict=False) for a in allow)
@@ -120,12 +123,15 @@ class VmcReceiver:
         except OSError as exc:
             raise DeviceError(f"cannot listen on UDP {self.host}:{self.port} ({exc.strerror or exc}); "
                               "is another program using the port?", self.where) from None
-        self._overruns = SO_RXQ_OVFL is not None
-        if self._overruns:
+        try:
+            self._sock.setsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF, receive_buffer_kb * 1024)
+        except OSError:
+            pass  # the system's default buffer then; overruns are still counted
+        if SO_RXQ_OVFL is not None:
             try:
                 self._sock.setsockopt(socket.SOL_SOCKET, SO_RXQ_OVFL, 1)
             except OSError:
-                self._overruns = False
+                pass  # no overrun count here; sequence gaps still show what went missing
         self._sock.settimeout(0.1)
         self._thread = threading.Thread(target=self._run, name=f"vmc-{self.port}", daemon=True)
         self._thread.start()
@@ -245,6 +251,7 @@ class VmcReceiver:
             if self._last_device_ns is not None and device_ns < self._last_device_ns - _RESYNC_NS:
                 self._outliers_before += self._sync.rejected
                 self._sync = ClockSync()
+                self._steps.clear()  # a new sender (or a restarted one) has its own frame period
             rejected = self._sync.rejected
             stamp = self._sync.observe(device_ns, receive_ns)
             if self._sync.rejected == rejected:  # an outlier is no sign of a sender restart either
@@ -260,10 +267,11 @@ class VmcReceiver:
 
     def _count_missing(self, device_ns: int) -> None:
         """Frames missing between the last sender time and this one: a step of k sender periods (the
-        median step) lost k - 1 frames. Steps of 0 (a skeleton split over bundles) and backwards are none."""
+        median step) lost k - 1 frames. Steps of 0 (a skeleton split over bundles), backwards or over a
+        second count none."""
         last = self._last_device_ns
-        if last is None or device_ns <= last:
-            return
+        if last is None or device_ns <= last or device_ns - last > _RESYNC_NS:
+            return  # (a jump of more than a second is a pause or a clock jump, and the runner reports gaps)
         step = device_ns - last
         if len(self._steps) >= _PERIOD_MIN_STEPS:
             period = statistics.median(self._steps)
