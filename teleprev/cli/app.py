@@ -15,6 +15,7 @@ from teleprev.cli import calibrate as calibrate_cli
 from teleprev.cli import collision
 from teleprev.cli import devices as devices_cli
 from teleprev.cli import export as export_cli
+from teleprev.cli import import_ as import_cli
 from teleprev.cli import record as record_cli
 from teleprev.cli import replay as replay_cli
 from teleprev.cli import robot
@@ -47,6 +48,7 @@ SESSIONS = "Sessions"
 app.command("info", rich_help_panel=SESSIONS)(session_cli.info)
 app.command("recover", rich_help_panel=SESSIONS)(session_cli.recover)
 app.command("export", rich_help_panel=SESSIONS)(export_cli.export)
+app.command("import", rich_help_panel=SESSIONS)(import_cli.import_)
 app.command("replay", rich_help_panel=SESSIONS)(replay_cli.replay)
 app.command("eval", rich_help_panel=SESSIONS)(replay_cli.eval_)
 app.command("audit", rich_help_panel=SESSIONS)(replay_cli.audit)

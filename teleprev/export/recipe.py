@@ -29,7 +29,8 @@ is taken. A stream may also be given by its topic ("/arm/left/state").
 
 A feature's `timing` is "action" for features named action / action.*, "observation" otherwise:
 observations use the latest sample at or before the frame's time, actions the command sent right after
-it (see timeline.py).
+it (see timeline.py). `timing = "next"` derives an action from a state stream: the value the stream
+has at the next frame's time (where the robot went), for recordings without commands.
 """
 
 from __future__ import annotations
@@ -96,7 +97,7 @@ class ExportSection:
 class FeatureSpec:
     name: str
     streams: tuple[str, ...]
-    timing: Literal["", "observation", "action"] = ""  # "": by the name (see the module doc)
+    timing: Literal["", "observation", "action", "next"] = ""  # "": by the name (see the module doc)
 
     def __post_init__(self):
         if not self.name or not self.streams:
@@ -105,7 +106,7 @@ class FeatureSpec:
     @property
     def is_action(self) -> bool:
         if self.timing:
-            return self.timing == "action"
+            return self.timing in ("action", "next")
         return self.name == "action" or self.name.startswith("action.")
 
 
@@ -130,9 +131,15 @@ def load_recipe(which: str | Path | None = None) -> Recipe:
     if not path.is_file():
         known = ", ".join(sorted(p.stem for p in recipes_dir().glob("*.toml"))) or "none"
         raise ConfigError(f"no such recipe file (recipes in {recipes_dir()}: {known})", str(which))
-    data = read_toml(path)
+    return recipe_from_table(read_toml(path), path)
+
+
+def recipe_from_table(data: dict, path: str | Path) -> Recipe:
+    """A recipe from its TOML table (checked as load_recipe checks a file); `path` names it in errors."""
     if "path" in data:
         raise ConfigError("unknown key 'path'", str(path))
+    if "import" in data:
+        raise ConfigError("an import recipe (it has an [import] table): use it with `teleprev import`", str(path))
     recipe = from_table(Recipe, data, str(path))
     names = [f.name for f in recipe.feature]
     for f in recipe.feature:
@@ -176,6 +183,7 @@ class ResolvedFeature:
     name: str
     is_action: bool
     sources: tuple[Source, ...]
+    next_frame: bool = False  # timing "next": the stream's value at the next frame (an action derived from states)
 
     @property
     def is_image(self) -> bool:
@@ -212,7 +220,7 @@ def resolve(recipe: Recipe, session_topics: dict, metadata: dict[str, dict[str, 
             for s in images:
                 out.append(ResolvedFeature(spec.name.replace("{camera}", s.prefix), False, (s,)))
         elif sources:
-            out.append(ResolvedFeature(spec.name, spec.is_action, tuple(sources)))
+            out.append(ResolvedFeature(spec.name, spec.is_action, tuple(sources), spec.timing == "next"))
     names = [f.name for f in out]
     dup = next((n for n in names if names.count(n) > 1), None)
     if dup:
