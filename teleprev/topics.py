@@ -16,6 +16,8 @@ What the pipeline computed and sent:
     /command/arm              JointSample   arm command actually sent (execute mode only)
     /command/hand             JointSample   end-effector command actually sent (execute mode only)
     /tf                       TransformsSample   robot link frames (for Foxglove's URDF panel)
+    /robot_description        RobotDescription   the rig's URDF (ROS 2 std_msgs/String), once at the start;
+                                                 the file also carries it as an attachment <robot>.urdf
 
 Events:
     /events/episode           teleprev.EpisodeEvent
@@ -32,6 +34,7 @@ FORMAT_VERSION = 2  # session layout version, written to the "teleprev" metadata
 MOTION_FORMAT_VERSION = 2
 
 TF = "/tf"
+ROBOT_DESCRIPTION = "/robot_description"
 RETARGETED = "/pipeline/retargeted"
 CORRECTED = "/pipeline/corrected"
 ARM_TARGET = "/pipeline/arm_target"

@@ -26,7 +26,11 @@ from teleprev.robot.frames import FramePublisher
 from teleprev.robot.model import load_robot
 from teleprev import topics
 from teleprev.clock import SessionClock
+from teleprev.live.frames import sensor_frames
 from teleprev.live.loop import SessionLoop
+from teleprev.messages import Logged, RobotDescription
+
+URDF_MEDIA_TYPE = "application/xml"  # the rig's URDF, attached to the session as <name>.urdf
 
 
 @dataclass
@@ -68,10 +72,12 @@ class LiveSession:
         self.driver = PipelineDriver(self.pipeline, InputTopics.for_devices(first["glove"], first["suit"], first["arm"], first["hand"]))
         self.robot = load_robot(rig.rig.robot)
         out.parent.mkdir(parents=True, exist_ok=True)
-        self.recorder = Recorder(out, self._metadata())
+        urdf = Path(self.robot.urdf_path)
+        self.recorder = Recorder(out, self._metadata(), attachments={urdf.name: (URDF_MEDIA_TYPE, urdf.read_bytes())})
         self.loop = SessionLoop(
-            self.clock, self.recorder.log, self.driver, frames=FramePublisher(self.robot),
-            tf_period_ns=int(1e9 / rig.pipeline.tf_rate_hz), queue_size=options.queue_size, on_episode_start=self._episode_started,
+            self.clock, self.recorder.log, self.driver,
+            frames=FramePublisher(self.robot, sensor_frames(rig, self.robot, rig_calibration(rig))),
+            tf_period_ns=int(1e9 / rig.pipeline.tf_rate_hz) if rig.pipeline.tf_rate_hz > 0 else 0, queue_size=options.queue_size, on_episode_start=self._episode_started,
         )
         self.runners = {name: DeviceRunner(dev, self.loop.sink, self.clock) for name, dev in self.devices.items()}
         self.loop.actuators = {kind: ActuatorPort(self.devices[first[kind]], self.runners[first[kind]]) for kind in ("arm", "hand")}
@@ -105,6 +111,8 @@ class LiveSession:
 
     def start(self) -> "LiveSession":
         self.recorder.start()
+        t = self.clock.now_ns()  # first in the file, so that Foxglove's URDF layer has the robot from the start
+        self.recorder.log(Logged(topics.ROBOT_DESCRIPTION, t, RobotDescription(t, self.robot.urdf_path.read_text())))
         self.loop.start()
         for runner in self.runners.values():
             runner.start()

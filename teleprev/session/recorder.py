@@ -74,6 +74,7 @@ class Recorder:
         flush_interval_s: float = 0.5,
         chunk_size: int = DEFAULT_CHUNK_SIZE,
         fsync: bool = True,
+        attachments: dict[str, tuple[str, bytes]] | None = None,
     ):
         if queue_size < 1:
             raise ValueError("queue_size must be at least 1")
@@ -82,7 +83,7 @@ class Recorder:
         self.path = Path(path)
         self.queue_size = queue_size
         self.flush_interval_s = flush_interval_s
-        self._writer = McapSessionWriter(self.path, metadata, chunk_size=chunk_size, fsync=fsync)
+        self._writer = McapSessionWriter(self.path, metadata, chunk_size=chunk_size, fsync=fsync, attachments=attachments)
         self._queue: queue.SimpleQueue = queue.SimpleQueue()
         self._lock = threading.Lock()
         self._stats: dict[str, StreamStats] = {}

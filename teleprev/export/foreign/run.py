@@ -39,7 +39,8 @@ def detect_format(path: Path) -> str:
     if summary is None:  # no summary section: teleprev's reader indexes it by a scan (protobuf / JSON only)
         return "foxglove"
     encodings = {c.message_encoding for c in summary.channels.values()}
-    return "ros2" if "cdr" in encodings else "foxglove"
+    # teleprev's own sessions carry one CDR channel (/robot_description) beside their protobuf ones
+    return "ros2" if "cdr" in encodings and "protobuf" not in encodings else "foxglove"
 
 
 def open_foreign(path: Path, recipe: ImportRecipe):
