@@ -33,6 +33,7 @@ FORMAT_VERSION = 2  # session layout version, written to the "teleprev" metadata
 # between trigger samples; a ModeSwitch with reason "estop" stops commanding at once.
 MOTION_FORMAT_VERSION = 2
 
+TASKS_RECORD = "tasks"  # metadata record: task id -> the task as a natural-language instruction
 TF = "/tf"
 ROBOT_DESCRIPTION = "/robot_description"
 RETARGETED = "/pipeline/retargeted"

@@ -14,6 +14,9 @@ def record(
     rig: Optional[Path] = typer.Argument(None, help="Rig file (TOML). Default: the all-simulated rig."),
     out: Optional[Path] = typer.Option(None, "--out", "-o", help="Session file to write (default: sessions/<time>_<task>.mcap)."),
     task: str = typer.Option("", "--task", "-t", help=TASKS_HELP),
+    task_text: str = typer.Option("", "--task-text", help="The task as an instruction in words, e.g. 'pick up the cube and "
+                                  "place it in the bowl' (default: the rig's [tasks] entry); exports give it to the "
+                                  "policy, the id stays in the session."),
     duration: Optional[float] = typer.Option(None, "--duration", help="Run unattended for this many seconds, then stop."),
     episodes: int = typer.Option(1, "--episodes", help="Unattended: split the duration into this many episodes."),
     engage_after: Optional[float] = typer.Option(
@@ -37,7 +40,7 @@ def record(
     console = Console()
     preview = preview and console.is_terminal  # a redrawn screen in a log file is noise: headless there
     options = RecordOptions(
-        out=out or default_session_path(task), rig=rig, models=models, task=task,
+        out=out or default_session_path(task), rig=rig, models=models, task=task, task_text=task_text,
         operator=operator, participant=participant, condition=condition, practice=practice,
     )
     recording = LiveSession(options)

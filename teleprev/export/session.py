@@ -19,6 +19,7 @@ from teleprev.export.recipe import IMAGE, Recipe, ResolvedFeature, resolve
 from teleprev.export.report import EpisodeReport, SessionReport
 from teleprev.export.streams import probe_joint_names, read_episode
 from teleprev.export.timeline import EpisodePlan, plan_episode
+from teleprev.topics import TASKS_RECORD
 
 _NS = 1_000_000_000
 DEFAULT_FPS = 30  # without a camera
@@ -122,7 +123,10 @@ class SessionSource:
         return out
 
     def task_of(self, episode) -> str:
-        return episode.task or self.reader.metadata.get("session", {}).get("task", "") or "teleoperation"
+        """The episode's task as LeRobot gets it: the instruction in words when the session's "tasks"
+        metadata (the rig's [tasks], record --task-text) has one for its id, else the id."""
+        task = episode.task or self.reader.metadata.get("session", {}).get("task", "") or "teleoperation"
+        return self.reader.metadata.get(TASKS_RECORD, {}).get(task, task)
 
     def close(self) -> None:
         self.reader.close()

@@ -39,6 +39,7 @@ class RecordOptions:
     rig: Path | None = None  # None: the default all-sim rig
     models: Path | None = None  # None: the rig's, else the shipped models/
     task: str = ""  # default task label (else the rig's)
+    task_text: str = ""  # the task as an instruction in words (else the rig's [tasks] entry for it)
     operator: str = ""
     participant: str = ""
     condition: str = ""
@@ -100,6 +101,11 @@ class LiveSession:
                         "practice": "true" if o.practice else "false", "software_version": __version__,
                         "numeric_platform": numeric_platform.describe()},
         }
+        tasks = dict(rig.tasks)
+        if o.task_text:
+            tasks[self.task] = o.task_text
+        if tasks:  # task id -> instruction: an export gives LeRobot the instruction, the episodes keep the id
+            meta[topics.TASKS_RECORD] = tasks
         hashes = self.pipeline.model_hashes()
         if hashes is not None:
             meta["models"] = hashes
