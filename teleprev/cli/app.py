@@ -88,12 +88,23 @@ def ray_address_default(argv: list[str]) -> list[str]:
     return out
 
 
+def foxglove_port_default(argv: list[str]) -> list[str]:
+    """`--foxglove [PORT]`: alone (not followed by a port number), it means Foxglove's usual port."""
+    out = []
+    for k, arg in enumerate(argv):
+        if arg == "--foxglove" and not (k + 1 < len(argv) and argv[k + 1].isdigit()):
+            out.append("--foxglove=8765")  # teleprev.live.foxglove_view.DEFAULT_PORT (not imported: --help stays fast)
+            continue
+        out.append(arg)
+    return out
+
+
 def main() -> None:
     """Entry point: user-facing errors print one clear line instead of a traceback."""
     from teleprev.errors import TeleprevError
 
     try:
-        app(args=ray_address_default(sys.argv[1:]))
+        app(args=foxglove_port_default(ray_address_default(sys.argv[1:])))
     except TeleprevError as exc:
         from rich.console import Console
         from rich.markup import escape

@@ -30,6 +30,9 @@ def record(
     participant: str = typer.Option("", "--participant", help="User-study participant id."),
     condition: str = typer.Option("", "--condition", help="User-study condition, e.g. 'w/ preview'."),
     practice: bool = typer.Option(False, "--practice", help="Mark the session as practice; press r when ready."),
+    foxglove: Optional[int] = typer.Option(None, "--foxglove", metavar="[PORT]", help="Also show the session live in "
+                                           "Foxglove: a WebSocket server on 127.0.0.1:PORT (default 8765) with the "
+                                           "file's topics.", show_default=False),
 ) -> None:
     """Record a session: devices, pipeline, preview and execute, episodes, all into one MCAP file."""
     from rich.console import Console
@@ -41,9 +44,11 @@ def record(
     preview = preview and console.is_terminal  # a redrawn screen in a log file is noise: headless there
     options = RecordOptions(
         out=out or default_session_path(task), rig=rig, models=models, task=task, task_text=task_text,
-        operator=operator, participant=participant, condition=condition, practice=practice,
+        operator=operator, participant=participant, condition=condition, practice=practice, foxglove=foxglove,
     )
     recording = LiveSession(options)
+    if recording.view is not None:
+        console.print(f"Foxglove: open connection {recording.view.url}", highlight=False)
     try:
         recording.start()
         if duration is not None:

@@ -17,6 +17,9 @@ def replay(
     engage_after: Optional[float] = typer.Option(None, "--engage-after", help="Engage automatically after this many seconds (else press space)."),
     view: str = typer.Option("side", "--view", help="Robot view: front, side or top."),
     preview: bool = typer.Option(True, "--preview/--no-preview", help="Show the terminal preview."),
+    foxglove: Optional[int] = typer.Option(None, "--foxglove", metavar="[PORT]", help="Also play the session's topics "
+                                           "live to Foxglove: a WebSocket server on 127.0.0.1:PORT (default 8765).",
+                                           show_default=False),
 ) -> None:
     """Play a session's commands back, on screen and optionally to the simulated or a real robot."""
     from rich.console import Console
@@ -25,7 +28,7 @@ def replay(
 
     if to not in ("preview", "sim", "arm"):
         raise typer.BadParameter("--to must be preview, sim or arm")
-    play(session, episode, speed, to, rig, engage_after, Console(), view, preview)
+    play(session, episode, speed, to, rig, engage_after, Console(), view, preview, foxglove)
 
 
 def eval_(

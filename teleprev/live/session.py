@@ -45,6 +45,7 @@ class RecordOptions:
     condition: str = ""
     practice: bool = False
     queue_size: int = 8192
+    foxglove: int | None = None  # a live Foxglove view on this port of 127.0.0.1 (0: any free port)
 
 
 def default_session_path(task: str) -> Path:
@@ -74,15 +75,31 @@ class LiveSession:
         self.robot = load_robot(rig.rig.robot)
         out.parent.mkdir(parents=True, exist_ok=True)
         urdf = Path(self.robot.urdf_path)
-        self.recorder = Recorder(out, self._metadata(), attachments={urdf.name: (URDF_MEDIA_TYPE, urdf.read_bytes())})
+        self.view = None
+        if options.foxglove is not None:
+            from teleprev.live.foxglove_view import FoxgloveView
+
+            self.view = FoxgloveView(options.foxglove)
+        try:
+            self.recorder = Recorder(out, self._metadata(), attachments={urdf.name: (URDF_MEDIA_TYPE, urdf.read_bytes())})
+        except BaseException:
+            if self.view is not None:
+                self.view.close()
+            raise
         self.loop = SessionLoop(
-            self.clock, self.recorder.log, self.driver,
+            self.clock, self._log, self.driver,
             frames=FramePublisher(self.robot, sensor_frames(rig, self.robot, rig_calibration(rig))),
             tf_period_ns=int(1e9 / rig.pipeline.tf_rate_hz) if rig.pipeline.tf_rate_hz > 0 else 0, queue_size=options.queue_size, on_episode_start=self._episode_started,
         )
         self.runners = {name: DeviceRunner(dev, self.loop.sink, self.clock) for name, dev in self.devices.items()}
         self.loop.actuators = {kind: ActuatorPort(self.devices[first[kind]], self.runners[first[kind]]) for kind in ("arm", "hand")}
         self.summary = None
+
+    def _log(self, msg: Logged) -> bool:
+        """Every message to the file, and to the live Foxglove view when there is one."""
+        if self.view is not None:
+            self.view.log(msg)
+        return self.recorder.log(msg)
 
     def _episode_started(self, task: str) -> None:
         for listener in self.context.task_listeners:
@@ -118,7 +135,7 @@ class LiveSession:
     def start(self) -> "LiveSession":
         self.recorder.start()
         t = self.clock.now_ns()  # first in the file, so that Foxglove's URDF layer has the robot from the start
-        self.recorder.log(Logged(topics.ROBOT_DESCRIPTION, t, RobotDescription(t, self.robot.urdf_path.read_text())))
+        self._log(Logged(topics.ROBOT_DESCRIPTION, t, RobotDescription(t, self.robot.urdf_path.read_text())))
         self.loop.start()
         for runner in self.runners.values():
             runner.start()
@@ -135,7 +152,11 @@ class LiveSession:
         stats = self.loop.stats
         extra = {"loop": {"dropped": json.dumps(dict(stats.dropped)), "commands_sent": json.dumps(dict(stats.commands_sent)),
                           "command_errors": json.dumps(dict(stats.command_errors))}}
-        self.summary = self.recorder.close(extra)
+        try:
+            self.summary = self.recorder.close(extra)
+        finally:
+            if self.view is not None:
+                self.view.close()
         return self.summary
 
     def __enter__(self) -> "LiveSession":
