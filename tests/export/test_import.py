@@ -95,10 +95,10 @@ def test_ros2_mcap_events_resampled_to_one_fps_with_derived_actions(tmp_path):
     assert frame["task"] == "pick up the cube and place it in the bowl"
 
 
-def test_rosbag2_sqlite_with_raw_images_split_at_gaps(tmp_path):
+def test_rosbag2_sqlite_zstd_with_raw_images_split_at_gaps(tmp_path):
     folder = write_ros2(tmp_path / "bag", ForeignSpec(episodes=((0.0, 1.5), (3.0, 4.5)), raw_images=True, events=False),
-                        storage="sqlite3")
-    assert (folder / "bag.db3").is_file()
+                        storage="sqlite3", zstd=True)
+    assert (folder / "bag.db3").is_file() and "zstd" in (folder / "metadata.yaml").read_text()
     recipe = load_import_recipe(_recipe(tmp_path, 'episodes = "gaps"\ngap_s = 0.5\ntask = "wave"', ROS_FEATURES,
                                         export="fps = 0"))
     report = import_files([folder], recipe, "t/x", tmp_path / "out")
@@ -162,3 +162,13 @@ def test_bad_import_recipes_and_files_say_what_is_wrong(tmp_path):
     with pytest.raises(SessionError, match="not a rosbag2 recording"):
         import_files([tmp_path], missing, "t/x", tmp_path / "out3")
     assert not (tmp_path / "out1").exists() and not (tmp_path / "out2").exists()
+
+
+def test_header_stamps_on_another_clock_are_refused_until_log_time_is_chosen(tmp_path):
+    bag = write_ros2(tmp_path / "bag", ForeignSpec(episodes=((0.0, 1.5),), header_offset_s=-3600.0), storage="mcap")
+    header = load_import_recipe(_recipe(tmp_path, "", ROS_FEATURES))
+    with pytest.raises(SessionError, match=r'header stamps are -3600.0 s from .* set \[import\] timestamps = "log"'):
+        import_files([bag], header, "t/x", tmp_path / "out1")
+    logged = load_import_recipe(_recipe(tmp_path, 'timestamps = "log"', ROS_FEATURES))
+    report = import_files([bag], logged, "t/x", tmp_path / "out2")
+    assert report.total_episodes == 1 and 40 <= report.total_frames <= 46

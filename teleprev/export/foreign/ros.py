@@ -39,6 +39,7 @@ _SCHEMAS = {
     TEXT: TEXT,
 }
 _SCAN = 200  # messages read to learn a joint stream's names or a TF topic's child frames
+CLOCK_SKEW_NS = 5_000_000_000  # header stamps further than this from the log times are on another clock
 _CHANNELS = {"rgb8": (3, (0, 1, 2)), "bgr8": (3, (2, 1, 0)), "rgba8": (4, (0, 1, 2)), "bgra8": (4, (2, 1, 0)),
              "8uc3": (3, (2, 1, 0)), "mono8": (1, (0, 0, 0)), "8uc1": (1, (0, 0, 0))}
 
@@ -67,6 +68,8 @@ class RosBagReader:
         self.start_ns = self._bag.start_time if self._bag.message_count else None
         self.end_ns = self._bag.end_time if self._bag.message_count else None
         self.topics = self._topic_infos()
+        if self._use_header:
+            self._check_clocks()
 
     def _topic_infos(self) -> dict[str, TopicInfo]:
         out = {}
@@ -81,6 +84,19 @@ class RosBagReader:
                     self._frames[name] = (topic, child)
                     out[name] = TopicInfo(name, POSE, "cdr", count, None, None)
         return out
+
+    def _check_clocks(self) -> None:
+        """Frames are planned on the stamps and episodes read by log time: the two must share a clock."""
+        for topic, info in self.topics.items():
+            if info.schema not in (JOINTS, IMAGE, POSE) or topic in self._frames:
+                continue
+            for _, log_ns, msg in self._raw([topic]):
+                stamp = self._stamp(msg.header, log_ns)
+                if abs(stamp - log_ns) > CLOCK_SKEW_NS:
+                    raise SessionError(f"{topic}: header stamps are {(stamp - log_ns) / 1e9:+.1f} s from the times the "
+                                       "messages were logged (another clock, e.g. simulation time); set [import] "
+                                       'timestamps = "log"', str(self.path))
+                break
 
     def _children(self, topic: str) -> list[str]:
         seen: dict[str, None] = {}

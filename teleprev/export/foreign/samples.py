@@ -37,6 +37,7 @@ class ForeignSpec:
     raw_images: bool = False  # sensor_msgs/Image (bgr8) instead of CompressedImage (JPEG)
     events: bool = True  # "start" / "stop" on /episode_events
     latency_ms: float = 2.0  # log time = stamp + latency
+    header_offset_s: float = 0.0  # header stamps this far from the log clock (a device or simulation clock)
 
     def times(self, hz: float) -> np.ndarray:
         """Sample times (s) of a stream: only while a demonstration runs (silence between them)."""
@@ -64,10 +65,11 @@ def _events(spec: ForeignSpec):
     return [(T0_NS + int(round(t * _NS)), kind, value, t) for t, kind, value in out]
 
 
-def write_ros2(path: str | Path, spec: ForeignSpec = ForeignSpec(), storage: str = "mcap") -> Path:
-    """A rosbag2 recording (a folder) written by rosbags; storage "mcap" or "sqlite3". Returns the folder."""
+def write_ros2(path: str | Path, spec: ForeignSpec = ForeignSpec(), storage: str = "mcap", zstd: bool = False) -> Path:
+    """A rosbag2 recording (a folder) written by rosbags; storage "mcap" or "sqlite3", each message
+    zstd-compressed with `zstd`. Returns the folder."""
     import cv2
-    from rosbags.rosbag2 import StoragePlugin, Writer
+    from rosbags.rosbag2 import CompressionFormat, CompressionMode, StoragePlugin, Writer
     from rosbags.typesys import Stores, get_typestore
 
     ts = get_typestore(Stores.ROS2_HUMBLE)
@@ -78,6 +80,7 @@ def write_ros2(path: str | Path, spec: ForeignSpec = ForeignSpec(), storage: str
     lat = int(spec.latency_ms * 1e6)
 
     def header(ns: int, frame: str = ""):
+        ns += int(spec.header_offset_s * _NS)
         return Header(stamp=Time(sec=ns // _NS, nanosec=ns % _NS), frame_id=frame)
 
     def pose_parts(t: float):
@@ -86,7 +89,10 @@ def write_ros2(path: str | Path, spec: ForeignSpec = ForeignSpec(), storage: str
         return position, np.array([0.0, 0.0, np.sin(q[3] / 2), np.cos(q[3] / 2)])
 
     path = Path(path)
-    with Writer(path, version=9, storage_plugin=plugin) as w:
+    writer = Writer(path, version=9, storage_plugin=plugin)
+    if zstd:
+        writer.set_compression(CompressionMode.MESSAGE, CompressionFormat.ZSTD)
+    with writer as w:
         c = {
             "joints": w.add_connection("/joint_states", "sensor_msgs/msg/JointState", typestore=ts),
             "image": w.add_connection("/camera/front/image", image_type, typestore=ts),
