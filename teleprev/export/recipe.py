@@ -237,7 +237,8 @@ def _sources(entry: str, schemas: dict[str, str], devices: dict[str, list[str]],
         if topic not in schemas:
             raise SessionError(f"no topic {topic} in this session", where)
         if schemas[topic] not in (JOINTS, POSE, IMAGE):
-            raise SessionError(f"{topic} holds {schemas[topic]} messages, expected {JOINTS}, {POSE} or {IMAGE}", where)
+            raise SessionError(f"{topic} holds {schemas[topic]} messages, expected {JOINTS}, {POSE} or {IMAGE}"
+                               f"{_import_hint(schemas[topic])}", where)
         parsed = T.parse_device_topic(topic)
         prefix = parsed[1] if parsed else topic.strip("/").split("/")[-1]
         return [Source(entry, topic, schemas[topic], prefix)]
@@ -273,5 +274,10 @@ def _sources(entry: str, schemas: dict[str, str], devices: dict[str, list[str]],
 
 def _checked(entry: str, topic: str, schemas: dict[str, str], schema: str, prefix: str, where: str) -> Source:
     if schemas[topic] != schema:
-        raise SessionError(f"stream {entry!r} ({topic}) holds {schemas[topic]} messages, expected {schema}", where)
+        raise SessionError(f"stream {entry!r} ({topic}) holds {schemas[topic]} messages, expected {schema}"
+                           f"{_import_hint(schemas[topic])}", where)
     return Source(entry, topic, schema, prefix)
+
+
+def _import_hint(schema: str) -> str:
+    return " (a ROS recording: bring it in with `teleprev import`)" if "/msg/" in schema else ""

@@ -177,7 +177,8 @@ def export_session(source: SessionSource, dataset, settings: ExportSettings, rep
         result.episodes.append(rep)
         report(Progress("episode_done", name, episode=ep.index, report=rep))
     if not episodes:
-        result.notes.append("no episodes recorded (nothing between episode start and stop events)")
+        result.notes.append("no episodes recorded (nothing between episode start and stop events; a file teleprev did "
+                            "not record is cut into episodes by `teleprev import`)")
     report(Progress("session_done", name, report=result))
     return result
 

@@ -2,6 +2,11 @@
 every message the session file gets, on the same topics with the same schemas (the robot included:
 /robot_description and /tf). Open it in Foxglove with "Open connection", ws://127.0.0.1:<port>.
 
+Every topic a recording will have is declared when the view starts, before a client can connect: a
+client connected while a channel appears can have its subscription to it refused ("unknown channel",
+seen with foxglove-sdk 0.30), and a Foxglove window opened before the camera's first frame would then
+show no camera.
+
 Publishing never holds up the session: `log()` queues the message (a full queue drops it and counts
 it) and one thread encodes and sends. /robot_description is sent once per session, so it is sent again
 whenever a client subscribes to it (a Foxglove window opened mid-session still gets the robot).
@@ -14,8 +19,11 @@ import threading
 import time
 from pathlib import Path
 
+import numpy as np
+
+from teleprev import topics as T
 from teleprev.errors import ConfigError
-from teleprev.messages import Logged, RobotDescription
+from teleprev.messages import Event, ImageSample, JointSample, Logged, PoseSample, RobotDescription, TransformsSample
 from teleprev.session.codec import encode, schema_for
 from teleprev.topics import ROBOT_DESCRIPTION
 
@@ -58,6 +66,16 @@ class FoxgloveView:
     def url(self) -> str:
         return f"ws://{HOST}:{self.port}"
 
+    def declare(self, topic: str, payload) -> None:
+        """Create a topic's channel now, with the schema `payload` (any message of its type) is recorded with.
+        Call before the first log()."""
+        from foxglove import Channel, Schema
+
+        if topic not in self._channels:
+            spec = schema_for(payload)
+            self._channels[topic] = Channel(topic, schema=Schema(name=spec.name, encoding=spec.encoding, data=spec.data),
+                                            message_encoding=spec.message_encoding, context=self._context)
+
     def log(self, msg: Logged) -> None:
         """Queue a message to publish; never blocks (a full queue drops it)."""
         if isinstance(msg.payload, RobotDescription):
@@ -73,22 +91,50 @@ class FoxgloveView:
         self._server.stop()
 
     def _run(self) -> None:
-        from foxglove import Channel, Schema
-
         while True:
             msg = self._queue.get()
             if msg is _STOP:
                 return
             try:
-                channel = self._channels.get(msg.topic)
-                if channel is None:
-                    spec = schema_for(msg.payload)
-                    channel = self._channels[msg.topic] = Channel(
-                        msg.topic, schema=Schema(name=spec.name, encoding=spec.encoding, data=spec.data),
-                        message_encoding=spec.message_encoding, context=self._context)
-                channel.log(encode(msg.payload), log_time=int(msg.log_time_ns))
+                if msg.topic not in self._channels:
+                    self.declare(msg.topic, msg.payload)
+                self._channels[msg.topic].log(encode(msg.payload), log_time=int(msg.log_time_ns))
             except (ValueError, TypeError) as exc:  # a message the file would refuse too: counted, not fatal
                 self.errors.setdefault(msg.topic, str(exc))
+
+
+_EXAMPLES = {
+    "joints": JointSample(0, (), np.zeros(0)),
+    "pose": PoseSample(0, "", np.zeros(3), np.array([0.0, 0.0, 0.0, 1.0])),
+    "image": ImageSample(0, "", b""),
+}
+_EVENTS = {T.EPISODE: "teleprev.EpisodeEvent", T.MODE: "teleprev.ModeSwitch", T.DEVICE_EVENT: "teleprev.DeviceEvent",
+           T.OPERATOR: "teleprev.OperatorEvent", T.STEP_REPORT: "teleprev.StepReport"}
+
+
+def declare_session(view: FoxgloveView, device_streams) -> None:
+    """Declare the topics of a live recording: the devices' streams (StreamSpec), the pipeline's, /tf, the
+    events and the robot description."""
+    for spec in device_streams:
+        if spec.payload in _EXAMPLES:
+            view.declare(spec.topic, _EXAMPLES[spec.payload])
+    view.declare(ROBOT_DESCRIPTION, RobotDescription(0, ""))
+    view.declare(T.TF, TransformsSample(0, ()))
+    for topic in (T.RETARGETED, T.CORRECTED, T.ARM_TARGET, T.COMMAND_ARM, T.COMMAND_HAND):
+        view.declare(topic, _EXAMPLES["joints"])
+    for topic, schema in _EVENTS.items():
+        view.declare(topic, Event(0, schema))
+
+
+def declare_file(view: FoxgloveView, path: Path) -> None:
+    """Declare the topics of a recorded session, each with the schema of its first message."""
+    from teleprev.session.reader import SessionReader
+
+    with SessionReader(path) as reader:
+        for topic in reader.topics:
+            first = next(iter(reader.messages([topic])), None)
+            if first is not None:
+                view.declare(topic, first.payload)
 
 
 def stream_session(view: FoxgloveView, path: Path, start_ns: int | None, stop_ns: int | None, speed: float,

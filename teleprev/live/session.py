@@ -77,9 +77,10 @@ class LiveSession:
         urdf = Path(self.robot.urdf_path)
         self.view = None
         if options.foxglove is not None:
-            from teleprev.live.foxglove_view import FoxgloveView
+            from teleprev.live.foxglove_view import FoxgloveView, declare_session
 
             self.view = FoxgloveView(options.foxglove)
+            declare_session(self.view, [s for dev in self.devices.values() for s in dev.streams()])
         try:
             self.recorder = Recorder(out, self._metadata(), attachments={urdf.name: (URDF_MEDIA_TYPE, urdf.read_bytes())})
         except BaseException:

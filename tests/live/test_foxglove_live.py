@@ -17,6 +17,9 @@ from pathlib import Path
 
 import pytest
 
+from teleprev.cli.app import foxglove_port_default
+from teleprev.errors import ConfigError
+from teleprev.live.foxglove_view import FoxgloveView
 from teleprev.live.session import LiveSession, RecordOptions
 from teleprev.rig import default_rig_path
 from teleprev.robot.model import load_robot
@@ -98,9 +101,10 @@ def test_record_serves_the_files_topics_live_with_the_robot(live):
     path, channels, got = live
     with SessionReader(path) as r:
         file_schemas = {t: info.schema for t, info in r.topics.items()}
-    assert WANTED <= set(channels) <= set(file_schemas)
-    for topic, ch in channels.items():
-        assert ch["schemaName"] == file_schemas[topic], topic
+    # every topic of the file is served with the file's schema (declared up front: some may stay empty)
+    assert WANTED <= set(file_schemas) <= set(channels)
+    for topic, schema in file_schemas.items():
+        assert channels[topic]["schemaName"] == schema, topic
     # the URDF is sent again to the client that subscribes after the session started
     (urdf,) = {_decode(channels["/robot_description"], d).urdf for _, d in got["/robot_description"]}
     assert urdf == load_robot("xarm6_leap_hand").urdf_path.read_text()
@@ -130,3 +134,15 @@ def test_replay_plays_the_session_to_foxglove(live):
     assert WANTED <= set(channels)
     assert _decode(channels["/robot_description"], got["/robot_description"][0][1]).urdf.startswith("<?xml")
     assert len(got["/arm/arm/state"]) > 20 and len(got["/tf"]) > 20
+
+
+def test_the_port_is_optional_and_a_busy_port_is_refused_clearly():
+    assert foxglove_port_default(["record", "--foxglove", "--no-preview"]) == ["record", "--foxglove=8765", "--no-preview"]
+    assert foxglove_port_default(["replay", "s.mcap", "--foxglove", "9000"]) == ["replay", "s.mcap", "--foxglove", "9000"]
+    assert foxglove_port_default(["record", "--foxglove"]) == ["record", "--foxglove=8765"]
+    first = FoxgloveView(0)
+    try:
+        with pytest.raises(ConfigError, match=f"cannot start the Foxglove server on 127.0.0.1:{first.port}"):
+            FoxgloveView(first.port)
+    finally:
+        first.close()
