@@ -43,6 +43,11 @@ class FoxgloveView:
             def on_subscribe(self, client, channel) -> None:
                 if channel.topic == ROBOT_DESCRIPTION and view._urdf is not None:
                     view._queue.put(view._urdf)
+                    # and once more shortly after: foxglove-sdk may call this before the client's sink takes
+                    # messages (its PR #533), which would drop the first copy
+                    again = threading.Timer(0.5, view._queue.put, args=(view._urdf,))
+                    again.daemon = True
+                    again.start()
 
         if not 0 <= port <= 65535:
             raise ConfigError(f"--foxglove: {port} is not a TCP port (0..65535)")
