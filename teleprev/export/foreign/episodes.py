@@ -8,7 +8,7 @@ import numpy as np
 
 from teleprev.errors import SessionError
 from teleprev.export.foreign.config import ImportSection
-from teleprev.messages import Event, JointSample
+from teleprev.messages import Event
 from teleprev.session.reader import Episode
 
 START_WORDS = ("start", "begin")
@@ -70,7 +70,7 @@ def _from_events(reader, section: ImportSection, task: str) -> list[Episode]:
 def _word(payload) -> str | None:
     """The lower-cased text of an event message: std_msgs/String's data, or a JSON object's "event"
     (teleprev's own episode events), "data" or "text" field."""
-    if isinstance(payload, JointSample) or not isinstance(payload, Event):
+    if not isinstance(payload, Event):
         return None
     for key in ("event", "data", "text"):
         value = payload.data.get(key)

@@ -48,7 +48,7 @@ class RosBagReader:
     """A ROS 2 recording with SessionReader's surface (see teleprev/export/foreign/__init__.py)."""
 
     def __init__(self, path: str | Path, recipe: ImportRecipe):
-        from rosbags.highlevel import AnyReader, AnyReaderError
+        from rosbags.highlevel import AnyReader
 
         self.path = Path(path)
         self.recipe = recipe
@@ -56,7 +56,7 @@ class RosBagReader:
         try:
             self._bag = AnyReader([self.path])
             self._bag.open()
-        except (AnyReaderError, Exception) as exc:  # rosbags raises several kinds for files it cannot read
+        except Exception as exc:  # rosbags raises several kinds (its own, OSError, KeyError...) for unreadable files
             raise SessionError(f"not a readable ROS 2 recording ({exc})", str(self.path)) from None
         self._conns: dict[str, list] = {}
         for c in self._bag.connections:
@@ -67,9 +67,13 @@ class RosBagReader:
                          "import": {"source": str(self.path), "format": "ros2"}}
         self.start_ns = self._bag.start_time if self._bag.message_count else None
         self.end_ns = self._bag.end_time if self._bag.message_count else None
-        self.topics = self._topic_infos()
-        if self._use_header:
-            self._check_clocks()
+        try:
+            self.topics = self._topic_infos()
+            if self._use_header:
+                self._check_clocks()
+        except BaseException:
+            self.close()
+            raise
 
     def _topic_infos(self) -> dict[str, TopicInfo]:
         out = {}
