@@ -66,7 +66,9 @@ def test_tf_runs_at_the_arm_state_rate_and_connects_every_sensor_frame(session):
         wrist_frames = {m.payload.frame_id for m in r.messages(["/suit/suit/wrist"])}
     assert len(tf) == len(arm) and [t.stamp_ns for t in tf] == arm  # one /tf per arm state, at its stamp
     parents = {tr.child: tr.parent for tr in tf[-1].transforms}
-    root = load_robot("xarm6_leap_hand").desc.root
+    robot = load_robot("xarm6_leap_hand")
+    root = robot.desc.root
+    assert set(parents) >= set(robot.links) - {root}  # every link of the URDF placed, so the URDF layer draws it
     for frame in image_frames | wrist_frames | {"palm_lower"}:
         seen = frame
         for _ in range(64):
