@@ -9,6 +9,7 @@ Recorded as (see teleprev/session/topics.py):
     JointSample  -> foxglove.JointStates     PoseSample -> foxglove.PoseInFrame
     ImageSample  -> foxglove.CompressedImage TransformsSample -> foxglove.FrameTransforms
     Event        -> JSON with a titled schema (one schema per event type)
+    RobotDescription -> std_msgs/msg/String (ROS 2 CDR)
 """
 
 from __future__ import annotations

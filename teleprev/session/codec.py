@@ -1,4 +1,5 @@
-"""Payloads to MCAP message bytes and back: foxglove protobuf schemas for samples, titled JSON for events.
+"""Payloads to MCAP message bytes and back: foxglove protobuf schemas for samples, titled JSON for events,
+and ROS 2 std_msgs/String in CDR for the robot description (the schema Foxglove's URDF layer reads).
 
 Encoding uses the foxglove-sdk message classes. Decoding reads the schema stored in the file (protobuf
 FileDescriptorSet or JSON schema), with a fast path for foxglove.JointStates, the bulk of a session:
