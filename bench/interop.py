@@ -9,7 +9,8 @@ Figures:
                         with datasets/imports/ros2_arm.toml (30 fps, h264); lerobot's one-time import is
                         outside it (import_realtime_x_with_startup counts it)
   foreign_formats_ok    how many of ros2-mcap, rosbag2-sqlite (raw bgr8 images), foxglove-mcap (written with
-                        the mcap library and Foxglove's schemas) import and load back with LeRobotDataset
+                        the mcap library and Foxglove's schemas; datasets/imports/foxglove_arm.toml) import and load
+                        back with LeRobotDataset
                         with the frames, joint names and values expected
   tf_rate_hz            /tf messages per second in a 3 s sim recording (arm_state_rate_hz beside it)
   urdf_embedded         the recording carries the rig's URDF as an attachment and on /robot_description,
@@ -26,25 +27,6 @@ from pathlib import Path
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 import common  # noqa: E402  (sets one-thread environment before numpy loads)
 
-ROOT = Path(__file__).resolve().parent.parent
-FOXGLOVE_RECIPE = """
-[import]
-episodes = "file"
-task = "pick up the cube and place it in the bowl"
-urdf = "{urdf}"
-[export]
-fps = 30
-[[feature]]
-name = "observation.state"
-streams = ["/joints"]
-[[feature]]
-name = "action"
-streams = ["/joints"]
-timing = "next"
-[[feature]]
-name = "observation.images.front"
-streams = ["/camera/front"]
-"""
 
 
 def import_speed(folder: Path, seconds: float) -> dict:
@@ -104,9 +86,7 @@ def formats(folder: Path, speed: dict) -> dict:
     import_files([sqlite], load_import_recipe("ros2_arm"), "bench/sqlite", folder / "sqlite_out")
     results["rosbag2-sqlite"] = check_dataset(folder / "sqlite_out", "bench/sqlite", 80, "joint_states.gripper")
     fox = write_foxglove_mcap(folder / "fox.mcap", ForeignSpec(episodes=((0.0, 3.0),)))
-    recipe = folder / "fox.toml"
-    recipe.write_text(FOXGLOVE_RECIPE.format(urdf=ROOT / "urdf" / "xarm6.urdf"))
-    import_files([fox], load_import_recipe(recipe), "bench/fox", folder / "fox_out")
+    import_files([fox], load_import_recipe("foxglove_arm"), "bench/fox", folder / "fox_out")
     results["foxglove-mcap"] = check_dataset(folder / "fox_out", "bench/fox", 80, "joints.gripper")
     return results
 

@@ -9,7 +9,7 @@ topics) plus an [import] table saying how to read the foreign files:
     timestamps = "header"        # header: the messages' own stamps (log time where a stamp is 0) | log: log time
     task = "pick up the cube and place it in the bowl"   # the episodes' task (natural language)
     robot_type = ""              # "": the URDF's robot name, else "unknown"
-    urdf = ""                    # joint streams keep the URDF's actuated joints, in its order
+    urdf = ""                    # a URDF path or a name in urdf/: joint streams keep its actuated joints, in its order
     [import.joints]              # or name them per topic (this order); both absent: every joint, as recorded
     "/joint_states" = ["joint1", "joint2"]
 """
@@ -79,11 +79,12 @@ def load_import_recipe(which: str | Path) -> ImportRecipe:
     joints, robot = (), ""
     if section.urdf:
         from teleprev.errors import UrdfError
+        from teleprev.robot.model import resolve_urdf
         from teleprev.robot.urdf import parse_urdf
 
-        urdf_path = Path(section.urdf)
-        if not urdf_path.is_absolute() and not urdf_path.exists():
-            urdf_path = path.parent / urdf_path  # relative to the recipe
+        urdf_path = resolve_urdf(section.urdf)
+        if not urdf_path.is_file() and (path.parent / section.urdf).is_file():
+            urdf_path = path.parent / section.urdf  # relative to the recipe
         try:
             desc = parse_urdf(urdf_path)
         except UrdfError as exc:
