@@ -9,6 +9,7 @@ Recorded as (see teleprev/session/topics.py):
     JointSample  -> foxglove.JointStates     PoseSample -> foxglove.PoseInFrame
     ImageSample  -> foxglove.CompressedImage TransformsSample -> foxglove.FrameTransforms
     Event        -> JSON with a titled schema (one schema per event type)
+    RobotDescription -> std_msgs/msg/String (ROS 2 CDR)
 """
 
 from __future__ import annotations
@@ -89,7 +90,16 @@ class Event:
     data: dict[str, Any] = field(default_factory=dict)
 
 
-Payload = Union[JointSample, PoseSample, ImageSample, TransformsSample, Event]
+@dataclass(frozen=True, slots=True)
+class RobotDescription:
+    """The robot's URDF text, recorded on /robot_description as ROS 2 std_msgs/msg/String (the one schema
+    Foxglove's URDF layer reads from a topic). std_msgs/String has no stamp: it reads back as 0."""
+
+    stamp_ns: int
+    urdf: str
+
+
+Payload = Union[JointSample, PoseSample, ImageSample, TransformsSample, Event, RobotDescription]
 
 
 @dataclass(frozen=True, slots=True)

@@ -45,6 +45,21 @@ class RigSection:
 
 
 @dataclass(frozen=True)
+class SensorFrame:
+    """Where a sensor's frame sits in the robot's tree (its calibrated extrinsics): [frames.<name>], name a
+    camera device (its images' frame) or "suit" (the suit's world frame, in which wrist poses are given)."""
+
+    parent: str = ""  # a link of the robot; "": its root (the arm's base)
+    xyz: tuple[float, float, float] = (0.0, 0.0, 0.0)  # metres, in the parent frame
+    rpy: tuple[float, float, float] | None = None  # radians (fixed-axis roll, pitch, yaw) ...
+    look_at: tuple[float, float, float] | None = None  # ... or a camera's optical frame (z forward, y down) aimed here
+
+    def __post_init__(self):
+        if self.rpy is not None and self.look_at is not None:
+            raise ValueError("give rpy or look_at, not both")
+
+
+@dataclass(frozen=True)
 class DeviceEntry:
     name: str
     plugin: str
@@ -60,6 +75,12 @@ class Rig:
     pipeline: PipelineConfig
     devices: dict[str, DeviceEntry]
     raw: dict = field(default_factory=dict)  # the file's content, recorded as session metadata
+    frames: dict[str, SensorFrame] = field(default_factory=dict)  # [frames.<name>]: sensors in the robot's tree
+    tasks: dict[str, str] = field(default_factory=dict)  # [tasks]: task id -> the instruction in words
+
+    def task_text(self, task: str) -> str:
+        """The natural-language instruction of a task id ([tasks]); the id itself when the rig has none."""
+        return self.tasks.get(task, task)
 
     @property
     def dir(self) -> Path:
@@ -149,9 +170,10 @@ def load_recorded_rig(metadata: dict, session: Path) -> Rig | None:
 
 def parse_rig(data: dict, path: Path | None, where: str | None = None) -> Rig:
     where = where or str(path)
-    unknown = sorted(set(data) - {"rig", "pipeline", "devices"})
+    unknown = sorted(set(data) - {"rig", "pipeline", "devices", "frames", "tasks"})
     if unknown:
-        raise ConfigError(f"unknown table [{unknown[0]}] (expected [rig], [pipeline] and [devices.<name>])", where)
+        raise ConfigError(f"unknown table [{unknown[0]}] (expected [rig], [pipeline], [devices.<name>], "
+                          "[frames.<name>] and [tasks])", where)
     rig = from_table(RigSection, data.get("rig", {}), f"{where} [rig]")
     if isinstance(data.get("pipeline"), dict) and "trigger" in data["pipeline"]:
         raise ConfigError("unknown key 'trigger': it was removed (a pipeline step runs on every glove sample); "
@@ -174,7 +196,23 @@ def parse_rig(data: dict, path: Path | None, where: str | None = None) -> Rig:
             raise ConfigError(f"plugin {table['plugin']!r} declares no valid kind", dwhere)
         settings = from_table(cls.Settings, settings_table, dwhere)
         devices[name] = DeviceEntry(name, table["plugin"], cls.kind, cls, settings)
-    return Rig(path.resolve() if path else None, rig, pipeline, devices, data)
+    frames = from_table(_Frames, {"frames": data.get("frames", {})}, f"{where} [frames]").frames
+    tasks = from_table(_Tasks, {"tasks": data.get("tasks", {})}, f"{where}").tasks
+    for name in frames:
+        if name != "suit" and (name not in devices or devices[name].kind != "camera"):
+            raise ConfigError("names no camera of this rig (a [frames] table is a camera device's name, or suit)",
+                              f"{where} [frames.{name}]")
+    return Rig(path.resolve() if path else None, rig, pipeline, devices, data, frames, tasks)
+
+
+@dataclass(frozen=True)
+class _Frames:
+    frames: dict[str, SensorFrame] = field(default_factory=dict)
+
+
+@dataclass(frozen=True)
+class _Tasks:
+    tasks: dict[str, str] = field(default_factory=dict)
 
 
 def _check_robot(rig: RigSection, pipeline: PipelineConfig, where: str) -> None:

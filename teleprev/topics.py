@@ -16,6 +16,8 @@ What the pipeline computed and sent:
     /command/arm              JointSample   arm command actually sent (execute mode only)
     /command/hand             JointSample   end-effector command actually sent (execute mode only)
     /tf                       TransformsSample   robot link frames (for Foxglove's URDF panel)
+    /robot_description        RobotDescription   the rig's URDF (ROS 2 std_msgs/String), once at the start;
+                                                 the file also carries it as an attachment <robot>.urdf
 
 Events:
     /events/episode           teleprev.EpisodeEvent
@@ -31,7 +33,9 @@ FORMAT_VERSION = 2  # session layout version, written to the "teleprev" metadata
 # between trigger samples; a ModeSwitch with reason "estop" stops commanding at once.
 MOTION_FORMAT_VERSION = 2
 
+TASKS_RECORD = "tasks"  # metadata record: task id -> the task as a natural-language instruction
 TF = "/tf"
+ROBOT_DESCRIPTION = "/robot_description"
 RETARGETED = "/pipeline/retargeted"
 CORRECTED = "/pipeline/corrected"
 ARM_TARGET = "/pipeline/arm_target"

@@ -15,6 +15,7 @@ from teleprev.cli import calibrate as calibrate_cli
 from teleprev.cli import collision
 from teleprev.cli import devices as devices_cli
 from teleprev.cli import export as export_cli
+from teleprev.cli import import_ as import_cli
 from teleprev.cli import record as record_cli
 from teleprev.cli import replay as replay_cli
 from teleprev.cli import robot
@@ -47,6 +48,7 @@ SESSIONS = "Sessions"
 app.command("info", rich_help_panel=SESSIONS)(session_cli.info)
 app.command("recover", rich_help_panel=SESSIONS)(session_cli.recover)
 app.command("export", rich_help_panel=SESSIONS)(export_cli.export)
+app.command("import", rich_help_panel=SESSIONS)(import_cli.import_)
 app.command("replay", rich_help_panel=SESSIONS)(replay_cli.replay)
 app.command("eval", rich_help_panel=SESSIONS)(replay_cli.eval_)
 app.command("audit", rich_help_panel=SESSIONS)(replay_cli.audit)
@@ -86,12 +88,23 @@ def ray_address_default(argv: list[str]) -> list[str]:
     return out
 
 
+def foxglove_port_default(argv: list[str]) -> list[str]:
+    """`--foxglove [PORT]`: alone (not followed by a port number), it means Foxglove's usual port."""
+    out = []
+    for k, arg in enumerate(argv):
+        if arg == "--foxglove" and not (k + 1 < len(argv) and argv[k + 1].isdigit()):
+            out.append("--foxglove=8765")  # teleprev.live.foxglove_view.DEFAULT_PORT (not imported: --help stays fast)
+            continue
+        out.append(arg)
+    return out
+
+
 def main() -> None:
     """Entry point: user-facing errors print one clear line instead of a traceback."""
     from teleprev.errors import TeleprevError
 
     try:
-        app(args=ray_address_default(sys.argv[1:]))
+        app(args=foxglove_port_default(ray_address_default(sys.argv[1:])))
     except TeleprevError as exc:
         from rich.console import Console
         from rich.markup import escape

@@ -14,6 +14,9 @@ def record(
     rig: Optional[Path] = typer.Argument(None, help="Rig file (TOML). Default: the all-simulated rig."),
     out: Optional[Path] = typer.Option(None, "--out", "-o", help="Session file to write (default: sessions/<time>_<task>.mcap)."),
     task: str = typer.Option("", "--task", "-t", help=TASKS_HELP),
+    task_text: str = typer.Option("", "--task-text", help="The task as an instruction in words, e.g. 'pick up the cube and "
+                                  "place it in the bowl' (default: the rig's [tasks] entry); exports give it to the "
+                                  "policy, the id stays in the session."),
     duration: Optional[float] = typer.Option(None, "--duration", help="Run unattended for this many seconds, then stop."),
     episodes: int = typer.Option(1, "--episodes", help="Unattended: split the duration into this many episodes."),
     engage_after: Optional[float] = typer.Option(
@@ -29,6 +32,9 @@ def record(
     practice: bool = typer.Option(False, "--practice", help="Mark the session as practice; press r when ready."),
     connect_timeout: float = typer.Option(
         5.0, "--connect-timeout", help="Unattended or headless: fail unless every device has sent something within this many seconds."),
+    foxglove: Optional[int] = typer.Option(None, "--foxglove", metavar="[PORT]", help="Also show the session live in "
+                                           "Foxglove: a WebSocket server on 127.0.0.1:PORT (default 8765) with the "
+                                           "file's topics.", show_default=False),
 ) -> None:
     """Record a session: devices, pipeline, preview and execute, episodes, all into one MCAP file."""
     from rich.console import Console
@@ -41,13 +47,15 @@ def record(
     console = Console()
     preview = preview and console.is_terminal  # a redrawn screen in a log file is noise: headless there
     options = RecordOptions(
-        out=out or default_session_path(task), rig=rig, models=models, task=task,
+        out=out or default_session_path(task), rig=rig, models=models, task=task, task_text=task_text,
         operator=operator, participant=participant, condition=condition, practice=practice,
-        connect_timeout_s=connect_timeout,
+        connect_timeout_s=connect_timeout, foxglove=foxglove,
     )
     unconnected: list[str] = []
     with StopSignals() as signals:
         recording = LiveSession(options)
+        if recording.view is not None:
+            console.print(f"Foxglove: open connection {recording.view.url}", highlight=False)
         try:
             recording.start()
             if duration is not None or not preview:  # nobody watches the device table: a dead rig must fail

@@ -18,6 +18,9 @@ def replay(
     view: str = typer.Option("side", "--view", help="Robot view: front, side or top."),
     preview: bool = typer.Option(True, "--preview/--no-preview", help="Show the terminal preview."),
     smooth: bool = typer.Option(False, "--smooth", help="Send the commands as the pipeline's jerk-limited generator re-commands them (needed with --to arm for a session that fails `teleprev audit`)."),
+    foxglove: Optional[int] = typer.Option(None, "--foxglove", metavar="[PORT]", help="Also play the session's topics "
+                                           "live to Foxglove: a WebSocket server on 127.0.0.1:PORT (default 8765).",
+                                           show_default=False),
 ) -> None:
     """Play a session's commands back, on screen and optionally to the simulated or a real robot.
     A real robot (--to arm) gets only a session that passes `teleprev audit`, or one played --smooth."""
@@ -39,7 +42,7 @@ def replay(
             console.print(f"[red]not replaying {session} to the robot: it fails the audit[/] ({reasons}). "
                           "Add --smooth to send it through the jerk-limited generator instead.")
             raise typer.Exit(1)
-    play(session, episode, speed, to, rig, engage_after, console, view, preview, smooth)
+    play(session, episode, speed, to, rig, engage_after, console, view, preview, smooth, foxglove)
 
 
 def eval_(

@@ -29,7 +29,8 @@ is taken. A stream may also be given by its topic ("/arm/left/state").
 
 A feature's `timing` is "action" for features named action / action.*, "observation" otherwise:
 observations use the latest sample at or before the frame's time, actions the command sent right after
-it (see timeline.py).
+it (see timeline.py). `timing = "next"` derives an action from a state stream: the value the stream
+has at the next frame's time (where the robot went), for recordings without commands.
 """
 
 from __future__ import annotations
@@ -97,7 +98,7 @@ class ExportSection:
 class FeatureSpec:
     name: str
     streams: tuple[str, ...]
-    timing: Literal["", "observation", "action"] = ""  # "": by the name (see the module doc)
+    timing: Literal["", "observation", "action", "next"] = ""  # "": by the name (see the module doc)
 
     def __post_init__(self):
         if not self.name or not self.streams:
@@ -106,7 +107,7 @@ class FeatureSpec:
     @property
     def is_action(self) -> bool:
         if self.timing:
-            return self.timing == "action"
+            return self.timing in ("action", "next")
         return self.name == "action" or self.name.startswith("action.")
 
 
@@ -131,9 +132,15 @@ def load_recipe(which: str | Path | None = None) -> Recipe:
     if not path.is_file():
         known = ", ".join(sorted(p.stem for p in recipes_dir().glob("*.toml"))) or "none"
         raise ConfigError(f"no such recipe file (recipes in {recipes_dir()}: {known})", str(which))
-    data = read_toml(path)
+    return recipe_from_table(read_toml(path), path)
+
+
+def recipe_from_table(data: dict, path: str | Path) -> Recipe:
+    """A recipe from its TOML table (checked as load_recipe checks a file); `path` names it in errors."""
     if "path" in data:
         raise ConfigError("unknown key 'path'", str(path))
+    if "import" in data:
+        raise ConfigError("an import recipe (it has an [import] table): use it with `teleprev import`", str(path))
     recipe = from_table(Recipe, data, str(path))
     names = [f.name for f in recipe.feature]
     for f in recipe.feature:
@@ -177,6 +184,7 @@ class ResolvedFeature:
     name: str
     is_action: bool
     sources: tuple[Source, ...]
+    next_frame: bool = False  # timing "next": the stream's value at the next frame (an action derived from states)
 
     @property
     def is_image(self) -> bool:
@@ -213,7 +221,7 @@ def resolve(recipe: Recipe, session_topics: dict, metadata: dict[str, dict[str, 
             for s in images:
                 out.append(ResolvedFeature(spec.name.replace("{camera}", s.prefix), False, (s,)))
         elif sources:
-            out.append(ResolvedFeature(spec.name, spec.is_action, tuple(sources)))
+            out.append(ResolvedFeature(spec.name, spec.is_action, tuple(sources), spec.timing == "next"))
     names = [f.name for f in out]
     dup = next((n for n in names if names.count(n) > 1), None)
     if dup:
@@ -230,7 +238,8 @@ def _sources(entry: str, schemas: dict[str, str], devices: dict[str, list[str]],
         if topic not in schemas:
             raise SessionError(f"no topic {topic} in this session", where)
         if schemas[topic] not in (JOINTS, POSE, IMAGE):
-            raise SessionError(f"{topic} holds {schemas[topic]} messages, expected {JOINTS}, {POSE} or {IMAGE}", where)
+            raise SessionError(f"{topic} holds {schemas[topic]} messages, expected {JOINTS}, {POSE} or {IMAGE}"
+                               f"{_import_hint(schemas[topic])}", where)
         parsed = T.parse_device_topic(topic)
         prefix = parsed[1] if parsed else topic.strip("/").split("/")[-1]
         return [Source(entry, topic, schemas[topic], prefix)]
@@ -268,5 +277,10 @@ def _sources(entry: str, schemas: dict[str, str], devices: dict[str, list[str]],
 
 def _checked(entry: str, topic: str, schemas: dict[str, str], schema: str, prefix: str, where: str) -> Source:
     if schemas[topic] != schema:
-        raise SessionError(f"stream {entry!r} ({topic}) holds {schemas[topic]} messages, expected {schema}", where)
+        raise SessionError(f"stream {entry!r} ({topic}) holds {schemas[topic]} messages, expected {schema}"
+                           f"{_import_hint(schemas[topic])}", where)
     return Source(entry, topic, schema, prefix)
+
+
+def _import_hint(schema: str) -> str:
+    return " (a ROS recording: bring it in with `teleprev import`)" if "/msg/" in schema else ""

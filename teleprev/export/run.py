@@ -14,6 +14,7 @@ import os
 import time
 from dataclasses import dataclass, replace
 from pathlib import Path
+from typing import Callable
 
 from teleprev.errors import ConfigError, SessionError, out_of_space
 from teleprev.export import dataset as D
@@ -37,6 +38,7 @@ class ExportOptions:
     workers: int = 1
     video: VideoSettings | None = None  # None: the recipe's
     ray: str | None = None  # run the sessions on Ray: "local" (a new local instance), "auto", "HOST:PORT"
+    open_reader: Callable | None = None  # files that are not teleprev sessions (teleprev/export/foreign/); one process
 
 
 def export(options: ExportOptions, report: Reporter = no_progress) -> ExportReport:
@@ -79,7 +81,7 @@ def export(options: ExportOptions, report: Reporter = no_progress) -> ExportRepo
     try:
         failed: dict[str, str] = {}
         startup = 0.0
-        if options.ray is not None or (options.workers > 1 and len(sources) > 1):
+        if options.open_reader is None and (options.ray is not None or (options.workers > 1 and len(sources) > 1)):
             for s in sources:
                 s.close()  # workers open their own readers (and import lerobot themselves, once each)
             reports = _parallel(options, staging, features, robot, fps, settings, video, report, failed)
@@ -116,7 +118,7 @@ def _open_all(options: ExportOptions, fps: int) -> list[SessionSource]:
     sources: list[SessionSource] = []
     try:
         for path in options.sessions:
-            sources.append(SessionSource(Path(path), options.recipe, fps))
+            sources.append(SessionSource(Path(path), options.recipe, fps, options.open_reader))
     except BaseException:
         for s in sources:
             s.close()

@@ -19,6 +19,7 @@ from teleprev.export.recipe import IMAGE, Recipe, ResolvedFeature, resolve
 from teleprev.export.report import EpisodeReport, SessionReport
 from teleprev.export.streams import probe_joint_names, read_episode
 from teleprev.export.timeline import EpisodePlan, plan_episode
+from teleprev.topics import TASKS_RECORD
 
 _NS = 1_000_000_000
 DEFAULT_FPS = 30  # without a camera
@@ -51,6 +52,7 @@ class SessionSource:
     path: Path
     recipe: Recipe
     fps: int = 0  # asked for (0: the recipe's, else the reference camera's rate)
+    open_reader: Callable | None = None  # path -> a reader with SessionReader's surface (None: a SessionReader)
     reader: object = field(init=False)
     features: list[ResolvedFeature] = field(init=False)
     names: dict[str, tuple[str, ...]] = field(init=False)  # joint names per joint topic
@@ -62,7 +64,7 @@ class SessionSource:
         from teleprev.session.reader import SessionReader
 
         self.path = Path(self.path)
-        self.reader = SessionReader(self.path)
+        self.reader = (self.open_reader or SessionReader)(self.path)
         try:
             self._resolve()
         except BaseException:
@@ -121,7 +123,10 @@ class SessionSource:
         return out
 
     def task_of(self, episode) -> str:
-        return episode.task or self.reader.metadata.get("session", {}).get("task", "") or "teleoperation"
+        """The episode's task as LeRobot gets it: the instruction in words when the session's "tasks"
+        metadata (the rig's [tasks], record --task-text) has one for its id, else the id."""
+        task = episode.task or self.reader.metadata.get("session", {}).get("task", "") or "teleoperation"
+        return self.reader.metadata.get(TASKS_RECORD, {}).get(task, task)
 
     def close(self) -> None:
         self.reader.close()
@@ -143,7 +148,9 @@ def _rate(reader, topic: str) -> float:
     return _NS / float(np.median(d)) if len(d) else 0.0
 
 
-def _decode(data: bytes, topic: str, log_ns: int, where: str) -> np.ndarray:
+def _decode(data, topic: str, log_ns: int, where: str) -> np.ndarray:
+    if isinstance(data, np.ndarray):  # a raw image a foreign reader already laid out as RGB
+        return np.ascontiguousarray(data)
     import cv2
 
     img = cv2.imdecode(np.frombuffer(data, np.uint8), cv2.IMREAD_COLOR_RGB)
@@ -170,7 +177,8 @@ def export_session(source: SessionSource, dataset, settings: ExportSettings, rep
         result.episodes.append(rep)
         report(Progress("episode_done", name, episode=ep.index, report=rep))
     if not episodes:
-        result.notes.append("no episodes recorded (nothing between episode start and stop events)")
+        result.notes.append("no episodes recorded (nothing between episode start and stop events; a file teleprev did "
+                            "not record is cut into episodes by `teleprev import`)")
     report(Progress("session_done", name, report=result))
     return result
 
@@ -198,9 +206,10 @@ def _export_episode(source: SessionSource, dataset, settings: ExportSettings, ep
         for s in f.sources:
             if s.topic == source.reference:
                 continue
-            key = _key(s.topic, f.is_action and s.schema != IMAGE)
+            timing = _timing(f, s)
+            key = _key(s.topic, timing)
             stamps = cams[s.topic].stamps if s.schema == IMAGE else joints[s.topic].stamps
-            streams[key] = (stamps, f.is_action and s.schema != IMAGE)
+            streams[key] = (stamps, timing)
             labels[key] = s.entry
     ref_key = None
     if source.reference:
@@ -231,8 +240,15 @@ def _export_episode(source: SessionSource, dataset, settings: ExportSettings, ep
     return rep
 
 
-def _key(topic: str, is_action: bool) -> str:
-    return f"{topic}|{'action' if is_action else 'observation'}"
+def _timing(f: ResolvedFeature, s) -> bool | str:
+    """How a feature's stream is looked up (see plan_episode): False, True (an action) or "next"."""
+    if s.schema == IMAGE or not f.is_action:
+        return False
+    return "next" if f.next_frame else True
+
+
+def _key(topic: str, timing: bool | str) -> str:
+    return f"{topic}|{'next' if timing == 'next' else 'action' if timing else 'observation'}"
 
 
 def _describe(plan: EpisodePlan, stamps: dict[str, np.ndarray], labels: dict[str, str], start_ns: int, fps: int,
@@ -271,7 +287,7 @@ def _write_pieces(source: SessionSource, dataset, plan: EpisodePlan, joints, cam
             continue
         cols = []
         for s in f.sources:
-            key = _key(s.topic, f.is_action)
+            key = _key(s.topic, _timing(f, s))
             look = plan.lookups[key]
             cols.append(joints[s.topic].values[look.index[frames_all]])
             align.append(look.err_ns[frames_all])

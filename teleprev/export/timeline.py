@@ -9,6 +9,7 @@ reference camera's first frame in the episode (the episode's start without a cam
   t_k = g_k; a hold older than `max_gap` is a gap.
 - Observations (state, other cameras, extras): the latest sample at or before t_k, never a later one;
   older than `max_gap` is a gap.
+- Derived actions ("next"): the latest sample at or before t_{k+1}, the state the robot reached.
 - Actions: the first command at or after t_k and before the next frame's time (the command sent after
   the observation, as lerobot's record loop pairs them); if none was sent in that window, the last
   one before t_k while it is not older than `max_gap` (the robot keeps its last target); else a gap.
@@ -120,10 +121,7 @@ def act(stamps: np.ndarray, times: np.ndarray, fps: int, max_gap_ns: int) -> Loo
     if n == 0:
         zeros = np.zeros(len(times), dtype=np.int64)
         return Lookup(zeros - 1, zeros, np.zeros(len(times), dtype=bool))
-    until = np.empty_like(times)
-    until[:-1] = times[1:]
-    if len(times):
-        until[-1] = times[-1] + _NS // fps
+    until = next_times(times, fps)
     j = np.searchsorted(stamps, times, side="left")
     jc = np.minimum(j, n - 1)
     after = (j < n) & (stamps[jc] < until)
@@ -133,6 +131,15 @@ def act(stamps: np.ndarray, times: np.ndarray, fps: int, max_gap_ns: int) -> Loo
     index = np.where(after, jc, np.where(before >= 0, before, -1))
     err = np.where(after, stamps[jc] - times, np.where(before >= 0, times - stamps[bc], 0))
     return Lookup(index, err, after | held_ok)
+
+
+def next_times(times: np.ndarray, fps: int) -> np.ndarray:
+    """Each frame's next frame time (the last frame's: one period later)."""
+    out = np.empty_like(times)
+    out[:-1] = times[1:]
+    if len(times):
+        out[-1] = times[-1] + _NS // fps
+    return out
 
 
 def plan_episode(
@@ -146,14 +153,20 @@ def plan_episode(
     min_frames: int,
 ) -> EpisodePlan:
     """Frames, lookups, gaps and pieces of one episode. `streams` maps a name to (sorted stamps,
-    is_action); the reference camera is `ref_name` with stamps `ref` (None: fixed clock)."""
+    timing): False an observation, True an action, "next" the observation at the next frame's time;
+    the reference camera is `ref_name` with stamps `ref` (None: fixed clock)."""
     frames = frame_grid(ref, start_ns, stop_ns, fps, max_gap_ns)
     lookups: dict[str, Lookup] = {}
     if ref_name is not None and frames.camera is not None:
         lookups[ref_name] = frames.camera
-    for name, (stamps, is_action) in streams.items():
+    for name, (stamps, timing) in streams.items():
         stamps = np.asarray(stamps, dtype=np.int64)
-        lookups[name] = act(stamps, frames.time_ns, fps, max_gap_ns) if is_action else observe(stamps, frames.time_ns, max_gap_ns)
+        if timing == "next":
+            lookups[name] = observe(stamps, next_times(frames.time_ns, fps), max_gap_ns)
+        elif timing:
+            lookups[name] = act(stamps, frames.time_ns, fps, max_gap_ns)
+        else:
+            lookups[name] = observe(stamps, frames.time_ns, max_gap_ns)
     plan = EpisodePlan(frames, lookups, [])
     ok = plan.covered()
     n = len(ok)

@@ -78,7 +78,7 @@ class SessionLoop:
         driver: PipelineDriver | None = None,
         actuators: dict[str, Actuator] | None = None,
         frames=None,
-        tf_period_ns: int = 33_333_333,
+        tf_period_ns: int = 0,
         queue_size: int = 4096,
         on_episode_start: Callable[[str], None] | None = None,
     ):
@@ -168,6 +168,8 @@ class SessionLoop:
             return
         started = time.perf_counter_ns()
         out = self.driver.feed(msg)
+        if sample.topic == self.driver.topics.arm:
+            self._publish_frames(payload)
         if out.result is None:
             return
         if len(self.stats.step_ns) < 100_000:
@@ -183,7 +185,6 @@ class SessionLoop:
             measured_effector=pipeline.measured(latest.get(self.driver.topics.effector), pipeline.effector_names),
             commands_sent=sum(self.stats.commands_sent.values()), dropped=sum(self.stats.dropped.values()),
         )
-        self._publish_frames(t)
 
     def _device_failed(self, data: dict) -> None:
         """A device failed: count it, tell the operator and, in execute, go back to preview, which brakes
@@ -208,21 +209,21 @@ class SessionLoop:
         else:
             self.stats.command_errors[kind] += 1
 
-    def _publish_frames(self, t_ns: int) -> None:
-        if self.frames is None or t_ns - self._last_tf_ns < self.tf_period_ns:
+    def _publish_frames(self, arm_state) -> None:
+        """/tf for every arm state sample (at most one per tf_period_ns), stamped with its acquisition time
+        so that the robot lines up with the images; the end effector at its latest measured state."""
+        if self.frames is None or arm_state.stamp_ns - self._last_tf_ns < self.tf_period_ns:
             return
-        snap = self.snapshot
-        arm, eff = snap.measured_arm, snap.measured_effector
+        pipeline, model = self.driver.pipeline, self.frames.model
+        arm = pipeline.measured(arm_state, pipeline.arm_names) if isinstance(arm_state, JointSample) else None
         if arm is None:
             return
-        self._last_tf_ns = t_ns
-        pipeline, model = self.driver.pipeline, self.frames.model
+        self._last_tf_ns = arm_state.stamp_ns
         joints = dict(zip(pipeline.arm_names, arm))
+        eff = pipeline.measured(self.driver.latest.get(self.driver.topics.effector), pipeline.effector_names)
         if eff is not None and pipeline.effector_names[0] in model.joint_index:
             joints.update(zip(pipeline.effector_names, eff))
-        q = model.vector(joints)
-        stamp = self._stamp()
-        self._log(Logged(topics.TF, stamp, self.frames.sample(q, stamp)))
+        self._log(Logged(topics.TF, self._stamp(), self.frames.sample(model.vector(joints), arm_state.stamp_ns)))
 
     def _control(self, action: str, data: dict) -> None:
         now = self.clock.now_ns()

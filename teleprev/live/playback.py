@@ -96,9 +96,29 @@ def build_player(session: Path, episode, speed: float, to: str, rig_path=None, s
     return player, runners, tap, rig, message
 
 
+def _start_view(port: int | None, session: Path, player: Player, console: Console):
+    """The live Foxglove view of a replay: the session's topics played at the player's speed from when it
+    starts playing. Returns (view, stop event, thread) or None."""
+    if port is None:
+        return None
+    from teleprev.live.foxglove_view import FoxgloveView, declare_file, stream_session
+
+    view = FoxgloveView(port)
+    declare_file(view, session)
+    stop = threading.Event()
+    p = player.p
+    lo, hi = int(p.t_ns[0]) - 1_000_000_000, int(p.t_ns[-1]) + 1_000_000_000  # the window around the played steps
+    thread = threading.Thread(target=stream_session, name="foxglove-replay", daemon=True,
+                              args=(view, session, lo, hi, player.speed, lambda: player.state.mode in ("playing", "done"), stop))
+    thread.start()
+    console.print(f"Foxglove: open connection {view.url}", highlight=False)
+    return view, stop, thread
+
+
 def play(session: Path, episode, speed: float, to: str, rig_path, engage_after, console: Console, view: str, show: bool,
-         smoothed: bool = False) -> None:
+         smoothed: bool = False, foxglove: int | None = None) -> None:
     player, runners, tap, rig, message = build_player(session, episode, speed, to, rig_path, smoothed)
+    live_view = _start_view(foxglove, session, player, console)
     for r in runners:
         r.start()
     thread = threading.Thread(target=player.run, daemon=True)
@@ -140,6 +160,10 @@ def play(session: Path, episode, speed: float, to: str, rig_path, engage_after, 
         thread.join(2.0)
         for r in runners:
             r.stop()
+        if live_view is not None:
+            live_view[1].set()
+            live_view[2].join(2.0)
+            live_view[0].close()
     sent = sum(1 for phase, _, _ in player.state.sent if phase == "playing")
     console.print(f"played {len(p.t_ns)} steps at {player.speed:.2f}x to {to}; {sent} commands sent" + (f"; {message}" if message else ""))
     if player.state.message:  # the robot refused a command or went away: playback stopped there

@@ -27,7 +27,11 @@ from teleprev.robot.frames import FramePublisher
 from teleprev.robot.model import load_robot
 from teleprev import topics
 from teleprev.clock import SessionClock
+from teleprev.live.frames import sensor_frames
 from teleprev.live.loop import SessionLoop
+from teleprev.messages import Logged, RobotDescription
+
+URDF_MEDIA_TYPE = "application/xml"  # the rig's URDF, attached to the session as <name>.urdf
 
 
 @dataclass
@@ -36,12 +40,14 @@ class RecordOptions:
     rig: Path | None = None  # None: the default all-sim rig
     models: Path | None = None  # None: the rig's, else the shipped models/
     task: str = ""  # default task label (else the rig's)
+    task_text: str = ""  # the task as an instruction in words (else the rig's [tasks] entry for it)
     operator: str = ""
     participant: str = ""
     condition: str = ""
     practice: bool = False
     queue_size: int = 8192
     connect_timeout_s: float = 5.0  # unattended: every device must have sent something by then
+    foxglove: int | None = None  # a live Foxglove view on this port of 127.0.0.1 (0: any free port)
 
 
 def default_session_path(task: str) -> Path:
@@ -70,10 +76,24 @@ class LiveSession:
         self.driver = PipelineDriver(self.pipeline, InputTopics.for_devices(first["glove"], first["suit"], first["arm"], first["hand"]))
         self.robot = load_robot(rig.rig.robot)
         out.parent.mkdir(parents=True, exist_ok=True)
-        self.recorder = Recorder(out, self._metadata(), on_failure=self._recording_failed)
+        urdf = Path(self.robot.urdf_path)
+        self.view = None
+        if options.foxglove is not None:
+            from teleprev.live.foxglove_view import FoxgloveView, declare_session
+
+            self.view = FoxgloveView(options.foxglove)
+            declare_session(self.view, [s for dev in self.devices.values() for s in dev.streams()])
+        try:
+            self.recorder = Recorder(out, self._metadata(), attachments={urdf.name: (URDF_MEDIA_TYPE, urdf.read_bytes())},
+                                     on_failure=self._recording_failed)
+        except BaseException:
+            if self.view is not None:
+                self.view.close()
+            raise
         self.loop = SessionLoop(
-            self.clock, self.recorder.log, self.driver, frames=FramePublisher(self.robot),
-            tf_period_ns=int(1e9 / rig.pipeline.tf_rate_hz), queue_size=options.queue_size, on_episode_start=self._episode_started,
+            self.clock, self._log, self.driver,
+            frames=FramePublisher(self.robot, sensor_frames(rig, self.robot, rig_calibration(rig))),
+            tf_period_ns=int(1e9 / rig.pipeline.tf_rate_hz) if rig.pipeline.tf_rate_hz > 0 else 0, queue_size=options.queue_size, on_episode_start=self._episode_started,
         )
         self.runners = {name: DeviceRunner(dev, self.loop.sink, self.clock) for name, dev in self.devices.items()}
         self.loop.actuators = {kind: ActuatorPort(self.devices[first[kind]], self.runners[first[kind]]) for kind in ("arm", "hand")}
@@ -114,6 +134,12 @@ class LiveSession:
             time.sleep(0.01)
         return False
 
+    def _log(self, msg: Logged) -> bool:
+        """Every message to the file, and to the live Foxglove view when there is one."""
+        if self.view is not None:
+            self.view.log(msg)
+        return self.recorder.log(msg)
+
     def _episode_started(self, task: str) -> None:
         for listener in self.context.task_listeners:
             listener(task)
@@ -131,6 +157,11 @@ class LiveSession:
                         "practice": "true" if o.practice else "false", "software_version": __version__,
                         "numeric_platform": numeric_platform.describe()},
         }
+        tasks = dict(rig.tasks)
+        if o.task_text:
+            tasks[self.task] = o.task_text
+        if tasks:  # task id -> instruction: an export gives LeRobot the instruction, the episodes keep the id
+            meta[topics.TASKS_RECORD] = tasks
         hashes = self.pipeline.model_hashes()
         if hashes is not None:
             meta["models"] = hashes
@@ -142,6 +173,8 @@ class LiveSession:
 
     def start(self) -> "LiveSession":
         self.recorder.start()
+        t = self.clock.now_ns()  # first in the file, so that Foxglove's URDF layer has the robot from the start
+        self._log(Logged(topics.ROBOT_DESCRIPTION, t, RobotDescription(t, self.robot.urdf_path.read_text())))
         self.loop.start()
         for runner in self.runners.values():
             runner.start()
@@ -162,7 +195,11 @@ class LiveSession:
                           "command_errors": json.dumps(dict(stats.command_errors)),
                           "device_failures": json.dumps(dict(stats.device_failures))},
                  "devices": {name: json.dumps(counts) for name, counts in self.device_counts().items()}}
-        self.summary = self.recorder.close(extra)
+        try:
+            self.summary = self.recorder.close(extra)
+        finally:
+            if self.view is not None:
+                self.view.close()
         return self.summary
 
     def __enter__(self) -> "LiveSession":

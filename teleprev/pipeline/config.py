@@ -29,7 +29,7 @@ class PipelineConfig:
     gripper_closed_flexion: float = 1.2  # flexion (rad) at which the gripper is fully closed
     vacuum_on_flexion: float = 0.9  # hysteresis: vacuum switches on above this flexion ...
     vacuum_off_flexion: float = 0.6  # ... and off below this one
-    tf_rate_hz: float = 30.0  # robot link frames on /tf
+    tf_rate_hz: float = 0.0  # cap on the rate of robot link frames on /tf; 0: one per arm state sample
     # Motion limits of the commands (teleprev/robot/limits.py has the defaults; leave a key out to use them).
     arm_acceleration: float | None = None  # rad/s^2 per arm joint
     arm_jerk: float | None = None  # rad/s^3 per arm joint
@@ -40,6 +40,8 @@ class PipelineConfig:
     def __post_init__(self):
         if self.gripper_joint not in HAND_JOINTS:
             raise ValueError(f"gripper_joint must be an SMPL-X hand joint ({', '.join(HAND_JOINTS)}), got {self.gripper_joint!r}")
+        if not 0 <= self.tf_rate_hz < float("inf"):
+            raise ValueError(f"tf_rate_hz must be >= 0 (0: every arm state sample), got {self.tf_rate_hz!r}")
         for key in ("arm_speed", "hand_speed", "arm_acceleration", "arm_jerk", "hand_acceleration"):
             value = getattr(self, key)
             if value is not None and not 0 < value < float("inf"):

@@ -10,8 +10,10 @@ from teleprev.transforms import matrix_to_quat
 
 
 class FramePublisher:
-    def __init__(self, model: RobotModel):
+    def __init__(self, model: RobotModel, sensors: tuple[Transform, ...] = ()):
+        """`sensors`: fixed frames (cameras, the suit's world) hung on the robot's links, sent with every sample."""
         self.model = model
+        self.sensors = tuple(sensors)
         self._joints = [j for j in model.desc.joints]
         self._parent = np.array([model.link_index[j.parent] for j in self._joints])
         self._child = np.array([model.link_index[j.child] for j in self._joints])
@@ -24,5 +26,5 @@ class FramePublisher:
             tuple(
                 Transform(j.parent, j.child, local[i, :3, 3].copy(), matrix_to_quat(local[i, :3, :3]))
                 for i, j in enumerate(self._joints)
-            ),
+            ) + self.sensors,
         )

@@ -1,4 +1,5 @@
-"""Payloads to MCAP message bytes and back: foxglove protobuf schemas for samples, titled JSON for events.
+"""Payloads to MCAP message bytes and back: foxglove protobuf schemas for samples, titled JSON for events,
+and ROS 2 std_msgs/String in CDR for the robot description (the schema Foxglove's URDF layer reads).
 
 Encoding uses the foxglove-sdk message classes. Decoding reads the schema stored in the file (protobuf
 FileDescriptorSet or JSON schema), with a fast path for foxglove.JointStates, the bulk of a session:
@@ -24,13 +25,16 @@ from typing import Callable
 
 import numpy as np
 
-from teleprev.messages import Event, ImageSample, JointSample, Payload, PoseSample, Transform, TransformsSample
+from teleprev.messages import (Event, ImageSample, JointSample, Payload, PoseSample, RobotDescription, Transform,
+                               TransformsSample)
 from teleprev.topics import EVENT_SCHEMAS
 
 JOINT_STATES = "foxglove.JointStates"
 POSE_IN_FRAME = "foxglove.PoseInFrame"
 COMPRESSED_IMAGE = "foxglove.CompressedImage"
 FRAME_TRANSFORMS = "foxglove.FrameTransforms"
+ROS_STRING = ("std_msgs/msg/String", "ros2msg", b"string data", "cdr")
+_CDR_LE = b"\x00\x01\x00\x00"  # CDR encapsulation header: plain CDR, little endian
 STAMP_KEY = "stamp_ns"
 
 _NS = 1_000_000_000
@@ -57,6 +61,8 @@ _spec_cache: dict[str, SchemaSpec] = {}
 
 def schema_for(payload: Payload) -> SchemaSpec:
     """The schema a payload is recorded with (foxglove.* protobuf, or the event's titled JSON schema)."""
+    if isinstance(payload, RobotDescription):
+        return SchemaSpec(*ROS_STRING)
     if isinstance(payload, Event):
         key = payload.schema
         if key not in _spec_cache:
@@ -142,6 +148,9 @@ def encode(payload: Payload) -> bytes:
                               translation=_vec3(fm, tr.translation), rotation=_quat(fm, tr.rotation))
             for tr in payload.transforms
         ]).encode()
+    if t is RobotDescription:
+        text = payload.urdf.encode("utf-8") + b"\0"
+        return _CDR_LE + len(text).to_bytes(4, "little") + text
     if t is Event:
         if STAMP_KEY in payload.data:
             raise ValueError(f"event data may not use the reserved key {STAMP_KEY!r}")
@@ -158,6 +167,8 @@ Decoder = Callable[[bytes], Payload]
 def decoder_for(schema_name: str, schema_encoding: str, schema_data: bytes, message_encoding: str) -> Decoder:
     """A function from message bytes to a payload, for a channel with this schema. Raises ValueError
     for a schema teleprev does not read."""
+    if (schema_name, message_encoding) == (ROS_STRING[0], ROS_STRING[3]):
+        return _robot_description
     if message_encoding == "json":
         title = schema_name
         if schema_encoding == "jsonschema" and schema_data:
@@ -178,6 +189,15 @@ def decoder_for(schema_name: str, schema_encoding: str, schema_data: bytes, mess
     if schema_name == FRAME_TRANSFORMS:
         return _transforms_decoder(cls)
     raise ValueError(f"unsupported schema {schema_name!r}")
+
+
+def _robot_description(data: bytes) -> RobotDescription:
+    if len(data) < 9 or data[:4] != _CDR_LE:
+        raise ValueError("not a little-endian CDR std_msgs/String")
+    n = int.from_bytes(data[4:8], "little")
+    if n < 1 or 8 + n > len(data):
+        raise ValueError("string length runs past the message")
+    return RobotDescription(0, data[8:8 + n - 1].decode("utf-8"))
 
 
 class _EventDecoder:

@@ -76,6 +76,7 @@ class Recorder:
         chunk_size: int = DEFAULT_CHUNK_SIZE,
         fsync: bool = True,
         on_failure: Callable[[BaseException], None] | None = None,
+        attachments: dict[str, tuple[str, bytes]] | None = None,
     ):
         """`on_failure(exc)` is called once, on the writer thread, the moment a write or flush fails (a full
         disk, a dead drive): at most one flush interval after the data it could not write was logged."""
@@ -86,7 +87,7 @@ class Recorder:
         self.path = Path(path)
         self.queue_size = queue_size
         self.flush_interval_s = flush_interval_s
-        self._writer = McapSessionWriter(self.path, metadata, chunk_size=chunk_size, fsync=fsync)
+        self._writer = McapSessionWriter(self.path, metadata, chunk_size=chunk_size, fsync=fsync, attachments=attachments)
         self._queue: queue.SimpleQueue = queue.SimpleQueue()
         self._lock = threading.Lock()
         self._stats: dict[str, StreamStats] = {}

@@ -52,7 +52,9 @@ class McapSessionWriter:
         chunk_size: int = DEFAULT_CHUNK_SIZE,
         compression: str = "zstd",
         fsync: bool = True,
+        attachments: dict[str, tuple[str, bytes]] | None = None,
     ):
+        """`attachments`: name -> (media type, bytes), written at the start (the robot's URDF)."""
         from mcap.writer import LIBRARY_IDENTIFIER, CompressionType, Writer
 
         kinds = {"zstd": CompressionType.ZSTD, "lz4": CompressionType.LZ4, "none": CompressionType.NONE}
@@ -88,6 +90,8 @@ class McapSessionWriter:
         })
         for name, rec in records.items():
             self.add_metadata(name, rec)
+        for name, (media_type, data) in (attachments or {}).items():
+            self._mcap.add_attachment(now, now, name, media_type, bytes(data))
         self.flush()
 
     def _channel(self, topic: str, payload: Payload) -> _Channel:

@@ -1,0 +1,54 @@
+"""`teleprev import FILE... --recipe R.toml --repo-id NAME`: robot recordings teleprev did not make (ROS 2
+MCAP, rosbag2 folders, Foxglove-schema MCAP) into a LeRobot dataset, through the export's machinery.
+
+Only typer and the standard library at import time (see cli/export.py)."""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import List, Optional
+
+import typer
+
+from teleprev.cli.export import DEFAULT_ROOT, _as_json, _Bars, _stop_on_sigterm
+
+
+def import_(
+    files: List[Path] = typer.Argument(..., help="ROS 2 .mcap files, rosbag2 folders (sqlite3 or mcap) or Foxglove-schema "
+                                       ".mcap files, imported in this order.", show_default=False),
+    recipe: str = typer.Option(..., "--recipe", help="Import recipe: which topics become which features, how episodes "
+                               "are cut: a file, or the name of one in datasets/imports/ (ros2_arm).", show_default=False),
+    repo_id: str = typer.Option(..., "--repo-id", help="Dataset name, e.g. lab/pick_place.", show_default=False),
+    root: Optional[Path] = typer.Option(None, "--root", help="Dataset folder (default: ./datasets/out/<repo-id>).",
+                                        show_default=False),
+    fps: int = typer.Option(0, "--fps", help="Frames per second (default: the recipe's, else the reference camera's rate)."),
+    append: bool = typer.Option(False, "--append", help="Add the files to an existing dataset."),
+    codec: Optional[str] = typer.Option(None, "--codec", help="Video codec: h264, hevc or av1 (default: the recipe's).",
+                                        show_default=False),
+    as_json: bool = typer.Option(False, "--json", help="Print the summary as one JSON object instead of a table."),
+) -> None:
+    """Import robot recordings (ROS 2 MCAP, rosbag2, Foxglove MCAP) into a LeRobot dataset."""
+    from rich.console import Console
+
+    from teleprev.export.foreign.config import load_import_recipe
+    from teleprev.export.foreign.run import import_files
+    from teleprev.export.run import with_video
+
+    the_recipe = load_import_recipe(recipe)
+    video = with_video(the_recipe.recipe, codec=codec)
+    target = root if root is not None else DEFAULT_ROOT / repo_id
+    console = Console(stderr=as_json)
+    with _stop_on_sigterm(), _Bars(console) as bars:
+        report = import_files(files, the_recipe, repo_id, target, fps=fps, append=append, video=video, report=bars)
+    if as_json:
+        import json
+
+        typer.echo(json.dumps(_as_json(report)))
+        return
+    from teleprev.export.report import export_notes, summary_table
+
+    console.print(summary_table(report))
+    for line in export_notes(report):
+        console.print(line, highlight=False)
+    console.print(f"[green]done:[/] {report.total_episodes} episodes, {report.total_frames} frames in {report.root} "
+                  f"(robot {the_recipe.robot_type}, video: {video.describe()})", highlight=False)
