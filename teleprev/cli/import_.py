@@ -10,7 +10,7 @@ from typing import List, Optional
 
 import typer
 
-from teleprev.cli.export import DEFAULT_ROOT, _as_json, _Bars, _stop_on_sigterm
+from teleprev.cli.export import DEFAULT_ROOT, _as_json, _Bars
 
 
 def import_(
@@ -38,8 +38,17 @@ def import_(
     video = with_video(the_recipe.recipe, codec=codec)
     target = root if root is not None else DEFAULT_ROOT / repo_id
     console = Console(stderr=as_json)
-    with _stop_on_sigterm(), _Bars(console) as bars:
-        report = import_files(files, the_recipe, repo_id, target, fps=fps, append=append, video=video, report=bars)
+    from teleprev.cli.signals import StopSignals
+
+    with StopSignals() as signals:  # SIGTERM / SIGHUP stop it like Ctrl-C: the staging folder goes
+        try:
+            with _Bars(console) as bars:
+                report = import_files(files, the_recipe, repo_id, target, fps=fps, append=append, video=video,
+                                      report=bars)
+        except KeyboardInterrupt:
+            Console(stderr=True).print(f"import stopped by {signals.name or 'SIGINT'}; {target} is as it was",
+                                       highlight=False, soft_wrap=True)
+            raise typer.Exit(signals.exit_code or 130) from None
     if as_json:
         import json
 

@@ -32,7 +32,11 @@ def test_a_signal_finalizes_the_session(tmp_path, signals, gap_s):
     finally:
         if proc.poll() is None:
             proc.kill()
-    assert proc.returncode == 128 + signals[0], stderr
+    if gap_s == 0.0 and len(signals) > 1:
+        # sent back to back, they may all be pending at once, and Python runs pending handlers by number
+        assert proc.returncode in {128 + s for s in signals}, stderr
+    else:
+        assert proc.returncode == 128 + signals[0], stderr
     assert not has_traceback(stdout + stderr)
     assert "is complete" in stdout
     with SessionReader(out, verify_crc=True) as reader:  # a complete file: footer, summary, counters
