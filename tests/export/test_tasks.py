@@ -14,7 +14,7 @@ from tests.helpers.sessions import record_sim
 @pytest.mark.parametrize("task_text", ["", "put the red cube in the blue bowl"])
 def test_the_dataset_gets_the_instruction_and_the_session_keeps_the_id(tmp_path, task_text):
     session = tmp_path / "s.mcap"
-    record_sim(session, seconds=1.2, engage_after=0.4, task="pick_place", task_text=task_text)
+    record_sim(session, seconds=2.5, engage_after=0.5, task="pick_place", task_text=task_text)  # long enough under load
     with SessionReader(session) as r:
         assert [e.task for e in r.episodes()] == ["pick_place"]
         assert r.metadata["session"]["task"] == "pick_place"
