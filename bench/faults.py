@@ -49,7 +49,7 @@ import common  # noqa: E402  (sets one-thread environment before numpy loads)
 ROOT = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(ROOT))
 from tests.helpers.faults import (  # noqa: E402
-    alive, descendants, fsize_limit, has_traceback, mcap_opens, run_cli, small_disk, start_cli, wait_for_file,
+    alive, fsize_limit, has_traceback, mcap_opens, run_cli, small_disk, start_cli, wait_for_file, workers_of,
 )
 
 SIGNALS = (signal.SIGKILL, signal.SIGTERM, signal.SIGHUP)
@@ -268,7 +268,7 @@ def export_signal(work: Path, k: int, base: Path, sessions: list[Path], sig: int
         args += ["-j", str(workers)]
     proc = start_cli(args)
     time.sleep(after_s)
-    children = descendants(proc.pid)
+    children = workers_of(proc.pid)
     proc.send_signal(sig)
     try:
         stdout, stderr = proc.communicate(timeout=120)
