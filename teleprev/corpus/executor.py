@@ -97,20 +97,31 @@ def _ignore(event: Any) -> None:
 # -- local worker processes ------------------------------------------------------------------------
 
 
+def die_with_parent() -> None:
+    """Ask the kernel to SIGKILL this process when its parent exits (Linux's PR_SET_PDEATHSIG)."""
+    import sys
+
+    if not sys.platform.startswith("linux"):
+        return
+    parent = os.getppid()
+    try:
+        import ctypes
+
+        ctypes.CDLL(None, use_errno=True).prctl(1, signal.SIGKILL)  # PR_SET_PDEATHSIG
+    except (OSError, AttributeError):
+        return
+    if os.getppid() != parent:  # the parent went before the request was made
+        os._exit(1)
+
+
 def _die_with(parent_pid: int) -> None:
     """A worker must never outlive the process that started it (it would go on writing into a staging
-    folder nobody will commit): the kernel kills it when its parent, the fork server, exits (the fork
-    server exits when the driver does), and a watchdog thread ends it if the driver itself is gone."""
-    import sys
+    folder nobody will commit): the kernel kills it when its parent, the fork server, dies (and the fork
+    server when the driver does: teleprev.corpus.orphans, preloaded there), and a watchdog thread ends
+    it if the driver is gone all the same (where there is no PR_SET_PDEATHSIG)."""
     import threading
 
-    if sys.platform.startswith("linux"):
-        try:
-            import ctypes
-
-            ctypes.CDLL(None, use_errno=True).prctl(1, signal.SIGKILL)  # PR_SET_PDEATHSIG
-        except (OSError, AttributeError):
-            pass
+    die_with_parent()
 
     def watch() -> None:
         while True:
@@ -171,8 +182,8 @@ class LocalExecutor:
         import multiprocessing as mp
 
         ctx = mp.get_context("forkserver")
-        # takes effect when the server starts (once per process); the first module makes it die with us
-        ctx.set_forkserver_preload(["teleprev.corpus.server_deathsig", *self.preload])
+        # takes effect when the server starts (once per process); orphans first: the server dies with us
+        ctx.set_forkserver_preload(["teleprev.corpus.orphans", *self.preload])
         return ctx
 
     def map(self, fn: Callable, context: Any, items: list, labels: list[str] | None = None,

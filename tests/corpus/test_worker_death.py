@@ -8,7 +8,7 @@ import sys
 import textwrap
 import time
 
-from tests.helpers.faults import ROOT, alive, descendants
+from tests.helpers.faults import ROOT, alive, workers_of
 
 DRIVER = textwrap.dedent("""
     import sys, time
@@ -34,7 +34,7 @@ def test_workers_die_with_their_parent(tmp_path):
         deadline = time.monotonic() + 60
         workers: set[int] = set()
         while time.monotonic() < deadline:  # the fork server and its two workers
-            workers = descendants(proc.pid)
+            workers = workers_of(proc.pid)
             if len(workers) >= 3:
                 break
             time.sleep(0.05)

@@ -17,7 +17,7 @@ import pytest
 from teleprev.export.dataset import Staging
 from teleprev.export.swap import FAULT_ENV, clean_stale
 from teleprev.export.synthetic import EpisodeSpec, SyntheticSession, write_session
-from tests.helpers.faults import ROOT, alive, descendants, has_traceback, run_cli, start_cli
+from tests.helpers.faults import ROOT, alive, has_traceback, run_cli, start_cli, workers_of
 
 
 def tree(root: Path) -> dict[str, str]:
@@ -90,14 +90,14 @@ def test_workers_die_with_a_killed_export_and_the_next_export_cleans_up(sessions
         deadline = time.monotonic() + 240
         while time.monotonic() < deadline:  # until both workers are writing their parts
             parts = [p for s in tmp_path.glob(".killed.export-*") for p in s.glob("part-*")]
-            workers |= descendants(proc.pid)
+            workers |= workers_of(proc.pid)
             if len(parts) == 2:
                 break
             assert proc.poll() is None, proc.communicate()
             time.sleep(0.05)
         else:
             pytest.fail("the workers never started")
-        workers |= descendants(proc.pid)
+        workers |= workers_of(proc.pid)
         proc.send_signal(signal.SIGKILL)
         proc.wait(timeout=10)
     finally:
@@ -113,3 +113,25 @@ def test_workers_die_with_a_killed_export_and_the_next_export_cleans_up(sessions
     assert run.returncode == 0 and not has_traceback(run.stdout + run.stderr), run.stderr
     assert "left by a killed export" in run.stdout
     assert not list(tmp_path.glob(".killed.export-*")) and (root / "meta" / "info.json").is_file()
+
+
+def test_sigterm_or_sighup_stop_an_append_and_leave_the_dataset_as_it_was(sessions, tmp_path):
+    root = tmp_path / "kept"
+    run = run_cli(["export", sessions[0], "--repo-id", "lab/kept", "--root", root], timeout=300)
+    assert run.returncode == 0, run.stderr
+    before = tree(root)
+    for sig in (signal.SIGTERM, signal.SIGHUP):
+        proc = start_cli(["export", sessions[1], "--repo-id", "lab/kept", "--root", root, "--append"])
+        try:
+            deadline = time.monotonic() + 240
+            while not list(tmp_path.glob(".kept.export-*/dataset")) and time.monotonic() < deadline:
+                assert proc.poll() is None, proc.communicate()
+                time.sleep(0.02)
+            proc.send_signal(sig)
+            stdout, stderr = proc.communicate(timeout=120)
+        finally:
+            if proc.poll() is None:
+                proc.kill()
+        assert proc.returncode == 128 + sig, stderr
+        assert not has_traceback(stdout + stderr) and f"stopped by {signal.Signals(sig).name}" in stderr
+        assert tree(root) == before and not list(tmp_path.glob(".kept.export-*"))

@@ -101,6 +101,20 @@ def descendants(pid: int) -> set[int]:
     return out
 
 
+def workers_of(pid: int) -> set[int]:
+    """The processes below `pid` that run teleprev's work: every descendant but multiprocessing's
+    resource tracker (it holds no task and ends when the last process using it has gone)."""
+    out = set()
+    for p in descendants(pid):
+        try:
+            cmdline = Path(f"/proc/{p}/cmdline").read_bytes()
+        except OSError:
+            continue
+        if b"resource_tracker" not in cmdline:
+            out.add(p)
+    return out
+
+
 def alive(pid: int) -> bool:
     try:
         stat = Path(f"/proc/{pid}/stat").read_text()

@@ -1,0 +1,485 @@
+"""Fault matrix: every fault a lab meets, on the real CLI in subprocesses, seeded.
+
+    python bench/faults.py [--json] [--quick] [--seed N] [--details FILE]
+
+Faults (times and offsets drawn from the seed):
+  record   SIGKILL / SIGTERM / SIGHUP at a random time of `teleprev record` (unattended, engaged); a full
+           disk (a small tmpfs of random size where mount works, else RLIMIT_FSIZE); a device dying mid-
+           session (a camera playing a clip that ends)
+  export   SIGKILL / SIGTERM / SIGHUP at a random time of `teleprev export --append` onto an existing
+           dataset (one in three with -j 2); appending on a full disk
+  recover  SIGKILL / SIGTERM / SIGHUP at a random time of `teleprev recover`
+  file     one flipped bit at a random offset of a recorded session; the session cut at a random offset
+Per fault: the exit code, the seconds of recording lost, whether the output opens with the checks of
+`mcap doctor` (the mcap library's readers with CRC validation: every record, the summary, every message),
+and whether the old dataset survived (byte for byte, or the whole new one in its place).
+
+Seconds lost: signals and record on a full disk: from the last message kept to the signal (or to the
+moment the disk filled: the file reached the disk's size); a device dying: the longest silence of the
+streams that did not die, over 0.1 s; flips and cuts: the log time the kept messages no longer cover,
+minus the damaged range (the chunk the flipped byte is in; everything after a cut).
+Figures:
+  faults_run        faults run
+  data_lost_s_max   the largest of those (target: <= 1.0 s)
+  silent_failures   faults that lost data (or a dataset) without a non-zero exit and a one-line message,
+                    either from the faulted command or from `teleprev info` on what it left
+  tracebacks_shown  runs that printed a Python traceback
+  datasets_lost     exports after which the old dataset was neither intact nor replaced by the whole new one
+The machine is shared with other work: times are not figures here, only what happened.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import json
+import os
+import random
+import shutil
+import signal
+import subprocess
+import sys
+import tempfile
+import time
+from dataclasses import asdict, dataclass
+from pathlib import Path
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+import common  # noqa: E402  (sets one-thread environment before numpy loads)
+
+ROOT = Path(__file__).resolve().parent.parent
+sys.path.insert(0, str(ROOT))
+from tests.helpers.faults import (  # noqa: E402
+    alive, fsize_limit, has_traceback, mcap_opens, run_cli, small_disk, start_cli, wait_for_file, workers_of,
+)
+
+SIGNALS = (signal.SIGKILL, signal.SIGTERM, signal.SIGHUP)
+LOST_EPS_S = 0.02  # below this a loss is rounding, not data
+
+
+@dataclass
+class Row:
+    kind: str
+    detail: str
+    exit_code: int | None
+    lost_s: float = 0.0
+    opens: bool | None = None
+    dataset_ok: bool | None = None
+    announced: bool = True  # a non-zero exit and one line, from the command or from `info` on its output
+    traceback: bool = False
+
+    @property
+    def silent(self) -> bool:
+        return not self.announced and (self.lost_s > LOST_EPS_S or self.dataset_ok is False)
+
+
+def one_line(run) -> bool:
+    return run.returncode != 0 and len([x for x in run.stderr.splitlines() if x.strip()]) == 1
+
+
+def info_announces(path: Path) -> tuple[bool, bool]:
+    """(`teleprev info` exits non-zero with one line, it printed a traceback)."""
+    run = run_cli(["info", path], timeout=120)
+    return one_line(run), has_traceback(run.stdout + run.stderr)
+
+
+def last_log_ns(path: Path) -> int | None:
+    from teleprev.session.reader import SessionReader
+
+    with SessionReader(path) as reader:
+        return reader.end_ns
+
+
+def message_times(path: Path):
+    """Every message's log time, all topics, sorted (from the index: no decoding)."""
+    import numpy as np
+
+    from teleprev.session.reader import SessionReader
+
+    with SessionReader(path) as reader:
+        parts = [reader.log_times(t) for t in reader.topics]
+    return np.sort(np.concatenate(parts)) if parts else np.zeros(0, np.int64)
+
+
+def uncovered_s(clean, kept) -> float:
+    """Log time the kept messages no longer cover: for each run of missing messages (in the clean file's
+    order), from the last kept message before it to the first kept one after (or the run's end)."""
+    import numpy as np
+
+    if len(clean) == 0:
+        return 0.0
+    have = np.isin(clean, kept)
+    lost, k, n = 0, 0, len(clean)
+    while k < n:
+        if have[k]:
+            k += 1
+            continue
+        j = k
+        while j < n and not have[j]:
+            j += 1
+        lo = clean[k - 1] if k > 0 else clean[k]
+        hi = clean[j] if j < n else clean[j - 1]
+        lost += int(hi - lo)
+        k = j
+    return lost / 1e9
+
+
+def tree(root: Path) -> dict[str, str]:
+    return {str(p.relative_to(root)): hashlib.sha256(p.read_bytes()).hexdigest()
+            for p in sorted(root.rglob("*")) if p.is_file()}
+
+
+# -- record ------------------------------------------------------------------------------------------------
+
+
+RECORD = ["record", "--duration", "60", "--no-preview", "--engage-after", "0.3"]
+
+
+def record_signal(work: Path, k: int, sig: int, after_s: float) -> Row:
+    out = work / f"rec_sig{k}.mcap"
+    proc = start_cli(RECORD + ["-o", out])
+    try:
+        if not wait_for_file(out, 150_000, timeout=120):
+            proc.kill()
+            return Row("record", f"{sig.name} (never started)", proc.wait(), traceback=True)
+        time.sleep(after_s)
+        sent_ns = time.time_ns()
+        proc.send_signal(sig)
+        stdout, stderr = proc.communicate(timeout=60)
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+    row = Row("record", f"{sig.name} at {after_s:.2f} s", proc.returncode, traceback=has_traceback(stdout + stderr))
+    final = out
+    if sig == signal.SIGKILL:
+        row.announced, tb = info_announces(out)
+        row.traceback |= tb
+        final = work / f"rec_sig{k}.recovered.mcap"
+        run = run_cli(["recover", out, "-o", final], timeout=120)
+        row.traceback |= has_traceback(run.stdout + run.stderr)
+    else:
+        row.announced = proc.returncode == 128 + sig
+    row.opens = mcap_opens(final)
+    end = last_log_ns(final) if final.exists() else None
+    row.lost_s = max(0.0, (sent_ns - end) / 1e9) if end is not None else float("inf")
+    return row
+
+
+def record_full_disk(work: Path, k: int, size: int) -> Row:
+    with small_disk(work / f"disk{k}", size) as (disk, preexec):
+        out = disk / "x.mcap"
+        limit = size if preexec is not None else None
+        proc = start_cli(RECORD + ["-o", out], preexec_fn=preexec)
+        full_ns = None
+        try:
+            while proc.poll() is None:  # the moment the file reaches the disk's size: the disk is full
+                if full_ns is None and out.exists():
+                    st = os.statvfs(disk)
+                    if (limit is not None and out.stat().st_size >= limit - 65536) or \
+                            (limit is None and st.f_bavail * st.f_frsize < 65536):
+                        full_ns = time.time_ns()
+                time.sleep(0.005)
+            stdout, stderr = proc.communicate(timeout=60)
+        finally:
+            if proc.poll() is None:
+                proc.kill()
+        row = Row("record", f"full disk at {size // 1000} kB", proc.returncode, announced=one_line(proc_result(proc, stderr)),
+                  traceback=has_traceback(stdout + stderr))
+        saved = work / f"disk{k}.recovered.mcap"
+        run = run_cli(["recover", out, "-o", saved], timeout=120)
+        row.traceback |= has_traceback(run.stdout + run.stderr)
+    row.opens = mcap_opens(saved)
+    end = last_log_ns(saved) if saved.exists() else None
+    if end is None or full_ns is None:
+        row.lost_s = float("inf") if end is None else 0.0
+    else:
+        row.lost_s = max(0.0, (full_ns - end) / 1e9)
+    return row
+
+
+def proc_result(proc, stderr: str):
+    return subprocess.CompletedProcess(proc.args, proc.returncode, "", stderr)
+
+
+def device_dies(work: Path, k: int, clip_s: float) -> Row:
+    import cv2
+    import numpy as np
+
+    folder = work / f"dev{k}"
+    folder.mkdir()
+    writer = cv2.VideoWriter(str(folder / "clip.mp4"), cv2.VideoWriter_fourcc(*"mp4v"), 30.0, (64, 48))
+    for i in range(int(clip_s * 30)):
+        writer.write(np.full((48, 64, 3), i % 255, np.uint8))
+    writer.release()
+    rig_text = (ROOT / "rigs" / "sim.toml").read_text()
+    rig_text += '\n[devices.cam_clip]\nplugin = "opencv.camera"\nsource = "clip.mp4"\n'
+    (folder / "rig.toml").write_text(rig_text)
+    out = folder / "s.mcap"
+    run = run_cli(["record", folder / "rig.toml", "--duration", str(clip_s + 2.5), "--no-preview", "--engage-after", "0.3",
+                   "-o", out], timeout=180)
+    row = Row("record", f"camera clip ends after {clip_s:.1f} s", run.returncode, traceback=has_traceback(run.stdout + run.stderr))
+    row.opens = mcap_opens(out)
+    from teleprev.session.reader import SessionReader
+    from teleprev.session.summary import summarize
+
+    s = summarize(out)
+    gaps = [st.max_gap_s or 0.0 for st in s.streams if st.topic.startswith(("/glove/", "/suit/", "/arm/", "/hand/"))]
+    row.lost_s = max(0.0, max(gaps, default=0.0) - 0.1)
+    with SessionReader(out) as reader:
+        clip = reader.topics.get("/camera/cam_clip/image")
+        marked = any(d.device == "cam_clip" for d in s.device_events)
+    # The session goes on without it (exit 0); the dead device must be marked in the file.
+    row.announced = run.returncode == 0 and clip is not None and marked
+    row.dataset_ok = None
+    if not marked:
+        row.lost_s = max(row.lost_s, 2 * LOST_EPS_S)  # an unmarked death counts as silent
+    return row
+
+
+# -- recover ----------------------------------------------------------------------------------------------
+
+
+def recover_signal(work: Path, k: int, src: Path, sig: int, after_s: float) -> Row:
+    before = hashlib.sha256(src.read_bytes()).hexdigest()
+    out = work / f"recsig{k}.mcap"
+    proc = start_cli(["recover", src, "-o", out])
+    time.sleep(after_s)
+    proc.send_signal(sig)
+    stdout, stderr = proc.communicate(timeout=60)
+    row = Row("recover", f"{sig.name} at {after_s:.2f} s", proc.returncode, traceback=has_traceback(stdout + stderr))
+    intact = hashlib.sha256(src.read_bytes()).hexdigest() == before
+    row.opens = (not out.exists()) or mcap_opens(out)  # nothing, or a whole file
+    row.lost_s = 0.0 if intact else float("inf")
+    row.announced = proc.returncode != 0 or (out.exists() and row.opens)
+    for partial in work.glob(f".{out.name}.partial-*"):  # a SIGKILL cannot clean up; the next run may
+        partial.unlink()
+    return row
+
+
+# -- export -----------------------------------------------------------------------------------------------
+
+
+def export_signal(work: Path, k: int, base: Path, sessions: list[Path], sig: int, after_s: float, workers: int,
+                  old_episodes: int, new_episodes: int) -> Row:
+    root = work / f"ds_kill{k}"
+    shutil.copytree(base, root)
+    old = tree(root)
+    args = ["export", *sessions, "--repo-id", "bench/faults", "--root", root, "--append"]
+    if workers > 1:
+        args += ["-j", str(workers)]
+    proc = start_cli(args)
+    time.sleep(after_s)
+    children = workers_of(proc.pid)
+    proc.send_signal(sig)
+    try:
+        stdout, stderr = proc.communicate(timeout=120)
+    except subprocess.TimeoutExpired:
+        proc.kill()
+        stdout, stderr = proc.communicate()
+    deadline = time.monotonic() + 5
+    while any(alive(p) for p in children) and time.monotonic() < deadline:
+        time.sleep(0.05)
+    outlived = [p for p in children if alive(p)]
+    for p in outlived:
+        os.kill(p, signal.SIGKILL)
+    row = Row("export", f"{sig.name} at {after_s:.1f} s, -j {workers}", proc.returncode,
+              traceback=has_traceback(stdout + stderr))
+    if root.is_dir() and tree(root) == old:
+        row.dataset_ok = True
+    else:
+        row.dataset_ok = root.is_dir() and whole_dataset(root, old_episodes + new_episodes)
+    if outlived:
+        row.dataset_ok = False  # a worker that outlives its export may still write
+        row.detail += f" ({len(outlived)} workers outlived it)"
+    from teleprev.export.swap import clean_stale
+
+    clean_stale(root)
+    shutil.rmtree(root, ignore_errors=True)
+    return row
+
+
+def whole_dataset(root: Path, episodes: int) -> bool:
+    from lerobot.datasets.lerobot_dataset import LeRobotDataset
+
+    try:
+        ds = LeRobotDataset("bench/faults", root=root, video_backend="pyav")
+        return ds.num_episodes == episodes and ds[len(ds) - 1] is not None
+    except Exception:
+        return False
+
+
+def export_full_disk(work: Path, k: int, base: Path, session: Path) -> Row:
+    with small_disk(work / f"xdisk{k}", 40_000_000) as (disk, preexec):
+        root = disk / "ds"
+        shutil.copytree(base, root)
+        old = tree(root)
+        if preexec is None:
+            st = os.statvfs(disk)
+            (disk / "filler").write_bytes(b"\0" * max(0, st.f_bavail * st.f_frsize - 150_000 - 40_000 * k))
+        else:
+            preexec = fsize_limit(150_000 + 40_000 * k)
+        run = run_cli(["export", session, "--repo-id", "bench/faults", "--root", root, "--append"], preexec_fn=preexec,
+                      timeout=300)
+        row = Row("export", "full disk", run.returncode, announced=one_line(run),
+                  traceback=has_traceback(run.stdout + run.stderr))
+        row.dataset_ok = tree(root) == old and not list(disk.glob(".ds.export-*"))
+    return row
+
+
+# -- files ------------------------------------------------------------------------------------------------
+
+
+def damaged_file(work: Path, k: int, clean: Path, clean_times, chunks, kind: str, rng: random.Random) -> Row:
+    data = bytearray(clean.read_bytes())
+    path = work / f"{kind}{k}.mcap"
+    if kind == "flip":
+        at = rng.randrange(len(data))
+        data[at] ^= 1 << rng.randrange(8)
+        hit = [c for c in chunks if c[0] <= at < c[0] + c[1]]
+        damaged_s = (hit[0][3] - hit[0][2]) / 1e9 if hit else 0.0
+        detail = f"bit flip at byte {at}" + (" (in a chunk)" if hit else "")
+    else:
+        at = rng.randrange(8, len(data))
+        del data[at:]
+        after = [c for c in chunks if c[0] + c[1] > at]
+        damaged_s = (clean_times[-1] - min(c[2] for c in after)) / 1e9 if after else 0.0
+        detail = f"cut at byte {at}"
+    path.write_bytes(bytes(data))
+    info = run_cli(["info", path], timeout=120)
+    row = Row("file", detail, info.returncode, traceback=has_traceback(info.stdout + info.stderr))
+    row.announced = one_line(info)
+    if info.returncode == 0:  # info found nothing wrong: then what is read back must be the recording
+        row.announced = same_messages(clean, path)
+    out = work / f"{kind}{k}.saved.mcap"
+    run = run_cli(["recover", path, "-o", out], timeout=120)
+    row.traceback |= has_traceback(run.stdout + run.stderr)
+    if run.returncode != 0 or not out.exists():
+        row.opens = False
+        row.lost_s = float("inf")
+        row.announced = row.announced and one_line(run)
+        return row
+    row.opens = mcap_opens(out)
+    kept = message_times(out)
+    row.lost_s = max(0.0, uncovered_s(clean_times, kept) - damaged_s)
+    return row
+
+
+def same_messages(a: Path, b: Path) -> bool:
+    from mcap.reader import make_reader
+
+    def raw(p):
+        with open(p, "rb") as f:
+            return [(c.topic, m.log_time, m.data) for _, c, m in make_reader(f, validate_crcs=True).iter_messages()]
+
+    try:
+        return raw(a) == raw(b)
+    except Exception:
+        return False
+
+
+# -- the matrix -------------------------------------------------------------------------------------------
+
+
+def main() -> None:
+    p = common.parser(__doc__)
+    p.add_argument("--seed", type=int, default=16)
+    p.add_argument("--details", type=Path, help="write every fault's row to this JSON file")
+    args = p.parse_args()
+    rng = random.Random(args.seed)
+    n = dict(record_signal=2, full_disk=2, device=1, recover_signal=1, export_signal=1, export_disk=1, flip=6, cut=3) \
+        if args.quick else dict(record_signal=8, full_disk=8, device=4, recover_signal=5, export_signal=3, export_disk=3,
+                                flip=100, cut=40)
+    os.environ.setdefault("HF_HUB_OFFLINE", "1")
+    rows: list[Row] = []
+
+    def add(row: Row) -> None:
+        rows.append(row)
+        print(f"{len(rows):4d} {row.kind:8s} {row.detail:42s} exit {row.exit_code!s:5s} lost {row.lost_s:7.3f} s "
+              f"opens {row.opens!s:5s} dataset {row.dataset_ok!s:5s} {'SILENT' if row.silent else ''}"
+              f"{' TRACEBACK' if row.traceback else ''}", file=sys.stderr, flush=True)
+
+    with tempfile.TemporaryDirectory(prefix="teleprev-faults-") as tmp:
+        work = Path(tmp)
+        clean = work / "clean.mcap"
+        run = run_cli(["record", "--duration", "6", "--no-preview", "--engage-after", "0.5", "-o", clean], timeout=180)
+        assert run.returncode == 0, run.stderr
+        from tests.helpers.faults import chunk_spans
+
+        chunks = chunk_spans(clean)
+        clean_times = message_times(clean)
+
+        for k in range(n["record_signal"]):
+            for sig in SIGNALS:
+                add(record_signal(work, len(rows), sig, rng.uniform(0.5, 3.5)))
+        for k in range(n["full_disk"]):
+            add(record_full_disk(work, k, rng.randrange(400_000, 2_500_000)))
+        for k in range(n["device"]):
+            add(device_dies(work, k, rng.uniform(1.0, 2.5)))
+        cut = work / "cut.mcap"
+        cut.write_bytes(clean.read_bytes()[: int(clean.stat().st_size * 0.9)])
+        for k in range(n["recover_signal"]):
+            for sig in SIGNALS:
+                add(recover_signal(work, len(rows), cut, sig, rng.uniform(0.05, 1.2)))
+
+        from teleprev.export.synthetic import EpisodeSpec, SyntheticSession, write_session
+
+        s0 = write_session(work / "s0.mcap", SyntheticSession((EpisodeSpec("pour", 3.0),), seed=1))
+        s1 = write_session(work / "s1.mcap", SyntheticSession((EpisodeSpec("pour", 6.0),), seed=2))
+        s2 = write_session(work / "s2.mcap", SyntheticSession((EpisodeSpec("hang", 6.0),), seed=3))
+        base = work / "base"
+        run = run_cli(["export", s0, "--repo-id", "bench/faults", "--root", base], timeout=600)
+        assert run.returncode == 0, run.stderr
+        t0 = time.monotonic()
+        timing_root = work / "timing"
+        shutil.copytree(base, timing_root)
+        run = run_cli(["export", s1, s2, "--repo-id", "bench/faults", "--root", timing_root, "--append"], timeout=600)
+        assert run.returncode == 0, run.stderr
+        export_s = time.monotonic() - t0
+        shutil.rmtree(timing_root)
+        for k in range(n["export_signal"]):
+            for sig in SIGNALS:
+                workers = 2 if (len(rows) % 3 == 0) else 1
+                add(export_signal(work, len(rows), base, [s1, s2], sig, rng.uniform(0.3, export_s * 1.1), workers, 1, 2))
+        for k in range(n["export_disk"]):
+            add(export_full_disk(work, k, base, s1))
+
+        for kind in ("flip", "cut"):
+            for k in range(n[kind]):
+                add(damaged_file(work, k, clean, clean_times, chunks, kind, rng))
+                for f in work.glob(f"{kind}{k}*"):
+                    f.unlink()
+
+    finite = [r.lost_s for r in rows]
+    figures = {
+        "faults_run": len(rows),
+        "data_lost_s_max": round(max(finite, default=0.0), 3),
+        "silent_failures": sum(r.silent for r in rows),
+        "tracebacks_shown": sum(r.traceback for r in rows),
+        "datasets_lost": sum(r.dataset_ok is False for r in rows),
+    }
+    by_kind: dict[str, list[Row]] = {}
+    for r in rows:
+        what = r.detail.split(" at ")[0].split(" (")[0].split(" after ")[0]
+        by_kind.setdefault(f"{r.kind} {what}", []).append(r)
+    from rich.console import Console
+    from rich.table import Table
+
+    table = Table(title="faults by kind", title_justify="left")
+    for col in ("fault", "runs", "exit codes", "max lost s", "opens", "dataset kept", "silent", "tracebacks"):
+        table.add_column(col)
+    for key, rs in by_kind.items():
+        opens = [r.opens for r in rs if r.opens is not None]
+        kept = [r.dataset_ok for r in rs if r.dataset_ok is not None]
+        table.add_row(key, str(len(rs)), " ".join(sorted({str(r.exit_code) for r in rs})),
+                      f"{max(r.lost_s for r in rs):.3f}", f"{sum(opens)}/{len(opens)}" if opens else "-",
+                      f"{sum(kept)}/{len(kept)}" if kept else "-", str(sum(r.silent for r in rs)),
+                      str(sum(r.traceback for r in rs)))
+    Console(stderr=args.json, width=max(100, shutil.get_terminal_size().columns)).print(table)
+    if args.details:
+        args.details.write_text(json.dumps([asdict(r) for r in rows], indent=1, default=str))
+    targets = {"faults_run": ">= 200", "data_lost_s_max": "<= 1.0 (flips and cuts: beyond the damaged range)",
+               "silent_failures": "0", "tracebacks_shown": "0", "datasets_lost": "0"}
+    common.report("bench/faults.py: the fault matrix on the real CLI", figures, targets, args.json)
+
+
+if __name__ == "__main__":
+    main()
