@@ -53,7 +53,6 @@ def export(
 
     from rich.console import Console
 
-    from teleprev.cli.signals import StopSignals
     from teleprev.corpus.sessions import resolve_sessions
     from teleprev.errors import ConfigError
     from teleprev.export.recipe import load_recipe
@@ -76,26 +75,8 @@ def export(
     options = ExportOptions(paths, repo_id, target, the_recipe, fps=fps, append=append,
                             include_discarded=include_discarded, workers=workers, video=video, ray=ray)
     console = Console(stderr=as_json)
-    with StopSignals() as signals:  # SIGTERM / SIGHUP stop it like Ctrl-C: the staging folder goes
-        try:
-            with _Bars(console) as bars:
-                report = run_export(options, bars)
-        except KeyboardInterrupt:
-            Console(stderr=True).print(f"export stopped by {signals.name or 'SIGINT'}; {target} is as it was",
-                                       highlight=False, soft_wrap=True)
-            raise typer.Exit(signals.exit_code or 130) from None
-    if as_json:
-        import json
-
-        typer.echo(json.dumps(_as_json(report)))
-    else:
-        from teleprev.export.report import export_notes, summary_table
-
-        console.print(summary_table(report))
-        for line in export_notes(report):
-            console.print(line, highlight=False)
-        console.print(f"[green]done:[/] {report.total_episodes} episodes, {report.total_frames} frames in {report.root} "
-                      f"(video: {video.describe()})", highlight=False)
+    report = run_stoppable("export", target, lambda bars: run_export(options, bars), console)
+    print_report(console, report, as_json, f"video: {video.describe()}")
     if report.failed:
         raise typer.Exit(1)  # the rest is in the dataset; a script must still notice
 
@@ -166,3 +147,36 @@ def _as_json(report) -> dict:
             "held_frames": sum(e.held_frames for e in s.episodes),
         } for s in report.sessions],
     }
+
+
+def run_stoppable(verb: str, target: Path, job, console):
+    """job(bars) with progress bars, stopped by SIGTERM / SIGHUP as by Ctrl-C (its staging folder goes):
+    then one line saying the target is as it was, and exit 128 + the signal."""
+    from rich.console import Console
+
+    from teleprev.cli.signals import StopSignals
+
+    with StopSignals() as signals:
+        try:
+            with _Bars(console) as bars:
+                return job(bars)
+        except KeyboardInterrupt:
+            Console(stderr=True).print(f"{verb} stopped by {signals.name or 'SIGINT'}; {target} is as it was",
+                                       highlight=False, soft_wrap=True)
+            raise typer.Exit(signals.exit_code or 130) from None
+
+
+def print_report(console, report, as_json: bool, details: str) -> None:
+    """The export's summary table and notes (or its JSON), and the closing line with `details`."""
+    if as_json:
+        import json
+
+        typer.echo(json.dumps(_as_json(report)))
+        return
+    from teleprev.export.report import export_notes, summary_table
+
+    console.print(summary_table(report))
+    for line in export_notes(report):
+        console.print(line, highlight=False)
+    console.print(f"[green]done:[/] {report.total_episodes} episodes, {report.total_frames} frames in {report.root} "
+                  f"({details})", highlight=False)

@@ -10,7 +10,7 @@ from typing import List, Optional
 
 import typer
 
-from teleprev.cli.export import DEFAULT_ROOT, _as_json, _Bars
+from teleprev.cli.export import DEFAULT_ROOT, print_report, run_stoppable
 
 
 def import_(
@@ -38,26 +38,6 @@ def import_(
     video = with_video(the_recipe.recipe, codec=codec)
     target = root if root is not None else DEFAULT_ROOT / repo_id
     console = Console(stderr=as_json)
-    from teleprev.cli.signals import StopSignals
-
-    with StopSignals() as signals:  # SIGTERM / SIGHUP stop it like Ctrl-C: the staging folder goes
-        try:
-            with _Bars(console) as bars:
-                report = import_files(files, the_recipe, repo_id, target, fps=fps, append=append, video=video,
-                                      report=bars)
-        except KeyboardInterrupt:
-            Console(stderr=True).print(f"import stopped by {signals.name or 'SIGINT'}; {target} is as it was",
-                                       highlight=False, soft_wrap=True)
-            raise typer.Exit(signals.exit_code or 130) from None
-    if as_json:
-        import json
-
-        typer.echo(json.dumps(_as_json(report)))
-        return
-    from teleprev.export.report import export_notes, summary_table
-
-    console.print(summary_table(report))
-    for line in export_notes(report):
-        console.print(line, highlight=False)
-    console.print(f"[green]done:[/] {report.total_episodes} episodes, {report.total_frames} frames in {report.root} "
-                  f"(robot {the_recipe.robot_type}, video: {video.describe()})", highlight=False)
+    report = run_stoppable("import", target, lambda bars: import_files(
+        files, the_recipe, repo_id, target, fps=fps, append=append, video=video, report=bars), console)
+    print_report(console, report, as_json, f"robot {the_recipe.robot_type}, video: {video.describe()}")

@@ -31,15 +31,26 @@ def exported(tmp_path_factory):
     return root
 
 
-def test_our_export_is_matched_by_name_and_stays_near_the_limits(exported):
+def test_our_export_is_matched_by_name_and_measured_as_lerobot_loads_it(exported):
+    from lerobot.datasets.lerobot_dataset import LeRobotDataset
+
     report = audit_path(exported, RIGS / "sim_gripper.toml")
     arm, hand = report.streams
     assert arm.commands > 30 and hand.commands == arm.commands
     assert report.note == "" and arm.position_outside == 0 and hand.position_outside == 0
-    assert 0 < arm.speed_max and arm.ratios["speed"] <= 1.0 + 1e-6
+    # the same figures from the dataset as lerobot loads it (actions at the frames' timestamps)
+    ds = LeRobotDataset("lab/audit", root=exported, video_backend="pyav")
+    names = ds.meta.features["action"]["names"]
+    cols = [names.index(f"arm.joint{i}") for i in range(1, 7)]
+    rows = [ds.hf_dataset[i] for i in range(len(ds.hf_dataset))]
+    t = np.array([float(r["timestamp"]) for r in rows])
+    q = np.array([np.asarray(r["action"], dtype=float)[cols] for r in rows])
+    v = np.diff(q, axis=0) / np.diff(t)[:, None]
+    a = 2 * np.diff(v, axis=0) / (t[2:] - t[:-2])[:, None]
+    assert np.isclose(arm.speed_max, np.abs(v).max(), rtol=1e-4) and np.isclose(arm.accel_max, np.abs(a).max(), rtol=1e-4)
     # An action is the first command sent in its frame, stamped with the frame's time: up to one command
-    # period (8 ms) of jitter on 33 ms frames, which divided differences amplify a little.
-    assert arm.ratios["accel"] < 1.5 and arm.ratios["jerk"] < 1.5
+    # period (8 ms) of jitter on 33 ms frames, which divided differences amplify, so no bound on the ratio.
+    assert 0 < arm.ratios["accel"]
 
 
 def _foreign(root: Path, jump: float) -> Path:

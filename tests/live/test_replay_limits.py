@@ -19,9 +19,8 @@ FIXTURE = Path(__file__).parents[1] / "fixtures" / "sim_v1.mcap"  # format 1: sp
 SIM_RIG = Path(__file__).parents[2] / "rigs" / "sim.toml"  # its robot is the sim arm and hand
 
 
-def _play_to_sim_arm(smoothed: bool):
-    """Play episode 0 of the fixture to the rig's robot (the sim arm, which faults like an xArm would)."""
-    player, runners, tap, rig, message = build_player(FIXTURE, 0, 1.0, "arm", SIM_RIG, smoothed=smoothed)
+def _play(player, runners) -> list:
+    """Engage at once and play to the end; the (stamp, positions) the arm was sent."""
     arm = player.actuators["arm"]
     sent, original = [], arm.send
     arm.send = lambda cmd: (sent.append((cmd.stamp_ns, cmd.positions.copy())), original(cmd))[1]
@@ -33,7 +32,13 @@ def _play_to_sim_arm(smoothed: bool):
     thread.join(60)
     for r in runners:
         r.stop()
-    return player, arm, sent
+    return sent
+
+
+def _play_to_sim_arm(smoothed: bool):
+    """Play episode 0 of the fixture to the rig's robot (the sim arm, which faults like an xArm would)."""
+    player, runners, tap, rig, message = build_player(FIXTURE, 0, 1.0, "arm", SIM_RIG, smoothed=smoothed)
+    return player, player.actuators["arm"], _play(player, runners)
 
 
 def test_the_cli_refuses_to_send_a_session_that_fails_the_audit_to_the_robot():
@@ -95,15 +100,7 @@ def test_a_fresh_recording_replays_to_the_sim_robot_without_a_fault(tmp_path):
     player, runners, tap, rig, message = build_player(session, 0, 2.0, "sim")
     assert player.speed == 1.0  # recorded at the limits: 2x would break them
     hand_steps = int(player.p.sent("effector").sum())
-    arm = player.actuators["arm"]
-    for r in runners:
-        r.start()
-    player.engage()
-    thread = threading.Thread(target=player.run)
-    thread.start()
-    thread.join(60)
-    for r in runners:
-        r.stop()
-    assert arm.fault == "" and player.state.message == ""
+    _play(player, runners)
+    assert player.actuators["arm"].fault == "" and player.state.message == ""
     played_hand = sum(1 for phase, kind, _ in player.state.sent if phase == "playing" and kind == "hand")
     assert played_hand == hand_steps  # each side at its own recorded stamps, nothing held in between
