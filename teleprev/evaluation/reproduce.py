@@ -8,6 +8,7 @@ shipped ones). Every step's outputs are kept next to what the session recorded f
 
 from __future__ import annotations
 
+import itertools
 import json
 import time
 from dataclasses import dataclass, field
@@ -27,6 +28,7 @@ from teleprev.robot.effectors import EndEffector
 from teleprev import topics
 from teleprev.session.reader import Episode, SessionReader
 
+PREPARE_BLOCK = 4096  # messages read ahead per batch of glove-sample preparation (bounds the memory)
 RECORDED_OUTPUTS = (topics.RETARGETED, topics.CORRECTED, topics.ARM_TARGET, topics.COMMAND_ARM, topics.COMMAND_HAND)
 
 
@@ -87,6 +89,14 @@ def _models_match(meta: dict, pipeline: Pipeline) -> bool | None:
     return now == recorded if recorded else None
 
 
+def _prepared(driver: PipelineDriver, messages, block: int = PREPARE_BLOCK):
+    """(message, its prepared glove input or None): the glove samples' state-independent work done a
+    block of messages at a time, ahead of the sequential pass (bit for bit what the step would compute)."""
+    messages = iter(messages)
+    while chunk := list(itertools.islice(messages, block)):
+        yield from zip(chunk, driver.prepare(chunk))
+
+
 def rerun_session(path: str | Path, models: str | Path | None = None, rig_path: str | Path | None = None) -> Rerun:
     path = Path(path)
     started = time.perf_counter()
@@ -110,14 +120,14 @@ def rerun_session(path: str | Path, models: str | Path | None = None, rig_path: 
     recorded_by_stamp: dict[str, dict[int, np.ndarray]] = {k: {} for k in RECORDED_OUTPUTS}
     n_inputs = 0
     wanted = [inputs.hand, inputs.wrist, inputs.arm, inputs.effector, topics.MODE, *RECORDED_OUTPUTS]
-    for msg in reader.messages(topics=[t for t in wanted if t in reader.topics]):
+    for msg, hand_input in _prepared(driver, reader.messages(topics=[t for t in wanted if t in reader.topics])):
         if msg.topic in recorded_by_stamp:
             if isinstance(msg.payload, JointSample):
                 recorded_by_stamp[msg.topic][msg.payload.stamp_ns] = msg.payload.positions
             continue
         n_inputs += 1
         t0 = time.perf_counter_ns()
-        out = driver.feed(msg)
+        out = driver.feed(msg, hand_input)
         if out.result is None:
             continue
         latency.append(time.perf_counter_ns() - t0)

@@ -31,6 +31,7 @@ from teleprev.errors import ModelError
 from teleprev.noncollision.mlp import CCN, CPN, file_sha256, load_model
 from teleprev.noncollision.projection import ProjectionSettings, descend
 from teleprev.robot.collision import SelfCollisionChecker
+from teleprev.robot.collision_report import CollisionReport
 from teleprev.robot.model import RobotModel
 
 ACTIONS = ("untouched", "ccn", "fallback")
@@ -42,6 +43,15 @@ class Correction:
     action: str  # "untouched" | "ccn" | "fallback"
     colliding_links: tuple[str, ...]  # links that collided in the input (empty if untouched)
     deviation: float  # max |q_out - q_in| in rad
+
+
+@dataclass(frozen=True)
+class Prepared:
+    """An input with the state-independent part of its correction done (Corrector.prepare)."""
+
+    q: np.ndarray  # the input
+    q0: np.ndarray  # clipped to the limits
+    report: CollisionReport  # the exact check of q0
 
 
 @dataclass(frozen=True)
@@ -125,12 +135,27 @@ class Corrector:
         return {role: file_sha256(path) for role, path in self.files.items()}
 
     # ---- the pipeline's call ----------------------------------------------------------------------
-    def correct(self, q: np.ndarray, previous: np.ndarray | None = None) -> Correction:
+    def prepare(self, q: np.ndarray) -> list[Prepared]:
+        """The part of `correct` that depends on the input alone, for inputs (N, n): each clipped to the
+        limits and checked exactly (a batch goes through the checker's batch check: the same answers)."""
         q_in = np.asarray(q, dtype=float)
-        if q_in.shape != self.model.lower.shape or not np.isfinite(q_in).all():
-            raise ValueError(f"expected {len(self.model.lower)} finite joint values, got {np.array2string(q_in, precision=3)}")
+        if q_in.ndim != 2 or q_in.shape[1:] != self.model.lower.shape or not np.isfinite(q_in).all():
+            raise ValueError(f"expected rows of {len(self.model.lower)} finite joint values, got "
+                             f"{np.array2string(q_in, precision=3)}")
         q0 = self.model.clip(q_in)
-        report = self.checker.check(q0)
+        if len(q0) == 1:
+            return [Prepared(q_in[0], q0[0], self.checker.check(q0[0]))]
+        pairs = self.checker.pair_matrix(q0)
+        labels = self.checker.labels_from_pairs(pairs)
+        names = self.checker.link_pairs
+        return [Prepared(q_in[i], q0[i], CollisionReport(labels[i], tuple(names[k] for k in np.flatnonzero(pairs[i]))))
+                for i in range(len(q0))]
+
+    def correct(self, q: np.ndarray, previous: np.ndarray | None = None, prepared: Prepared | None = None) -> Correction:
+        """`prepared`: `prepare`'s answer for q, when computed ahead."""
+        if prepared is None:
+            prepared = self.prepare(np.asarray(q, dtype=float)[None])[0]
+        q_in, q0, report = prepared.q, prepared.q0, prepared.report
         if not report.colliding:
             return Correction(q0, "untouched", (), float(np.abs(q0 - q_in).max()))
         links = tuple(report.colliding_links(self.checker.link_names))
