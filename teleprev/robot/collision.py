@@ -182,6 +182,10 @@ class FclSelfCollisionChecker:
         shapes = self._shape_world(self.model.fk(q).world)
         return bool(self._fcl_pairs(shapes, self._candidates(shapes), first_only=True))
 
+    def first_collision(self, q: np.ndarray) -> int | None:
+        """Index of the first configuration of the batch q (N, n) in self-collision, or None."""
+        return next((i for i, x in enumerate(q) if self.collides(x)), None)
+
     def pair_matrix(self, q: np.ndarray, world: np.ndarray | None = None) -> np.ndarray:
         """(N, len(link_pairs)) bool: which checked link pairs collide, for a batch of configurations.
 
@@ -240,6 +244,14 @@ class SelfCollisionChecker(FclSelfCollisionChecker):
         if not self._loose.collides(q):
             return False
         return True if self._tight.collides(q) else super().collides(q)
+
+    def first_collision(self, q: np.ndarray) -> int | None:
+        if self._loose is None:
+            return super().first_collision(q)
+        k = self._loose.first_collision(q)
+        while k is not None and not (self._tight.collides(q[k]) or super().collides(q[k])):
+            k = self._loose.first_collision(q, k + 1)  # within the margin and free for FCL: go on
+        return k
 
     def pair_matrix(self, q: np.ndarray, world: np.ndarray | None = None) -> np.ndarray:
         if self._loose is None:

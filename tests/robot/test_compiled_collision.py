@@ -132,6 +132,25 @@ def test_the_pipeline_checker_gives_fcls_answers_bit_for_bit(hand, hand_checker,
     assert band >= 8, "the near-contact sample should exercise the FCL side"
 
 
+def test_first_collision_of_a_batch_is_fcls(hand, hand_checker, rng):
+    """A segment's points in order, through the boundary: the first FCL finds colliding, even when the
+    compiled check is unsure of an earlier one (within its margin, free for FCL)."""
+    checker = SelfCollisionChecker(hand)
+    pool = hand.sample_uniform(300, rng)
+    colliding = hand_checker.pair_matrix(pool).any(axis=1)
+    for q0, q1 in zip(pool[~colliding][:10], pool[colliding][:10]):
+        lo, hi = 0.0, 1.0
+        for _ in range(60):
+            mid = 0.5 * (lo + hi)
+            lo, hi = (lo, mid) if hand_checker.collides(q0 + mid * (q1 - q0)) else (mid, hi)
+        points = q0 + np.array([0.0, 0.5 * lo, lo, hi, 1.0])[:, None] * (q1 - q0)
+        expected = next(i for i, q in enumerate(points) if hand_checker.collides(q))
+        assert checker.first_collision(points) == expected
+        assert hand_checker.first_collision(points) == expected
+        assert checker.first_collision(points[:expected]) is None
+    assert CompiledSelfCollisionChecker(hand).first_collision(pool) == int(np.argmax(colliding))
+
+
 # ---- the box-box test itself -------------------------------------------------------------------
 def _boxes(*placed):
     """(S, 3, 4) poses and (S, 4) sizes for kernels.boxes_apart from (size, xyz, rpy) triples."""
