@@ -120,6 +120,8 @@ class Pipeline:
         once (eval, ahead of the sequential pass): element-wise array arithmetic, so each row's bits are
         the same either way (tests/pipeline/test_prepared.py)."""
         n = len(samples)
+        if n == 1:
+            return [self._prepare_hand(samples[0])]
         out = [HandInput() for _ in range(n)]
         poses = np.zeros((n, 15, 3))
         valid = np.ones(n, dtype=bool)
@@ -145,6 +147,21 @@ class Pipeline:
         for j, k in enumerate(ok):
             out[rows[k]] = HandInput("", flexion[k], abduction[k], prepared[j])
         return out
+
+    def _prepare_hand(self, s: JointSample) -> HandInput:
+        """prepare_hands for one sample, without the batch's bookkeeping (the live step's case)."""
+        try:
+            pose = hand_pose_from_values(s.names, s.positions)
+        except KeyError:
+            return HandInput("glove_invalid")
+        if not np.isfinite(pose).all():
+            return HandInput("glove_invalid")
+        if np.einsum("ij,ij->i", pose, pose).max() > MAX_JOINT_ROTATION**2:
+            return HandInput("glove_out_of_range")
+        flexion, abduction = angles_from_hand_pose(pose)
+        if flexion.max() > MAX_FLEXION or flexion.min() < MIN_FLEXION or abs(abduction).max() > MAX_ABDUCTION:
+            return HandInput("glove_out_of_range")
+        return HandInput("", flexion, abduction, self.effector.prepare(flexion[None], abduction[None])[0])
 
     def _hand(self, inputs: StepInputs, flags: list[str]) -> HandInput | None:
         if not self._fresh(inputs.hand, "glove", inputs.t_ns, flags):
