@@ -96,6 +96,7 @@ class Pipeline:
         self.effector = effector
         self.effector_names = effector.names
         self._stale_ns = int(cfg.stale_ms * 1e6)
+        self._last_wrist: tuple = (None, "", None)  # (sample, flag, pose): a cache, the step stays pure
 
     def model_hashes(self) -> dict[str, str] | None:
         """{role: sha256} of the model files the pipeline runs (a session records them, eval compares);
@@ -176,14 +177,22 @@ class Pipeline:
         s = inputs.wrist
         if not self._fresh(s, "suit", inputs.t_ns, flags):
             return None
+        if self._last_wrist[0] is not s:  # the suit runs at half the glove's rate: most samples come twice
+            self._last_wrist = (s, *self._wrist_pose(s))
+        _, flag, matrix = self._last_wrist
+        if flag:
+            flags.append(flag)
+        return matrix
+
+    @staticmethod
+    def _wrist_pose(s: PoseSample) -> tuple[str, np.ndarray | None]:
+        """("", the wrist pose) or (why the sample is unusable, None)."""
         p, q = np.asarray(s.position, dtype=float), np.asarray(s.orientation, dtype=float)
         if not (np.isfinite(p).all() and np.isfinite(q).all()):
-            flags.append("suit_invalid")
-            return None
+            return "suit_invalid", None
         if float(p @ p) > MAX_WRIST_DISTANCE**2 or abs(float(q @ q) ** 0.5 - 1.0) > 0.1:
-            flags.append("suit_out_of_range")
-            return None
-        return s.matrix()
+            return "suit_out_of_range", None
+        return "", s.matrix()
 
     def measured(self, sample: JointSample | None, names: tuple[str, ...]) -> np.ndarray | None:
         if sample is None:
