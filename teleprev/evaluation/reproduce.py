@@ -76,9 +76,21 @@ def _pipeline_for(reader: SessionReader, path: Path, models, rig_path):
     if "rig" not in meta or not meta["rig"].get("toml"):
         raise SessionError("the session does not carry its rig (metadata 'rig'); pass --config RIG", str(path))
     recorded_path = meta["rig"].get("path") or None
-    rig = load_rig_text(meta["rig"]["toml"], f"{path}: recorded rig", Path(recorded_path) if recorded_path else None)
-    calibration = load_calibration_text(meta.get("calibration", {}).get("toml", ""), f"{path}: recorded calibration")
-    return build_pipeline(rig, models, calibration, motion=motion), "recorded in the session"
+    calibration_toml = meta.get("calibration", {}).get("toml", "")
+    key = (meta["rig"]["toml"], recorded_path, calibration_toml, str(models) if models else None, motion)
+    if key not in _BUILT:
+        rig = load_rig_text(meta["rig"]["toml"], f"{path}: recorded rig", Path(recorded_path) if recorded_path else None)
+        calibration = load_calibration_text(calibration_toml, f"{path}: recorded calibration")
+        if len(_BUILT) >= 8:
+            _BUILT.pop(next(iter(_BUILT)))
+        _BUILT[key] = build_pipeline(rig, models, calibration, motion=motion)
+    return _BUILT[key], "recorded in the session"
+
+
+# Pipelines built from recorded rigs, by (rig, rig path, calibration, models, motion): the sessions of a
+# corpus mostly share one rig, and building one (rig plugins, URDFs, models, checkers) costs about 0.1 s.
+# A Pipeline keeps no state between steps (PipelineState does), so sessions can share one.
+_BUILT: dict[tuple, Pipeline] = {}
 
 
 def _models_match(meta: dict, pipeline: Pipeline) -> bool | None:
