@@ -69,6 +69,22 @@ def test_a_batch_prepares_each_sample_as_it_would_be_prepared_alone(pipeline, rn
     assert any(colliding) and not all(colliding)
 
 
+def test_the_corrector_answers_a_batch_as_it_answers_each_input(pipeline, rng):
+    """Corrections done ahead (CCN per input, CPN scores batched, decided singly near the threshold)
+    equal the ones `correct` computes for the input alone."""
+    corrector = pipeline.effector.corrector
+    q = corrector.model.sample_uniform(300, rng)
+    prepared = corrector.prepare(q)
+    answered = 0
+    for x, p in zip(q, prepared):
+        alone = corrector.correct(x)
+        got = corrector.correct(x, None, p)
+        answered += p.answer is not None
+        assert got.action == alone.action and got.colliding_links == alone.colliding_links
+        assert np.array_equal(got.q, alone.q) and got.deviation == alone.deviation
+    assert answered > 100
+
+
 def test_a_driver_fed_prepared_samples_computes_the_same_session(pipeline, rng):
     """A session's worth of messages, stepped with and without preparation ahead: every output the same."""
     topics = InputTopics.for_devices("glove", "suit", "arm", "hand")
