@@ -15,6 +15,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
+from threadpoolctl import threadpool_limits
 
 from teleprev import numeric_platform
 from teleprev.errors import SessionError
@@ -132,25 +133,28 @@ def rerun_session(path: str | Path, models: str | Path | None = None, rig_path: 
     recorded_by_stamp: dict[str, dict[int, np.ndarray]] = {k: {} for k in RECORDED_OUTPUTS}
     n_inputs = 0
     wanted = [inputs.hand, inputs.wrist, inputs.arm, inputs.effector, topics.MODE, *RECORDED_OUTPUTS]
-    for msg, hand_input in _prepared(driver, reader.messages(topics=[t for t in wanted if t in reader.topics])):
-        if msg.topic in recorded_by_stamp:
-            if isinstance(msg.payload, JointSample):
-                recorded_by_stamp[msg.topic][msg.payload.stamp_ns] = msg.payload.positions
-            continue
-        n_inputs += 1
-        t0 = time.perf_counter_ns()
-        out = driver.feed(msg, hand_input)
-        if out.result is None:
-            continue
-        latency.append(time.perf_counter_ns() - t0)
-        t_list.append(msg.log_time_ns)
-        report = out.result.report
-        mode.append(report["mode"])
-        action.append(report["corrector"])
-        flags.append(report["flags"])
-        produced = {topic: payload.positions for topic, payload in out.logged if isinstance(payload, JointSample)}
-        for topic in RECORDED_OUTPUTS:
-            rows[topic].append(produced.get(topic))
+    # One BLAS thread: the batched CPN is a few hundred rows, where threads cost more than they give (on a
+    # busy machine or with -j workers, many times more); single configurations never use them anyway.
+    with threadpool_limits(1, user_api="blas"):
+        for msg, hand_input in _prepared(driver, reader.messages(topics=[t for t in wanted if t in reader.topics])):
+            if msg.topic in recorded_by_stamp:
+                if isinstance(msg.payload, JointSample):
+                    recorded_by_stamp[msg.topic][msg.payload.stamp_ns] = msg.payload.positions
+                continue
+            n_inputs += 1
+            t0 = time.perf_counter_ns()
+            out = driver.feed(msg, hand_input)
+            if out.result is None:
+                continue
+            latency.append(time.perf_counter_ns() - t0)
+            t_list.append(msg.log_time_ns)
+            report = out.result.report
+            mode.append(report["mode"])
+            action.append(report["corrector"])
+            flags.append(report["flags"])
+            produced = {topic: payload.positions for topic, payload in out.logged if isinstance(payload, JointSample)}
+            for topic in RECORDED_OUTPUTS:
+                rows[topic].append(produced.get(topic))
     t = np.array(t_list, dtype=np.int64)
 
     def table(values: list, width: int) -> np.ndarray:
