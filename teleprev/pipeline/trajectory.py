@@ -19,7 +19,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from teleprev.pipeline.kernels import hand_stop, hand_track
+from teleprev.pipeline.kernels import hand_stop, hand_track, warm
 
 REST_VELOCITY = 1e-6  # rad/s: below this (and no acceleration) a joint is at rest
 REST_ACCELERATION = 1e-5
@@ -151,6 +151,7 @@ class HandLimiter:
         self.upper = _vector(upper)
         self.velocity = _vector(velocity)
         self.acceleration = _vector(acceleration)
+        warm()  # load the kernels from numba's cache now, not in a live loop's first steps
 
     def track(self, q: np.ndarray, v: np.ndarray, target: np.ndarray, target_v: np.ndarray | None, dt: float,
               dt_before: float, speed_frac: float = 1.0) -> tuple[np.ndarray, np.ndarray]:

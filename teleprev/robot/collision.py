@@ -228,6 +228,8 @@ class SelfCollisionChecker(FclSelfCollisionChecker):
         if all(s.kind == "box" for n in self.link_names for s in model.links[n].collisions):
             self._loose = CompiledSelfCollisionChecker(model, self.exclusions)  # FCL's contacts and more
             self._tight = CompiledSelfCollisionChecker(model, self.exclusions, margin=-kernels.MARGIN)  # fewer
+            q = model.neutral()  # load the kernels from numba's cache now, not in a live loop's first steps
+            self._loose.check(q), self._loose.collides(q), self._loose.first_collision(q[None])
 
     def check(self, q: np.ndarray) -> CollisionReport:
         if self._loose is None:
