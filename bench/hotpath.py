@@ -1,10 +1,11 @@
-"""Issue 18's compiled hot path, first part: the LEAP Hand's exact self-collision check (one thread).
+"""Issue 18's compiled hot path: the LEAP Hand's exact self-collision check (one thread).
 
     python bench/hotpath.py [--json] [--quick]
 
-Compares the compiled checker (numba kernels) with the fcl checker it is meant to replace and with a
+Compares the compiled checker (numba kernels) with the fcl checker it replaced and with a
 vectorised-numpy version of the same separating-axis test, checks it against FCL on uniform random
-configurations, and times what compiling costs: cold (empty kernel cache, in a fresh process), from
+configurations, times the checker the pipeline runs (SelfCollisionChecker: compiled, FCL within the
+margin; its answers must equal FCL's exactly), and times what compiling costs: cold (empty kernel cache, in a fresh process), from
 the cache, and whether `teleprev --help` stays fast.
 """
 
@@ -120,13 +121,14 @@ def compile_costs() -> dict:
     }
 
 
-def agreement(hand, fcl_checker, compiled, strict, n: int, rng) -> dict:
+def agreement(hand, fcl_checker, compiled, strict, pipeline_checker, n: int, rng) -> dict:
     """Configurations whose colliding link pairs differ between the compiled check and FCL, in batches."""
-    disagree = margin_side = missed = label_diff = 0
+    disagree = margin_side = missed = label_diff = pipeline_diff = 0
     for start in range(0, n, 5000):
         q = hand.sample_uniform(min(5000, n - start), rng)
         expected = fcl_checker.pair_matrix(q)
         ours = compiled.pair_matrix(q)
+        pipeline_diff += int((pipeline_checker.pair_matrix(q) != expected).any(axis=1).sum())
         deep = strict.pair_matrix(q)
         differ = (ours != expected).any(axis=1)
         # margin-side: the compiled check adds pairs (and drops none) that are not overlapping by more than 1 nm
@@ -141,20 +143,22 @@ def agreement(hand, fcl_checker, compiled, strict, n: int, rng) -> dict:
         "compiled_vs_fcl_missed_contacts": missed,
         "compiled_vs_fcl_label_disagreements": label_diff,
         "compiled_vs_fcl_configs": n,
+        "pipeline_checker_vs_fcl_disagreements": pipeline_diff,
     }
 
 
 def main() -> None:
     args = common.parser(__doc__).parse_args()
     from teleprev.robot import kernels
-    from teleprev.robot.collision import SelfCollisionChecker
+    from teleprev.robot.collision import FclSelfCollisionChecker, SelfCollisionChecker
     from teleprev.robot.compiled_collision import CompiledSelfCollisionChecker
     from teleprev.robot.model import load_robot
 
     quick = args.quick
     rng = np.random.default_rng(18)
     hand = load_robot("leap_hand_right")
-    fcl_checker = SelfCollisionChecker(hand)
+    fcl_checker = FclSelfCollisionChecker(hand)
+    pipeline_checker = SelfCollisionChecker(hand)
     compiled = CompiledSelfCollisionChecker(hand)
     strict = CompiledSelfCollisionChecker(hand, margin=-kernels.MARGIN)
     numpy_sat = NumpySat(compiled)
@@ -164,7 +168,7 @@ def main() -> None:
     free = pool[~pool_pairs.any(axis=1)]
     uniform = pool[: len(free)]
     for q in uniform[:100]:  # load the kernels, warm the caches
-        compiled.check(q), compiled.collides(q), fcl_checker.check(q), numpy_sat.pairs(q)
+        compiled.check(q), compiled.collides(q), fcl_checker.check(q), numpy_sat.pairs(q), pipeline_checker.check(q)
 
     def p50_us(fn, qs):
         return common.percentile(common.time_calls(fn, [(q,) for q in qs]), 50) * 1e6
@@ -182,6 +186,8 @@ def main() -> None:
         "collision_check_uniform_us_p50": p50_us(compiled.check, uniform),
         "collision_first_contact_uniform_us_p50": p50_us(compiled.collides, uniform),
         "compiled_batch_us_per_config": batch_us,
+        "pipeline_checker_us_p50": p50_us(pipeline_checker.check, free),
+        "pipeline_checker_uniform_us_p50": p50_us(pipeline_checker.check, uniform),
         "fcl_collision_check_us_p50": p50_us(fcl_checker.check, free),
         "fcl_first_contact_us_p50": p50_us(fcl_checker.collides, free),
         "numpy_vectorised_collision_us_p50": p50_us(numpy_sat.pairs, free[: min(len(free), 2000)]),
@@ -190,12 +196,13 @@ def main() -> None:
         "numpy_fk_us_p50": p50_us(hand.fk, free),
         "free_configs_timed": int(len(free)),
     }
-    figures.update(agreement(hand, fcl_checker, compiled, strict, 10_000 if quick else 100_000, rng))
+    figures.update(agreement(hand, fcl_checker, compiled, strict, pipeline_checker, 10_000 if quick else 100_000, rng))
     figures.update(compile_costs())
     targets = {
         "collision_check_us_p50": "<= 20 (collision-free configs: every pair examined)",
         "compiled_vs_fcl_disagreements": "0, or margin-side only",
         "compiled_vs_fcl_missed_contacts": "0",
+        "pipeline_checker_vs_fcl_disagreements": "0 (FCL decides within the margin)",
         "cached_import_and_first_call_s": "no compile on the record/eval path",
         "help_s": "<= 0.8",
     }

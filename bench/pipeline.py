@@ -155,7 +155,7 @@ def main() -> None:
     figures.update(preview_rate(4.0 if args.quick else 12.0))
     figures.update(dex_retargeting(10.0 if args.quick else 30.0))
     targets = {
-        "step_ms_p50": "<= 0.5", "step_ms_p99": "<= 2.0", "corrected_frac": "reported", "fallback_frac": "reported",
+        "step_ms_p50": "<= 0.1", "step_ms_p99": "<= 0.5", "corrected_frac": "reported", "fallback_frac": "reported",
         "preview_fps": ">= 20 (pipeline at 120 Hz)", "dexretargeting_ms_p50": "for comparison",
     }
     common.report("bench/pipeline.py: one pipeline step (retarget + Corrector + IK + gate), one thread", figures, targets, args.json)

@@ -5,7 +5,8 @@
 Records a session of the default sim rig (LEAP Hand, shipped models; two episodes, engaged after 2 s)
 through the real recording path, then re-runs it as `teleprev eval` does: raw input streams and mode
 switches through the pipeline, camera frames never decoded. eval_realtime_x = recorded seconds per
-second of wall time (file reading, the pipeline, the metrics, one process).
+second of wall time (file reading, the pipeline, the metrics, one process); eval_cpu_realtime_x the same
+per second of the process's CPU time, which on a shared machine is the fairer one-core figure.
 """
 
 from __future__ import annotations
@@ -42,22 +43,25 @@ def main() -> None:
                 rec.loop.control("stop")
         finally:
             rec.stop()
-        t0 = time.perf_counter()
+        t0, c0 = time.perf_counter(), time.process_time()
         result = evaluate([path])
-        wall = time.perf_counter() - t0
+        wall, cpu = time.perf_counter() - t0, time.process_time() - c0
     o = result.report["overall"]
     figures = {
         "eval_realtime_x": o["duration_s"] / wall,
         "bit_identical": bool(result.report["sessions"][0]["bit_identical"]),
         "recorded_s": o["duration_s"],
         "eval_wall_s": wall,
+        "eval_cpu_realtime_x": o["duration_s"] / cpu,  # per second of this process's CPU time: the one-core
+        # figure when other processes share the core (wall time then counts their turns too)
         "steps": o["steps"],
         "step_ms_p50": o["latency_ms_p50"],
         "rerun_only_realtime_x": o["realtime_x"],
         "collision_after_frac": o.get("collision_after_frac", 0.0),
         "corrected_frac": (o.get("ccn", 0) + o.get("fallback", 0)) / max(o["steps"], 1),
     }
-    targets = {"eval_realtime_x": ">= 100 (video not decoded)", "bit_identical": "true (same models and config)"}
+    targets = {"eval_realtime_x": ">= 100 (video not decoded)", "eval_cpu_realtime_x": ">= 100 (one core)",
+               "bit_identical": "true (same models and config)"}
     common.report("bench/replay.py: re-running a recorded session", figures, targets, args.json)
 
 

@@ -19,9 +19,10 @@ def xarm6():
 
 @pytest.fixture(scope="session")
 def hand_checker(hand):
-    from teleprev.robot.collision import SelfCollisionChecker
+    """FCL deciding every contact: the independent reference the compiled check is tested against."""
+    from teleprev.robot.collision import FclSelfCollisionChecker
 
-    return SelfCollisionChecker(hand)
+    return FclSelfCollisionChecker(hand)
 
 
 @pytest.fixture

@@ -23,7 +23,7 @@ from typing import Callable
 from teleprev.corpus.executor import Outcome, run_task
 from teleprev.evaluation.report import Regression, Tolerances, compare, default_tolerances, make_report
 
-PRELOAD = ["numpy", "teleprev.evaluation.evaluate", "teleprev.evaluation.plots"]
+PRELOAD = ["numpy", "teleprev.evaluation.evaluate", "teleprev.evaluation.plots", "teleprev.evaluation.preload"]
 
 
 @dataclass(frozen=True)

@@ -8,12 +8,14 @@ shipped ones). Every step's outputs are kept next to what the session recorded f
 
 from __future__ import annotations
 
+import itertools
 import json
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
+from threadpoolctl import threadpool_limits
 
 from teleprev import numeric_platform
 from teleprev.errors import SessionError
@@ -27,6 +29,7 @@ from teleprev.robot.effectors import EndEffector
 from teleprev import topics
 from teleprev.session.reader import Episode, SessionReader
 
+PREPARE_BLOCK = 4096  # messages read ahead per batch of glove-sample preparation (bounds the memory)
 RECORDED_OUTPUTS = (topics.RETARGETED, topics.CORRECTED, topics.ARM_TARGET, topics.COMMAND_ARM, topics.COMMAND_HAND)
 
 
@@ -71,11 +74,24 @@ def _pipeline_for(reader: SessionReader, path: Path, models, rig_path):
     if rig_path:
         rig = load_rig(rig_path)
         return build_pipeline(rig, models, rig_calibration(rig), motion=motion), f"rig file {rig_path}"
-    rig = load_recorded_rig(meta, path)
-    if rig is None:
+    if not meta.get("rig", {}).get("toml"):
         raise SessionError("the session does not carry its rig (metadata 'rig'); pass --config RIG", str(path))
-    calibration = load_calibration_text(meta.get("calibration", {}).get("toml", ""), f"{path}: recorded calibration")
-    return build_pipeline(rig, models, calibration, motion=motion), "recorded in the session"
+    calibration_toml = meta.get("calibration", {}).get("toml", "")
+    # a recorded rig is anchored at its session's folder (teleprev.rig.load_recorded_rig): part of the key
+    key = (meta["rig"]["toml"], str(path.resolve().parent), calibration_toml, str(models) if models else None, motion)
+    if key not in _BUILT:
+        rig = load_recorded_rig(meta, path)
+        calibration = load_calibration_text(calibration_toml, f"{path}: recorded calibration")
+        if len(_BUILT) >= 8:
+            _BUILT.pop(next(iter(_BUILT)))
+        _BUILT[key] = build_pipeline(rig, models, calibration, motion=motion)
+    return _BUILT[key], "recorded in the session"
+
+
+# Pipelines built from recorded rigs, by (rig, session folder, calibration, models, motion): the sessions
+# of a corpus mostly share one rig, and building one (rig plugins, URDFs, models, checkers) costs about
+# 0.1 s. A Pipeline keeps no state between steps (PipelineState does), so sessions can share one.
+_BUILT: dict[tuple, Pipeline] = {}
 
 
 def _models_match(meta: dict, pipeline: Pipeline) -> bool | None:
@@ -84,6 +100,14 @@ def _models_match(meta: dict, pipeline: Pipeline) -> bool | None:
         return True  # the pipeline runs no models
     recorded = meta.get("models")
     return now == recorded if recorded else None
+
+
+def _prepared(driver: PipelineDriver, messages, block: int = PREPARE_BLOCK):
+    """(message, its prepared glove input or None): the glove samples' state-independent work done a
+    block of messages at a time, ahead of the sequential pass (bit for bit what the step would compute)."""
+    messages = iter(messages)
+    while chunk := list(itertools.islice(messages, block)):
+        yield from zip(chunk, driver.prepare(chunk))
 
 
 def rerun_session(path: str | Path, models: str | Path | None = None, rig_path: str | Path | None = None) -> Rerun:
@@ -109,25 +133,28 @@ def rerun_session(path: str | Path, models: str | Path | None = None, rig_path: 
     recorded_by_stamp: dict[str, dict[int, np.ndarray]] = {k: {} for k in RECORDED_OUTPUTS}
     n_inputs = 0
     wanted = [inputs.hand, inputs.wrist, inputs.arm, inputs.effector, topics.MODE, *RECORDED_OUTPUTS]
-    for msg in reader.messages(topics=[t for t in wanted if t in reader.topics]):
-        if msg.topic in recorded_by_stamp:
-            if isinstance(msg.payload, JointSample):
-                recorded_by_stamp[msg.topic][msg.payload.stamp_ns] = msg.payload.positions
-            continue
-        n_inputs += 1
-        t0 = time.perf_counter_ns()
-        out = driver.feed(msg)
-        if out.result is None:
-            continue
-        latency.append(time.perf_counter_ns() - t0)
-        t_list.append(msg.log_time_ns)
-        report = out.result.report
-        mode.append(report["mode"])
-        action.append(report["corrector"])
-        flags.append(report["flags"])
-        produced = {topic: payload.positions for topic, payload in out.logged if isinstance(payload, JointSample)}
-        for topic in RECORDED_OUTPUTS:
-            rows[topic].append(produced.get(topic))
+    # One BLAS thread: the batched CPN is a few hundred rows, where threads cost more than they give (on a
+    # busy machine or with -j workers, many times more); single configurations never use them anyway.
+    with threadpool_limits(1, user_api="blas"):
+        for msg, hand_input in _prepared(driver, reader.messages(topics=[t for t in wanted if t in reader.topics])):
+            if msg.topic in recorded_by_stamp:
+                if isinstance(msg.payload, JointSample):
+                    recorded_by_stamp[msg.topic][msg.payload.stamp_ns] = msg.payload.positions
+                continue
+            n_inputs += 1
+            t0 = time.perf_counter_ns()
+            out = driver.feed(msg, hand_input)
+            if out.result is None:
+                continue
+            latency.append(time.perf_counter_ns() - t0)
+            t_list.append(msg.log_time_ns)
+            report = out.result.report
+            mode.append(report["mode"])
+            action.append(report["corrector"])
+            flags.append(report["flags"])
+            produced = {topic: payload.positions for topic, payload in out.logged if isinstance(payload, JointSample)}
+            for topic in RECORDED_OUTPUTS:
+                rows[topic].append(produced.get(topic))
     t = np.array(t_list, dtype=np.int64)
 
     def table(values: list, width: int) -> np.ndarray:

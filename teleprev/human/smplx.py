@@ -107,11 +107,17 @@ def _untwist(w, x, y, z):
     twist = np.arctan2(-m12, m11)
     # twist and twist +- pi describe the same bone direction (flexion f or pi - f): take the smaller twist
     twist = np.where(twist > 0.5 * np.pi, twist - np.pi, np.where(twist < -0.5 * np.pi, twist + np.pi, twist))
-    if not np.any(np.abs(twist) > TWIST_NOISE):
+    moved = np.abs(twist) > TWIST_NOISE
+    if not np.any(moved):
         return w, x, y, z
-    twist = np.where(np.abs(twist) > TWIST_NOISE, twist, 0.0)
+    twist = np.where(moved, twist, 0.0)
     c, s = np.cos(0.5 * twist), np.sin(0.5 * twist)
-    return w * c + x * s, x * c - w * s, y * c - z * s, z * c + y * s
+    turned = w * c + x * s, x * c - w * s, y * c - z * s, z * c + y * s
+    if w.ndim < 2:
+        return turned
+    # a batch of poses: each pose as if alone, so the twist-free ones keep their bits exactly
+    posed = np.any(moved, axis=-1)[..., None]
+    return tuple(np.where(posed, new, old) for new, old in zip(turned, (w, x, y, z)))
 
 
 @functools.lru_cache(maxsize=64)

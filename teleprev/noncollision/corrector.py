@@ -28,9 +28,10 @@ from pathlib import Path
 import numpy as np
 
 from teleprev.errors import ModelError
-from teleprev.noncollision.mlp import CCN, CPN, file_sha256, load_model
+from teleprev.noncollision.mlp import CCN, CPN, SCORE_BAND, file_sha256, load_model
 from teleprev.noncollision.projection import ProjectionSettings, descend
 from teleprev.robot.collision import SelfCollisionChecker
+from teleprev.robot.collision_report import CollisionReport
 from teleprev.robot.model import RobotModel
 
 ACTIONS = ("untouched", "ccn", "fallback")
@@ -42,6 +43,17 @@ class Correction:
     action: str  # "untouched" | "ccn" | "fallback"
     colliding_links: tuple[str, ...]  # links that collided in the input (empty if untouched)
     deviation: float  # max |q_out - q_in| in rad
+
+
+@dataclass(frozen=True)
+class Prepared:
+    """An input with the state-independent part of its correction done (Corrector.prepare)."""
+
+    q: np.ndarray  # the input
+    q0: np.ndarray  # clipped to the limits
+    report: CollisionReport  # the exact check of q0
+    proposal: np.ndarray | None = None  # the CCN's proposal for q0 (batches only, where q0 collides)
+    answer: Correction | None = None  # the correction, where it needs no previous output (batches only)
 
 
 @dataclass(frozen=True)
@@ -125,36 +137,88 @@ class Corrector:
         return {role: file_sha256(path) for role, path in self.files.items()}
 
     # ---- the pipeline's call ----------------------------------------------------------------------
-    def correct(self, q: np.ndarray, previous: np.ndarray | None = None) -> Correction:
+    def prepare(self, q: np.ndarray) -> list[Prepared]:
+        """The part of `correct` that depends on the input alone, for inputs (N, n): each clipped to the
+        limits and checked exactly, and for a batch also the correction itself unless it falls back (that
+        needs the previous output). The same answers as `correct` alone: the batch check answers as the
+        single one, the CCN runs per input, and the CPN's batched scores decide only where they are
+        further than SCORE_BAND from the threshold (batched float32 sums differ from single ones in the
+        last bits), the single network elsewhere."""
         q_in = np.asarray(q, dtype=float)
-        if q_in.shape != self.model.lower.shape or not np.isfinite(q_in).all():
-            raise ValueError(f"expected {len(self.model.lower)} finite joint values, got {np.array2string(q_in, precision=3)}")
+        if q_in.ndim != 2 or q_in.shape[1:] != self.model.lower.shape or not np.isfinite(q_in).all():
+            raise ValueError(f"expected rows of {len(self.model.lower)} finite joint values, got "
+                             f"{np.array2string(q_in, precision=3)}")
         q0 = self.model.clip(q_in)
-        report = self.checker.check(q0)
+        if len(q0) == 1:
+            return [Prepared(q_in[0], q0[0], self.checker.check(q0[0]))]
+        pairs = self.checker.pair_matrix(q0)
+        labels = self.checker.labels_from_pairs(pairs)
+        names = self.checker.link_pairs
+        out = [Prepared(q_in[i], q0[i], CollisionReport(labels[i], tuple(names[k] for k in np.flatnonzero(pairs[i]))))
+               for i in range(len(q0))]
+        rows = [i for i, p in enumerate(out) if p.report.colliding]
+        if not rows:
+            return out
+        proposals = [self.ccn(q0[i]) for i in rows]
+        steps = 2 ** self.settings.shorten_levels
+        fractions = np.arange(1, steps) / steps
+        points = np.stack([q0[i] + fractions[:, None] * (p - q0[i]) for i, p in zip(rows, proposals)])
+        scores = self.cpn.score(points.reshape(-1, points.shape[-1])).reshape(len(rows), steps - 1)
+        for i, proposal, point, score in zip(rows, proposals, points, scores):
+            def free(k: int) -> bool:
+                s = float(score[k - 1])
+                if abs(s - self.cpn.free_below) > SCORE_BAND * (1.0 + abs(s)):
+                    return s < self.cpn.free_below
+                return self.cpn.predicts_free(point[k - 1])
+
+            shorter = self._shortest_predicted_free(q0[i], proposal, free)
+            answer = self._ccn_answer(q_in[i], shorter, proposal, out[i].report)
+            out[i] = Prepared(q_in[i], q0[i], out[i].report, proposal, answer)
+        return out
+
+    def correct(self, q: np.ndarray, previous: np.ndarray | None = None, prepared: Prepared | None = None) -> Correction:
+        """`prepared`: `prepare`'s answer for q, when computed ahead."""
+        if prepared is None:
+            prepared = self.prepare(np.asarray(q, dtype=float)[None])[0]
+        if prepared.answer is not None:
+            return prepared.answer
+        q_in, q0, report = prepared.q, prepared.q0, prepared.report
         if not report.colliding:
             return Correction(q0, "untouched", (), float(np.abs(q0 - q_in).max()))
+        proposal = prepared.proposal
+        if proposal is None:
+            proposal = self.ccn(q0)
+            shorter = self._shortest_predicted_free(q0, proposal, None)
+            answer = self._ccn_answer(q_in, shorter, proposal, report)
+            if answer is not None:
+                return answer
+        out = self._fallback(q0, proposal, previous)
         links = tuple(report.colliding_links(self.checker.link_names))
-        proposal = self.ccn(q0)
-        shorter = self._shortest_predicted_free(q0, proposal)
+        return Correction(out, "fallback", links, float(np.abs(out - q_in).max()))
+
+    def _ccn_answer(self, q_in: np.ndarray, shorter: np.ndarray | None, proposal: np.ndarray,
+                    report: CollisionReport) -> Correction | None:
+        """The shortened correction if it is free, else the full proposal if it is, else None (fallback)."""
+        links = tuple(report.colliding_links(self.checker.link_names))
         if shorter is not None and not self.checker.collides(shorter):
             return Correction(shorter, "ccn", links, float(np.abs(shorter - q_in).max()))
         if not self.checker.collides(proposal):
             return Correction(proposal, "ccn", links, float(np.abs(proposal - q_in).max()))
-        out = self._fallback(q0, proposal, previous)
-        return Correction(out, "fallback", links, float(np.abs(out - q_in).max()))
+        return None
 
-    def _shortest_predicted_free(self, q0: np.ndarray, proposal: np.ndarray) -> np.ndarray | None:
+    def _shortest_predicted_free(self, q0: np.ndarray, proposal: np.ndarray, free=None) -> np.ndarray | None:
         """The smallest fraction k / 2**shorten_levels of the correction the CPN predicts free, by bisection
-        (one CPN call per level: a batch of points costs as much per point as single calls)."""
-        lo, hi = 0, 2 ** self.settings.shorten_levels  # in units of 1 / 2**levels; hi: the full proposal
+        (one CPN call per level, unless `free(k)` answers for the CPN: Corrector.prepare's batch)."""
+        steps = 2 ** self.settings.shorten_levels
+        lo, hi = 0, steps  # in units of 1 / 2**levels; hi: the full proposal
         delta = proposal - q0
         while hi - lo > 1:
             mid = (lo + hi) // 2
-            if self.cpn.predicts_free(q0 + (mid / 2 ** self.settings.shorten_levels) * delta):
+            if free(mid) if free is not None else self.cpn.predicts_free(q0 + (mid / steps) * delta):
                 hi = mid
             else:
                 lo = mid
-        return None if hi == 2 ** self.settings.shorten_levels else q0 + (hi / 2 ** self.settings.shorten_levels) * delta
+        return None if hi == steps else q0 + (hi / steps) * delta
 
     # ---- fallback -------------------------------------------------------------------------------
     def _anchor(self, previous: np.ndarray | None) -> np.ndarray:

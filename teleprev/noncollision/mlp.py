@@ -366,6 +366,9 @@ def load_model(path: Path, kind: str, robot, link_names: tuple[str, ...] | None 
 
 
 # ---- the two networks at runtime --------------------------------------------------------------------
+SCORE_BAND = 1e-3  # relative: scores this near the threshold are decided one configuration at a time
+# (batched float32 sums differ from single ones by about 1e-6 of the score; tests/noncollision/test_mlp.py)
+
 class CPN:
     """Per-link self-collision probability of configurations (numpy); q is (n,) or (N, n)."""
 
@@ -377,6 +380,7 @@ class CPN:
         self._slots = net.info.slot_matrix()  # (slots, m)
         t = self.threshold
         self._free_below = np.float32(-np.log1p(-t) if self.noisy_or else np.log(t / (1.0 - t)))
+        self.free_below = float(self._free_below)
 
     def _prob(self, slots: np.ndarray) -> np.ndarray:
         if self.noisy_or:
@@ -386,6 +390,12 @@ class CPN:
     def prob(self, q: np.ndarray) -> np.ndarray:
         """Per-link probabilities (m,) for one configuration (n,), or (N, m) for (N, n)."""
         return self._prob(self.net.slots(np.asarray(q)))
+
+    def score(self, q: np.ndarray) -> np.ndarray:
+        """What the threshold compares, for configurations (N, n): the largest per-link sum (float32), free
+        below `free_below`. Batched float32 sums may differ from a single configuration's in the last bits."""
+        slots = self.net.slots(np.asarray(q))
+        return (softplus(slots) @ self._slots if self.noisy_or else slots @ self._slots).max(axis=-1)
 
     def predicts_free(self, q: np.ndarray) -> np.ndarray:
         """Every link below the operating threshold (compared before the last, monotonic step)."""

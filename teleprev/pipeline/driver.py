@@ -13,7 +13,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from teleprev.messages import Event, JointSample, Logged, PoseSample
-from teleprev.pipeline.step import Pipeline, PipelineState, StepInputs, StepResult
+from teleprev.pipeline.step import HandInput, Pipeline, PipelineState, StepInputs, StepResult
 from teleprev import topics
 
 
@@ -56,17 +56,27 @@ class PipelineDriver:
     def mode(self) -> str:
         return self.state.mode
 
-    def _inputs(self, t_ns: int) -> StepInputs:
+    def _inputs(self, t_ns: int, hand_input: HandInput | None = None) -> StepInputs:
         g = self.latest.get
-        return StepInputs(t_ns, g(self.topics.hand), g(self.topics.wrist), g(self.topics.arm), g(self.topics.effector))
+        return StepInputs(t_ns, g(self.topics.hand), g(self.topics.wrist), g(self.topics.arm), g(self.topics.effector),
+                          hand_input)
+
+    def prepare(self, messages: list[Logged]) -> list[HandInput | None]:
+        """For a run of messages about to be fed: Pipeline.prepare_hands of each trigger sample, in one
+        batch (None for the other messages), to pass to `feed` with its message."""
+        hand = [i for i, m in enumerate(messages) if m.topic == self.topics.hand and isinstance(m.payload, JointSample)]
+        out: list[HandInput | None] = [None] * len(messages)
+        for i, prepared in zip(hand, self.pipeline.prepare_hands([messages[i].payload for i in hand])):
+            out[i] = prepared
+        return out
 
     def request_mode(self, mode: str, t_ns: int) -> str:
         """Switch preview/execute at log time t_ns; returns "" or why it was refused."""
         self.state, refused = self.pipeline.set_mode(self.state, mode, self._inputs(t_ns))
         return refused
 
-    def feed(self, msg: Logged) -> Outputs:
-        """One logged sample, in log-time order."""
+    def feed(self, msg: Logged, hand_input: HandInput | None = None) -> Outputs:
+        """One logged sample, in log-time order; `hand_input`: its entry from `prepare`, if any."""
         payload = msg.payload
         if msg.topic in (self.topics.hand, self.topics.wrist, self.topics.arm, self.topics.effector):
             if isinstance(payload, (JointSample, PoseSample)):
@@ -83,7 +93,7 @@ class PipelineDriver:
             return self._outputs(result, msg.log_time_ns) if result is not None else Outputs()
         if msg.topic != self.topics.hand:
             return Outputs()
-        return self._outputs(self.pipeline.step(self.state, self._inputs(msg.log_time_ns)), msg.log_time_ns)
+        return self._outputs(self.pipeline.step(self.state, self._inputs(msg.log_time_ns, hand_input)), msg.log_time_ns)
 
     def _outputs(self, result: StepResult, t: int) -> Outputs:
         self.state = result.state

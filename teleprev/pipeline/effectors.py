@@ -45,8 +45,14 @@ class Effector(ABC):
     corrector: Corrector | None = None  # only a hand that can collide with itself has one
 
     @abstractmethod
-    def target(self, flexion: np.ndarray, abduction: np.ndarray, previous: np.ndarray | None) -> EffectorTarget:
-        """The target for this hand pose; `previous` is the last target (None before the first)."""
+    def target(self, flexion: np.ndarray, abduction: np.ndarray, previous: np.ndarray | None,
+               prepared=None) -> EffectorTarget:
+        """The target for this hand pose; `previous` is the last target (None before the first);
+        `prepared`: this pose's answer from `prepare` (None: computed here)."""
+
+    def prepare(self, flexion: np.ndarray, abduction: np.ndarray) -> list:
+        """The part of `target` that needs no pipeline state, for a batch of poses (N, 15): one entry per pose."""
+        return [None] * len(flexion)
 
 
 class LeapEffector(Effector):
@@ -64,10 +70,16 @@ class LeapEffector(Effector):
         speed = np.minimum(hand.velocity_limit, cfg.hand_speed)
         self.guard = JointGuard(hand.lower, hand.upper, speed, max_dt, checker=corrector.checker)
 
-    def target(self, flexion: np.ndarray, abduction: np.ndarray, previous: np.ndarray | None) -> EffectorTarget:
-        q = self.retarget.from_angles(flexion, abduction)
-        c = self.corrector.correct(q, previous)
-        return EffectorTarget(q, c.q, c.action, tuple(c.colliding_links), float(c.deviation))
+    def prepare(self, flexion: np.ndarray, abduction: np.ndarray) -> list:
+        """Retargeted joints and the Corrector's exact check of them (both element-wise or per row)."""
+        return self.corrector.prepare(self.retarget.from_angles(flexion, abduction))
+
+    def target(self, flexion: np.ndarray, abduction: np.ndarray, previous: np.ndarray | None,
+               prepared=None) -> EffectorTarget:
+        if prepared is None:
+            prepared = self.prepare(flexion[None], abduction[None])[0]
+        c = self.corrector.correct(prepared.q, previous, prepared)
+        return EffectorTarget(prepared.q, c.q, c.action, tuple(c.colliding_links), float(c.deviation))
 
 
 class GripperEffector(Effector):
@@ -80,7 +92,8 @@ class GripperEffector(Effector):
         speed = np.array([robot.velocity_limit[i]])
         self.guard = JointGuard(robot.lower[i:i + 1], robot.upper[i:i + 1], speed, max_dt)
 
-    def target(self, flexion: np.ndarray, abduction: np.ndarray, previous: np.ndarray | None) -> EffectorTarget:
+    def target(self, flexion: np.ndarray, abduction: np.ndarray, previous: np.ndarray | None,
+               prepared=None) -> EffectorTarget:
         q = np.array([self.map(float(flexion[self.joint]))])
         return EffectorTarget(q, q, "untouched")
 
@@ -93,7 +106,8 @@ class VacuumEffector(Effector):
         self.map = VacuumMap(cfg.vacuum_on_flexion, cfg.vacuum_off_flexion)
         self.guard = JointGuard(np.zeros(1), np.ones(1), np.array([np.inf]), max_dt)  # a switch: no speed to cap
 
-    def target(self, flexion: np.ndarray, abduction: np.ndarray, previous: np.ndarray | None) -> EffectorTarget:
+    def target(self, flexion: np.ndarray, abduction: np.ndarray, previous: np.ndarray | None,
+               prepared=None) -> EffectorTarget:
         was_on = previous is not None and previous[0] > 0.5
         q = np.array([1.0 if self.map(float(flexion[self.joint]), was_on) else 0.0])
         return EffectorTarget(q, q, "untouched")

@@ -44,6 +44,18 @@ class StepInputs:
     wrist: PoseSample | None = None  # right wrist from the suit
     arm: JointSample | None = None  # measured arm joints
     effector: JointSample | None = None  # measured end-effector joints
+    hand_input: HandInput | None = None  # Pipeline.prepare_hands' answer for `hand`, when computed ahead
+
+
+@dataclass(frozen=True)
+class HandInput:
+    """A glove sample, prepared: the finger angles and the effector's preparation, or the flag saying why
+    the sample is unusable ("glove_invalid", "glove_out_of_range")."""
+
+    flag: str = ""
+    flexion: np.ndarray | None = None
+    abduction: np.ndarray | None = None
+    effector: Any = None  # Effector.prepare's answer for these angles
 
 
 @dataclass(frozen=True)
@@ -84,6 +96,7 @@ class Pipeline:
         self.effector = effector
         self.effector_names = effector.names
         self._stale_ns = int(cfg.stale_ms * 1e6)
+        self._last_wrist: tuple = (None, "", None)  # (sample, flag, pose): a cache, the step stays pure
 
     def model_hashes(self) -> dict[str, str] | None:
         """{role: sha256} of the model files the pipeline runs (a session records them, eval compares);
@@ -102,39 +115,84 @@ class Pipeline:
             return False
         return True
 
-    def _finger_angles(self, inputs: StepInputs, flags: list[str]) -> tuple[np.ndarray, np.ndarray] | None:
-        s = inputs.hand
-        if not self._fresh(s, "glove", inputs.t_ns, flags):
-            return None
+    def prepare_hands(self, samples: list[JointSample]) -> list[HandInput]:
+        """What each glove sample gives before any pipeline state: finger angles (or why none) and the
+        end effector's state-independent work on them. One sample (the live step) or a session's worth at
+        once (eval, ahead of the sequential pass): element-wise array arithmetic, so each row's bits are
+        the same either way (tests/pipeline/test_prepared.py)."""
+        n = len(samples)
+        if n == 1:
+            return [self._prepare_hand(samples[0])]
+        out = [HandInput() for _ in range(n)]
+        poses = np.zeros((n, 15, 3))
+        valid = np.ones(n, dtype=bool)
+        for i, s in enumerate(samples):
+            try:
+                poses[i] = hand_pose_from_values(s.names, s.positions)
+            except KeyError:
+                out[i], valid[i] = HandInput("glove_invalid"), False
+        finite = np.isfinite(poses).all(axis=(1, 2))
+        in_range = np.einsum("nij,nij->ni", poses, poses).max(axis=1) <= MAX_JOINT_ROTATION**2
+        for i in np.flatnonzero(valid & ~(finite & in_range)):
+            out[i] = HandInput("glove_invalid" if not finite[i] else "glove_out_of_range")
+        rows = np.flatnonzero(valid & finite & in_range)
+        if not len(rows):
+            return out
+        flexion, abduction = angles_from_hand_pose(poses[rows])
+        bent = ((flexion.max(axis=1) > MAX_FLEXION) | (flexion.min(axis=1) < MIN_FLEXION)
+                | (abs(abduction).max(axis=1) > MAX_ABDUCTION))
+        ok = np.flatnonzero(~bent)
+        prepared = self.effector.prepare(flexion[ok], abduction[ok])
+        for k in np.flatnonzero(bent):
+            out[rows[k]] = HandInput("glove_out_of_range")
+        for j, k in enumerate(ok):
+            out[rows[k]] = HandInput("", flexion[k], abduction[k], prepared[j])
+        return out
+
+    def _prepare_hand(self, s: JointSample) -> HandInput:
+        """prepare_hands for one sample, without the batch's bookkeeping (the live step's case)."""
         try:
             pose = hand_pose_from_values(s.names, s.positions)
         except KeyError:
-            flags.append("glove_invalid")
-            return None
+            return HandInput("glove_invalid")
         if not np.isfinite(pose).all():
-            flags.append("glove_invalid")
-            return None
+            return HandInput("glove_invalid")
         if np.einsum("ij,ij->i", pose, pose).max() > MAX_JOINT_ROTATION**2:
-            flags.append("glove_out_of_range")
-            return None
+            return HandInput("glove_out_of_range")
         flexion, abduction = angles_from_hand_pose(pose)
         if flexion.max() > MAX_FLEXION or flexion.min() < MIN_FLEXION or abs(abduction).max() > MAX_ABDUCTION:
-            flags.append("glove_out_of_range")
+            return HandInput("glove_out_of_range")
+        return HandInput("", flexion, abduction, self.effector.prepare(flexion[None], abduction[None])[0])
+
+    def _hand(self, inputs: StepInputs, flags: list[str]) -> HandInput | None:
+        if not self._fresh(inputs.hand, "glove", inputs.t_ns, flags):
             return None
-        return flexion, abduction
+        hand = inputs.hand_input if inputs.hand_input is not None else self.prepare_hands([inputs.hand])[0]
+        if hand.flag:
+            flags.append(hand.flag)
+            return None
+        return hand
 
     def _wrist(self, inputs: StepInputs, flags: list[str]) -> np.ndarray | None:
         s = inputs.wrist
         if not self._fresh(s, "suit", inputs.t_ns, flags):
             return None
+        if self._last_wrist[0] is not s:  # the suit runs at half the glove's rate: most samples come twice
+            self._last_wrist = (s, *self._wrist_pose(s))
+        _, flag, matrix = self._last_wrist
+        if flag:
+            flags.append(flag)
+        return matrix
+
+    @staticmethod
+    def _wrist_pose(s: PoseSample) -> tuple[str, np.ndarray | None]:
+        """("", the wrist pose) or (why the sample is unusable, None)."""
         p, q = np.asarray(s.position, dtype=float), np.asarray(s.orientation, dtype=float)
         if not (np.isfinite(p).all() and np.isfinite(q).all()):
-            flags.append("suit_invalid")
-            return None
+            return "suit_invalid", None
         if float(p @ p) > MAX_WRIST_DISTANCE**2 or abs(float(q @ q) ** 0.5 - 1.0) > 0.1:
-            flags.append("suit_out_of_range")
-            return None
-        return s.matrix()
+            return "suit_out_of_range", None
+        return "", s.matrix()
 
     def measured(self, sample: JointSample | None, names: tuple[str, ...]) -> np.ndarray | None:
         if sample is None:
@@ -178,11 +236,12 @@ class Pipeline:
         flags: list[str] = []
         report: dict = {"step": state.step, "mode": state.mode, "corrector": "held", "colliding_links": [], "deviation_rad": 0.0}
 
-        angles = self._finger_angles(inputs, flags)
+        hand = self._hand(inputs, flags)
+        angles = None if hand is None else (hand.flexion, hand.abduction)
         retargeted = corrected = None
         effector_q = state.effector_q
-        if angles is not None:
-            t = self.effector.target(*angles, state.effector_q)
+        if hand is not None:
+            t = self.effector.target(hand.flexion, hand.abduction, state.effector_q, hand.effector)
             retargeted, corrected, effector_q = t.retargeted, t.target, t.target
             report.update(corrector=t.action, colliding_links=list(t.colliding_links), deviation_rad=t.deviation)
 

@@ -111,11 +111,8 @@ class SweptCheck:
             return True
         if self.clearance > 0 and self.clear(q0):
             points = self._points(q0, q1, self.clearance / 2)
-            for q in points[:-1]:
-                if self.grown.collides(q):
-                    return False
-            return self.clear(points[-1])
-        return not any(self.checker.collides(q) for q in self._points(q0, q1, START_STEP_M))
+            return self.grown.first_collision(points[:-1]) is None and self.clear(points[-1])
+        return self.checker.first_collision(self._points(q0, q1, START_STEP_M)) is None
 
     def last_free_on_segment(self, q0: np.ndarray, q1: np.ndarray, steps: int = 10) -> np.ndarray:
         """A point of the segment q0 -> q1 whose own segment from q0 passes (q0 itself at worst), by bisection."""

@@ -19,6 +19,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from teleprev.pipeline.kernels import hand_stop, hand_track, warm
+
 REST_VELOCITY = 1e-6  # rad/s: below this (and no acceleration) a joint is at rest
 REST_ACCELERATION = 1e-5
 BRAKE_FRACTION = 0.8  # of the hand's acceleration cap, for the braking envelope
@@ -145,41 +147,35 @@ class HandLimiter:
     """
 
     def __init__(self, lower: np.ndarray, upper: np.ndarray, velocity: np.ndarray, acceleration: np.ndarray):
-        self.lower = np.asarray(lower, dtype=float)
-        self.upper = np.asarray(upper, dtype=float)
-        self.velocity = np.asarray(velocity, dtype=float)
-        self.acceleration = np.asarray(acceleration, dtype=float)
+        self.lower = _vector(lower)
+        self.upper = _vector(upper)
+        self.velocity = _vector(velocity)
+        self.acceleration = _vector(acceleration)
+        warm()  # load the kernels from numba's cache now, not in a live loop's first steps
 
     def track(self, q: np.ndarray, v: np.ndarray, target: np.ndarray, target_v: np.ndarray | None, dt: float,
               dt_before: float, speed_frac: float = 1.0) -> tuple[np.ndarray, np.ndarray]:
         """(command, its velocity) one step of dt towards `target` (where the target is at the end of the
-        step, moving at `target_v`) from command q moving at v."""
+        step, moving at `target_v`) from command q moving at v.
+
+        Per joint (compiled: kernels.hand_track): the target clamped to the limits and its velocity to 0.9
+        of the cap, dropped where the target is about to stop at a joint limit; then land on the target at
+        the end of the step, unless that closes in faster than, in the target's frame, steps of dt each
+        slowing by a*dt could still stop within the distance (braking planned at BRAKE_FRACTION of the cap
+        leaves room to land exactly); the velocity changes by at most the cap over the step."""
         if dt <= 0:
             return q, v
-        a = self.acceleration
-        cap = self.velocity * speed_frac
-        dv = a * 0.5 * (dt + (dt_before if dt_before > 0 else dt))
-        target = np.minimum(np.maximum(target, self.lower), self.upper)
-        tv = np.zeros_like(q) if target_v is None else np.clip(target_v, -0.9 * cap, 0.9 * cap)
-        room = np.where(tv > 0, self.upper - target, target - self.lower)
-        tv = np.where(tv * tv > a * room, 0.0, tv)  # a target about to stop at a joint limit
-        # Land on the target at the end of the step, unless that closes in faster than, in the target's
-        # frame, steps of dt each slowing by a*dt could still stop within the distance.
-        e = target - q
-        ab = BRAKE_FRACTION * a  # braking planned a little under the cap leaves room to land exactly
-        brake = np.sqrt(2.0 * ab * np.abs(e) + (0.5 * ab * dt) ** 2) - 0.5 * ab * dt
-        want = np.where(e >= 0, np.minimum(e / dt, tv + brake), np.maximum(e / dt, tv - brake))
-        want = np.minimum(np.maximum(want, -cap), cap)
-        v_new = np.minimum(np.maximum(want, v - dv), v + dv)
-        v_new = np.minimum(np.maximum(v_new, -np.maximum(cap, np.abs(v))), np.maximum(cap, np.abs(v)))
-        cmd = np.minimum(np.maximum(q + v_new * dt, self.lower), self.upper)
-        return cmd, (cmd - q) / dt
+        has_tv = target_v is not None
+        return hand_track(_vector(q), _vector(v), _vector(target), _vector(target_v) if has_tv else self.lower, has_tv,
+                          float(dt), float(dt_before), float(speed_frac), self.lower, self.upper, self.velocity,
+                          self.acceleration, BRAKE_FRACTION)
 
     def stop(self, q: np.ndarray, v: np.ndarray, dt: float, dt_before: float) -> tuple[np.ndarray, np.ndarray]:
-        """One step of the hardest braking the cap allows."""
+        """One step of the hardest braking the cap allows (compiled: kernels.hand_stop)."""
         if dt <= 0:
             return q, v
-        dv = self.acceleration * 0.5 * (dt + (dt_before if dt_before > 0 else dt))
-        v_new = np.where(v > 0, np.maximum(v - dv, 0.0), np.minimum(v + dv, 0.0))
-        cmd = np.minimum(np.maximum(q + v_new * dt, self.lower), self.upper)
-        return cmd, (cmd - q) / dt
+        return hand_stop(_vector(q), _vector(v), float(dt), float(dt_before), self.lower, self.upper, self.acceleration)
+
+
+def _vector(x) -> np.ndarray:
+    return np.ascontiguousarray(x, dtype=np.float64)

@@ -1,6 +1,17 @@
-"""Exact self-collision on python-fcl, with per-link labels and the colliding link pairs.
+"""Exact self-collision, with per-link labels and the colliding link pairs.
 
-fcl decides every contact. Two vectorised numpy filters only decide which shape pairs fcl needs to
+    SelfCollisionChecker     what everything calls: for all-box geometry the compiled check decides
+                             (teleprev/robot/compiled_collision.py, microseconds), FCL only where the
+                             compiled answer is within its margin of touching; FCL alone otherwise
+    FclSelfCollisionChecker  FCL decides every contact (also the tests' independent reference)
+
+The compiled check brackets FCL's answer (tests/robot/test_compiled_collision.py): every pair FCL finds
+in contact, it reports with its margin (1 nm) on the "colliding" side; every pair it reports with the
+margin turned the other way (overlapping by more than 1 nm), FCL finds. Where the two agree they are
+FCL's answer; where they differ (a pair within a nanometre of touching) FCL is asked. So the answers
+are FCL's, bit for bit: sessions recorded with the FCL checker re-run identically.
+
+In FclSelfCollisionChecker fcl decides every contact. Two vectorised numpy filters only decide which shape pairs fcl needs to
 look at: bounding spheres, then, for box pairs, the face axes of the separating-axis test (a pair they
 let through may still be apart, and fcl decides; a pair they drop is apart for sure).
 Link pairs that are never checked (parent and child, and pairs that touch in every sampled
@@ -13,6 +24,8 @@ import fcl
 import numpy as np
 
 from teleprev.robot.collision_report import CollisionReport, link_labels
+from teleprev.robot.compiled_collision import CompiledSelfCollisionChecker
+from teleprev.robot import kernels
 from teleprev.robot.exclusions import Exclusions, load_exclusions
 from teleprev.robot.model import RobotModel
 
@@ -61,8 +74,8 @@ def _distance2(centres: np.ndarray) -> np.ndarray:
     return sq[..., :, None] + sq[..., None, :] - 2.0 * (centres @ np.swapaxes(centres, -1, -2))
 
 
-class SelfCollisionChecker:
-    """Self-collision of one robot model.
+class FclSelfCollisionChecker:
+    """Self-collision of one robot model, every contact decided by FCL.
 
     `link_names` are the links with collision geometry (the m labels of a configuration), in model order.
     """
@@ -169,6 +182,10 @@ class SelfCollisionChecker:
         shapes = self._shape_world(self.model.fk(q).world)
         return bool(self._fcl_pairs(shapes, self._candidates(shapes), first_only=True))
 
+    def first_collision(self, q: np.ndarray) -> int | None:
+        """Index of the first configuration of the batch q (N, n) in self-collision, or None."""
+        return next((i for i, x in enumerate(q) if self.collides(x)), None)
+
     def pair_matrix(self, q: np.ndarray, world: np.ndarray | None = None) -> np.ndarray:
         """(N, len(link_pairs)) bool: which checked link pairs collide, for a batch of configurations.
 
@@ -200,3 +217,51 @@ class SelfCollisionChecker:
 
     def labels_from_pairs(self, pairs: np.ndarray) -> np.ndarray:
         return link_labels(pairs, self._pair_links, len(self.link_names))
+
+
+class SelfCollisionChecker(FclSelfCollisionChecker):
+    """FCL's answers (see the module docstring), from compiled code wherever it is certain of them."""
+
+    def __init__(self, model: RobotModel, exclusions: Exclusions | None = None):
+        super().__init__(model, exclusions)
+        self._loose = self._tight = None
+        if all(s.kind == "box" for n in self.link_names for s in model.links[n].collisions):
+            self._loose = CompiledSelfCollisionChecker(model, self.exclusions)  # FCL's contacts and more
+            self._tight = CompiledSelfCollisionChecker(model, self.exclusions, margin=-kernels.MARGIN)  # fewer
+            q = model.neutral()  # load the kernels from numba's cache now, not in a live loop's first steps
+            self._loose.check(q), self._loose.collides(q), self._loose.first_collision(q[None])
+
+    def check(self, q: np.ndarray) -> CollisionReport:
+        if self._loose is None:
+            return super().check(q)
+        loose = self._loose.check(q)
+        if not loose.pairs:
+            return loose
+        tight = self._tight.check(q)
+        return tight if tight.pairs == loose.pairs else super().check(q)
+
+    def collides(self, q: np.ndarray) -> bool:
+        if self._loose is None:
+            return super().collides(q)
+        if not self._loose.collides(q):
+            return False
+        return True if self._tight.collides(q) else super().collides(q)
+
+    def first_collision(self, q: np.ndarray) -> int | None:
+        if self._loose is None:
+            return super().first_collision(q)
+        k = self._loose.first_collision(q)
+        while k is not None and not (self._tight.collides(q[k]) or super().collides(q[k])):
+            k = self._loose.first_collision(q, k + 1)  # within the margin and free for FCL: go on
+        return k
+
+    def pair_matrix(self, q: np.ndarray, world: np.ndarray | None = None) -> np.ndarray:
+        if self._loose is None:
+            return super().pair_matrix(q, world)
+        q = np.atleast_2d(q)
+        world = self._loose.kinematics.world(q) if world is None else world
+        loose = self._loose.pair_matrix(q, world)
+        unsure = np.flatnonzero((loose != self._tight.pair_matrix(q, world)).any(axis=1))
+        if len(unsure):
+            loose[unsure] = super().pair_matrix(q[unsure])
+        return loose

@@ -23,7 +23,7 @@ class CollisionReport:
 def link_labels(pairs: np.ndarray, pair_links: np.ndarray, n_links: int) -> np.ndarray:
     """(N, n_links) bool: a link is labelled colliding when any pair it belongs to collides.
     `pairs` is (N, P) bool over the checked pairs, `pair_links` (P, 2) their link indices."""
-    labels = np.zeros((len(pairs), n_links), dtype=bool)
+    touches = np.zeros((len(pair_links), n_links), dtype=np.int32)  # pair -> its two links
     for side in (0, 1):
-        np.logical_or.at(labels, (slice(None), pair_links[:, side]), pairs)
-    return labels
+        touches[np.arange(len(pair_links)), pair_links[:, side]] = 1
+    return (np.asarray(pairs, dtype=np.int32) @ touches) > 0

@@ -100,6 +100,11 @@ class CompiledSelfCollisionChecker:
         """Whether one configuration is in self-collision; stops at the first contact."""
         return bool(kernels.collides(self._q(q), *self.kinematics.tables, *self._tables(), self.margin))
 
+    def first_collision(self, q: np.ndarray, start: int = 0) -> int | None:
+        """Index of the first configuration of the batch q (N, n), from `start` on, in self-collision."""
+        k = kernels.first_colliding(self._q(q), start, *self.kinematics.tables, *self._tables(), self.margin)
+        return None if k < 0 else int(k)
+
     def pair_matrix(self, q: np.ndarray, world: np.ndarray | None = None) -> np.ndarray:
         """(N, len(link_pairs)) bool: which checked link pairs collide, for a batch of configurations.
 
@@ -129,6 +134,7 @@ def warm(robot: str = "leap_hand_right") -> None:
     checker.check(q)
     checker.collides(q)
     qs = np.stack([q, q])
+    checker.first_collision(qs)
     checker.pair_matrix(qs)
     checker.pair_matrix(qs, checker.kinematics.world(qs))
     checker.kinematics.world(q)

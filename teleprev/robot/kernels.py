@@ -286,3 +286,18 @@ def pair_matrix(qs, link_int, link_num, link_terms, shape_link, shape_local, sha
         self_collision_into(world, shape_link, shape_local, shape_size, links, spheres, pairs, margin, False,
                             hits[k], labels)
     return hits
+
+
+@njit(cache=True)
+def first_colliding(qs, start, link_int, link_num, link_terms, shape_link, shape_local, shape_size, links, spheres,
+                    pairs, margin):
+    """Index of the first configuration of qs (N, n) from `start` on that collides, or -1."""
+    world = np.empty((link_int.shape[0], 4, 4))
+    hits = np.zeros(pairs.shape[0], dtype=np.bool_)
+    labels = np.zeros(links.shape[0], dtype=np.bool_)
+    for k in range(start, qs.shape[0]):
+        fk_into(qs[k], link_int, link_num, link_terms, world)
+        if self_collision_into(world, shape_link, shape_local, shape_size, links, spheres, pairs, margin, True,
+                               hits, labels) > 0:
+            return k
+    return -1

@@ -38,3 +38,15 @@ def test_the_old_session_still_evaluates():
     assert commanded.sum() > 300
     if r.models_match:  # with the models it was recorded with, it must reproduce bit for bit
         assert session["bit_identical"]
+
+
+def test_sessions_of_one_rig_share_a_pipeline_and_rerun_the_same():
+    from teleprev.evaluation import reproduce
+
+    first = reproduce.rerun_session(FIXTURE)
+    built = dict(reproduce._BUILT)
+    second = reproduce.rerun_session(FIXTURE)
+    assert reproduce._BUILT == built and len(built) >= 1  # built once, reused
+    for topic, table in first.rerun.items():
+        np.testing.assert_array_equal(table, second.rerun[topic])
+    assert [list(f) for f in first.flags] == [list(f) for f in second.flags]

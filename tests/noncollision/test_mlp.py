@@ -64,3 +64,17 @@ def test_mean_probability_gradient(hand, hand_checker, activation):
     eps = 1e-3
     numeric = np.stack([(cpn.prob(q + eps * e).mean(1) - cpn.prob(q - eps * e).mean(1)) / (2 * eps) for e in np.eye(16)], axis=1)
     assert np.allclose(grad, numeric, atol=2e-3 * np.abs(numeric).max())
+
+
+def test_batched_scores_stay_far_inside_the_band_of_single_ones(hand, rng):
+    """Corrector.prepare trusts a batched CPN score's side of the threshold unless it is within SCORE_BAND
+    of it: batched and single float32 sums must differ by far less than that (the shipped CPN)."""
+    from teleprev.noncollision.corrector import Corrector
+    from teleprev.noncollision.mlp import SCORE_BAND
+
+    cpn = Corrector.load(None, hand).cpn
+    q = np.concatenate([hand.sample_uniform(1500, rng), hand.clip(hand.neutral() + rng.normal(0, 0.3, (1500, 16)))])
+    batch = cpn.score(q).astype(np.float64)
+    single = np.array([float(cpn.score(x)) for x in q])
+    assert np.max(np.abs(batch - single) / (1.0 + np.abs(single))) < SCORE_BAND / 100
+    assert np.array_equal(single < cpn.free_below, np.array([cpn.predicts_free(x) for x in q]))

@@ -1,6 +1,6 @@
 """The compiled self-collision check and FK against FCL and the numpy FK.
 
-FCL (through SelfCollisionChecker, itself checked against brute-force FCL in test_collision.py) is the
+FCL (through FclSelfCollisionChecker, itself checked against brute-force FCL in test_collision.py) is the
 independent reference. The compiled check errs towards "colliding" by at most its margin, so its answer
 is bracketed: every pair FCL reports, the compiled check reports; every pair the compiled check reports
 with the margin turned negative (deeper than 1 nm only), FCL reports.
@@ -15,6 +15,7 @@ import pytest
 
 from teleprev.errors import UrdfError
 from teleprev.robot import kernels
+from teleprev.robot.collision import SelfCollisionChecker
 from teleprev.robot.compiled_collision import CompiledSelfCollisionChecker
 from teleprev.robot.compiled_kinematics import CompiledKinematics
 from teleprev.robot.exclusions import Exclusions
@@ -105,6 +106,49 @@ def test_near_contact_configurations_differ_only_inside_the_margin(hand, hand_ch
         margin_side += compiled.collides(q_free)
     # within 1e-16 rad of FCL's boundary, the boxes are within the margin: "colliding" on both sides
     assert margin_side >= 30
+
+
+def test_the_pipeline_checker_gives_fcls_answers_bit_for_bit(hand, hand_checker, rng):
+    """SelfCollisionChecker decides with the compiled check and asks FCL inside the margin, so its answers
+    are FCL's everywhere, including configurations a last bit away from FCL's contact boundary."""
+    checker = SelfCollisionChecker(hand)
+    q = hand.sample_uniform(5000, rng)
+    np.testing.assert_array_equal(checker.pair_matrix(q), hand_checker.pair_matrix(q))
+    pool = hand.sample_uniform(200, rng)
+    colliding = hand_checker.pair_matrix(pool).any(axis=1)
+    band = 0
+    for q0, q1 in zip(pool[~colliding][:15], pool[colliding][:15]):
+        lo, hi = 0.0, 1.0
+        for _ in range(60):
+            mid = 0.5 * (lo + hi)
+            lo, hi = (lo, mid) if hand_checker.collides(q0 + mid * (q1 - q0)) else (mid, hi)
+        for q in (q0 + lo * (q1 - q0), q0 + hi * (q1 - q0)):
+            expected = hand_checker.check(q)
+            report = checker.check(q)
+            assert report.pairs == expected.pairs and checker.collides(q) == expected.colliding
+            np.testing.assert_array_equal(report.labels, expected.labels)
+            np.testing.assert_array_equal(checker.pair_matrix(q[None])[0], hand_checker.pair_matrix(q[None])[0])
+        band += CompiledSelfCollisionChecker(hand).collides(q0 + lo * (q1 - q0))  # free for FCL, in the margin
+    assert band >= 8, "the near-contact sample should exercise the FCL side"
+
+
+def test_first_collision_of_a_batch_is_fcls(hand, hand_checker, rng):
+    """A segment's points in order, through the boundary: the first FCL finds colliding, even when the
+    compiled check is unsure of an earlier one (within its margin, free for FCL)."""
+    checker = SelfCollisionChecker(hand)
+    pool = hand.sample_uniform(300, rng)
+    colliding = hand_checker.pair_matrix(pool).any(axis=1)
+    for q0, q1 in zip(pool[~colliding][:10], pool[colliding][:10]):
+        lo, hi = 0.0, 1.0
+        for _ in range(60):
+            mid = 0.5 * (lo + hi)
+            lo, hi = (lo, mid) if hand_checker.collides(q0 + mid * (q1 - q0)) else (mid, hi)
+        points = q0 + np.array([0.0, 0.5 * lo, lo, hi, 1.0])[:, None] * (q1 - q0)
+        expected = next(i for i, q in enumerate(points) if hand_checker.collides(q))
+        assert checker.first_collision(points) == expected
+        assert hand_checker.first_collision(points) == expected
+        assert checker.first_collision(points[:expected]) is None
+    assert CompiledSelfCollisionChecker(hand).first_collision(pool) == int(np.argmax(colliding))
 
 
 # ---- the box-box test itself -------------------------------------------------------------------
