@@ -23,6 +23,7 @@ def replay(
                                            show_default=False),
 ) -> None:
     """Play a session's commands back, on screen and optionally to the simulated or a real robot.
+
     A real robot (--to arm) gets only a session that passes `teleprev audit`, or one played --smooth."""
     from rich.console import Console
 
@@ -60,8 +61,9 @@ def eval_(
                                            "--extra ray`.", show_default=False),
     rows: int = typer.Option(30, "--rows", help="Sessions shown in the table of a corpus (the worst; the report has all)."),
 ) -> None:
-    """Re-run the pipeline on recorded raw streams, measure it, and catch regressions; exits 1 on a
-    regression or a session that could not be evaluated."""
+    """Re-run the pipeline on recorded raw streams, measure it, and catch regressions.
+
+    Exits 1 on a regression or a session that could not be evaluated."""
     from rich.console import Console
 
     from teleprev.corpus.sessions import resolve_sessions
@@ -106,8 +108,9 @@ def audit(
     config: Optional[Path] = typer.Option(None, "--config", help="Rig whose limits apply (default: the rig recorded in each session; required for a dataset)."),
     json_out: Optional[Path] = typer.Option(None, "--json", help="Write the audit as JSON here."),
 ) -> None:
-    """Check every command stream of a session, or a dataset's actions, against the robot's limits:
-    position, speed, acceleration, jerk, and (for a hand) end-point and swept self-collision. Exits 1 on
+    """Check a session's commands, or a dataset's actions, against the robot's limits.
+
+    Position, speed, acceleration, jerk, and (for a hand) end-point and swept self-collision. Exits 1 on
     any violation."""
     from rich.console import Console
 
