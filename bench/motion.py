@@ -19,6 +19,7 @@ command stream (divided differences on the command stamps; the sim hand's measur
 
 from __future__ import annotations
 
+import re
 import sys
 import tempfile
 import time
@@ -64,6 +65,7 @@ plugin = "replay.suit"
 session = "{session}"
 
 """ + arm_hand
+    rig = re.sub(r"(?ms)^\[frames\.cam_front\].*?(?=^\[)", "", rig)  # the played-back rig has no camera
     path = tmp / "replay.toml"
     path.write_text(rig)
     return path
