@@ -190,7 +190,13 @@ def main() -> None:
         "controlled_stops": len(stops),
         "trajectory_us_p99": common.percentile(cost, 99) if cost else float("nan"),
         "audits_passed": sum(a.ok for a in audits),
+        "hand_commands_colliding": sum(a.streams[1].colliding or 0 for a in audits),
+        "commands_outside_limits": sum(st.position_outside for a in audits for st in a.streams),
     }
+    for a in audits:
+        if not a.ok:
+            print(f"audit failed: {Path(a.session).name}: " + "; ".join(
+                f"{st.topic}: {v}" for st in a.streams for v in st.violations), file=sys.stderr)
     targets = {"arm_accel_max_ratio": "<= 1.05", "arm_jerk_max_ratio": "<= 1.05", "hand_accel_max_ratio": "<= 1.05",
                "hand_swept_colliding": "0", "hand_state_colliding": "0", "tracking_lag_ms_p50": "goal <= 40",
                "trajectory_us_p50": "<= 30"}
