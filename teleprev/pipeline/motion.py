@@ -167,6 +167,14 @@ class Motion:
             arm_cmd = arm.q
             if executing:
                 flags.append("arm_stopping")
+        if arm_cmd is not None:
+            # The generator limits velocity, acceleration and jerk, not position: heading for a limit faster
+            # than it can stop there (a target that jumped, a stop), its profile passes the limit before
+            # coming back. The joint limits are hard: the command is held at the limit meanwhile.
+            inside = np.minimum(np.maximum(arm_cmd, self.arm.lower), self.arm.upper)
+            if not np.array_equal(inside, arm_cmd):
+                flags.append("arm_limit_held")
+                arm_cmd = inside
 
         eff_cmd, hand_v = None, m.hand_v
         if self.hand is None:

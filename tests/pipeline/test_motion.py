@@ -236,3 +236,27 @@ def test_after_a_stall_with_an_idle_step_first_the_next_command_still_starts_fro
     t, q = commands(more)
     assert np.abs(q[0] - last).max() < 1e-4
     assert_within(np.r_[t[0] - 2 * 10**7, t[0] - 10**7, t], np.vstack([last, last, q]), 2.14, ARM.acceleration, ARM.jerk)
+
+
+def test_a_stop_that_would_pass_a_joint_limit_holds_the_command_at_the_limit(pipeline):
+    """Moving fast 0.05 rad short of a joint limit, the jerk-limited profile cannot stop before it and
+    passes it; the command sent never leaves the limits."""
+    from teleprev.pipeline.trajectory import JointMotion
+
+    p = pipeline
+    state, results = run(p, 200, engage_at=100)
+    upper = p.motion.arm.upper
+    q = state.arm_cmd.copy()
+    q[0] = upper[0] - 0.05
+    v = np.zeros_like(q)
+    v[0] = 1.5  # rad/s towards the limit: a jerk-limited stop needs ~0.13 rad
+    fast = dataclasses.replace(state, arm_cmd=q, motion=dataclasses.replace(state.motion, arm=JointMotion(q, v, np.zeros_like(q))))
+    s = fast.motion.arm
+    for _ in range(30):
+        s = p.motion.arm.stop(s, 1 / 120)
+    assert s.q[0] > upper[0]  # the profile itself passes the limit
+    _, more = run(p, 30, state=fast, make=lambda k: inputs(200 + k, p.arm_names, p.effector_names, [0.05]),
+                  mode_at={0: "preview"})
+    t, qs = commands(more)
+    assert len(t) > 5 and np.all(qs <= upper + 1e-12) and np.all(qs >= p.motion.arm.lower - 1e-12)
+    assert any("arm_limit_held" in r.report["flags"] for _, r in more)
