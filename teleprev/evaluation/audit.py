@@ -13,7 +13,7 @@ rig's [pipeline] keys, else teleprev/robot/limits.py and the URDF):
 
 and, for the hand's measured state, how many samples were in self-collision. Ratios are measured /
 limit: above 1 is a violation (a tolerance of 1e-6 absorbs rounding). Runs of commands more than
-RUN_GAP_S apart are measured separately (a new engage starts from rest). A dataset's actions are taken
+the pipeline's RESUME_GAP_NS apart are measured separately (a new engage starts from rest). A dataset's actions are taken
 as commands sent at its frames' timestamps, each episode on its own.
 """
 
@@ -26,10 +26,10 @@ from pathlib import Path
 import numpy as np
 
 from teleprev import topics
-from teleprev.pipeline.derivatives import divided_differences
+from teleprev.pipeline.derivatives import divided_differences, runs
+from teleprev.pipeline.motion import RESUME_GAP_NS
 from teleprev.errors import SessionError
 
-RUN_GAP_S = 0.06  # as the pipeline's RESUME_GAP_NS: after a pause this long, commands start again from rest
 SWEPT_STEP_M = 0.0005
 TOLERANCE = 1e-6
 
@@ -87,9 +87,7 @@ class AuditReport:
 
 
 def _runs(t_ns: np.ndarray) -> list[slice]:
-    breaks = np.flatnonzero(np.diff(t_ns) > RUN_GAP_S * 1e9) + 1
-    edges = [0, *breaks.tolist(), len(t_ns)]
-    return [slice(a, b) for a, b in zip(edges, edges[1:]) if b > a]
+    return runs(t_ns, RESUME_GAP_NS)
 
 
 def _measure(audit: StreamAudit, t_ns: np.ndarray, q: np.ndarray, lower: np.ndarray, upper: np.ndarray) -> None:

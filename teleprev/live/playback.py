@@ -59,7 +59,7 @@ def build_player(session: Path, episode, speed: float, to: str, rig_path=None, s
     if smoothed:
         if pipeline.motion is None:
             raise ConfigError("--smooth needs the rig's motion limits, and this rig has none", str(rig.path or session))
-        playback, effective = smooth(playback, pipeline.motion, speed), speed  # generated for this speed
+        playback, effective = smooth(playback, pipeline.motion, eff_guard, speed), speed  # generated for this speed
     else:
         effective = safe_speed(playback, pipeline.arm_guard.speed, eff_guard.speed, speed, pipeline.motion)
         if to != "preview" and pipeline.motion is not None and effective < min(speed, 1.0) - ROUNDING:

@@ -21,7 +21,7 @@ import numpy as np
 
 from teleprev.errors import DeviceError, SessionError
 from teleprev.messages import JointSample
-from teleprev.pipeline.derivatives import divided_differences
+from teleprev.pipeline.derivatives import divided_differences, runs
 from teleprev.pipeline.guard import JointGuard
 from teleprev.pipeline.motion import RESUME_GAP_NS
 from teleprev.pipeline.trajectory import JointMotion
@@ -131,17 +131,16 @@ def safe_speed(p: Playback, arm_caps: np.ndarray, effector_caps: np.ndarray, req
         ratios.append(np.nanmin(np.where(np.isfinite(r), r, np.inf)) if step.size else np.inf)
     if motion is not None:
         for side, q, sent in (("arm", p.arm, p.sent("arm")), ("hand", p.effector, p.sent("effector"))):
-            t = p.t_ns[sent]
-            breaks = np.flatnonzero(np.diff(t) > RESUME_GAP_NS) + 1
-            if len(breaks):  # played faster, a pause between runs must stay a pause (the arm stood there)
-                ratios.append(float(np.diff(t)[breaks - 1].min()) / RESUME_GAP_NS)
-            for run in np.split(np.flatnonzero(sent), breaks):  # each run starts from rest: measured alone
-                if side == "arm" and len(run) >= 4:
-                    _, acc, jerk = divided_differences(p.t_ns[run], q[run])
-                    ratios.append(_power_room(motion.arm.acceleration, acc, 2))
-                    ratios.append(_power_room(motion.arm.jerk, jerk, 3))
-                elif side == "hand" and motion.hand is not None and len(run) >= 3:
-                    ratios.append(_power_room(motion.hand.acceleration, divided_differences(p.t_ns[run], q[run])[1], 2))
+            t, q = p.t_ns[sent], q[sent]
+            pieces = runs(t, RESUME_GAP_NS)
+            if len(pieces) > 1:  # played faster, a pause between runs must stay a pause (the arm stood there)
+                ratios.append(min(int(t[r.start] - t[r.start - 1]) for r in pieces[1:]) / RESUME_GAP_NS)
+            for run in pieces:  # each run starts from rest: measured alone
+                _, acc, jerk = divided_differences(t[run], q[run])
+                if side == "arm":
+                    ratios += [_power_room(motion.arm.acceleration, acc, 2), _power_room(motion.arm.jerk, jerk, 3)]
+                elif motion.hand is not None:
+                    ratios.append(_power_room(motion.hand.acceleration, acc, 2))
     speed = float(min(requested, *ratios))
     return min(requested, 1.0) if requested >= 1.0 and speed >= 1.0 - ROUNDING else speed
 
@@ -157,31 +156,50 @@ def _power_room(limit: np.ndarray, measured: np.ndarray, power: int) -> float:
     return float(np.min(np.where(peak > 0, room, np.inf)))
 
 
-def smooth(p: Playback, motion, speed: float = 1.0, max_step_s: float = 1 / 120) -> Playback:
-    """The played sequence as the pipeline's own generator would command it (`replay --smooth`), in the
-    time it is played at `speed`: the arm jerk-limited, the hand acceleration-capped along segments that
-    keep the clearance, from rest at the first command, meeting each recorded command as a moving target
-    (at most `max_step_s` apart, so no pause is long enough for a servo arm to stand), braking to rest at
-    the last. Stamps stay in the recording's time (played time x speed), as the Player expects."""
-    arm_gen, hand = motion.arm, motion.hand
-    s = JointMotion.rest(p.arm[0])
-    e, ev = p.effector[0].copy(), np.zeros_like(p.effector[0])
-    t0 = int(p.t_ns[0])
-    t, arm, eff = [t0], [s.q], [e]
-    played, dt_before, flags = 0.0, 0.0, []
+class _Generated:
+    """Commands as the pipeline's Motion generates them, one step at a time: the arm jerk-limited, the hand
+    acceleration-capped along segments that keep the clearance (an end effector without a cap through its
+    speed guard, as live)."""
 
-    def step(dt, target_a, tv_a, target_e, tv_e):
-        nonlocal s, e, ev, dt_before, played
-        s = arm_gen.track(s, target_a, tv_a, dt)[0]
-        if hand is not None:
-            e, ev = motion.hand_step(e, ev, target_e, tv_e, dt, dt_before, 1.0, flags)
+    def __init__(self, motion, effector_guard: JointGuard, arm: np.ndarray, effector: np.ndarray):
+        self.motion, self.effector_guard = motion, effector_guard
+        self.arm = JointMotion.rest(arm)
+        self.effector, self.effector_v = np.array(effector, dtype=float), np.zeros(len(effector))
+        self.dt_before, self.flags = 0.0, []
+
+    def step(self, dt: float, arm, arm_v, effector, effector_v, frac: float = 1.0) -> None:
+        m = self.motion
+        self.arm = m.arm.track(self.arm, arm, arm_v, dt, frac)[0]
+        if m.hand is not None:
+            self.effector, self.effector_v = m.hand_step(self.effector, self.effector_v, effector, effector_v, dt,
+                                                         self.dt_before, frac, self.flags)
         else:
-            e = target_e
-        dt_before = dt
+            self.effector = self.effector_guard.step(self.effector, effector, dt, frac, target_valid=True)
+        self.dt_before = dt
+
+    def at_rest_on(self, arm: np.ndarray, effector: np.ndarray) -> bool:
+        return (self.arm.at_rest and not np.any(self.effector_v) and np.max(np.abs(self.arm.q - arm)) < 1e-9
+                and np.max(np.abs(self.effector - effector)) < 1e-9)
+
+
+def smooth(p: Playback, motion, effector_guard: JointGuard, speed: float = 1.0, max_step_s: float = 1 / 120) -> Playback:
+    """The played sequence as the pipeline's own generator would command it (`replay --smooth`), in the
+    time it is played at `speed`: from rest at the first command, meeting each recorded command as a
+    moving target (at most `max_step_s` apart, so no pause is long enough for a servo arm to stand),
+    braking to rest at the last. Stamps stay in the recording's time (played time x speed), as the
+    Player expects."""
+    g = _Generated(motion, effector_guard, p.arm[0], p.effector[0])
+    t0 = int(p.t_ns[0])
+    t, arm, eff = [t0], [g.arm.q], [g.effector]
+    played = 0.0
+
+    def step(dt, *targets):
+        nonlocal played
+        g.step(dt, *targets)
         played += dt
         t.append(t0 + int(round(played * speed * 1e9)))
-        arm.append(s.q)
-        eff.append(e)
+        arm.append(g.arm.q)
+        eff.append(g.effector)
 
     arm_sent, eff_sent = p.sent("arm"), p.sent("effector")
     for k in range(1, len(p.t_ns)):
@@ -197,7 +215,7 @@ def smooth(p: Playback, motion, speed: float = 1.0, max_step_s: float = 1 / 120)
             step(span / n, p.arm[k - 1] + f * (p.arm[k] - p.arm[k - 1]), va,
                  p.effector[k - 1] + f * (p.effector[k] - p.effector[k - 1]), ve)
     for _ in range(int(SETTLE_S / max_step_s)):  # then come to rest on the last command
-        if s.at_rest and not np.any(ev) and np.allclose(s.q, p.arm[-1], atol=1e-9) and np.allclose(e, p.effector[-1], atol=1e-9):
+        if g.at_rest_on(p.arm[-1], p.effector[-1]):
             break
         step(max_step_s, p.arm[-1], None, p.effector[-1], None)
     return Playback(np.array(t, dtype=np.int64), np.array(arm), np.array(eff), p.arm_names, p.effector_names,
@@ -314,18 +332,12 @@ class Player:
     def _limited_ramp(self, arm, eff, target_a, target_e) -> bool:
         """The ramp through the pipeline's generator: from rest where the robot is to rest at the first
         command, at the engage fraction of the speed caps and within the acceleration and jerk limits."""
-        m, frac, flags = self.motion, self.engage_speed_frac, []
-        s, ev, dt = JointMotion.rest(arm), np.zeros_like(eff), self.period
-        t_ns = self._now_ns()
+        g, t_ns = _Generated(self.motion, self.effector_guard, arm, eff), self._now_ns()
         while not self._stop.is_set():  # at least one command: the robot holds where it is told to
-            s = m.arm.track(s, target_a, None, dt, frac)[0]
-            if m.hand is not None:
-                eff, ev = m.hand_step(eff, ev, target_e, None, dt, dt, frac, flags)
-            else:
-                eff = self.effector_guard.step(eff, target_e, dt, frac, target_valid=True)
-            t_ns += int(dt * 1e9)
-            self._send(s.q, eff, t_ns)
+            g.step(self.period, target_a, None, target_e, None, self.engage_speed_frac)
+            t_ns += int(self.period * 1e9)
+            self._send(g.arm.q, g.effector, t_ns)
             time.sleep(self.period)
-            if s.at_rest and not np.any(ev) and np.max(np.abs(s.q - target_a)) < 1e-9 and np.max(np.abs(eff - target_e)) < 1e-9:
+            if g.at_rest_on(target_a, target_e):
                 return True  # at rest on the first command: the played commands start from rest there
         return False

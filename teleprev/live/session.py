@@ -100,11 +100,10 @@ class LiveSession:
         self.summary = None
 
     def _recording_failed(self, exc: OSError) -> None:
-        """On the recorder's writer thread, the moment a write fails: the robot brakes to rest and the
-        preview says why; the session then ends (the caller sees `failure`) with a non-zero exit."""
-        from teleprev.errors import describe_os_error
-
-        self.loop.control("halt", why=f"recording failed ({describe_os_error(exc)})")
+        """On the recorder's writer thread, the moment a write fails (the recorder has noted it, so
+        `failure` says why): the robot brakes to rest and the preview says why; the session then ends
+        with a non-zero exit."""
+        self.loop.control("halt", why=self.failure)
 
     @property
     def failure(self) -> str:
@@ -119,8 +118,6 @@ class LiveSession:
     def settle(self, timeout_s: float = 3.0) -> bool:
         """Back to preview (if not there) and wait until the commands have braked to rest, so that
         stopping the devices never cuts a motion short; False if it did not settle in time."""
-        import time
-
         start = time.monotonic()
         asked = False
         while time.monotonic() < start + timeout_s:

@@ -13,3 +13,11 @@ def divided_differences(t_ns: np.ndarray, q: np.ndarray) -> tuple[np.ndarray, np
     f2 = np.diff(v, axis=0) / (t[2:] - t[:-2])[:, None]
     f3 = np.diff(f2, axis=0) / (t[3:] - t[:-3])[:, None]
     return v, 2.0 * f2, 6.0 * f3
+
+
+def runs(t_ns: np.ndarray, gap_ns: int) -> list[slice]:
+    """The runs of a command stream: stamps more than gap_ns apart start a new one (after such a pause
+    the commands start again from rest, so each run is measured alone)."""
+    breaks = np.flatnonzero(np.diff(np.asarray(t_ns, dtype=np.int64)) > gap_ns) + 1
+    edges = [0, *breaks.tolist(), len(t_ns)]
+    return [slice(a, b) for a, b in zip(edges, edges[1:]) if b > a]

@@ -372,9 +372,8 @@ class SessionReader:
         import zlib
 
         try:
-            tail = mr.read_exact(self._f, self.file_bytes - mr.FOOTER_RECORD_SIZE - len(mr.MAGIC), mr.FOOTER_RECORD_SIZE)
-            summary_start = struct.unpack_from("<Q", tail, 9)[0]
-            end_at = (summary_start or self.file_bytes - mr.FOOTER_RECORD_SIZE - len(mr.MAGIC)) - 13
+            _, summary_start, _ = mr.read_footer(self._f, self.file_bytes)
+            end_at = (summary_start or self.file_bytes - mr.FOOTER_RECORD_SIZE - len(mr.MAGIC)) - 13  # DataEnd: 1+8+4
             op, length, crc = struct.unpack("<BQI", mr.read_exact(self._f, end_at, 13))
         except (mr.McapFormatError, struct.error):
             return None

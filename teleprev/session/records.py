@@ -281,8 +281,8 @@ def record_at(buf, offset: int, expect: int) -> memoryview:
     return memoryview(buf)[offset + 9:offset + 9 + length]
 
 
-def read_summary(f, size: int) -> SummarySection | None:
-    """The summary section of a complete file (None when the file was written without one). Raises
+def read_footer(f, size: int) -> tuple[bytes, int, int]:
+    """(the footer record's bytes, summary_start, summary_crc) of a complete file. Raises
     McapFormatError when the file does not end with a footer and the closing magic (cut short)."""
     if size < len(MAGIC) * 2 + FOOTER_RECORD_SIZE:
         raise McapFormatError("file too short to hold an MCAP footer")
@@ -290,13 +290,20 @@ def read_summary(f, size: int) -> SummarySection | None:
     if tail[-8:] != MAGIC or tail[0] != FOOTER:
         raise McapFormatError("no footer and closing magic at the end of the file")
     summary_start, _summary_offset_start, summary_crc = struct.unpack_from("<QQI", tail, 9)
+    return tail[:FOOTER_RECORD_SIZE], summary_start, summary_crc
+
+
+def read_summary(f, size: int) -> SummarySection | None:
+    """The summary section of a complete file (None when the file was written without one). Raises
+    McapFormatError when the file does not end with a footer and the closing magic (cut short)."""
+    footer, summary_start, summary_crc = read_footer(f, size)
     if summary_start == 0:
         return None
     footer_at = size - FOOTER_RECORD_SIZE - len(MAGIC)
     if not len(MAGIC) <= summary_start <= footer_at:
         raise McapFormatError(f"footer points at summary offset {summary_start} outside the file")
     buf = read_exact(f, summary_start, footer_at - summary_start)
-    if summary_crc and zlib.crc32(tail[:FOOTER_RECORD_SIZE - 4], zlib.crc32(buf)) != summary_crc:
+    if summary_crc and zlib.crc32(footer[:-4], zlib.crc32(buf)) != summary_crc:
         raise McapFormatError("summary CRC mismatch (the index at the end of the file was changed)")
     out = SummarySection()
     for op, b, e in iter_records(buf):
