@@ -42,3 +42,22 @@ def record_corpus(folder: Path, names: str = "abc", seconds: float = 2.0) -> Pat
     for name in names:
         record_sim(folder / f"{name}.mcap", seconds=seconds, engage_after=0.5)
     return folder
+
+
+class RecordingPort:
+    """A test double at the ActuatorPort interface: keeps (monotonic time, command) of what the loop
+    sends, and passes it on."""
+
+    def __init__(self, port):
+        self.port, self.sent = port, []
+
+    def send(self, command):
+        self.sent.append((time.monotonic(), command))
+        return self.port.send(command)
+
+
+def record_what_is_sent(rec: LiveSession) -> dict[str, RecordingPort]:
+    """Put a RecordingPort between the session loop and each actuator."""
+    doubles = {k: RecordingPort(p) for k, p in rec.loop.actuators.items()}
+    rec.loop.actuators = doubles
+    return doubles

@@ -8,22 +8,11 @@ import numpy as np
 import pytest
 from rich.console import Console
 
-from tests.helpers.sessions import record_sim
+from tests.helpers.sessions import record_sim, record_what_is_sent
 from teleprev.robot.collision import SelfCollisionChecker
 from teleprev.robot.model import load_robot
 from teleprev import topics
 from teleprev.session.reader import SessionReader
-
-
-class CountingPort:
-    """A test double at the ActuatorPort interface: counts and keeps what the loop sends."""
-
-    def __init__(self, port):
-        self.port, self.sent = port, []
-
-    def send(self, command):
-        self.sent.append(command)
-        return self.port.send(command)
 
 
 def test_a_whole_session_in_preview_sends_no_motion_command(tmp_path):
@@ -31,8 +20,7 @@ def test_a_whole_session_in_preview_sends_no_motion_command(tmp_path):
     import time
 
     rec = LiveSession(RecordOptions(out=tmp_path / "p.mcap"))
-    doubles = {k: CountingPort(p) for k, p in rec.loop.actuators.items()}
-    rec.loop.actuators = doubles
+    doubles = record_what_is_sent(rec)
     rec.start()
     rec.loop.control("start", task="pick_place")
     time.sleep(3.0)

@@ -12,25 +12,14 @@ import pytest
 from teleprev.errors import SessionError
 from teleprev.session.recover import recover
 from tests.helpers.faults import has_traceback, run_cli, small_disk
-
-
-class TimedPort:
-    """A test double at the ActuatorPort interface: keeps (monotonic time, command) of what the loop sends."""
-
-    def __init__(self, port):
-        self.port, self.sent = port, []
-
-    def send(self, command):
-        self.sent.append((time.monotonic(), command))
-        return self.port.send(command)
+from tests.helpers.sessions import record_what_is_sent
 
 
 def test_a_full_disk_stops_the_robot_and_the_preview_says_why(tmp_path):
     from teleprev.live.session import LiveSession, RecordOptions
 
     rec = LiveSession(RecordOptions(out=tmp_path / "full.mcap"))
-    doubles = {k: TimedPort(p) for k, p in rec.loop.actuators.items()}
-    rec.loop.actuators = doubles
+    doubles = record_what_is_sent(rec)
     rec.start()
     try:
         rec.loop.control("start", task="pick_place")
