@@ -28,10 +28,13 @@ Events:
 
 from __future__ import annotations
 
-FORMAT_VERSION = 2  # session layout version, written to the "teleprev" metadata record
+FORMAT_VERSION = 3  # session layout version, written to the "teleprev" metadata record
 # Format 2: commands go through the motion limits (teleprev/pipeline/motion.py); idle steps may command
 # between trigger samples; a ModeSwitch with reason "estop" stops commanding at once.
 MOTION_FORMAT_VERSION = 2
+# Format 3: the pipeline's arithmetic is the compiled hot path (IK, CPN/CCN, hand preparation, swept
+# check), whose last bits differ from the numpy code that recorded formats 1 and 2.
+COMPILED_FORMAT_VERSION = 3
 
 TASKS_RECORD = "tasks"  # metadata record: task id -> the task as a natural-language instruction
 TF = "/tf"

@@ -79,26 +79,31 @@ def build_motion(rig: Rig, ik: ArmIK, arm_speed: np.ndarray, effector, swept: Sw
 
 
 def build_pipeline(rig: Rig, models: str | Path | None = None, calibration: Calibration | None = None,
-                   motion: bool = True) -> Pipeline:
+                   motion: bool = True, compiled: bool = True) -> Pipeline:
     """`motion`: acceleration and jerk limits on the commands (teleprev/pipeline/motion.py); sessions
-    recorded before them (format version 1) are re-run with motion=False."""
+    recorded before them (format version 1) are re-run with motion=False. `compiled`: the compiled hot
+    path's arithmetic (IK, CPN/CCN, hand preparation, swept check); sessions recorded before it (format
+    versions 1 and 2) are re-run with compiled=False, the numpy arithmetic that recorded them."""
     cfg = rig.pipeline
     calibration = calibration if calibration is not None else rig_calibration(rig)
     robot = load_robot(rig.rig.robot)
     # Tracking: a bounded number of iterations and no cold-start retry, so an unreachable target costs a
     # bounded step; the best effort within the limits is flagged and the next step continues from it.
     ik = ArmIK(robot, cfg.tcp_link or rig.effector.tcp_link, position_tolerance=cfg.ik_position_tolerance,
-               rotation_tolerance=cfg.ik_rotation_tolerance, max_iterations=cfg.ik_iterations, retry=False)
+               rotation_tolerance=cfg.ik_rotation_tolerance, max_iterations=cfg.ik_iterations, retry=False,
+               compiled=compiled)
     arm_speed = _capped_speed(rig, "arm_speed", ik.chain.velocity_limit) if motion else np.minimum(ik.chain.velocity_limit, cfg.arm_speed)
     max_dt = cfg.max_command_dt_ms / 1000.0
     arm_guard = JointGuard(ik.chain.lower, ik.chain.upper, arm_speed, max_dt)
     arm = ArmRetargeter(ik, cfg.wrist_scale, cfg.workspace_min, cfg.workspace_max, calibration.suit_to_robot())
-    effector, swept = build_effector(rig, robot, cfg, max_dt, calibration, models, motion)
-    return Pipeline(cfg, arm, arm_guard, effector, build_motion(rig, ik, arm_speed, effector, swept) if motion else None)
+    effector, swept = build_effector(rig, robot, cfg, max_dt, calibration, models, motion, compiled)
+    return Pipeline(cfg, arm, arm_guard, effector, build_motion(rig, ik, arm_speed, effector, swept) if motion else None,
+                    compiled=compiled)
 
 
 def build_effector(rig: Rig, robot: RobotModel, cfg: PipelineConfig, max_dt: float, calibration: Calibration,
-                   models: str | Path | None = None, motion: bool = True) -> tuple[Effector, SweptCheck | None]:
+                   models: str | Path | None = None, motion: bool = True,
+                   compiled: bool = True) -> tuple[Effector, SweptCheck | None]:
     """The pipeline's side of the rig's end effector, chosen by its row of the table, and (for a hand
     with self-collision, when motion limits are on) the swept check its commands go through."""
     spec = rig.effector
@@ -110,11 +115,11 @@ def build_effector(rig: Rig, robot: RobotModel, cfg: PipelineConfig, max_dt: flo
         if motion:
             # The clearance is part of "collision-free" from the Corrector on: its exact check runs on the
             # hand's shapes grown by half the margin, so targets keep it, and the guard checks the motion.
-            swept = SweptCheck(hand, SelfCollisionChecker(hand), hand_clearance_m(rig))
+            swept = SweptCheck(hand, SelfCollisionChecker(hand), hand_clearance_m(rig), compiled=compiled)
             checker = swept.grown
             _capped_speed(rig, "hand_speed", hand.velocity_limit)
-        corrector = Corrector.load(models_dir(rig, models), hand, checker)
-        return LeapEffector(spec, hand, corrector, cfg, max_dt, calibration.leap_map()), swept
+        corrector = Corrector.load(models_dir(rig, models), hand, checker, compiled=compiled)
+        return LeapEffector(spec, hand, corrector, cfg, max_dt, calibration.leap_map(), compiled=compiled), swept
     if spec.is_switch:
         return VacuumEffector(spec, cfg, max_dt), None
     return GripperEffector(spec, robot, cfg, max_dt), None

@@ -101,8 +101,10 @@ def find_models(models_dir: Path, model: RobotModel) -> tuple[Path, Path]:
 
 class Corrector:
     def __init__(self, model: RobotModel, checker: SelfCollisionChecker, cpn: CPN, ccn: CCN,
-                 settings: CorrectorSettings = CorrectorSettings(), files: dict[str, Path] | None = None):
+                 settings: CorrectorSettings = CorrectorSettings(), files: dict[str, Path] | None = None,
+                 compiled: bool = False):
         self.model = model
+        self.compiled = compiled  # compiled CPN/CCN inference (sessions of format 3 on); False: numpy
         self.checker = checker
         self.cpn = cpn
         self.ccn = ccn
@@ -116,7 +118,8 @@ class Corrector:
         self._extend = np.linspace(1.0, 2.0, 9)[1:, None]
 
     @classmethod
-    def load(cls, models_dir: Path | None, model: RobotModel, checker: SelfCollisionChecker | None = None) -> "Corrector":
+    def load(cls, models_dir: Path | None, model: RobotModel, checker: SelfCollisionChecker | None = None,
+             compiled: bool = False) -> "Corrector":
         """The CPN and CCN for `model` from `models_dir` (None: the shipped models/ folder)."""
         from teleprev.paths import data_dir
 
@@ -130,7 +133,8 @@ class Corrector:
                 f"trained against another CPN than {cpn_path.name}; retrain the CCN (`teleprev collision train-ccn`)",
                 str(ccn_path),
             )
-        return cls(model, checker, cpn, CCN(ccn_net, model.lower, model.upper), files={"cpn": cpn_path, "ccn": ccn_path})
+        return cls(model, checker, cpn, CCN(ccn_net, model.lower, model.upper), files={"cpn": cpn_path, "ccn": ccn_path},
+                   compiled=compiled)
 
     def model_hashes(self) -> dict[str, str]:
         """{role: sha256} of the weight files loaded (a session records them, eval compares them)."""

@@ -57,7 +57,7 @@ class Effector(ABC):
 
 class LeapEffector(Effector):
     def __init__(self, spec: EndEffector, hand: RobotModel, corrector: Corrector, cfg: PipelineConfig, max_dt: float,
-                 mapping: dict[str, JointMap] | None = None):
+                 mapping: dict[str, JointMap] | None = None, compiled: bool = False):
         # the Corrector and the guard work in the URDF's joint order, which the table's must therefore be
         if hand.joint_names != spec.joints:
             raise UrdfError(f"the {spec.name!r} row of the end-effector table names joints {list(spec.joints)}, "
@@ -66,6 +66,7 @@ class LeapEffector(Effector):
         self.model = hand
         self.names = spec.joints
         self.retarget = LeapRetargeter(hand, mapping)
+        self.compiled = compiled  # compiled retargeting (sessions of format 3 on); False: numpy
         self.corrector = corrector
         speed = np.minimum(hand.velocity_limit, cfg.hand_speed)
         self.guard = JointGuard(hand.lower, hand.upper, speed, max_dt, checker=corrector.checker)

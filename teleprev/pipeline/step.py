@@ -87,8 +87,9 @@ class StepResult:
 
 class Pipeline:
     def __init__(self, cfg: PipelineConfig, arm: ArmRetargeter, arm_guard: JointGuard, effector: Effector,
-                 motion: Motion | None = None):
+                 motion: Motion | None = None, compiled: bool = False):
         self.cfg = cfg
+        self.compiled = compiled  # the compiled hot path (sessions of format 3 on); False: the numpy arithmetic
         self.motion = motion  # teleprev.pipeline.motion.Motion: limits on acceleration and jerk (None: speed caps only)
         self.arm = arm
         self.arm_names = arm.ik.joint_names

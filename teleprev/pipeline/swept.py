@@ -77,8 +77,9 @@ def reach_table(model: RobotModel, link_names: tuple[str, ...]) -> np.ndarray:
 
 
 class SweptCheck:
-    def __init__(self, model: RobotModel, checker: SelfCollisionChecker, clearance_m: float):
+    def __init__(self, model: RobotModel, checker: SelfCollisionChecker, clearance_m: float, compiled: bool = False):
         self.model = model
+        self.compiled = compiled  # the compiled segment check (sessions of format 3 on); False: the numpy one
         self.checker = checker
         self.clearance = float(clearance_m)
         self.grown = (SelfCollisionChecker(inflated_model(model, self.clearance / 2), checker.exclusions)

@@ -42,6 +42,7 @@ class ArmIK:
         damping: float = 1e-6,
         max_step: float = 0.4,
         retry: bool = True,
+        compiled: bool = False,
     ):
         full = model.chain_to(tip)
         self.joint_names = full.joint_names
@@ -60,6 +61,7 @@ class ArmIK:
         self.damping = damping
         self.max_step = max_step
         self.retry = retry  # a second, short-stepped try from the start when the first does not converge
+        self.compiled = compiled  # the compiled solver (sessions of format 3 on); False: the numpy one
         self._tip_index = self.chain.link_index[last.child]
         self._joint_links = np.array([self.chain.link_index[j.child] for j in self.chain.joints])
         self._axes = np.array([j.axis for j in self.chain.joints])
