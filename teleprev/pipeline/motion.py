@@ -15,10 +15,11 @@ The motion state (MotionState) lives in PipelineState, so the step stays a pure 
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, replace
+from dataclasses import dataclass
 
 import numpy as np
 
+from teleprev.pipeline.frozen import evolve
 from teleprev.pipeline.trajectory import ArmGenerator, HandLimiter, JointMotion
 
 ENGAGED_TOL = 0.02  # rad (m for a gripper): the engage ramp is over once the commands come this close to the
@@ -46,7 +47,7 @@ class MotionState:
     @property
     def moving(self) -> bool:
         arm = self.arm is not None and not self.arm.at_rest
-        hand = self.hand_v is not None and bool(np.any(self.hand_v != 0.0))
+        hand = self.hand_v is not None and bool(self.hand_v.any())  # NaN counts as moving, -0.0 does not
         return arm or hand
 
 
@@ -69,12 +70,12 @@ class Motion:
         reset = dict(anchor=None, arm_q=None, arm_q_before=None, arm_solved_ns=-1, engaging=False)
         if mode == "estop":
             # The controller's own immediate stop: teleprev sends nothing more.
-            return replace(state, mode="preview", arm_cmd=None, effector_cmd=None, motion=None, **reset), ""
+            return evolve(state, mode="preview", arm_cmd=None, effector_cmd=None, motion=None, **reset), ""
         if mode == "preview":
             m = state.motion
             if m is None or not m.moving:
-                return replace(state, mode="preview", arm_cmd=None, effector_cmd=None, motion=None, **reset), ""
-            return replace(state, mode="preview", motion=replace(m, stopping=True), **reset), ""
+                return evolve(state, mode="preview", arm_cmd=None, effector_cmd=None, motion=None, **reset), ""
+            return evolve(state, mode="preview", motion=evolve(m, stopping=True), **reset), ""
         if mode != "execute":
             return state, f"unknown mode {mode!r}"
         arm_q = p.measured(inputs.arm, p.arm_names)
@@ -85,14 +86,14 @@ class Motion:
             return state, "nothing previewed yet (waiting for glove and suit)"
         if state.motion is not None and state.arm_cmd is not None:
             # Still braking from the last execute: carry on from where the commands are.
-            return replace(state, mode="execute", motion=replace(state.motion, stopping=False), engaging=True), ""
+            return evolve(state, mode="execute", motion=evolve(state.motion, stopping=False), engaging=True), ""
         arm_q = np.clip(arm_q, p.arm_guard.lower, p.arm_guard.upper)
         eff_q = np.clip(eff_q, p.effector.guard.lower, p.effector.guard.upper)
         if not p.effector.guard.valid(eff_q):
             return state, ("the end effector's measured state is not a valid command (self-collision, or closer "
                            "than the clearance margin?)")
         m = MotionState(arm=JointMotion.rest(arm_q), hand_v=np.zeros_like(eff_q) if self.hand is not None else None)
-        return replace(state, mode="execute", arm_cmd=arm_q, effector_cmd=eff_q, cmd_ns=inputs.t_ns, engaging=True,
+        return evolve(state, mode="execute", arm_cmd=arm_q, effector_cmd=eff_q, cmd_ns=inputs.t_ns, engaging=True,
                        motion=m), ""
 
     # ---- commands ------------------------------------------------------------------------------
@@ -109,7 +110,7 @@ class Motion:
                 target_v = raw if m.target_v is None else keep * m.target_v + (1.0 - keep) * raw
             else:
                 target_v = np.zeros_like(arm_target)
-            m = replace(m, target_ns=stamp, target_q=arm_target, target_v=target_v)
+            m = evolve(m, target_ns=stamp, target_q=arm_target, target_v=target_v)
         ahead = min(max(inputs.t_ns - stamp, 0), EXTRAPOLATE_MAX_NS) / 1e9
         return m, arm_target + target_v * ahead, target_v
 
@@ -121,7 +122,7 @@ class Motion:
             tv = raw if tv is None else keep * tv + (1.0 - keep) * raw
         else:
             tv = np.zeros_like(target)
-        return replace(m, hand_target=target, hand_target_v=tv), tv
+        return evolve(m, hand_target=target, hand_target_v=tv), tv
 
     def commands(self, p, state, new, inputs, arm_target, effector_target, flags):
         """(new state, arm command or None, effector command or None) for one step.
@@ -132,9 +133,9 @@ class Motion:
         executing = state.mode == "execute"
         if m is not None and not executing and m.moving and inputs.t_ns - state.cmd_ns > RESUME_GAP_NS:
             # Braking after a switch to preview, but stalled past the resume gap: the arm stands already.
-            return replace(new, motion=None, arm_cmd=None, effector_cmd=None), None, None
+            return evolve(new, motion=None, arm_cmd=None, effector_cmd=None), None, None
         if m is None or not (executing or m.moving):
-            return replace(new, motion=None) if m is not None else new, None, None
+            return evolve(new, motion=None) if m is not None else new, None, None
         if not executing:
             arm_target = effector_target = None
             flags.append("stopping")
@@ -144,11 +145,11 @@ class Motion:
             if m.moving:
                 # No command went out for this long (the process stalled): a servo-mode arm has stood at the
                 # last command meanwhile, so carry on from rest there, not from where the motion would be.
-                m = replace(m, arm=JointMotion.rest(state.arm_cmd),
+                m = evolve(m, arm=JointMotion.rest(state.arm_cmd),
                             hand_v=None if m.hand_v is None else np.zeros_like(m.hand_v), dt=0.0)
                 flags.append("commands_resumed")
                 if not (executing or m.moving):
-                    return replace(new, motion=None, arm_cmd=None, effector_cmd=None, cmd_ns=inputs.t_ns), None, None
+                    return evolve(new, motion=None, arm_cmd=None, effector_cmd=None, cmd_ns=inputs.t_ns), None, None
             # Moving or not, the next command starts from rest one short step ago, not at the last
             # command's time: after a pause the arm (and sim.arm) take a command as the start of a new stream.
             dt = RESUME_STEP_S
@@ -160,7 +161,7 @@ class Motion:
             if self.feedforward:
                 m, arm_target, target_v = self._feedforward(m, inputs, arm_target)
             arm, arm_reached = self.arm.track(arm, arm_target, target_v, dt, frac)
-            arm_reached = arm_reached or float(np.max(np.abs(arm.q - arm_target))) < ENGAGED_TOL
+            arm_reached = arm_reached or float(np.abs(arm.q - arm_target).max()) < ENGAGED_TOL
             arm_cmd = arm.q
         elif not arm.at_rest:
             arm = self.arm.stop(arm, dt)
@@ -172,7 +173,7 @@ class Motion:
             # than it can stop there (a target that jumped, a stop), its profile passes the limit before
             # coming back. The joint limits are hard: the command is held at the limit meanwhile.
             inside = np.minimum(np.maximum(arm_cmd, self.arm.lower), self.arm.upper)
-            if not np.array_equal(inside, arm_cmd):
+            if not (inside == arm_cmd).all():
                 flags.append("arm_limit_held")
                 arm_cmd = inside
 
@@ -180,7 +181,7 @@ class Motion:
         if self.hand is None:
             if effector_target is not None:
                 eff_cmd = p.effector.guard.step(state.effector_cmd, effector_target, dt, frac, target_valid=True)
-        elif effector_target is not None or np.any(hand_v != 0.0):
+        elif effector_target is not None or hand_v.any():
             last = state.effector_cmd
             tv = None
             if effector_target is not None and self.feedforward:
@@ -190,21 +191,21 @@ class Motion:
             eff_cmd, hand_v = self.hand_step(last, hand_v, effector_target, tv, dt, m.dt, frac, flags)
 
         if arm_cmd is None and eff_cmd is None:
-            return replace(new, motion=replace(m, arm=arm, hand_v=hand_v)), None, None
+            return evolve(new, motion=evolve(m, arm=arm, hand_v=hand_v)), None, None
         a = arm_cmd if arm_cmd is not None else state.arm_cmd
         e = eff_cmd if eff_cmd is not None else state.effector_cmd
         # The engage ramp is over once the arm's generator meets its target within a step (or is within
         # the tolerance of it) and the hand is within the tolerance of its target.
         engaging = state.engaging and executing and not (
-            arm_reached and new.effector_q is not None and np.max(np.abs(e - new.effector_q)) < ENGAGED_TOL
+            arm_reached and new.effector_q is not None and np.abs(e - new.effector_q).max() < ENGAGED_TOL
         )
-        m = replace(m, arm=arm, hand_v=hand_v, dt=dt, idle=False)
+        m = evolve(m, arm=arm, hand_v=hand_v, dt=dt, idle=False)
         if not executing and not m.moving:
             # Stopped after a switch to preview: forget the commands, as a switch at rest does.
-            return replace(new, motion=None, arm_cmd=None, effector_cmd=None, cmd_ns=inputs.t_ns), arm_cmd, eff_cmd
+            return evolve(new, motion=None, arm_cmd=None, effector_cmd=None, cmd_ns=inputs.t_ns), arm_cmd, eff_cmd
         if state.engaging and executing:
             flags.append("engaging")
-        return replace(new, arm_cmd=a, effector_cmd=e, cmd_ns=inputs.t_ns, engaging=engaging, motion=m), arm_cmd, eff_cmd
+        return evolve(new, arm_cmd=a, effector_cmd=e, cmd_ns=inputs.t_ns, engaging=engaging, motion=m), arm_cmd, eff_cmd
 
     def hand_step(self, last, v, target, target_v, dt, dt_before, frac, flags):
         """(command, velocity) one step of dt from hand command `last` moving at v: towards `target`
@@ -248,10 +249,10 @@ class Motion:
         """A step without new targets (the trigger device went quiet): brake to rest within the limits.
         Returns (new state, arm command, effector command, step report)."""
         flags = ["idle_stop"]
-        new = replace(state, step=state.step + 1)
+        new = evolve(state, step=state.step + 1)
         new, arm_cmd, eff_cmd = self.commands(p, state, new, inputs, None, None, flags)
         if new.motion is not None:
-            new = replace(new, motion=replace(new.motion, idle=True))
+            new = evolve(new, motion=evolve(new.motion, idle=True))
         report = {"step": state.step, "mode": state.mode, "corrector": "held", "colliding_links": [],
                   "deviation_rad": 0.0, "flags": flags}
         return new, arm_cmd, eff_cmd, report

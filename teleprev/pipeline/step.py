@@ -15,7 +15,7 @@ instead of freezing; its state is PipelineState.motion.
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field, replace
+from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
@@ -24,6 +24,7 @@ from teleprev.human.smplx import angles_from_hand_pose, hand_pose_from_values
 from teleprev.messages import JointSample, PoseSample
 from teleprev.pipeline.config import PipelineConfig
 from teleprev.pipeline.effectors import Effector
+from teleprev.pipeline.frozen import evolve
 from teleprev.pipeline.guard import JointGuard
 from teleprev.pipeline.motion import Motion
 from teleprev.retarget.arm import Anchor, ArmRetargeter
@@ -216,7 +217,7 @@ class Pipeline:
             return state, ""
         if mode == "preview":
             # Re-anchor at the next step: the preview starts again from where the robot is.
-            return replace(state, mode="preview", anchor=None, arm_q=None, arm_q_before=None, arm_solved_ns=-1,
+            return evolve(state, mode="preview", anchor=None, arm_q=None, arm_q_before=None, arm_solved_ns=-1,
                            arm_cmd=None, effector_cmd=None, engaging=False), ""
         if mode != "execute":
             return state, f"unknown mode {mode!r}"
@@ -230,7 +231,7 @@ class Pipeline:
         eff_q = np.clip(eff_q, self.effector.guard.lower, self.effector.guard.upper)
         if not self.effector.guard.valid(eff_q):
             return state, "the end effector's measured state is not a valid command (self-collision?)"
-        return replace(state, mode="execute", arm_cmd=arm_q, effector_cmd=eff_q, cmd_ns=inputs.t_ns, engaging=True), ""
+        return evolve(state, mode="execute", arm_cmd=arm_q, effector_cmd=eff_q, cmd_ns=inputs.t_ns, engaging=True), ""
 
     # ---- step ----------------------------------------------------------------------------------
     def step(self, state: PipelineState, inputs: StepInputs) -> StepResult:
@@ -275,7 +276,7 @@ class Pipeline:
                 if clipped:
                     flags.append("workspace_clipped")
 
-        new = replace(state, step=state.step + 1, anchor=anchor, arm_q=arm_q, arm_q_before=arm_q_before,
+        new = evolve(state, step=state.step + 1, anchor=anchor, arm_q=arm_q, arm_q_before=arm_q_before,
                       arm_solved_ns=solved_ns, effector_q=effector_q)
         arm_cmd = eff_cmd = None
         if self.motion is not None:
@@ -294,7 +295,7 @@ class Pipeline:
                 engaging = state.engaging and not (
                     np.max(np.abs(a - arm_q)) < ENGAGED_TOL and np.max(np.abs(e - effector_q)) < ENGAGED_TOL
                 )
-                new = replace(new, arm_cmd=a, effector_cmd=e, cmd_ns=inputs.t_ns, engaging=engaging)
+                new = evolve(new, arm_cmd=a, effector_cmd=e, cmd_ns=inputs.t_ns, engaging=engaging)
             if state.engaging:
                 flags.append("engaging")
         report["flags"] = flags

@@ -16,6 +16,7 @@ on the command stamps stay within the limits too (by the mean value theorem for 
 from __future__ import annotations
 
 from dataclasses import dataclass
+from functools import cached_property
 
 import numpy as np
 
@@ -39,9 +40,9 @@ class JointMotion:
         q = np.asarray(q, dtype=float)
         return cls(q, np.zeros_like(q), np.zeros_like(q))
 
-    @property
+    @cached_property  # asked several times per step; a JointMotion is never changed, only replaced
     def at_rest(self) -> bool:
-        return bool(np.all(np.abs(self.v) < REST_VELOCITY) and np.all(np.abs(self.a) < REST_ACCELERATION))
+        return bool((np.abs(self.v) < REST_VELOCITY).all() and (np.abs(self.a) < REST_ACCELERATION).all())
 
 
 class ArmGenerator:
