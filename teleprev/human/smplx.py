@@ -134,7 +134,7 @@ def hand_values(names: tuple[str, ...], values: np.ndarray) -> np.ndarray:
     """The 45 values in HAND_POSE_NAMES order from named values (any order); KeyError when some are
     missing. Names already in that order (every glove plugin's) cost no look-up, and the answer may then
     be `values` itself: read it, do not write it."""
-    if names is HAND_POSE_NAMES or names is _SAME_ORDER[0] or names == HAND_POSE_NAMES:
+    if names is HAND_POSE_NAMES or names is _SAME_ORDER[0] or (isinstance(names, tuple) and names == HAND_POSE_NAMES):
         v = np.asarray(values, dtype=float)
         if v.shape == (45,):
             _SAME_ORDER[0] = names  # a decoder hands the same tuple to every sample: compared once

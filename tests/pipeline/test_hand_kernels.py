@@ -142,6 +142,7 @@ def test_hand_values_reads_names_in_any_order(rng):
     assert np.array_equal(hand_values(same, v), v)
     order = rng.permutation(45)
     assert np.array_equal(hand_values(tuple(np.array(HAND_POSE_NAMES)[order]), v[order]), v)
+    assert np.array_equal(hand_values(np.array(HAND_POSE_NAMES)[order], v[order]), v)  # names in an array
     pose = hand_pose_from_values(HAND_POSE_NAMES, v)
     assert np.array_equal(pose.ravel(), v) and not np.shares_memory(pose, v)
     with pytest.raises(KeyError):
