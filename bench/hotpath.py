@@ -1,4 +1,5 @@
-"""Issue 18's compiled hot path: the LEAP Hand's exact self-collision check (one thread).
+"""Issue 18's compiled hot path: the LEAP Hand's exact self-collision check and the glove sample's
+preparation (one thread).
 
     python bench/hotpath.py [--json] [--quick]
 
@@ -6,7 +7,10 @@ Compares the compiled checker (numba kernels) with the fcl checker it replaced a
 vectorised-numpy version of the same separating-axis test, checks it against FCL on uniform random
 configurations, times the checker the pipeline runs (SelfCollisionChecker: compiled, FCL within the
 margin; its answers must equal FCL's exactly), and times what compiling costs: cold (empty kernel cache, in a fresh process), from
-the cache, and whether `teleprev --help` stays fast.
+the cache, and whether `teleprev --help` stays fast. The glove preparation (Pipeline.prepare_hands: decode,
+checks, angles, retargeting, clip, and for the LEAP Hand the exact check) is timed with the numpy
+arithmetic (formats 1 and 2) and the compiled one (format 3, teleprev/pipeline/hand_kernels.py), the two
+interleaved sample by sample: one sample as the live step prepares it, and a session's worth as eval does.
 """
 
 from __future__ import annotations
@@ -147,6 +151,40 @@ def agreement(hand, fcl_checker, compiled, strict, pipeline_checker, n: int, rng
     }
 
 
+def prepare_hand_figures(quick: bool, rng) -> dict:
+    """Pipeline.prepare_hands per glove sample, numpy vs compiled, for the LEAP Hand (angles, retargeting,
+    exact check) and a parallel gripper (the angles only), alone and in a batch."""
+    from teleprev.human.smplx import HAND_POSE_NAMES, hand_pose_from_angles
+    from teleprev.live.build import build_pipeline
+    from teleprev.messages import JointSample
+    from teleprev.rig import default_rig_path, load_rig
+
+    n = 1000 if quick else 5000
+    gloves = [JointSample(k, HAND_POSE_NAMES, hand_pose_from_angles(rng.uniform(-0.2, 1.8, 15),
+                                                                     rng.uniform(-0.4, 0.4, 15)).ravel())
+              for k in range(n)]
+    figures = {}
+    for label, rig in (("", default_rig_path()), ("gripper_", default_rig_path().parent / "sim_gripper.toml")):
+        old, new = (build_pipeline(load_rig(rig), compiled=c) for c in (False, True))
+        for g in gloves[:50]:  # load the kernels, warm the caches
+            old.prepare_hands([g]), new.prepare_hands([g])
+        t_old, t_new = [], []
+        for g in gloves:
+            t_old += common.time_calls(old.prepare_hands, [([g],)])
+            t_new += common.time_calls(new.prepare_hands, [([g],)])
+        batch = {}
+        for name, p in (("numpy", old), ("compiled", new)):
+            t = time.perf_counter()
+            p.prepare_hands(gloves)
+            batch[name] = (time.perf_counter() - t) / n * 1e6
+        figures[f"prepare_{label}hand_us_p50_numpy"] = common.percentile(t_old, 50) * 1e6
+        figures[f"prepare_{label}hand_us_p50_compiled"] = common.percentile(t_new, 50) * 1e6
+        figures[f"prepare_{label}hand_speedup"] = figures[f"prepare_{label}hand_us_p50_numpy"] / figures[f"prepare_{label}hand_us_p50_compiled"]
+        figures[f"prepare_{label}hands_batch_us_per_sample_numpy"] = batch["numpy"]
+        figures[f"prepare_{label}hands_batch_us_per_sample_compiled"] = batch["compiled"]
+    return figures
+
+
 def main() -> None:
     args = common.parser(__doc__).parse_args()
     from teleprev.robot import kernels
@@ -196,6 +234,7 @@ def main() -> None:
         "numpy_fk_us_p50": p50_us(hand.fk, free),
         "free_configs_timed": int(len(free)),
     }
+    figures.update(prepare_hand_figures(quick, rng))
     figures.update(agreement(hand, fcl_checker, compiled, strict, pipeline_checker, 10_000 if quick else 100_000, rng))
     figures.update(compile_costs())
     targets = {
@@ -205,6 +244,7 @@ def main() -> None:
         "pipeline_checker_vs_fcl_disagreements": "0 (FCL decides within the margin)",
         "cached_import_and_first_call_s": "no compile on the record/eval path",
         "help_s": "<= 0.8",
+        "prepare_hand_us_p50_compiled": "part of the step's <= 100 (LEAP Hand: includes the exact check)",
     }
     common.report("bench/hotpath.py: compiled LEAP Hand self-collision (one thread)", figures, targets, args.json)
 

@@ -48,6 +48,7 @@ JOINT_FRAMES = _joint_frames()  # (15, 3, 3)
 # The joint frames as (cos, sin) of their turn about y, for angles_from_hand_pose.
 _FRAME_COS = np.array([np.cos(_THUMB_TILT) if j.startswith("thumb") else 1.0 for j in HAND_JOINTS])
 _FRAME_SIN = np.array([np.sin(_THUMB_TILT) if j.startswith("thumb") else 0.0 for j in HAND_JOINTS])
+FRAME_TURN = np.stack([_FRAME_COS, _FRAME_SIN])  # (2, 15): the same, for the compiled preparation
 
 
 def hand_pose_from_angles(flexion: np.ndarray, abduction: np.ndarray) -> np.ndarray:
@@ -129,6 +130,22 @@ def _order(names: tuple[str, ...]) -> np.ndarray:
     return np.array([index[n] for n in HAND_POSE_NAMES])
 
 
+def hand_values(names: tuple[str, ...], values: np.ndarray) -> np.ndarray:
+    """The 45 values in HAND_POSE_NAMES order from named values (any order); KeyError when some are
+    missing. Names already in that order (every glove plugin's) cost no look-up, and the answer may then
+    be `values` itself: read it, do not write it."""
+    if names is HAND_POSE_NAMES or names is _SAME_ORDER[0] or (isinstance(names, tuple) and names == HAND_POSE_NAMES):
+        v = np.asarray(values, dtype=float)
+        if v.shape == (45,):
+            _SAME_ORDER[0] = names  # a decoder hands the same tuple to every sample: compared once
+            return v
+    return np.asarray(values, dtype=float)[_order(tuple(names))]
+
+
+_SAME_ORDER: list = [HAND_POSE_NAMES]  # the last names tuple found equal to HAND_POSE_NAMES
+
+
 def hand_pose_from_values(names: tuple[str, ...], values: np.ndarray) -> np.ndarray:
     """A (15, 3) hand pose from named values (any order), as recorded in a JointSample."""
-    return np.asarray(values, dtype=float)[_order(tuple(names))].reshape(15, 3)
+    v = hand_values(names, values)
+    return (v.copy() if v is values else v).reshape(15, 3)

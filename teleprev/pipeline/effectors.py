@@ -50,9 +50,16 @@ class Effector(ABC):
         """The target for this hand pose; `previous` is the last target (None before the first);
         `prepared`: this pose's answer from `prepare` (None: computed here)."""
 
-    def prepare(self, flexion: np.ndarray, abduction: np.ndarray) -> list:
-        """The part of `target` that needs no pipeline state, for a batch of poses (N, 15): one entry per pose."""
+    def prepare(self, flexion: np.ndarray, abduction: np.ndarray, retargeted: np.ndarray | None = None) -> list:
+        """The part of `target` that needs no pipeline state, for a batch of poses (N, 15): one entry per
+        pose. `retargeted`: the joints the compiled preparation computed with the angles (kernel_table)."""
         return [None] * len(flexion)
+
+    def kernel_table(self) -> np.ndarray | None:
+        """The retargeting for the compiled hand preparation to compute with the angles
+        (teleprev/pipeline/hand_kernels.py: rows source, gain, offset, lower, upper); None: the effector
+        needs the angles only."""
+        return None
 
 
 class LeapEffector(Effector):
@@ -67,13 +74,28 @@ class LeapEffector(Effector):
         self.names = spec.joints
         self.retarget = LeapRetargeter(hand, mapping)
         self.compiled = compiled  # compiled retargeting (sessions of format 3 on); False: numpy
+        self._table = None
+        if compiled:
+            from teleprev.pipeline import hand_kernels
+
+            self._kernels, self._table = hand_kernels, self.retarget.table()
         self.corrector = corrector
         speed = np.minimum(hand.velocity_limit, cfg.hand_speed)
         self.guard = JointGuard(hand.lower, hand.upper, speed, max_dt, checker=corrector.checker)
 
-    def prepare(self, flexion: np.ndarray, abduction: np.ndarray) -> list:
-        """Retargeted joints and the Corrector's exact check of them (both element-wise or per row)."""
-        return self.corrector.prepare(self.retarget.from_angles(flexion, abduction))
+    def prepare(self, flexion: np.ndarray, abduction: np.ndarray, retargeted: np.ndarray | None = None) -> list:
+        """Retargeted joints and the Corrector's exact check of them (both element-wise or per row).
+        `retargeted`: those joints, where the compiled preparation computed them with the angles."""
+        if retargeted is None:
+            if self.compiled:  # the compiled preparation's row code, for angles computed elsewhere
+                angles = np.ascontiguousarray(np.concatenate([flexion, abduction], axis=-1), dtype=float)
+                retargeted = self._kernels.retarget_rows(angles, self._table)
+            else:
+                retargeted = self.retarget.from_angles(flexion, abduction)
+        return self.corrector.prepare(retargeted)
+
+    def kernel_table(self) -> np.ndarray | None:
+        return self._table
 
     def target(self, flexion: np.ndarray, abduction: np.ndarray, previous: np.ndarray | None,
                prepared=None) -> EffectorTarget:

@@ -20,7 +20,7 @@ from typing import Any
 
 import numpy as np
 
-from teleprev.human.smplx import angles_from_hand_pose, hand_pose_from_values
+from teleprev.human.smplx import FRAME_TURN, TWIST_NOISE, angles_from_hand_pose, hand_pose_from_values, hand_values
 from teleprev.messages import JointSample, PoseSample
 from teleprev.pipeline.config import PipelineConfig
 from teleprev.pipeline.effectors import Effector
@@ -99,6 +99,14 @@ class Pipeline:
         self.effector_names = effector.names
         self._stale_ns = int(cfg.stale_ms * 1e6)
         self._last_wrist: tuple = (None, "", None)  # (sample, flag, pose): a cache, the step stays pure
+        if compiled:
+            from teleprev.pipeline import hand_kernels
+
+            self._hand_kernels = hand_kernels
+            table = effector.kernel_table()
+            self._hand_retargets = table is not None  # the kernel computes the effector's joints too
+            self._hand_table = table if table is not None else np.zeros((5, 0))
+            self._hand_limits = np.array([MAX_JOINT_ROTATION**2, MIN_FLEXION, MAX_FLEXION, MAX_ABDUCTION, TWIST_NOISE])
 
     def model_hashes(self) -> dict[str, str] | None:
         """{role: sha256} of the model files the pipeline runs (a session records them, eval compares);
@@ -122,6 +130,8 @@ class Pipeline:
         end effector's state-independent work on them. One sample (the live step) or a session's worth at
         once (eval, ahead of the sequential pass): element-wise array arithmetic, so each row's bits are
         the same either way (tests/pipeline/test_prepared.py)."""
+        if self.compiled:
+            return self._prepare_compiled(samples)
         n = len(samples)
         if n == 1:
             return [self._prepare_hand(samples[0])]
@@ -165,6 +175,42 @@ class Pipeline:
         if flexion.max() > MAX_FLEXION or flexion.min() < MIN_FLEXION or abs(abduction).max() > MAX_ABDUCTION:
             return HandInput("glove_out_of_range")
         return HandInput("", flexion, abduction, self.effector.prepare(flexion[None], abduction[None])[0])
+
+    _KERNEL_FLAGS = ("", "glove_invalid", "glove_out_of_range", "glove_out_of_range")  # by hand_kernels' flag
+
+    def _prepare_compiled(self, samples: list[JointSample]) -> list[HandInput]:
+        """prepare_hands in compiled code (teleprev/pipeline/hand_kernels.py): decode, checks, angles and
+        (for an effector with a kernel table) the retargeted joints, by one row code for one sample and for
+        many, so each sample's bits are the same either way; then the effector's preparation of the rows
+        that passed (the Corrector's exact check, for the LEAP Hand)."""
+        n = len(samples)
+        if n == 1:  # the live step's case
+            try:
+                rows = np.array(hand_values(samples[0].names, samples[0].positions), dtype=float, ndmin=2)
+            except KeyError:
+                return [HandInput("glove_invalid")]
+        else:
+            rows = np.empty((n, 45))
+            for i, s in enumerate(samples):
+                try:
+                    rows[i] = hand_values(s.names, s.positions)
+                except KeyError:
+                    rows[i] = np.nan  # missing components: glove_invalid, as a non-finite sample
+        codes, angles, joints = self._hand_kernels.prepare_rows(rows, FRAME_TURN, self._hand_limits, self._hand_table)
+        if n == 1:
+            if codes[0]:
+                return [HandInput(self._KERNEL_FLAGS[codes[0]])]
+            flexion, abduction = angles[:, :15], angles[:, 15:]
+            prepared = self.effector.prepare(flexion, abduction, joints if self._hand_retargets else None)
+            return [HandInput("", flexion[0], abduction[0], prepared[0])]
+        out = [HandInput(self._KERNEL_FLAGS[c]) if c else None for c in codes.tolist()]
+        ok = np.flatnonzero(codes == 0)
+        if len(ok):
+            flexion, abduction = angles[ok, :15], angles[ok, 15:]
+            prepared = self.effector.prepare(flexion, abduction, joints[ok] if self._hand_retargets else None)
+            for j, k in enumerate(ok.tolist()):
+                out[k] = HandInput("", flexion[j], abduction[j], prepared[j])
+        return out
 
     def _hand(self, inputs: StepInputs, flags: list[str]) -> HandInput | None:
         if not self._fresh(inputs.hand, "glove", inputs.t_ns, flags):

@@ -66,6 +66,13 @@ class LeapRetargeter:
         self._offset = np.zeros(n)
         self._src[order], self._gain[order], self._offset[order] = src, gain, offset
 
+    def table(self) -> np.ndarray:
+        """The mapping as the compiled preparation takes it (teleprev/pipeline/hand_kernels.py): rows
+        source angle index (into [flexion(15), abduction(15)]), gain, offset, lower and upper limit, one
+        column per joint in the model's order."""
+        return np.ascontiguousarray(np.stack([self._src.astype(float), self._gain, self._offset,
+                                              self.hand.lower, self.hand.upper]), dtype=float)
+
     def from_angles(self, flexion: np.ndarray, abduction: np.ndarray) -> np.ndarray:
         """Joint values, clamped to the limits, from finger angles (..., 15) as angles_from_hand_pose gives."""
         angles = np.concatenate([flexion, abduction], axis=-1)

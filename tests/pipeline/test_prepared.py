@@ -15,9 +15,11 @@ from teleprev.transforms import axis_angle_to_matrix, matrix_to_axis_angle
 from tests.helpers.pipeline_inputs import ARM_HOME, RATE_HZ, wrist_sample
 
 
-@pytest.fixture(scope="module")
-def pipeline():
-    return build_pipeline(load_rig())  # the default rig: LEAP Hand, shipped CPN/CCN, motion limits
+@pytest.fixture(scope="module", params=[True, False], ids=["compiled", "numpy"])
+def pipeline(request):
+    # the default rig: LEAP Hand, shipped CPN/CCN, motion limits; the compiled hot path (format 3) and the
+    # numpy arithmetic that formats 1 and 2 re-run with
+    return build_pipeline(load_rig(), compiled=request.param)
 
 
 def _twisted(pose: np.ndarray, twist: float) -> np.ndarray:

@@ -1,0 +1,127 @@
+"""Compiled (numba) preparation of glove samples: the pipeline's per-sample arithmetic from the 45
+axis-angle values to the effector's retargeted joints, for sessions of format 3 on (Pipeline.compiled).
+
+Per row, in one pass and in this order (the order of the numpy path, Pipeline._prepare_hand):
+    decode      the 15 joints' axis-angle vectors, in HAND_POSE_NAMES order (the name lookup is Python's)
+    checks      every value finite (else INVALID), every joint's rotation <= MAX_JOINT_ROTATION (else
+                OUT_OF_RANGE)
+    angles      angles_from_hand_pose (teleprev/human/smplx.py): the quaternion, turned into the joint
+                frame, the twist about the bone taken off where it is above TWIST_NOISE, then flexion and
+                abduction; BENT (flexion or abduction beyond the human bounds) when implausible
+    retarget    LeapRetargeter.from_angles: angle[source] * gain + offset, clipped to the joint limits
+                (skipped for an effector that needs only the angles: a table with no columns)
+
+The same row code runs for one sample (the live step) and for a session's samples (eval), and each row
+depends on nothing but its own values, so a sample gets the same bits either way. The arithmetic follows
+the numpy expressions but not bit for bit (libm's sin/cos/atan2 and the per-joint untwist may differ in
+the last bits, tests/pipeline/test_hand_kernels.py bounds it): a new session format, format 3. The
+kernels that call each other live in this file only, so that the on-disk cache is invalidated with them.
+Compiled on the first call and cached on disk (cache=True); warm(), run by scripts/setup.sh, fills the cache.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+from numba import njit
+
+OK, INVALID, OUT_OF_RANGE, BENT = 0, 1, 2, 3  # per-row flags: BENT is out of range too, found from the angles
+
+# limits: the plausibility bounds, in this order
+MAX_ROTATION_SQ, MIN_FLEXION, MAX_FLEXION, MAX_ABDUCTION, TWIST_NOISE = range(5)
+# table rows: the effector's retargeting, one column per joint
+SOURCE, GAIN, OFFSET, LOWER, UPPER = range(5)
+
+
+@njit(cache=True, inline="always")
+def _clip(v, lo, hi):
+    v = v if v > lo else lo  # np.maximum then np.minimum, as RobotModel.clip
+    return v if v < hi else hi
+
+
+@njit(cache=True, inline="always")
+def _retarget_row(angles, table, out):
+    for i in range(table.shape[1]):
+        a = angles[int(table[SOURCE, i])]
+        out[i] = _clip(a * table[GAIN, i] + table[OFFSET, i], table[LOWER, i], table[UPPER, i])
+
+
+@njit(cache=True, inline="always")
+def _prepare_row(values, frames, limits, table, angles, q):
+    """One glove sample: its flag, and where OK its angles [flexion(15), abduction(15)] and joints."""
+    n = values.shape[0]
+    for k in range(n):
+        if not math.isfinite(values[k]):
+            return INVALID
+    for j in range(15):
+        vx, vy, vz = values[3 * j], values[3 * j + 1], values[3 * j + 2]
+        if vx * vx + vy * vy + vz * vz > limits[MAX_ROTATION_SQ]:
+            return OUT_OF_RANGE
+    flag = OK
+    for j in range(15):
+        vx, vy, vz = values[3 * j], values[3 * j + 1], values[3 * j + 2]
+        angle = math.sqrt(vx * vx + vy * vy + vz * vz)
+        half = 0.5 * angle
+        scale = math.sin(half) / angle if angle > 1e-12 else 0.5
+        w = math.cos(half)
+        x0, y, z0 = vx * scale, vy * scale, vz * scale
+        c, s = frames[0, j], frames[1, j]
+        x = c * x0 - s * z0
+        z = s * x0 + c * z0
+        # the twist about the bone (the one nearer zero of the two that point the bone alike), taken off
+        m11 = 1.0 - 2.0 * (x * x + z * z)
+        m12 = 2.0 * (y * z - x * w)
+        twist = math.atan2(-m12, m11)
+        if twist > 0.5 * math.pi:
+            twist -= math.pi
+        elif twist < -0.5 * math.pi:
+            twist += math.pi
+        if abs(twist) > limits[TWIST_NOISE]:
+            tc, ts = math.cos(0.5 * twist), math.sin(0.5 * twist)
+            w, x, y, z = w * tc + x * ts, x * tc - w * ts, y * tc - z * ts, z * tc + y * ts
+        flexion = math.atan2(2.0 * (x * y + z * w), 1.0 - 2.0 * (x * x + z * z))
+        abduction = math.atan2(2.0 * (x * z + y * w), 1.0 - 2.0 * (x * x + y * y))
+        angles[j] = flexion
+        angles[15 + j] = abduction
+        if flexion > limits[MAX_FLEXION] or flexion < limits[MIN_FLEXION] or abs(abduction) > limits[MAX_ABDUCTION]:
+            flag = BENT
+    if flag == OK:
+        _retarget_row(angles, table, q)
+    return flag
+
+
+@njit(cache=True)
+def prepare_rows(values, frames, limits, table):
+    """Glove samples (N, 45) -> (flags (N,), angles (N, 30) [flexion, abduction], joints (N, table columns)).
+
+    frames: (2, 15) cos and sin of each joint frame's turn about y; limits: the bounds above; table: the
+    retargeting (5, n). Angles where the flag is INVALID or OUT_OF_RANGE, and joints where it is not OK,
+    are left zero."""
+    rows = values.shape[0]
+    flags = np.empty(rows, dtype=np.int64)
+    angles = np.zeros((rows, 30))
+    q = np.zeros((rows, table.shape[1]))
+    for r in range(rows):
+        flags[r] = _prepare_row(values[r], frames, limits, table, angles[r], q[r])
+    return flags, angles, q
+
+
+@njit(cache=True)
+def retarget_rows(angles, table):
+    """LeapRetargeter.from_angles for angles (N, 30) [flexion, abduction]: the rows' joints (N, n), the
+    same row code as prepare_rows's (for a pipeline that computes the angles in numpy)."""
+    rows = angles.shape[0]
+    q = np.empty((rows, table.shape[1]))
+    for r in range(rows):
+        _retarget_row(angles[r], table, q[r])
+    return q
+
+
+def warm() -> None:
+    """Compile (or load from the cache) every kernel here for the float64 arrays the pipeline passes."""
+    values = np.zeros((1, 45))
+    table = np.zeros((5, 2))
+    table[UPPER] = 1.0
+    prepare_rows(values, np.ones((2, 15)), np.array([8.41, -1.2, 2.7, 1.3, 1e-9]), table)
+    retarget_rows(np.zeros((1, 30)), table)
