@@ -79,6 +79,38 @@ def main() -> None:
         converged += result.converged
         q = result.q
 
+    # The pipeline's arm solve (ArmRetargeter: target, then IK from the constant-velocity warm start) and
+    # IK alone, numpy against compiled on the same targets, interleaved so that both see the same noise.
+    from teleprev.retarget.arm import ArmRetargeter
+
+    numpy_arm, compiled_arm = ArmRetargeter(ArmIK(arm, "link_eef")), ArmRetargeter(ArmIK(arm, "link_eef", compiled=True))
+    q_home = np.array([0.0, -0.3, -0.6, 0.0, 0.9, 0.0])
+    anchor = numpy_arm.anchor(np.eye(4), q_home)
+    wrists = []  # the wrist poses that ask for the targets (identity anchor wrist, no scale or frame change)
+    for target in targets:
+        w = np.eye(4)
+        w[:3, :3] = target[:3, :3] @ anchor.tcp[:3, :3].T
+        w[:3, 3] = target[:3, 3] - anchor.tcp[:3, 3]
+        wrists.append(w)
+    compiled_arm.solve(anchor, wrists[0], q_home)  # loads the kernels (from numba's cache after setup.sh)
+    arm_us = {False: [], True: []}
+    ik_us = {False: [], True: []}
+    ik_converged = {False: 0, True: 0}
+    state = {False: (q_home, q_home), True: (q_home, q_home)}
+    for k, wrist in enumerate(wrists):
+        for retargeter in ((numpy_arm, compiled_arm) if k % 2 else (compiled_arm, numpy_arm)):
+            c = retargeter.ik.compiled
+            q, q_before = state[c]
+            start = 2.0 * q - q_before
+            t = time.perf_counter()
+            result, _ = retargeter.solve(anchor, wrist, start)
+            arm_us[c].append(time.perf_counter() - t)
+            t = time.perf_counter()
+            retargeter.ik.solve(targets[k], start)
+            ik_us[c].append(time.perf_counter() - t)
+            ik_converged[c] += result.converged
+            state[c] = (result.q, q)
+
     checker = SelfCollisionChecker(hand)
     pool = hand.sample_uniform(4000 if args.quick else 20_000, rng)
     free = pool[~checker.pair_matrix(pool).any(axis=1)]
@@ -102,6 +134,14 @@ def main() -> None:
         "ik_ms_p50": common.percentile(ik_times, 50) * 1e3,
         "ik_ms_p99": common.percentile(ik_times, 99) * 1e3,
         "ik_converged_frac": converged / len(targets),
+        "ik_us_p50": common.percentile(ik_us[False], 50) * 1e6,
+        "ik_compiled_us_p50": common.percentile(ik_us[True], 50) * 1e6,
+        "ik_compiled_us_p99": common.percentile(ik_us[True], 99) * 1e6,
+        "ik_compiled_speedup_x": common.percentile(ik_us[False], 50) / common.percentile(ik_us[True], 50),
+        "arm_solve_us_p50": common.percentile(arm_us[False], 50) * 1e6,
+        "arm_solve_compiled_us_p50": common.percentile(arm_us[True], 50) * 1e6,
+        "arm_solve_compiled_speedup_x": common.percentile(arm_us[False], 50) / common.percentile(arm_us[True], 50),
+        "ik_compiled_converged_frac": ik_converged[True] / len(targets),
         "collision_check_us_p50": common.percentile(check_times, 50) * 1e6,
         "collision_free_configs": int(len(free)),
         "labels_per_s": float(np.median(label_rates)),

@@ -31,4 +31,5 @@ fi
 # seconds of compiling; `teleprev --help` never loads them.
 .venv/bin/python -c 'from teleprev.robot.compiled_collision import warm; warm()
 from teleprev.pipeline.kernels import warm; warm()
-from teleprev.pipeline.hand_kernels import warm; warm()'
+from teleprev.pipeline.hand_kernels import warm; warm()
+from teleprev.robot.ik import warm; warm()'

@@ -4,6 +4,8 @@ them instead of paying numba's first-call start (about 0.4 s) in its first sessi
 
 from teleprev.pipeline.kernels import warm as _warm_pipeline
 from teleprev.robot.compiled_collision import warm as _warm_collision
+from teleprev.robot.ik import warm as _warm_ik
 
 _warm_collision()
 _warm_pipeline()
+_warm_ik()

@@ -40,15 +40,22 @@ class ArmRetargeter:
     ):
         self.ik = ik
         self.scale = scale
-        self.lo = np.asarray(workspace_min, dtype=float)
-        self.hi = np.asarray(workspace_max, dtype=float)
-        self.m = np.eye(3) if suit_to_robot is None else np.asarray(suit_to_robot, dtype=float)
+        # own float64 copies: the compiled path hands these to numba as they are
+        self.lo = np.array(workspace_min, dtype=float)
+        self.hi = np.array(workspace_max, dtype=float)
+        self.m = np.eye(3) if suit_to_robot is None else np.array(suit_to_robot, dtype=float)
 
     def anchor(self, wrist: np.ndarray, arm_q: np.ndarray) -> Anchor:
         return Anchor(np.array(wrist, dtype=float), self.ik.pose(arm_q))
 
     def target(self, anchor: Anchor, wrist: np.ndarray) -> tuple[np.ndarray, bool]:
         """The TCP target pose, and whether the workspace box clipped it."""
+        if self.ik.compiled:  # the same products in compiled code (kernels.arm_target_into)
+            from teleprev.robot import kernels
+
+            t = np.empty((4, 4))
+            clipped = kernels.arm_target_into(*self._kernel_args(anchor, wrist), t)
+            return t, bool(clipped)
         m = self.m
         t = _EYE4.copy()
         desired = anchor.tcp[:3, 3] + self.scale * (m @ (wrist[:3, 3] - anchor.wrist[:3, 3]))
@@ -56,6 +63,20 @@ class ArmRetargeter:
         t[:3, :3] = m @ wrist[:3, :3] @ anchor.wrist[:3, :3].T @ m.T @ anchor.tcp[:3, :3]
         return t, bool((t[:3, 3] != desired).any())
 
+    def _kernel_args(self, anchor: Anchor, wrist: np.ndarray) -> tuple:
+        """kernels.arm_target_into's inputs. The anchor's arrays (anchor() made them) and m, lo, hi are
+        writeable float64 already; the wrist is copied, since a read-only or other-typed array would make
+        numba compile another signature (seconds, in the live loop)."""
+        return (anchor.wrist, anchor.tcp, np.array(wrist, dtype=np.float64), self.m, float(self.scale), self.lo,
+                self.hi)
+
     def solve(self, anchor: Anchor, wrist: np.ndarray, q_start: np.ndarray) -> tuple[IkResult, bool]:
+        if self.ik.compiled:  # target and IK in one compiled call (kernels.arm_solve)
+            from teleprev.robot import kernels
+
+            q, converged, iterations, pos_err, rot_err, clipped = kernels.arm_solve(
+                *self._kernel_args(anchor, wrist), np.array(q_start, dtype=np.float64),
+                *self.ik.kernel_args())
+            return IkResult(q, converged, iterations, pos_err, rot_err), bool(clipped)
         target, clipped = self.target(anchor, wrist)
         return self.ik.solve(target, q_start), clipped

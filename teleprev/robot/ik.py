@@ -29,6 +29,9 @@ class ArmIK:
     `tcp` is a fixed transform from the tip link to the point being placed (for example a palm centre).
     Each iteration takes a damped least-squares step on the 6-D pose error, caps the step size and
     clips to the joint limits, so every iterate (and the result) is within limits.
+
+    compiled=True runs the same algorithm in one numba kernel (kernels.ik_solve: the 6x6 system by
+    Cholesky instead of numpy's LU, so the last bits differ; the same inputs give the same bits).
     """
 
     def __init__(
@@ -67,6 +70,24 @@ class ArmIK:
         self._axes = np.array([j.axis for j in self.chain.joints])
         self._revolute = np.array([j.type != "prismatic" for j in self.chain.joints])
         self._all_revolute = bool(self._revolute.all())
+        self._kernel_tables = self._compiled_tables() if compiled else None
+
+    def _compiled_tables(self) -> tuple:
+        """The kernel's arm tables, in kernels.ik_solve's argument order from the FK tables to the limits
+        (imports numba: only a compiled ArmIK builds them)."""
+        from teleprev.robot.compiled_kinematics import CompiledKinematics
+
+        c = np.ascontiguousarray
+        return (*CompiledKinematics(self.chain).tables, int(self._tip_index), c(self.tcp, dtype=np.float64),
+                c(self._joint_links, dtype=np.int64), c(self._axes, dtype=np.float64), c(self._revolute, dtype=np.bool_),
+                c(self.chain.lower, dtype=np.float64), c(self.chain.upper, dtype=np.float64))
+
+    def kernel_args(self) -> tuple:
+        """The compiled solver's tables and settings (kernels.ik_solve's arguments after target and q_start)."""
+        if self._kernel_tables is None:
+            self._kernel_tables = self._compiled_tables()
+        return (*self._kernel_tables, float(self.position_tolerance), float(self.rotation_tolerance),
+                int(self.max_iterations), float(self.damping), float(self.max_step), bool(self.retry))
 
     def pose(self, q: np.ndarray) -> np.ndarray:
         """The TCP pose (4x4) for arm joints q."""
@@ -87,6 +108,14 @@ class ArmIK:
         return jac
 
     def solve(self, target: np.ndarray, q_start: np.ndarray) -> IkResult:
+        if self.compiled:
+            from teleprev.robot import kernels
+
+            # fresh writeable float64 copies: a read-only array (a decoded message) would make numba compile
+            # another signature, seconds in the live loop
+            q, converged, iterations, pos_err, rot_err = kernels.ik_solve(
+                np.array(target, dtype=np.float64), np.array(q_start, dtype=np.float64), *self.kernel_args())
+            return IkResult(q, converged, iterations, pos_err, rot_err)
         result = self._solve(target, q_start, self.max_step)
         if not result.converged and self.retry:
             # A long first step can land a joint on its limit in a local minimum; short steps from the
@@ -131,3 +160,19 @@ class ArmIK:
                 dq *= max_step / biggest
             q = np.minimum(np.maximum(q + dq, self.chain.lower), self.chain.upper)
         return IkResult(q, False, self.max_iterations, pos_err, rot_err)
+
+
+def warm(robot: str = "xarm6", tip: str = "link_eef") -> None:
+    """Compile the compiled IK's kernels (kernels.ik_solve, arm_target_into, arm_solve) into numba's on-disk
+    cache, or load them from it, for the argument types the pipeline passes."""
+    from teleprev.retarget.arm import ArmRetargeter
+    from teleprev.robot.model import load_robot
+
+    ik = ArmIK(load_robot(robot), tip, compiled=True)
+    q = ik.chain.neutral()
+    pose = ik.pose(q)
+    ik.solve(pose, q)
+    arm = ArmRetargeter(ik)
+    anchor = arm.anchor(pose, q)
+    arm.target(anchor, pose)
+    arm.solve(anchor, pose, q)
