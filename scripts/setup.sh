@@ -26,7 +26,9 @@ if ! "$PY" -m uv --version >/dev/null 2>&1; then
   "$PY" -m pip install --quiet --disable-pip-version-check uv
 fi
 "$PY" -m uv sync --frozen --python "$PY" --quiet "$@"
-# Compile the numba kernels (teleprev/robot/kernels.py, teleprev/pipeline/kernels.py) into their on-disk
+# Compile the numba kernels (teleprev/robot/kernels.py, teleprev/pipeline/kernels.py,
+# teleprev/noncollision/kernels.py) into their on-disk
 # cache now, so that no record or eval pays the seconds of compiling; `teleprev --help` never loads them.
 .venv/bin/python -c 'from teleprev.robot.compiled_collision import warm; warm()
-from teleprev.pipeline.kernels import warm; warm()'
+from teleprev.pipeline.kernels import warm; warm()
+from teleprev.noncollision.compiled import warm; warm()'
