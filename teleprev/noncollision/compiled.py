@@ -104,7 +104,9 @@ class CompiledNets:
 
     def propose_shorten(self, q0: np.ndarray):
         """For colliding configurations q0 (N, n) within the limits: (proposals, shortened, hi), see kernels."""
-        return kernels.propose_shorten(_rows(q0), *self._args)
+        if q0.dtype != np.float64 or q0.ndim != 2 or not q0.flags.c_contiguous:  # the Corrector passes such rows
+            q0 = _rows(q0)
+        return kernels.propose_shorten(q0, *self._args)
 
 
 def warm() -> None:
