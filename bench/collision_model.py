@@ -1,7 +1,8 @@
 """Non-collision module figures: CPN accuracy and speed, CCN validity, the gradient-projection baseline,
-and the runtime Corrector, all on held-out data this run generates (one thread).
+and the runtime Corrector, all on held-out data this run generates (one thread); and issue 18's compiled
+CPN / CCN inference against the numpy networks, in the same run (`*_numpy_us` / `*_compiled_us`).
 
-    python bench/collision_model.py [--json] [--quick] [--models DIR]
+    python bench/collision_model.py [--json] [--quick] [--models DIR] [--compiled-only]
 
 Held-out data: uniform samples for the CPN (plus boundary samples, the `cpn_boundary_*` figures); invalid
 configurations from uniform sampling and from retargeted human hand trajectories for the CCN, the baseline
@@ -23,9 +24,51 @@ import numpy as np  # noqa: E402
 SEED = 777  # differs from every training seed
 
 
+COMPILED_TARGETS = {"correct_compiled_us": "(live step p50 <= 100 us in all)"}
+
+
+def _median_us(fn, inputs) -> float:
+    return float(np.median(common.time_calls(fn, [(x,) for x in inputs]))) * 1e6
+
+
+def compiled_inference(hand, checker, corrector, models, n: int) -> dict:
+    """Per-call microseconds (medians over the same colliding inputs, interleaved rounds) of the numpy and
+    the compiled CPN decision, CCN proposal, the Corrector's CCN step (proposal + bisection) and its
+    single-configuration correct() after prepare (the live step's path), numpy vs compiled."""
+    from teleprev.noncollision.corrector import Corrector
+
+    fast = Corrector.load(models, hand, checker, compiled=True)
+    nets = fast._nets
+    q = hand.sample_uniform(8 * n, np.random.default_rng(SEED + 1))
+    q = q[checker.pair_matrix(q).any(axis=1)][:n]
+    prep_np = [corrector.prepare(x[None])[0] for x in q]
+    prep_c = [fast.prepare(x[None])[0] for x in q]
+    cases = {
+        "cpn": (corrector.cpn.predicts_free, nets.cpn.predicts_free, q),
+        "ccn": (corrector.ccn, nets.ccn, q),
+        "ccn_step": (lambda x: corrector._shortest_predicted_free(x, corrector.ccn(x)),
+                     lambda x: nets.propose_shorten(x[None]), q),
+        "correct": (lambda k: corrector.correct(q[k], None, prep_np[k]), lambda k: fast.correct(q[k], None, prep_c[k]),
+                    range(len(q))),
+    }
+    out: dict = {}
+    gc.disable()
+    for name, (numpy_fn, compiled_fn, inputs) in cases.items():
+        numpy_fn(next(iter(inputs)))
+        compiled_fn(next(iter(inputs)))
+        rounds = [(_median_us(numpy_fn, inputs), _median_us(compiled_fn, inputs)) for _ in range(3)]
+        out[f"{name}_numpy_us"] = float(np.median([r[0] for r in rounds]))
+        out[f"{name}_compiled_us"] = float(np.median([r[1] for r in rounds]))
+        out[f"{name}_speedup"] = out[f"{name}_numpy_us"] / out[f"{name}_compiled_us"]
+    gc.enable()
+    out["compiled_n"] = len(q)
+    return out
+
+
 def main() -> None:
     p = common.parser(__doc__)
     p.add_argument("--models", type=Path, default=None, help="models folder (default: the shipped models/)")
+    p.add_argument("--compiled-only", action="store_true", help="only the numpy vs compiled inference figures")
     args = p.parse_args()
 
     from teleprev.noncollision import evaluate, sampling
@@ -41,6 +84,11 @@ def main() -> None:
     cpn, ccn = corrector.cpn, corrector.ccn
     rng = np.random.default_rng(SEED)
     figures: dict = {}
+    compiled_figs = compiled_inference(hand, checker, corrector, args.models, 500 if quick else 2000)
+    if args.compiled_only:
+        common.report("bench/collision_model.py: numpy vs compiled CPN/CCN inference (LEAP Hand, one thread)",
+                      compiled_figs, COMPILED_TARGETS, args.json)
+        return
 
     # ---- CPN: accuracy on fresh labelled data, speed -------------------------------------------
     n_u, n_b = (20_000, 10_000) if quick else (200_000, 50_000)
@@ -140,7 +188,9 @@ def main() -> None:
         "n_invalid_trajectory": n_traj_invalid,
     }
     figures.update(extra)
+    figures.update(compiled_figs)
     targets = {
+        **COMPILED_TARGETS,
         "cpn_auc_min_link": ">= 0.995 (uniform held-out)",
         "cpn_recall": ">= 0.995",
         "cpn_config_fnr": "<= 0.005",

@@ -26,10 +26,6 @@ if ! "$PY" -m uv --version >/dev/null 2>&1; then
   "$PY" -m pip install --quiet --disable-pip-version-check uv
 fi
 "$PY" -m uv sync --frozen --python "$PY" --quiet "$@"
-# Compile the numba kernels (teleprev/robot/kernels.py, teleprev/pipeline/kernels.py,
-# teleprev/pipeline/hand_kernels.py) into their on-disk cache now, so that no record or eval pays the
-# seconds of compiling; `teleprev --help` never loads them.
-.venv/bin/python -c 'from teleprev.robot.compiled_collision import warm; warm()
-from teleprev.pipeline.kernels import warm; warm()
-from teleprev.pipeline.hand_kernels import warm; warm()
-from teleprev.robot.ik import warm; warm()'
+# Compile every numba kernel of the pipeline (teleprev/pipeline/compiled.py) into numba's on-disk cache
+# now, so that no record or eval pays the seconds of compiling; `teleprev --help` never loads them.
+.venv/bin/python -c 'from teleprev.pipeline.compiled import warm; warm()'

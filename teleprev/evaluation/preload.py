@@ -2,10 +2,6 @@
 the compiled kernels from numba's cache once, so that every worker forked from the server starts with
 them instead of paying numba's first-call start (about 0.4 s) in its first session."""
 
-from teleprev.pipeline.kernels import warm as _warm_pipeline
-from teleprev.robot.compiled_collision import warm as _warm_collision
-from teleprev.robot.ik import warm as _warm_ik
+from teleprev.pipeline.compiled import warm
 
-_warm_collision()
-_warm_pipeline()
-_warm_ik()
+warm()

@@ -17,7 +17,9 @@ Taking as little of the CCN's correction as the checker allows keeps the output 
 the input only just collides, so a smooth input trajectory entering or leaving collision gives a smooth
 output (the full proposal would jump by the CCN's safety margin), and it lowers the deviation.
 Every answer has passed the exact checker (the anchor was checked when it became the anchor), so no
-path returns a colliding configuration. Numpy only: this runs in every pipeline step.
+path returns a colliding configuration. No torch: this runs in every pipeline step. compiled=True (sessions
+of format 3 on): the CPN / CCN inference runs in numba kernels (noncollision/compiled.py), the CCN step
+(proposal and bisection) in one call; compiled=False: the numpy networks, as sessions before recorded.
 """
 
 from __future__ import annotations
@@ -113,6 +115,16 @@ class Corrector:
         self.neutral = model.neutral()
         if checker.collides(self.neutral):
             raise ModelError("the neutral (open) hand is in self-collision, so there is no safe fallback pose", str(model.urdf_path))
+        self._nets = None  # compiled: the kernels' CPN, CCN and fused CCN step (noncollision/compiled.py)
+        self._cpn = cpn  # what the fallback asks: the numpy CPN, or the compiled one (same gradient)
+        if compiled:
+            from teleprev.noncollision.compiled import CompiledNets
+
+            self._nets = CompiledNets(cpn, ccn, settings.shorten_levels)
+            self._cpn = self._nets.cpn
+            # load the kernels from numba's cache now, not in a live loop's first steps
+            self._nets.propose_shorten(self.neutral[None])
+            self._cpn.predicts_free(self.neutral[None])
         s = np.linspace(0.0, 1.0, settings.segment_points + 1)[1:]
         self._segment = s[:, None]
         self._extend = np.linspace(1.0, 2.0, 9)[1:, None]
@@ -147,7 +159,8 @@ class Corrector:
         needs the previous output). The same answers as `correct` alone: the batch check answers as the
         single one, the CCN runs per input, and the CPN's batched scores decide only where they are
         further than SCORE_BAND from the threshold (batched float32 sums differ from single ones in the
-        last bits), the single network elsewhere."""
+        last bits), the single network elsewhere. Compiled: a row's arithmetic does not depend on its
+        batch, so the batched kernel answers as the single path does, with no band to re-decide."""
         q_in = np.asarray(q, dtype=float)
         if q_in.ndim != 2 or q_in.shape[1:] != self.model.lower.shape or not np.isfinite(q_in).all():
             raise ValueError(f"expected rows of {len(self.model.lower)} finite joint values, got "
@@ -162,6 +175,13 @@ class Corrector:
                for i in range(len(q0))]
         rows = [i for i, p in enumerate(out) if p.report.colliding]
         if not rows:
+            return out
+        if self._nets is not None:
+            proposals, shortened, his = self._nets.propose_shorten(q0[rows])
+            steps = self._nets.steps
+            for i, proposal, shorter, hi in zip(rows, proposals, shortened, his):
+                answer = self._ccn_answer(q_in[i], None if hi == steps else shorter, proposal, out[i].report)
+                out[i] = Prepared(q_in[i], q0[i], out[i].report, proposal, answer)
             return out
         proposals = [self.ccn(q0[i]) for i in rows]
         steps = 2 ** self.settings.shorten_levels
@@ -191,8 +211,13 @@ class Corrector:
             return Correction(q0, "untouched", (), float(np.abs(q0 - q_in).max()))
         proposal = prepared.proposal
         if proposal is None:
-            proposal = self.ccn(q0)
-            shorter = self._shortest_predicted_free(q0, proposal, None)
+            if self._nets is not None:
+                proposals, shortened, his = self._nets.propose_shorten(q0[None])
+                proposal = proposals[0]
+                shorter = None if his[0] == self._nets.steps else shortened[0]
+            else:
+                proposal = self.ccn(q0)
+                shorter = self._shortest_predicted_free(q0, proposal, None)
             answer = self._ccn_answer(q_in, shorter, proposal, report)
             if answer is not None:
                 return answer
@@ -236,19 +261,19 @@ class Corrector:
     def _fallback(self, q0: np.ndarray, proposal: np.ndarray, previous: np.ndarray | None) -> np.ndarray:
         s = self.settings
         longer = self.model.clip(q0 + self._extend * (proposal - q0))
-        free = np.flatnonzero(self.cpn.predicts_free(longer))
+        free = np.flatnonzero(self._cpn.predicts_free(longer))
         if len(free) and not self.checker.collides(longer[free[0]]):
             return longer[free[0]]
         q = proposal
         for _ in range(s.projection_steps):
-            q, free = descend(self.cpn, self.model, q, q0, s.projection)
+            q, free = descend(self._cpn, self.model, q, q0, s.projection)
             if free:
                 break
         if not self.checker.collides(q):
             return q
         anchor = self._anchor(previous)
         points = proposal + self._segment * (anchor - proposal)
-        candidates = np.flatnonzero(self.cpn.predicts_free(points[:-1]))
+        candidates = np.flatnonzero(self._cpn.predicts_free(points[:-1]))
         for k in candidates[: s.segment_checks]:
             if not self.checker.collides(points[k]):
                 return points[k]

@@ -1,0 +1,134 @@
+"""Compiled CPN / CCN inference (teleprev.noncollision.kernels) for Corrector(compiled=True), sessions of
+format 3 on. The numpy networks (mlp.py) stay for training, gradients (projection) and compiled=False.
+
+The kernels' loop order is fixed and a row's arithmetic does not depend on its batch, so a batch
+answers bit for bit as single calls do (tests/noncollision/test_compiled_mlp.py); the answers agree with
+the numpy networks to float32 rounding. Importing this module imports numba: only the Corrector does,
+when asked for the compiled path (never `teleprev --help`).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from teleprev.noncollision import kernels
+from teleprev.noncollision.mlp import CCN, CPN, MLP
+
+_ACTIVATION = {"relu": kernels.RELU, "silu": kernels.SILU, "tanh": kernels.TANH}
+
+
+def pack(net: MLP) -> tuple[np.ndarray, np.ndarray]:
+    """(net_i, net_w) for the kernels (layout: kernels' module docstring), from the folded weights."""
+    info = net.info
+    g, win, wout = len(info.groups), info.width_in, info.width_out
+    header = [g, win, wout, len(net._w), len(info.joint_names), _ACTIVATION[info.activation],
+              int(info.combine == "noisy_or"), len(info.outputs)]
+    layers, chunks, offset = [], [], 0
+    for w, b in zip(net._w, net._b):
+        w = np.ascontiguousarray(w, dtype=np.float32)  # (G, in, out)
+        b = np.ascontiguousarray(b[:, 0, :], dtype=np.float32)  # (G, out)
+        layers += [offset, offset + w.size, w.shape[1], w.shape[2]]
+        chunks += [w.ravel(), b.ravel()]
+        offset += w.size + b.size
+    matrix = info.slot_matrix()  # (slots, outputs)
+    feeds = [np.flatnonzero(matrix[:, k]) for k in range(matrix.shape[1])]
+    pointers = np.cumsum([0] + [len(f) for f in feeds])
+    net_i = np.concatenate([header, np.asarray(net._index, dtype=np.int64).ravel(), layers, pointers,
+                            np.concatenate(feeds) if feeds else []]).astype(np.int64)
+    return net_i, np.concatenate(chunks).astype(np.float32)
+
+
+def _rows(q) -> np.ndarray:
+    return np.ascontiguousarray(np.atleast_2d(np.asarray(q, dtype=np.float64)))
+
+
+class CompiledMLP:
+    """The raw outputs of an MLP, compiled: slots(q) as MLP.slots (to float32 rounding)."""
+
+    def __init__(self, net: MLP):
+        self.net = net
+        self.i, self.w = pack(net)
+
+    def slots(self, q: np.ndarray) -> np.ndarray:
+        q = np.asarray(q)
+        out = kernels.slots(_rows(q), self.i, self.w)
+        return out[0] if q.ndim == 1 else out
+
+
+class CompiledCPN:
+    """A CPN whose threshold decision is compiled; the gradient (projection) stays numpy's."""
+
+    def __init__(self, cpn: CPN):
+        self.cpn = cpn
+        self.mlp = CompiledMLP(cpn.net)
+        t = cpn.threshold
+        # p < t for every link  <=>  prod (1 + exp(z)) < 1 / (1 - t)  (noisy-or),  sum z < logit(t)  (identity)
+        self.bound = float(1.0 / (1.0 - t) if cpn.noisy_or else np.log(t / (1.0 - t)))
+        self.threshold, self.link_names = cpn.threshold, cpn.link_names
+
+    def predicts_free(self, q: np.ndarray):
+        """As CPN.predicts_free: a bool for one configuration (n,), (N,) bools for (N, n)."""
+        q = np.asarray(q)
+        free = kernels.predicts_free(_rows(q), self.mlp.i, self.mlp.w, self.bound)
+        return bool(free[0]) if q.ndim == 1 else free
+
+    def mean_prob_grad(self, q: np.ndarray, scaled: bool = False):
+        return self.cpn.mean_prob_grad(q, scaled)
+
+    def prob(self, q: np.ndarray) -> np.ndarray:
+        return self.cpn._prob(self.mlp.slots(q))
+
+
+class CompiledCCN:
+    """The CCN's proposals, compiled: clip(q + scale * net(x)) as CCN.__call__ (to float32 rounding)."""
+
+    def __init__(self, ccn: CCN):
+        self.ccn = ccn
+        self.mlp = CompiledMLP(ccn.net)
+        self.f = np.concatenate([ccn.lower, ccn.upper, ccn.output_scale]).astype(np.float64)
+
+    def __call__(self, q: np.ndarray) -> np.ndarray:
+        q = np.asarray(q)
+        out = kernels.propose(_rows(q), self.mlp.i, self.mlp.w, self.f)
+        return out[0] if q.ndim == 1 else out
+
+
+class CompiledNets:
+    """The Corrector's compiled CPN and CCN, and its fused CCN step (kernels.propose_shorten)."""
+
+    def __init__(self, cpn: CPN, ccn: CCN, shorten_levels: int):
+        self.cpn = CompiledCPN(cpn)
+        self.ccn = CompiledCCN(ccn)
+        self.steps = 2 ** shorten_levels
+        self._args = (self.ccn.mlp.i, self.ccn.mlp.w, self.ccn.f, self.cpn.mlp.i, self.cpn.mlp.w, self.cpn.bound, self.steps)
+
+    def propose_shorten(self, q0: np.ndarray):
+        """For colliding configurations q0 (N, n) within the limits: (proposals, shortened, hi), see kernels."""
+        if q0.dtype != np.float64 or q0.ndim != 2 or not q0.flags.c_contiguous:  # the Corrector passes such rows
+            q0 = _rows(q0)
+        return kernels.propose_shorten(q0, *self._args)
+
+
+def warm() -> None:
+    """Compile (or load from numba's cache) every kernel here, for the array types the Corrector passes."""
+    from teleprev.noncollision.groups import Group
+    from teleprev.noncollision.mlp import ModelInfo
+
+    n = 2
+    joints = ("a", "b")
+    for kind, activation, combine in (("cpn", "relu", "noisy_or"), ("ccn", "silu", "identity"), ("cpn", "tanh", "identity")):
+        outputs = ("l0", "l1") if kind == "cpn" else joints
+        info = ModelInfo(kind, "warm", "", joints, ("l0", "l1"), (Group(joints, tuple((o,) for o in outputs)),), combine,
+                         (4,), activation, np.zeros(n), np.ones(n), threshold=0.5 if kind == "cpn" else None,
+                         output_scale=np.ones(n) if kind == "ccn" else None)
+        net = MLP(info, [np.ones(s, np.float32) for s in info.layer_shapes()],
+                  [np.ones((s[0], s[2]), np.float32) for s in info.layer_shapes()])
+        q = np.zeros((3, n))
+        CompiledMLP(net).slots(q)
+        if kind == "cpn":
+            cpn = CPN(net)
+            CompiledCPN(cpn).predicts_free(q)
+        else:
+            ccn = CCN(net, -np.ones(n), np.ones(n))
+            CompiledCCN(ccn)(q)
+    CompiledNets(cpn, ccn, 2).propose_shorten(q)

@@ -1,0 +1,19 @@
+"""Every numba kernel the pipeline runs, loaded (or compiled, the first time) in one call.
+
+scripts/setup.sh calls warm() so that numba's on-disk cache holds every kernel before the first record or
+eval; eval's worker fork server calls it so that workers start with them loaded. Nothing here is
+imported by `teleprev --help`.
+"""
+
+from __future__ import annotations
+
+
+def warm() -> None:
+    from teleprev.noncollision.compiled import warm as noncollision
+    from teleprev.pipeline.hand_kernels import warm as hand
+    from teleprev.pipeline.kernels import warm as motion
+    from teleprev.robot.compiled_collision import warm as collision
+    from teleprev.robot.ik import warm as ik
+
+    for each in (collision, ik, noncollision, hand, motion):
+        each()
