@@ -80,3 +80,17 @@ class ArmRetargeter:
             return IkResult(q, converged, iterations, pos_err, rot_err), bool(clipped)
         target, clipped = self.target(anchor, wrist)
         return self.ik.solve(target, q_start), clipped
+
+
+def warm(robot: str = "xarm6", tip: str = "link_eef") -> None:
+    """Compile the compiled retargeter's kernels (kernels.arm_target_into, arm_solve) into numba's on-disk
+    cache, or load them from it, for the argument types the pipeline passes."""
+    from teleprev.robot.model import load_robot
+
+    ik = ArmIK(load_robot(robot), tip, compiled=True)
+    q = ik.chain.neutral()
+    pose = ik.pose(q)
+    arm = ArmRetargeter(ik)
+    anchor = arm.anchor(pose, q)
+    arm.target(anchor, pose)
+    arm.solve(anchor, pose, q)

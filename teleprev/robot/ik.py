@@ -163,16 +163,10 @@ class ArmIK:
 
 
 def warm(robot: str = "xarm6", tip: str = "link_eef") -> None:
-    """Compile the compiled IK's kernels (kernels.ik_solve, arm_target_into, arm_solve) into numba's on-disk
-    cache, or load them from it, for the argument types the pipeline passes."""
-    from teleprev.retarget.arm import ArmRetargeter
+    """Compile the compiled IK's kernel (kernels.ik_solve) into numba's on-disk cache, or load it from it,
+    for the argument types the pipeline passes (teleprev.retarget.arm.warm does the retargeter's)."""
     from teleprev.robot.model import load_robot
 
     ik = ArmIK(load_robot(robot), tip, compiled=True)
     q = ik.chain.neutral()
-    pose = ik.pose(q)
-    ik.solve(pose, q)
-    arm = ArmRetargeter(ik)
-    anchor = arm.anchor(pose, q)
-    arm.target(anchor, pose)
-    arm.solve(anchor, pose, q)
+    ik.solve(ik.pose(q), q)
