@@ -29,4 +29,5 @@ fi
 # Compile the numba kernels (teleprev/robot/kernels.py, teleprev/pipeline/kernels.py) into their on-disk
 # cache now, so that no record or eval pays the seconds of compiling; `teleprev --help` never loads them.
 .venv/bin/python -c 'from teleprev.robot.compiled_collision import warm; warm()
-from teleprev.pipeline.kernels import warm; warm()'
+from teleprev.pipeline.kernels import warm; warm()
+from teleprev.pipeline.swept import warm; warm()'
