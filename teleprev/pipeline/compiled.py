@@ -12,9 +12,10 @@ def warm() -> None:
     from teleprev.noncollision.compiled import warm as noncollision
     from teleprev.pipeline.hand_kernels import warm as hand
     from teleprev.pipeline.kernels import warm as motion
+    from teleprev.pipeline.swept import warm as swept
     from teleprev.retarget.arm import warm as arm
     from teleprev.robot.compiled_collision import warm as collision
     from teleprev.robot.ik import warm as ik
 
-    for each in (collision, ik, arm, noncollision, hand, motion):
+    for each in (collision, ik, arm, noncollision, hand, motion, swept):
         each()

@@ -214,9 +214,13 @@ class Motion:
             cmd, cmd_v = self.hand.track(last, v, target, target_v, dt, dt_before, frac)
         else:
             cmd, cmd_v = self.hand.stop(last, v, dt, dt_before)
-        if self.swept is not None and not (self.swept.segment_free(last, cmd)
-                                           and self.swept.segment_free(cmd, self._stop_point(cmd, cmd_v))):
-            cmd, cmd_v = self._avoid(last, v, dt, dt_before, flags)
+        if self.swept is not None:
+            h = self.hand  # compiled: both segments in one kernel call (None: it leaves them to these calls)
+            free = self.swept.command_free(last, cmd, cmd_v, h.acceleration, h.lower, h.upper) if self.swept.compiled else None
+            if free is None:
+                free = self.swept.segment_free(last, cmd) and self.swept.segment_free(cmd, self._stop_point(cmd, cmd_v))
+            if not free:
+                cmd, cmd_v = self._avoid(last, v, dt, dt_before, flags)
         if not np.any(cmd != last):
             cmd_v = np.zeros_like(cmd_v)
         return cmd, cmd_v

@@ -13,6 +13,13 @@ Checking the grown shapes at n = ceil(2 M / c) evenly spaced points (M: the larg
 segment) then proves every configuration on the segment keeps at least c/2 between links: any point of
 the segment is within half a spacing of a checked one, where two links moved at most M/n <= c/2 towards
 each other. The end point itself keeps the full c.
+
+SweptCheck(compiled=True) (sessions of format 3 on) runs a segment in one numba kernel
+(teleprev/robot/kernels.py, swept_*): the bound, the points, the checks in order, the end point's, and
+last_free_on_segment's bisection. Per configuration it decides as SelfCollisionChecker does (the
+compiled box test with its margin turned either way) and hands the ones within the margin back to FCL
+here, so its answers are the numpy check's (tests/pipeline/test_swept.py); only the bound's last bit
+may differ (a summation order), which can change the number of points only at an exact tie.
 """
 
 from __future__ import annotations
@@ -22,7 +29,8 @@ import math
 
 import numpy as np
 
-from teleprev.robot.collision import SelfCollisionChecker
+from teleprev.robot import kernels
+from teleprev.robot.collision import FclSelfCollisionChecker, SelfCollisionChecker
 from teleprev.robot.model import RobotModel
 from teleprev.robot.urdf import Shape
 
@@ -86,6 +94,29 @@ class SweptCheck:
                       if self.clearance > 0 else checker)
         self.reach = reach_table(model, checker.link_names)
         self._clear_cache: tuple[bytes, bool] = (b"", False)  # the last end point checked (pure: a cache)
+        self._kernel_args = self._compiled_tables() if compiled else None
+        if self._kernel_args is not None:  # load the kernels from numba's cache now, not in a live loop's first steps
+            q = model.neutral()
+            self._segment_free_compiled(q, q + 1e-3)
+            self._last_free_compiled(q, q + 1e-3, 1)
+            self.command_free(q, q + 1e-3, q, q + 1.0, q - 1.0, q + 1.0)
+            self._clear_cache = (b"", False)
+
+    def _compiled_tables(self) -> tuple | None:
+        """The swept kernels' tables (teleprev/robot/kernels.py), or None where the checkers are not the
+        compiled ones (geometry other than boxes): then the numpy check runs."""
+        loose, tight = self.checker._loose, self.checker._tight
+        grown = self.grown._loose
+        if loose is None or grown is None:
+            return None
+        g, p = grown._tables(), loose._tables()
+        if not all(np.array_equal(g[i], p[i]) for i in (0, 3, 5)):  # same links, boxes per link and pairs
+            return None
+        self._point = np.empty(len(self.model.joint_names))
+        return (np.ascontiguousarray(self.reach, dtype=np.float64), self.clearance / 2 if self.clearance > 0 else 0.0,
+                START_STEP_M, *loose.kinematics.tables, p[0],
+                np.ascontiguousarray(np.stack([g[1], p[1]])), np.ascontiguousarray(np.stack([g[2], p[2]])), p[3],
+                np.ascontiguousarray(np.stack([g[4], p[4]])), p[5], loose.margin, tight.margin, self._point)
 
     def motion_bound(self, q0: np.ndarray, q1: np.ndarray) -> float:
         """Metres: no point of any link moves further than this on the segment q0 -> q1."""
@@ -108,6 +139,11 @@ class SweptCheck:
         """The segment from command q0 (itself checked) to q1 keeps the clearance (half of it between the
         checked points). From a start already inside the margin (a measured state at engage), the plain
         shapes are checked every START_STEP_M of link motion instead, so the hand can move out."""
+        if self._kernel_args is not None:
+            return self._segment_free_compiled(q0, q1)
+        return self._segment_free_numpy(q0, q1)
+
+    def _segment_free_numpy(self, q0: np.ndarray, q1: np.ndarray) -> bool:
         if np.array_equal(q0, q1):
             return True
         if self.clearance > 0 and self.clear(q0):
@@ -117,6 +153,10 @@ class SweptCheck:
 
     def last_free_on_segment(self, q0: np.ndarray, q1: np.ndarray, steps: int = 10) -> np.ndarray:
         """A point of the segment q0 -> q1 whose own segment from q0 passes (q0 itself at worst), by bisection."""
+        if self._kernel_args is not None:
+            lo = self._last_free_compiled(q0, q1, steps)
+            if lo is not None:
+                return q0 + lo * (q1 - q0)
         lo, hi = 0.0, 1.0
         for _ in range(steps):
             mid = 0.5 * (lo + hi)
@@ -125,3 +165,86 @@ class SweptCheck:
             else:
                 hi = mid
         return q0 + lo * (q1 - q0)
+
+    # ---- compiled (teleprev/robot/kernels.py: swept_segment, swept_last_free) -----------------------
+    # The kernels check every configuration with the compiled test of the checkers (FK once, then the
+    # loose and the tight margin: SelfCollisionChecker's decision) and hand back the ones within the
+    # margin, which FCL decides here, as SelfCollisionChecker does. So the answers are the checker's.
+    def _segment_free_compiled(self, q0, q1) -> bool:
+        q0 = np.ascontiguousarray(q0, dtype=np.float64)
+        q1 = np.ascontiguousarray(q1, dtype=np.float64)
+        key = q0.tobytes()
+        cached = self._clear_cache
+        q0_clear = int(cached[1]) if cached[0] == key else -1
+        start = 1
+        while True:
+            answer, k, known, end_clear = kernels.swept_segment(q0, q1, q0_clear, start, *self._kernel_args)
+            if known != q0_clear:  # the kernel checked q0's clearance: clear(q0) caches it
+                self._clear_cache = (key, bool(known))
+                q0_clear = known
+            if answer == kernels.SWEPT_FREE or answer == kernels.SWEPT_COLLIDES:
+                if end_clear >= 0:
+                    self._clear_cache = (self._point.tobytes(), bool(end_clear))
+                return answer == kernels.SWEPT_FREE
+            if answer == kernels.SWEPT_UNSURE_START:
+                q0_clear = int(not FclSelfCollisionChecker.collides(self.grown, self._point))
+                self._clear_cache = (key, bool(q0_clear))
+                start = 1
+            elif answer == kernels.SWEPT_UNSURE_GROWN or answer == kernels.SWEPT_UNSURE_PLAIN:
+                checker = self.grown if answer == kernels.SWEPT_UNSURE_GROWN else self.checker
+                if FclSelfCollisionChecker.collides(checker, self._point):
+                    return False
+                start = k + 1
+            elif answer == kernels.SWEPT_UNSURE_END:
+                free = not FclSelfCollisionChecker.collides(self.grown, self._point)
+                self._clear_cache = (self._point.tobytes(), free)
+                return free
+            else:  # not finite, or too many points
+                return self._segment_free_numpy(q0, q1)
+
+    def command_free(self, q0, q1, v1, acceleration, lower, upper) -> bool | None:
+        """Compiled only: segment_free(q0, q1) and segment_free(q1, stop) in one kernel call, stop being
+        where braking at `acceleration` from q1 at v1 ends within [lower, upper] (Motion._stop_point's
+        arithmetic, in the kernel). None where the kernel cannot answer alone (a configuration within the
+        margin, inputs it does not take, or no compiled check): then the caller makes the two calls."""
+        if self._kernel_args is None:
+            return None
+        q0 = np.ascontiguousarray(q0, dtype=np.float64)
+        q1 = np.ascontiguousarray(q1, dtype=np.float64)
+        key0, key1 = q0.tobytes(), q1.tobytes()
+        cached = self._clear_cache
+        answer, cache, clear = kernels.swept_command(
+            q0, q1, np.ascontiguousarray(v1, dtype=np.float64), acceleration, lower, upper,
+            int(cached[1]) if cached[0] == key0 else -1, int(cached[1]) if cached[0] == key1 else -1,
+            *self._kernel_args)
+        if answer != kernels.SWEPT_FREE and answer != kernels.SWEPT_COLLIDES:
+            return None
+        if cache:
+            self._clear_cache = ((key0, key1, self._point.tobytes())[cache - 1], bool(clear))
+        return answer == kernels.SWEPT_FREE
+
+    def _last_free_compiled(self, q0, q1, steps: int) -> float | None:
+        """The bisection's fraction of the segment, or None where a configuration on the way is within the
+        margin (then the caller bisects, each segment checked by _segment_free_compiled)."""
+        q0 = np.ascontiguousarray(q0, dtype=np.float64)
+        q1 = np.ascontiguousarray(q1, dtype=np.float64)
+        key = q0.tobytes()
+        cached = self._clear_cache
+        q0_clear = int(cached[1]) if cached[0] == key else -1
+        end = np.empty_like(q0)
+        answer, lo, q0_clear, cache = kernels.swept_last_free(q0, q1, int(steps), q0_clear, *self._kernel_args, end)
+        if answer != kernels.SWEPT_FREE:
+            return None
+        if cache == 1:
+            self._clear_cache = (key, bool(q0_clear))
+        elif cache >= 2:
+            self._clear_cache = (end.tobytes(), cache == 3)
+        return float(lo)
+
+
+def warm(robot: str = "leap_hand_right") -> None:
+    """Compile the swept kernels into numba's on-disk cache (or load them): scripts/setup.sh runs it."""
+    from teleprev.robot.model import load_robot
+
+    hand = load_robot(robot)
+    SweptCheck(hand, SelfCollisionChecker(hand), 0.003, compiled=True)

@@ -85,3 +85,93 @@ def test_the_clearance_is_distance_between_links(swept):
         if checked >= 5:
             break
     assert checked
+
+
+# ---- the compiled check (SweptCheck(compiled=True), teleprev/robot/kernels.py) gives the numpy check's answers
+@pytest.fixture(scope="module")
+def pair():
+    hand = load_robot("leap_hand_right")
+    plain = SelfCollisionChecker(hand)
+    return SweptCheck(hand, plain, 0.003), SweptCheck(hand, plain, 0.003, compiled=True)
+
+
+def _segments(hand, n, rng):
+    """Zero-length, short, medium and long segments, from anywhere: clear starts, starts inside the margin,
+    colliding starts (uniform samples are mostly not clear)."""
+    pool = hand.sample_uniform(2 * n, rng)
+    out = []
+    for k in range(n):
+        q0, q1 = pool[2 * k], pool[2 * k + 1]
+        kind = k % 6
+        if kind == 0:
+            q1 = q0.copy()
+        elif kind == 1:
+            q1 = q0 + rng.normal(0, 0.01, q0.shape)
+        elif kind == 2:
+            q1 = q0 + 0.05 * (q1 - q0)
+        elif kind == 3:
+            q1 = q0 + 0.3 * (q1 - q0)
+        elif kind == 4:  # from near the open hand, which is clear
+            q0 = hand.neutral() + rng.normal(0, 0.05, q0.shape)
+            q1 = q0 + rng.normal(0, 0.05, q0.shape)
+        out.append((q0, np.clip(q1, hand.lower, hand.upper)))
+    return out
+
+
+def _agree(numpy_swept, compiled_swept, segments):
+    for q0, q1 in segments:
+        numpy_swept._clear_cache = compiled_swept._clear_cache = (b"", False)
+        assert numpy_swept.segment_free(q0, q1) == compiled_swept.segment_free(q0, q1)
+        assert numpy_swept._clear_cache == compiled_swept._clear_cache
+        assert numpy_swept.segment_free(q1, q0) == compiled_swept.segment_free(q1, q0)  # with a cache hit at q0 maybe
+        assert numpy_swept._clear_cache == compiled_swept._clear_cache
+    for q0, q1 in segments[::5]:
+        a, b = numpy_swept.last_free_on_segment(q0, q1), compiled_swept.last_free_on_segment(q0, q1)
+        assert a.tobytes() == b.tobytes()
+        assert numpy_swept._clear_cache == compiled_swept._clear_cache
+
+
+def test_compiled_segment_checks_agree_with_numpy(pair):
+    numpy_swept, compiled_swept = pair
+    assert compiled_swept._kernel_args is not None  # LEAP Hand: boxes, so the kernels run
+    segments = _segments(numpy_swept.model, 1200, np.random.default_rng(3))
+    free = sum(numpy_swept.segment_free(*s) for s in segments)
+    assert 0.2 * len(segments) < free < 0.9 * len(segments)  # both answers are well represented
+    _agree(numpy_swept, compiled_swept, segments)
+
+
+def test_compiled_check_asks_fcl_within_the_margin(pair):
+    """With the tight margin pushed far out, every contact the loose test finds is left to FCL (the
+    kernel's UNSURE answers): the answers stay the numpy check's."""
+    numpy_swept, compiled_swept = pair
+    hand = numpy_swept.model
+    unsure = SweptCheck(hand, numpy_swept.checker, 0.003, compiled=True)
+    args = list(unsure._kernel_args)
+    args[-2] = -1.0  # the tight test's margin: no contact is ever certain
+    unsure._kernel_args = tuple(args)
+    _agree(numpy_swept, unsure, _segments(hand, 300, np.random.default_rng(4)))
+
+
+def test_compiled_command_check_is_both_segment_checks(pair):
+    """command_free: segment_free(q0, q1) and segment_free(q1, the stop point), as Motion.hand_step makes
+    them, with the same clearance cache afterwards."""
+    from teleprev.pipeline.trajectory import HandLimiter
+
+    numpy_swept, compiled_swept = pair
+    hand = numpy_swept.model
+    limiter = HandLimiter(hand.lower, hand.upper, hand.velocity_limit, np.full(len(hand.lower), 40.0))
+    rng = np.random.default_rng(5)
+    decided = 0
+    for q0, q1 in _segments(hand, 600, rng):
+        v1 = rng.normal(0, 1.0, q0.shape) * (rng.random() < 0.8)
+        stop = np.minimum(np.maximum(q1 + v1 * np.abs(v1) / (2.0 * limiter.acceleration), limiter.lower), limiter.upper)
+        for cache in ((b"", False), (q0.tobytes(), True), (q1.tobytes(), False)):
+            numpy_swept._clear_cache = compiled_swept._clear_cache = cache
+            expected = numpy_swept.segment_free(q0, q1) and numpy_swept.segment_free(q1, stop)
+            got = compiled_swept.command_free(q0, q1, v1, limiter.acceleration, limiter.lower, limiter.upper)
+            if got is None:  # within the margin somewhere: the caller makes the two calls
+                continue
+            decided += 1
+            assert got == expected
+            assert numpy_swept._clear_cache == compiled_swept._clear_cache
+    assert decided > 1000

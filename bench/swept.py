@@ -1,0 +1,185 @@
+"""Issue 18's compiled hot path: the swept self-collision check of hand commands (one thread).
+
+    python bench/swept.py [--json] [--quick]
+
+Re-runs the fixture sessions (tests/fixtures/sim_v*.mcap) to collect the hand's command segments as the
+pipeline checks them (Motion.hand_step: the step, then the way to its stop point; the stop-short
+bisection where the step is not free), then replays exactly those calls, in order, through the numpy
+SweptCheck and the compiled one (SweptCheck(compiled=True): one kernel per segment, FCL within the
+margin) in the same run, and counts the answers on which they differ (must be 0). Also random segments
+from inside the margin, zero-length and long ones.
+
+    swept_us_p50 / _numpy        one segment_free call (median over the recorded calls)
+    swept_step_us_p50 / _numpy   all swept calls of one hand step (median over steps)
+    hand_step_us_p50 / _numpy    Motion.hand_step with either check (compiled: both segments of a
+                                 command in one kernel call, SweptCheck.command_free)
+"""
+
+from __future__ import annotations
+
+import copy
+import sys
+import time
+from pathlib import Path
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+import common  # noqa: E402  (sets one-thread environment before numpy loads)
+
+import numpy as np  # noqa: E402
+
+ROOT = Path(__file__).resolve().parents[1]
+FIXTURES = ("sim_v1.mcap", "sim_v2.mcap")
+
+
+def recorded_calls() -> tuple[list[list[tuple]], list[tuple], float]:
+    """The swept calls of every hand step of the fixture sessions (per step a list of (method, args)),
+    those steps' Motion.hand_step calls (motion, args), and the rig's clearance."""
+    from teleprev.evaluation.reproduce import rerun_session
+    from teleprev.pipeline.motion import Motion
+    from teleprev.pipeline.swept import SweptCheck
+
+    steps: list[list[tuple]] = []
+    hand_steps: list[tuple] = []
+    clearance = 0.0
+    seg, last, hand_step = SweptCheck.segment_free, SweptCheck.last_free_on_segment, Motion.hand_step
+
+    def seg_rec(self, q0, q1):
+        steps[-1].append(("segment_free", (np.array(q0), np.array(q1))))
+        return seg(self, q0, q1)
+
+    def last_rec(self, q0, q1, steps_=10):
+        steps[-1].append(("last_free_on_segment", (np.array(q0), np.array(q1), steps_)))
+        return last(self, q0, q1, steps_)
+
+    def step_rec(self, *args, **kw):
+        nonlocal clearance
+        clearance = self.swept.clearance if self.swept is not None else clearance
+        steps.append([])
+        hand_steps.append((self, copy.deepcopy(args)))
+        return hand_step(self, *args, **kw)
+
+    SweptCheck.segment_free, SweptCheck.last_free_on_segment, Motion.hand_step = seg_rec, last_rec, step_rec
+    try:
+        for name in FIXTURES:
+            rerun_session(ROOT / "tests" / "fixtures" / name)
+    finally:
+        SweptCheck.segment_free, SweptCheck.last_free_on_segment, Motion.hand_step = seg, last, hand_step
+    keep = [k for k, s in enumerate(steps) if s]
+    return [steps[k] for k in keep], [hand_steps[k] for k in keep], clearance
+
+
+def random_segments(hand, swept, n: int, rng) -> list[tuple]:
+    """Segments of every kind the check meets: short and long, from clear starts and from starts inside the
+    margin (the plain shapes then), zero-length ones."""
+    out = []
+    pool = hand.sample_uniform(n * 2, rng)
+    for k in range(n):
+        q0, q1 = pool[2 * k], pool[2 * k + 1]
+        kind = k % 5
+        if kind == 0:
+            q1 = q0.copy()
+        elif kind == 1:
+            q1 = q0 + rng.normal(0, 0.02, q0.shape)
+        elif kind == 2:
+            q1 = q0 + 0.2 * (q1 - q0)
+        out.append((q0, q1))
+    return out
+
+
+def main() -> None:
+    args = common.parser(__doc__).parse_args()
+    from teleprev.pipeline.swept import SweptCheck
+    from teleprev.robot.collision import SelfCollisionChecker
+    from teleprev.robot.model import load_robot
+
+    steps, hand_steps, clearance = recorded_calls()
+    hand = load_robot("leap_hand_right")
+    plain = SelfCollisionChecker(hand)
+    numpy_swept = SweptCheck(hand, plain, clearance, compiled=False)
+    compiled_swept = SweptCheck(hand, plain, clearance, compiled=True)
+
+    def replay(swept):
+        """Each recorded call in order (the clearance cache sees what it sees live): answers, per-call and
+        per-step seconds."""
+        answers, calls, per_step = [], [], []
+        for step in steps:
+            t_step = 0.0
+            for method, call in step:
+                fn = getattr(swept, method)
+                t = time.perf_counter()
+                out = fn(*call)
+                dt = time.perf_counter() - t
+                t_step += dt
+                if method == "segment_free":
+                    calls.append(dt)
+                answers.append(out if isinstance(out, bool) else out.tobytes())
+            per_step.append(t_step)
+        return answers, calls, per_step
+
+    rounds = 1 if args.quick else 3
+    results = {"numpy": [], "compiled": []}
+    for _ in range(rounds):  # interleaved, so that both see the same machine load
+        for name, swept in (("numpy", numpy_swept), ("compiled", compiled_swept)):
+            results[name].append(replay(swept))
+    a_numpy, a_compiled = results["numpy"][0][0], results["compiled"][0][0]
+    disagree = sum(x != y for x, y in zip(a_numpy, a_compiled))
+
+    def p50(name: str, index: int) -> float:
+        return float(np.median([common.percentile(r[index], 50) for r in results[name]])) * 1e6
+
+    def replay_hand_steps(swept):
+        """Motion.hand_step of every recorded step with this swept check: outputs, seconds per step."""
+        outputs, seconds = [], []
+        for motion, call in hand_steps:
+            saved, motion.swept = motion.swept, swept
+            call = (*call[:-1], [])  # a fresh flags list
+            t = time.perf_counter()
+            cmd, cmd_v = motion.hand_step(*call)
+            seconds.append(time.perf_counter() - t)
+            motion.swept = saved
+            outputs.append((cmd.tobytes(), cmd_v.tobytes(), tuple(call[-1])))
+        return outputs, seconds
+
+    per_hand = {"numpy": [], "compiled": []}
+    for _ in range(rounds):
+        for name, swept in (("numpy", numpy_swept), ("compiled", compiled_swept)):
+            per_hand[name].append(replay_hand_steps(swept))
+    hand_disagree = sum(x != y for x, y in zip(per_hand["numpy"][0][0], per_hand["compiled"][0][0]))
+
+    def hand_p50(name: str) -> float:
+        return float(np.median([common.percentile(r[1], 50) for r in per_hand[name]])) * 1e6
+
+    rng = np.random.default_rng(18)
+    segments = random_segments(hand, compiled_swept, 300 if args.quick else 2000, rng)
+    random_disagree = sum(numpy_swept.segment_free(*s) != compiled_swept.segment_free(*s) for s in segments)
+    random_disagree += sum(bool(np.any(numpy_swept.last_free_on_segment(*s) != compiled_swept.last_free_on_segment(*s)))
+                           for s in segments[: len(segments) // 4])
+    seg_numpy = common.time_calls(numpy_swept.segment_free, segments)
+    seg_compiled = common.time_calls(compiled_swept.segment_free, segments)
+
+    figures = {
+        "swept_us_p50": p50("compiled", 1),
+        "swept_us_p50_numpy": p50("numpy", 1),
+        "swept_step_us_p50": p50("compiled", 2),
+        "swept_step_us_p50_numpy": p50("numpy", 2),
+        "hand_step_us_p50": hand_p50("compiled"),
+        "hand_step_us_p50_numpy": hand_p50("numpy"),
+        "swept_step_us_p99": float(np.median([common.percentile(r[2], 99) for r in results["compiled"]])) * 1e6,
+        "swept_step_us_p99_numpy": float(np.median([common.percentile(r[2], 99) for r in results["numpy"]])) * 1e6,
+        "swept_random_us_p50": common.percentile(seg_compiled, 50) * 1e6,
+        "swept_random_us_p50_numpy": common.percentile(seg_numpy, 50) * 1e6,
+        "swept_recorded_steps": len(steps),
+        "swept_recorded_calls": len(a_numpy),
+        "swept_compiled_vs_numpy_disagreements": disagree + random_disagree,
+        "hand_step_compiled_vs_numpy_disagreements": hand_disagree,
+    }
+    targets = {
+        "swept_step_us_p50": "well under the 0.1 ms step budget",
+        "swept_compiled_vs_numpy_disagreements": "0",
+        "hand_step_compiled_vs_numpy_disagreements": "0 (commands, velocities and flags bit for bit)",
+    }
+    common.report("bench/swept.py: compiled swept check of hand commands (one thread)", figures, targets, args.json)
+
+
+if __name__ == "__main__":
+    main()
