@@ -407,6 +407,46 @@ class JointStatesDecoder:
 
     def batch(self, datas: list[bytes]) -> list[JointSample]:
         out: list = [None] * len(datas)
+        for idxs, layout, rows in self._by_layout(datas):
+            if layout is None:
+                for i in idxs:
+                    out[i] = self(datas[i])
+                continue
+            pos = list(np.ascontiguousarray(rows[:, layout.pos_idx]).view(_F64))
+            vel = (repeat(None) if layout.vel_idx is None
+                   else list(np.ascontiguousarray(rows[:, layout.vel_idx]).view(_F64)))
+            names = layout.names
+            decoded = [JointSample(t, names, p, v) for t, p, v in zip(layout.stamps(rows), pos, vel)]
+            for r in _unmatched(rows, layout):
+                decoded[r] = self(datas[idxs[r]])
+            for i, sample in zip(idxs, decoded):
+                out[i] = sample
+        return out
+
+    def columns(self, datas: list[bytes]) -> tuple[list[int], list[np.ndarray]]:
+        """The stamps and positions of many messages of one channel: what batch() would give, without
+        making the JointSamples."""
+        stamps: list = [None] * len(datas)
+        positions: list = [None] * len(datas)
+        for idxs, layout, rows in self._by_layout(datas):
+            if layout is None:
+                for i in idxs:
+                    sample = self(datas[i])
+                    stamps[i], positions[i] = sample.stamp_ns, sample.positions
+                continue
+            group_stamps = layout.stamps(rows)
+            group_positions = list(np.ascontiguousarray(rows[:, layout.pos_idx]).view(_F64))
+            for r in _unmatched(rows, layout):
+                sample = self(datas[idxs[r]])
+                group_stamps[r], group_positions[r] = sample.stamp_ns, sample.positions
+            for i, t, p in zip(idxs, group_stamps, group_positions):
+                stamps[i], positions[i] = t, p
+        return stamps, positions
+
+    def _by_layout(self, datas: list[bytes]):
+        """Groups of messages of one length: (their indices, their layout, their bytes as rows of an
+        array) where a layout of that length is known and the group is worth an array; (indices, None,
+        None) for messages to decode one by one."""
         by_len: dict[int, list[int]] = {}
         for i, n in enumerate(map(len, datas)):
             idxs = by_len.get(n)
@@ -417,23 +457,10 @@ class JointStatesDecoder:
         for n, idxs in by_len.items():
             layouts = self._layouts.get(n)
             if not layouts or len(idxs) < 4:
-                for i in idxs:
-                    out[i] = self(datas[i])
+                yield idxs, None, None
                 continue
-            layout = layouts[0]
             rows = np.frombuffer(b"".join([datas[i] for i in idxs]), _U8).reshape(len(idxs), n)
-            ok = ((rows & layout.mask) == layout.skel).all(axis=1)
-            pos = list(np.ascontiguousarray(rows[:, layout.pos_idx]).view(_F64))
-            vel = (repeat(None) if layout.vel_idx is None
-                   else list(np.ascontiguousarray(rows[:, layout.vel_idx]).view(_F64)))
-            names = layout.names
-            decoded = [JointSample(t, names, p, v) for t, p, v in zip(layout.stamps(rows), pos, vel)]
-            if not ok.all():
-                for r in np.flatnonzero(~ok).tolist():
-                    decoded[r] = self(datas[idxs[r]])
-            for i, sample in zip(idxs, decoded):
-                out[i] = sample
-        return out
+            yield idxs, layouts[0], rows
 
     def _slow(self, data: bytes) -> JointSample:
         stamp, names, pos, vel, pos_off, vel_off, plain = _parse_joint_states(data)
@@ -462,6 +489,12 @@ class JointStatesDecoder:
         self._layouts.setdefault(a.shape[0], []).append(
             _Layout(names, mask, skel.tobytes(), skel, pos_idx, vel_idx, sec, nsec))
         self._count += 1
+
+
+def _unmatched(rows: np.ndarray, layout: _Layout) -> list[int]:
+    """The rows that do not have the layout (they are decoded one by one)."""
+    ok = ((rows & layout.mask) == layout.skel).all(axis=1)
+    return [] if ok.all() else np.flatnonzero(~ok).tolist()
 
 
 def _timestamp_spans(data: bytes) -> tuple[tuple[int, int], tuple[int, int]] | None:
