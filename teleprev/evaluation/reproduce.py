@@ -176,7 +176,7 @@ def rerun_session(path: str | Path, models: str | Path | None = None, rig_path: 
         inputs = InputTopics(**json.loads(meta["pipeline"]["inputs"]))
     except (KeyError, TypeError, ValueError):
         raise SessionError("the session does not say which streams fed its pipeline (metadata 'pipeline')", str(path)) from None
-    missing = [t for t in (inputs.hand, inputs.wrist, inputs.arm, inputs.effector) if t not in reader.topics]
+    missing = [t for t in (inputs.hand, inputs.wrist, inputs.arm, inputs.effector) if t not in reader.schemas]
     if missing:
         raise SessionError(f"the session lacks the pipeline's input streams {missing}", str(path))
     driver = PipelineDriver(pipeline, inputs)
@@ -189,14 +189,14 @@ def rerun_session(path: str | Path, models: str | Path | None = None, rig_path: 
     # The recorded outputs are read as tables (stamps and values, no messages) in the same pass as the
     # inputs; an output topic of another schema comes through as messages and is skipped, as before.
     tables = {k: JointTable() for k in RECORDED_OUTPUTS
-              if k in reader.topics and reader.topics[k].schema == JOINT_STATES}
+              if reader.schemas.get(k) == JOINT_STATES}
     streamed = [inputs.hand, inputs.wrist, inputs.arm, inputs.effector, topics.MODE,
                 *(k for k in RECORDED_OUTPUTS if k not in tables)]
     n_inputs = 0
     # One BLAS thread: the batched CPN is a few hundred rows, where threads cost more than they give (on a
     # busy machine or with -j workers, many times more); single configurations never use them anyway.
     with threadpool_limits(1, user_api="blas"):
-        messages = reader.messages(topics=[t for t in streamed if t in reader.topics], tables=tables)
+        messages = reader.messages(topics=[t for t in streamed if t in reader.schemas], tables=tables)
         for msg, hand_input in _prepared(driver, messages):
             if msg.topic in recorded_by_stamp:
                 if isinstance(msg.payload, JointSample):

@@ -314,7 +314,7 @@ class PoseInFrameDecoder:
 
     def batch(self, datas: list[bytes]) -> list[PoseSample]:
         out: list = [None] * len(datas)
-        for idxs, layout, rows in _by_length(datas, self._layouts):
+        for idxs, layout, rows in _by_length(datas, self._layouts.get):
             if layout is None:
                 for i in idxs:
                     out[i] = self(datas[i])
@@ -455,10 +455,30 @@ class _Layout:
 
 def _stamps(rows: np.ndarray, sec_span: tuple[int, int], nsec_span: tuple[int, int]) -> list[int]:
     """The timestamps (ns) of messages given as rows of bytes, from the spans of their varints."""
-    sec, nsec = _varint_column(rows, *sec_span), _varint_column(rows, *nsec_span)
+    key = (sec_span, nsec_span)
+    weights = _stamp_weights.get(key)
+    if weights is None:
+        weights = _stamp_weights[key] = _varint_weights(sec_span, nsec_span)
+    idx, w = weights
+    both = (rows[:, idx] & 0x7F).astype(np.int64) @ w  # (n, 2): seconds, nanoseconds
+    sec, nsec = both[:, 0], both[:, 1]
     if sec.max() < 9_000_000_000:  # no int64 overflow in ns (until the year 2255)
         return (sec * _NS + nsec).tolist()
     return [s * _NS + n for s, n in zip(sec.tolist(), nsec.tolist())]
+
+
+_stamp_weights: dict[tuple, tuple[np.ndarray, np.ndarray]] = {}
+
+
+def _varint_weights(sec_span: tuple[int, int], nsec_span: tuple[int, int]) -> tuple[np.ndarray, np.ndarray]:
+    """The byte indices of both varints (at most 5 bytes each), and each byte's weight (2^(7j)) in the
+    seconds column or the nanoseconds one: the 7-bit groups' sum as one product."""
+    idx, w = [], []
+    for column, (start, n) in enumerate((sec_span, nsec_span)):
+        for j in range(n):
+            idx.append(start + j)
+            w.append([1 << (7 * j), 0] if column == 0 else [0, 1 << (7 * j)])
+    return np.array(idx, dtype=np.intp), np.array(w, dtype=np.int64).reshape(len(idx), 2)
 
 
 def _varint_span(data: bytes, start: int, n: int) -> int:
@@ -466,15 +486,6 @@ def _varint_span(data: bytes, start: int, n: int) -> int:
     for j in range(n):
         r |= (data[start + j] & 0x7F) << (7 * j)
     return r
-
-
-_SHIFTS = np.arange(0, 35, 7, dtype=np.int64)
-
-
-def _varint_column(rows: np.ndarray, start: int, n: int) -> np.ndarray:
-    if n == 0:
-        return np.zeros(rows.shape[0], dtype=np.int64)
-    return ((rows[:, start:start + n] & 0x7F).astype(np.int64) << _SHIFTS[:n]).sum(axis=1)
 
 
 class JointStatesDecoder:
@@ -536,7 +547,11 @@ class JointStatesDecoder:
         return stamps, positions
 
     def _by_layout(self, datas: list[bytes]):
-        return _by_length(datas, {n: layouts[0] for n, layouts in self._layouts.items()})
+        return _by_length(datas, self._first_layout)
+
+    def _first_layout(self, n: int) -> _Layout | None:
+        layouts = self._layouts.get(n)
+        return layouts[0] if layouts else None
 
     def _slow(self, data: bytes) -> JointSample:
         stamp, names, pos, vel, pos_off, vel_off, plain = _parse_joint_states(data)
@@ -567,10 +582,11 @@ class JointStatesDecoder:
         self._count += 1
 
 
-def _by_length(datas: list[bytes], layouts: dict):
+def _by_length(datas: list[bytes], layout_of: Callable):
     """Groups of messages of one length: (their indices, the layout of that length, their bytes as rows
     of an array) where a layout is known and the group is worth an array; (indices, None, None) for
-    messages to decode one by one."""
+    messages to decode one by one. A group of a length without a layout yet gives its first message
+    alone first: decoding it may learn the layout for the rest."""
     by_len: dict[int, list[int]] = {}
     for i, n in enumerate(map(len, datas)):
         idxs = by_len.get(n)
@@ -579,7 +595,11 @@ def _by_length(datas: list[bytes], layouts: dict):
         else:
             idxs.append(i)
     for n, idxs in by_len.items():
-        layout = layouts.get(n)
+        layout = layout_of(n)
+        if layout is None and len(idxs) > 4:
+            yield idxs[:1], None, None
+            idxs = idxs[1:]
+            layout = layout_of(n)
         if layout is None or len(idxs) < 4:
             yield idxs, None, None
             continue

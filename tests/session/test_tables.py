@@ -124,18 +124,21 @@ def test_an_undecodable_message_fails_the_same_with_tables(tmp_path, message_ind
     messages."""
     rng = np.random.default_rng(4)
     msgs = []
-    for k in range(200):
+    for k in range(400):
         x = JointSample(k, ("a", "b", "c"), rng.standard_normal(3))
-        data = encode(x) if k != 120 else encode(x)[:-3]  # cut short: does not decode
+        data = encode(x) if k != 300 else encode(x)[:-3]  # cut short: does not decode
         msgs.append(("/x", 1000 + k, data, x))
         y = JointSample(k, ("d",), rng.standard_normal(1))
         msgs.append(("/y", 1000 + k, encode(y), y))
     path = tmp_path / "bad.mcap"
     _write_raw(path, msgs, message_index=message_index)
     with SessionReader(path) as reader:
+        assert len(reader._chunks) > 8  # more than one batch of chunks, the bad one inside the second
         plain = read_plain(reader, ["/y"], ["/x"])
-        assert plain[2] is not None and "message on /x at log time 1120 does not decode" in plain[2]
-        assert 10 < len(plain[0]) < 200
+        assert plain[2] is not None and "message on /x at log time 1300 does not decode" in plain[2]
+        # every message of the chunks before the one that fails, none after
+        bad = next(c for c in reader._chunks if c.start_ns <= 1300 <= c.end_ns)
+        assert [m.log_time_ns for m in plain[0]] == list(range(1000, bad.start_ns))
         assert_same_reading(plain, read_tabled(reader, ["/y"], ["/x"]))
         good_until = reader.start_ns + 100
         assert_same_reading(read_plain(reader, ["/y"], ["/x"], hi=good_until),
@@ -158,10 +161,13 @@ def test_a_damaged_chunk_fails_the_same_with_tables(tmp_path):
     shutil.copy(FIXTURE, path)
     with SessionReader(path) as reader:
         n = len(reader._chunks)
-    damage_chunk(path, n // 2)
+    start, _ = damage_chunk(path, n // 2)
     with SessionReader(path) as reader:
         plain = read_plain(reader, STREAMED, TABLED)
         assert plain[2] is not None and "is damaged" in plain[2] and len(plain[0]) > 0
+        before = read_plain(reader, STREAMED, TABLED, hi=start)  # every message of the chunks before it
+        assert before[2] is None
+        assert_same_reading((*before[:2], plain[2]), plain)
         assert_same_reading(plain, read_tabled(reader, STREAMED, TABLED))
 
 
