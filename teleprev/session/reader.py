@@ -1,8 +1,8 @@
 """Reads a recorded session back: metadata, topics, messages decoded into teleprev payloads, episodes.
 
 Messages come in log_time order (ties in file order), a few chunks at a time (see _BATCH_CHUNKS), so
-memory stays bounded by a few chunks. A file cut short by a crash has no summary: opening it raises SessionError pointing at
-`teleprev recover`.
+memory stays bounded by a few chunks. A file cut short by a crash has no summary: opening it raises
+SessionError pointing at `teleprev recover`.
 """
 
 from __future__ import annotations
@@ -638,7 +638,7 @@ class JointTable:
 
 
 class _Order:
-    """A chunk's wanted messages in log time order (file order for equal times): per message its
+    """Wanted messages of one or more chunks in log time order (file order for equal times): per message its
     channel, its index among that channel's messages in file order, and its log time (int64 arrays)."""
 
     __slots__ = ("channels", "indices_", "times")
@@ -704,6 +704,8 @@ class _Located:
     @classmethod
     def join(cls, parts: list[_Located]) -> _Located:
         """Chunks that follow each other in time, as one: each channel's messages in chunk order."""
+        if not parts:
+            return cls({}, _Order.empty())
         if len(parts) == 1:
             return parts[0]
         per_channel: dict[int, list[bytes]] = {}

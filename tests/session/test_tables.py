@@ -156,15 +156,18 @@ def test_sequentially_parsed_chunks_give_the_same_tables(tmp_path):
         assert_same_reading(read_plain(reader, STREAMED[:3], TABLED), read_tabled(reader, STREAMED[:3], TABLED))
 
 
-def test_a_damaged_chunk_fails_the_same_with_tables(tmp_path):
+@pytest.mark.parametrize("which", ["first", "first of a batch", "inside a batch"])
+def test_a_damaged_chunk_fails_the_same_with_tables(tmp_path, which):
+    """The messages of every chunk before the damaged one come first, then its error."""
     path = tmp_path / "damaged.mcap"
     shutil.copy(FIXTURE, path)
     with SessionReader(path) as reader:
         n = len(reader._chunks)
-    start, _ = damage_chunk(path, n // 2)
+    assert n > 10
+    start, _ = damage_chunk(path, {"first": 0, "first of a batch": 8, "inside a batch": 10}[which])
     with SessionReader(path) as reader:
         plain = read_plain(reader, STREAMED, TABLED)
-        assert plain[2] is not None and "is damaged" in plain[2] and len(plain[0]) > 0
+        assert plain[2] is not None and "is damaged" in plain[2]
         before = read_plain(reader, STREAMED, TABLED, hi=start)  # every message of the chunks before it
         assert before[2] is None
         assert_same_reading((*before[:2], plain[2]), plain)
