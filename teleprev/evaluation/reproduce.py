@@ -22,12 +22,13 @@ from teleprev.errors import SessionError
 from teleprev.messages import Event, JointSample
 from teleprev.live.build import build_pipeline, rig_calibration
 from teleprev.pipeline.driver import InputTopics, PipelineDriver
-from teleprev.pipeline.step import Pipeline
+from teleprev.pipeline.step import Pipeline, StepResult
 from teleprev.retarget.calibration import load_calibration_text
 from teleprev.rig import load_recorded_rig, load_rig
 from teleprev.robot.effectors import EndEffector
 from teleprev import topics
-from teleprev.session.reader import Episode, SessionReader
+from teleprev.session.codec import JOINT_STATES
+from teleprev.session.reader import Episode, JointTable, SessionReader
 
 PREPARE_BLOCK = 4096  # messages read ahead per batch of glove-sample preparation (bounds the memory)
 RECORDED_OUTPUTS = (topics.RETARGETED, topics.CORRECTED, topics.ARM_TARGET, topics.COMMAND_ARM, topics.COMMAND_HAND)
@@ -120,6 +121,51 @@ def _prepared(driver: PipelineDriver, messages, block: int = PREPARE_BLOCK):
         yield from zip(chunk, driver.prepare(chunk))
 
 
+class _Steps:
+    """What the re-run produced, a list entry per step, gathered as the steps go."""
+
+    def __init__(self) -> None:
+        self.t_ns: list[int] = []
+        self.mode: list[str] = []
+        self.corrector: list[str] = []
+        self.latency_ns: list[int] = []
+        self.flags: list[list[str]] = []
+        self.rows: dict[str, list[np.ndarray | None]] = {k: [] for k in RECORDED_OUTPUTS}
+
+    def add(self, t_ns: int, result: StepResult, latency_ns: int) -> None:
+        self.t_ns.append(t_ns)
+        self.latency_ns.append(latency_ns)
+        report = result.report
+        self.mode.append(report["mode"])
+        self.corrector.append(report["corrector"])
+        self.flags.append(report["flags"])
+        # the streams PipelineDriver.feed records for this step (the corrected hand only with a retargeted one)
+        rows = self.rows
+        rows[topics.RETARGETED].append(result.retargeted)
+        rows[topics.CORRECTED].append(result.corrected if result.retargeted is not None else None)
+        rows[topics.ARM_TARGET].append(result.arm_target)
+        rows[topics.COMMAND_ARM].append(result.arm_command)
+        rows[topics.COMMAND_HAND].append(result.effector_command)
+
+
+def _table(values: list[np.ndarray | None], width: int) -> np.ndarray:
+    """Rows of a (len(values), width) float64 table; NaN rows where a value is None."""
+    out = np.full((len(values), width), np.nan)
+    present = [i for i, v in enumerate(values) if v is not None]
+    if not present:
+        return out
+    try:
+        block = np.array([values[i] for i in present])
+    except ValueError:  # ragged rows
+        block = None
+    if block is not None and block.dtype != object and block.shape == (len(present), width):
+        out[present] = block
+        return out
+    for i in present:  # odd rows: each assigned as it is (broadcasting, errors and all)
+        out[i] = values[i]
+    return out
+
+
 def rerun_session(path: str | Path, models: str | Path | None = None, rig_path: str | Path | None = None) -> Rerun:
     path = Path(path)
     started = time.perf_counter()
@@ -130,7 +176,7 @@ def rerun_session(path: str | Path, models: str | Path | None = None, rig_path: 
         inputs = InputTopics(**json.loads(meta["pipeline"]["inputs"]))
     except (KeyError, TypeError, ValueError):
         raise SessionError("the session does not say which streams fed its pipeline (metadata 'pipeline')", str(path)) from None
-    missing = [t for t in (inputs.hand, inputs.wrist, inputs.arm, inputs.effector) if t not in reader.topics]
+    missing = [t for t in (inputs.hand, inputs.wrist, inputs.arm, inputs.effector) if t not in reader.schemas]
     if missing:
         raise SessionError(f"the session lacks the pipeline's input streams {missing}", str(path))
     driver = PipelineDriver(pipeline, inputs)
@@ -138,46 +184,38 @@ def rerun_session(path: str | Path, models: str | Path | None = None, rig_path: 
     widths = {topics.RETARGETED: len(eff_names), topics.CORRECTED: len(eff_names), topics.ARM_TARGET: len(arm_names),
               topics.COMMAND_ARM: len(arm_names), topics.COMMAND_HAND: len(eff_names)}
 
-    t_list, mode, action, latency, flags = [], [], [], [], []
-    rows: dict[str, list] = {k: [] for k in RECORDED_OUTPUTS}
+    steps = _Steps()
     recorded_by_stamp: dict[str, dict[int, np.ndarray]] = {k: {} for k in RECORDED_OUTPUTS}
+    # The recorded outputs are read as tables (stamps and values, no messages) in the same pass as the
+    # inputs; an output topic of another schema comes through as messages and is skipped, as before.
+    tables = {k: JointTable() for k in RECORDED_OUTPUTS
+              if reader.schemas.get(k) == JOINT_STATES}
+    streamed = [inputs.hand, inputs.wrist, inputs.arm, inputs.effector, topics.MODE,
+                *(k for k in RECORDED_OUTPUTS if k not in tables)]
     n_inputs = 0
-    wanted = [inputs.hand, inputs.wrist, inputs.arm, inputs.effector, topics.MODE, *RECORDED_OUTPUTS]
     # One BLAS thread: the batched CPN is a few hundred rows, where threads cost more than they give (on a
     # busy machine or with -j workers, many times more); single configurations never use them anyway.
     with threadpool_limits(1, user_api="blas"):
-        for msg, hand_input in _prepared(driver, reader.messages(topics=[t for t in wanted if t in reader.topics])):
+        messages = reader.messages(topics=[t for t in streamed if t in reader.schemas], tables=tables)
+        for msg, hand_input in _prepared(driver, messages):
             if msg.topic in recorded_by_stamp:
                 if isinstance(msg.payload, JointSample):
                     recorded_by_stamp[msg.topic][msg.payload.stamp_ns] = msg.payload.positions
                 continue
             n_inputs += 1
             t0 = time.perf_counter_ns()
-            out = driver.feed(msg, hand_input)
-            if out.result is None:
-                continue
-            latency.append(time.perf_counter_ns() - t0)
-            t_list.append(msg.log_time_ns)
-            report = out.result.report
-            mode.append(report["mode"])
-            action.append(report["corrector"])
-            flags.append(report["flags"])
-            produced = {topic: payload.positions for topic, payload in out.logged if isinstance(payload, JointSample)}
-            for topic in RECORDED_OUTPUTS:
-                rows[topic].append(produced.get(topic))
-    t = np.array(t_list, dtype=np.int64)
-
-    def table(values: list, width: int) -> np.ndarray:
-        out = np.full((len(values), width), np.nan)
-        for i, v in enumerate(values):
-            if v is not None:
-                out[i] = v
-        return out
-
-    rerun = {k: table(rows[k], widths[k]) for k in RECORDED_OUTPUTS}
-    recorded = {k: table([recorded_by_stamp[k].get(int(s)) for s in t], widths[k]) for k in RECORDED_OUTPUTS}
+            result = driver.advance(msg, hand_input)
+            if result is not None:
+                steps.add(msg.log_time_ns, result, time.perf_counter_ns() - t0)
+    for k, table in tables.items():
+        recorded_by_stamp[k] = dict(zip(table.stamp_ns, table.positions))
+    t = np.array(steps.t_ns, dtype=np.int64)
+    rerun = {k: _table(steps.rows[k], widths[k]) for k in RECORDED_OUTPUTS}
+    t_keys = t.tolist()
+    recorded = {k: _table([recorded_by_stamp[k].get(s) for s in t_keys], widths[k]) for k in RECORDED_OUTPUTS}
     notes = []
-    extra = {k: len(set(recorded_by_stamp[k]) - set(t.tolist())) for k in RECORDED_OUTPUTS}
+    stepped = set(t_keys)
+    extra = {k: len(set(recorded_by_stamp[k]) - stepped) for k in RECORDED_OUTPUTS}
     if any(extra.values()):
         notes.append(f"recorded outputs at times the re-run never stepped: { {k: v for k, v in extra.items() if v} }")
     recorded_platform = meta.get("session", {}).get("numeric_platform")
@@ -185,7 +223,8 @@ def rerun_session(path: str | Path, models: str | Path | None = None, rig_path: 
         notes.append(f"recorded on numeric platform {recorded_platform!r}, re-run on {numeric_platform.describe()!r}: "
                      "the last bits may differ")
     return Rerun(
-        path, t, np.array(mode), np.array(action), np.array(latency, dtype=np.int64), flags, arm_names, eff_names,
+        path, t, np.array(steps.mode), np.array(steps.corrector), np.array(steps.latency_ns, dtype=np.int64), steps.flags,
+        arm_names, eff_names,
         pipeline.effector.spec, rerun, recorded, reader.episodes(), meta, _models_match(meta, pipeline), rig_source,
         reader.duration_s, n_inputs,
         time.perf_counter() - started, notes,

@@ -48,6 +48,7 @@ class PipelineDriver:
     def __init__(self, pipeline: Pipeline, inputs: InputTopics):
         self.pipeline = pipeline
         self.topics = inputs
+        self._input_topics = frozenset((inputs.hand, inputs.wrist, inputs.arm, inputs.effector))
         self.state = PipelineState()
         self.latest: dict[str, object] = {}
         self.last_result: StepResult | None = None
@@ -77,27 +78,36 @@ class PipelineDriver:
 
     def feed(self, msg: Logged, hand_input: HandInput | None = None) -> Outputs:
         """One logged sample, in log-time order; `hand_input`: its entry from `prepare`, if any."""
+        result = self.advance(msg, hand_input)
+        return Outputs() if result is None else self._outputs(result, msg.log_time_ns)
+
+    def advance(self, msg: Logged, hand_input: HandInput | None = None) -> StepResult | None:
+        """What `feed` does, without making the messages to record: the step's result, or None when the
+        sample stepped nothing (an input sample other than the trigger's, a mode switch)."""
         payload = msg.payload
-        if msg.topic in (self.topics.hand, self.topics.wrist, self.topics.arm, self.topics.effector):
+        topic = msg.topic
+        if topic in self._input_topics:
             if isinstance(payload, (JointSample, PoseSample)):
-                self.latest[msg.topic] = payload
-        elif msg.topic == topics.MODE and isinstance(payload, Event):
+                self.latest[topic] = payload
+        elif topic == topics.MODE and isinstance(payload, Event):
             # A recorded switch: it was accepted live, and the same state accepts it again.
             mode = "estop" if payload.data.get("reason") == "estop" else payload.data.get("mode", "")
             self.request_mode(mode, msg.log_time_ns)
-            return Outputs()
-        if msg.topic == self.topics.arm and self.pipeline.motion is not None:
+            return None
+        if topic == self.topics.arm and self.pipeline.motion is not None:
             # The trigger device may have gone quiet with the commands still moving: the arm's state
             # samples keep the clock going so that the commands brake to rest instead of freezing.
             result = self.pipeline.idle_step(self.state, self._inputs(msg.log_time_ns))
-            return self._outputs(result, msg.log_time_ns) if result is not None else Outputs()
-        if msg.topic != self.topics.hand:
-            return Outputs()
-        return self._outputs(self.pipeline.step(self.state, self._inputs(msg.log_time_ns, hand_input)), msg.log_time_ns)
+        elif topic == self.topics.hand:
+            result = self.pipeline.step(self.state, self._inputs(msg.log_time_ns, hand_input))
+        else:
+            return None
+        if result is not None:
+            self.state = result.state
+            self.last_result = result
+        return result
 
     def _outputs(self, result: StepResult, t: int) -> Outputs:
-        self.state = result.state
-        self.last_result = result
         out = Outputs(result=result)
         eff_names = self.pipeline.effector_names
         arm_names = self.pipeline.arm_names

@@ -183,7 +183,7 @@ def decoder_for(schema_name: str, schema_encoding: str, schema_data: bytes, mess
         return JointStatesDecoder()
     cls = _protobuf_class(schema_name, schema_data)
     if schema_name == POSE_IN_FRAME:
-        return _pose_decoder(cls)
+        return PoseInFrameDecoder(_pose_decoder(cls))
     if schema_name == COMPRESSED_IMAGE:
         return _image_decoder(cls)
     if schema_name == FRAME_TRANSFORMS:
@@ -242,6 +242,93 @@ def _pose_decoder(cls) -> Decoder:
         return PoseSample(_stamp(m.timestamp), m.frame_id, np.array((p.x, p.y, p.z)), np.array((q.x, q.y, q.z, q.w)))
 
     return decode
+
+
+# The end of a PoseInFrame whose seven doubles are all present: pose (field 3) { position (1) { x y z },
+# orientation (2) { x y z w } }; None marks the 8 bytes of a double.
+_POSE_TAIL = (b"\x1a\x43", b"\x0a\x1b", b"\x09", None, b"\x11", None, b"\x19", None,
+              b"\x12\x24", b"\x09", None, b"\x11", None, b"\x19", None, b"\x21", None)
+_POSE_TAIL_BYTES = sum(8 if part is None else len(part) for part in _POSE_TAIL)
+
+
+@dataclass(slots=True)
+class _PoseLayout:
+    """One byte layout of a whole PoseInFrame message: everything but the seven doubles and the
+    timestamp's varint payload bits is fixed (frame id, tags, lengths, varint continuation bits)."""
+
+    frame_id: str
+    mask: np.ndarray  # uint8: 0x00 over the doubles, 0x80 over timestamp varints, 0xFF elsewhere
+    skel: np.ndarray  # message & mask
+    value_idx: np.ndarray  # byte indices of position x y z then orientation x y z w
+    sec: tuple[int, int]
+    nsec: tuple[int, int]
+
+    @classmethod
+    def learn(cls, data: bytes, sample: PoseSample) -> _PoseLayout | None:
+        """The layout of `data` if it has the plain one (leading timestamp, frame id, all seven doubles)
+        and reading it through the layout gives `sample` (what the protobuf runtime decoded) exactly."""
+        spans = _timestamp_spans(data)
+        tail = len(data) - _POSE_TAIL_BYTES
+        if spans is None or tail < 0:
+            return None
+        mask = np.full(len(data), 0xFF, np.uint8)
+        p = tail
+        for part in _POSE_TAIL:
+            if part is None:
+                mask[p:p + 8] = 0
+                p += 8
+            elif data[p:p + len(part)] != part:
+                return None
+            else:
+                p += len(part)
+        for start, n in spans:
+            mask[start:start + n] = 0x80
+        a = np.frombuffer(data, _U8)
+        layout = cls(sample.frame_id, mask, a & mask, np.flatnonzero(mask == 0), *spans)
+        values = a[layout.value_idx].view(_F64)
+        same = (values.tobytes() == sample.position.tobytes() + sample.orientation.tobytes()
+                and layout.stamps(a[None, :]) == [sample.stamp_ns])
+        return layout if same else None
+
+    def stamps(self, rows: np.ndarray) -> list[int]:
+        return _stamps(rows, self.sec, self.nsec)
+
+
+class PoseInFrameDecoder:
+    """Decodes foxglove.PoseInFrame into PoseSample through the protobuf runtime; `batch()` reads the
+    messages of a known layout (see _PoseLayout) as rows of one array, with the same result."""
+
+    _MAX_LAYOUTS = 8
+
+    def __init__(self, decode: Decoder) -> None:
+        self._decode = decode
+        self._layouts: dict[int, _PoseLayout] = {}
+
+    def __call__(self, data: bytes) -> PoseSample:
+        sample = self._decode(data)
+        if len(data) not in self._layouts and len(self._layouts) < self._MAX_LAYOUTS:
+            layout = _PoseLayout.learn(data, sample)
+            if layout is not None:
+                self._layouts[len(data)] = layout
+        return sample
+
+    def batch(self, datas: list[bytes]) -> list[PoseSample]:
+        out: list = [None] * len(datas)
+        for idxs, layout, rows in _by_length(datas, self._layouts.get):
+            if layout is None:
+                for i in idxs:
+                    out[i] = self(datas[i])
+                continue
+            values = np.ascontiguousarray(rows[:, layout.value_idx]).view(_F64)
+            position, orientation = values[:, :3].copy(), values[:, 3:].copy()
+            frame_id = layout.frame_id
+            decoded = [PoseSample(t, frame_id, p, q)
+                       for t, p, q in zip(layout.stamps(rows), position, orientation)]
+            for r in _unmatched(rows, layout):
+                decoded[r] = self(datas[idxs[r]])
+            for i, sample in zip(idxs, decoded):
+                out[i] = sample
+        return out
 
 
 def _image_decoder(cls) -> Decoder:
@@ -363,10 +450,35 @@ class _Layout:
         return _varint_span(data, *self.sec) * _NS + _varint_span(data, *self.nsec)
 
     def stamps(self, rows: np.ndarray) -> list[int]:
-        sec, nsec = _varint_column(rows, *self.sec), _varint_column(rows, *self.nsec)
-        if sec.max() < 9_000_000_000:  # no int64 overflow in ns (until the year 2255)
-            return (sec * _NS + nsec).tolist()
-        return [s * _NS + n for s, n in zip(sec.tolist(), nsec.tolist())]
+        return _stamps(rows, self.sec, self.nsec)
+
+
+def _stamps(rows: np.ndarray, sec_span: tuple[int, int], nsec_span: tuple[int, int]) -> list[int]:
+    """The timestamps (ns) of messages given as rows of bytes, from the spans of their varints."""
+    key = (sec_span, nsec_span)
+    weights = _stamp_weights.get(key)
+    if weights is None:
+        weights = _stamp_weights[key] = _varint_weights(sec_span, nsec_span)
+    idx, w = weights
+    both = (rows[:, idx] & 0x7F).astype(np.int64) @ w  # (n, 2): seconds, nanoseconds
+    sec, nsec = both[:, 0], both[:, 1]
+    if sec.max() < 9_000_000_000:  # no int64 overflow in ns (until the year 2255)
+        return (sec * _NS + nsec).tolist()
+    return [s * _NS + n for s, n in zip(sec.tolist(), nsec.tolist())]
+
+
+_stamp_weights: dict[tuple, tuple[np.ndarray, np.ndarray]] = {}
+
+
+def _varint_weights(sec_span: tuple[int, int], nsec_span: tuple[int, int]) -> tuple[np.ndarray, np.ndarray]:
+    """The byte indices of both varints (at most 5 bytes each), and each byte's weight (2^(7j)) in the
+    seconds column or the nanoseconds one: the 7-bit groups' sum as one product."""
+    idx, w = [], []
+    for column, (start, n) in enumerate((sec_span, nsec_span)):
+        for j in range(n):
+            idx.append(start + j)
+            w.append([1 << (7 * j), 0] if column == 0 else [0, 1 << (7 * j)])
+    return np.array(idx, dtype=np.intp), np.array(w, dtype=np.int64).reshape(len(idx), 2)
 
 
 def _varint_span(data: bytes, start: int, n: int) -> int:
@@ -374,15 +486,6 @@ def _varint_span(data: bytes, start: int, n: int) -> int:
     for j in range(n):
         r |= (data[start + j] & 0x7F) << (7 * j)
     return r
-
-
-_SHIFTS = np.arange(0, 35, 7, dtype=np.int64)
-
-
-def _varint_column(rows: np.ndarray, start: int, n: int) -> np.ndarray:
-    if n == 0:
-        return np.zeros(rows.shape[0], dtype=np.int64)
-    return ((rows[:, start:start + n] & 0x7F).astype(np.int64) << _SHIFTS[:n]).sum(axis=1)
 
 
 class JointStatesDecoder:
@@ -407,33 +510,48 @@ class JointStatesDecoder:
 
     def batch(self, datas: list[bytes]) -> list[JointSample]:
         out: list = [None] * len(datas)
-        by_len: dict[int, list[int]] = {}
-        for i, n in enumerate(map(len, datas)):
-            idxs = by_len.get(n)
-            if idxs is None:
-                by_len[n] = [i]
-            else:
-                idxs.append(i)
-        for n, idxs in by_len.items():
-            layouts = self._layouts.get(n)
-            if not layouts or len(idxs) < 4:
+        for idxs, layout, rows in self._by_layout(datas):
+            if layout is None:
                 for i in idxs:
                     out[i] = self(datas[i])
                 continue
-            layout = layouts[0]
-            rows = np.frombuffer(b"".join([datas[i] for i in idxs]), _U8).reshape(len(idxs), n)
-            ok = ((rows & layout.mask) == layout.skel).all(axis=1)
             pos = list(np.ascontiguousarray(rows[:, layout.pos_idx]).view(_F64))
             vel = (repeat(None) if layout.vel_idx is None
                    else list(np.ascontiguousarray(rows[:, layout.vel_idx]).view(_F64)))
             names = layout.names
             decoded = [JointSample(t, names, p, v) for t, p, v in zip(layout.stamps(rows), pos, vel)]
-            if not ok.all():
-                for r in np.flatnonzero(~ok).tolist():
-                    decoded[r] = self(datas[idxs[r]])
+            for r in _unmatched(rows, layout):
+                decoded[r] = self(datas[idxs[r]])
             for i, sample in zip(idxs, decoded):
                 out[i] = sample
         return out
+
+    def columns(self, datas: list[bytes]) -> tuple[list[int], list[np.ndarray]]:
+        """The stamps and positions of many messages of one channel: what batch() would give, without
+        making the JointSamples."""
+        stamps: list = [None] * len(datas)
+        positions: list = [None] * len(datas)
+        for idxs, layout, rows in self._by_layout(datas):
+            if layout is None:
+                for i in idxs:
+                    sample = self(datas[i])
+                    stamps[i], positions[i] = sample.stamp_ns, sample.positions
+                continue
+            group_stamps = layout.stamps(rows)
+            group_positions = list(np.ascontiguousarray(rows[:, layout.pos_idx]).view(_F64))
+            for r in _unmatched(rows, layout):
+                sample = self(datas[idxs[r]])
+                group_stamps[r], group_positions[r] = sample.stamp_ns, sample.positions
+            for i, t, p in zip(idxs, group_stamps, group_positions):
+                stamps[i], positions[i] = t, p
+        return stamps, positions
+
+    def _by_layout(self, datas: list[bytes]):
+        return _by_length(datas, self._first_layout)
+
+    def _first_layout(self, n: int) -> _Layout | None:
+        layouts = self._layouts.get(n)
+        return layouts[0] if layouts else None
 
     def _slow(self, data: bytes) -> JointSample:
         stamp, names, pos, vel, pos_off, vel_off, plain = _parse_joint_states(data)
@@ -462,6 +580,36 @@ class JointStatesDecoder:
         self._layouts.setdefault(a.shape[0], []).append(
             _Layout(names, mask, skel.tobytes(), skel, pos_idx, vel_idx, sec, nsec))
         self._count += 1
+
+
+def _by_length(datas: list[bytes], layout_of: Callable):
+    """Groups of messages of one length: (their indices, the layout of that length, their bytes as rows
+    of an array) where a layout is known and the group is worth an array; (indices, None, None) for
+    messages to decode one by one. A group of a length without a layout yet gives its first message
+    alone first: decoding it may learn the layout for the rest."""
+    by_len: dict[int, list[int]] = {}
+    for i, n in enumerate(map(len, datas)):
+        idxs = by_len.get(n)
+        if idxs is None:
+            by_len[n] = [i]
+        else:
+            idxs.append(i)
+    for n, idxs in by_len.items():
+        layout = layout_of(n)
+        if layout is None and len(idxs) > 4:
+            yield idxs[:1], None, None
+            idxs = idxs[1:]
+            layout = layout_of(n)
+        if layout is None or len(idxs) < 4:
+            yield idxs, None, None
+            continue
+        yield idxs, layout, np.frombuffer(b"".join([datas[i] for i in idxs]), _U8).reshape(len(idxs), n)
+
+
+def _unmatched(rows: np.ndarray, layout) -> list[int]:
+    """The rows that do not have the layout (they are decoded one by one)."""
+    ok = ((rows & layout.mask) == layout.skel).all(axis=1)
+    return [] if ok.all() else np.flatnonzero(~ok).tolist()
 
 
 def _timestamp_spans(data: bytes) -> tuple[tuple[int, int], tuple[int, int]] | None:

@@ -1,8 +1,8 @@
 """Reads a recorded session back: metadata, topics, messages decoded into teleprev payloads, episodes.
 
-Messages come in log_time order (ties in file order), chunk by chunk, so memory stays bounded by a
-chunk. A file cut short by a crash has no summary: opening it raises SessionError pointing at
-`teleprev recover`.
+Messages come in log_time order (ties in file order), a few chunks at a time (see _BATCH_CHUNKS), so
+memory stays bounded by a few chunks. A file cut short by a crash has no summary: opening it raises
+SessionError pointing at `teleprev recover`.
 """
 
 from __future__ import annotations
@@ -19,11 +19,12 @@ import numpy as np
 from teleprev.errors import SessionError
 from teleprev.messages import Event, Logged
 from teleprev.session import records as mr
-from teleprev.session.codec import decoder_for
+from teleprev.session.codec import JointStatesDecoder, decoder_for
 from teleprev.topics import EPISODE
 
 _END = 1 << 64
-_RELEASE_CHUNKS = 8  # chunks (4 MiB each by default) read between two release_pages calls
+_BATCH_CHUNKS = 8  # chunks decoded together at most (each channel's messages of them in one batch),
+_BATCH_BYTES = 8 << 20  # and their compressed bytes at most; release_pages after each batch
 _I64_END = (1 << 63) - 1  # log times beyond int64 (year 2262) are not expected
 _HEAD_BYTES = np.arange(23)  # a message record's opcode, length, channel, sequence and log time
 
@@ -106,15 +107,24 @@ class SessionReader:
         return out
 
     @cached_property
+    def schemas(self) -> dict[str, str]:
+        """Topic -> schema name ("" without one), from the summary alone: what `topics` says without
+        reading the message indexes for counts and times."""
+        out = {}
+        for topic, ids in sorted(self._by_topic.items()):
+            schema = self._summary.schemas.get(self._summary.channels[ids[0]].schema_id)
+            out[topic] = schema.name if schema else ""
+        return out
+
+    @cached_property
     def topics(self) -> dict[str, TopicInfo]:
         counts = self._summary.statistics.channel_message_counts if self._summary.statistics else {}
         out = {}
         for topic, ids in sorted(self._by_topic.items()):
             ch = self._summary.channels[ids[0]]
-            schema = self._summary.schemas.get(ch.schema_id)
             times = self.log_times(topic)
             n = sum(counts.get(i, 0) for i in ids) if counts else len(times)
-            out[topic] = TopicInfo(topic, schema.name if schema else "", ch.message_encoding, n,
+            out[topic] = TopicInfo(topic, self.schemas[topic], ch.message_encoding, n,
                                    int(times.min()) if len(times) else None, int(times.max()) if len(times) else None)
         return out
 
@@ -177,32 +187,70 @@ class SessionReader:
 
     def messages(
         self, topics: Iterable[str] | None = None, start_ns: int | None = None, end_ns: int | None = None,
+        *, tables: dict[str, JointTable] | None = None,
     ) -> Iterator[Logged]:
         """Messages with start_ns <= log_time < end_ns, in log_time order, decoded into teleprev
-        payloads. With `topics` None, every topic whose schema teleprev reads."""
+        payloads. With `topics` None, every topic whose schema teleprev reads.
+
+        `tables` (topic -> JointTable, foxglove.JointStates topics only) reads those topics in the same
+        pass without yielding them: each message's stamp and positions are appended to its topic's
+        table instead, in the order they would have been yielded (a cheaper decode when a caller only
+        needs the values)."""
+        tables = tables or {}
         decoders, names = self._decoders(topics)
+        if tables:
+            table_decoders, table_names = self._decoders(list(tables))
+            decoders.update(table_decoders)
+            names.update(table_names)
+        tabled = self._table_channels(tables, decoders)
         lo = 0 if start_ns is None else int(start_ns)
         hi = _END if end_ns is None else int(end_ns)
         wanted = frozenset(decoders)
+        reading = _Reading(decoders, names, lo, hi, wanted, tabled)
+        batch: list[mr.ChunkIndex] = []  # consecutive chunks that overlap no other: decoded together
+        for group in self._chunk_groups(lo, hi, wanted):
+            if len(group) == 1:
+                batch.append(group[0])
+                if len(batch) < _BATCH_CHUNKS and sum(c.length for c in batch) < _BATCH_BYTES:
+                    continue
+                yield from self._decode_batch(batch, reading)
+            else:
+                if batch:
+                    yield from self._decode_batch(batch, reading)
+                yield from self._decode_group(group, reading)
+            batch = []
+            self.release_pages()
+        if batch:
+            yield from self._decode_batch(batch, reading)
+
+    def _chunk_groups(self, lo: int, hi: int, wanted) -> Iterator[list[mr.ChunkIndex]]:
+        """The chunks that may hold wanted messages in [lo, hi), in time order, as groups of chunks that
+        overlap in time (most groups are one chunk)."""
         group: list = []
         group_end = -1
-        decoded = 0
         for chunk in self._chunks:
             if chunk.end_ns < lo or chunk.start_ns >= hi:
                 continue
             if chunk.message_index_offsets and wanted.isdisjoint(chunk.message_index_offsets):
                 continue
             if group and chunk.start_ns >= group_end:
-                yield from self._decode_group(group, decoders, names, lo, hi, wanted)
-                decoded += len(group)
-                if decoded >= _RELEASE_CHUNKS:
-                    decoded = 0
-                    self.release_pages()
+                yield group
                 group = []
             group.append(chunk)
             group_end = max(group_end, chunk.end_ns) if len(group) > 1 else chunk.end_ns
         if group:
-            yield from self._decode_group(group, decoders, names, lo, hi, wanted)
+            yield group
+
+    def _table_channels(self, tables: dict[str, JointTable], decoders) -> dict[int, JointTable]:
+        """channel id -> the table its messages go to."""
+        out = {}
+        for topic, table in tables.items():
+            for ch in self._by_topic[topic]:
+                if not isinstance(decoders.get(ch), JointStatesDecoder):
+                    raise SessionError(f"topic {topic} is not foxglove.JointStates: it cannot be read as a table",
+                                       str(self.path))
+                out[ch] = table
+        return out
 
     def _decoders(self, topics: Iterable[str] | None):
         decoders, names = {}, {}
@@ -233,28 +281,72 @@ class SessionReader:
             names[i] = ch.topic
         return decoders, names
 
-    def _decode_group(self, group, decoders, names, lo, hi, wanted) -> Iterator[Logged]:
+    def _decode_group(self, group, reading: _Reading) -> Iterator[Logged]:
         if len(group) == 1:
-            yield from self._decode_chunk(group[0], decoders, names, lo, hi, wanted)
+            yield from self._decode_chunk(group[0], reading)
             return
-        # Chunks overlapping in time: merge them (a stable sort keeps file order for equal times).
+        # Chunks overlapping in time: merge them (a stable sort keeps file order for equal times). Tabled
+        # topics are decoded as messages here too, then appended to their tables in the merged order.
         merged = [m for c in sorted(group, key=lambda c: c.offset)
-                  for m in self._decode_chunk(c, decoders, names, lo, hi, wanted)]
+                  for m in self._decode_chunk(c, reading.untabled())]
         merged.sort(key=_logged_time)
-        yield from merged
+        by_topic = {self._summary.channels[ch].topic: table for ch, table in reading.tabled.items()}
+        for m in merged:
+            table = by_topic.get(m.topic)
+            if table is None:
+                yield m
+            else:
+                table.append(m.payload.stamp_ns, m.payload.positions)
 
-    def _decode_chunk(self, chunk: mr.ChunkIndex, decoders, names, lo: int, hi: int, wanted) -> list[Logged]:
-        """The chunk's messages on `wanted` channels in [lo, hi), decoded, in log time order (file
-        order for equal times). Each channel's messages are decoded together (see
-        JointStatesDecoder.batch)."""
+    def _decode_batch(self, chunks: list[mr.ChunkIndex], reading: _Reading) -> Iterator[Logged]:
+        """Consecutive chunks that overlap no other, each channel's messages of all of them decoded in one
+        batch; what decoding them chunk by chunk gives, errors included: a chunk that does not read is
+        raised after the messages of the chunks before it, and a message that does not decode sends the
+        batch back to chunk by chunk, which fails where it always did."""
+        located, error = [], None
+        for chunk in chunks:
+            try:
+                located.append(self._locate(chunk, reading))
+            except SessionError as exc:
+                error = exc
+                break
+        try:
+            messages = self._decode_located(_Located.join(located), reading)
+        except SessionError:
+            for one in located:
+                yield from self._decode_located(one, reading)
+        else:
+            yield from messages
+        if error is not None:
+            raise error
+
+    def _decode_chunk(self, chunk: mr.ChunkIndex, reading: _Reading) -> list[Logged]:
+        return self._decode_located(self._locate(chunk, reading), reading)
+
+    def _locate(self, chunk: mr.ChunkIndex, reading: _Reading) -> _Located:
+        """The chunk's messages on wanted channels in [lo, hi), as bytes, and their order."""
         buf = self._chunk_records(chunk)
-        located = self._locate_indexed(chunk, buf, wanted, lo, hi)
+        located = self._locate_indexed(chunk, buf, reading.wanted, reading.lo, reading.hi)
         if located is None:
-            located = self._locate_sequential(chunk, buf, wanted, lo, hi)
-        per_channel, order = located
-        decoded = {ch: self._decode_all(decoders[ch], datas, names[ch], ch, order)
-                   for ch, datas in per_channel.items()}
-        return [Logged(names[c], t, decoded[c][k]) for c, k, t in order]
+            located = self._locate_sequential(chunk, buf, reading.wanted, reading.lo, reading.hi)
+        return _Located(*located)
+
+    def _decode_located(self, located: _Located, reading: _Reading) -> list[Logged]:
+        """The located messages decoded, in log time order (file order for equal times); those of tabled
+        channels go to their tables instead, once every channel has decoded. Each channel's messages
+        are decoded together (see JointStatesDecoder.batch)."""
+        names = reading.names
+        order = located.order
+        decoded, tabled = {}, []
+        for ch, datas in located.per_channel.items():
+            decoder, table = reading.decoders[ch], reading.tabled.get(ch)
+            if table is None:
+                decoded[ch] = self._decode_all(decoder, getattr(decoder, "batch", None), datas, names[ch], ch, order)
+            else:
+                tabled.append((table, ch, self._decode_all(decoder, decoder.columns, datas, names[ch], ch, order)))
+        for table, ch, (stamps, positions) in tabled:
+            table.extend_in_order(stamps, positions, order.indices(ch))
+        return [Logged(names[c], t, decoded[c][k]) for c, k, t in order.entries(exclude=reading.tabled)]
 
     def _locate_indexed(self, chunk, buf: bytes, wanted, lo: int, hi: int):
         """Per channel, the wanted messages' bytes, and the (channel, index, log time) order, found
@@ -265,7 +357,7 @@ class SessionReader:
             return None
         sel = [(ch, e) for ch, e in index.items() if ch in wanted]
         if not sel:
-            return {}, []
+            return {}, _Order.empty()
         entries = np.concatenate([e for _, e in sel]).astype(np.int64)
         chans = np.concatenate([np.full(len(e), ch, dtype=np.int64) for ch, e in sel])
         ks = np.concatenate([np.arange(len(e)) for _, e in sel])
@@ -287,17 +379,17 @@ class SessionReader:
         if not ((head[:, 0] == mr.MESSAGE).all() and (lengths >= 22).all() and (ends <= n).all()
                 and (channel == chans).all() and (logged == times).all()):
             return None
-        starts = (offs + 31).tolist()
-        ends_l = ends.tolist()
-        chans_l = chans.tolist()
-        per_channel: dict[int, list[bytes]] = {ch: [] for ch, _ in sel}
-        for c, s0, e0 in zip(chans_l, starts, ends_l):
-            per_channel[c].append(buf[s0:e0])
+        # the entries come channel after channel: one run of each wanted channel with messages left
+        run_starts = np.flatnonzero(np.diff(chans, prepend=-1))
+        run_ends = [*run_starts[1:].tolist(), len(chans)]
+        starts, stops = (offs + 31).tolist(), ends.tolist()
+        per_channel: dict[int, list[bytes]] = {}
+        for a, b in zip(run_starts.tolist(), run_ends):
+            per_channel[int(chans[a])] = [buf[s0:e0] for s0, e0 in zip(starts[a:b], stops[a:b])]
         if keep is not None:  # renumber within each channel after filtering
-            ks = np.concatenate([np.arange(int((chans == ch).sum())) for ch, _ in sel])
+            ks = np.arange(len(chans)) - np.repeat(run_starts, np.diff([*run_starts.tolist(), len(chans)]))
         ordering = np.lexsort((offs, times))
-        order = list(zip(chans[ordering].tolist(), ks[ordering].tolist(), times[ordering].tolist()))
-        return {c: d for c, d in per_channel.items() if d}, order
+        return per_channel, _Order(chans[ordering], ks[ordering], times[ordering])
 
     def _locate_sequential(self, chunk, buf: bytes, wanted, lo: int, hi: int):
         per_channel: dict[int, list[bytes]] = {}
@@ -313,7 +405,7 @@ class SessionReader:
                     order.append((ch, len(datas), t))
                     datas.append(buf[b + 22:e])
         order.sort(key=_third)  # stable: file order for equal times
-        return per_channel, order
+        return per_channel, _Order.of(order)
 
     def _records(self, chunk, buf: bytes):
         try:
@@ -325,14 +417,14 @@ class SessionReader:
             raise SessionError(f"chunk at byte {chunk.offset} holds a malformed record: {exc}",
                                str(self.path)) from None
 
-    def _decode_all(self, decoder, datas: list[bytes], topic: str, channel: int, order) -> list:
-        batch = getattr(decoder, "batch", None)
+    def _decode_all(self, decoder, batch, datas: list[bytes], topic: str, channel: int, order: _Order):
+        """`batch(datas)` (or `decoder` on each message when batch is None); when that fails, the error
+        names the first message that does not decode."""
         try:
             return batch(datas) if batch is not None else [decoder(d) for d in datas]
         except (ValueError, IndexError, TypeError, KeyError):
             pass
-        times = [t for _, t in sorted((k, t) for c, k, t in order if c == channel)]
-        for data, t in zip(datas, times):  # find the message that does not decode
+        for data, t in zip(datas, order.times_by_index(channel)):  # find the message that does not decode
             try:
                 decoder(data)
             except (ValueError, IndexError, TypeError, KeyError) as exc:
@@ -516,6 +608,129 @@ class SessionReader:
 
     def __exit__(self, *exc) -> None:
         self.close()
+
+
+class JointTable:
+    """A foxglove.JointStates topic read by SessionReader.messages(tables=...): each message's stamp_ns
+    and positions, in the order messages() would have yielded the messages."""
+
+    __slots__ = ("stamp_ns", "positions")
+
+    def __init__(self) -> None:
+        self.stamp_ns: list[int] = []
+        self.positions: list[np.ndarray] = []
+
+    def __len__(self) -> int:
+        return len(self.stamp_ns)
+
+    def append(self, stamp_ns: int, positions: np.ndarray) -> None:
+        self.stamp_ns.append(stamp_ns)
+        self.positions.append(positions)
+
+    def extend_in_order(self, stamps: list[int], positions: list[np.ndarray], indices: list[int]) -> None:
+        """Append messages decoded in file order, taking them in `indices` order."""
+        if indices == list(range(len(stamps))):
+            self.stamp_ns.extend(stamps)
+            self.positions.extend(positions)
+        else:
+            self.stamp_ns.extend([stamps[k] for k in indices])
+            self.positions.extend([positions[k] for k in indices])
+
+
+class _Order:
+    """Wanted messages of one or more chunks in log time order (file order for equal times): per message its
+    channel, its index among that channel's messages in file order, and its log time (int64 arrays)."""
+
+    __slots__ = ("channels", "indices_", "times")
+
+    def __init__(self, channels: np.ndarray, indices: np.ndarray, times: np.ndarray):
+        self.channels, self.indices_, self.times = channels, indices, times
+
+    @classmethod
+    def empty(cls) -> _Order:
+        none = np.zeros(0, dtype=np.int64)
+        return cls(none, none, none)
+
+    @classmethod
+    def of(cls, entries: list[tuple[int, int, int]]) -> _Order:
+        if not entries:
+            return cls.empty()
+        channels, indices, times = zip(*entries)
+        try:
+            log_times = np.array(times, dtype=np.int64)
+        except OverflowError:  # log times past int64 (year 2262): kept as Python integers
+            log_times = np.array(times, dtype=object)
+        return cls(np.array(channels, dtype=np.int64), np.array(indices, dtype=np.int64), log_times)
+
+    def after(self, counts: dict[int, int]) -> _Order:
+        """This order with each channel's indices moved past `counts[channel]` earlier messages."""
+        if not any(counts.values()):
+            return self
+        shift = np.zeros(max(counts) + 1, dtype=np.int64)
+        shift[list(counts)] = list(counts.values())
+        return _Order(self.channels, self.indices_ + shift[self.channels], self.times)
+
+    @classmethod
+    def concat(cls, orders: list[_Order]) -> _Order:
+        return cls(*(np.concatenate(column) for column in zip(*((o.channels, o.indices_, o.times) for o in orders))))
+
+    def entries(self, exclude=()) -> Iterator[tuple[int, int, int]]:
+        """(channel, index, log time) in order, leaving out the channels in `exclude`."""
+        channels, indices, times = self.channels, self.indices_, self.times
+        if exclude:
+            keep = ~np.isin(channels, list(exclude))
+            channels, indices, times = channels[keep], indices[keep], times[keep]
+        return zip(channels.tolist(), indices.tolist(), times.tolist())
+
+    def indices(self, channel: int) -> list[int]:
+        """The channel's messages (their indices in file order) in log time order."""
+        return self.indices_[self.channels == channel].tolist()
+
+    def times_by_index(self, channel: int) -> list[int]:
+        """The log times of the channel's messages in file order."""
+        mine = self.channels == channel
+        out = np.empty(int(mine.sum()), dtype=self.times.dtype)
+        out[self.indices_[mine]] = self.times[mine]
+        return out.tolist()
+
+
+@dataclass(frozen=True, slots=True)
+class _Located:
+    """Wanted messages of one or more chunks: per channel their bytes in file order, and their order."""
+
+    per_channel: dict[int, list[bytes]]
+    order: _Order
+
+    @classmethod
+    def join(cls, parts: list[_Located]) -> _Located:
+        """Chunks that follow each other in time, as one: each channel's messages in chunk order."""
+        if not parts:
+            return cls({}, _Order.empty())
+        if len(parts) == 1:
+            return parts[0]
+        per_channel: dict[int, list[bytes]] = {}
+        orders = []
+        for part in parts:
+            orders.append(part.order.after({ch: len(per_channel.get(ch, ())) for ch in part.per_channel}))
+            for ch, datas in part.per_channel.items():
+                per_channel.setdefault(ch, []).extend(datas)
+        return cls(per_channel, _Order.concat(orders))
+
+
+@dataclass(frozen=True, slots=True)
+class _Reading:
+    """What one messages() call reads: decoders and topic names by channel, the log time window, the
+    wanted channels and the tabled ones."""
+
+    decoders: dict
+    names: dict[int, str]
+    lo: int
+    hi: int
+    wanted: frozenset
+    tabled: dict[int, JointTable]
+
+    def untabled(self) -> _Reading:
+        return _Reading(self.decoders, self.names, self.lo, self.hi, self.wanted, {})
 
 
 def _third(entry) -> int:

@@ -1,0 +1,53 @@
+"""foxglove.PoseInFrame's batch decode (a learned byte layout, messages gathered as rows) gives exactly
+what the protobuf runtime gives, message by message, whatever the layouts in the batch."""
+
+from __future__ import annotations
+
+import foxglove.messages as fm
+import numpy as np
+
+from teleprev.messages import PoseSample
+from teleprev.session.codec import POSE_IN_FRAME, PoseInFrameDecoder, _pose_decoder, _protobuf_class, encode
+
+T0 = 1_700_000_000_123_456_789
+
+
+def protobuf_decoder():
+    return _pose_decoder(_protobuf_class(POSE_IN_FRAME, fm.PoseInFrame.get_schema().data))
+
+
+def same(a: PoseSample, b: PoseSample) -> bool:
+    return (a.stamp_ns == b.stamp_ns and a.frame_id == b.frame_id and a.position.tobytes() == b.position.tobytes()
+            and a.orientation.tobytes() == b.orientation.tobytes())
+
+
+def test_batches_decode_as_the_protobuf_runtime(rng):
+    samples = []
+    for k in range(300):
+        position, orientation = rng.standard_normal(3), rng.standard_normal(4)
+        if k % 17 == 3:
+            position[k % 3] = 0.0  # left out by the encoder: another length
+        if k % 23 == 5:
+            orientation[k % 4] = -0.0
+        stamp = [T0 + k * 16_666_667, k, 0, 10**9, 127 * 10**9 + 128][0 if k % 11 else (k // 11) % 5]
+        frame = "world" if k % 29 else ["", "w0rld", "a-much-longer-frame-name"][k % 3]
+        samples.append(PoseSample(stamp, frame, position, orientation))
+    datas = [encode(s) for s in samples]
+    reference = protobuf_decoder()
+    expected = [reference(d) for d in datas]
+    fast = PoseInFrameDecoder(protobuf_decoder())
+    fast(datas[0])  # learns the common layout
+    assert fast._layouts
+    for block in (datas[:7], datas[7:120], datas[120:]):
+        got = fast.batch(block)
+        assert all(same(a, b) for a, b in zip(got, expected[datas.index(block[0]):]))
+        assert len(got) == len(block)
+    assert all(same(a, b) for a, b in zip(fast.batch(datas), expected))
+
+
+def test_a_layout_is_learned_only_when_it_reads_back_the_message():
+    d = PoseInFrameDecoder(protobuf_decoder())
+    d(encode(PoseSample(T0, "world", np.zeros(3), np.array([0.0, 0.0, 0.0, 1.0]))))  # zeros: not the plain layout
+    assert not d._layouts
+    d(encode(PoseSample(T0, "world", np.ones(3), np.ones(4))))
+    assert len(d._layouts) == 1
