@@ -16,8 +16,11 @@ Arithmetic (what makes the answers the same bits every time, on every x86-64 CPU
   The inner loop runs across output units, each its own sum, so the compiler vectorises it without
   reassociating anything. No fastmath: no reassociation and no fused multiply-add contraction. numpy's
   matmul goes to OpenBLAS, which picks its kernels (blocking, FMA) per CPU; these loops do not.
-- A row's arithmetic never depends on the other rows of its batch (rows are processed in blocks only
-  to reuse the weights they stream), so a batch answers bit for bit as single calls do.
+- A row's arithmetic never depends on the other rows of its batch, so a batch answers bit for bit as
+  single calls do. Batches run four (or two) rows per pass over a layer's weights (_dense4, _dense2), each
+  weight loaded once for all of them; such a pass skips only the inputs that are zero in every one of its
+  rows, so a row may add an exact zero product that alone it skips: no nonzero sum changes, and a zero
+  sum's sign is not seen by anything after it (see _dense2). A single row runs alone (_forward1).
 - exp is computed here (_exp: float64, range-reduced by halving, a Taylor polynomial and squaring: only
   + and *), not by the C library, whose expf/tanhf may differ between CPU variants and versions. It
   serves the SiLU / tanh activations (computed in float64, rounded to float32) and the CPN's decision.
@@ -38,7 +41,7 @@ from numba import njit
 
 RELU, SILU, TANH = 0, 1, 2
 HEADER = 8  # G, width_in, width_out, layers, joints, activation, noisy_or, outputs
-BLOCK = 8  # rows per block in batches (they share each weight row while it is in cache)
+BLOCK = 8  # rows per block in batches (passes of four rows, then two, then one, over each layer)
 EXP_CLAMP = 88.0  # |x| clamped for exp: beyond it nothing these kernels decide changes
 
 
@@ -94,9 +97,150 @@ def _dense(h, n_in, n_out, w, bias, nz, acc):
 
 
 @njit(cache=True, error_model="numpy")
+def _dense2(h, n_in, n_out, w, bias, nz, acc):
+    """_dense for two rows at once, h[0] and h[1] into acc[0] and acc[1]: each weight row loaded once for
+    both. Each row's sum still starts from its bias and adds input i's product in order of i; the inputs
+    are those nonzero in either row, so a row may add an exact zero product the one-row pass skips. That
+    changes no nonzero value (x + 0 == x) and at most the sign of a zero sum, which nothing downstream
+    tells apart (ReLU makes it +0; SiLU and tanh keep it a zero, skipped or added as a zero; the CPN's
+    exp and the CCN's sum from +0.0 treat -0 as +0): the CPN's decisions and the CCN's proposals are the
+    bits of one row at a time, and a raw output (slots) differs at most in the sign of an exact zero."""
+    h0, h1 = h[0], h[1]
+    k = 0
+    for i in range(n_in):
+        nz[k] = i
+        k += (h0[i] != 0) | (h1[i] != 0)
+    acc0, acc1 = acc[0], acc[1]
+    for o in range(n_out):
+        acc0[o] = bias[o]
+        acc1[o] = bias[o]
+    j = 0
+    while j + 4 <= k:
+        i0, i1, i2, i3 = nz[j], nz[j + 1], nz[j + 2], nz[j + 3]
+        v0, v1, v2, v3 = h0[i0], h0[i1], h0[i2], h0[i3]
+        u0, u1, u2, u3 = h1[i0], h1[i1], h1[i2], h1[i3]
+        w0 = w[i0 * n_out:(i0 + 1) * n_out]
+        w1 = w[i1 * n_out:(i1 + 1) * n_out]
+        w2 = w[i2 * n_out:(i2 + 1) * n_out]
+        w3 = w[i3 * n_out:(i3 + 1) * n_out]
+        for o in range(n_out):
+            a0, a1, a2, a3 = w0[o], w1[o], w2[o], w3[o]
+            acc0[o] = (((acc0[o] + v0 * a0) + v1 * a1) + v2 * a2) + v3 * a3
+            acc1[o] = (((acc1[o] + u0 * a0) + u1 * a1) + u2 * a2) + u3 * a3
+        j += 4
+    while j < k:
+        i = nz[j]
+        v, u = h0[i], h1[i]
+        wi = w[i * n_out:(i + 1) * n_out]
+        for o in range(n_out):
+            acc0[o] = acc0[o] + v * wi[o]
+            acc1[o] = acc1[o] + u * wi[o]
+        j += 1
+
+
+@njit(cache=True, error_model="numpy")
+def _dense4(h, n_in, n_out, w, bias, nz, acc):
+    """_dense2 for four rows, h[0:4] into acc[0:4], two inputs per pass over the accumulators."""
+    h0, h1, h2, h3 = h[0], h[1], h[2], h[3]
+    k = 0
+    for i in range(n_in):
+        nz[k] = i
+        k += (h0[i] != 0) | (h1[i] != 0) | (h2[i] != 0) | (h3[i] != 0)
+    acc0, acc1, acc2, acc3 = acc[0], acc[1], acc[2], acc[3]
+    for o in range(n_out):
+        acc0[o] = bias[o]
+        acc1[o] = bias[o]
+        acc2[o] = bias[o]
+        acc3[o] = bias[o]
+    j = 0
+    while j + 2 <= k:
+        i0, i1 = nz[j], nz[j + 1]
+        w0 = w[i0 * n_out:(i0 + 1) * n_out]
+        w1 = w[i1 * n_out:(i1 + 1) * n_out]
+        a0, a1, b0, b1 = h0[i0], h0[i1], h1[i0], h1[i1]
+        c0, c1, d0, d1 = h2[i0], h2[i1], h3[i0], h3[i1]
+        for o in range(n_out):
+            x0, x1 = w0[o], w1[o]
+            acc0[o] = (acc0[o] + a0 * x0) + a1 * x1
+            acc1[o] = (acc1[o] + b0 * x0) + b1 * x1
+            acc2[o] = (acc2[o] + c0 * x0) + c1 * x1
+            acc3[o] = (acc3[o] + d0 * x0) + d1 * x1
+        j += 2
+    while j < k:
+        i = nz[j]
+        a0, b0, c0, d0 = h0[i], h1[i], h2[i], h3[i]
+        wi = w[i * n_out:(i + 1) * n_out]
+        for o in range(n_out):
+            x0 = wi[o]
+            acc0[o] = acc0[o] + a0 * x0
+            acc1[o] = acc1[o] + b0 * x0
+            acc2[o] = acc2[o] + c0 * x0
+            acc3[o] = acc3[o] + d0 * x0
+        j += 1
+
+
+@njit(cache=True, inline="always", error_model="numpy")
+def _activate(acc, h, n_out, act):
+    """h[:n_out] = the hidden activation of acc[:n_out] (float32)."""
+    if act == RELU:
+        for o in range(n_out):
+            v = acc[o]
+            h[o] = v if v > 0 else np.float32(0.0)
+    elif act == SILU:  # z sigmoid(z) = z / (1 + exp(-z))
+        for o in range(n_out):
+            z = np.float64(acc[o])
+            h[o] = np.float32(z / (1.0 + _exp(-z)))
+    else:  # tanh(z) = (1 - exp(-2z)) / (1 + exp(-2z))
+        for o in range(n_out):
+            e = _exp(-2.0 * np.float64(acc[o]))
+            h[o] = np.float32((1.0 - e) / (1.0 + e))
+
+
+@njit(cache=True, error_model="numpy")
 def _forward(x, r0, nb, net_i, net_w, slots):
     """Raw outputs of rows r0 .. r0 + nb of x (float64 (R, n)) into slots[:nb] (float32 (>= nb, G * width_out)),
-    one row at a time: a row's arithmetic is the same whatever else is in the batch."""
+    four rows per pass over each layer (_dense4) while four are left, then two (_dense2), then one alone
+    (_forward1). A row's outputs do not depend on what else is in the batch (see _dense2)."""
+    g_count, win, wout, n_layers, act = net_i[0], net_i[1], net_i[2], net_i[3], net_i[5]
+    lay = HEADER + g_count * win
+    widest = win
+    for layer in range(n_layers):
+        widest = max(widest, net_i[lay + 4 * layer + 3])
+    h = np.zeros((4, widest), np.float32)
+    acc = np.empty((4, widest), np.float32)
+    nz = np.empty(widest, np.int64)
+    r = 0
+    while r + 2 <= nb:
+        width = 4 if r + 4 <= nb else 2
+        for g in range(g_count):
+            for i in range(win):
+                c = net_i[HEADER + g * win + i]
+                for k in range(width):
+                    h[k, i] = np.float32(x[r0 + r + k, c])
+            for layer in range(n_layers):
+                t = lay + 4 * layer
+                n_in, n_out = net_i[t + 2], net_i[t + 3]
+                w0 = net_i[t] + g * n_in * n_out
+                b0 = net_i[t + 1] + g * n_out
+                if width == 4:
+                    _dense4(h, n_in, n_out, net_w[w0:w0 + n_in * n_out], net_w[b0:b0 + n_out], nz, acc)
+                else:
+                    _dense2(h, n_in, n_out, net_w[w0:w0 + n_in * n_out], net_w[b0:b0 + n_out], nz, acc)
+                if layer == n_layers - 1:
+                    for k in range(width):
+                        for o in range(n_out):
+                            slots[r + k, g * wout + o] = acc[k, o]
+                else:
+                    for k in range(width):
+                        _activate(acc[k], h[k], n_out, act)
+        r += width
+    if r < nb:
+        _forward1(x, r0 + r, net_i, net_w, slots[r:r + 1])
+
+
+@njit(cache=True, error_model="numpy")
+def _forward1(x, row, net_i, net_w, slots):
+    """Raw outputs of row `row` of x (float64 (R, n)) into slots[0], one row alone."""
     g_count, win, wout, n_layers, act = net_i[0], net_i[1], net_i[2], net_i[3], net_i[5]
     lay = HEADER + g_count * win
     widest = win
@@ -105,31 +249,20 @@ def _forward(x, r0, nb, net_i, net_w, slots):
     h = np.zeros(widest, np.float32)
     acc = np.empty(widest, np.float32)
     nz = np.empty(widest, np.int64)
-    for r in range(nb):
-        for g in range(g_count):
-            for i in range(win):
-                h[i] = np.float32(x[r0 + r, net_i[HEADER + g * win + i]])
-            for layer in range(n_layers):
-                t = lay + 4 * layer
-                n_in, n_out = net_i[t + 2], net_i[t + 3]
-                w0 = net_i[t] + g * n_in * n_out
-                b0 = net_i[t + 1] + g * n_out
-                _dense(h, n_in, n_out, net_w[w0:w0 + n_in * n_out], net_w[b0:b0 + n_out], nz, acc)
-                if layer == n_layers - 1:
-                    for o in range(n_out):
-                        slots[r, g * wout + o] = acc[o]
-                elif act == RELU:
-                    for o in range(n_out):
-                        v = acc[o]
-                        h[o] = v if v > 0 else np.float32(0.0)
-                elif act == SILU:  # z sigmoid(z) = z / (1 + exp(-z))
-                    for o in range(n_out):
-                        z = np.float64(acc[o])
-                        h[o] = np.float32(z / (1.0 + _exp(-z)))
-                else:  # tanh(z) = (1 - exp(-2z)) / (1 + exp(-2z))
-                    for o in range(n_out):
-                        e = _exp(-2.0 * np.float64(acc[o]))
-                        h[o] = np.float32((1.0 - e) / (1.0 + e))
+    for g in range(g_count):
+        for i in range(win):
+            h[i] = np.float32(x[row, net_i[HEADER + g * win + i]])
+        for layer in range(n_layers):
+            t = lay + 4 * layer
+            n_in, n_out = net_i[t + 2], net_i[t + 3]
+            w0 = net_i[t] + g * n_in * n_out
+            b0 = net_i[t + 1] + g * n_out
+            _dense(h, n_in, n_out, net_w[w0:w0 + n_in * n_out], net_w[b0:b0 + n_out], nz, acc)
+            if layer == n_layers - 1:
+                for o in range(n_out):
+                    slots[0, g * wout + o] = acc[o]
+            else:
+                _activate(acc, h, n_out, act)
 
 
 @njit(cache=True, error_model="numpy")
@@ -212,30 +345,40 @@ def propose_shorten(q0, ccn_i, ccn_w, ccn_f, cpn_i, cpn_w, bound, steps):
     proposal (R, n): the CCN's;  shorter (R, n): q0 + (hi / steps) (proposal - q0);  hi (R,): the
     fraction (in 1 / steps) that Corrector._shortest_predicted_free's bisection picks, `steps` where the
     CPN predicts none of the points it tries free (then `shorter` is the proposal's row, unused).
-    The bisection scores the point of each level as it goes (log2(steps) CPN rows, not steps - 1); a
-    row's answer does not depend on the others, so a batch answers as single calls do.
+    The bisection scores the point of each level as it goes (log2(steps) CPN rows, not steps - 1), one
+    level of every row at a time so that the CPN scores the rows' points in blocks; a row's answer does
+    not depend on the others, so a batch answers as single calls do.
     """
     rows, n = q0.shape
     proposal = propose(q0, ccn_i, ccn_w, ccn_f)
-    shorter = np.empty((rows, n))
-    hi_out = np.empty(rows, np.int64)
-    point = np.empty((1, n))
-    buf = np.empty((1, cpn_i[0] * cpn_i[2]), np.float32)
-    free = np.zeros(1, np.bool_)
-    for r in range(rows):
-        shorter[r] = proposal[r]
-        lo, hi = 0, steps
-        while hi - lo > 1:
-            mid = (lo + hi) // 2
-            f = mid / steps
-            for j in range(n):
-                point[0, j] = q0[r, j] + f * (proposal[r, j] - q0[r, j])
-            _forward(point, 0, 1, cpn_i, cpn_w, buf)
-            _free_rows(buf, 1, cpn_i, bound, free, 0)
-            if free[0]:
-                hi = mid
-                shorter[r] = point[0]
+    shorter = proposal.copy()
+    lo = np.zeros(rows, np.int64)
+    hi = np.full(rows, steps, np.int64)
+    active = np.empty(rows, np.int64)  # the rows still bisecting, this level
+    points = np.empty((rows, n))
+    free = np.empty(rows, np.bool_)
+    buf = np.empty((BLOCK, cpn_i[0] * cpn_i[2]), np.float32)
+    while True:  # one level of every row's bisection per pass, its points scored in blocks
+        m = 0
+        for r in range(rows):
+            if hi[r] - lo[r] > 1:
+                f = ((lo[r] + hi[r]) // 2) / steps
+                for j in range(n):
+                    points[m, j] = q0[r, j] + f * (proposal[r, j] - q0[r, j])
+                active[m] = r
+                m += 1
+        if m == 0:
+            break
+        for r0 in range(0, m, BLOCK):
+            nb = min(BLOCK, m - r0)
+            _forward(points, r0, nb, cpn_i, cpn_w, buf)
+            _free_rows(buf, nb, cpn_i, bound, free, r0)
+        for k in range(m):
+            r = active[k]
+            mid = (lo[r] + hi[r]) // 2
+            if free[k]:
+                hi[r] = mid
+                shorter[r] = points[k]
             else:
-                lo = mid
-        hi_out[r] = hi
-    return proposal, shorter, hi_out
+                lo[r] = mid
+    return proposal, shorter, hi
