@@ -78,6 +78,29 @@ def test_batch_rows_equal_single_rows_bitwise(hand, shipped, colliding):
     assert all(np.array_equal(a, b) for a, b in zip(again, batch))
 
 
+@pytest.mark.parametrize("activation", ["relu", "silu", "tanh"])
+def test_every_batch_width_answers_as_a_single_row(hand, hand_checker, activation):
+    """Batches run four rows, then two, then one per pass over a layer, each pass adding the inputs nonzero
+    in any of its rows (a zero product where a row's own input is zero): batches of every size up to two
+    blocks, rows with zero joints and ReLU's zero units among them, give each row the bits it has alone."""
+    rng = np.random.default_rng(12)
+    q = hand.sample_uniform(17, rng)
+    q[::3] = 0.0  # whole rows of zero inputs next to rows without
+    q[1::4, :5] = 0.0
+    cpn = CPN(_random_net(hand, hand_checker, "cpn", activation, rng))
+    ccn = CCN(_random_net(hand, hand_checker, "ccn", activation, rng), hand.lower, hand.upper)
+    nets = CompiledNets(cpn, ccn, 2)
+    alone = [(nets.cpn.mlp.slots(x), nets.cpn.predicts_free(x), nets.ccn(x), nets.propose_shorten(x[None]))
+             for x in q]
+    for size in range(2, 18):
+        x = q[:size]
+        slots, free, proposals, batch = nets.cpn.mlp.slots(x), nets.cpn.predicts_free(x), nets.ccn(x), nets.propose_shorten(x)
+        for k in range(size):
+            assert np.array_equal(slots[k], alone[k][0]) and free[k] == alone[k][1]
+            assert proposals[k].tobytes() == alone[k][2].tobytes()
+            assert all(a[k].tobytes() == b[0].tobytes() for a, b in zip(batch, alone[k][3]))
+
+
 def test_fused_step_bisects_as_the_numpy_corrector_would(shipped, colliding):
     """propose_shorten picks the fraction that _shortest_predicted_free picks, asking the compiled CPN."""
     nets = CompiledNets(shipped.cpn, shipped.ccn, 2)
