@@ -272,12 +272,10 @@ class SelfCollisionChecker(FclSelfCollisionChecker):
     def pair_matrix(self, q: np.ndarray, world: np.ndarray | None = None) -> np.ndarray:
         if self._args is None:
             return super().pair_matrix(q, world)
-        q = np.atleast_2d(np.ascontiguousarray(q, dtype=np.float64))
-        if world is None:
-            hits, unsure = kernels.pair_matrix_margins(q, *self._args)
-        else:
-            world = np.ascontiguousarray(world, dtype=np.float64).reshape(-1, *world.shape[-3:])
-            hits, unsure = kernels.pair_matrix_margins_world(world, *self._args[3:])
+        q = np.atleast_2d(q)
+        world = self._loose.kinematics.world(q) if world is None else world  # (one kernel fewer to compile)
+        world = np.ascontiguousarray(world, dtype=np.float64).reshape(-1, *world.shape[-3:])
+        hits, unsure = kernels.pair_matrix_margins_world(world, *self._args[3:])
         unsure = np.flatnonzero(unsure)
         if len(unsure):
             hits[unsure] = super().pair_matrix(q[unsure])

@@ -769,23 +769,6 @@ def pair_matrix_margins_world(world, shape_link, shape_local, shape_size, links,
 
 
 @njit(cache=True)
-def pair_matrix_margins(qs, link_int, link_num, link_terms, shape_link, shape_local, shape_size, links, spheres,
-                        pairs, loose, tight):
-    """pair_matrix_margins_world of a batch of configurations (N, n)."""
-    n = qs.shape[0]
-    world = np.empty((link_int.shape[0], 4, 4))
-    hits = np.zeros((n, pairs.shape[0]), dtype=np.bool_)
-    unsure = np.zeros(n, dtype=np.bool_)
-    labels = np.zeros(links.shape[0], dtype=np.bool_)
-    index = np.empty(pairs.shape[0], dtype=np.int64)
-    for k in range(n):
-        fk_into(qs[k], link_int, link_num, link_terms, world)
-        unsure[k] = self_collision_margins_into(world, shape_link, shape_local, shape_size, links, spheres, pairs,
-                                                loose, tight, False, hits[k], labels, index) < 0
-    return hits, unsure
-
-
-@njit(cache=True)
 def first_colliding_margins(qs, start, link_int, link_num, link_terms, shape_link, shape_local, shape_size, links,
                             spheres, pairs, loose, tight):
     """The first configuration of qs (N, n) from `start` on that collides for the loose margin: (k, 1)
