@@ -167,9 +167,10 @@ class SweptCheck:
         return q0 + lo * (q1 - q0)
 
     # ---- compiled (teleprev/robot/kernels.py: swept_segment, swept_last_free) -----------------------
-    # The kernels check every configuration with the compiled test of the checkers (FK once, then the
-    # loose and the tight margin: SelfCollisionChecker's decision) and hand back the ones within the
-    # margin, which FCL decides here, as SelfCollisionChecker does. So the answers are the checker's.
+    # The kernels check every configuration with the compiled test of the checkers (one pass with the
+    # loose and the tight margin: SelfCollisionChecker's decision, kernels.self_collision_margins_into)
+    # and hand back the ones within the margin, which FCL decides here, as SelfCollisionChecker does. So
+    # the answers are the checker's.
     def _segment_free_compiled(self, q0, q1) -> bool:
         q0 = np.ascontiguousarray(q0, dtype=np.float64)
         q1 = np.ascontiguousarray(q1, dtype=np.float64)

@@ -220,48 +220,63 @@ class FclSelfCollisionChecker:
 
 
 class SelfCollisionChecker(FclSelfCollisionChecker):
-    """FCL's answers (see the module docstring), from compiled code wherever it is certain of them."""
+    """FCL's answers (see the module docstring), from compiled code wherever it is certain of them.
+
+    The compiled test runs once per configuration with both margins (kernels.*_margins: FK, box poses
+    and bounding spheres once, each axis compared with +MARGIN and -MARGIN); `_loose` and `_tight` are
+    the two single-margin checkers whose answers it gives at once (the swept check takes their tables).
+    """
 
     def __init__(self, model: RobotModel, exclusions: Exclusions | None = None):
         super().__init__(model, exclusions)
         self._loose = self._tight = None
+        self._args = None
         if all(s.kind == "box" for n in self.link_names for s in model.links[n].collisions):
             self._loose = CompiledSelfCollisionChecker(model, self.exclusions)  # FCL's contacts and more
             self._tight = CompiledSelfCollisionChecker(model, self.exclusions, margin=-kernels.MARGIN)  # fewer
+            # the kernels' arguments after q, built once: FK tables, collision tables, the two margins
+            self._args = (*self._loose.kinematics.tables, *self._loose._tables(), self._loose.margin,
+                          self._tight.margin)
+            self._n_labels = len(self.link_names)
             q = model.neutral()  # load the kernels from numba's cache now, not in a live loop's first steps
-            self._loose.check(q), self._loose.collides(q), self._loose.first_collision(q[None])
+            self.check(q), self.collides(q), self.first_collision(q[None]), self.pair_matrix(q[None])
 
     def check(self, q: np.ndarray) -> CollisionReport:
-        if self._loose is None:
+        if self._args is None:
             return super().check(q)
-        loose = self._loose.check(q)
-        if not loose.pairs:
-            return loose
-        tight = self._tight.check(q)
-        return tight if tight.pairs == loose.pairs else super().check(q)
+        labels = np.zeros(self._n_labels, dtype=bool)
+        index = np.empty(len(self.link_pairs), dtype=np.int64)
+        n = kernels.check_margins(np.ascontiguousarray(q, dtype=np.float64), *self._args, False, labels, index)
+        if n == 0:
+            return CollisionReport(labels, ())
+        if n > 0:
+            names = self.link_pairs
+            return CollisionReport(labels, tuple([names[i] for i in index[:n].tolist()]))
+        return super().check(q)  # a pair within the margin of touching
 
     def collides(self, q: np.ndarray) -> bool:
-        if self._loose is None:
+        if self._args is None:
             return super().collides(q)
-        if not self._loose.collides(q):
-            return False
-        return True if self._tight.collides(q) else super().collides(q)
+        n = kernels.collides_margins(np.ascontiguousarray(q, dtype=np.float64), *self._args)
+        return n > 0 if n >= 0 else super().collides(q)
 
     def first_collision(self, q: np.ndarray) -> int | None:
-        if self._loose is None:
+        if self._args is None:
             return super().first_collision(q)
-        k = self._loose.first_collision(q)
-        while k is not None and not (self._tight.collides(q[k]) or super().collides(q[k])):
-            k = self._loose.first_collision(q, k + 1)  # within the margin and free for FCL: go on
-        return k
+        q = np.ascontiguousarray(q, dtype=np.float64)
+        k, state = kernels.first_colliding_margins(q, 0, *self._args)
+        while k >= 0 and state < 0 and not super().collides(q[k]):  # within the margin and free for FCL: go on
+            k, state = kernels.first_colliding_margins(q, k + 1, *self._args)
+        return None if k < 0 else int(k)
 
     def pair_matrix(self, q: np.ndarray, world: np.ndarray | None = None) -> np.ndarray:
-        if self._loose is None:
+        if self._args is None:
             return super().pair_matrix(q, world)
         q = np.atleast_2d(q)
-        world = self._loose.kinematics.world(q) if world is None else world
-        loose = self._loose.pair_matrix(q, world)
-        unsure = np.flatnonzero((loose != self._tight.pair_matrix(q, world)).any(axis=1))
+        world = self._loose.kinematics.world(q) if world is None else world  # (one kernel fewer to compile)
+        world = np.ascontiguousarray(world, dtype=np.float64).reshape(-1, *world.shape[-3:])
+        hits, unsure = kernels.pair_matrix_margins_world(world, *self._args[3:])
+        unsure = np.flatnonzero(unsure)
         if len(unsure):
-            loose[unsure] = super().pair_matrix(q[unsure])
-        return loose
+            hits[unsure] = super().pair_matrix(q[unsure])
+        return hits

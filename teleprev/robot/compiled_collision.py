@@ -125,7 +125,8 @@ class CompiledSelfCollisionChecker:
 
 
 def warm(robot: str = "leap_hand_right") -> None:
-    """Compile every kernel the checker and the compiled FK call into numba's on-disk cache (or load it)."""
+    """Compile every kernel the checkers (this one and SelfCollisionChecker, both margins in one pass) and
+    the compiled FK call into numba's on-disk cache (or load it)."""
     from teleprev.robot.model import load_robot
 
     model = load_robot(robot)
@@ -138,3 +139,7 @@ def warm(robot: str = "leap_hand_right") -> None:
     checker.pair_matrix(qs)
     checker.pair_matrix(qs, checker.kinematics.world(qs))
     checker.kinematics.world(q)
+    from teleprev.robot.collision import SelfCollisionChecker  # both margins in one pass: its kernels
+
+    both = SelfCollisionChecker(model, checker.exclusions)  # loads check, collides, first_collision, pair_matrix
+    both.pair_matrix(qs, checker.kinematics.world(qs))

@@ -415,6 +415,119 @@ def boxes_apart(boxes, a, b, size, margin):
     return _edge_apart(t1, r02, t0, r12, ha0 * p12 + ha1 * p02 + hb0 * p21 + hb1 * p20, margin)
 
 
+# Both margins in one pass (SelfCollisionChecker's decision): a pair's state under the loose margin
+# (FCL's contacts and more) and the tight one (fewer) from the same arithmetic. Each axis is compared
+# with both margins exactly as boxes_apart compares it with one, so the two answers are bit for bit
+# those of two boxes_apart calls; loose >= tight, so an axis that separates by more than `loose`
+# separates by more than `tight` too and decides both.
+BOX_APART, BOX_LOOSE, BOX_BOTH = 0, 1, 2  # apart for both margins / colliding for the loose one only / for both
+
+
+@njit(cache=True, inline="always")
+def _edge_state(tx, rx, ty, ry, reach, loose, tight, tight_apart):
+    """_edge_apart for both margins: -1 if the axis separates by more than `loose`, else whether it
+    (or an earlier axis: tight_apart) separates by more than `tight` (1 / 0)."""
+    gap = abs(tx * rx - ty * ry) - reach
+    length = np.sqrt(rx * rx + ry * ry)
+    if gap > loose * length:
+        return -1
+    return 1 if tight_apart or gap > tight * length else 0
+
+
+@njit(cache=True, inline="always")
+def boxes_state(boxes, a, b, size, loose, tight):
+    """boxes_apart for both margins at once (loose >= tight): BOX_APART if some axis separates boxes a
+    and b by more than `loose`; else BOX_LOOSE if some axis separates them by more than `tight`; else
+    BOX_BOTH. The same expressions as boxes_apart, axis by axis, in the same order."""
+    ha0, ha1, ha2 = size[a, 0], size[a, 1], size[a, 2]
+    hb0, hb1, hb2 = size[b, 0], size[b, 1], size[b, 2]
+    d0 = boxes[b, 0, 3] - boxes[a, 0, 3]
+    d1 = boxes[b, 1, 3] - boxes[a, 1, 3]
+    d2 = boxes[b, 2, 3] - boxes[a, 2, 3]
+    a00, a10, a20 = boxes[a, 0, 0], boxes[a, 1, 0], boxes[a, 2, 0]
+    a01, a11, a21 = boxes[a, 0, 1], boxes[a, 1, 1], boxes[a, 2, 1]
+    a02, a12, a22 = boxes[a, 0, 2], boxes[a, 1, 2], boxes[a, 2, 2]
+    b00, b10, b20 = boxes[b, 0, 0], boxes[b, 1, 0], boxes[b, 2, 0]
+    b01, b11, b21 = boxes[b, 0, 1], boxes[b, 1, 1], boxes[b, 2, 1]
+    b02, b12, b22 = boxes[b, 0, 2], boxes[b, 1, 2], boxes[b, 2, 2]
+
+    # a's face normals
+    t0 = a00 * d0 + a10 * d1 + a20 * d2
+    r00 = a00 * b00 + a10 * b10 + a20 * b20
+    r01 = a00 * b01 + a10 * b11 + a20 * b21
+    r02 = a00 * b02 + a10 * b12 + a20 * b22
+    q00, q01, q02 = abs(r00), abs(r01), abs(r02)
+    gap = abs(t0) - (ha0 + hb0 * q00 + hb1 * q01 + hb2 * q02)
+    if gap > loose:
+        return BOX_APART
+    tight_apart = gap > tight
+    t1 = a01 * d0 + a11 * d1 + a21 * d2
+    r10 = a01 * b00 + a11 * b10 + a21 * b20
+    r11 = a01 * b01 + a11 * b11 + a21 * b21
+    r12 = a01 * b02 + a11 * b12 + a21 * b22
+    q10, q11, q12 = abs(r10), abs(r11), abs(r12)
+    gap = abs(t1) - (ha1 + hb0 * q10 + hb1 * q11 + hb2 * q12)
+    if gap > loose:
+        return BOX_APART
+    tight_apart = tight_apart or gap > tight
+    t2 = a02 * d0 + a12 * d1 + a22 * d2
+    r20 = a02 * b00 + a12 * b10 + a22 * b20
+    r21 = a02 * b01 + a12 * b11 + a22 * b21
+    r22 = a02 * b02 + a12 * b12 + a22 * b22
+    q20, q21, q22 = abs(r20), abs(r21), abs(r22)
+    gap = abs(t2) - (ha2 + hb0 * q20 + hb1 * q21 + hb2 * q22)
+    if gap > loose:
+        return BOX_APART
+    tight_apart = tight_apart or gap > tight
+
+    # b's face normals
+    gap = abs(t0 * r00 + t1 * r10 + t2 * r20) - (ha0 * q00 + ha1 * q10 + ha2 * q20 + hb0)
+    if gap > loose:
+        return BOX_APART
+    tight_apart = tight_apart or gap > tight
+    gap = abs(t0 * r01 + t1 * r11 + t2 * r21) - (ha0 * q01 + ha1 * q11 + ha2 * q21 + hb1)
+    if gap > loose:
+        return BOX_APART
+    tight_apart = tight_apart or gap > tight
+    gap = abs(t0 * r02 + t1 * r12 + t2 * r22) - (ha0 * q02 + ha1 * q12 + ha2 * q22 + hb2)
+    if gap > loose:
+        return BOX_APART
+    tight_apart = tight_apart or gap > tight
+
+    # a_i x b_j (see boxes_apart)
+    p00, p01, p02 = q00 + _PAD, q01 + _PAD, q02 + _PAD
+    p10, p11, p12 = q10 + _PAD, q11 + _PAD, q12 + _PAD
+    p20, p21, p22 = q20 + _PAD, q21 + _PAD, q22 + _PAD
+    s = _edge_state(t2, r10, t1, r20, ha1 * p20 + ha2 * p10 + hb1 * p02 + hb2 * p01, loose, tight, tight_apart)
+    if s < 0:
+        return BOX_APART
+    s = _edge_state(t2, r11, t1, r21, ha1 * p21 + ha2 * p11 + hb2 * p00 + hb0 * p02, loose, tight, s == 1)
+    if s < 0:
+        return BOX_APART
+    s = _edge_state(t2, r12, t1, r22, ha1 * p22 + ha2 * p12 + hb0 * p01 + hb1 * p00, loose, tight, s == 1)
+    if s < 0:
+        return BOX_APART
+    s = _edge_state(t0, r20, t2, r00, ha2 * p00 + ha0 * p20 + hb1 * p12 + hb2 * p11, loose, tight, s == 1)
+    if s < 0:
+        return BOX_APART
+    s = _edge_state(t0, r21, t2, r01, ha2 * p01 + ha0 * p21 + hb2 * p10 + hb0 * p12, loose, tight, s == 1)
+    if s < 0:
+        return BOX_APART
+    s = _edge_state(t0, r22, t2, r02, ha2 * p02 + ha0 * p22 + hb0 * p11 + hb1 * p10, loose, tight, s == 1)
+    if s < 0:
+        return BOX_APART
+    s = _edge_state(t1, r00, t0, r10, ha0 * p10 + ha1 * p00 + hb1 * p22 + hb2 * p21, loose, tight, s == 1)
+    if s < 0:
+        return BOX_APART
+    s = _edge_state(t1, r01, t0, r11, ha0 * p11 + ha1 * p01 + hb2 * p20 + hb0 * p22, loose, tight, s == 1)
+    if s < 0:
+        return BOX_APART
+    s = _edge_state(t1, r02, t0, r12, ha0 * p12 + ha1 * p02 + hb0 * p21 + hb1 * p20, loose, tight, s == 1)
+    if s < 0:
+        return BOX_APART
+    return BOX_LOOSE if s == 1 else BOX_BOTH
+
+
 # ---- self-collision ----------------------------------------------------------------------------
 @njit(cache=True, inline="always")
 def _apart2(x, y, reach):
@@ -540,6 +653,139 @@ def first_colliding(qs, start, link_int, link_num, link_terms, shape_link, shape
     return -1
 
 
+# ---- self-collision, both margins in one pass (SelfCollisionChecker) ----------------------------
+# SelfCollisionChecker's compiled decision: the test with the margin `loose` (MARGIN: FCL's contacts and
+# more) and with `tight` (-MARGIN: fewer), FK, box poses and bounding spheres computed once. Every cull
+# and every axis is compared with both margins exactly as self_collision_into compares it with one, so
+# the answers are those of the two separate calls (tests/robot/test_compiled_collision.py).
+MARGINS_UNSURE = -1  # the two margins disagree on some pair (within the margin of touching): FCL decides
+
+
+@njit(cache=True)
+def self_collision_margins_into(world, shape_link, shape_local, shape_size, links, spheres, pairs, loose, tight,
+                                first_only, hits, labels, index):
+    """self_collision_into with the margins `loose` and `tight` (loose >= tight) at once.
+
+    Without first_only: the number n of pairs colliding for both margins, when no pair collides for the
+    loose one alone (the two calls' answers are equal): hits (P,) and labels (m,) set, index[:n] the
+    pairs in order. MARGINS_UNSURE as soon as a pair collides for the loose margin only (hits, labels and
+    index then partial). With first_only: 1 at the first pair colliding for both margins, 0 when none
+    collides for the loose margin, MARGINS_UNSURE when some do but none for the tight one.
+    Same culls as self_collision_into; a sphere apart by more than `tight` but not `loose` leaves only
+    the loose question for the boxes inside it.
+    """
+    n_shapes = shape_link.shape[0]
+    boxes = np.empty((n_shapes, 3, 4))
+    for k in range(n_shapes):
+        _place(world, shape_link[k], shape_local[k], boxes, k)
+    n_links = links.shape[0]
+    centres = np.empty((n_links, 3))
+    for k in range(n_links):
+        w = links[k, 0]
+        for r in range(3):
+            centres[k, r] = (world[w, r, 0] * spheres[k, 0] + world[w, r, 1] * spheres[k, 1]
+                             + world[w, r, 2] * spheres[k, 2] + world[w, r, 3])
+    count = 0
+    loose_only = False
+    for p in range(pairs.shape[0]):
+        la = pairs[p, 0]
+        lb = pairs[p, 1]
+        reach = spheres[la, 3] + spheres[lb, 3]
+        if _apart2(centres[la], centres[lb], reach + loose):
+            continue
+        tight_l = not _apart2(centres[la], centres[lb], reach + tight)
+        loose_hit = False
+        tight_hit = False
+        for a in range(links[la, 1], links[la, 2]):
+            reach = shape_size[a, 3] + spheres[lb, 3]
+            if _apart2(boxes[a, :, 3], centres[lb], reach + loose):
+                continue
+            tight_a = tight_l and not _apart2(boxes[a, :, 3], centres[lb], reach + tight)
+            for b in range(links[lb, 1], links[lb, 2]):
+                reach = shape_size[a, 3] + shape_size[b, 3]
+                if _apart2(boxes[a, :, 3], boxes[b, :, 3], reach + loose):
+                    continue
+                tight_b = tight_a and not _apart2(boxes[a, :, 3], boxes[b, :, 3], reach + tight)
+                state = boxes_state(boxes, a, b, shape_size, loose, tight)
+                if state == BOX_APART:
+                    continue
+                loose_hit = True
+                if tight_b and state == BOX_BOTH:
+                    tight_hit = True
+                    break
+            if tight_hit:
+                break
+        if tight_hit:
+            hits[p] = True
+            labels[la] = True
+            labels[lb] = True
+            index[count] = p
+            count += 1
+            if first_only:
+                return count
+        elif loose_hit:
+            if not first_only:
+                return MARGINS_UNSURE
+            loose_only = True
+    return MARGINS_UNSURE if loose_only else count
+
+
+@njit(cache=True)
+def check_margins(q, link_int, link_num, link_terms, shape_link, shape_local, shape_size, links, spheres, pairs,
+                  loose, tight, first_only, labels, index):
+    """FK, then self_collision_margins_into for one configuration: its answer (labels (m,) zeros on the
+    way in, index (P,) scratch)."""
+    world = fk(q, link_int, link_num, link_terms)
+    hits = np.zeros(pairs.shape[0], dtype=np.bool_)
+    return self_collision_margins_into(world, shape_link, shape_local, shape_size, links, spheres, pairs, loose,
+                                       tight, first_only, hits, labels, index)
+
+
+@njit(cache=True)
+def collides_margins(q, link_int, link_num, link_terms, shape_link, shape_local, shape_size, links, spheres, pairs,
+                     loose, tight):
+    """check_margins with first_only, its scratch arrays its own: 1, 0 or MARGINS_UNSURE."""
+    world = fk(q, link_int, link_num, link_terms)
+    hits = np.zeros(pairs.shape[0], dtype=np.bool_)
+    labels = np.zeros(links.shape[0], dtype=np.bool_)
+    index = np.empty(1, dtype=np.int64)
+    return self_collision_margins_into(world, shape_link, shape_local, shape_size, links, spheres, pairs, loose,
+                                       tight, True, hits, labels, index)
+
+
+@njit(cache=True)
+def pair_matrix_margins_world(world, shape_link, shape_local, shape_size, links, spheres, pairs, loose, tight):
+    """(N, P) pairs colliding for both margins, and (N,) whether a row is unsure (some pair collides for
+    the loose margin only; its row is then partial), of a batch given its link transforms (N, L, 4, 4)."""
+    n = world.shape[0]
+    hits = np.zeros((n, pairs.shape[0]), dtype=np.bool_)
+    unsure = np.zeros(n, dtype=np.bool_)
+    labels = np.zeros(links.shape[0], dtype=np.bool_)
+    index = np.empty(pairs.shape[0], dtype=np.int64)
+    for k in range(n):
+        unsure[k] = self_collision_margins_into(world[k], shape_link, shape_local, shape_size, links, spheres, pairs,
+                                                loose, tight, False, hits[k], labels, index) < 0
+    return hits, unsure
+
+
+@njit(cache=True)
+def first_colliding_margins(qs, start, link_int, link_num, link_terms, shape_link, shape_local, shape_size, links,
+                            spheres, pairs, loose, tight):
+    """The first configuration of qs (N, n) from `start` on that collides for the loose margin: (k, 1)
+    if it collides for the tight one too, (k, MARGINS_UNSURE) if not; (-1, 0) if none does."""
+    world = np.empty((link_int.shape[0], 4, 4))
+    hits = np.zeros(pairs.shape[0], dtype=np.bool_)
+    labels = np.zeros(links.shape[0], dtype=np.bool_)
+    index = np.empty(pairs.shape[0], dtype=np.int64)
+    for k in range(start, qs.shape[0]):
+        fk_into(qs[k], link_int, link_num, link_terms, world)
+        state = self_collision_margins_into(world, shape_link, shape_local, shape_size, links, spheres, pairs, loose,
+                                            tight, True, hits, labels, index)
+        if state != 0:
+            return k, state
+    return -1, 0
+
+
 # ---- swept check of a hand command's segment (teleprev/pipeline/swept.py) ------------------------
 # A configuration's state under one checker: FREE / COLLIDING where the compiled test is decisive, UNSURE
 # where its answer is within the margin (the loose test finds a contact, the tight one none): FCL decides.
@@ -555,22 +801,21 @@ SWEPT_MAX_POINTS = 1e7
 
 @njit(cache=True)
 def _swept_point(q, which, link_int, link_num, link_terms, shape_link, shape_local, shape_size, links, spheres,
-                 pairs, loose, tight, world, hits, labels):
+                 pairs, loose, tight, world, hits, labels, index):
     """POINT_* of configuration q under shape set `which` (0 grown, 1 plain): the loose test (margin
-    `loose`) clears it, or the tight one (margin `tight`) confirms a contact, or neither (UNSURE)."""
+    `loose`) clears it, or the tight one (margin `tight`) confirms a contact, or neither (UNSURE); both
+    margins in one pass (self_collision_margins_into)."""
     fk_into(q, link_int, link_num, link_terms, world)
-    if self_collision_into(world, shape_link, shape_local[which], shape_size[which], links, spheres[which], pairs,
-                           loose, True, hits, labels) == 0:
+    state = self_collision_margins_into(world, shape_link, shape_local[which], shape_size[which], links,
+                                        spheres[which], pairs, loose, tight, True, hits, labels, index)
+    if state == 0:
         return POINT_FREE
-    if self_collision_into(world, shape_link, shape_local[which], shape_size[which], links, spheres[which], pairs,
-                           tight, True, hits, labels) > 0:
-        return POINT_COLLIDING
-    return POINT_UNSURE
+    return POINT_COLLIDING if state > 0 else POINT_UNSURE
 
 
 @njit(cache=True)
 def _swept(q0, q1, q0_clear, start, reach, spacing, start_step, link_int, link_num, link_terms, shape_link,
-           shape_local, shape_size, links, spheres, pairs, loose, tight, world, hits, labels, point):
+           shape_local, shape_size, links, spheres, pairs, loose, tight, world, hits, labels, index, point):
     """SweptCheck.segment_free from point `start` on: (answer, k, q0_clear, end_clear).
 
     q0_clear: whether q0 keeps the clearance (1 / 0), -1 if not known yet (then it is checked here and
@@ -599,7 +844,7 @@ def _swept(q0, q1, q0_clear, start, reach, spacing, start_step, link_int, link_n
     if spacing > 0:
         if q0_clear < 0:
             state = _swept_point(q0, 0, link_int, link_num, link_terms, shape_link, shape_local, shape_size, links,
-                                 spheres, pairs, loose, tight, world, hits, labels)
+                                 spheres, pairs, loose, tight, world, hits, labels, index)
             if state == POINT_UNSURE:
                 point[:] = q0
                 return SWEPT_UNSURE_START, 0, q0_clear, -1
@@ -615,7 +860,7 @@ def _swept(q0, q1, q0_clear, start, reach, spacing, start_step, link_int, link_n
         for i in range(n_q):
             point[i] = q0[i] + f * (q1[i] - q0[i])  # numpy's q0 + (k / n) * (q1 - q0), element by element
         state = _swept_point(point, which, link_int, link_num, link_terms, shape_link, shape_local, shape_size,
-                             links, spheres, pairs, loose, tight, world, hits, labels)
+                             links, spheres, pairs, loose, tight, world, hits, labels, index)
         if grown and k == n:  # the end point keeps the full clearance
             if state == POINT_UNSURE:
                 return SWEPT_UNSURE_END, k, q0_clear, -1
@@ -634,8 +879,9 @@ def swept_segment(q0, q1, q0_clear, start, reach, spacing, start_step, link_int,
     world = np.empty((link_int.shape[0], 4, 4))
     hits = np.zeros(pairs.shape[0], dtype=np.bool_)
     labels = np.zeros(links.shape[0], dtype=np.bool_)
+    index = np.empty(pairs.shape[0], dtype=np.int64)
     return _swept(q0, q1, q0_clear, start, reach, spacing, start_step, link_int, link_num, link_terms, shape_link,
-                  shape_local, shape_size, links, spheres, pairs, loose, tight, world, hits, labels, point)
+                  shape_local, shape_size, links, spheres, pairs, loose, tight, world, hits, labels, index, point)
 
 
 @njit(cache=True)
@@ -651,6 +897,7 @@ def swept_last_free(q0, q1, steps, q0_clear, reach, spacing, start_step, link_in
     world = np.empty((link_int.shape[0], 4, 4))
     hits = np.zeros(pairs.shape[0], dtype=np.bool_)
     labels = np.zeros(links.shape[0], dtype=np.bool_)
+    index = np.empty(pairs.shape[0], dtype=np.int64)
     qm = np.empty_like(q0)
     lo = 0.0
     hi = 1.0
@@ -661,7 +908,7 @@ def swept_last_free(q0, q1, steps, q0_clear, reach, spacing, start_step, link_in
             qm[i] = q0[i] + mid * (q1[i] - q0[i])
         answer, k, q0_clear, end_clear = _swept(q0, qm, q0_clear, 1, reach, spacing, start_step, link_int, link_num,
                                                 link_terms, shape_link, shape_local, shape_size, links, spheres,
-                                                pairs, loose, tight, world, hits, labels, point)
+                                                pairs, loose, tight, world, hits, labels, index, point)
         if answer > SWEPT_FREE:
             return answer, lo, q0_clear, cache
         if end_clear >= 0:
@@ -706,6 +953,7 @@ def swept_command(q0, q1, v1, acceleration, lower, upper, q0_clear, q1_clear, re
     world = np.empty((link_int.shape[0], 4, 4))
     hits = np.zeros(pairs.shape[0], dtype=np.bool_)
     labels = np.zeros(links.shape[0], dtype=np.bool_)
+    index = np.empty(pairs.shape[0], dtype=np.int64)
     n_q = q1.shape[0]
     stop = np.empty(n_q)
     for i in range(n_q):
@@ -715,7 +963,7 @@ def swept_command(q0, q1, v1, acceleration, lower, upper, q0_clear, q1_clear, re
     clear = 0
     answer, k, c0, end = _swept(q0, q1, q0_clear, 1, reach, spacing, start_step, link_int, link_num, link_terms,
                                 shape_link, shape_local, shape_size, links, spheres, pairs, loose, tight, world,
-                                hits, labels, point)
+                                hits, labels, index, point)
     if answer > SWEPT_FREE:
         return answer, 0, 0
     if end >= 0:
@@ -732,7 +980,7 @@ def swept_command(q0, q1, v1, acceleration, lower, upper, q0_clear, q1_clear, re
         return answer, cache, clear
     answer, k, c1, end = _swept(q1, stop, q1_clear, 1, reach, spacing, start_step, link_int, link_num, link_terms,
                                 shape_link, shape_local, shape_size, links, spheres, pairs, loose, tight, world,
-                                hits, labels, point)
+                                hits, labels, index, point)
     if answer > SWEPT_FREE:
         return answer, 0, 0
     if end >= 0:

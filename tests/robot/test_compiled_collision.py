@@ -234,3 +234,99 @@ def test_importing_compiles_nothing_and_needs_no_fcl():
     )
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True).stdout.strip()
     assert out == "[] False"
+
+
+# ---- both margins in one pass (SelfCollisionChecker's kernels) ------------------------------------
+def _near_contact(checker, hand, rng, n: int) -> np.ndarray:
+    """Configurations a last bit either side of the contact boundary of `checker` (bisected 60 times
+    between a free and a colliding configuration): where the two margins disagree."""
+    pool = hand.sample_uniform(10 * n, rng)
+    colliding = checker.pair_matrix(pool).any(axis=1)
+    out = []
+    for q0, q1 in zip(pool[~colliding][:n], pool[colliding][:n]):
+        lo, hi = 0.0, 1.0
+        for _ in range(60):
+            mid = 0.5 * (lo + hi)
+            lo, hi = (lo, mid) if checker.collides(q0 + mid * (q1 - q0)) else (mid, hi)
+        out += [q0 + lo * (q1 - q0), q0 + hi * (q1 - q0)]
+    return np.array(out)
+
+
+@pytest.fixture(scope="module", params=["plain", "grown"])
+def margins(request, hand):
+    """SelfCollisionChecker (its kernels' arguments: both margins) and its two single-margin checkers,
+    for the hand's shapes and for them grown as the swept check grows them."""
+    from teleprev.pipeline.swept import inflated_model
+
+    model = hand if request.param == "plain" else inflated_model(hand, 0.0015)
+    checker = SelfCollisionChecker(model)
+    return model, checker, checker._loose, checker._tight
+
+
+def test_both_margins_in_one_pass_equal_the_two_separate_calls(hand, margins, rng):
+    model, checker, loose, tight = margins
+    q = np.concatenate([hand.sample_uniform(3000, rng), _near_contact(loose, hand, rng, 25),
+                        _near_contact(tight, hand, rng, 25)])
+    lo, ti = loose.pair_matrix(q), tight.pair_matrix(q)
+    differ = (lo != ti).any(axis=1)
+    assert not (ti & ~lo).any()  # the tight margin's pairs are among the loose one's
+    assert differ.sum() >= 15, "the near-contact sample should have configurations within the margin"
+
+    hits, unsure = kernels.pair_matrix_margins_world(loose.kinematics.world(q), *checker._args[3:])
+    np.testing.assert_array_equal(unsure, differ)
+    np.testing.assert_array_equal(hits[~differ], lo[~differ])
+
+    n_pairs, n_links = len(checker.link_pairs), len(checker.link_names)
+    for i in np.r_[np.flatnonzero(differ), np.arange(0, len(q), 7)]:
+        labels, index = np.zeros(n_links, dtype=bool), np.empty(n_pairs, dtype=np.int64)
+        n = kernels.check_margins(q[i], *checker._args, False, labels, index)
+        a, b = loose.check(q[i]), tight.check(q[i])
+        if differ[i]:
+            assert n == kernels.MARGINS_UNSURE
+        else:
+            assert n == len(a.pairs) and tuple(checker.link_pairs[k] for k in index[:n]) == a.pairs == b.pairs
+            np.testing.assert_array_equal(labels, a.labels)
+        expected = 0 if not loose.collides(q[i]) else 1 if tight.collides(q[i]) else kernels.MARGINS_UNSURE
+        assert kernels.collides_margins(q[i], *checker._args) == expected
+        labels = np.zeros(n_links, dtype=bool)
+        assert kernels.check_margins(q[i], *checker._args, True, labels, index) == expected
+
+
+def test_first_colliding_with_both_margins_is_the_loose_ones_with_the_tight_answer(hand, margins, rng):
+    model, checker, loose, tight = margins
+    near = _near_contact(loose, hand, rng, 10)
+    free = hand.sample_uniform(400, rng)
+    free = free[~loose.pair_matrix(free).any(axis=1)][:20]
+    for q in (np.concatenate([free[:5], near[k:k + 1], free[5:]]) for k in range(len(near))):
+        for start in (0, 3, 6, len(q)):
+            k, state = kernels.first_colliding_margins(q, start, *checker._args)
+            expected = loose.first_collision(q, start)
+            assert k == (-1 if expected is None else expected)
+            if k >= 0:
+                assert state == (1 if tight.collides(q[k]) else kernels.MARGINS_UNSURE)
+            else:
+                assert state == 0
+
+
+def test_box_state_is_the_two_single_margin_answers(rng):
+    """boxes_state against boxes_apart with either margin, on box pairs apart, touching and overlapping
+    by amounts around the margin (face, edge and random contacts, random orientations)."""
+    sizes = rng.uniform(0.005, 0.05, (400, 2, 3))
+    states = set()
+    for k in range(400):
+        (sa, sb) = sizes[k]
+        rpy = rng.uniform(-np.pi, np.pi, 3) if k % 3 else rng.normal(0, 1e-9, 3) * (k % 2)
+        # push b along a's x axis until its face touches, then by a gap around the margin
+        placed = [(tuple(sa), (0, 0, 0), (0, 0, 0)), (tuple(sb), (0, 0, 0), tuple(rpy))]
+        poses, size = _boxes(*placed)
+        extent = sb @ np.abs(poses[1, :3, :3][0]) / 2 + sa[0] / 2
+        gap = rng.choice([-3e-9, -1.5e-9, -1e-9, -5e-10, 0.0, 5e-10, 1e-9, 1.5e-9, 3e-9, 1e-3, -1e-3])
+        poses[1, :, 3] = (extent + gap, rng.uniform(-0.3, 0.3) * sa[1], rng.uniform(-0.3, 0.3) * sa[2])
+        for a, b in ((0, 1), (1, 0)):
+            loose = kernels.boxes_apart(poses, a, b, size, kernels.MARGIN)
+            tight = kernels.boxes_apart(poses, a, b, size, -kernels.MARGIN)
+            state = kernels.boxes_state(poses, a, b, size, kernels.MARGIN, -kernels.MARGIN)
+            expected = kernels.BOX_APART if loose else kernels.BOX_LOOSE if tight else kernels.BOX_BOTH
+            assert state == expected
+            states.add(state)
+    assert states == {kernels.BOX_APART, kernels.BOX_LOOSE, kernels.BOX_BOTH}
