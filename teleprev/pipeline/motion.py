@@ -116,22 +116,24 @@ class Motion:
         estimate = ESTIMATE_RAW if m.target_v is None else ESTIMATE_BLEND
         return estimate, m.target_q, m.target_v, gap / 1e9, keep, ahead
 
-    def _arm_track(self, m: MotionState, inputs, target: np.ndarray, dt: float, frac: float, flags: list[str]):
-        """The arm's command dt on towards a fresh target, held within the joint limits. Returns (motion state,
-        the arm's motion, the command, whether it reached the target: within the step or the tolerance)."""
+    def _arm_track(self, m: MotionState, inputs, target: np.ndarray, dt: float, frac: float, flags: list[str],
+                   estimates: dict):
+        """The arm's command dt on towards a fresh target, held within the joint limits. Returns (the arm's
+        motion, the command, whether it reached the target: within the step or the tolerance); a new
+        estimate of the target's velocity goes into `estimates` (MotionState's fields)."""
         estimate, before, before_v, gap, keep, ahead = self._arm_estimate(m, inputs, target)
         plan = self.arm.plan(m.arm, target, dt, frac, estimate, before, before_v, gap, keep, ahead)
         if estimate in (ESTIMATE_ZERO, ESTIMATE_RAW, ESTIMATE_BLEND):  # a new wrist sample: its target, the new estimate
-            m = evolve(m, target_ns=inputs.wrist.stamp_ns, target_q=target, target_v=plan[PLAN_ESTIMATE])
+            estimates.update(target_ns=inputs.wrist.stamp_ns, target_q=target, target_v=plan[PLAN_ESTIMATE])
         out = self.arm.follow(m.arm, plan, dt, ENGAGED_TOL)
         if out is None:  # ruckig found no profile: a controlled stop instead
             arm = self.arm.stop(m.arm, dt)
             close = float(np.abs(arm.q - plan[PLAN_GOAL]).max()) < ENGAGED_TOL
-            return m, arm, self._limit_held(arm.q, flags), close
+            return arm, self._limit_held(arm.q, flags), close
         arm, reached, command, held, close = out
         if held:
             flags.append("arm_limit_held")
-        return m, arm, command, reached or close
+        return arm, command, reached or close
 
     def _limit_held(self, q: np.ndarray, flags: list[str]) -> np.ndarray:
         """The generator limits velocity, acceleration and jerk, not position: heading for a limit faster
@@ -153,17 +155,19 @@ class Motion:
         keep = math.exp(-dt * 1e9 / self.feedforward_tau_ns)
         return ESTIMATE_RAW if m.hand_target_v is None else ESTIMATE_BLEND, m.hand_target, m.hand_target_v, keep
 
-    def _hand_command(self, m: MotionState, last, v, target, dt: float, frac: float, flags: list[str]):
-        """hand_step with Motion's estimate of the target's velocity: (motion state, command, velocity).
-        Everything before the swept check in one kernel call (HandLimiter.command)."""
+    def _hand_command(self, m: MotionState, last, v, target, dt: float, frac: float, flags: list[str],
+                      estimates: dict):
+        """hand_step with Motion's estimate of the target's velocity: (command, velocity); the target and
+        its estimate go into `estimates` (MotionState's fields). Everything before the swept check in one
+        kernel call (HandLimiter.command)."""
         estimate, before, before_v, keep = self._hand_estimate(m, target, dt)
         rows, unchanged = self.hand.command(last, v, target, estimate, before, before_v, keep, dt, m.dt, frac)
         if estimate != ESTIMATE_NONE:
-            m = evolve(m, hand_target=target, hand_target_v=rows[2])
+            estimates.update(hand_target=target, hand_target_v=rows[2])
         cmd, cmd_v, avoided = self._keep_clear(last, v, rows[0], rows[1], dt, m.dt, flags)
         if avoided:
             unchanged = not np.any(cmd != last)
-        return m, cmd, np.zeros_like(cmd_v) if unchanged else cmd_v
+        return cmd, np.zeros_like(cmd_v) if unchanged else cmd_v
 
     def commands(self, p, state, new, inputs, arm_target, effector_target, flags):
         """(new state, arm command or None, effector command or None) for one step.
@@ -197,8 +201,9 @@ class Motion:
 
         arm_cmd = None
         arm, arm_reached = m.arm, arm_target is None
+        estimates: dict = {}  # the targets' velocity estimates this step makes: fields of the new MotionState
         if arm_target is not None:
-            m, arm, arm_cmd, arm_reached = self._arm_track(m, inputs, arm_target, dt, frac, flags)
+            arm, arm_cmd, arm_reached = self._arm_track(m, inputs, arm_target, dt, frac, flags, estimates)
         elif not arm.at_rest:
             arm = self.arm.stop(arm, dt)
             if executing:
@@ -212,10 +217,11 @@ class Motion:
         elif effector_target is not None or hand_v.any():
             if effector_target is None and executing:
                 flags.append("hand_stopping")
-            m, eff_cmd, hand_v = self._hand_command(m, state.effector_cmd, hand_v, effector_target, dt, frac, flags)
+            eff_cmd, hand_v = self._hand_command(m, state.effector_cmd, hand_v, effector_target, dt, frac, flags,
+                                                 estimates)
 
         if arm_cmd is None and eff_cmd is None:
-            return evolve(new, motion=evolve(m, arm=arm, hand_v=hand_v)), None, None
+            return evolve(new, motion=evolve(m, arm=arm, hand_v=hand_v, **estimates)), None, None
         a = arm_cmd if arm_cmd is not None else state.arm_cmd
         e = eff_cmd if eff_cmd is not None else state.effector_cmd
         # The engage ramp is over once the arm's generator meets its target within a step (or is within
@@ -223,7 +229,7 @@ class Motion:
         engaging = state.engaging and executing and not (
             arm_reached and new.effector_q is not None and np.abs(e - new.effector_q).max() < ENGAGED_TOL
         )
-        m = evolve(m, arm=arm, hand_v=hand_v, dt=dt, idle=False)
+        m = evolve(m, arm=arm, hand_v=hand_v, dt=dt, idle=False, **estimates)
         if not executing and not m.moving:
             # Stopped after a switch to preview: forget the commands, as a switch at rest does.
             return evolve(new, motion=None, arm_cmd=None, effector_cmd=None, cmd_ns=inputs.t_ns), arm_cmd, eff_cmd

@@ -44,9 +44,10 @@ class JointMotion:
 
     @classmethod
     def known(cls, q: np.ndarray, v: np.ndarray, a: np.ndarray, at_rest: bool) -> "JointMotion":
-        """A JointMotion whose at_rest the caller has computed already (kernels.arm_sample)."""
-        s = cls(q, v, a)
-        s.__dict__["at_rest"] = at_rest  # where cached_property keeps its value
+        """A JointMotion whose at_rest the caller has computed already (kernels.arm_sample). Built as
+        frozen.evolve builds copies (a frozen dataclass's __init__ costs about a microsecond)."""
+        s = object.__new__(cls)
+        s.__dict__.update(q=q, v=v, a=a, at_rest=at_rest)  # at_rest: where cached_property keeps its value
         return s
 
     @cached_property  # asked several times per step; a JointMotion is never changed, only replaced
