@@ -47,9 +47,9 @@ class MotionState:
 
     @property
     def moving(self) -> bool:
-        arm = self.arm is not None and not self.arm.at_rest
-        hand = self.hand_v is not None and bool(self.hand_v.any())  # NaN counts as moving, -0.0 does not
-        return arm or hand
+        if self.arm is not None and not self.arm.at_rest:
+            return True
+        return self.hand_v is not None and bool(self.hand_v.any())  # NaN counts as moving, -0.0 does not
 
 
 class Motion:
@@ -283,8 +283,8 @@ class Motion:
     def idle_due(self, state, t_ns: int) -> bool:
         """No pipeline step for a while, and the commands are still moving: time for an idle step."""
         m = state.motion
-        return (m is not None and m.moving and state.cmd_ns is not None
-                and (m.idle or t_ns - state.cmd_ns > self.idle_after_ns))
+        return (m is not None and state.cmd_ns is not None and (m.idle or t_ns - state.cmd_ns > self.idle_after_ns)
+                and m.moving)  # the cheap tests first: the driver asks at every arm state sample
 
     def idle(self, p, state, inputs):
         """A step without new targets (the trigger device went quiet): brake to rest within the limits.
