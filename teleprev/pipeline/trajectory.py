@@ -63,11 +63,11 @@ class ArmGenerator:
                  jerk: np.ndarray):
         from ruckig import ControlInterface, InputParameter, Ruckig, Synchronization, Trajectory
 
-        self.lower = np.asarray(lower, dtype=float)
-        self.upper = np.asarray(upper, dtype=float)
-        self.velocity = np.asarray(velocity, dtype=float)
-        self.acceleration = np.asarray(acceleration, dtype=float)
-        self.jerk = np.asarray(jerk, dtype=float)
+        self.lower = _vector(lower)  # the kernels' argument type: contiguous float64
+        self.upper = _vector(upper)
+        self.velocity = _vector(velocity)
+        self.acceleration = _vector(acceleration)
+        self.jerk = _vector(jerk)
         n = len(self.lower)
         self._otg = Ruckig(n)
         self._inp = InputParameter(n)
