@@ -5,8 +5,8 @@ Each kernel performs numpy's (or Python's float) operations on every element in 
 multiply-add, no reassociation), with numpy's minimum / maximum on equal values (the second argument)
 where the code they replace used those, so its results equal that code's bit for bit
 (tests/pipeline/test_kernels.py); sessions recorded before them re-run identically. Scalars such as an
-exponential's value are computed in Python and passed in (libm's exp and LLVM's may differ). Compiled on the first call and cached on disk (cache=True); warm(), run by
-scripts/setup.sh, fills the cache.
+exponential's value are computed in Python and passed in (libm's exp and LLVM's may differ). Compiled on
+the first call and cached on disk (cache=True); warm(), run by scripts/setup.sh, fills the cache.
 """
 
 from __future__ import annotations
@@ -221,6 +221,7 @@ def warm() -> None:
     hand_track(x, x, x, x, True, 0.01, 0.01, 1.0, x - 1.0, x + 1.0, x + 1.0, x + 1.0, 0.8)
     hand_stop(x, x, 0.01, 0.01, x - 1.0, x + 1.0, x + 1.0)
     for tracking in (True, False):
-        hand_command(x, x, tracking, x, ESTIMATE_BLEND, x, x, 0.5, 0.01, 0.01, 1.0, x - 1.0, x + 1.0, x + 1.0, x + 1.0, 0.8)
+        hand_command(x, x, tracking, x, ESTIMATE_BLEND, x, x, 0.5, 0.01, 0.01, 1.0, x - 1.0, x + 1.0, x + 1.0, x + 1.0,
+                     0.8)
     plan = arm_plan(x, x, x, ESTIMATE_BLEND, x, x, 0.01, 0.5, 0.0, 0.01, 1.0, x + 1.0, x - 1.0, x + 1.0, x + 1.0)
     arm_sample(plan[4], plan[5], np.zeros((3, 2)), plan[6], x - 1.0, x + 1.0, 0.02, 1e-6, 1e-5)

@@ -123,7 +123,7 @@ class Motion:
         estimate of the target's velocity goes into `estimates` (MotionState's fields)."""
         estimate, before, before_v, gap, keep, ahead = self._arm_estimate(m, inputs, target)
         plan = self.arm.plan(m.arm, target, dt, frac, estimate, before, before_v, gap, keep, ahead)
-        if estimate in (ESTIMATE_ZERO, ESTIMATE_RAW, ESTIMATE_BLEND):  # a new wrist sample: its target, the new estimate
+        if estimate in (ESTIMATE_ZERO, ESTIMATE_RAW, ESTIMATE_BLEND):  # a new wrist sample: its target, its estimate
             estimates.update(target_ns=inputs.wrist.stamp_ns, target_q=target, target_v=plan[PLAN_ESTIMATE])
         out = self.arm.follow(m.arm, plan, dt, ENGAGED_TOL)
         if out is None:  # ruckig found no profile: a controlled stop instead
