@@ -12,7 +12,8 @@ command stream (divided differences on the command stamps; the sim hand's measur
     hand_swept_colliding, hand_state_colliding                      command segments / state samples
     tracking_lag_ms_p50    the shift that best lines the arm command up with the arm target, while
                            executing past the engage ramp (median over sessions)
-    trajectory_us_p50      the arm generator's cost per step (ruckig), timed while re-running a session
+    trajectory_us_p50      the arm generator's cost per step (ruckig and the arithmetic around it: ArmGenerator.plan
+                           and follow, or stop), timed while re-running a session
     stop_distance_rad_max  the longest controlled stop: joint travel from the last command before a
                            stop began (preview, stale input, a quiet trigger) to rest
 """
@@ -129,23 +130,30 @@ def stop_distances(path: Path) -> list[float]:
 
 
 def generator_cost_us(path: Path) -> list[float]:
-    """Per-step cost of the arm generator (ArmGenerator.track / stop), timed during a re-run of a session."""
+    """Per-step cost of the arm generator (ArmGenerator.plan and follow, or stop), timed during a re-run of
+    a session."""
     from teleprev.evaluation.reproduce import rerun_session
     from teleprev.pipeline import trajectory
 
     times: list[float] = []
-    originals = {name: getattr(trajectory.ArmGenerator, name) for name in ("track", "stop")}
+    planned = [0.0]  # a step's plan, to count with its follow
+    originals = {name: getattr(trajectory.ArmGenerator, name) for name in ("plan", "follow", "stop")}
 
-    def timed(fn):
+    def timed(name, fn):
         def call(self, *args, **kwargs):
             t = time.perf_counter_ns()
             out = fn(self, *args, **kwargs)
-            times.append((time.perf_counter_ns() - t) / 1000.0)
+            us = (time.perf_counter_ns() - t) / 1000.0
+            if name == "plan":
+                planned[0] = us
+            else:
+                times.append(us + planned[0])
+                planned[0] = 0.0
             return out
         return call
 
     for name, fn in originals.items():
-        setattr(trajectory.ArmGenerator, name, timed(fn))
+        setattr(trajectory.ArmGenerator, name, timed(name, fn))
     try:
         rerun_session(path)
     finally:

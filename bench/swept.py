@@ -41,7 +41,7 @@ def recorded_calls() -> tuple[list[list[tuple]], list[tuple], float]:
     steps: list[list[tuple]] = []
     hand_steps: list[tuple] = []
     clearance = 0.0
-    seg, last, hand_step = SweptCheck.segment_free, SweptCheck.last_free_on_segment, Motion.hand_step
+    seg, last, hand_command = SweptCheck.segment_free, SweptCheck.last_free_on_segment, Motion._hand_command
 
     def seg_rec(self, q0, q1):
         steps[-1].append(("segment_free", (np.array(q0), np.array(q1))))
@@ -51,19 +51,23 @@ def recorded_calls() -> tuple[list[list[tuple]], list[tuple], float]:
         steps[-1].append(("last_free_on_segment", (np.array(q0), np.array(q1), steps_)))
         return last(self, q0, q1, steps_)
 
-    def step_rec(self, *args, **kw):
+    def step_rec(self, m, last_cmd, v, target, dt, frac, flags, estimates):
+        # Motion's hand step, recorded as the Motion.hand_step call that does the same: its target velocity
+        # is the estimate the step tracked with (None: no feed-forward, or braking).
         nonlocal clearance
         clearance = self.swept.clearance if self.swept is not None else clearance
         steps.append([])
-        hand_steps.append((self, copy.deepcopy(args)))
-        return hand_step(self, *args, **kw)
+        args = copy.deepcopy((last_cmd, v, target, None, dt, m.dt, frac, list(flags)))
+        out = hand_command(self, m, last_cmd, v, target, dt, frac, flags, estimates)
+        hand_steps.append((self, (*args[:3], copy.deepcopy(estimates.get("hand_target_v")), *args[4:])))
+        return out
 
-    SweptCheck.segment_free, SweptCheck.last_free_on_segment, Motion.hand_step = seg_rec, last_rec, step_rec
+    SweptCheck.segment_free, SweptCheck.last_free_on_segment, Motion._hand_command = seg_rec, last_rec, step_rec
     try:
         for name in FIXTURES:
             rerun_session(ROOT / "tests" / "fixtures" / name)
     finally:
-        SweptCheck.segment_free, SweptCheck.last_free_on_segment, Motion.hand_step = seg, last, hand_step
+        SweptCheck.segment_free, SweptCheck.last_free_on_segment, Motion._hand_command = seg, last, hand_command
     keep = [k for k, s in enumerate(steps) if s]
     return [steps[k] for k in keep], [hand_steps[k] for k in keep], clearance
 

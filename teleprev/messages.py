@@ -19,7 +19,7 @@ from typing import Any, Union
 
 import numpy as np
 
-from teleprev.transforms import quat_to_matrix
+from teleprev.transforms import pose_matrix
 
 
 @dataclass(frozen=True, slots=True)
@@ -49,10 +49,7 @@ class PoseSample:
     orientation: np.ndarray
 
     def matrix(self) -> np.ndarray:
-        t = np.eye(4)
-        t[:3, :3] = quat_to_matrix(self.orientation)
-        t[:3, 3] = self.position
-        return t
+        return pose_matrix(self.position, self.orientation)
 
 
 @dataclass(frozen=True, slots=True)

@@ -64,18 +64,29 @@ def matrix_to_axis_angle(r: np.ndarray) -> np.ndarray:
     return axis * angle
 
 
+def _rotation_rows(x: float, y: float, z: float, w: float) -> list[list[float]]:
+    """The rotation matrix of quaternion x y z w (normalised first), as three rows of floats."""
+    n = 1.0 / math.sqrt(x * x + y * y + z * z + w * w)
+    x, y, z, w = x * n, y * n, z * n, w * n
+    return [
+        [1 - 2 * (y * y + z * z), 2 * (x * y - z * w), 2 * (x * z + y * w)],
+        [2 * (x * y + z * w), 1 - 2 * (x * x + z * z), 2 * (y * z - x * w)],
+        [2 * (x * z - y * w), 2 * (y * z + x * w), 1 - 2 * (x * x + y * y)],
+    ]
+
+
+def pose_matrix(position, quaternion) -> np.ndarray:
+    """The 4x4 homogeneous transform of a position (3,) and a quaternion (4,) x y z w (normalised first)."""
+    r = _rotation_rows(*np.asarray(quaternion, dtype=float).tolist())
+    x, y, z = np.asarray(position, dtype=float).tolist()
+    return np.array([[*r[0], x], [*r[1], y], [*r[2], z], [0.0, 0.0, 0.0, 1.0]])
+
+
 def quat_to_matrix(q) -> np.ndarray:
     """Quaternion(s) (..., 4) as x y z w to rotation matrices (..., 3, 3); normalises first."""
     q = np.asarray(q, dtype=float)
     if q.shape == (4,):  # one quaternion: plain floats are several times faster than array operations
-        x, y, z, w = q.tolist()
-        n = 1.0 / math.sqrt(x * x + y * y + z * z + w * w)
-        x, y, z, w = x * n, y * n, z * n, w * n
-        return np.array([
-            [1 - 2 * (y * y + z * z), 2 * (x * y - z * w), 2 * (x * z + y * w)],
-            [2 * (x * y + z * w), 1 - 2 * (x * x + z * z), 2 * (y * z - x * w)],
-            [2 * (x * z - y * w), 2 * (y * z + x * w), 1 - 2 * (x * x + y * y)],
-        ])
+        return np.array(_rotation_rows(*q.tolist()))
     q = q / np.linalg.norm(q, axis=-1, keepdims=True)
     x, y, z, w = q[..., 0], q[..., 1], q[..., 2], q[..., 3]
     m = np.stack(

@@ -15,10 +15,11 @@ T = TypeVar("T")
 def evolve(obj: T, **changes) -> T:
     """`obj` with `changes` applied; a name that is not a field is an error, as in dataclasses.replace."""
     cls = type(obj)
-    if not changes.keys() <= cls.__dataclass_fields__.keys():
-        raise TypeError(f"{cls.__name__} has no field(s) {sorted(changes.keys() - cls.__dataclass_fields__.keys())}")
     new = object.__new__(cls)
     state = new.__dict__
     state.update(obj.__dict__)
+    fields = len(state)
     state.update(changes)
+    if len(state) != fields:  # a change added a key: a name that is not a field (cheaper than a set test)
+        raise TypeError(f"{cls.__name__} has no field(s) {sorted(changes.keys() - cls.__dataclass_fields__.keys())}")
     return new

@@ -20,7 +20,8 @@ from dataclasses import dataclass
 import numpy as np
 
 from teleprev.pipeline.frozen import evolve
-from teleprev.pipeline.trajectory import ArmGenerator, HandLimiter, JointMotion
+from teleprev.pipeline.kernels import ESTIMATE_BLEND, ESTIMATE_HELD, ESTIMATE_NONE, ESTIMATE_RAW, ESTIMATE_ZERO
+from teleprev.pipeline.trajectory import PLAN_ESTIMATE, PLAN_GOAL, ArmGenerator, HandLimiter, JointMotion
 
 ENGAGED_TOL = 0.02  # rad (m for a gripper): the engage ramp is over once the commands come this close to the
 # targets (a human wrist often moves the target faster than the ramp's half speed, so a tight tolerance never ends it)
@@ -46,9 +47,9 @@ class MotionState:
 
     @property
     def moving(self) -> bool:
-        arm = self.arm is not None and not self.arm.at_rest
-        hand = self.hand_v is not None and bool(self.hand_v.any())  # NaN counts as moving, -0.0 does not
-        return arm or hand
+        if self.arm is not None and not self.arm.at_rest:
+            return True
+        return self.hand_v is not None and bool(self.hand_v.any())  # NaN counts as moving, -0.0 does not
 
 
 class Motion:
@@ -97,32 +98,76 @@ class Motion:
                        motion=m), ""
 
     # ---- commands ------------------------------------------------------------------------------
-    def _feedforward(self, m: MotionState, inputs, arm_target: np.ndarray):
-        """The target's velocity from the last two wrist samples, and the target moved on to now."""
+    def _arm_estimate(self, m: MotionState, inputs, target: np.ndarray) -> tuple:
+        """How this step estimates the arm target's velocity (kernels.ESTIMATE_*): from the last two wrist
+        samples, smoothed, and the target moved on to now. Returns (estimate, before, before_v, gap in
+        seconds, keep, ahead in seconds): ArmGenerator.plan's arguments."""
+        if not self.feedforward:
+            return ESTIMATE_NONE, None, None, 0.0, 0.0, 0.0
         stamp = inputs.wrist.stamp_ns
-        target_v = m.target_v
-        if stamp != m.target_ns:
-            gap = stamp - m.target_ns
-            if m.target_q is not None and 0 < gap <= FEEDFORWARD_MAX_GAP_NS:
-                # IK targets jitter by its tolerance from sample to sample: smooth the estimate.
-                raw = (arm_target - m.target_q) / (gap / 1e9)
-                keep = math.exp(-gap / self.feedforward_tau_ns)
-                target_v = raw if m.target_v is None else keep * m.target_v + (1.0 - keep) * raw
-            else:
-                target_v = np.zeros_like(arm_target)
-            m = evolve(m, target_ns=stamp, target_q=arm_target, target_v=target_v)
         ahead = min(max(inputs.t_ns - stamp, 0), EXTRAPOLATE_MAX_NS) / 1e9
-        return m, arm_target + target_v * ahead, target_v
+        if stamp == m.target_ns:
+            return ESTIMATE_HELD, None, m.target_v, 0.0, 0.0, ahead
+        gap = stamp - m.target_ns
+        if m.target_q is None or not 0 < gap <= FEEDFORWARD_MAX_GAP_NS:
+            return ESTIMATE_ZERO, None, None, 0.0, 0.0, ahead
+        # IK targets jitter by its tolerance from sample to sample: smooth the estimate.
+        keep = math.exp(-gap / self.feedforward_tau_ns)
+        estimate = ESTIMATE_RAW if m.target_v is None else ESTIMATE_BLEND
+        return estimate, m.target_q, m.target_v, gap / 1e9, keep, ahead
 
-    def _hand_feedforward(self, m: MotionState, target: np.ndarray, dt: float):
-        tv = m.hand_target_v
-        if m.hand_target is not None and 0 < dt <= FEEDFORWARD_MAX_GAP_NS / 1e9:
-            raw = (target - m.hand_target) / dt
-            keep = math.exp(-dt * 1e9 / self.feedforward_tau_ns)
-            tv = raw if tv is None else keep * tv + (1.0 - keep) * raw
-        else:
-            tv = np.zeros_like(target)
-        return evolve(m, hand_target=target, hand_target_v=tv), tv
+    def _arm_track(self, m: MotionState, inputs, target: np.ndarray, dt: float, frac: float, flags: list[str],
+                   estimates: dict):
+        """The arm's command dt on towards a fresh target, held within the joint limits. Returns (the arm's
+        motion, the command, whether it reached the target: within the step or the tolerance); a new
+        estimate of the target's velocity goes into `estimates` (MotionState's fields)."""
+        estimate, before, before_v, gap, keep, ahead = self._arm_estimate(m, inputs, target)
+        plan = self.arm.plan(m.arm, target, dt, frac, estimate, before, before_v, gap, keep, ahead)
+        if estimate in (ESTIMATE_ZERO, ESTIMATE_RAW, ESTIMATE_BLEND):  # a new wrist sample: its target, its estimate
+            estimates.update(target_ns=inputs.wrist.stamp_ns, target_q=target, target_v=plan[PLAN_ESTIMATE])
+        out = self.arm.follow(m.arm, plan, dt, ENGAGED_TOL)
+        if out is None:  # ruckig found no profile: a controlled stop instead
+            arm = self.arm.stop(m.arm, dt)
+            close = float(np.abs(arm.q - plan[PLAN_GOAL]).max()) < ENGAGED_TOL
+            return arm, self._limit_held(arm.q, flags), close
+        arm, reached, command, held, close = out
+        if held:
+            flags.append("arm_limit_held")
+        return arm, command, reached or close
+
+    def _limit_held(self, q: np.ndarray, flags: list[str]) -> np.ndarray:
+        """The generator limits velocity, acceleration and jerk, not position: heading for a limit faster
+        than it can stop there (a target that jumped, a stop), its profile passes the limit before coming
+        back. The joint limits are hard: the command is held at the limit meanwhile."""
+        inside = np.minimum(np.maximum(q, self.arm.lower), self.arm.upper)
+        if (inside == q).all():
+            return q
+        flags.append("arm_limit_held")
+        return inside
+
+    def _hand_estimate(self, m: MotionState, target: np.ndarray | None, dt: float) -> tuple:
+        """How this step estimates the hand target's velocity (kernels.ESTIMATE_*): from the last two
+        targets, smoothed. Returns (estimate, before, before_v, keep): HandLimiter.command's arguments."""
+        if target is None or not self.feedforward:
+            return ESTIMATE_NONE, None, None, 0.0
+        if m.hand_target is None or not 0 < dt <= FEEDFORWARD_MAX_GAP_NS / 1e9:
+            return ESTIMATE_ZERO, None, None, 0.0
+        keep = math.exp(-dt * 1e9 / self.feedforward_tau_ns)
+        return ESTIMATE_RAW if m.hand_target_v is None else ESTIMATE_BLEND, m.hand_target, m.hand_target_v, keep
+
+    def _hand_command(self, m: MotionState, last, v, target, dt: float, frac: float, flags: list[str],
+                      estimates: dict):
+        """hand_step with Motion's estimate of the target's velocity: (command, velocity); the target and
+        its estimate go into `estimates` (MotionState's fields). Everything before the swept check in one
+        kernel call (HandLimiter.command)."""
+        estimate, before, before_v, keep = self._hand_estimate(m, target, dt)
+        rows, unchanged = self.hand.command(last, v, target, estimate, before, before_v, keep, dt, m.dt, frac)
+        if estimate != ESTIMATE_NONE:
+            estimates.update(hand_target=target, hand_target_v=rows[2])
+        cmd, cmd_v, avoided = self._keep_clear(last, v, rows[0], rows[1], dt, m.dt, flags)
+        if avoided:
+            unchanged = not np.any(cmd != last)
+        return cmd, np.zeros_like(cmd_v) if unchanged else cmd_v
 
     def commands(self, p, state, new, inputs, arm_target, effector_target, flags):
         """(new state, arm command or None, effector command or None) for one step.
@@ -156,42 +201,27 @@ class Motion:
 
         arm_cmd = None
         arm, arm_reached = m.arm, arm_target is None
+        estimates: dict = {}  # the targets' velocity estimates this step makes: fields of the new MotionState
         if arm_target is not None:
-            target_v = None
-            if self.feedforward:
-                m, arm_target, target_v = self._feedforward(m, inputs, arm_target)
-            arm, arm_reached = self.arm.track(arm, arm_target, target_v, dt, frac)
-            arm_reached = arm_reached or float(np.abs(arm.q - arm_target).max()) < ENGAGED_TOL
-            arm_cmd = arm.q
+            arm, arm_cmd, arm_reached = self._arm_track(m, inputs, arm_target, dt, frac, flags, estimates)
         elif not arm.at_rest:
             arm = self.arm.stop(arm, dt)
-            arm_cmd = arm.q
             if executing:
                 flags.append("arm_stopping")
-        if arm_cmd is not None:
-            # The generator limits velocity, acceleration and jerk, not position: heading for a limit faster
-            # than it can stop there (a target that jumped, a stop), its profile passes the limit before
-            # coming back. The joint limits are hard: the command is held at the limit meanwhile.
-            inside = np.minimum(np.maximum(arm_cmd, self.arm.lower), self.arm.upper)
-            if not (inside == arm_cmd).all():
-                flags.append("arm_limit_held")
-                arm_cmd = inside
+            arm_cmd = self._limit_held(arm.q, flags)
 
         eff_cmd, hand_v = None, m.hand_v
         if self.hand is None:
             if effector_target is not None:
                 eff_cmd = p.effector.guard.step(state.effector_cmd, effector_target, dt, frac, target_valid=True)
         elif effector_target is not None or hand_v.any():
-            last = state.effector_cmd
-            tv = None
-            if effector_target is not None and self.feedforward:
-                m, tv = self._hand_feedforward(m, effector_target, dt)
             if effector_target is None and executing:
                 flags.append("hand_stopping")
-            eff_cmd, hand_v = self.hand_step(last, hand_v, effector_target, tv, dt, m.dt, frac, flags)
+            eff_cmd, hand_v = self._hand_command(m, state.effector_cmd, hand_v, effector_target, dt, frac, flags,
+                                                 estimates)
 
         if arm_cmd is None and eff_cmd is None:
-            return evolve(new, motion=evolve(m, arm=arm, hand_v=hand_v)), None, None
+            return evolve(new, motion=evolve(m, arm=arm, hand_v=hand_v, **estimates)), None, None
         a = arm_cmd if arm_cmd is not None else state.arm_cmd
         e = eff_cmd if eff_cmd is not None else state.effector_cmd
         # The engage ramp is over once the arm's generator meets its target within a step (or is within
@@ -199,7 +229,7 @@ class Motion:
         engaging = state.engaging and executing and not (
             arm_reached and new.effector_q is not None and np.abs(e - new.effector_q).max() < ENGAGED_TOL
         )
-        m = evolve(m, arm=arm, hand_v=hand_v, dt=dt, idle=False)
+        m = evolve(m, arm=arm, hand_v=hand_v, dt=dt, idle=False, **estimates)
         if not executing and not m.moving:
             # Stopped after a switch to preview: forget the commands, as a switch at rest does.
             return evolve(new, motion=None, arm_cmd=None, effector_cmd=None, cmd_ns=inputs.t_ns), arm_cmd, eff_cmd
@@ -214,16 +244,23 @@ class Motion:
             cmd, cmd_v = self.hand.track(last, v, target, target_v, dt, dt_before, frac)
         else:
             cmd, cmd_v = self.hand.stop(last, v, dt, dt_before)
-        if self.swept is not None:
-            h = self.hand  # compiled: both segments in one kernel call (None: it leaves them to these calls)
-            free = self.swept.command_free(last, cmd, cmd_v, h.acceleration, h.lower, h.upper) if self.swept.compiled else None
-            if free is None:
-                free = self.swept.segment_free(last, cmd) and self.swept.segment_free(cmd, self._stop_point(cmd, cmd_v))
-            if not free:
-                cmd, cmd_v = self._avoid(last, v, dt, dt_before, flags)
+        cmd, cmd_v, _ = self._keep_clear(last, v, cmd, cmd_v, dt, dt_before, flags)
         if not np.any(cmd != last):
             cmd_v = np.zeros_like(cmd_v)
         return cmd, cmd_v
+
+    def _keep_clear(self, last, v, cmd, cmd_v, dt, dt_before, flags):
+        """(cmd, cmd_v, False) where the segment from `last` to cmd and on to its stop point keeps the
+        clearance, else _avoid's command and velocity and True."""
+        if self.swept is None:
+            return cmd, cmd_v, False
+        h = self.hand  # compiled: both segments in one kernel call (None: it leaves them to these calls)
+        free = self.swept.command_free(last, cmd, cmd_v, h.acceleration, h.lower, h.upper) if self.swept.compiled else None
+        if free is None:
+            free = self.swept.segment_free(last, cmd) and self.swept.segment_free(cmd, self._stop_point(cmd, cmd_v))
+        if free:
+            return cmd, cmd_v, False
+        return *self._avoid(last, v, dt, dt_before, flags), True
 
     def _stop_point(self, q, v):
         """Where braking at the cap from q at v would end: a command is taken only if that way is free too,
@@ -246,8 +283,8 @@ class Motion:
     def idle_due(self, state, t_ns: int) -> bool:
         """No pipeline step for a while, and the commands are still moving: time for an idle step."""
         m = state.motion
-        return (m is not None and m.moving and state.cmd_ns is not None
-                and (m.idle or t_ns - state.cmd_ns > self.idle_after_ns))
+        return (m is not None and state.cmd_ns is not None and (m.idle or t_ns - state.cmd_ns > self.idle_after_ns)
+                and m.moving)  # the cheap tests first: the driver asks at every arm state sample
 
     def idle(self, p, state, inputs):
         """A step without new targets (the trigger device went quiet): brake to rest within the limits.

@@ -20,11 +20,13 @@ from functools import cached_property
 
 import numpy as np
 
-from teleprev.pipeline.kernels import hand_stop, hand_track, warm
+from teleprev.pipeline.kernels import (ESTIMATE_GIVEN, ESTIMATE_NONE, arm_plan, arm_sample, hand_command, hand_stop,
+                                       hand_track, warm)
 
 REST_VELOCITY = 1e-6  # rad/s: below this (and no acceleration) a joint is at rest
 REST_ACCELERATION = 1e-5
 BRAKE_FRACTION = 0.8  # of the hand's acceleration cap, for the braking envelope
+PLAN_GOAL, PLAN_ESTIMATE = 6, 7  # rows of ArmGenerator.plan: the target moved on, its velocity estimate
 
 
 @dataclass(frozen=True)
@@ -40,6 +42,14 @@ class JointMotion:
         q = np.asarray(q, dtype=float)
         return cls(q, np.zeros_like(q), np.zeros_like(q))
 
+    @classmethod
+    def known(cls, q: np.ndarray, v: np.ndarray, a: np.ndarray, at_rest: bool) -> "JointMotion":
+        """A JointMotion whose at_rest the caller has computed already (kernels.arm_sample). Built as
+        frozen.evolve builds copies (a frozen dataclass's __init__ costs about a microsecond)."""
+        s = object.__new__(cls)
+        s.__dict__.update(q=q, v=v, a=a, at_rest=at_rest)  # at_rest: where cached_property keeps its value
+        return s
+
     @cached_property  # asked several times per step; a JointMotion is never changed, only replaced
     def at_rest(self) -> bool:
         return bool((np.abs(self.v) < REST_VELOCITY).all() and (np.abs(self.a) < REST_ACCELERATION).all())
@@ -53,11 +63,11 @@ class ArmGenerator:
                  jerk: np.ndarray):
         from ruckig import ControlInterface, InputParameter, Ruckig, Synchronization, Trajectory
 
-        self.lower = np.asarray(lower, dtype=float)
-        self.upper = np.asarray(upper, dtype=float)
-        self.velocity = np.asarray(velocity, dtype=float)
-        self.acceleration = np.asarray(acceleration, dtype=float)
-        self.jerk = np.asarray(jerk, dtype=float)
+        self.lower = _vector(lower)  # the kernels' argument type: contiguous float64
+        self.upper = _vector(upper)
+        self.velocity = _vector(velocity)
+        self.acceleration = _vector(acceleration)
+        self.jerk = _vector(jerk)
         n = len(self.lower)
         self._otg = Ruckig(n)
         self._inp = InputParameter(n)
@@ -71,70 +81,64 @@ class ArmGenerator:
         # Each joint on its own time-optimal profile: tracking a moving target, not a straight joint path.
         self._inp.synchronization = Synchronization.No
         self._zero = [0.0] * n
-        self._lower, self._upper = self.lower.tolist(), self.upper.tolist()
-        self._velocity, self._acceleration = self.velocity.tolist(), self.acceleration.tolist()
 
-    def _run(self, s: JointMotion, dt: float, velocity: list[float], target: list[float] | None,
-             target_v: list[float] | None) -> tuple[JointMotion, float] | None:
-        """`dt` seconds along the time-optimal profile to `target`, moving at constant `target_v`, or (no
-        target) to rest; and the profile's duration. A moving target is planned in its own frame (where
-        it stands still, and the velocity limits shift by its velocity), so the profile meets it rather
-        than the point where it was. Plain floats: per-element numpy calls would cost more than ruckig."""
+    def plan(self, s: JointMotion, target: np.ndarray, dt: float, speed_frac: float = 1.0,
+             estimate: int = ESTIMATE_NONE, before: np.ndarray | None = None, before_v: np.ndarray | None = None,
+             gap: float = 0.0, keep: float = 0.0, ahead: float = 0.0) -> np.ndarray:
+        """ruckig's inputs for `dt` seconds towards `target` (kernels.arm_plan's rows), with the target's velocity
+        estimated as `estimate` says from the target before and its estimate (see kernels.ESTIMATE_*).
+
+        The target is clamped to the limits and its velocity to 0.9 of the cap, dropped towards a joint limit
+        the joint could not stop before. A moving target is planned in its own frame (where it stands still,
+        and the velocity limits shift by its velocity), so the profile meets it rather than the point where
+        it was: `target` is where the target is dt from now, and it was at target - velocity * dt when s was."""
+        target = _vector(target)
+        return arm_plan(_vector(s.q), _vector(s.v), target, estimate, target if before is None else _vector(before),
+                        target if before_v is None else _vector(before_v), float(gap), float(keep), float(ahead),
+                        float(dt), float(speed_frac), self.velocity, self.lower, self.upper, self.acceleration)
+
+    def follow(self, s: JointMotion, plan: np.ndarray, dt: float, tol: float = 0.0) -> tuple | None:
+        """`dt` seconds along the time-optimal profile of `plan` (ArmGenerator.plan's rows), or None where ruckig
+        finds none. Returns (the motion, whether the profile reaches the target within dt, its position held
+        within the joint limits, whether that hold changed it, whether it is within `tol` of the target)."""
         inp = self._inp
-        tv = self._zero if target_v is None else target_v
-        cv, vmax, vmin, cp, base = [], [], [], [], []
-        for q, v, w, m, g in zip(s.q.tolist(), s.v.tolist(), tv, velocity, target if target is not None else tv):
-            cv.append(v - w)
-            vmax.append(m - w)
-            vmin.append(-m - w)
-            if target is None:
-                base.append(q + w * dt)
-            else:
-                # `target` is where the target is dt from now; it was at target - tv * dt when s was.
-                cp.append(q - (g - w * dt))
-        inp.current_velocity = cv
+        inp.current_velocity, inp.max_velocity, inp.min_velocity, inp.current_position = plan[:4].tolist()
         inp.current_acceleration = s.a.tolist()
-        inp.max_velocity = vmax
-        inp.min_velocity = vmin
-        if target is None:
-            inp.control_interface = self._velocity_interface
-            inp.current_position = self._zero
-        else:
-            inp.control_interface = self._position
-            inp.current_position = cp
-            base = target
+        inp.control_interface = self._position
         if self._otg.calculate(inp, self._traj).value < 0:  # an error result: invalid input or no solution
             return None
-        q, v, a = self._traj.at_time(dt if dt > 0.0 else 0.0)
-        return (JointMotion(np.array([b + x for b, x in zip(base, q)]), np.array([w + x for w, x in zip(tv, v)]), np.array(a)),
-                self._traj.duration)
+        sample = np.array(self._traj.at_time(dt if dt > 0.0 else 0.0))
+        rows, held, close, at_rest = arm_sample(plan[4], plan[5], sample, plan[6], self.lower, self.upper, tol,
+                                                REST_VELOCITY, REST_ACCELERATION)
+        motion = JointMotion.known(rows[0], rows[1], rows[2], at_rest)
+        return motion, self._traj.duration <= dt, rows[3] if held else rows[0], held, close
 
     def track(self, s: JointMotion, target: np.ndarray, target_v: np.ndarray | None, dt: float,
               speed_frac: float = 1.0) -> tuple[JointMotion, bool]:
         """The motion `dt` seconds on, heading for `target` (met moving at `target_v`, or at rest), and
         whether it gets there within those `dt` seconds."""
-        velocity = self._velocity if speed_frac == 1.0 else [m * speed_frac for m in self._velocity]
-        target = [lo if g < lo else hi if g > hi else g for g, lo, hi in zip(target.tolist(), self._lower, self._upper)]
-        tv = None
-        if target_v is not None:
-            tv = []
-            for w, g, m, lo, hi, acc in zip(target_v.tolist(), target, velocity, self._lower, self._upper, self._acceleration):
-                cap = 0.9 * m
-                w = -cap if w < -cap else cap if w > cap else w
-                # No feed-forward towards a joint limit the joint could not stop before.
-                room = hi - g if w > 0 else g - lo
-                tv.append(0.0 if w * w > acc * room else w)
-        out = self._run(s, dt, velocity, target, tv)
+        estimate = ESTIMATE_NONE if target_v is None else ESTIMATE_GIVEN
+        out = self.follow(s, self.plan(s, target, dt, speed_frac, estimate, before_v=target_v), dt)
         if out is None:
             return self.stop(s, dt), False
-        return out[0], out[1] <= dt
+        return out[0], out[1]
 
     def stop(self, s: JointMotion, dt: float) -> JointMotion:
         """A controlled stop: velocity and acceleration brought to zero within the limits."""
-        out = self._run(s, dt, np.maximum(self.velocity, np.abs(s.v)).tolist(), None, None)
-        if out is None:  # cannot happen with positive limits; hold rather than guess
+        inp = self._inp
+        velocity = np.maximum(self.velocity, np.abs(s.v)).tolist()
+        inp.current_velocity = s.v.tolist()
+        inp.current_acceleration = s.a.tolist()
+        inp.max_velocity = velocity
+        inp.min_velocity = [-m for m in velocity]
+        inp.control_interface = self._velocity_interface
+        inp.current_position = self._zero
+        if self._otg.calculate(inp, self._traj).value < 0:  # cannot happen with positive limits; hold rather than guess
             return JointMotion.rest(s.q)
-        out = out[0]
+        p, w, a = self._traj.at_time(dt if dt > 0.0 else 0.0)
+        # The frame of a target at rest, as in plan: "+ 0.0" turns -0.0 into 0.0, which the recorded commands did.
+        q = [x + 0.0 * dt + y for x, y in zip(s.q.tolist(), p)]
+        out = JointMotion(np.array(q), np.array([0.0 + y for y in w]), np.array(a))
         if out.at_rest:
             return JointMotion.rest(out.q)
         return out
@@ -176,6 +180,20 @@ class HandLimiter:
         if dt <= 0:
             return q, v
         return hand_stop(_vector(q), _vector(v), float(dt), float(dt_before), self.lower, self.upper, self.acceleration)
+
+    def command(self, q: np.ndarray, v: np.ndarray, target: np.ndarray | None, estimate: int,
+                before: np.ndarray | None, before_v: np.ndarray | None, keep: float, dt: float, dt_before: float,
+                speed_frac: float = 1.0) -> tuple[np.ndarray, bool]:
+        """track towards `target` with its velocity estimated as `estimate` says from the target before and
+        its estimate (kernels.ESTIMATE_*, over the gap dt; ESTIMATE_NONE: no target velocity), or (no target)
+        stop, in one kernel call (kernels.hand_command). Returns (rows: command, its velocity, the estimate;
+        whether the command is q)."""
+        q = _vector(q)
+        tracking = target is not None
+        return hand_command(q, _vector(v), tracking, _vector(target) if tracking else q, estimate,
+                            q if before is None else _vector(before), q if before_v is None else _vector(before_v),
+                            float(keep), float(dt), float(dt_before), float(speed_frac), self.lower, self.upper,
+                            self.velocity, self.acceleration, BRAKE_FRACTION)
 
 
 def _vector(x) -> np.ndarray:

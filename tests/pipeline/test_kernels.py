@@ -4,7 +4,7 @@ for bit, so sessions recorded with those re-run identically."""
 import numpy as np
 import pytest
 
-from teleprev.pipeline.trajectory import BRAKE_FRACTION, HandLimiter
+from teleprev.pipeline.trajectory import BRAKE_FRACTION, HandLimiter, JointMotion
 
 
 def numpy_track(h, q, v, target, target_v, dt, dt_before, speed_frac=1.0):
@@ -78,3 +78,164 @@ def test_a_step_of_no_time_changes_nothing(limiter):
     q, v = limiter.lower + 0.1, np.ones(16)
     assert limiter.track(q, v, q + 1, None, 0.0, 0.01)[0] is q
     assert limiter.stop(q, v, -1.0, 0.01)[1] is v
+
+
+# ---- the fused kernels: Motion's target velocity estimates with the hand's cap and the arm's plan -----
+def numpy_estimate(target, before, before_v, gap, keep):
+    """Motion's feed-forward estimate as it was written in numpy: (target - before) / gap, smoothed."""
+    raw = (target - before) / gap
+    return raw if before_v is None else keep * before_v + (1.0 - keep) * raw
+
+
+def test_hand_command_equals_the_estimate_then_track_or_stop(limiter, rng):
+    from teleprev.pipeline.kernels import ESTIMATE_BLEND, ESTIMATE_NONE, ESTIMATE_RAW, ESTIMATE_ZERO
+
+    for k, (q, v, target, target_v, dt, dt_before, frac) in enumerate(_cases(limiter, rng, 2000)):
+        before = target - rng.normal(0, 0.01, len(q))
+        before_v = target_v if target_v is not None else np.zeros_like(q)
+        keep = float(np.exp(-dt * 1e9 / 30e6))
+        estimate = (ESTIMATE_NONE, ESTIMATE_ZERO, ESTIMATE_RAW, ESTIMATE_BLEND)[k % 4]
+        rows, unchanged = limiter.command(q, v, target, estimate, before, before_v, keep, dt, dt_before, frac)
+        tv = {ESTIMATE_NONE: None, ESTIMATE_ZERO: np.zeros_like(target),
+              ESTIMATE_RAW: numpy_estimate(target, before, None, dt, keep),
+              ESTIMATE_BLEND: numpy_estimate(target, before, before_v, dt, keep)}[estimate]
+        want = numpy_track(limiter, q, v, target, tv, dt, dt_before, frac)
+        assert _bits_equal(rows[0], want[0]) and _bits_equal(rows[1], want[1])
+        if tv is not None:
+            assert _bits_equal(rows[2], tv)
+        assert unchanged == (not np.any(want[0] != q))
+        rows, unchanged = limiter.command(q, v, None, ESTIMATE_NONE, q, q, 0.0, dt, dt_before, frac)
+        want = numpy_stop(limiter, q, v, dt, dt_before)
+        assert _bits_equal(rows[0], want[0]) and _bits_equal(rows[1], want[1])
+    q, v = limiter.lower + 0.1, np.ones(16)
+    rows, unchanged = limiter.command(q, v, q + 1, ESTIMATE_ZERO, q, q, 0.0, 0.0, 0.01)
+    assert unchanged and _bits_equal(rows[0], q) and _bits_equal(rows[1], v)  # a step of no time: as it was
+
+
+class ReferenceArmGenerator:
+    """ArmGenerator.track and .stop as they were written in Python floats (the reference)."""
+
+    def __init__(self, g):
+        self.g = g
+
+    def _run(self, s, dt, velocity, target, target_v):
+        g = self.g
+        inp = g._inp
+        tv = g._zero if target_v is None else target_v
+        cv, vmax, vmin, cp, base = [], [], [], [], []
+        for q, v, w, m, t in zip(s.q.tolist(), s.v.tolist(), tv, velocity, target if target is not None else tv):
+            cv.append(v - w)
+            vmax.append(m - w)
+            vmin.append(-m - w)
+            if target is None:
+                base.append(q + w * dt)
+            else:
+                cp.append(q - (t - w * dt))
+        inp.current_velocity, inp.current_acceleration, inp.max_velocity, inp.min_velocity = cv, s.a.tolist(), vmax, vmin
+        if target is None:
+            inp.control_interface, inp.current_position = g._velocity_interface, g._zero
+        else:
+            inp.control_interface, inp.current_position = g._position, cp
+            base = target
+        if g._otg.calculate(inp, g._traj).value < 0:
+            return None
+        q, v, a = g._traj.at_time(dt if dt > 0.0 else 0.0)
+        return (JointMotion(np.array([b + x for b, x in zip(base, q)]), np.array([w + x for w, x in zip(tv, v)]),
+                            np.array(a)), g._traj.duration)
+
+    def track(self, s, target, target_v, dt, speed_frac=1.0):
+        g = self.g
+        lower, upper, acceleration = g.lower.tolist(), g.upper.tolist(), g.acceleration.tolist()
+        velocity = g.velocity.tolist() if speed_frac == 1.0 else [m * speed_frac for m in g.velocity.tolist()]
+        target = [lo if t < lo else hi if t > hi else t for t, lo, hi in zip(target.tolist(), lower, upper)]
+        tv = None
+        if target_v is not None:
+            tv = []
+            for w, t, m, lo, hi, acc in zip(target_v.tolist(), target, velocity, lower, upper, acceleration):
+                cap = 0.9 * m
+                w = -cap if w < -cap else cap if w > cap else w
+                room = hi - t if w > 0 else t - lo
+                tv.append(0.0 if w * w > acc * room else w)
+        out = self._run(s, dt, velocity, target, tv)
+        if out is None:
+            return self.stop(s, dt), False
+        return out[0], out[1] <= dt
+
+    def stop(self, s, dt):
+        out = self._run(s, dt, np.maximum(self.g.velocity, np.abs(s.v)).tolist(), None, None)
+        if out is None:
+            return JointMotion.rest(s.q)
+        return JointMotion.rest(out[0].q) if out[0].at_rest else out[0]
+
+
+@pytest.fixture
+def generator(rng):
+    from teleprev.pipeline.trajectory import ArmGenerator
+
+    n = 6
+    lower = rng.uniform(-3.0, -1.0, n)
+    return ArmGenerator(lower, lower + rng.uniform(2.0, 5.0, n), np.full(n, 2.0), np.full(n, 8.0), np.full(n, 60.0))
+
+
+def _arm_cases(g, rng, count):
+    n = len(g.lower)
+    for k in range(count):
+        q = rng.uniform(g.lower, g.upper)
+        if k % 9 == 0:
+            q[:2] = g.upper[:2] - rng.uniform(0, 0.01, 2)  # at a limit, heading out
+        s = JointMotion(q, rng.normal(0, 1.0, n) * (rng.random(n) < 0.8), rng.normal(0, 4.0, n) * (rng.random(n) < 0.8))
+        if k % 13 == 0:
+            s = JointMotion.rest(q)
+        target = q + rng.normal(0, 0.02 if k % 2 else 0.4, n)
+        if k % 11 == 0:
+            target[2:4] = g.upper[2:4] + 0.2
+        target_v = None if k % 3 == 0 else rng.normal(0, 1.5, n) * (rng.random(n) < 0.7)
+        yield s, target, target_v, (1 / 120, 1 / 60, 0.003, 0.05)[k % 4], (1.0, 0.5)[k % 2]
+
+
+def _same_motion(a, b):
+    return _bits_equal(a.q, b.q) and _bits_equal(a.v, b.v) and _bits_equal(a.a, b.a) and a.at_rest == b.at_rest
+
+
+def test_the_arm_generator_equals_its_python_float_reference(generator, rng):
+    ref = ReferenceArmGenerator(generator)
+    for s, target, target_v, dt, frac in _arm_cases(generator, rng, 1500):
+        got, want = generator.track(s, target, target_v, dt, frac), ref.track(s, target, target_v, dt, frac)
+        assert _same_motion(got[0], want[0]) and got[1] == want[1]
+        assert _same_motion(generator.stop(s, dt), ref.stop(s, dt))
+
+
+def test_the_arm_plan_with_motions_estimate_equals_feedforward_then_track(generator, rng):
+    """Motion's feed-forward (the estimate, the target moved on by `ahead`) then track, as numpy and
+    Python floats computed them; and follow's limit hold and tolerance test as numpy's."""
+    from teleprev.pipeline.kernels import ESTIMATE_BLEND, ESTIMATE_HELD, ESTIMATE_RAW, ESTIMATE_ZERO
+    from teleprev.pipeline.trajectory import PLAN_ESTIMATE, PLAN_GOAL
+
+    ref = ReferenceArmGenerator(generator)
+    held_seen = 0
+    for k, (s, target, target_v, dt, frac) in enumerate(_arm_cases(generator, rng, 1500)):
+        before = target - rng.normal(0, 0.005, len(target))
+        before_v = target_v if target_v is not None else np.zeros_like(target)
+        gap_ns = int(rng.integers(1, 100_000_000))
+        keep, ahead = float(np.exp(-gap_ns / 30e6)), float(rng.choice([0.0, 0.004, 0.05]))
+        estimate = (ESTIMATE_HELD, ESTIMATE_ZERO, ESTIMATE_RAW, ESTIMATE_BLEND)[k % 4]
+        if estimate == ESTIMATE_HELD:
+            want_v = before_v
+        elif estimate == ESTIMATE_ZERO:
+            want_v = np.zeros_like(target)
+        else:
+            want_v = numpy_estimate(target, before, before_v if estimate == ESTIMATE_BLEND else None, gap_ns / 1e9, keep)
+        goal = target + want_v * ahead
+        plan = generator.plan(s, target, dt, frac, estimate, before, before_v, gap_ns / 1e9, keep, ahead)
+        assert _bits_equal(plan[PLAN_ESTIMATE], want_v) and _bits_equal(plan[PLAN_GOAL], goal)
+        out = generator.follow(s, plan, dt, 0.02)
+        want = ref.track(s, goal, want_v, dt, frac)
+        if out is None:
+            continue
+        motion, reached, command, held, close = out
+        assert _same_motion(motion, want[0]) and reached == want[1]
+        inside = np.minimum(np.maximum(motion.q, generator.lower), generator.upper)
+        assert held == (not (inside == motion.q).all()) and _bits_equal(command, inside if held else motion.q)
+        assert close == (float(np.abs(motion.q - goal).max()) < 0.02)
+        held_seen += held
+    assert held_seen > 10
