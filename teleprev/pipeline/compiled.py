@@ -14,8 +14,9 @@ def warm() -> None:
     from teleprev.pipeline.kernels import warm as motion
     from teleprev.pipeline.swept import warm as swept
     from teleprev.retarget.arm import warm as arm
+    from teleprev.robot.collision import warm as checker
     from teleprev.robot.compiled_collision import warm as collision
     from teleprev.robot.ik import warm as ik
 
-    for each in (collision, ik, arm, noncollision, hand, motion, swept):
+    for each in (collision, checker, ik, arm, noncollision, hand, motion, swept):
         each()

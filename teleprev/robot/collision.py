@@ -280,3 +280,14 @@ class SelfCollisionChecker(FclSelfCollisionChecker):
         if len(unsure):
             hits[unsure] = super().pair_matrix(q[unsure])
         return hits
+
+
+def warm(robot: str = "leap_hand_right") -> None:
+    """Compile SelfCollisionChecker's kernels (both margins in one pass) into numba's on-disk cache (or load
+    them): building one loads check, collides and first_collision; pair_matrix is asked here."""
+    from teleprev.robot.model import load_robot
+
+    model = load_robot(robot)
+    checker = SelfCollisionChecker(model)
+    qs = np.stack([model.neutral(), model.neutral()])
+    checker.pair_matrix(qs, checker._loose.kinematics.world(qs))

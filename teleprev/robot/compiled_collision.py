@@ -125,8 +125,8 @@ class CompiledSelfCollisionChecker:
 
 
 def warm(robot: str = "leap_hand_right") -> None:
-    """Compile every kernel the checkers (this one and SelfCollisionChecker, both margins in one pass) and
-    the compiled FK call into numba's on-disk cache (or load it)."""
+    """Compile every kernel this checker and the compiled FK call into numba's on-disk cache (or load it);
+    teleprev.robot.collision.warm does SelfCollisionChecker's (both margins in one pass)."""
     from teleprev.robot.model import load_robot
 
     model = load_robot(robot)
@@ -139,7 +139,3 @@ def warm(robot: str = "leap_hand_right") -> None:
     checker.pair_matrix(qs)
     checker.pair_matrix(qs, checker.kinematics.world(qs))
     checker.kinematics.world(q)
-    from teleprev.robot.collision import SelfCollisionChecker  # both margins in one pass: its kernels
-
-    both = SelfCollisionChecker(model, checker.exclusions)  # loads check, collides, first_collision, pair_matrix
-    both.pair_matrix(qs, checker.kinematics.world(qs))
