@@ -335,15 +335,29 @@ def _place(world, link, local, out, k):
         out[k, r, 3] = w0 * local[0, 3] + w1 * local[1, 3] + w2 * local[2, 3] + world[link, r, 3]
 
 
-@njit(cache=True, inline="always")
-def _edge_apart(tx, rx, ty, ry, reach, margin):
-    """One edge-edge axis: the unnormalised axis has length |(rx, ry)|, so the margin scales with it."""
-    return abs(tx * rx - ty * ry) - reach > margin * np.sqrt(rx * rx + ry * ry)
+# The separating-axis test decides two margins in one pass (SelfCollisionChecker's decision): a pair's
+# state under the loose margin (FCL's contacts and more) and the tight one (fewer) from the same
+# arithmetic; loose >= tight, so an axis that separates by more than `loose` separates by more than
+# `tight` too and decides both. With loose == tight it is the one-margin test (boxes_apart).
+BOX_APART, BOX_LOOSE, BOX_BOTH = 0, 1, 2  # apart for both margins / colliding for the loose one only / for both
 
 
 @njit(cache=True, inline="always")
-def boxes_apart(boxes, a, b, size, margin):
-    """Whether boxes a and b are separated by more than `margin` along one of the 15 SAT axes.
+def _edge_state(tx, rx, ty, ry, reach, loose, tight, tight_apart):
+    """One edge-edge axis: -1 if it separates by more than `loose`, else whether it (or an earlier axis:
+    tight_apart) separates by more than `tight` (1 / 0). The unnormalised axis has length |(rx, ry)|, so
+    the margins scale with it."""
+    gap = abs(tx * rx - ty * ry) - reach
+    length = np.sqrt(rx * rx + ry * ry)
+    if gap > loose * length:
+        return -1
+    return 1 if tight_apart or gap > tight * length else 0
+
+
+@njit(cache=True, inline="always")
+def boxes_state(boxes, a, b, size, loose, tight):
+    """BOX_APART if one of the 15 SAT axes separates boxes a and b by more than `loose`; else BOX_LOOSE if
+    one separates them by more than `tight`; else BOX_BOTH (loose >= tight).
 
     boxes (S, 3, 4): poses (columns 0-2 the box axes in the world, column 3 the centre); size (S, 4):
     half extents first. In box a's frame: rij = a_i . b_j, t = offset of b's centre; pij = |rij| + _PAD.
@@ -362,96 +376,6 @@ def boxes_apart(boxes, a, b, size, margin):
     b02, b12, b22 = boxes[b, 0, 2], boxes[b, 1, 2], boxes[b, 2, 2]
 
     # a's face normals, one row of R at a time so that an early exit skips the rest
-    t0 = a00 * d0 + a10 * d1 + a20 * d2
-    r00 = a00 * b00 + a10 * b10 + a20 * b20
-    r01 = a00 * b01 + a10 * b11 + a20 * b21
-    r02 = a00 * b02 + a10 * b12 + a20 * b22
-    q00, q01, q02 = abs(r00), abs(r01), abs(r02)
-    if abs(t0) - (ha0 + hb0 * q00 + hb1 * q01 + hb2 * q02) > margin:
-        return True
-    t1 = a01 * d0 + a11 * d1 + a21 * d2
-    r10 = a01 * b00 + a11 * b10 + a21 * b20
-    r11 = a01 * b01 + a11 * b11 + a21 * b21
-    r12 = a01 * b02 + a11 * b12 + a21 * b22
-    q10, q11, q12 = abs(r10), abs(r11), abs(r12)
-    if abs(t1) - (ha1 + hb0 * q10 + hb1 * q11 + hb2 * q12) > margin:
-        return True
-    t2 = a02 * d0 + a12 * d1 + a22 * d2
-    r20 = a02 * b00 + a12 * b10 + a22 * b20
-    r21 = a02 * b01 + a12 * b11 + a22 * b21
-    r22 = a02 * b02 + a12 * b12 + a22 * b22
-    q20, q21, q22 = abs(r20), abs(r21), abs(r22)
-    if abs(t2) - (ha2 + hb0 * q20 + hb1 * q21 + hb2 * q22) > margin:
-        return True
-
-    # b's face normals
-    if abs(t0 * r00 + t1 * r10 + t2 * r20) - (ha0 * q00 + ha1 * q10 + ha2 * q20 + hb0) > margin:
-        return True
-    if abs(t0 * r01 + t1 * r11 + t2 * r21) - (ha0 * q01 + ha1 * q11 + ha2 * q21 + hb1) > margin:
-        return True
-    if abs(t0 * r02 + t1 * r12 + t2 * r22) - (ha0 * q02 + ha1 * q12 + ha2 * q22 + hb2) > margin:
-        return True
-
-    # a_i x b_j: distance |t_i2 r_i1j - t_i1 r_i2j| (i1, i2 the next two axes after i, cyclically)
-    p00, p01, p02 = q00 + _PAD, q01 + _PAD, q02 + _PAD
-    p10, p11, p12 = q10 + _PAD, q11 + _PAD, q12 + _PAD
-    p20, p21, p22 = q20 + _PAD, q21 + _PAD, q22 + _PAD
-    if _edge_apart(t2, r10, t1, r20, ha1 * p20 + ha2 * p10 + hb1 * p02 + hb2 * p01, margin):
-        return True
-    if _edge_apart(t2, r11, t1, r21, ha1 * p21 + ha2 * p11 + hb2 * p00 + hb0 * p02, margin):
-        return True
-    if _edge_apart(t2, r12, t1, r22, ha1 * p22 + ha2 * p12 + hb0 * p01 + hb1 * p00, margin):
-        return True
-    if _edge_apart(t0, r20, t2, r00, ha2 * p00 + ha0 * p20 + hb1 * p12 + hb2 * p11, margin):
-        return True
-    if _edge_apart(t0, r21, t2, r01, ha2 * p01 + ha0 * p21 + hb2 * p10 + hb0 * p12, margin):
-        return True
-    if _edge_apart(t0, r22, t2, r02, ha2 * p02 + ha0 * p22 + hb0 * p11 + hb1 * p10, margin):
-        return True
-    if _edge_apart(t1, r00, t0, r10, ha0 * p10 + ha1 * p00 + hb1 * p22 + hb2 * p21, margin):
-        return True
-    if _edge_apart(t1, r01, t0, r11, ha0 * p11 + ha1 * p01 + hb2 * p20 + hb0 * p22, margin):
-        return True
-    return _edge_apart(t1, r02, t0, r12, ha0 * p12 + ha1 * p02 + hb0 * p21 + hb1 * p20, margin)
-
-
-# Both margins in one pass (SelfCollisionChecker's decision): a pair's state under the loose margin
-# (FCL's contacts and more) and the tight one (fewer) from the same arithmetic. Each axis is compared
-# with both margins exactly as boxes_apart compares it with one, so the two answers are bit for bit
-# those of two boxes_apart calls; loose >= tight, so an axis that separates by more than `loose`
-# separates by more than `tight` too and decides both.
-BOX_APART, BOX_LOOSE, BOX_BOTH = 0, 1, 2  # apart for both margins / colliding for the loose one only / for both
-
-
-@njit(cache=True, inline="always")
-def _edge_state(tx, rx, ty, ry, reach, loose, tight, tight_apart):
-    """_edge_apart for both margins: -1 if the axis separates by more than `loose`, else whether it
-    (or an earlier axis: tight_apart) separates by more than `tight` (1 / 0)."""
-    gap = abs(tx * rx - ty * ry) - reach
-    length = np.sqrt(rx * rx + ry * ry)
-    if gap > loose * length:
-        return -1
-    return 1 if tight_apart or gap > tight * length else 0
-
-
-@njit(cache=True, inline="always")
-def boxes_state(boxes, a, b, size, loose, tight):
-    """boxes_apart for both margins at once (loose >= tight): BOX_APART if some axis separates boxes a
-    and b by more than `loose`; else BOX_LOOSE if some axis separates them by more than `tight`; else
-    BOX_BOTH. The same expressions as boxes_apart, axis by axis, in the same order."""
-    ha0, ha1, ha2 = size[a, 0], size[a, 1], size[a, 2]
-    hb0, hb1, hb2 = size[b, 0], size[b, 1], size[b, 2]
-    d0 = boxes[b, 0, 3] - boxes[a, 0, 3]
-    d1 = boxes[b, 1, 3] - boxes[a, 1, 3]
-    d2 = boxes[b, 2, 3] - boxes[a, 2, 3]
-    a00, a10, a20 = boxes[a, 0, 0], boxes[a, 1, 0], boxes[a, 2, 0]
-    a01, a11, a21 = boxes[a, 0, 1], boxes[a, 1, 1], boxes[a, 2, 1]
-    a02, a12, a22 = boxes[a, 0, 2], boxes[a, 1, 2], boxes[a, 2, 2]
-    b00, b10, b20 = boxes[b, 0, 0], boxes[b, 1, 0], boxes[b, 2, 0]
-    b01, b11, b21 = boxes[b, 0, 1], boxes[b, 1, 1], boxes[b, 2, 1]
-    b02, b12, b22 = boxes[b, 0, 2], boxes[b, 1, 2], boxes[b, 2, 2]
-
-    # a's face normals
     t0 = a00 * d0 + a10 * d1 + a20 * d2
     r00 = a00 * b00 + a10 * b10 + a20 * b20
     r01 = a00 * b01 + a10 * b11 + a20 * b21
@@ -494,7 +418,7 @@ def boxes_state(boxes, a, b, size, loose, tight):
         return BOX_APART
     tight_apart = tight_apart or gap > tight
 
-    # a_i x b_j (see boxes_apart)
+    # a_i x b_j: distance |t_i2 r_i1j - t_i1 r_i2j| (i1, i2 the next two axes after i, cyclically)
     p00, p01, p02 = q00 + _PAD, q01 + _PAD, q02 + _PAD
     p10, p11, p12 = q10 + _PAD, q11 + _PAD, q12 + _PAD
     p20, p21, p22 = q20 + _PAD, q21 + _PAD, q22 + _PAD
@@ -528,6 +452,13 @@ def boxes_state(boxes, a, b, size, loose, tight):
     return BOX_LOOSE if s == 1 else BOX_BOTH
 
 
+@njit(cache=True, inline="always")
+def boxes_apart(boxes, a, b, size, margin):
+    """Whether boxes a and b are separated by more than `margin` along one of the 15 SAT axes: boxes_state
+    with one margin (whose tight question then never arises)."""
+    return boxes_state(boxes, a, b, size, margin, margin) == BOX_APART
+
+
 # ---- self-collision ----------------------------------------------------------------------------
 @njit(cache=True, inline="always")
 def _apart2(x, y, reach):
@@ -548,45 +479,11 @@ def self_collision_into(world, shape_link, shape_local, shape_size, links, spher
     bounding-sphere radius. Checked links: links (m, 3) the model link and the range [start, stop) of
     its boxes, spheres (m, 4) a bounding sphere of those boxes (centre in the link frame, radius).
     pairs (P, 2): the checked link pairs. With first_only it stops at the first colliding pair.
-    Bounding spheres cull first: link against link, box against the other link, box against box.
+    self_collision_margins_into with one margin: the two margins' answers then never differ.
     """
-    n_shapes = shape_link.shape[0]
-    boxes = np.empty((n_shapes, 3, 4))
-    for k in range(n_shapes):
-        _place(world, shape_link[k], shape_local[k], boxes, k)
-    n_links = links.shape[0]
-    centres = np.empty((n_links, 3))
-    for k in range(n_links):
-        w = links[k, 0]
-        for r in range(3):
-            centres[k, r] = (world[w, r, 0] * spheres[k, 0] + world[w, r, 1] * spheres[k, 1]
-                             + world[w, r, 2] * spheres[k, 2] + world[w, r, 3])
-    count = 0
-    for p in range(pairs.shape[0]):
-        la = pairs[p, 0]
-        lb = pairs[p, 1]
-        if _apart2(centres[la], centres[lb], spheres[la, 3] + spheres[lb, 3] + margin):
-            continue
-        hit = False
-        for a in range(links[la, 1], links[la, 2]):
-            if _apart2(boxes[a, :, 3], centres[lb], shape_size[a, 3] + spheres[lb, 3] + margin):
-                continue
-            for b in range(links[lb, 1], links[lb, 2]):
-                if _apart2(boxes[a, :, 3], boxes[b, :, 3], shape_size[a, 3] + shape_size[b, 3] + margin):
-                    continue
-                if not boxes_apart(boxes, a, b, shape_size, margin):
-                    hit = True
-                    break
-            if hit:
-                break
-        if hit:
-            hits[p] = True
-            labels[la] = True
-            labels[lb] = True
-            count += 1
-            if first_only:
-                break
-    return count
+    index = np.empty(pairs.shape[0], dtype=np.int64)
+    return self_collision_margins_into(world, shape_link, shape_local, shape_size, links, spheres, pairs, margin,
+                                       margin, first_only, hits, labels, index)
 
 
 @njit(cache=True)
@@ -656,23 +553,23 @@ def first_colliding(qs, start, link_int, link_num, link_terms, shape_link, shape
 # ---- self-collision, both margins in one pass (SelfCollisionChecker) ----------------------------
 # SelfCollisionChecker's compiled decision: the test with the margin `loose` (MARGIN: FCL's contacts and
 # more) and with `tight` (-MARGIN: fewer), FK, box poses and bounding spheres computed once. Every cull
-# and every axis is compared with both margins exactly as self_collision_into compares it with one, so
-# the answers are those of the two separate calls (tests/robot/test_compiled_collision.py).
+# and every axis is compared with both margins in the same expressions, so the answers are those of two
+# one-margin calls (tests/robot/test_compiled_collision.py).
 MARGINS_UNSURE = -1  # the two margins disagree on some pair (within the margin of touching): FCL decides
 
 
 @njit(cache=True)
 def self_collision_margins_into(world, shape_link, shape_local, shape_size, links, spheres, pairs, loose, tight,
                                 first_only, hits, labels, index):
-    """self_collision_into with the margins `loose` and `tight` (loose >= tight) at once.
+    """Colliding checked-link pairs under the margins `loose` and `tight` (loose >= tight) at once.
 
     Without first_only: the number n of pairs colliding for both margins, when no pair collides for the
     loose one alone (the two calls' answers are equal): hits (P,) and labels (m,) set, index[:n] the
     pairs in order. MARGINS_UNSURE as soon as a pair collides for the loose margin only (hits, labels and
     index then partial). With first_only: 1 at the first pair colliding for both margins, 0 when none
     collides for the loose margin, MARGINS_UNSURE when some do but none for the tight one.
-    Same culls as self_collision_into; a sphere apart by more than `tight` but not `loose` leaves only
-    the loose question for the boxes inside it.
+    Bounding spheres cull first: link against link, box against the other link, box against box; a
+    sphere apart by more than `tight` but not `loose` leaves only the loose question for the boxes inside.
     """
     n_shapes = shape_link.shape[0]
     boxes = np.empty((n_shapes, 3, 4))
