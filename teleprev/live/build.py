@@ -97,10 +97,6 @@ def build_pipeline(rig: Rig, models: str | Path | None = None, calibration: Cali
     arm_guard = JointGuard(ik.chain.lower, ik.chain.upper, arm_speed, max_dt)
     arm = ArmRetargeter(ik, cfg.wrist_scale, cfg.workspace_min, cfg.workspace_max, calibration.suit_to_robot())
     effector, swept = build_effector(rig, robot, cfg, max_dt, calibration, models, motion, compiled)
-    if compiled:
-        from teleprev.pipeline.compiled import warm
-
-        warm()  # load every kernel now (about 0.1 s from numba's cache), not in the live loop's first steps
     return Pipeline(cfg, arm, arm_guard, effector, build_motion(rig, ik, arm_speed, effector, swept) if motion else None,
                     compiled=compiled)
 

@@ -108,6 +108,7 @@ class Pipeline:
             self._hand_retargets = table is not None  # the kernel computes the effector's joints too
             self._hand_table = table if table is not None else np.zeros((5, 0))
             self._hand_limits = np.array([MAX_JOINT_ROTATION**2, MIN_FLEXION, MAX_FLEXION, MAX_ABDUCTION, TWIST_NOISE])
+            hand_kernels.warm()  # load them from numba's cache now, not in a live loop's first steps
 
     def model_hashes(self) -> dict[str, str] | None:
         """{role: sha256} of the model files the pipeline runs (a session records them, eval compares);

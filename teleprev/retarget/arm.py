@@ -44,6 +44,11 @@ class ArmRetargeter:
         self.lo = np.array(workspace_min, dtype=float)
         self.hi = np.array(workspace_max, dtype=float)
         self.m = np.eye(3) if suit_to_robot is None else np.array(suit_to_robot, dtype=float)
+        if ik.compiled:  # load the kernels from numba's cache now, not in a live loop's first steps
+            q = ik.chain.neutral()
+            pose = ik.pose(q)
+            self.solve(self.anchor(pose, q), pose, q)
+            self.target(self.anchor(pose, q), pose)
 
     def anchor(self, wrist: np.ndarray, arm_q: np.ndarray) -> Anchor:
         return Anchor(np.array(wrist, dtype=float), self.ik.pose(arm_q))
@@ -87,10 +92,4 @@ def warm(robot: str = "xarm6", tip: str = "link_eef") -> None:
     cache, or load them from it, for the argument types the pipeline passes."""
     from teleprev.robot.model import load_robot
 
-    ik = ArmIK(load_robot(robot), tip, compiled=True)
-    q = ik.chain.neutral()
-    pose = ik.pose(q)
-    arm = ArmRetargeter(ik)
-    anchor = arm.anchor(pose, q)
-    arm.target(anchor, pose)
-    arm.solve(anchor, pose, q)
+    ArmRetargeter(ArmIK(load_robot(robot), tip, compiled=True))  # the constructors load the kernels

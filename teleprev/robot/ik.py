@@ -71,6 +71,9 @@ class ArmIK:
         self._revolute = np.array([j.type != "prismatic" for j in self.chain.joints])
         self._all_revolute = bool(self._revolute.all())
         self._kernel_tables = self._compiled_tables() if compiled else None
+        if compiled:  # load the kernel from numba's cache now, not in a live loop's first steps
+            q = self.chain.neutral()
+            self.solve(self.pose(q), q)
 
     def _compiled_tables(self) -> tuple:
         """The kernel's arm tables, in kernels.ik_solve's argument order from the FK tables to the limits
@@ -167,6 +170,4 @@ def warm(robot: str = "xarm6", tip: str = "link_eef") -> None:
     for the argument types the pipeline passes (teleprev.retarget.arm.warm does the retargeter's)."""
     from teleprev.robot.model import load_robot
 
-    ik = ArmIK(load_robot(robot), tip, compiled=True)
-    q = ik.chain.neutral()
-    ik.solve(ik.pose(q), q)
+    ArmIK(load_robot(robot), tip, compiled=True)  # its constructor loads the kernel
