@@ -17,10 +17,10 @@ Arithmetic (what makes the answers the same bits every time, on every x86-64 CPU
   reassociating anything. No fastmath: no reassociation and no fused multiply-add contraction. numpy's
   matmul goes to OpenBLAS, which picks its kernels (blocking, FMA) per CPU; these loops do not.
 - A row's arithmetic never depends on the other rows of its batch, so a batch answers bit for bit as
-  single calls do. Batches run four (or two) rows per pass over a layer's weights (_dense4, _dense2), each
+  single calls do. Batches run four rows per pass over a layer's weights (_dense4), each
   weight loaded once for all of them; such a pass skips only the inputs that are zero in every one of its
   rows, so a row may add an exact zero product that alone it skips: no nonzero sum changes, and a zero
-  sum's sign is not seen by anything after it (see _dense2). A single row runs alone (_forward1).
+  sum's sign is not seen by anything after it (see _dense4). Other rows run alone (_forward1).
 - exp is computed here (_exp: float64, range-reduced by halving, a Taylor polynomial and squaring: only
   + and *), not by the C library, whose expf/tanhf may differ between CPU variants and versions. It
   serves the SiLU / tanh activations (computed in float64, rounded to float32) and the CPN's decision.
@@ -41,7 +41,7 @@ from numba import njit
 
 RELU, SILU, TANH = 0, 1, 2
 HEADER = 8  # G, width_in, width_out, layers, joints, activation, noisy_or, outputs
-BLOCK = 8  # rows per block in batches (passes of four rows, then two, then one, over each layer)
+BLOCK = 8  # rows per block in batches (passes of four rows over each layer, then one row at a time)
 EXP_CLAMP = 88.0  # |x| clamped for exp: beyond it nothing these kernels decide changes
 
 
@@ -97,50 +97,15 @@ def _dense(h, n_in, n_out, w, bias, nz, acc):
 
 
 @njit(cache=True, error_model="numpy")
-def _dense2(h, n_in, n_out, w, bias, nz, acc):
-    """_dense for two rows at once, h[0] and h[1] into acc[0] and acc[1]: each weight row loaded once for
-    both. Each row's sum still starts from its bias and adds input i's product in order of i; the inputs
-    are those nonzero in either row, so a row may add an exact zero product the one-row pass skips. That
-    changes no nonzero value (x + 0 == x) and at most the sign of a zero sum, which nothing downstream
-    tells apart (ReLU makes it +0; SiLU and tanh keep it a zero, skipped or added as a zero; the CPN's
-    exp and the CCN's sum from +0.0 treat -0 as +0): the CPN's decisions and the CCN's proposals are the
-    bits of one row at a time, and a raw output (slots) differs at most in the sign of an exact zero."""
-    h0, h1 = h[0], h[1]
-    k = 0
-    for i in range(n_in):
-        nz[k] = i
-        k += (h0[i] != 0) | (h1[i] != 0)
-    acc0, acc1 = acc[0], acc[1]
-    for o in range(n_out):
-        acc0[o] = bias[o]
-        acc1[o] = bias[o]
-    j = 0
-    while j + 4 <= k:
-        i0, i1, i2, i3 = nz[j], nz[j + 1], nz[j + 2], nz[j + 3]
-        v0, v1, v2, v3 = h0[i0], h0[i1], h0[i2], h0[i3]
-        u0, u1, u2, u3 = h1[i0], h1[i1], h1[i2], h1[i3]
-        w0 = w[i0 * n_out:(i0 + 1) * n_out]
-        w1 = w[i1 * n_out:(i1 + 1) * n_out]
-        w2 = w[i2 * n_out:(i2 + 1) * n_out]
-        w3 = w[i3 * n_out:(i3 + 1) * n_out]
-        for o in range(n_out):
-            a0, a1, a2, a3 = w0[o], w1[o], w2[o], w3[o]
-            acc0[o] = (((acc0[o] + v0 * a0) + v1 * a1) + v2 * a2) + v3 * a3
-            acc1[o] = (((acc1[o] + u0 * a0) + u1 * a1) + u2 * a2) + u3 * a3
-        j += 4
-    while j < k:
-        i = nz[j]
-        v, u = h0[i], h1[i]
-        wi = w[i * n_out:(i + 1) * n_out]
-        for o in range(n_out):
-            acc0[o] = acc0[o] + v * wi[o]
-            acc1[o] = acc1[o] + u * wi[o]
-        j += 1
-
-
-@njit(cache=True, error_model="numpy")
 def _dense4(h, n_in, n_out, w, bias, nz, acc):
-    """_dense2 for four rows, h[0:4] into acc[0:4], two inputs per pass over the accumulators."""
+    """_dense for four rows, h[0:4] into acc[0:4], two inputs per pass over the accumulators: each weight
+    row loaded once for all four. Each row's sum still starts from its bias and adds input i's product in
+    order of i; the inputs are those nonzero in any of the rows, so a row may add an exact zero product
+    the one-row pass skips. That changes no nonzero value (x + 0 == x) and at most the sign of a zero sum,
+    which nothing downstream tells apart (ReLU makes it +0; SiLU and tanh keep it a zero, skipped or added
+    as a zero; the CPN's exp and the CCN's sum from +0.0 treat -0 as +0): the CPN's decisions and the
+    CCN's proposals are the bits of one row at a time, and a raw output (slots) differs at most in the
+    sign of an exact zero."""
     h0, h1, h2, h3 = h[0], h[1], h[2], h[3]
     k = 0
     for i in range(n_in):
@@ -199,8 +164,8 @@ def _activate(acc, h, n_out, act):
 @njit(cache=True, error_model="numpy")
 def _forward(x, r0, nb, net_i, net_w, slots):
     """Raw outputs of rows r0 .. r0 + nb of x (float64 (R, n)) into slots[:nb] (float32 (>= nb, G * width_out)),
-    four rows per pass over each layer (_dense4) while four are left, then two (_dense2), then one alone
-    (_forward1). A row's outputs do not depend on what else is in the batch (see _dense2)."""
+    four rows per pass over each layer (_dense4) while four are left, then each row alone (_forward1). A
+    row's outputs do not depend on what else is in the batch (see _dense4)."""
     g_count, win, wout, n_layers, act = net_i[0], net_i[1], net_i[2], net_i[3], net_i[5]
     lay = HEADER + g_count * win
     widest = win
@@ -210,32 +175,28 @@ def _forward(x, r0, nb, net_i, net_w, slots):
     acc = np.empty((4, widest), np.float32)
     nz = np.empty(widest, np.int64)
     r = 0
-    while r + 2 <= nb:
-        width = 4 if r + 4 <= nb else 2
+    while r + 4 <= nb:
         for g in range(g_count):
             for i in range(win):
                 c = net_i[HEADER + g * win + i]
-                for k in range(width):
+                for k in range(4):
                     h[k, i] = np.float32(x[r0 + r + k, c])
             for layer in range(n_layers):
                 t = lay + 4 * layer
                 n_in, n_out = net_i[t + 2], net_i[t + 3]
                 w0 = net_i[t] + g * n_in * n_out
                 b0 = net_i[t + 1] + g * n_out
-                if width == 4:
-                    _dense4(h, n_in, n_out, net_w[w0:w0 + n_in * n_out], net_w[b0:b0 + n_out], nz, acc)
-                else:
-                    _dense2(h, n_in, n_out, net_w[w0:w0 + n_in * n_out], net_w[b0:b0 + n_out], nz, acc)
+                _dense4(h, n_in, n_out, net_w[w0:w0 + n_in * n_out], net_w[b0:b0 + n_out], nz, acc)
                 if layer == n_layers - 1:
-                    for k in range(width):
+                    for k in range(4):
                         for o in range(n_out):
                             slots[r + k, g * wout + o] = acc[k, o]
                 else:
-                    for k in range(width):
+                    for k in range(4):
                         _activate(acc[k], h[k], n_out, act)
-        r += width
-    if r < nb:
-        _forward1(x, r0 + r, net_i, net_w, slots[r:r + 1])
+        r += 4
+    for k in range(r, nb):
+        _forward1(x, r0 + k, net_i, net_w, slots[k:k + 1])
 
 
 @njit(cache=True, error_model="numpy")
