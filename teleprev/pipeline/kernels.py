@@ -64,22 +64,6 @@ def _span(dt, dt_before):
 
 
 @njit(cache=True)
-def hand_track(q, v, target, target_v, has_target_v, dt, dt_before, speed_frac, lower, upper, velocity,
-               acceleration, brake_fraction):
-    """trajectory.HandLimiter.track's arithmetic for dt > 0: (command, its velocity)."""
-    n = q.shape[0]
-    cmd = np.empty(n)
-    vel = np.empty(n)
-    span = _span(dt, dt_before)
-    for i in range(n):
-        cap = velocity[i] * speed_frac
-        tv = _min(_max(target_v[i], -0.9 * cap), 0.9 * cap) if has_target_v else 0.0
-        cmd[i], vel[i] = _track_joint(q[i], v[i], target[i], tv, dt, span, cap, lower[i], upper[i], acceleration[i],
-                                      brake_fraction)
-    return cmd, vel
-
-
-@njit(cache=True)
 def hand_stop(q, v, dt, dt_before, lower, upper, acceleration):
     """trajectory.HandLimiter.stop's arithmetic for dt > 0: (command, its velocity)."""
     n = q.shape[0]
@@ -218,7 +202,6 @@ def arm_sample(base, base_v, sample, goal, lower, upper, tol, rest_velocity, res
 def warm() -> None:
     """Compile (or load from the cache) every kernel here for float64 vectors."""
     x = np.zeros(2)
-    hand_track(x, x, x, x, True, 0.01, 0.01, 1.0, x - 1.0, x + 1.0, x + 1.0, x + 1.0, 0.8)
     hand_stop(x, x, 0.01, 0.01, x - 1.0, x + 1.0, x + 1.0)
     for tracking in (True, False):
         hand_command(x, x, tracking, x, ESTIMATE_BLEND, x, x, 0.5, 0.01, 0.01, 1.0, x - 1.0, x + 1.0, x + 1.0, x + 1.0,

@@ -20,7 +20,8 @@ from dataclasses import dataclass
 import numpy as np
 
 from teleprev.pipeline.frozen import evolve
-from teleprev.pipeline.kernels import ESTIMATE_BLEND, ESTIMATE_HELD, ESTIMATE_NONE, ESTIMATE_RAW, ESTIMATE_ZERO
+from teleprev.pipeline.kernels import (ESTIMATE_BLEND, ESTIMATE_GIVEN, ESTIMATE_HELD, ESTIMATE_NONE, ESTIMATE_RAW,
+                                       ESTIMATE_ZERO)
 from teleprev.pipeline.trajectory import PLAN_ESTIMATE, PLAN_GOAL, ArmGenerator, HandLimiter, JointMotion
 
 ENGAGED_TOL = 0.02  # rad (m for a gripper): the engage ramp is over once the commands come this close to the
@@ -157,17 +158,14 @@ class Motion:
 
     def _hand_command(self, m: MotionState, last, v, target, dt: float, frac: float, flags: list[str],
                       estimates: dict):
-        """hand_step with Motion's estimate of the target's velocity: (command, velocity); the target and
-        its estimate go into `estimates` (MotionState's fields). Everything before the swept check in one
-        kernel call (HandLimiter.command)."""
+        """_hand_move with Motion's estimate of the target's velocity: (command, velocity); the target and
+        its estimate go into `estimates` (MotionState's fields)."""
         estimate, before, before_v, keep = self._hand_estimate(m, target, dt)
-        rows, unchanged = self.hand.command(last, v, target, estimate, before, before_v, keep, dt, m.dt, frac)
+        cmd, cmd_v, target_v = self._hand_move(last, v, target, estimate, before, before_v, keep, dt, m.dt, frac,
+                                               flags)
         if estimate != ESTIMATE_NONE:
-            estimates.update(hand_target=target, hand_target_v=rows[2])
-        cmd, cmd_v, avoided = self._keep_clear(last, v, rows[0], rows[1], dt, m.dt, flags)
-        if avoided:
-            unchanged = not np.any(cmd != last)
-        return cmd, np.zeros_like(cmd_v) if unchanged else cmd_v
+            estimates.update(hand_target=target, hand_target_v=target_v)
+        return cmd, cmd_v
 
     def commands(self, p, state, new, inputs, arm_target, effector_target, flags):
         """(new state, arm command or None, effector command or None) for one step.
@@ -239,15 +237,20 @@ class Motion:
 
     def hand_step(self, last, v, target, target_v, dt, dt_before, frac, flags):
         """(command, velocity) one step of dt from hand command `last` moving at v: towards `target`
-        (None: brake), within the acceleration cap, and only along a segment that keeps the clearance."""
-        if target is not None:
-            cmd, cmd_v = self.hand.track(last, v, target, target_v, dt, dt_before, frac)
-        else:
-            cmd, cmd_v = self.hand.stop(last, v, dt, dt_before)
-        cmd, cmd_v, _ = self._keep_clear(last, v, cmd, cmd_v, dt, dt_before, flags)
-        if not np.any(cmd != last):
-            cmd_v = np.zeros_like(cmd_v)
-        return cmd, cmd_v
+        (None: brake) moving at `target_v` (None: met at rest), within the acceleration cap, and only along
+        a segment that keeps the clearance (replay's smoothing: the live step estimates target_v itself)."""
+        estimate = ESTIMATE_NONE if target_v is None else ESTIMATE_GIVEN
+        return self._hand_move(last, v, target, estimate, None, target_v, 0.0, dt, dt_before, frac, flags)[:2]
+
+    def _hand_move(self, last, v, target, estimate, before, before_v, keep, dt, dt_before, frac, flags):
+        """(command, velocity, the target's velocity estimate): the capped track or stop with the target's
+        velocity estimated as `estimate` says (HandLimiter.command, one kernel call), then only along a
+        segment that keeps the clearance; a command equal to `last` has velocity zero."""
+        rows, unchanged = self.hand.command(last, v, target, estimate, before, before_v, keep, dt, dt_before, frac)
+        cmd, cmd_v, avoided = self._keep_clear(last, v, rows[0], rows[1], dt, dt_before, flags)
+        if avoided:
+            unchanged = not np.any(cmd != last)
+        return cmd, np.zeros_like(cmd_v) if unchanged else cmd_v, rows[2]
 
     def _keep_clear(self, last, v, cmd, cmd_v, dt, dt_before, flags):
         """(cmd, cmd_v, False) where the segment from `last` to cmd and on to its stop point keeps the

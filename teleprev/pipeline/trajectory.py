@@ -21,7 +21,7 @@ from functools import cached_property
 import numpy as np
 
 from teleprev.pipeline.kernels import (ESTIMATE_GIVEN, ESTIMATE_NONE, arm_plan, arm_sample, hand_command, hand_stop,
-                                       hand_track, warm)
+                                       warm)
 
 REST_VELOCITY = 1e-6  # rad/s: below this (and no acceleration) a joint is at rest
 REST_ACCELERATION = 1e-5
@@ -163,17 +163,16 @@ class HandLimiter:
         """(command, its velocity) one step of dt towards `target` (where the target is at the end of the
         step, moving at `target_v`) from command q moving at v.
 
-        Per joint (compiled: kernels.hand_track): the target clamped to the limits and its velocity to 0.9
+        Per joint (compiled: kernels.hand_command): the target clamped to the limits and its velocity to 0.9
         of the cap, dropped where the target is about to stop at a joint limit; then land on the target at
         the end of the step, unless that closes in faster than, in the target's frame, steps of dt each
         slowing by a*dt could still stop within the distance (braking planned at BRAKE_FRACTION of the cap
         leaves room to land exactly); the velocity changes by at most the cap over the step."""
         if dt <= 0:
             return q, v
-        has_tv = target_v is not None
-        return hand_track(_vector(q), _vector(v), _vector(target), _vector(target_v) if has_tv else self.lower, has_tv,
-                          float(dt), float(dt_before), float(speed_frac), self.lower, self.upper, self.velocity,
-                          self.acceleration, BRAKE_FRACTION)
+        estimate = ESTIMATE_NONE if target_v is None else ESTIMATE_GIVEN
+        rows, _ = self.command(q, v, target, estimate, None, target_v, 0.0, dt, dt_before, speed_frac)
+        return rows[0], rows[1]
 
     def stop(self, q: np.ndarray, v: np.ndarray, dt: float, dt_before: float) -> tuple[np.ndarray, np.ndarray]:
         """One step of the hardest braking the cap allows (compiled: kernels.hand_stop)."""
