@@ -77,6 +77,7 @@ def eval_(
         from teleprev.evaluation.corpus import PRELOAD
 
         executor = make_executor(workers, ray, PRELOAD)
+        executor.start()  # local workers' fork server: it loads the kernels while this process goes on
     from teleprev.evaluation.corpus import evaluate_corpus, print_corpus
 
     try:

@@ -186,6 +186,14 @@ class LocalExecutor:
         ctx.set_forkserver_preload(["teleprev.corpus.orphans", *self.preload])
         return ctx
 
+    def start(self) -> None:
+        """Start the fork server now rather than in map(): it imports `preload` (lerobot takes seconds) on
+        another core while this process goes on, checking the sessions, say. Returns at once."""
+        from multiprocessing import forkserver
+
+        self._context()
+        forkserver.ensure_running()
+
     def map(self, fn: Callable, context: Any, items: list, labels: list[str] | None = None,
             on_event: Emit = _ignore, on_done: Callable[[Outcome], None] = _ignore) -> list[Outcome]:
         """Run fn on every item; the outcomes in item order."""
@@ -371,6 +379,9 @@ class RayExecutor:
             for ref in running:
                 ray.cancel(ref, force=True)
         return [outcomes[i] for i in range(len(items))]
+
+    def start(self) -> None:
+        """Nothing: the instance is started or joined by __init__."""
 
     def close(self) -> None:
         if self.owned and self.ray.is_initialized():

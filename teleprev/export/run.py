@@ -61,6 +61,8 @@ def export(options: ExportOptions, report: Reporter = no_progress) -> ExportRepo
         info = D.read_info(target)
         fps = fps or int(info.get("fps", 0))
 
+    parallel = options.open_reader is None and (options.ray is not None or (options.workers > 1 and len(options.sessions) > 1))
+    executor = _local_workers(options) if parallel else None  # started now: lerobot loads while the sessions are checked
     sources = _open_all(options, fps)
     try:
         first = sources[0]
@@ -81,10 +83,10 @@ def export(options: ExportOptions, report: Reporter = no_progress) -> ExportRepo
     try:
         failed: dict[str, str] = {}
         startup = 0.0
-        if options.open_reader is None and (options.ray is not None or (options.workers > 1 and len(sources) > 1)):
+        if parallel:
             for s in sources:
                 s.close()  # workers open their own readers (and import lerobot themselves, once each)
-            reports = _parallel(options, staging, features, robot, fps, settings, video, report, failed)
+            reports = _parallel(options, staging, features, robot, fps, settings, video, report, failed, executor)
         else:
             startup = time.perf_counter()  # after the checks, so bad input is refused without waiting for it
             report(Progress("phase", "loading lerobot"))
@@ -167,7 +169,20 @@ def _sequential(options, sources, staging, features, robot, fps, settings, video
         raise
 
 
-def _parallel(options, staging, features, robot, fps, settings, video, report, failed) -> list[SessionReport]:
+def _local_workers(options: ExportOptions):
+    """The local workers' executor with its fork server started (None for Ray, which starts in
+    _parallel, after the checks: a cluster is not joined for input that is then refused)."""
+    if options.ray is not None:
+        return None
+    from teleprev.corpus.executor import LocalExecutor
+    from teleprev.export.parallel import PRELOAD
+
+    executor = LocalExecutor(options.workers, PRELOAD)
+    executor.start()
+    return executor
+
+
+def _parallel(options, staging, features, robot, fps, settings, video, report, failed, executor=None) -> list[SessionReport]:
     from teleprev.corpus.executor import make_executor
     from teleprev.export.parallel import PRELOAD, Job, export_parallel, merge
 
@@ -176,7 +191,8 @@ def _parallel(options, staging, features, robot, fps, settings, video, report, f
     job = Job(options.repo_id, options.recipe, fps, features, robot, settings, video)
     where = "a Ray cluster" if options.ray is not None else f"{min(options.workers, len(paths))} workers"
     report(Progress("phase", f"starting {where} (lerobot loads once per worker)"))
-    executor = make_executor(options.workers, options.ray, PRELOAD)
+    if executor is None:
+        executor = make_executor(options.workers, options.ray, PRELOAD)
     try:
         outcomes = export_parallel(paths, parts, job, executor, report)
         reports = [o.value for o in outcomes if o.ok]
