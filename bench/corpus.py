@@ -1,6 +1,6 @@
 """Corpus figures: export and eval of 8 sessions with 2 workers against 1, and what Ray costs.
 
-    python bench/corpus.py [--json] [--quick] [--no-ray]
+    python bench/corpus.py [--json] [--quick] [--no-ray] [--only eval|export] [--eval-s S] [--export-s S] [--runs N]
 
 Every timing is a whole `teleprev` command in a fresh process (`python -m teleprev.cli.app ...`), as a
 user runs it: interpreter start, imports (lerobot's for export), workers' start, the sessions, and for
@@ -28,6 +28,11 @@ Figures:
   *_wall_s                          the commands' wall times behind the ratios (best of two runs, 1 and 2
                                     workers alternating, since other work shares the cores)
 The machine's cores are shared: cpu_count and the load average before the runs say how busy it was.
+
+Each command also pays costs that do not shrink with workers: the interpreter and imports (lerobot's
+import alone is about 4 s, torch and torchvision inside it; eval's modules and its compiled kernels
+about 1 s), opening and checking every session, and export's merge. --eval-s and --export-s set the
+sessions' length (default 20 and 30 s) to see how the ratio grows as the sessions outweigh them.
 """
 
 from __future__ import annotations
@@ -119,38 +124,49 @@ def ray_overhead() -> dict:
 def main() -> None:
     p = common.parser(__doc__)
     p.add_argument("--no-ray", action="store_true", help="leave out the Ray figures (without the ray extra)")
+    p.add_argument("--only", choices=("eval", "export"), default=None, help="measure one of the two commands")
+    p.add_argument("--eval-s", type=float, default=None, help="length of each eval session in seconds (default 20)")
+    p.add_argument("--export-s", type=float, default=None, help="length of each export session in seconds (default 30)")
+    p.add_argument("--runs", type=int, default=None, help="runs of each command, best kept (default 2)")
     args = p.parse_args()
     eval_s, export_s, size = (6.0, 6.0, (320, 240)) if args.quick else (20.0, 30.0, (640, 480))
+    eval_s, export_s = args.eval_s or eval_s, args.export_s or export_s
+    runs = args.runs or (1 if args.quick else 2)
+    commands = [c for c in ("eval", "export") if args.only in (None, c)]
     figures: dict = {"cpu_count": os.cpu_count(), "load_avg_1min_before": round(os.getloadavg()[0], 2)}
     with tempfile.TemporaryDirectory() as tmp:
         tmp = Path(tmp)
-        record_eval_sessions(tmp / "eval", eval_s)
-        write_export_sessions(tmp / "export", export_s, *size)
-        timed(["eval", str(tmp / "eval" / "s0.mcap")])  # warm the file cache and numba's kernel cache
+        if "eval" in commands:
+            record_eval_sessions(tmp / "eval", eval_s)
+            timed(["eval", str(tmp / "eval" / "s0.mcap")])  # warm the file cache and numba's kernel cache
+        if "export" in commands:
+            write_export_sessions(tmp / "export", export_s, *size)
+        argv = {"eval": lambda n: ["eval", str(tmp / "eval"), "-j", str(n)],
+                "export": lambda n: ["export", str(tmp / "export"), "--repo-id", "bench/corpus", "--root",
+                                     str(tmp / f"ds{n}"), "-j", str(n), "--json"]}
 
         walls: dict[str, float] = {}
-        for _ in range(1 if args.quick else 2):  # alternating, best of each: the cores are shared with others
+        for _ in range(runs):  # alternating, best of each: the cores are shared with others
             for n in (1, 2):
-                for key, wall in ((f"eval_wall_s_workers{n}", lambda: timed(["eval", str(tmp / "eval"), "-j", str(n)])),
-                                  (f"export_wall_s_workers{n}", lambda: timed(
-                                      ["export", str(tmp / "export"), "--repo-id", "bench/corpus", "--root",
-                                       str(tmp / f"ds{n}"), "-j", str(n), "--json"]))):
-                    took = wall()
+                for command in commands:
+                    key = f"{command}_wall_s_workers{n}"
+                    took = timed(argv[command](n))
                     if took < walls.get(key, float("inf")):
                         walls[key] = took
                         if n == 1:  # (a fork server's workers are not the command's children: not counted)
                             figures[key.replace("wall_s", "cores_busy")] = BUSY[-1]
                     shutil.rmtree(tmp / f"ds{n}", ignore_errors=True)
-        figures["corpus_speedup_2_workers_eval"] = walls["eval_wall_s_workers1"] / walls["eval_wall_s_workers2"]
-        figures["corpus_speedup_2_workers_export"] = walls["export_wall_s_workers1"] / walls["export_wall_s_workers2"]
-        figures["corpus_speedup_2_workers"] = min(figures["corpus_speedup_2_workers_eval"],
-                                                  figures["corpus_speedup_2_workers_export"])
+        for command in commands:
+            figures[f"corpus_speedup_2_workers_{command}"] = walls[f"{command}_wall_s_workers1"] / walls[f"{command}_wall_s_workers2"]
+        figures["corpus_speedup_2_workers"] = min(figures[f"corpus_speedup_2_workers_{c}"] for c in commands)
         figures.update(walls)
-        figures["eval_recorded_s"] = SESSIONS * eval_s
-        figures["export_recorded_s"] = SESSIONS * export_s
+        for command, seconds in (("eval", eval_s), ("export", export_s)):
+            if command in commands:
+                figures[f"{command}_recorded_s"] = SESSIONS * seconds
         if not args.no_ray:
             figures.update(ray_overhead())
-            figures["eval_ray_wall_s"] = timed(["eval", str(tmp / "eval"), "--ray", "-j", "2"])
+            if "eval" in commands:
+                figures["eval_ray_wall_s"] = timed(["eval", str(tmp / "eval"), "--ray", "-j", "2"])
     figures["load_avg_1min_after"] = round(os.getloadavg()[0], 2)
     figures = {k: round(v, 3) if isinstance(v, float) else v for k, v in figures.items()}
     targets = {"corpus_speedup_2_workers": ">= 1.7 (8 sessions, 2 workers vs 1)", "ray_overhead_s": "reported"}
