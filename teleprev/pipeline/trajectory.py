@@ -81,6 +81,7 @@ class ArmGenerator:
         # Each joint on its own time-optimal profile: tracking a moving target, not a straight joint path.
         self._inp.synchronization = Synchronization.No
         self._zero = [0.0] * n
+        warm()  # load the kernels from numba's cache now, not in a live loop's first steps (a rig without a HandLimiter too)
 
     def plan(self, s: JointMotion, target: np.ndarray, dt: float, speed_frac: float = 1.0,
              estimate: int = ESTIMATE_NONE, before: np.ndarray | None = None, before_v: np.ndarray | None = None,
