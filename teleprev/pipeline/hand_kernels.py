@@ -7,7 +7,7 @@ Per row, in one pass and in this order (the order of the numpy path, Pipeline._p
                 OUT_OF_RANGE)
     angles      angles_from_hand_pose (teleprev/human/smplx.py): the quaternion, turned into the joint
                 frame, the twist about the bone taken off where it is above TWIST_NOISE, then flexion and
-                abduction; BENT (flexion or abduction beyond the human bounds) when implausible
+                abduction; OUT_OF_RANGE too where flexion or abduction is beyond the human bounds
     retarget    LeapRetargeter.from_angles: angle[source] * gain + offset, clipped to the joint limits
                 (skipped for an effector that needs only the angles: a table with no columns)
 
@@ -26,7 +26,8 @@ import math
 import numpy as np
 from numba import njit
 
-OK, INVALID, OUT_OF_RANGE, BENT = 0, 1, 2, 3  # per-row flags: BENT is out of range too, found from the angles
+OK, INVALID, OUT_OF_RANGE = 0, 1, 2  # per-row flags
+FLAG_NAMES = ("", "glove_invalid", "glove_out_of_range")  # the pipeline's flag for each (HandInput.flag)
 
 # limits: the plausibility bounds, in this order
 MAX_ROTATION_SQ, MIN_FLEXION, MAX_FLEXION, MAX_ABDUCTION, TWIST_NOISE = range(5)
@@ -85,7 +86,7 @@ def _prepare_row(values, frames, limits, table, angles, q):
         angles[j] = flexion
         angles[15 + j] = abduction
         if flexion > limits[MAX_FLEXION] or flexion < limits[MIN_FLEXION] or abs(abduction) > limits[MAX_ABDUCTION]:
-            flag = BENT
+            flag = OUT_OF_RANGE
     if flag == OK:
         _retarget_row(angles, table, q)
     return flag

@@ -258,7 +258,7 @@ class Motion:
         if self.swept is None:
             return cmd, cmd_v, False
         h = self.hand  # compiled: both segments in one kernel call (None: it leaves them to these calls)
-        free = self.swept.command_free(last, cmd, cmd_v, h.acceleration, h.lower, h.upper) if self.swept.compiled else None
+        free = self.swept.command_free(last, cmd, cmd_v, h.acceleration, h.lower, h.upper)
         if free is None:
             free = self.swept.segment_free(last, cmd) and self.swept.segment_free(cmd, self._stop_point(cmd, cmd_v))
         if free:

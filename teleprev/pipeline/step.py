@@ -178,8 +178,6 @@ class Pipeline:
             return HandInput("glove_out_of_range")
         return HandInput("", flexion, abduction, self.effector.prepare(flexion[None], abduction[None])[0])
 
-    _KERNEL_FLAGS = ("", "glove_invalid", "glove_out_of_range", "glove_out_of_range")  # by hand_kernels' flag
-
     def _prepare_compiled(self, samples: list[JointSample]) -> list[HandInput]:
         """prepare_hands in compiled code (teleprev/pipeline/hand_kernels.py): decode, checks, angles and
         (for an effector with a kernel table) the retargeted joints, by one row code for one sample and for
@@ -201,11 +199,11 @@ class Pipeline:
         codes, angles, joints = self._hand_kernels.prepare_rows(rows, FRAME_TURN, self._hand_limits, self._hand_table)
         if n == 1:
             if codes[0]:
-                return [HandInput(self._KERNEL_FLAGS[codes[0]])]
+                return [HandInput(self._hand_kernels.FLAG_NAMES[codes[0]])]
             flexion, abduction = angles[:, :15], angles[:, 15:]
             prepared = self.effector.prepare(flexion, abduction, joints if self._hand_retargets else None)
             return [HandInput("", flexion[0], abduction[0], prepared[0])]
-        out = [HandInput(self._KERNEL_FLAGS[c]) if c else None for c in codes.tolist()]
+        out = [HandInput(self._hand_kernels.FLAG_NAMES[c]) if c else None for c in codes.tolist()]
         ok = np.flatnonzero(codes == 0)
         if len(ok):
             flexion, abduction = angles[ok, :15], angles[ok, 15:]

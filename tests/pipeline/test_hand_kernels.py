@@ -5,9 +5,10 @@ numpy one it stands in for: the same flags on every input, good or broken, angle
 import numpy as np
 import pytest
 
-from teleprev.human.smplx import HAND_POSE_NAMES, hand_pose_from_angles, hand_pose_from_values, hand_values
+from teleprev.human.smplx import HAND_POSE_NAMES, TWIST_NOISE, hand_pose_from_angles, hand_pose_from_values, hand_values
 from teleprev.live.build import build_pipeline
 from teleprev.messages import JointSample
+from teleprev.pipeline import hand_kernels
 from teleprev.pipeline.step import MAX_ABDUCTION, MAX_FLEXION, MAX_JOINT_ROTATION, MIN_FLEXION
 from teleprev.rig import load_rig
 from tests.helpers.pipeline_inputs import twisted
@@ -131,8 +132,12 @@ def test_the_compiled_leap_retargeting_is_the_numpy_one(pipelines, rng):
 
 
 def test_the_bounds_are_the_pipelines(pipelines):
+    """Each bound sits where the kernel reads it (hand_kernels' index names), not only in the same order."""
     _, p = pipelines["leap_hand"]
-    assert p._hand_limits[:4].tolist() == [MAX_JOINT_ROTATION**2, MIN_FLEXION, MAX_FLEXION, MAX_ABDUCTION]
+    limits = p._hand_limits
+    assert limits[hand_kernels.MAX_ROTATION_SQ] == MAX_JOINT_ROTATION**2
+    assert limits[hand_kernels.MIN_FLEXION] == MIN_FLEXION and limits[hand_kernels.MAX_FLEXION] == MAX_FLEXION
+    assert limits[hand_kernels.MAX_ABDUCTION] == MAX_ABDUCTION and limits[hand_kernels.TWIST_NOISE] == TWIST_NOISE
 
 
 def test_hand_values_reads_names_in_any_order(rng):
