@@ -73,12 +73,8 @@ class LeapEffector(Effector):
         self.model = hand
         self.names = spec.joints
         self.retarget = LeapRetargeter(hand, mapping)
-        self.compiled = compiled  # compiled retargeting (sessions of format 3 on); False: numpy
-        self._table = None
-        if compiled:
-            from teleprev.pipeline import hand_kernels
-
-            self._kernels, self._table = hand_kernels, self.retarget.table()
+        # compiled (sessions of format 3 on): the glove kernel retargets with the angles, by this table
+        self._table = self.retarget.table() if compiled else None
         self.corrector = corrector
         speed = np.minimum(hand.velocity_limit, cfg.hand_speed)
         self.guard = JointGuard(hand.lower, hand.upper, speed, max_dt, checker=corrector.checker)
@@ -87,11 +83,7 @@ class LeapEffector(Effector):
         """Retargeted joints and the Corrector's exact check of them (both element-wise or per row).
         `retargeted`: those joints, where the compiled preparation computed them with the angles."""
         if retargeted is None:
-            if self.compiled:  # the compiled preparation's row code, for angles computed elsewhere
-                angles = np.ascontiguousarray(np.concatenate([flexion, abduction], axis=-1), dtype=float)
-                retargeted = self._kernels.retarget_rows(angles, self._table)
-            else:
-                retargeted = self.retarget.from_angles(flexion, abduction)
+            retargeted = self.retarget.from_angles(flexion, abduction)
         return self.corrector.prepare(retargeted)
 
     def kernel_table(self) -> np.ndarray | None:

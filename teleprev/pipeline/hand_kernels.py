@@ -108,21 +108,9 @@ def prepare_rows(values, frames, limits, table):
     return flags, angles, q
 
 
-@njit(cache=True)
-def retarget_rows(angles, table):
-    """LeapRetargeter.from_angles for angles (N, 30) [flexion, abduction]: the rows' joints (N, n), the
-    same row code as prepare_rows's (for a pipeline that computes the angles in numpy)."""
-    rows = angles.shape[0]
-    q = np.empty((rows, table.shape[1]))
-    for r in range(rows):
-        _retarget_row(angles[r], table, q[r])
-    return q
-
-
 def warm() -> None:
     """Compile (or load from the cache) every kernel here for the float64 arrays the pipeline passes."""
     values = np.zeros((1, 45))
     table = np.zeros((5, 2))
     table[UPPER] = 1.0
     prepare_rows(values, np.ones((2, 15)), np.array([8.41, -1.2, 2.7, 1.3, 1e-9]), table)
-    retarget_rows(np.zeros((1, 30)), table)
