@@ -46,7 +46,6 @@ class CompiledMLP:
     """The raw outputs of an MLP, compiled: slots(q) as MLP.slots (to float32 rounding)."""
 
     def __init__(self, net: MLP):
-        self.net = net
         self.i, self.w = pack(net)
 
     def slots(self, q: np.ndarray) -> np.ndarray:
@@ -64,7 +63,6 @@ class CompiledCPN:
         t = cpn.threshold
         # p < t for every link  <=>  prod (1 + exp(z)) < 1 / (1 - t)  (noisy-or),  sum z < logit(t)  (identity)
         self.bound = float(1.0 / (1.0 - t) if cpn.noisy_or else np.log(t / (1.0 - t)))
-        self.threshold, self.link_names = cpn.threshold, cpn.link_names
 
     def predicts_free(self, q: np.ndarray):
         """As CPN.predicts_free: a bool for one configuration (n,), (N,) bools for (N, n)."""
@@ -83,7 +81,6 @@ class CompiledCCN:
     """The CCN's proposals, compiled: clip(q + scale * net(x)) as CCN.__call__ (to float32 rounding)."""
 
     def __init__(self, ccn: CCN):
-        self.ccn = ccn
         self.mlp = CompiledMLP(ccn.net)
         self.f = np.concatenate([ccn.lower, ccn.upper, ccn.output_scale]).astype(np.float64)
 

@@ -106,7 +106,6 @@ class Corrector:
                  settings: CorrectorSettings = CorrectorSettings(), files: dict[str, Path] | None = None,
                  compiled: bool = False):
         self.model = model
-        self.compiled = compiled  # compiled CPN/CCN inference (sessions of format 3 on); False: numpy
         self.checker = checker
         self.cpn = cpn
         self.ccn = ccn
