@@ -63,18 +63,6 @@ def _span(dt, dt_before):
     return dt + (dt_before if dt_before > 0 else dt)
 
 
-@njit(cache=True)
-def hand_stop(q, v, dt, dt_before, lower, upper, acceleration):
-    """trajectory.HandLimiter.stop's arithmetic for dt > 0: (command, its velocity)."""
-    n = q.shape[0]
-    cmd = np.empty(n)
-    vel = np.empty(n)
-    span = _span(dt, dt_before)
-    for i in range(n):
-        cmd[i], vel[i] = _stop_joint(q[i], v[i], dt, span, lower[i], upper[i], acceleration[i])
-    return cmd, vel
-
-
 # How a step estimates its target's velocity (Motion's feed-forward): the estimate `hand_command` and
 # `arm_plan` compute, from the target before (`before`, its estimate `before_v`) and this step's target.
 ESTIMATE_NONE = 0  # no target velocity: plan to meet the target at rest
@@ -202,7 +190,6 @@ def arm_sample(base, base_v, sample, goal, lower, upper, tol, rest_velocity, res
 def warm() -> None:
     """Compile (or load from the cache) every kernel here for float64 vectors."""
     x = np.zeros(2)
-    hand_stop(x, x, 0.01, 0.01, x - 1.0, x + 1.0, x + 1.0)
     for tracking in (True, False):
         hand_command(x, x, tracking, x, ESTIMATE_BLEND, x, x, 0.5, 0.01, 0.01, 1.0, x - 1.0, x + 1.0, x + 1.0, x + 1.0,
                      0.8)

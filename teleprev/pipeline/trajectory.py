@@ -20,8 +20,7 @@ from functools import cached_property
 
 import numpy as np
 
-from teleprev.pipeline.kernels import (ESTIMATE_GIVEN, ESTIMATE_NONE, arm_plan, arm_sample, hand_command, hand_stop,
-                                       warm)
+from teleprev.pipeline.kernels import ESTIMATE_GIVEN, ESTIMATE_NONE, arm_plan, arm_sample, hand_command, warm
 
 REST_VELOCITY = 1e-6  # rad/s: below this (and no acceleration) a joint is at rest
 REST_ACCELERATION = 1e-5
@@ -176,10 +175,11 @@ class HandLimiter:
         return rows[0], rows[1]
 
     def stop(self, q: np.ndarray, v: np.ndarray, dt: float, dt_before: float) -> tuple[np.ndarray, np.ndarray]:
-        """One step of the hardest braking the cap allows (compiled: kernels.hand_stop)."""
+        """One step of the hardest braking the cap allows (compiled: kernels.hand_command, not tracking)."""
         if dt <= 0:
             return q, v
-        return hand_stop(_vector(q), _vector(v), float(dt), float(dt_before), self.lower, self.upper, self.acceleration)
+        rows, _ = self.command(q, v, None, ESTIMATE_NONE, None, None, 0.0, dt, dt_before)
+        return rows[0], rows[1]
 
     def command(self, q: np.ndarray, v: np.ndarray, target: np.ndarray | None, estimate: int,
                 before: np.ndarray | None, before_v: np.ndarray | None, keep: float, dt: float, dt_before: float,
