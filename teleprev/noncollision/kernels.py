@@ -161,16 +161,32 @@ def _activate(acc, h, n_out, act):
             h[o] = np.float32((1.0 - e) / (1.0 + e))
 
 
+@njit(cache=True, inline="always", error_model="numpy")
+def _widest(net_i):
+    """The widest activation of a network: its input or one of its layers' outputs."""
+    lay = _layout(net_i)[0]
+    widest = net_i[1]
+    for layer in range(net_i[3]):
+        widest = max(widest, net_i[lay + 4 * layer + 3])
+    return widest
+
+
+@njit(cache=True, inline="always", error_model="numpy")
+def _layer(net_i, lay, layer, g):
+    """Layer `layer` of network g: (inputs, outputs, offset of its weights, offset of its biases in net_w)."""
+    t = lay + 4 * layer
+    n_in, n_out = net_i[t + 2], net_i[t + 3]
+    return n_in, n_out, net_i[t] + g * n_in * n_out, net_i[t + 1] + g * n_out
+
+
 @njit(cache=True, error_model="numpy")
 def _forward(x, r0, nb, net_i, net_w, slots):
     """Raw outputs of rows r0 .. r0 + nb of x (float64 (R, n)) into slots[:nb] (float32 (>= nb, G * width_out)),
     four rows per pass over each layer (_dense4) while four are left, then each row alone (_forward1). A
     row's outputs do not depend on what else is in the batch (see _dense4)."""
     g_count, win, wout, n_layers, act = net_i[0], net_i[1], net_i[2], net_i[3], net_i[5]
-    lay = HEADER + g_count * win
-    widest = win
-    for layer in range(n_layers):
-        widest = max(widest, net_i[lay + 4 * layer + 3])
+    lay = _layout(net_i)[0]
+    widest = _widest(net_i)
     h = np.zeros((4, widest), np.float32)
     acc = np.empty((4, widest), np.float32)
     nz = np.empty(widest, np.int64)
@@ -182,10 +198,7 @@ def _forward(x, r0, nb, net_i, net_w, slots):
                 for k in range(4):
                     h[k, i] = np.float32(x[r0 + r + k, c])
             for layer in range(n_layers):
-                t = lay + 4 * layer
-                n_in, n_out = net_i[t + 2], net_i[t + 3]
-                w0 = net_i[t] + g * n_in * n_out
-                b0 = net_i[t + 1] + g * n_out
+                n_in, n_out, w0, b0 = _layer(net_i, lay, layer, g)
                 _dense4(h, n_in, n_out, net_w[w0:w0 + n_in * n_out], net_w[b0:b0 + n_out], nz, acc)
                 if layer == n_layers - 1:
                     for k in range(4):
@@ -196,28 +209,20 @@ def _forward(x, r0, nb, net_i, net_w, slots):
                         _activate(acc[k], h[k], n_out, act)
         r += 4
     for k in range(r, nb):
-        _forward1(x, r0 + k, net_i, net_w, slots[k:k + 1])
+        _forward1(x, r0 + k, net_i, net_w, slots[k:k + 1], h[0], acc[0], nz)
 
 
 @njit(cache=True, error_model="numpy")
-def _forward1(x, row, net_i, net_w, slots):
-    """Raw outputs of row `row` of x (float64 (R, n)) into slots[0], one row alone."""
+def _forward1(x, row, net_i, net_w, slots, h, acc, nz):
+    """Raw outputs of row `row` of x (float64 (R, n)) into slots[0], one row alone; h, acc, nz: scratch of
+    the network's widest activation (every entry is written before it is read)."""
     g_count, win, wout, n_layers, act = net_i[0], net_i[1], net_i[2], net_i[3], net_i[5]
-    lay = HEADER + g_count * win
-    widest = win
-    for layer in range(n_layers):
-        widest = max(widest, net_i[lay + 4 * layer + 3])
-    h = np.zeros(widest, np.float32)
-    acc = np.empty(widest, np.float32)
-    nz = np.empty(widest, np.int64)
+    lay = _layout(net_i)[0]
     for g in range(g_count):
         for i in range(win):
             h[i] = np.float32(x[row, net_i[HEADER + g * win + i]])
         for layer in range(n_layers):
-            t = lay + 4 * layer
-            n_in, n_out = net_i[t + 2], net_i[t + 3]
-            w0 = net_i[t] + g * n_in * n_out
-            b0 = net_i[t + 1] + g * n_out
+            n_in, n_out, w0, b0 = _layer(net_i, lay, layer, g)
             _dense(h, n_in, n_out, net_w[w0:w0 + n_in * n_out], net_w[b0:b0 + n_out], nz, acc)
             if layer == n_layers - 1:
                 for o in range(n_out):
