@@ -200,7 +200,7 @@ class Corrector:
         in one kernel call; the shortened proposals are checked exactly in one batched pass, the full
         proposals only for the rows whose shortened one collides (or was not found); deviations in one
         array operation. Each (report, colliding links) is built once per distinct set of colliding pairs
-        (a session holds few), and shared, read-only, by the rows that have it. The same checks in the same
+        (a session holds few; the free rows share one), and shared, read-only, by the rows that have it. The same checks in the same
         order as _ccn_answer row by row: the same answers."""
         n_rows = len(q0)
         untouched = np.abs(q0 - q_in).max(axis=1).tolist()
@@ -208,15 +208,8 @@ class Corrector:
         reports, links = [None] * n_rows, [()] * n_rows
         seen: dict[bytes, tuple[CollisionReport, tuple[str, ...]]] = {}
         names, link_names = self.checker.link_pairs, self.checker.link_names
-        free_report = None
         rows = np.flatnonzero(hit)
-        for i in np.flatnonzero(~hit).tolist():
-            if free_report is None:
-                label = self.checker.labels_from_pairs(pairs[i:i + 1])[0]
-                label.setflags(write=False)
-                free_report = CollisionReport(label, ())
-            reports[i] = free_report
-        for i in rows.tolist():
+        for i in range(n_rows):  # a free row's pairs are all zero: one more key
             key = pairs[i].tobytes()
             known = seen.get(key)
             if known is None:
@@ -225,8 +218,8 @@ class Corrector:
                 report = CollisionReport(label, tuple(names[k] for k in np.flatnonzero(pairs[i])))
                 known = seen[key] = (report, tuple(report.colliding_links(link_names)))
             reports[i], links[i] = known
-        out = [Prepared(q_in[i], q0[i], reports[i], None, Correction(q0[i], "untouched", (), untouched[i]))
-               if reports[i] is free_report else None for i in range(n_rows)]
+        out = [None if collides else Prepared(q_in[i], q0[i], reports[i], None, Correction(q0[i], "untouched", (), untouched[i]))
+               for i, collides in enumerate(hit.tolist())]
         if not len(rows):
             return out
         proposals, shortened, his = self._nets.propose_shorten(q0[rows])
