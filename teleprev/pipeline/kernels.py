@@ -133,7 +133,7 @@ def arm_plan(q, v, target, mode, before, before_v, gap, keep, ahead, dt, speed_f
     out = np.empty((8, n))
     for i in range(n):
         estimate = _estimate(mode, target[i], before[i], before_v[i], gap, keep) if mode != ESTIMATE_NONE else 0.0
-        goal = target[i] + estimate * ahead if mode >= ESTIMATE_HELD else target[i]
+        goal = target[i] + estimate * ahead if mode != ESTIMATE_NONE and mode != ESTIMATE_GIVEN else target[i]
         m = velocity[i] * speed_frac
         lo = lower[i]
         hi = upper[i]
