@@ -7,6 +7,7 @@ import pytest
 from teleprev.pipeline.swept import SweptCheck
 from teleprev.robot.collision import SelfCollisionChecker
 from teleprev.robot.model import load_robot
+from tests.helpers.hand_segments import random_segments
 
 
 @pytest.fixture(scope="module")
@@ -95,30 +96,24 @@ def pair():
     return SweptCheck(hand, plain, 0.003), SweptCheck(hand, plain, 0.003, compiled=True)
 
 
-def _segments(hand, n, rng):
-    """Zero-length, short, medium and long segments, from anywhere: clear starts, starts inside the margin,
-    colliding starts (uniform samples are mostly not clear)."""
-    pool = hand.sample_uniform(2 * n, rng)
-    out = []
-    for k in range(n):
-        q0, q1 = pool[2 * k], pool[2 * k + 1]
-        kind = k % 6
-        if kind == 0:
-            q1 = q0.copy()
-        elif kind == 1:
-            q1 = q0 + rng.normal(0, 0.01, q0.shape)
-        elif kind == 2:
-            q1 = q0 + 0.05 * (q1 - q0)
-        elif kind == 3:
-            q1 = q0 + 0.3 * (q1 - q0)
-        elif kind == 4:  # from near the open hand, which is clear
-            q0 = hand.neutral() + rng.normal(0, 0.05, q0.shape)
-            q1 = q0 + rng.normal(0, 0.05, q0.shape)
-        out.append((q0, np.clip(q1, hand.lower, hand.upper)))
-    return out
+def _agree(numpy_swept, compiled_swept, segments, monkeypatch):
+    """The compiled check answers as the numpy one, with the same clearance cache; returns how often it
+    handed a segment to the numpy check, and how many bisections the kernel finished alone (a kernel that
+    never decides would agree too, through those fallbacks)."""
+    handed, bisected = [0], [0]
+    numpy_check, kernel_bisection = compiled_swept._segment_free_numpy, compiled_swept._last_free_compiled
 
+    def to_numpy(q0, q1):
+        handed[0] += 1
+        return numpy_check(q0, q1)
 
-def _agree(numpy_swept, compiled_swept, segments):
+    def bisection(q0, q1, steps):
+        lo = kernel_bisection(q0, q1, steps)
+        bisected[0] += lo is not None
+        return lo
+
+    monkeypatch.setattr(compiled_swept, "_segment_free_numpy", to_numpy)
+    monkeypatch.setattr(compiled_swept, "_last_free_compiled", bisection)
     for q0, q1 in segments:
         numpy_swept._clear_cache = compiled_swept._clear_cache = (b"", False)
         assert numpy_swept.segment_free(q0, q1) == compiled_swept.segment_free(q0, q1)
@@ -129,27 +124,40 @@ def _agree(numpy_swept, compiled_swept, segments):
         a, b = numpy_swept.last_free_on_segment(q0, q1), compiled_swept.last_free_on_segment(q0, q1)
         assert a.tobytes() == b.tobytes()
         assert numpy_swept._clear_cache == compiled_swept._clear_cache
+    return handed[0], bisected[0]
 
 
-def test_compiled_segment_checks_agree_with_numpy(pair):
+def test_compiled_segment_checks_agree_with_numpy(pair, monkeypatch):
     numpy_swept, compiled_swept = pair
     assert compiled_swept._kernel_args is not None  # LEAP Hand: boxes, so the kernels run
-    segments = _segments(numpy_swept.model, 1200, np.random.default_rng(3))
+    segments = random_segments(numpy_swept.model, 1200, np.random.default_rng(3))
     free = sum(numpy_swept.segment_free(*s) for s in segments)
     assert 0.2 * len(segments) < free < 0.9 * len(segments)  # both answers are well represented
-    _agree(numpy_swept, compiled_swept, segments)
+    handed, bisected = _agree(numpy_swept, compiled_swept, segments, monkeypatch)
+    assert handed == 0 and bisected > 0.9 * len(segments[::5])  # the kernels decided
 
 
-def test_compiled_check_asks_fcl_within_the_margin(pair):
+def test_compiled_check_asks_fcl_within_the_margin(pair, monkeypatch):
     """With the tight margin pushed far out, every contact the loose test finds is left to FCL (the
     kernel's UNSURE answers): the answers stay the numpy check's."""
+    from teleprev.robot.collision import FclSelfCollisionChecker
+
     numpy_swept, compiled_swept = pair
     hand = numpy_swept.model
     unsure = SweptCheck(hand, numpy_swept.checker, 0.003, compiled=True)
     args = list(unsure._kernel_args)
     args[-2] = -1.0  # the tight test's margin: no contact is ever certain
     unsure._kernel_args = tuple(args)
-    _agree(numpy_swept, unsure, _segments(hand, 300, np.random.default_rng(4)))
+    asked = [0]
+    fcl = FclSelfCollisionChecker.collides
+
+    def ask_fcl(checker, q):
+        asked[0] += 1
+        return fcl(checker, q)
+
+    monkeypatch.setattr(FclSelfCollisionChecker, "collides", ask_fcl)
+    handed, _ = _agree(numpy_swept, unsure, random_segments(hand, 300, np.random.default_rng(4)), monkeypatch)
+    assert handed == 0 and asked[0] > 50  # the kernel's UNSURE answers went to FCL, not to the numpy check
 
 
 def test_compiled_command_check_is_both_segment_checks(pair):
@@ -162,7 +170,7 @@ def test_compiled_command_check_is_both_segment_checks(pair):
     limiter = HandLimiter(hand.lower, hand.upper, hand.velocity_limit, np.full(len(hand.lower), 40.0))
     rng = np.random.default_rng(5)
     decided = 0
-    for q0, q1 in _segments(hand, 600, rng):
+    for q0, q1 in random_segments(hand, 600, rng):
         v1 = rng.normal(0, 1.0, q0.shape) * (rng.random() < 0.8)
         stop = np.minimum(np.maximum(q1 + v1 * np.abs(v1) / (2.0 * limiter.acceleration), limiter.lower), limiter.upper)
         for cache in ((b"", False), (q0.tobytes(), True), (q1.tobytes(), False)):
