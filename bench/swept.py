@@ -27,6 +27,9 @@ import common  # noqa: E402  (sets one-thread environment before numpy loads)
 
 import numpy as np  # noqa: E402
 
+sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
+from tests.helpers.hand_segments import random_segments  # noqa: E402
+
 ROOT = Path(__file__).resolve().parents[1]
 FIXTURES = ("sim_v1.mcap", "sim_v2.mcap")
 
@@ -70,24 +73,6 @@ def recorded_calls() -> tuple[list[list[tuple]], list[tuple], float]:
         SweptCheck.segment_free, SweptCheck.last_free_on_segment, Motion._hand_command = seg, last, hand_command
     keep = [k for k, s in enumerate(steps) if s]
     return [steps[k] for k in keep], [hand_steps[k] for k in keep], clearance
-
-
-def random_segments(hand, swept, n: int, rng) -> list[tuple]:
-    """Segments of every kind the check meets: short and long, from clear starts and from starts inside the
-    margin (the plain shapes then), zero-length ones."""
-    out = []
-    pool = hand.sample_uniform(n * 2, rng)
-    for k in range(n):
-        q0, q1 = pool[2 * k], pool[2 * k + 1]
-        kind = k % 5
-        if kind == 0:
-            q1 = q0.copy()
-        elif kind == 1:
-            q1 = q0 + rng.normal(0, 0.02, q0.shape)
-        elif kind == 2:
-            q1 = q0 + 0.2 * (q1 - q0)
-        out.append((q0, q1))
-    return out
 
 
 def main() -> None:
@@ -154,7 +139,7 @@ def main() -> None:
         return float(np.median([common.percentile(r[1], 50) for r in per_hand[name]])) * 1e6
 
     rng = np.random.default_rng(18)
-    segments = random_segments(hand, compiled_swept, 300 if args.quick else 2000, rng)
+    segments = random_segments(hand, 300 if args.quick else 2000, rng)
     random_disagree = sum(numpy_swept.segment_free(*s) != compiled_swept.segment_free(*s) for s in segments)
     random_disagree += sum(bool(np.any(numpy_swept.last_free_on_segment(*s) != compiled_swept.last_free_on_segment(*s)))
                            for s in segments[: len(segments) // 4])
