@@ -90,19 +90,25 @@ class CompiledSelfCollisionChecker:
         return np.ascontiguousarray(q, dtype=np.float64)
 
     # ---- public (SelfCollisionChecker's API) ---------------------------------------------------
+    # SelfCollisionChecker's two-margin kernels (kernels.*_margins) with both margins `margin`: their
+    # answers are then never MARGINS_UNSURE, and those of this one margin.
+    def _margin_args(self) -> tuple:
+        return (*self.kinematics.tables, *self._tables(), self.margin, self.margin)
+
     def check(self, q: np.ndarray) -> CollisionReport:
         """All colliding link pairs and the per-link labels of one configuration."""
-        hits, labels = kernels.check(self._q(q), *self.kinematics.tables, *self._tables(), self.margin, False)
-        pairs = tuple(self.link_pairs[i] for i in np.flatnonzero(hits)) if labels.any() else ()
-        return CollisionReport(labels, pairs)
+        labels = np.zeros(len(self.link_names), dtype=bool)
+        index = np.empty(len(self.link_pairs), dtype=np.int64)
+        n = kernels.check_margins(self._q(q), *self._margin_args(), False, labels, index)
+        return CollisionReport(labels, tuple([self.link_pairs[i] for i in index[:n].tolist()]))
 
     def collides(self, q: np.ndarray) -> bool:
         """Whether one configuration is in self-collision; stops at the first contact."""
-        return bool(kernels.collides(self._q(q), *self.kinematics.tables, *self._tables(), self.margin))
+        return bool(kernels.collides_margins(self._q(q), *self._margin_args()) > 0)
 
     def first_collision(self, q: np.ndarray, start: int = 0) -> int | None:
         """Index of the first configuration of the batch q (N, n), from `start` on, in self-collision."""
-        k = kernels.first_colliding(self._q(q), start, *self.kinematics.tables, *self._tables(), self.margin)
+        k = kernels.first_colliding_margins(self._q(q), start, *self._margin_args())[0]
         return None if k < 0 else int(k)
 
     def pair_matrix(self, q: np.ndarray, world: np.ndarray | None = None) -> np.ndarray:
@@ -110,11 +116,10 @@ class CompiledSelfCollisionChecker:
 
         `world` may pass link transforms (N, L, 4, 4) already computed.
         """
-        if world is not None:
-            world = np.ascontiguousarray(world, dtype=np.float64).reshape(-1, *world.shape[-3:])
-            return kernels.pair_matrix_world(world, *self._tables(), self.margin)
-        q = np.atleast_2d(self._q(q))
-        return kernels.pair_matrix(q, *self.kinematics.tables, *self._tables(), self.margin)
+        if world is None:
+            world = self.kinematics.world(np.atleast_2d(self._q(q)))
+        world = np.ascontiguousarray(world, dtype=np.float64).reshape(-1, *world.shape[-3:])
+        return kernels.pair_matrix_margins_world(world, *self._tables(), self.margin, self.margin)[0]
 
     def labels(self, q: np.ndarray, world: np.ndarray | None = None) -> np.ndarray:
         """(N, m) bool per-link labels for a batch of configurations."""
@@ -125,8 +130,9 @@ class CompiledSelfCollisionChecker:
 
 
 def warm(robot: str = "leap_hand_right") -> None:
-    """Compile every kernel this checker and the compiled FK call into numba's on-disk cache (or load it);
-    teleprev.robot.collision.warm does SelfCollisionChecker's (both margins in one pass)."""
+    """Compile every kernel this checker and the compiled FK call into numba's on-disk cache (or load it):
+    SelfCollisionChecker's two-margin kernels (teleprev.robot.collision.warm) and the FK of one
+    configuration and of a batch."""
     from teleprev.robot.model import load_robot
 
     model = load_robot(robot)
@@ -136,6 +142,5 @@ def warm(robot: str = "leap_hand_right") -> None:
     checker.collides(q)
     qs = np.stack([q, q])
     checker.first_collision(qs)
-    checker.pair_matrix(qs)
-    checker.pair_matrix(qs, checker.kinematics.world(qs))
+    checker.pair_matrix(qs)  # the batch FK, then pair_matrix_margins_world
     checker.kinematics.world(q)

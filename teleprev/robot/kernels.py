@@ -469,87 +469,6 @@ def _apart2(x, y, reach):
     return dx * dx + dy * dy + dz * dz > reach * reach
 
 
-@njit(cache=True)
-def self_collision_into(world, shape_link, shape_local, shape_size, links, spheres, pairs, margin, first_only,
-                        hits, labels):
-    """Colliding checked-link pairs of one configuration into hits (P,) and labels (m,); returns their count.
-
-    world (L, 4, 4): link transforms. Boxes (S of them, grouped by checked link): shape_link (S,) the
-    model link, shape_local (S, 3, 4) the pose in that link, shape_size (S, 4) half extents and
-    bounding-sphere radius. Checked links: links (m, 3) the model link and the range [start, stop) of
-    its boxes, spheres (m, 4) a bounding sphere of those boxes (centre in the link frame, radius).
-    pairs (P, 2): the checked link pairs. With first_only it stops at the first colliding pair.
-    self_collision_margins_into with one margin: the two margins' answers then never differ.
-    """
-    index = np.empty(pairs.shape[0], dtype=np.int64)
-    return self_collision_margins_into(world, shape_link, shape_local, shape_size, links, spheres, pairs, margin,
-                                       margin, first_only, hits, labels, index)
-
-
-@njit(cache=True)
-def check(q, link_int, link_num, link_terms, shape_link, shape_local, shape_size, links, spheres, pairs, margin,
-          first_only):
-    """FK, then self_collision_into: (hits (P,), labels (m,)) of one configuration."""
-    world = fk(q, link_int, link_num, link_terms)
-    hits = np.zeros(pairs.shape[0], dtype=np.bool_)
-    labels = np.zeros(links.shape[0], dtype=np.bool_)
-    self_collision_into(world, shape_link, shape_local, shape_size, links, spheres, pairs, margin, first_only,
-                        hits, labels)
-    return hits, labels
-
-
-@njit(cache=True)
-def collides(q, link_int, link_num, link_terms, shape_link, shape_local, shape_size, links, spheres, pairs, margin):
-    """Whether one configuration collides, stopping at the first contact."""
-    world = fk(q, link_int, link_num, link_terms)
-    hits = np.zeros(pairs.shape[0], dtype=np.bool_)
-    labels = np.zeros(links.shape[0], dtype=np.bool_)
-    return self_collision_into(world, shape_link, shape_local, shape_size, links, spheres, pairs, margin, True,
-                               hits, labels) > 0
-
-
-@njit(cache=True)
-def pair_matrix_world(world, shape_link, shape_local, shape_size, links, spheres, pairs, margin):
-    """(N, P) colliding pairs of a batch given its link transforms (N, L, 4, 4)."""
-    n = world.shape[0]
-    hits = np.zeros((n, pairs.shape[0]), dtype=np.bool_)
-    labels = np.zeros(links.shape[0], dtype=np.bool_)
-    for k in range(n):
-        self_collision_into(world[k], shape_link, shape_local, shape_size, links, spheres, pairs, margin, False,
-                            hits[k], labels)
-    return hits
-
-
-@njit(cache=True)
-def pair_matrix(qs, link_int, link_num, link_terms, shape_link, shape_local, shape_size, links, spheres, pairs,
-                margin):
-    """(N, P) colliding pairs of a batch of configurations (N, n)."""
-    n = qs.shape[0]
-    world = np.empty((link_int.shape[0], 4, 4))
-    hits = np.zeros((n, pairs.shape[0]), dtype=np.bool_)
-    labels = np.zeros(links.shape[0], dtype=np.bool_)
-    for k in range(n):
-        fk_into(qs[k], link_int, link_num, link_terms, world)
-        self_collision_into(world, shape_link, shape_local, shape_size, links, spheres, pairs, margin, False,
-                            hits[k], labels)
-    return hits
-
-
-@njit(cache=True)
-def first_colliding(qs, start, link_int, link_num, link_terms, shape_link, shape_local, shape_size, links, spheres,
-                    pairs, margin):
-    """Index of the first configuration of qs (N, n) from `start` on that collides, or -1."""
-    world = np.empty((link_int.shape[0], 4, 4))
-    hits = np.zeros(pairs.shape[0], dtype=np.bool_)
-    labels = np.zeros(links.shape[0], dtype=np.bool_)
-    for k in range(start, qs.shape[0]):
-        fk_into(qs[k], link_int, link_num, link_terms, world)
-        if self_collision_into(world, shape_link, shape_local, shape_size, links, spheres, pairs, margin, True,
-                               hits, labels) > 0:
-            return k
-    return -1
-
-
 # ---- self-collision, both margins in one pass (SelfCollisionChecker) ----------------------------
 # SelfCollisionChecker's compiled decision: the test with the margin `loose` (MARGIN: FCL's contacts and
 # more) and with `tight` (-MARGIN: fewer), FK, box poses and bounding spheres computed once. Every cull
@@ -563,6 +482,12 @@ def self_collision_margins_into(world, shape_link, shape_local, shape_size, link
                                 first_only, hits, labels, index):
     """Colliding checked-link pairs under the margins `loose` and `tight` (loose >= tight) at once.
 
+    world (L, 4, 4): link transforms. Boxes (S of them, grouped by checked link): shape_link (S,) the
+    model link, shape_local (S, 3, 4) the pose in that link, shape_size (S, 4) half extents and
+    bounding-sphere radius. Checked links: links (m, 3) the model link and the range [start, stop) of
+    its boxes, spheres (m, 4) a bounding sphere of those boxes (centre in the link frame, radius).
+    pairs (P, 2): the checked link pairs. With loose == tight it is the one-margin test
+    (CompiledSelfCollisionChecker): MARGINS_UNSURE never arises.
     Without first_only: the number n of pairs colliding for both margins, when no pair collides for the
     loose one alone (the two calls' answers are equal): hits (P,) and labels (m,) set, index[:n] the
     pairs in order. MARGINS_UNSURE as soon as a pair collides for the loose margin only (hits, labels and
