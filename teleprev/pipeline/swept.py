@@ -105,18 +105,17 @@ class SweptCheck:
     def _compiled_tables(self) -> tuple | None:
         """The swept kernels' tables (teleprev/robot/kernels.py), or None where the checkers are not the
         compiled ones (geometry other than boxes): then the numpy check runs."""
-        loose, tight = self.checker._loose, self.checker._tight
-        grown = self.grown._loose
-        if loose is None or grown is None:
+        plain, grown = self.checker._args, self.grown._args  # FK tables, collision tables, the two margins
+        if plain is None or grown is None:
             return None
-        g, p = grown._tables(), loose._tables()
+        g, p = grown[3:9], plain[3:9]
         if not all(np.array_equal(g[i], p[i]) for i in (0, 3, 5)):  # same links, boxes per link and pairs
             return None
         self._point = np.empty(len(self.model.joint_names))
         return (np.ascontiguousarray(self.reach, dtype=np.float64), self.clearance / 2 if self.clearance > 0 else 0.0,
-                START_STEP_M, *loose.kinematics.tables, p[0],
+                START_STEP_M, *plain[:3], p[0],
                 np.ascontiguousarray(np.stack([g[1], p[1]])), np.ascontiguousarray(np.stack([g[2], p[2]])), p[3],
-                np.ascontiguousarray(np.stack([g[4], p[4]])), p[5], loose.margin, tight.margin, self._point)
+                np.ascontiguousarray(np.stack([g[4], p[4]])), p[5], *plain[9:], self._point)
 
     def motion_bound(self, q0: np.ndarray, q1: np.ndarray) -> float:
         """Metres: no point of any link moves further than this on the segment q0 -> q1."""

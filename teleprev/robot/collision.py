@@ -223,20 +223,20 @@ class SelfCollisionChecker(FclSelfCollisionChecker):
     """FCL's answers (see the module docstring), from compiled code wherever it is certain of them.
 
     The compiled test runs once per configuration with both margins (kernels.*_margins: FK, box poses
-    and bounding spheres once, each axis compared with +MARGIN and -MARGIN); `_loose` and `_tight` are
-    the two single-margin checkers whose answers it gives at once (the swept check takes their tables).
+    and bounding spheres once, each axis compared with +MARGIN and -MARGIN): the answers of `_loose`
+    (CompiledSelfCollisionChecker with +MARGIN: FCL's contacts and more) and of the same checker with
+    -MARGIN (fewer) at once. `_args` holds the kernels' arguments (the swept check takes its tables).
     """
 
     def __init__(self, model: RobotModel, exclusions: Exclusions | None = None):
         super().__init__(model, exclusions)
-        self._loose = self._tight = None
+        self._loose = None
         self._args = None
         if all(s.kind == "box" for n in self.link_names for s in model.links[n].collisions):
             self._loose = CompiledSelfCollisionChecker(model, self.exclusions)  # FCL's contacts and more
-            self._tight = CompiledSelfCollisionChecker(model, self.exclusions, margin=-kernels.MARGIN)  # fewer
             # the kernels' arguments after q, built once: FK tables, collision tables, the two margins
             self._args = (*self._loose.kinematics.tables, *self._loose._tables(), self._loose.margin,
-                          self._tight.margin)
+                          -kernels.MARGIN)
             self._n_labels = len(self.link_names)
             q = model.neutral()  # load the kernels from numba's cache now, not in a live loop's first steps
             self.check(q), self.collides(q), self.first_collision(q[None]), self.pair_matrix(q[None])

@@ -260,7 +260,8 @@ def margins(request, hand):
 
     model = hand if request.param == "plain" else inflated_model(hand, 0.0015)
     checker = SelfCollisionChecker(model)
-    return model, checker, checker._loose, checker._tight
+    return model, checker, checker._loose, CompiledSelfCollisionChecker(model, checker.exclusions,
+                                                                        margin=-kernels.MARGIN)
 
 
 def test_both_margins_in_one_pass_equal_the_two_separate_calls(hand, margins, rng):
