@@ -86,9 +86,8 @@ class ArmIK:
                 c(self.chain.lower, dtype=np.float64), c(self.chain.upper, dtype=np.float64))
 
     def kernel_args(self) -> tuple:
-        """The compiled solver's tables and settings (kernels.ik_solve's arguments after target and q_start)."""
-        if self._kernel_tables is None:
-            self._kernel_tables = self._compiled_tables()
+        """The compiled solver's tables and settings (kernels.ik_solve's arguments after target and q_start);
+        a compiled ArmIK only (its tables are built in __init__)."""
         return (*self._kernel_tables, float(self.position_tolerance), float(self.rotation_tolerance),
                 int(self.max_iterations), float(self.damping), float(self.max_step), bool(self.retry))
 
