@@ -16,7 +16,7 @@ def warm() -> None:
     from teleprev.retarget.arm import warm as arm
     from teleprev.robot.collision import warm as checker
     from teleprev.robot.compiled_collision import warm as collision
-    from teleprev.robot.ik import warm as ik
 
-    for each in (collision, checker, ik, arm, noncollision, hand, motion, swept):
+    # no teleprev.robot.ik.warm: arm's ArmRetargeter(ArmIK(compiled=True)) loads kernels.ik_solve already
+    for each in (collision, checker, arm, noncollision, hand, motion, swept):
         each()

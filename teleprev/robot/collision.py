@@ -284,10 +284,7 @@ class SelfCollisionChecker(FclSelfCollisionChecker):
 
 def warm(robot: str = "leap_hand_right") -> None:
     """Compile SelfCollisionChecker's kernels (both margins in one pass) into numba's on-disk cache (or load
-    them): building one loads check, collides and first_collision; pair_matrix is asked here."""
+    them): building one calls check, collides, first_collision and pair_matrix (the batch FK too)."""
     from teleprev.robot.model import load_robot
 
-    model = load_robot(robot)
-    checker = SelfCollisionChecker(model)
-    qs = np.stack([model.neutral(), model.neutral()])
-    checker.pair_matrix(qs, checker._loose.kinematics.world(qs))
+    SelfCollisionChecker(load_robot(robot))
