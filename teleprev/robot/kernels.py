@@ -97,7 +97,10 @@ IK_STALL = 0.98  # teleprev.robot.ik._STALL
 
 @njit(cache=True, inline="always")
 def _clip_to(v, lo, hi):
-    """np.minimum(np.maximum(v, lo), hi) for one value (NaN stays NaN, as in numpy)."""
+    """v clipped to [lo, hi] for one value: np.minimum(np.maximum(v, lo), hi) (NaN stays NaN, as in numpy)
+    except for the sign of a zero: where v and a bound are zeros of opposite sign (they compare equal) it
+    returns v, numpy the bound (_clip_to(-0.0, 0.0, 1.0) is -0.0, numpy's 0.0). Recorded sessions depend
+    on these exact values: keep the comparisons as they are."""
     v = lo if v < lo else v
     return hi if v > hi else v
 
