@@ -17,6 +17,6 @@ def warm() -> None:
     from teleprev.robot.collision import warm as checker
     from teleprev.robot.compiled_collision import warm as collision
 
-    # no teleprev.robot.ik.warm: arm's ArmRetargeter(ArmIK(compiled=True)) loads kernels.ik_solve already
+    # (the IK's kernel: arm's ArmRetargeter(ArmIK(compiled=True)) loads it)
     for each in (collision, checker, arm, noncollision, hand, motion, swept):
         each()

@@ -162,11 +162,3 @@ class ArmIK:
                 dq *= max_step / biggest
             q = np.minimum(np.maximum(q + dq, self.chain.lower), self.chain.upper)
         return IkResult(q, False, self.max_iterations, pos_err, rot_err)
-
-
-def warm(robot: str = "xarm6", tip: str = "link_eef") -> None:
-    """Compile the compiled IK's kernel (kernels.ik_solve) into numba's on-disk cache, or load it from it,
-    for the argument types the pipeline passes (teleprev.retarget.arm.warm does the retargeter's)."""
-    from teleprev.robot.model import load_robot
-
-    ArmIK(load_robot(robot), tip, compiled=True)  # its constructor loads the kernel

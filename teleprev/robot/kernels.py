@@ -3,7 +3,7 @@ the exact self-collision test of box geometry.
 
 Kernels take arrays and numbers only; CompiledKinematics and CompiledSelfCollisionChecker build the
 tables from a RobotModel. Each kernel compiles on its first call and is cached on disk (numba
-`cache=True`), never at import: `teleprev.robot.compiled_collision.warm()`, run by scripts/setup.sh,
+`cache=True`), never at import: `teleprev.pipeline.compiled.warm()`, run by scripts/setup.sh,
 fills the cache so that no record or eval pays the compile.
 
 All kernels live in this one file on purpose: numba invalidates a cached kernel when its own source
