@@ -267,20 +267,25 @@ class _PoseLayout:
     def learn(cls, data: bytes, sample: PoseSample) -> _PoseLayout | None:
         """The layout of `data` if it has the plain one (leading timestamp, frame id, all seven doubles)
         and reading it through the layout gives `sample` (what the protobuf runtime decoded) exactly."""
-        spans = _timestamp_spans(data)
         tail = len(data) - _POSE_TAIL_BYTES
-        if spans is None or tail < 0:
+        if tail < 0:
             return None
-        mask = np.full(len(data), 0xFF, np.uint8)
+        doubles = []
         p = tail
         for part in _POSE_TAIL:
             if part is None:
-                mask[p:p + 8] = 0
+                doubles.append(p)
                 p += 8
             elif data[p:p + len(part)] != part:
                 return None
             else:
                 p += len(part)
+        spans = _timestamp_spans(data)
+        if spans is None:
+            return None
+        mask = np.full(len(data), 0xFF, np.uint8)
+        for p in doubles:
+            mask[p:p + 8] = 0
         for start, n in spans:
             mask[start:start + n] = 0x80
         a = np.frombuffer(data, _U8)
@@ -299,25 +304,41 @@ class PoseInFrameDecoder:
     messages of a known layout (see _PoseLayout) as rows of one array, with the same result."""
 
     _MAX_LAYOUTS = 8
+    # Learning is tried a bounded number of times: a stream whose messages never have the plain layout
+    # (a double exactly 0.0 is left out by the encoder, so the fixed tail never matches) would otherwise
+    # try it again on every message, on top of the protobuf decode.
+    _TRIES_PER_LENGTH = 2  # failed learns of one message length before that length is no longer tried
+    _MAX_FAILED_LEARNS = 16  # failed learns in all
 
     def __init__(self, decode: Decoder) -> None:
         self._decode = decode
         self._layouts: dict[int, _PoseLayout] = {}
+        self._failed: dict[int, int] = {}  # message length -> failed learns
+        self._failures = 0
 
     def __call__(self, data: bytes) -> PoseSample:
         sample = self._decode(data)
-        if len(data) not in self._layouts and len(self._layouts) < self._MAX_LAYOUTS:
+        n = len(data)
+        if self._may_learn(n):
             layout = _PoseLayout.learn(data, sample)
-            if layout is not None:
-                self._layouts[len(data)] = layout
+            if layout is None:
+                self._failed[n] = self._failed.get(n, 0) + 1
+                self._failures += 1
+            else:
+                self._layouts[n] = layout
         return sample
+
+    def _may_learn(self, n: int) -> bool:
+        return (n not in self._layouts and len(self._layouts) < self._MAX_LAYOUTS
+                and self._failures < self._MAX_FAILED_LEARNS and self._failed.get(n, 0) < self._TRIES_PER_LENGTH)
 
     def batch(self, datas: list[bytes]) -> list[PoseSample]:
         out: list = [None] * len(datas)
         for idxs, layout, rows in _by_length(datas, self._layouts.get):
             if layout is None:
+                decode = self if self._may_learn(len(datas[idxs[0]])) else self._decode
                 for i in idxs:
-                    out[i] = self(datas[i])
+                    out[i] = decode(datas[i])
                 continue
             values = np.ascontiguousarray(rows[:, layout.value_idx]).view(_F64)
             position, orientation = values[:, :3].copy(), values[:, 3:].copy()

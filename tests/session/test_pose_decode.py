@@ -7,7 +7,8 @@ import foxglove.messages as fm
 import numpy as np
 
 from teleprev.messages import PoseSample
-from teleprev.session.codec import POSE_IN_FRAME, PoseInFrameDecoder, _pose_decoder, _protobuf_class, encode
+from teleprev.session.codec import (POSE_IN_FRAME, PoseInFrameDecoder, _pose_decoder, _PoseLayout, _protobuf_class,
+                                   encode)
 
 T0 = 1_700_000_000_123_456_789
 
@@ -49,5 +50,28 @@ def test_a_layout_is_learned_only_when_it_reads_back_the_message():
     d = PoseInFrameDecoder(protobuf_decoder())
     d(encode(PoseSample(T0, "world", np.zeros(3), np.array([0.0, 0.0, 0.0, 1.0]))))  # zeros: not the plain layout
     assert not d._layouts
+    d(encode(PoseSample(T0, "world", np.ones(3), np.ones(4))))
+    assert len(d._layouts) == 1
+
+
+def test_messages_that_cannot_be_learned_are_not_learned_again_and_again(monkeypatch):
+    calls = []
+    learn = _PoseLayout.learn.__func__
+
+    def counting_learn(cls, data, sample):
+        calls.append(len(data))
+        return learn(cls, data, sample)
+
+    monkeypatch.setattr(_PoseLayout, "learn", classmethod(counting_learn))
+    # planar poses: z is exactly 0.0, which the encoder leaves out, so no message has the plain layout
+    datas = [encode(PoseSample(T0 + k * 8_333_333, "world", np.array([1.0 + k, 2.0, 0.0]), np.ones(4)))
+             for k in range(2000)]
+    d = PoseInFrameDecoder(protobuf_decoder())
+    expected = [protobuf_decoder()(x) for x in datas]
+    for block in (datas[:500], datas[500:]):
+        assert all(same(a, b) for a, b in zip(d.batch(block), expected[datas.index(block[0]):]))
+    assert not d._layouts
+    assert len(calls) <= PoseInFrameDecoder._MAX_FAILED_LEARNS
+    # a learnable message afterwards still gets its layout
     d(encode(PoseSample(T0, "world", np.ones(3), np.ones(4))))
     assert len(d._layouts) == 1
