@@ -7,10 +7,11 @@ import foxglove.messages as fm
 import numpy as np
 
 from teleprev.messages import PoseSample
-from teleprev.session.codec import (POSE_IN_FRAME, PoseInFrameDecoder, _pose_decoder, _PoseLayout, _protobuf_class,
-                                   encode)
+from teleprev.session.codec import (_POSE_TAIL_BYTES, POSE_IN_FRAME, PoseInFrameDecoder, _pose_decoder, _PoseLayout,
+                                   _protobuf_class, encode)
 
 T0 = 1_700_000_000_123_456_789
+FILLER = np.frombuffer(b"\x3f" * 8, "<f8")[0]
 
 
 def protobuf_decoder():
@@ -52,6 +53,26 @@ def test_a_layout_is_learned_only_when_it_reads_back_the_message():
     assert not d._layouts
     d(encode(PoseSample(T0, "world", np.ones(3), np.ones(4))))
     assert len(d._layouts) == 1
+
+
+def test_a_layout_whose_tail_matches_but_reads_the_message_differently_is_not_kept():
+    # A message with no pose whose frame id is the byte tail of a pose whose doubles are all 0x3f3f...
+    # (ASCII, so valid UTF-8): its last bytes match the plain layout's fixed tail, but protobuf reads a
+    # frame id and a zero pose, not those doubles; only the read-back check tells them apart.
+    pose_tail = encode(PoseSample(T0, "world", np.full(3, FILLER), np.full(4, FILLER)))[-_POSE_TAIL_BYTES:]
+    cls = _protobuf_class(POSE_IN_FRAME, fm.PoseInFrame.get_schema().data)
+    m = cls(frame_id=pose_tail.decode("utf-8"))
+    m.timestamp.seconds, m.timestamp.nanos = divmod(T0, 10**9)
+    data = m.SerializeToString()
+    assert data.endswith(pose_tail)
+    sample = protobuf_decoder()(data)
+    assert sample.frame_id == pose_tail.decode("utf-8") and not sample.position.any()
+    assert _PoseLayout.learn(data, sample) is None
+    d = PoseInFrameDecoder(protobuf_decoder())
+    assert same(d(data), sample)
+    assert not d._layouts
+    assert all(same(got, sample) for got in d.batch([data] * 10))
+    assert not d._layouts
 
 
 def test_messages_that_cannot_be_learned_are_not_learned_again_and_again(monkeypatch):
