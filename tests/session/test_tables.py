@@ -179,7 +179,7 @@ def test_only_joint_states_topics_make_tables():
         list(reader.messages(["/glove/glove/hand"], tables={"/suit/suit/wrist": JointTable()}))
 
 
-def test_columns_decode_what_batch_decodes(rng):
+def test_columns_decode_what_batch_decodes(rng, monkeypatch):
     """JointStatesDecoder.columns against batch: a learned layout, messages of other layouts and lengths
     among them, and a message that only looks like the layout (its name differs)."""
     dec = JointStatesDecoder()
@@ -192,7 +192,17 @@ def test_columns_decode_what_batch_decodes(rng):
     dec(datas[0])  # learn the layout
     groups = [(idxs, layout is not None) for idxs, layout, _ in dec._by_layout(datas)]
     assert ([0, 1, 2, 3, 4, 5, 6, 7, 10, 11], True) in groups  # an array of rows, message 5 not matching
+    one_by_one = []
+    call = JointStatesDecoder.__call__
+
+    def counting_call(self, data):
+        one_by_one.append(datas.index(data))
+        return call(self, data)
+
+    monkeypatch.setattr(JointStatesDecoder, "__call__", counting_call)
     stamps, positions = dec.columns(datas)
+    assert sorted(one_by_one) == [5, 8, 9]  # the rows of the layout are read from the array
+    monkeypatch.undo()
     batch = JointStatesDecoder()
     batch(datas[0])
     expected = batch.batch(datas)
