@@ -11,6 +11,7 @@ from __future__ import annotations
 import itertools
 import json
 import time
+from collections.abc import Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -21,7 +22,7 @@ from teleprev import numeric_platform
 from teleprev.errors import SessionError
 from teleprev.messages import Event, JointSample
 from teleprev.live.build import build_pipeline, rig_calibration
-from teleprev.pipeline.driver import InputTopics, PipelineDriver
+from teleprev.pipeline.driver import RECORDED_JOINT_TOPICS, InputTopics, PipelineDriver, recorded_names, recorded_values
 from teleprev.pipeline.step import Pipeline, StepResult
 from teleprev.retarget.calibration import load_calibration_text
 from teleprev.rig import load_recorded_rig, load_rig
@@ -31,7 +32,7 @@ from teleprev.session.codec import JOINT_STATES
 from teleprev.session.reader import Episode, JointTable, SessionReader
 
 PREPARE_BLOCK = 4096  # messages read ahead per batch of glove-sample preparation (bounds the memory)
-RECORDED_OUTPUTS = (topics.RETARGETED, topics.CORRECTED, topics.ARM_TARGET, topics.COMMAND_ARM, topics.COMMAND_HAND)
+RECORDED_OUTPUTS = RECORDED_JOINT_TOPICS  # what the live recorder records per step (PipelineDriver.feed)
 
 
 @dataclass
@@ -130,7 +131,7 @@ class _Steps:
         self.corrector: list[str] = []
         self.latency_ns: list[int] = []
         self.flags: list[list[str]] = []
-        self.rows: dict[str, list[np.ndarray | None]] = {k: [] for k in RECORDED_OUTPUTS}
+        self.values: list[tuple[np.ndarray | None, ...]] = []  # per step: recorded_values (RECORDED_OUTPUTS' order)
 
     def add(self, t_ns: int, result: StepResult, latency_ns: int) -> None:
         self.t_ns.append(t_ns)
@@ -139,16 +140,15 @@ class _Steps:
         self.mode.append(report["mode"])
         self.corrector.append(report["corrector"])
         self.flags.append(report["flags"])
-        # the streams PipelineDriver.feed records for this step (the corrected hand only with a retargeted one)
-        rows = self.rows
-        rows[topics.RETARGETED].append(result.retargeted)
-        rows[topics.CORRECTED].append(result.corrected if result.retargeted is not None else None)
-        rows[topics.ARM_TARGET].append(result.arm_target)
-        rows[topics.COMMAND_ARM].append(result.arm_command)
-        rows[topics.COMMAND_HAND].append(result.effector_command)
+        self.values.append(recorded_values(result))  # what PipelineDriver.feed records for this step
+
+    def rows(self) -> dict[str, tuple[np.ndarray | None, ...]]:
+        """Per stream of RECORDED_OUTPUTS, its value at each step (None: nothing recorded)."""
+        columns = zip(*self.values) if self.values else ((),) * len(RECORDED_OUTPUTS)
+        return dict(zip(RECORDED_OUTPUTS, columns))
 
 
-def _table(values: list[np.ndarray | None], width: int) -> np.ndarray:
+def _table(values: Sequence[np.ndarray | None], width: int) -> np.ndarray:
     """Rows of a (len(values), width) float64 table; NaN rows where a value is None."""
     out = np.full((len(values), width), np.nan)
     present = [i for i, v in enumerate(values) if v is not None]
@@ -181,8 +181,7 @@ def rerun_session(path: str | Path, models: str | Path | None = None, rig_path: 
         raise SessionError(f"the session lacks the pipeline's input streams {missing}", str(path))
     driver = PipelineDriver(pipeline, inputs)
     arm_names, eff_names = pipeline.arm_names, pipeline.effector_names
-    widths = {topics.RETARGETED: len(eff_names), topics.CORRECTED: len(eff_names), topics.ARM_TARGET: len(arm_names),
-              topics.COMMAND_ARM: len(arm_names), topics.COMMAND_HAND: len(eff_names)}
+    widths = {k: len(names) for k, names in zip(RECORDED_OUTPUTS, recorded_names(pipeline))}
 
     steps = _Steps()
     recorded_by_stamp: dict[str, dict[int, np.ndarray]] = {k: {} for k in RECORDED_OUTPUTS}
@@ -210,7 +209,8 @@ def rerun_session(path: str | Path, models: str | Path | None = None, rig_path: 
     for k, table in tables.items():
         recorded_by_stamp[k] = dict(zip(table.stamp_ns, table.positions))
     t = np.array(steps.t_ns, dtype=np.int64)
-    rerun = {k: _table(steps.rows[k], widths[k]) for k in RECORDED_OUTPUTS}
+    rows = steps.rows()
+    rerun = {k: _table(rows[k], widths[k]) for k in RECORDED_OUTPUTS}
     t_keys = t.tolist()
     recorded = {k: _table([recorded_by_stamp[k].get(s) for s in t_keys], widths[k]) for k in RECORDED_OUTPUTS}
     notes = []

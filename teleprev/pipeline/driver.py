@@ -34,6 +34,27 @@ class InputTopics:
         )
 
 
+# The JointStates streams a step's results are recorded on, in the order they are recorded.
+RECORDED_JOINT_TOPICS = (topics.RETARGETED, topics.CORRECTED, topics.ARM_TARGET, topics.COMMAND_ARM,
+                         topics.COMMAND_HAND)
+
+
+def recorded_values(result: StepResult) -> tuple[np.ndarray | None, ...]:
+    """What one step records on each of RECORDED_JOINT_TOPICS, in that order (None: nothing): the one
+    place that says which result goes on which topic, for the live recorder (PipelineDriver.feed) and the
+    evaluation's re-run alike. The corrected hand is recorded only with a retargeted one. (A tuple, not a
+    dict: the evaluation calls it on every step.)"""
+    retargeted = result.retargeted
+    return (retargeted, None if retargeted is None else result.corrected, result.arm_target, result.arm_command,
+            result.effector_command)
+
+
+def recorded_names(pipeline: Pipeline) -> tuple[tuple[str, ...], ...]:
+    """The joint names of each of RECORDED_JOINT_TOPICS, in that order."""
+    arm, eff = pipeline.arm_names, pipeline.effector_names
+    return eff, eff, arm, arm, eff
+
+
 @dataclass
 class Outputs:
     """What one fed sample produced: messages to record and commands to send."""
@@ -52,6 +73,7 @@ class PipelineDriver:
         self.state = PipelineState()
         self.latest: dict[str, object] = {}
         self.last_result: StepResult | None = None
+        self._names = recorded_names(pipeline)
 
     @property
     def mode(self) -> str:
@@ -109,19 +131,15 @@ class PipelineDriver:
 
     def _outputs(self, result: StepResult, t: int) -> Outputs:
         out = Outputs(result=result)
-        eff_names = self.pipeline.effector_names
-        arm_names = self.pipeline.arm_names
-        if result.retargeted is not None:
-            out.logged.append((topics.RETARGETED, JointSample(t, eff_names, result.retargeted)))
-            out.logged.append((topics.CORRECTED, JointSample(t, eff_names, result.corrected)))
-        if result.arm_target is not None:
-            out.logged.append((topics.ARM_TARGET, JointSample(t, arm_names, result.arm_target)))
-        if result.arm_command is not None:
-            out.arm_command = JointSample(t, arm_names, result.arm_command)
-            out.logged.append((topics.COMMAND_ARM, out.arm_command))
-        if result.effector_command is not None:
-            out.effector_command = JointSample(t, eff_names, result.effector_command)
-            out.logged.append((topics.COMMAND_HAND, out.effector_command))
+        for topic, names, value in zip(RECORDED_JOINT_TOPICS, self._names, recorded_values(result)):
+            if value is None:
+                continue
+            sample = JointSample(t, names, value)
+            out.logged.append((topic, sample))
+            if topic == topics.COMMAND_ARM:
+                out.arm_command = sample
+            elif topic == topics.COMMAND_HAND:
+                out.effector_command = sample
         out.logged.append((topics.STEP_REPORT, Event(t, "teleprev.StepReport", _json_ready(result.report))))
         return out
 
