@@ -9,6 +9,7 @@ is that older sessions keep working.
 from pathlib import Path
 
 import numpy as np
+import pytest
 
 from teleprev.messages import ImageSample, JointSample, TransformsSample
 from teleprev.evaluation.evaluate import evaluate
@@ -39,8 +40,11 @@ def test_the_old_session_still_evaluates():
     r = result.reruns[0]
     commanded = ~np.isnan(r.rerun["/command/hand"]).any(axis=1)
     assert commanded.sum() > 300
-    if r.models_match:  # with the models it was recorded with, it must reproduce bit for bit
-        assert session["bit_identical"]
+    # with the models it was recorded with, it must reproduce bit for bit
+    if not r.models_match:
+        pytest.skip(f"bit identity not checked: the shipped models are not the ones {FIXTURE.name} was "
+                    f"recorded with (models_match={r.models_match})")
+    assert session["bit_identical"]
 
 
 def test_sessions_of_one_rig_share_a_pipeline_and_rerun_the_same():
@@ -66,5 +70,7 @@ def test_a_format_2_session_reruns_with_the_numpy_arithmetic_bit_for_bit():
     r = result.reruns[0]
     assert (~np.isnan(r.rerun["/command/arm"]).any(axis=1)).sum() > 500
     assert "ccn" in set(r.corrector)  # the CCN's arithmetic is part of what must reproduce
-    if r.models_match:
-        assert session["bit_identical"]
+    if not r.models_match:
+        pytest.skip(f"bit identity not checked: the shipped models are not the ones {FIXTURE_V2.name} was "
+                    f"recorded with (models_match={r.models_match})")
+    assert session["bit_identical"]
