@@ -32,7 +32,6 @@ from teleprev.session.codec import JOINT_STATES
 from teleprev.session.reader import Episode, JointTable, SessionReader
 
 PREPARE_BLOCK = 4096  # messages read ahead per batch of glove-sample preparation (bounds the memory)
-RECORDED_OUTPUTS = RECORDED_JOINT_TOPICS  # what the live recorder records per step (PipelineDriver.feed)
 
 
 @dataclass
@@ -131,7 +130,7 @@ class _Steps:
         self.corrector: list[str] = []
         self.latency_ns: list[int] = []
         self.flags: list[list[str]] = []
-        self.values: list[tuple[np.ndarray | None, ...]] = []  # per step: recorded_values (RECORDED_OUTPUTS' order)
+        self.values: list[tuple[np.ndarray | None, ...]] = []  # per step: recorded_values (RECORDED_JOINT_TOPICS' order)
 
     def add(self, t_ns: int, result: StepResult, latency_ns: int) -> None:
         self.t_ns.append(t_ns)
@@ -143,9 +142,9 @@ class _Steps:
         self.values.append(recorded_values(result))  # what PipelineDriver.feed records for this step
 
     def rows(self) -> dict[str, tuple[np.ndarray | None, ...]]:
-        """Per stream of RECORDED_OUTPUTS, its value at each step (None: nothing recorded)."""
-        columns = zip(*self.values) if self.values else ((),) * len(RECORDED_OUTPUTS)
-        return dict(zip(RECORDED_OUTPUTS, columns))
+        """Per stream of RECORDED_JOINT_TOPICS, its value at each step (None: nothing recorded)."""
+        columns = zip(*self.values) if self.values else ((),) * len(RECORDED_JOINT_TOPICS)
+        return dict(zip(RECORDED_JOINT_TOPICS, columns))
 
 
 def _table(values: Sequence[np.ndarray | None], width: int) -> np.ndarray:
@@ -181,16 +180,16 @@ def rerun_session(path: str | Path, models: str | Path | None = None, rig_path: 
         raise SessionError(f"the session lacks the pipeline's input streams {missing}", str(path))
     driver = PipelineDriver(pipeline, inputs)
     arm_names, eff_names = pipeline.arm_names, pipeline.effector_names
-    widths = {k: len(names) for k, names in zip(RECORDED_OUTPUTS, recorded_names(pipeline))}
+    widths = {k: len(names) for k, names in zip(RECORDED_JOINT_TOPICS, recorded_names(pipeline))}
 
     steps = _Steps()
-    recorded_by_stamp: dict[str, dict[int, np.ndarray]] = {k: {} for k in RECORDED_OUTPUTS}
+    recorded_by_stamp: dict[str, dict[int, np.ndarray]] = {k: {} for k in RECORDED_JOINT_TOPICS}
     # The recorded outputs are read as tables (stamps and values, no messages) in the same pass as the
     # inputs; an output topic of another schema comes through as messages and is skipped, as before.
-    tables = {k: JointTable() for k in RECORDED_OUTPUTS
+    tables = {k: JointTable() for k in RECORDED_JOINT_TOPICS
               if reader.schemas.get(k) == JOINT_STATES}
     streamed = [inputs.hand, inputs.wrist, inputs.arm, inputs.effector, topics.MODE,
-                *(k for k in RECORDED_OUTPUTS if k not in tables)]
+                *(k for k in RECORDED_JOINT_TOPICS if k not in tables)]
     n_inputs = 0
     # One BLAS thread: the batched CPN is a few hundred rows, where threads cost more than they give (on a
     # busy machine or with -j workers, many times more); single configurations never use them anyway.
@@ -210,12 +209,12 @@ def rerun_session(path: str | Path, models: str | Path | None = None, rig_path: 
         recorded_by_stamp[k] = dict(zip(table.stamp_ns, table.positions))
     t = np.array(steps.t_ns, dtype=np.int64)
     rows = steps.rows()
-    rerun = {k: _table(rows[k], widths[k]) for k in RECORDED_OUTPUTS}
+    rerun = {k: _table(rows[k], widths[k]) for k in RECORDED_JOINT_TOPICS}
     t_keys = t.tolist()
-    recorded = {k: _table([recorded_by_stamp[k].get(s) for s in t_keys], widths[k]) for k in RECORDED_OUTPUTS}
+    recorded = {k: _table([recorded_by_stamp[k].get(s) for s in t_keys], widths[k]) for k in RECORDED_JOINT_TOPICS}
     notes = []
     stepped = set(t_keys)
-    extra = {k: len(set(recorded_by_stamp[k]) - stepped) for k in RECORDED_OUTPUTS}
+    extra = {k: len(set(recorded_by_stamp[k]) - stepped) for k in RECORDED_JOINT_TOPICS}
     if any(extra.values()):
         notes.append(f"recorded outputs at times the re-run never stepped: { {k: v for k, v in extra.items() if v} }")
     recorded_platform = meta.get("session", {}).get("numeric_platform")
