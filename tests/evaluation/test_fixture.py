@@ -1,6 +1,7 @@
 """Sessions recorded by earlier teleprevs still read and evaluate: tests/fixtures/sim_v1.mcap (format 1:
-speed caps only) and sim_v2.mcap (format 2: motion limits, numpy arithmetic; recorded with
-tests/fixtures/fixture_rig.toml, two episodes engaged for 3 s each).
+speed caps only), sim_v2.mcap (format 2: motion limits, numpy arithmetic) and sim_v3.mcap (format 3: the
+compiled hot path, commands computed at each pipeline step), each recorded with
+tests/fixtures/fixture_rig.toml, two episodes engaged for 3 s each.
 
 Re-record it only when the format changes on purpose, and keep the old one as sim_v<N>.mcap: the point
 is that older sessions keep working.
@@ -17,6 +18,7 @@ from teleprev.session.reader import SessionReader
 
 FIXTURE = Path(__file__).parents[1] / "fixtures" / "sim_v1.mcap"
 FIXTURE_V2 = Path(__file__).parents[1] / "fixtures" / "sim_v2.mcap"
+FIXTURE_V3 = Path(__file__).parents[1] / "fixtures" / "sim_v3.mcap"
 
 
 def test_every_stream_of_the_old_session_decodes():
@@ -74,3 +76,18 @@ def test_a_format_2_session_reruns_with_the_numpy_arithmetic_bit_for_bit():
         pytest.skip(f"bit identity not checked: the shipped models are not the ones {FIXTURE_V2.name} was "
                     f"recorded with (models_match={r.models_match})")
     assert session["bit_identical"]
+
+
+def test_a_format_3_session_reruns_with_the_compiled_arithmetic_bit_for_bit():
+    from teleprev.evaluation import reproduce
+
+    reader = SessionReader(FIXTURE_V3)
+    assert reader.metadata["teleprev"]["format_version"] == "3"
+    assert reproduce.recorded_with_motion(reader.metadata) and reproduce.recorded_compiled(reader.metadata)
+    result = evaluate([FIXTURE_V3])
+    session = result.report["sessions"][0]
+    r = result.reruns[0]
+    assert (~np.isnan(r.rerun["/command/arm"]).any(axis=1)).sum() > 500
+    assert (~np.isnan(r.rerun["/command/hand"]).any(axis=1)).sum() > 500
+    assert "ccn" in set(r.corrector)
+    assert r.models_match and session["bit_identical"]
