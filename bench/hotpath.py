@@ -9,7 +9,7 @@ configurations, times the checker the pipeline runs (SelfCollisionChecker: compi
 margin; its answers must equal FCL's exactly), and times what compiling costs: cold (empty kernel cache, in a fresh process), from
 the cache, and whether `teleprev --help` stays fast. The glove preparation (Pipeline.prepare_hands: decode,
 checks, angles, retargeting, clip, and for the LEAP Hand the exact check) is timed with the numpy
-arithmetic (formats 1 and 2) and the compiled one (format 3, teleprev/pipeline/hand_kernels.py), the two
+arithmetic (formats 1 and 2) and the compiled one (format 3, teleprev/kernels/glove.py), the two
 interleaved sample by sample: one sample as the live step prepares it, and a session's worth as eval does.
 """
 
@@ -187,7 +187,7 @@ def prepare_hand_figures(quick: bool, rng) -> dict:
 
 def main() -> None:
     args = common.parser(__doc__).parse_args()
-    from teleprev.robot import kernels
+    from teleprev.kernels import boxes as boxes_kernels
     from teleprev.robot.collision import FclSelfCollisionChecker, SelfCollisionChecker
     from teleprev.robot.compiled_collision import CompiledSelfCollisionChecker
     from teleprev.robot.model import load_robot
@@ -198,7 +198,7 @@ def main() -> None:
     fcl_checker = FclSelfCollisionChecker(hand)
     pipeline_checker = SelfCollisionChecker(hand)
     compiled = CompiledSelfCollisionChecker(hand)
-    strict = CompiledSelfCollisionChecker(hand, margin=-kernels.MARGIN)
+    strict = CompiledSelfCollisionChecker(hand, margin=-boxes_kernels.MARGIN)
     numpy_sat = NumpySat(compiled)
 
     pool = hand.sample_uniform(4000 if quick else 20_000, rng)

@@ -17,7 +17,7 @@ ROOT = Path(__file__).resolve().parents[1]
 # Lowest first. A package is placed whole, a ground-floor module alone.
 LAYERS: list[tuple[str, ...]] = [
     ("teleprev.errors", "teleprev.paths", "teleprev.config", "teleprev.numeric_platform", "teleprev.transforms",
-     "teleprev.clock", "teleprev.topics", "teleprev.messages", "teleprev.corpus"),
+     "teleprev.clock", "teleprev.topics", "teleprev.messages", "teleprev.corpus", "teleprev.kernels"),
     ("teleprev.robot", "teleprev.human", "teleprev.session"),
     ("teleprev.devices", "teleprev.retarget", "teleprev.noncollision"),
     ("teleprev.pipeline",),

@@ -1,4 +1,4 @@
-"""Compiled CPN / CCN inference (teleprev.noncollision.kernels) for Corrector(compiled=True), sessions of
+"""Compiled CPN / CCN inference (teleprev.kernels.mlp) for Corrector(compiled=True), sessions of
 format 3 on. The numpy networks (mlp.py) stay for training, gradients (projection) and compiled=False.
 
 The kernels' loop order is fixed and a row's arithmetic does not depend on its batch, so a batch
@@ -11,10 +11,10 @@ from __future__ import annotations
 
 import numpy as np
 
-from teleprev.noncollision import kernels
+from teleprev.kernels import mlp as mlp_kernels
 from teleprev.noncollision.mlp import CCN, CPN, MLP
 
-_ACTIVATION = {"relu": kernels.RELU, "silu": kernels.SILU, "tanh": kernels.TANH}
+_ACTIVATION = {"relu": mlp_kernels.RELU, "silu": mlp_kernels.SILU, "tanh": mlp_kernels.TANH}
 
 
 def pack(net: MLP) -> tuple[np.ndarray, np.ndarray]:
@@ -50,7 +50,7 @@ class CompiledMLP:
 
     def slots(self, q: np.ndarray) -> np.ndarray:
         q = np.asarray(q)
-        out = kernels.slots(_rows(q), self.i, self.w)
+        out = mlp_kernels.slots(_rows(q), self.i, self.w)
         return out[0] if q.ndim == 1 else out
 
 
@@ -67,7 +67,7 @@ class CompiledCPN:
     def predicts_free(self, q: np.ndarray):
         """As CPN.predicts_free: a bool for one configuration (n,), (N,) bools for (N, n)."""
         q = np.asarray(q)
-        free = kernels.predicts_free(_rows(q), self.mlp.i, self.mlp.w, self.bound)
+        free = mlp_kernels.predicts_free(_rows(q), self.mlp.i, self.mlp.w, self.bound)
         return bool(free[0]) if q.ndim == 1 else free
 
     def mean_prob_grad(self, q: np.ndarray, scaled: bool = False):
@@ -86,12 +86,12 @@ class CompiledCCN:
 
     def __call__(self, q: np.ndarray) -> np.ndarray:
         q = np.asarray(q)
-        out = kernels.propose(_rows(q), self.mlp.i, self.mlp.w, self.f)
+        out = mlp_kernels.propose(_rows(q), self.mlp.i, self.mlp.w, self.f)
         return out[0] if q.ndim == 1 else out
 
 
 class CompiledNets:
-    """The Corrector's compiled CPN and CCN, and its fused CCN step (kernels.propose_shorten)."""
+    """The Corrector's compiled CPN and CCN, and its fused CCN step (mlp_kernels.propose_shorten)."""
 
     def __init__(self, cpn: CPN, ccn: CCN, shorten_levels: int):
         self.cpn = CompiledCPN(cpn)
@@ -103,7 +103,7 @@ class CompiledNets:
         """For colliding configurations q0 (N, n) within the limits: (proposals, shortened, hi), see kernels."""
         if q0.dtype != np.float64 or q0.ndim != 2 or not q0.flags.c_contiguous:  # the Corrector passes such rows
             q0 = _rows(q0)
-        return kernels.propose_shorten(q0, *self._args)
+        return mlp_kernels.propose_shorten(q0, *self._args)
 
 
 def warm() -> None:

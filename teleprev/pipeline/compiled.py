@@ -10,8 +10,8 @@ from __future__ import annotations
 
 def warm() -> None:
     from teleprev.noncollision.compiled import warm as noncollision
-    from teleprev.pipeline.hand_kernels import warm as hand
-    from teleprev.pipeline.kernels import warm as motion
+    from teleprev.kernels.glove import warm as hand
+    from teleprev.kernels.motion import warm as motion
     from teleprev.pipeline.swept import warm as swept
     from teleprev.retarget.arm import warm as arm
     from teleprev.robot.collision import warm as checker

@@ -57,7 +57,7 @@ class Effector(ABC):
 
     def kernel_table(self) -> np.ndarray | None:
         """The retargeting for the compiled hand preparation to compute with the angles
-        (teleprev/pipeline/hand_kernels.py: rows source, gain, offset, lower, upper); None: the effector
+        (teleprev/kernels/glove.py: rows source, gain, offset, lower, upper); None: the effector
         needs the angles only."""
         return None
 

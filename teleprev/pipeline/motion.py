@@ -20,7 +20,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from teleprev.pipeline.frozen import evolve
-from teleprev.pipeline.kernels import (ESTIMATE_BLEND, ESTIMATE_GIVEN, ESTIMATE_HELD, ESTIMATE_NONE, ESTIMATE_RAW,
+from teleprev.kernels.motion import (ESTIMATE_BLEND, ESTIMATE_GIVEN, ESTIMATE_HELD, ESTIMATE_NONE, ESTIMATE_RAW,
                                        ESTIMATE_ZERO)
 from teleprev.pipeline.trajectory import PLAN_ESTIMATE, PLAN_GOAL, ArmGenerator, HandLimiter, JointMotion
 

@@ -101,14 +101,14 @@ class Pipeline:
         self._stale_ns = int(cfg.stale_ms * 1e6)
         self._last_wrist: tuple = (None, "", None)  # (sample, flag, pose): a cache, the step stays pure
         if compiled:
-            from teleprev.pipeline import hand_kernels
+            from teleprev.kernels import glove as glove_kernels
 
-            self._hand_kernels = hand_kernels
+            self._hand_kernels = glove_kernels
             table = effector.kernel_table()
             self._hand_retargets = table is not None  # the kernel computes the effector's joints too
             self._hand_table = table if table is not None else np.zeros((5, 0))
             self._hand_limits = np.array([MAX_JOINT_ROTATION**2, MIN_FLEXION, MAX_FLEXION, MAX_ABDUCTION, TWIST_NOISE])
-            hand_kernels.warm()  # load them from numba's cache now, not in a live loop's first steps
+            glove_kernels.warm()  # load them from numba's cache now, not in a live loop's first steps
 
     def model_hashes(self) -> dict[str, str] | None:
         """{role: sha256} of the model files the pipeline runs (a session records them, eval compares);
@@ -179,7 +179,7 @@ class Pipeline:
         return HandInput("", flexion, abduction, self.effector.prepare(flexion[None], abduction[None])[0])
 
     def _prepare_compiled(self, samples: list[JointSample]) -> list[HandInput]:
-        """prepare_hands in compiled code (teleprev/pipeline/hand_kernels.py): decode, checks, angles and
+        """prepare_hands in compiled code (teleprev/kernels/glove.py): decode, checks, angles and
         (for an effector with a kernel table) the retargeted joints, by one row code for one sample and for
         many, so each sample's bits are the same either way; then the effector's preparation of the rows
         that passed (the Corrector's exact check, for the LEAP Hand)."""

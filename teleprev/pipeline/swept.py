@@ -15,7 +15,7 @@ the segment is within half a spacing of a checked one, where two links moved at 
 each other. The end point itself keeps the full c.
 
 SweptCheck(compiled=True) (sessions of format 3 on) runs a segment in one numba kernel
-(teleprev/robot/kernels.py, swept_*): the bound, the points, the checks in order, the end point's, and
+(teleprev/kernels/swept.py, swept_*): the bound, the points, the checks in order, the end point's, and
 last_free_on_segment's bisection. Per configuration it decides as SelfCollisionChecker does (the
 compiled box test with its margin turned either way) and hands the ones within the margin back to FCL
 here, so its answers are the numpy check's (tests/pipeline/test_swept.py); only the bound's last bit
@@ -29,7 +29,7 @@ import math
 
 import numpy as np
 
-from teleprev.robot import kernels
+from teleprev.kernels import collision as collision_kernels, swept as swept_kernels
 from teleprev.robot.collision import FclSelfCollisionChecker, SelfCollisionChecker
 from teleprev.robot.model import RobotModel
 from teleprev.robot.urdf import Shape
@@ -103,7 +103,7 @@ class SweptCheck:
             self._clear_cache = (b"", False)
 
     def _compiled_tables(self) -> tuple | None:
-        """The swept kernels' tables (teleprev/robot/kernels.py), or None where the checkers are not the
+        """The swept kernels' tables (teleprev/kernels/swept.py), or None where the checkers are not the
         compiled ones (geometry other than boxes): then the numpy check runs."""
         plain, grown = self.checker._args, self.grown._args  # FK tables, collision tables, the two margins
         if plain is None or grown is None:
@@ -165,9 +165,9 @@ class SweptCheck:
                 hi = mid
         return q0 + lo * (q1 - q0)
 
-    # ---- compiled (teleprev/robot/kernels.py: swept_segment, swept_last_free) -----------------------
+    # ---- compiled (teleprev/kernels/swept.py: swept_segment, swept_last_free) -----------------------
     # The kernels check every configuration with the compiled test of the checkers (one pass with the
-    # loose and the tight margin: SelfCollisionChecker's decision, kernels.self_collision_margins_into)
+    # loose and the tight margin: SelfCollisionChecker's decision, collision_kernels.self_collision_margins_into)
     # and hand back the ones within the margin, which FCL decides here, as SelfCollisionChecker does. So
     # the answers are the checker's.
     def _segment_free_compiled(self, q0, q1) -> bool:
@@ -178,24 +178,24 @@ class SweptCheck:
         q0_clear = int(cached[1]) if cached[0] == key else -1
         start = 1
         while True:
-            answer, k, known, end_clear = kernels.swept_segment(q0, q1, q0_clear, start, *self._kernel_args)
+            answer, k, known, end_clear = swept_kernels.swept_segment(q0, q1, q0_clear, start, *self._kernel_args)
             if known != q0_clear:  # the kernel checked q0's clearance: clear(q0) caches it
                 self._clear_cache = (key, bool(known))
                 q0_clear = known
-            if answer == kernels.SWEPT_FREE or answer == kernels.SWEPT_COLLIDES:
+            if answer == swept_kernels.SWEPT_FREE or answer == swept_kernels.SWEPT_COLLIDES:
                 if end_clear >= 0:
                     self._clear_cache = (self._point.tobytes(), bool(end_clear))
-                return answer == kernels.SWEPT_FREE
-            if answer == kernels.SWEPT_UNSURE_START:
+                return answer == swept_kernels.SWEPT_FREE
+            if answer == swept_kernels.SWEPT_UNSURE_START:
                 q0_clear = int(not FclSelfCollisionChecker.collides(self.grown, self._point))
                 self._clear_cache = (key, bool(q0_clear))
                 start = 1
-            elif answer == kernels.SWEPT_UNSURE_GROWN or answer == kernels.SWEPT_UNSURE_PLAIN:
-                checker = self.grown if answer == kernels.SWEPT_UNSURE_GROWN else self.checker
+            elif answer == swept_kernels.SWEPT_UNSURE_GROWN or answer == swept_kernels.SWEPT_UNSURE_PLAIN:
+                checker = self.grown if answer == swept_kernels.SWEPT_UNSURE_GROWN else self.checker
                 if FclSelfCollisionChecker.collides(checker, self._point):
                     return False
                 start = k + 1
-            elif answer == kernels.SWEPT_UNSURE_END:
+            elif answer == swept_kernels.SWEPT_UNSURE_END:
                 free = not FclSelfCollisionChecker.collides(self.grown, self._point)
                 self._clear_cache = (self._point.tobytes(), free)
                 return free
@@ -213,15 +213,15 @@ class SweptCheck:
         q1 = np.ascontiguousarray(q1, dtype=np.float64)
         key0, key1 = q0.tobytes(), q1.tobytes()
         cached = self._clear_cache
-        answer, cache, clear = kernels.swept_command(
+        answer, cache, clear = swept_kernels.swept_command(
             q0, q1, np.ascontiguousarray(v1, dtype=np.float64), acceleration, lower, upper,
             int(cached[1]) if cached[0] == key0 else -1, int(cached[1]) if cached[0] == key1 else -1,
             *self._kernel_args)
-        if answer != kernels.SWEPT_FREE and answer != kernels.SWEPT_COLLIDES:
+        if answer != swept_kernels.SWEPT_FREE and answer != swept_kernels.SWEPT_COLLIDES:
             return None
         if cache:
             self._clear_cache = ((key0, key1, self._point.tobytes())[cache - 1], bool(clear))
-        return answer == kernels.SWEPT_FREE
+        return answer == swept_kernels.SWEPT_FREE
 
     def _last_free_compiled(self, q0, q1, steps: int) -> float | None:
         """The bisection's fraction of the segment, or None where a configuration on the way is within the
@@ -232,8 +232,8 @@ class SweptCheck:
         cached = self._clear_cache
         q0_clear = int(cached[1]) if cached[0] == key else -1
         end = np.empty_like(q0)
-        answer, lo, q0_clear, cache = kernels.swept_last_free(q0, q1, int(steps), q0_clear, *self._kernel_args, end)
-        if answer != kernels.SWEPT_FREE:
+        answer, lo, q0_clear, cache = swept_kernels.swept_last_free(q0, q1, int(steps), q0_clear, *self._kernel_args, end)
+        if answer != swept_kernels.SWEPT_FREE:
             return None
         if cache == 1:
             self._clear_cache = (key, bool(q0_clear))

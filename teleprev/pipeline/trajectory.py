@@ -20,7 +20,7 @@ from functools import cached_property
 
 import numpy as np
 
-from teleprev.pipeline.kernels import ESTIMATE_GIVEN, ESTIMATE_NONE, arm_plan, arm_sample, hand_command, warm
+from teleprev.kernels.motion import ESTIMATE_GIVEN, ESTIMATE_NONE, arm_plan, arm_sample, hand_command, warm
 
 REST_VELOCITY = 1e-6  # rad/s: below this (and no acceleration) a joint is at rest
 REST_ACCELERATION = 1e-5

@@ -55,11 +55,10 @@ class ArmRetargeter:
 
     def target(self, anchor: Anchor, wrist: np.ndarray) -> tuple[np.ndarray, bool]:
         """The TCP target pose, and whether the workspace box clipped it."""
-        if self.ik.compiled:  # the same products in compiled code (kernels.arm_target_into)
-            from teleprev.robot import kernels
-
+        if self.ik.compiled:  # the same products in compiled code (ik_kernels.arm_target_into)
+            from teleprev.kernels import ik as ik_kernels
             t = np.empty((4, 4))
-            clipped = kernels.arm_target_into(*self._kernel_args(anchor, wrist), t)
+            clipped = ik_kernels.arm_target_into(*self._kernel_args(anchor, wrist), t)
             return t, bool(clipped)
         m = self.m
         t = _EYE4.copy()
@@ -69,17 +68,16 @@ class ArmRetargeter:
         return t, bool((t[:3, 3] != desired).any())
 
     def _kernel_args(self, anchor: Anchor, wrist: np.ndarray) -> tuple:
-        """kernels.arm_target_into's inputs. The anchor's arrays (anchor() made them) and m, lo, hi are
+        """ik_kernels.arm_target_into's inputs. The anchor's arrays (anchor() made them) and m, lo, hi are
         writeable float64 already; the wrist is copied, since a read-only or other-typed array would make
         numba compile another signature (seconds, in the live loop)."""
         return (anchor.wrist, anchor.tcp, np.array(wrist, dtype=np.float64), self.m, float(self.scale), self.lo,
                 self.hi)
 
     def solve(self, anchor: Anchor, wrist: np.ndarray, q_start: np.ndarray) -> tuple[IkResult, bool]:
-        if self.ik.compiled:  # target and IK in one compiled call (kernels.arm_solve)
-            from teleprev.robot import kernels
-
-            q, converged, iterations, pos_err, rot_err, clipped = kernels.arm_solve(
+        if self.ik.compiled:  # target and IK in one compiled call (ik_kernels.arm_solve)
+            from teleprev.kernels import ik as ik_kernels
+            q, converged, iterations, pos_err, rot_err, clipped = ik_kernels.arm_solve(
                 *self._kernel_args(anchor, wrist), np.array(q_start, dtype=np.float64),
                 *self.ik.kernel_args())
             return IkResult(q, converged, iterations, pos_err, rot_err), bool(clipped)
@@ -88,7 +86,7 @@ class ArmRetargeter:
 
 
 def warm(robot: str = "xarm6", tip: str = "link_eef") -> None:
-    """Compile the compiled retargeter's kernels (kernels.arm_target_into, arm_solve) into numba's on-disk
+    """Compile the compiled retargeter's kernels (ik_kernels.arm_target_into, arm_solve) into numba's on-disk
     cache, or load them from it, for the argument types the pipeline passes."""
     from teleprev.robot.model import load_robot
 

@@ -67,7 +67,7 @@ class LeapRetargeter:
         self._src[order], self._gain[order], self._offset[order] = src, gain, offset
 
     def table(self) -> np.ndarray:
-        """The mapping as the compiled preparation takes it (teleprev/pipeline/hand_kernels.py): rows
+        """The mapping as the compiled preparation takes it (teleprev/kernels/glove.py): rows
         source angle index (into [flexion(15), abduction(15)]), gain, offset, lower and upper limit, one
         column per joint in the model's order."""
         return np.ascontiguousarray(np.stack([self._src.astype(float), self._gain, self._offset,

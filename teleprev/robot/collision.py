@@ -25,7 +25,7 @@ import numpy as np
 
 from teleprev.robot.collision_report import CollisionReport, link_labels
 from teleprev.robot.compiled_collision import CompiledSelfCollisionChecker
-from teleprev.robot import kernels
+from teleprev.kernels import boxes as boxes_kernels, collision as collision_kernels
 from teleprev.robot.exclusions import Exclusions, load_exclusions
 from teleprev.robot.model import RobotModel
 
@@ -236,7 +236,7 @@ class SelfCollisionChecker(FclSelfCollisionChecker):
             self._loose = CompiledSelfCollisionChecker(model, self.exclusions)  # FCL's contacts and more
             # the kernels' arguments after q, built once: FK tables, collision tables, the two margins
             self._args = (*self._loose.kinematics.tables, *self._loose._tables(), self._loose.margin,
-                          -kernels.MARGIN)
+                          -boxes_kernels.MARGIN)
             self._n_labels = len(self.link_names)
             q = model.neutral()  # load the kernels from numba's cache now, not in a live loop's first steps
             self.check(q), self.collides(q), self.first_collision(q[None]), self.pair_matrix(q[None])
@@ -246,7 +246,7 @@ class SelfCollisionChecker(FclSelfCollisionChecker):
             return super().check(q)
         labels = np.zeros(self._n_labels, dtype=bool)
         index = np.empty(len(self.link_pairs), dtype=np.int64)
-        n = kernels.check_margins(np.ascontiguousarray(q, dtype=np.float64), *self._args, False, labels, index)
+        n = collision_kernels.check_margins(np.ascontiguousarray(q, dtype=np.float64), *self._args, False, labels, index)
         if n == 0:
             return CollisionReport(labels, ())
         if n > 0:
@@ -257,16 +257,16 @@ class SelfCollisionChecker(FclSelfCollisionChecker):
     def collides(self, q: np.ndarray) -> bool:
         if self._args is None:
             return super().collides(q)
-        n = kernels.collides_margins(np.ascontiguousarray(q, dtype=np.float64), *self._args)
+        n = collision_kernels.collides_margins(np.ascontiguousarray(q, dtype=np.float64), *self._args)
         return n > 0 if n >= 0 else super().collides(q)
 
     def first_collision(self, q: np.ndarray) -> int | None:
         if self._args is None:
             return super().first_collision(q)
         q = np.ascontiguousarray(q, dtype=np.float64)
-        k, state = kernels.first_colliding_margins(q, 0, *self._args)
+        k, state = collision_kernels.first_colliding_margins(q, 0, *self._args)
         while k >= 0 and state < 0 and not super().collides(q[k]):  # within the margin and free for FCL: go on
-            k, state = kernels.first_colliding_margins(q, k + 1, *self._args)
+            k, state = collision_kernels.first_colliding_margins(q, k + 1, *self._args)
         return None if k < 0 else int(k)
 
     def pair_matrix(self, q: np.ndarray, world: np.ndarray | None = None) -> np.ndarray:
@@ -275,7 +275,7 @@ class SelfCollisionChecker(FclSelfCollisionChecker):
         q = np.atleast_2d(q)
         world = self._loose.kinematics.world(q) if world is None else world  # (one kernel fewer to compile)
         world = np.ascontiguousarray(world, dtype=np.float64).reshape(-1, *world.shape[-3:])
-        hits, unsure = kernels.pair_matrix_margins_world(world, *self._args[3:])
+        hits, unsure = collision_kernels.pair_matrix_margins_world(world, *self._args[3:])
         unsure = np.flatnonzero(unsure)
         if len(unsure):
             hits[unsure] = super().pair_matrix(q[unsure])

@@ -3,8 +3,8 @@
 Same link names, checked link pairs (and their order), exclusions, method names and return types as
 the fcl-based teleprev.robot.collision.SelfCollisionChecker, so swapping one for the other is a
 one-line change. The arithmetic (FK, box poses, bounding spheres, the separating-axis test) is in
-teleprev.robot.kernels. A pair counts as colliding unless its boxes are apart by more than `margin`
-(kernels.MARGIN, 1 nm) along a separating axis or their bounding spheres are: against FCL it can only
+teleprev.kernels (fk, boxes, collision). A pair counts as colliding unless its boxes are apart by more than `margin`
+(boxes_kernels.MARGIN, 1 nm) along a separating axis or their bounding spheres are: against FCL it can only
 err towards "colliding", and only for boxes within nanometres of touching.
 
 Importing this module compiles nothing; the first call of each kernel compiles it (seconds) unless the
@@ -18,7 +18,7 @@ import itertools
 import numpy as np
 
 from teleprev.errors import UrdfError
-from teleprev.robot import kernels
+from teleprev.kernels import boxes as boxes_kernels, collision as collision_kernels
 from teleprev.robot.collision_report import CollisionReport, link_labels
 from teleprev.robot.compiled_kinematics import CompiledKinematics
 from teleprev.robot.exclusions import Exclusions, load_exclusions
@@ -35,7 +35,7 @@ class CompiledSelfCollisionChecker:
     -margin (tests use it to bracket FCL's answer from below).
     """
 
-    def __init__(self, model: RobotModel, exclusions: Exclusions | None = None, margin: float = kernels.MARGIN):
+    def __init__(self, model: RobotModel, exclusions: Exclusions | None = None, margin: float = boxes_kernels.MARGIN):
         self.model = model
         self.exclusions = exclusions if exclusions is not None else load_exclusions(model)
         self.margin = float(margin)
@@ -99,16 +99,16 @@ class CompiledSelfCollisionChecker:
         """All colliding link pairs and the per-link labels of one configuration."""
         labels = np.zeros(len(self.link_names), dtype=bool)
         index = np.empty(len(self.link_pairs), dtype=np.int64)
-        n = kernels.check_margins(self._q(q), *self._margin_args(), False, labels, index)
+        n = collision_kernels.check_margins(self._q(q), *self._margin_args(), False, labels, index)
         return CollisionReport(labels, tuple([self.link_pairs[i] for i in index[:n].tolist()]))
 
     def collides(self, q: np.ndarray) -> bool:
         """Whether one configuration is in self-collision; stops at the first contact."""
-        return bool(kernels.collides_margins(self._q(q), *self._margin_args()) > 0)
+        return bool(collision_kernels.collides_margins(self._q(q), *self._margin_args()) > 0)
 
     def first_collision(self, q: np.ndarray, start: int = 0) -> int | None:
         """Index of the first configuration of the batch q (N, n), from `start` on, in self-collision."""
-        k = kernels.first_colliding_margins(self._q(q), start, *self._margin_args())[0]
+        k = collision_kernels.first_colliding_margins(self._q(q), start, *self._margin_args())[0]
         return None if k < 0 else int(k)
 
     def pair_matrix(self, q: np.ndarray, world: np.ndarray | None = None) -> np.ndarray:
@@ -119,7 +119,7 @@ class CompiledSelfCollisionChecker:
         if world is None:
             world = self.kinematics.world(np.atleast_2d(self._q(q)))
         world = np.ascontiguousarray(world, dtype=np.float64).reshape(-1, *world.shape[-3:])
-        return kernels.pair_matrix_margins_world(world, *self._tables(), self.margin, self.margin)[0]
+        return collision_kernels.pair_matrix_margins_world(world, *self._tables(), self.margin, self.margin)[0]
 
     def labels(self, q: np.ndarray, world: np.ndarray | None = None) -> np.ndarray:
         """(N, m) bool per-link labels for a batch of configurations."""

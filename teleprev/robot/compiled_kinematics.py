@@ -1,4 +1,4 @@
-"""Forward kinematics in compiled code (teleprev.robot.kernels), for any tree of fixed, revolute and
+"""Forward kinematics in compiled code (teleprev.kernels.fk), for any tree of fixed, revolute and
 prismatic joints given as a RobotModel. Same link order and transforms as RobotModel.fk (to rounding).
 """
 
@@ -6,7 +6,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from teleprev.robot import kernels
+from teleprev.kernels import fk as fk_kernels
 from teleprev.robot.model import LinkPoses, RobotModel
 
 
@@ -32,10 +32,10 @@ class CompiledKinematics:
             if j.type == "fixed":
                 continue  # kind FIXED, driven by nothing
             if j.type == "prismatic":
-                self.link_int[i, 2] = kernels.PRISMATIC
+                self.link_int[i, 2] = fk_kernels.PRISMATIC
                 self.link_terms[i, 3, :, 3] = rot @ j.axis
             else:  # revolute and continuous: R(a) = I + sin(a) K + (1 - cos(a)) K^2
-                self.link_int[i, 2] = kernels.REVOLUTE
+                self.link_int[i, 2] = fk_kernels.REVOLUTE
                 k = _skew(j.axis)
                 self.link_terms[i, 1, :, :3] = rot @ k
                 self.link_terms[i, 2, :, :3] = rot @ k @ k
@@ -53,9 +53,9 @@ class CompiledKinematics:
         """Link transforms (L, 4, 4) of one configuration (n,), or (N, L, 4, 4) of a batch (N, n)."""
         q = np.ascontiguousarray(q, dtype=np.float64)
         if q.ndim == 1:
-            return kernels.fk(q, self.link_int, self.link_num, self.link_terms)
+            return fk_kernels.fk(q, self.link_int, self.link_num, self.link_terms)
         flat = q.reshape(-1, q.shape[-1])
-        world = kernels.fk_batch(flat, self.link_int, self.link_num, self.link_terms)
+        world = fk_kernels.fk_batch(flat, self.link_int, self.link_num, self.link_terms)
         return world.reshape(q.shape[:-1] + world.shape[1:])
 
     def fk(self, q: np.ndarray) -> LinkPoses:

@@ -30,7 +30,7 @@ class ArmIK:
     Each iteration takes a damped least-squares step on the 6-D pose error, caps the step size and
     clips to the joint limits, so every iterate (and the result) is within limits.
 
-    compiled=True runs the same algorithm in one numba kernel (kernels.ik_solve: the 6x6 system by
+    compiled=True runs the same algorithm in one numba kernel (ik_kernels.ik_solve: the 6x6 system by
     Cholesky instead of numpy's LU, so the last bits differ; the same inputs give the same bits).
     """
 
@@ -76,7 +76,7 @@ class ArmIK:
             self.solve(self.pose(q), q)
 
     def _compiled_tables(self) -> tuple:
-        """The kernel's arm tables, in kernels.ik_solve's argument order from the FK tables to the limits
+        """The kernel's arm tables, in ik_kernels.ik_solve's argument order from the FK tables to the limits
         (imports numba: only a compiled ArmIK builds them)."""
         from teleprev.robot.compiled_kinematics import CompiledKinematics
 
@@ -86,7 +86,7 @@ class ArmIK:
                 c(self.chain.lower, dtype=np.float64), c(self.chain.upper, dtype=np.float64))
 
     def kernel_args(self) -> tuple:
-        """The compiled solver's tables and settings (kernels.ik_solve's arguments after target and q_start);
+        """The compiled solver's tables and settings (ik_kernels.ik_solve's arguments after target and q_start);
         a compiled ArmIK only (its tables are built in __init__)."""
         return (*self._kernel_tables, float(self.position_tolerance), float(self.rotation_tolerance),
                 int(self.max_iterations), float(self.damping), float(self.max_step), bool(self.retry))
@@ -111,11 +111,10 @@ class ArmIK:
 
     def solve(self, target: np.ndarray, q_start: np.ndarray) -> IkResult:
         if self.compiled:
-            from teleprev.robot import kernels
-
+            from teleprev.kernels import ik as ik_kernels
             # fresh writeable float64 copies: a read-only array (a decoded message) would make numba compile
             # another signature, seconds in the live loop
-            q, converged, iterations, pos_err, rot_err = kernels.ik_solve(
+            q, converged, iterations, pos_err, rot_err = ik_kernels.ik_solve(
                 np.array(target, dtype=np.float64), np.array(q_start, dtype=np.float64), *self.kernel_args())
             return IkResult(q, converged, iterations, pos_err, rot_err)
         result = self._solve(target, q_start, self.max_step)

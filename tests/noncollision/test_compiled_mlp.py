@@ -1,4 +1,4 @@
-"""Compiled CPN / CCN inference (teleprev/noncollision/kernels.py): agrees with the numpy networks to float32
+"""Compiled CPN / CCN inference (teleprev/kernels/mlp.py): agrees with the numpy networks to float32
 rounding, answers a row the same bits whatever batch it is in, and Corrector(compiled=True) keeps every
 guarantee of the numpy one (every answer passes the exact checker; prepare-then-correct == correct)."""
 

@@ -1,4 +1,4 @@
-"""The compiled glove preparation (teleprev/pipeline/hand_kernels.py, sessions of format 3 on) against the
+"""The compiled glove preparation (teleprev/kernels/glove.py, sessions of format 3 on) against the
 numpy one it stands in for: the same flags on every input, good or broken, angles and joints within
 1e-12; and one sample prepared alone (the live step) has the same bits as in a batch (eval)."""
 
@@ -8,7 +8,7 @@ import pytest
 from teleprev.human.smplx import HAND_POSE_NAMES, TWIST_NOISE, hand_pose_from_angles, hand_pose_from_values, hand_values
 from teleprev.live.build import build_pipeline
 from teleprev.messages import JointSample
-from teleprev.pipeline import hand_kernels
+from teleprev.kernels import glove as hand_kernels
 from teleprev.pipeline.step import MAX_ABDUCTION, MAX_FLEXION, MAX_JOINT_ROTATION, MIN_FLEXION
 from teleprev.rig import load_rig
 from tests.helpers.pipeline_inputs import twisted

@@ -1,4 +1,4 @@
-"""The compiled hand limiter (teleprev/pipeline/kernels.py) equals the numpy expressions it replaced, bit
+"""The compiled hand limiter (teleprev/kernels/motion.py) equals the numpy expressions it replaced, bit
 for bit, so sessions recorded with those re-run identically."""
 
 import numpy as np
@@ -88,7 +88,7 @@ def numpy_estimate(target, before, before_v, gap, keep):
 
 
 def test_hand_command_equals_the_estimate_then_track_or_stop(limiter, rng):
-    from teleprev.pipeline.kernels import ESTIMATE_BLEND, ESTIMATE_NONE, ESTIMATE_RAW, ESTIMATE_ZERO
+    from teleprev.kernels.motion import ESTIMATE_BLEND, ESTIMATE_NONE, ESTIMATE_RAW, ESTIMATE_ZERO
 
     for k, (q, v, target, target_v, dt, dt_before, frac) in enumerate(_cases(limiter, rng, 2000)):
         before = target - rng.normal(0, 0.01, len(q))
@@ -208,7 +208,7 @@ def test_the_arm_generator_equals_its_python_float_reference(generator, rng):
 def test_the_arm_plan_with_motions_estimate_equals_feedforward_then_track(generator, rng):
     """Motion's feed-forward (the estimate, the target moved on by `ahead`) then track, as numpy and
     Python floats computed them; and follow's limit hold and tolerance test as numpy's."""
-    from teleprev.pipeline.kernels import ESTIMATE_BLEND, ESTIMATE_HELD, ESTIMATE_RAW, ESTIMATE_ZERO
+    from teleprev.kernels.motion import ESTIMATE_BLEND, ESTIMATE_HELD, ESTIMATE_RAW, ESTIMATE_ZERO
     from teleprev.pipeline.trajectory import PLAN_ESTIMATE, PLAN_GOAL
 
     ref = ReferenceArmGenerator(generator)

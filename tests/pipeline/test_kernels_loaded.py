@@ -15,15 +15,15 @@ SCRIPT = textwrap.dedent("""
 
     import numpy as np
     from numba.core.registry import CPUDispatcher
-    import teleprev.noncollision.kernels, teleprev.pipeline.hand_kernels, teleprev.pipeline.kernels, teleprev.robot.kernels
+    import importlib, pkgutil
+    import teleprev.kernels
     from teleprev.live.build import build_pipeline
     from teleprev.messages import JointSample, PoseSample
     from teleprev.pipeline.step import PipelineState, StepInputs
     from teleprev.rig import load_rig
     from teleprev.human.smplx import HAND_POSE_NAMES
 
-    modules = (teleprev.noncollision.kernels, teleprev.pipeline.hand_kernels, teleprev.pipeline.kernels,
-               teleprev.robot.kernels)
+    modules = [importlib.import_module("teleprev.kernels." + m.name) for m in pkgutil.iter_modules(teleprev.kernels.__path__)]
 
     def loaded():
         return {(m.__name__, name, str(sig)) for m in modules for name, f in vars(m).items()

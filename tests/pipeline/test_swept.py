@@ -88,7 +88,7 @@ def test_the_clearance_is_distance_between_links(swept):
     assert checked
 
 
-# ---- the compiled check (SweptCheck(compiled=True), teleprev/robot/kernels.py) gives the numpy check's answers
+# ---- the compiled check (SweptCheck(compiled=True), teleprev/kernels/swept.py) gives the numpy check's answers
 @pytest.fixture(scope="module")
 def pair():
     hand = load_robot("leap_hand_right")

@@ -14,7 +14,7 @@ import numpy as np
 import pytest
 
 from teleprev.errors import UrdfError
-from teleprev.robot import kernels
+from teleprev.kernels import boxes as boxes_kernels, collision as collision_kernels
 from teleprev.robot.collision import SelfCollisionChecker
 from teleprev.robot.compiled_collision import CompiledSelfCollisionChecker
 from teleprev.robot.compiled_kinematics import CompiledKinematics
@@ -31,7 +31,7 @@ def compiled(hand):
 @pytest.fixture(scope="module")
 def strict(hand):
     """Reports only pairs that overlap by more than the margin: a lower bracket on FCL's answer."""
-    return CompiledSelfCollisionChecker(hand, margin=-kernels.MARGIN)
+    return CompiledSelfCollisionChecker(hand, margin=-boxes_kernels.MARGIN)
 
 
 def _assert_bracketed(fcl_pairs, loose, tight):
@@ -153,7 +153,7 @@ def test_first_collision_of_a_batch_is_fcls(hand, hand_checker, rng):
 
 # ---- the box-box test itself -------------------------------------------------------------------
 def _boxes(*placed):
-    """(S, 3, 4) poses and (S, 4) sizes for kernels.boxes_apart from (size, xyz, rpy) triples."""
+    """(S, 3, 4) poses and (S, 4) sizes for boxes_kernels.boxes_apart from (size, xyz, rpy) triples."""
     poses = np.array([make_transform(rpy_to_matrix(*rpy), xyz)[:3] for _, xyz, rpy in placed])
     sizes = np.array([[*(np.array(s) / 2), np.linalg.norm(s) / 2] for s, _, _ in placed])
     return poses, sizes
@@ -166,9 +166,9 @@ def _fcl_collide(placed) -> bool:
     return bool(fcl.collide(a, b, fcl.CollisionRequest(), fcl.CollisionResult()))
 
 
-def _apart(placed, margin=kernels.MARGIN) -> bool:
+def _apart(placed, margin=boxes_kernels.MARGIN) -> bool:
     poses, sizes = _boxes(*placed)
-    return bool(kernels.boxes_apart(poses, 0, 1, sizes, margin))
+    return bool(boxes_kernels.boxes_apart(poses, 0, 1, sizes, margin))
 
 
 def test_face_contact_is_decided_at_the_margin():
@@ -229,8 +229,9 @@ def test_importing_compiles_nothing_and_needs_no_fcl():
         "import sys\n"
         "import teleprev.robot.compiled_collision\n"
         "from numba.core.registry import CPUDispatcher\n"
-        "from teleprev.robot import kernels\n"
-        "print(sorted(n for n, f in vars(kernels).items() if isinstance(f, CPUDispatcher) and f.signatures), 'fcl' in sys.modules)\n"
+        "import importlib, pkgutil, teleprev.kernels\n"
+        "mods = [importlib.import_module('teleprev.kernels.' + m.name) for m in pkgutil.iter_modules(teleprev.kernels.__path__)]\n"
+        "print(sorted(n for k in mods for n, f in vars(k).items() if isinstance(f, CPUDispatcher) and f.signatures), 'fcl' in sys.modules)\n"
     )
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True).stdout.strip()
     assert out == "[] False"
@@ -261,7 +262,7 @@ def margins(request, hand):
     model = hand if request.param == "plain" else inflated_model(hand, 0.0015)
     checker = SelfCollisionChecker(model)
     return model, checker, checker._loose, CompiledSelfCollisionChecker(model, checker.exclusions,
-                                                                        margin=-kernels.MARGIN)
+                                                                        margin=-boxes_kernels.MARGIN)
 
 
 def test_both_margins_in_one_pass_equal_the_two_separate_calls(hand, margins, rng):
@@ -273,24 +274,24 @@ def test_both_margins_in_one_pass_equal_the_two_separate_calls(hand, margins, rn
     assert not (ti & ~lo).any()  # the tight margin's pairs are among the loose one's
     assert differ.sum() >= 15, "the near-contact sample should have configurations within the margin"
 
-    hits, unsure = kernels.pair_matrix_margins_world(loose.kinematics.world(q), *checker._args[3:])
+    hits, unsure = collision_kernels.pair_matrix_margins_world(loose.kinematics.world(q), *checker._args[3:])
     np.testing.assert_array_equal(unsure, differ)
     np.testing.assert_array_equal(hits[~differ], lo[~differ])
 
     n_pairs, n_links = len(checker.link_pairs), len(checker.link_names)
     for i in np.r_[np.flatnonzero(differ), np.arange(0, len(q), 7)]:
         labels, index = np.zeros(n_links, dtype=bool), np.empty(n_pairs, dtype=np.int64)
-        n = kernels.check_margins(q[i], *checker._args, False, labels, index)
+        n = collision_kernels.check_margins(q[i], *checker._args, False, labels, index)
         a, b = loose.check(q[i]), tight.check(q[i])
         if differ[i]:
-            assert n == kernels.MARGINS_UNSURE
+            assert n == collision_kernels.MARGINS_UNSURE
         else:
             assert n == len(a.pairs) and tuple(checker.link_pairs[k] for k in index[:n]) == a.pairs == b.pairs
             np.testing.assert_array_equal(labels, a.labels)
-        expected = 0 if not loose.collides(q[i]) else 1 if tight.collides(q[i]) else kernels.MARGINS_UNSURE
-        assert kernels.collides_margins(q[i], *checker._args) == expected
+        expected = 0 if not loose.collides(q[i]) else 1 if tight.collides(q[i]) else collision_kernels.MARGINS_UNSURE
+        assert collision_kernels.collides_margins(q[i], *checker._args) == expected
         labels = np.zeros(n_links, dtype=bool)
-        assert kernels.check_margins(q[i], *checker._args, True, labels, index) == expected
+        assert collision_kernels.check_margins(q[i], *checker._args, True, labels, index) == expected
 
 
 def test_first_colliding_with_both_margins_is_the_loose_ones_with_the_tight_answer(hand, margins, rng):
@@ -300,11 +301,11 @@ def test_first_colliding_with_both_margins_is_the_loose_ones_with_the_tight_answ
     free = free[~loose.pair_matrix(free).any(axis=1)][:20]
     for q in (np.concatenate([free[:5], near[k:k + 1], free[5:]]) for k in range(len(near))):
         for start in (0, 3, 6, len(q)):
-            k, state = kernels.first_colliding_margins(q, start, *checker._args)
+            k, state = collision_kernels.first_colliding_margins(q, start, *checker._args)
             expected = loose.first_collision(q, start)
             assert k == (-1 if expected is None else expected)
             if k >= 0:
-                assert state == (1 if tight.collides(q[k]) else kernels.MARGINS_UNSURE)
+                assert state == (1 if tight.collides(q[k]) else collision_kernels.MARGINS_UNSURE)
             else:
                 assert state == 0
 
@@ -324,10 +325,10 @@ def test_box_state_is_the_two_single_margin_answers(rng):
         gap = rng.choice([-3e-9, -1.5e-9, -1e-9, -5e-10, 0.0, 5e-10, 1e-9, 1.5e-9, 3e-9, 1e-3, -1e-3])
         poses[1, :, 3] = (extent + gap, rng.uniform(-0.3, 0.3) * sa[1], rng.uniform(-0.3, 0.3) * sa[2])
         for a, b in ((0, 1), (1, 0)):
-            loose = kernels.boxes_apart(poses, a, b, size, kernels.MARGIN)
-            tight = kernels.boxes_apart(poses, a, b, size, -kernels.MARGIN)
-            state = kernels.boxes_state(poses, a, b, size, kernels.MARGIN, -kernels.MARGIN)
-            expected = kernels.BOX_APART if loose else kernels.BOX_LOOSE if tight else kernels.BOX_BOTH
+            loose = boxes_kernels.boxes_apart(poses, a, b, size, boxes_kernels.MARGIN)
+            tight = boxes_kernels.boxes_apart(poses, a, b, size, -boxes_kernels.MARGIN)
+            state = boxes_kernels.boxes_state(poses, a, b, size, boxes_kernels.MARGIN, -boxes_kernels.MARGIN)
+            expected = boxes_kernels.BOX_APART if loose else boxes_kernels.BOX_LOOSE if tight else boxes_kernels.BOX_BOTH
             assert state == expected
             states.add(state)
-    assert states == {kernels.BOX_APART, kernels.BOX_LOOSE, kernels.BOX_BOTH}
+    assert states == {boxes_kernels.BOX_APART, boxes_kernels.BOX_LOOSE, boxes_kernels.BOX_BOTH}

@@ -1,4 +1,4 @@
-"""The compiled arm IK (ArmIK(compiled=True), kernels.ik_solve) against the numpy solver it replaces.
+"""The compiled arm IK (ArmIK(compiled=True), ik_kernels.ik_solve) against the numpy solver it replaces.
 
 Same algorithm, so the same answers to rounding: the 6x6 system is solved by Cholesky instead of numpy's
 LU, so the last bits differ, but convergence, iteration counts and joint values agree, every result is
@@ -161,8 +161,7 @@ def test_tcp_offset_and_a_prismatic_joint_match_numpy(rng):
 
 
 def test_rotation_error_kernel_matches_numpy_near_zero_and_pi(rng):
-    from teleprev.robot import kernels
-
+    from teleprev.kernels import ik as ik_kernels
     out = np.empty(3)
     for angle in [0.0, 1e-9, 1e-7, 0.3, 2.0, np.pi - 2e-4, np.pi - 1e-5, np.pi]:
         for _ in range(20):
@@ -173,7 +172,7 @@ def test_rotation_error_kernel_matches_numpy_near_zero_and_pi(rng):
             current[:3, :3] = base
             target = np.eye(4)
             target[:3, :3] = axis_angle_to_matrix(angle * axis) @ base
-            kernels.rotation_error_into(target, current, out)
+            ik_kernels.rotation_error_into(target, current, out)
             assert np.abs(out - rotation_error(target[:3, :3], base)).max() < 1e-6
 
 
@@ -228,8 +227,7 @@ def test_retarget_solve_is_target_then_ik_in_one_call(xarm6, rng):
 
 def test_read_only_inputs_are_accepted(xarm6, iks):
     """Decoded messages are read-only arrays; the wrappers copy, so no other signature is compiled."""
-    from teleprev.robot import kernels
-
+    from teleprev.kernels import ik as ik_kernels
     _, compiled_ik = iks
     q = np.array([0.0, -0.3, -0.6, 0.0, 0.9, 0.0])
     target = compiled_ik.pose(q)
@@ -240,4 +238,4 @@ def test_read_only_inputs_are_accepted(xarm6, iks):
     wrist = np.eye(4)
     wrist.flags.writeable = False
     arm.solve(arm.anchor(wrist, q), wrist, q)
-    assert len(kernels.ik_solve.signatures) == len(kernels.arm_solve.signatures) == 1
+    assert len(ik_kernels.ik_solve.signatures) == len(ik_kernels.arm_solve.signatures) == 1
