@@ -39,7 +39,7 @@ t = time.perf_counter()
 from teleprev.robot.compiled_collision import CompiledSelfCollisionChecker
 CompiledSelfCollisionChecker(hand).check(hand.neutral())
 first = time.perf_counter() - t
-from teleprev.robot.compiled_collision import warm
+from teleprev.kernels import warm
 t = time.perf_counter()
 warm()
 print(first, time.perf_counter() - t)

@@ -26,6 +26,6 @@ if ! "$PY" -m uv --version >/dev/null 2>&1; then
   "$PY" -m pip install --quiet --disable-pip-version-check uv
 fi
 "$PY" -m uv sync --frozen --python "$PY" --quiet "$@"
-# Compile every numba kernel of the pipeline (teleprev/pipeline/compiled.py) into numba's on-disk cache
+# Compile every numba kernel (teleprev/kernels/) into numba's on-disk cache
 # now, so that no record or eval pays the seconds of compiling; `teleprev --help` never loads them.
-.venv/bin/python -c 'from teleprev.pipeline.compiled import warm; warm()'
+.venv/bin/python -c 'from teleprev.kernels import warm; warm()'

@@ -2,6 +2,6 @@
 the compiled kernels from numba's cache once, so that every worker forked from the server starts with
 them instead of paying numba's first-call start (about 0.4 s) in its first session."""
 
-from teleprev.pipeline.compiled import warm
+from teleprev.kernels import warm
 
 warm()

@@ -5,11 +5,31 @@ once per configuration, then every checked link pair culled by spheres and decid
 
 from __future__ import annotations
 
+from typing import NamedTuple
+
 import numpy as np
 from numba import njit
 
 from teleprev.kernels.boxes import BOX_APART, BOX_BOTH, _place, boxes_state
-from teleprev.kernels.fk import fk, fk_into
+from teleprev.kernels.fk import FkTable, fk, fk_into
+
+
+class BoxTable(NamedTuple):
+    """A robot's collision boxes (S of them, grouped by checked link) and its checked link pairs."""
+
+    shape_link: np.ndarray  # (S,) int64: the model link (FK row) of each box
+    shape_local: np.ndarray  # (S, 3, 4) the box's pose in that link
+    shape_size: np.ndarray  # (S, 4) half extents, then the bounding sphere's radius
+    links: np.ndarray  # (m, 3) int64: per checked link, its model link and the range [start, stop) of its boxes
+    spheres: np.ndarray  # (m, 4) per checked link, a bounding sphere of its boxes (centre in the link, radius)
+    pairs: np.ndarray  # (P, 2) int64: the checked link pairs
+
+
+class Margins(NamedTuple):
+    """The two margins one pass decides (loose >= tight; equal: the one-margin test)."""
+
+    loose: float
+    tight: float
 
 @njit(cache=True, inline="always")
 def _apart2(x, y, reach):
@@ -158,3 +178,12 @@ def first_colliding_margins(qs, start, link_int, link_num, link_terms, shape_lin
             return k, state
     return -1, 0
 
+
+# Each kernel's parameters, a table standing for its fields in order (tests/kernels/test_tables.py).
+SIGNATURES = {
+    "self_collision_margins_into": ("world", BoxTable, Margins, "first_only", "hits", "labels", "index"),
+    "check_margins": ("q", FkTable, BoxTable, Margins, "first_only", "labels", "index"),
+    "collides_margins": ("q", FkTable, BoxTable, Margins),
+    "pair_matrix_margins_world": ("world", BoxTable, Margins),
+    "first_colliding_margins": ("qs", "start", FkTable, BoxTable, Margins),
+}

@@ -7,11 +7,21 @@ FkTable); each kernel takes the table's fields, in FkTable's order, after its ow
 
 from __future__ import annotations
 
+from typing import NamedTuple
+
 import numpy as np
 from numba import njit
 
 # Joint kinds in the FK table.
 FIXED, REVOLUTE, PRISMATIC = 0, 1, 2
+
+
+class FkTable(NamedTuple):
+    """A joint tree, links in parent-first order (row 0 the root)."""
+
+    link_int: np.ndarray  # (L, 3) int64: parent row, joint-vector index of the driving joint, kind
+    link_num: np.ndarray  # (L, 2) float64: multiplier and offset on that joint's value (mimic joints)
+    link_terms: np.ndarray  # (L, 4, 3, 4) float64: the joint origin's top rows and the three terms (fk_into)
 
 
 
@@ -69,3 +79,7 @@ def fk_batch(qs, link_int, link_num, link_terms):
     for k in range(qs.shape[0]):
         fk_into(qs[k], link_int, link_num, link_terms, world[k])
     return world
+
+
+# Each kernel's parameters, a table standing for its fields in order (tests/kernels/test_tables.py).
+SIGNATURES = {"fk_into": ("q", FkTable, "world"), "fk": ("q", FkTable), "fk_batch": ("qs", FkTable)}

@@ -23,6 +23,8 @@ from __future__ import annotations
 
 import math
 
+from typing import NamedTuple
+
 import numpy as np
 from numba import njit
 
@@ -33,6 +35,12 @@ FLAG_NAMES = ("", "glove_invalid", "glove_out_of_range")  # the pipeline's flag 
 MAX_ROTATION_SQ, MIN_FLEXION, MAX_FLEXION, MAX_ABDUCTION, TWIST_NOISE = range(5)
 # table rows: the effector's retargeting, one column per joint
 SOURCE, GAIN, OFFSET, LOWER, UPPER = range(5)
+
+
+class GloveTable(NamedTuple):
+    frames: np.ndarray  # (2, 15) cos and sin of each finger joint frame's turn about y
+    limits: np.ndarray  # (5,) the plausibility bounds, indexed MAX_ROTATION_SQ .. TWIST_NOISE
+    table: np.ndarray  # (5, n) the effector's retargeting, rows SOURCE .. UPPER (n = 0: angles only)
 
 
 @njit(cache=True, inline="always")
@@ -108,9 +116,5 @@ def prepare_rows(values, frames, limits, table):
     return flags, angles, q
 
 
-def warm() -> None:
-    """Compile (or load from the cache) every kernel here for the float64 arrays the pipeline passes."""
-    values = np.zeros((1, 45))
-    table = np.zeros((5, 2))
-    table[UPPER] = 1.0
-    prepare_rows(values, np.ones((2, 15)), np.array([8.41, -1.2, 2.7, 1.3, 1e-9]), table)
+# Each kernel's parameters, a table standing for its fields in order (tests/kernels/test_tables.py).
+SIGNATURES = {"prepare_rows": ("values", GloveTable)}

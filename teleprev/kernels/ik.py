@@ -4,10 +4,42 @@ feeds it (teleprev.retarget.arm.ArmRetargeter): one call per pipeline step does 
 
 from __future__ import annotations
 
+from typing import NamedTuple
+
 import numpy as np
 from numba import njit
 
-from teleprev.kernels.fk import fk_into
+from teleprev.kernels.fk import FkTable, fk_into
+
+
+class IkChain(NamedTuple):
+    """The arm chain's joints as the solver takes them (after its FkTable)."""
+
+    tip: int  # the tip link's row in the FK table
+    tcp: np.ndarray  # (4, 4) the tool transform from the tip link
+    joint_links: np.ndarray  # (n,) int64: each joint's child link row
+    axes: np.ndarray  # (n, 3) each joint's axis in its child link's frame
+    revolute: np.ndarray  # (n,) bool
+    lower: np.ndarray  # (n,) joint limits
+    upper: np.ndarray
+
+
+class IkSettings(NamedTuple):
+    position_tolerance: float  # metres
+    rotation_tolerance: float  # radians
+    max_iterations: int
+    damping: float
+    max_step: float  # radians per iteration, the largest joint step
+    retry: bool  # a short-stepped second try from the start when the first does not converge
+
+
+class Workspace(NamedTuple):
+    """How the wrist's motion moves the TCP target (ArmRetargeter): rotated, scaled, clipped to a box."""
+
+    m: np.ndarray  # (3, 3) the suit frame in the robot frame
+    scale: float
+    lo: np.ndarray  # (3,) the workspace box
+    hi: np.ndarray
 
 # ArmIK._solve's algorithm, step for step: damped least squares on the 6-D pose error from a clipped warm
 # start, damping lam2 = damping + 1e-2 |err|^2, joints pinned at a limit and pushed outwards taken out of
@@ -247,3 +279,10 @@ def arm_solve(anchor_wrist, anchor_tcp, wrist, m, scale, lo, hi, q_start, link_i
                                  max_step, retry)
     return q, ok, it, pe, re, clipped
 
+
+# Each kernel's parameters, a table standing for its fields in order (tests/kernels/test_tables.py).
+SIGNATURES = {
+    "ik_solve": ("target", "q_start", FkTable, IkChain, IkSettings),
+    "arm_target_into": ("anchor_wrist", "anchor_tcp", "wrist", Workspace, "t"),
+    "arm_solve": ("anchor_wrist", "anchor_tcp", "wrist", Workspace, "q_start", FkTable, IkChain, IkSettings),
+}

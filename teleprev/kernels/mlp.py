@@ -36,6 +36,8 @@ when its own source file changes, not when a kernel it calls in another file doe
 
 from __future__ import annotations
 
+from typing import NamedTuple
+
 import numpy as np
 from numba import njit
 
@@ -43,6 +45,25 @@ RELU, SILU, TANH = 0, 1, 2
 HEADER = 8  # G, width_in, width_out, layers, joints, activation, noisy_or, outputs
 BLOCK = 8  # rows per block in batches (passes of four rows over each layer, then one row at a time)
 EXP_CLAMP = 88.0  # |x| clamped for exp: beyond it nothing these kernels decide changes
+
+
+class Net(NamedTuple):
+    """A network packed for the kernels (layout above)."""
+
+    net_i: np.ndarray  # int64
+    net_w: np.ndarray  # float32
+
+
+class CcnStep(NamedTuple):
+    """The Corrector's CCN step: the CCN, its limits and output scale, and the CPN's decision."""
+
+    ccn_i: np.ndarray
+    ccn_w: np.ndarray
+    ccn_f: np.ndarray  # float64: lower, upper, output_scale
+    cpn_i: np.ndarray
+    cpn_w: np.ndarray
+    bound: float  # the CPN's decision bound (see the module docstring)
+    steps: int  # 2 ** the Corrector's shortening levels
 
 
 @njit(cache=True, inline="always", error_model="numpy")
@@ -348,3 +369,12 @@ def propose_shorten(q0, ccn_i, ccn_w, ccn_f, cpn_i, cpn_w, bound, steps):
             else:
                 lo[r] = mid
     return proposal, shorter, hi
+
+
+# Each kernel's parameters, a table standing for its fields in order (tests/kernels/test_tables.py).
+SIGNATURES = {
+    "slots": ("x", Net),
+    "predicts_free": ("x", Net, "bound"),
+    "propose": ("x", Net, "net_f"),
+    "propose_shorten": ("q0", CcnStep),
+}

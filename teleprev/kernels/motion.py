@@ -13,8 +13,29 @@ from __future__ import annotations
 
 import math
 
+from typing import NamedTuple
+
 import numpy as np
 from numba import njit
+
+
+class HandLimits(NamedTuple):
+    """The hand limiter's caps, per joint (HandLimiter)."""
+
+    lower: np.ndarray
+    upper: np.ndarray
+    velocity: np.ndarray
+    acceleration: np.ndarray
+    brake_fraction: float  # of the acceleration cap, for the braking envelope
+
+
+class ArmLimits(NamedTuple):
+    """The arm generator's limits around ruckig, per joint (ArmGenerator)."""
+
+    velocity: np.ndarray
+    lower: np.ndarray
+    upper: np.ndarray
+    acceleration: np.ndarray
 
 
 @njit(cache=True, inline="always")
@@ -187,11 +208,10 @@ def arm_sample(base, base_v, sample, goal, lower, upper, tol, rest_velocity, res
     return out, held, close, at_rest
 
 
-def warm() -> None:
-    """Compile (or load from the cache) every kernel here for float64 vectors."""
-    x = np.zeros(2)
-    for tracking in (True, False):
-        hand_command(x, x, tracking, x, ESTIMATE_BLEND, x, x, 0.5, 0.01, 0.01, 1.0, x - 1.0, x + 1.0, x + 1.0, x + 1.0,
-                     0.8)
-    plan = arm_plan(x, x, x, ESTIMATE_BLEND, x, x, 0.01, 0.5, 0.0, 0.01, 1.0, x + 1.0, x - 1.0, x + 1.0, x + 1.0)
-    arm_sample(plan[4], plan[5], np.zeros((3, 2)), plan[6], x - 1.0, x + 1.0, 0.02, 1e-6, 1e-5)
+# Each kernel's parameters, a table standing for its fields in order (tests/kernels/test_tables.py).
+SIGNATURES = {
+    "hand_command": ("q", "v", "tracking", "target", "mode", "before", "before_v", "keep", "dt", "dt_before",
+                     "speed_frac", HandLimits),
+    "arm_plan": ("q", "v", "target", "mode", "before", "before_v", "gap", "keep", "ahead", "dt", "speed_frac",
+                 ArmLimits),
+}

@@ -5,11 +5,31 @@ and the plain shapes, the end point's clearance, and the bisection for the last 
 
 from __future__ import annotations
 
+from typing import NamedTuple
+
 import numpy as np
 from numba import njit
 
-from teleprev.kernels.collision import self_collision_margins_into
-from teleprev.kernels.fk import fk_into
+from teleprev.kernels.collision import Margins, self_collision_margins_into
+from teleprev.kernels.fk import FkTable, fk_into
+
+
+class SweptTable(NamedTuple):
+    reach: np.ndarray  # (links, joints): R[L, j] bounds how far a point of link L moves per radian of joint j
+    spacing: float  # half the clearance (0: none): the largest link motion between two checked points
+    start_step: float  # the same from a start inside the margin (plain shapes)
+
+
+class SweptShapes(NamedTuple):
+    """A BoxTable for two shape sets of one robot: the shapes grown by half the clearance (row 0 of
+    shape_local, shape_size and spheres) and the plain ones (row 1); the same links, boxes and pairs."""
+
+    shape_link: np.ndarray  # (S,) int64
+    shape_local: np.ndarray  # (2, S, 3, 4)
+    shape_size: np.ndarray  # (2, S, 4)
+    links: np.ndarray  # (m, 3) int64
+    spheres: np.ndarray  # (2, m, 4)
+    pairs: np.ndarray  # (P, 2) int64
 
 # A configuration's state under one checker: FREE / COLLIDING where the compiled test is decisive, UNSURE
 # where its answer is within the margin (the loose test finds a contact, the tight one none): FCL decides.
@@ -212,3 +232,13 @@ def swept_command(q0, q1, v1, acceleration, lower, upper, q0_clear, q1_clear, re
     elif k >= 0 and spacing > 0:
         cache, clear = 2, c1
     return answer, cache, clear
+
+
+# Each kernel's parameters, a table standing for its fields in order (tests/kernels/test_tables.py).
+SIGNATURES = {
+    "swept_segment": ("q0", "q1", "q0_clear", "start", SweptTable, FkTable, SweptShapes, Margins, "point"),
+    "swept_last_free": ("q0", "q1", "steps", "q0_clear", SweptTable, FkTable, SweptShapes, Margins, "point",
+                        "cached"),
+    "swept_command": ("q0", "q1", "v1", "acceleration", "lower", "upper", "q0_clear", "q1_clear", SweptTable,
+                      FkTable, SweptShapes, Margins, "point"),
+}

@@ -46,11 +46,11 @@ class CompiledMLP:
     """The raw outputs of an MLP, compiled: slots(q) as MLP.slots (to float32 rounding)."""
 
     def __init__(self, net: MLP):
-        self.i, self.w = pack(net)
+        self.net = mlp_kernels.Net(*pack(net))
 
     def slots(self, q: np.ndarray) -> np.ndarray:
         q = np.asarray(q)
-        out = mlp_kernels.slots(_rows(q), self.i, self.w)
+        out = mlp_kernels.slots(_rows(q), *self.net)
         return out[0] if q.ndim == 1 else out
 
 
@@ -67,7 +67,7 @@ class CompiledCPN:
     def predicts_free(self, q: np.ndarray):
         """As CPN.predicts_free: a bool for one configuration (n,), (N,) bools for (N, n)."""
         q = np.asarray(q)
-        free = mlp_kernels.predicts_free(_rows(q), self.mlp.i, self.mlp.w, self.bound)
+        free = mlp_kernels.predicts_free(_rows(q), *self.mlp.net, self.bound)
         return bool(free[0]) if q.ndim == 1 else free
 
     def mean_prob_grad(self, q: np.ndarray, scaled: bool = False):
@@ -86,7 +86,7 @@ class CompiledCCN:
 
     def __call__(self, q: np.ndarray) -> np.ndarray:
         q = np.asarray(q)
-        out = mlp_kernels.propose(_rows(q), self.mlp.i, self.mlp.w, self.f)
+        out = mlp_kernels.propose(_rows(q), *self.mlp.net, self.f)
         return out[0] if q.ndim == 1 else out
 
 
@@ -97,35 +97,10 @@ class CompiledNets:
         self.cpn = CompiledCPN(cpn)
         self.ccn = CompiledCCN(ccn)
         self.steps = 2 ** shorten_levels
-        self._args = (self.ccn.mlp.i, self.ccn.mlp.w, self.ccn.f, self.cpn.mlp.i, self.cpn.mlp.w, self.cpn.bound, self.steps)
+        self._step = mlp_kernels.CcnStep(*self.ccn.mlp.net, self.ccn.f, *self.cpn.mlp.net, self.cpn.bound, self.steps)
 
     def propose_shorten(self, q0: np.ndarray):
         """For colliding configurations q0 (N, n) within the limits: (proposals, shortened, hi), see kernels."""
         if q0.dtype != np.float64 or q0.ndim != 2 or not q0.flags.c_contiguous:  # the Corrector passes such rows
             q0 = _rows(q0)
-        return mlp_kernels.propose_shorten(q0, *self._args)
-
-
-def warm() -> None:
-    """Compile (or load from numba's cache) every kernel here, for the array types the Corrector passes."""
-    from teleprev.noncollision.groups import Group
-    from teleprev.noncollision.mlp import ModelInfo
-
-    n = 2
-    joints = ("a", "b")
-    for kind, activation, combine in (("cpn", "relu", "noisy_or"), ("ccn", "silu", "identity"), ("cpn", "tanh", "identity")):
-        outputs = ("l0", "l1") if kind == "cpn" else joints
-        info = ModelInfo(kind, "warm", "", joints, ("l0", "l1"), (Group(joints, tuple((o,) for o in outputs)),), combine,
-                         (4,), activation, np.zeros(n), np.ones(n), threshold=0.5 if kind == "cpn" else None,
-                         output_scale=np.ones(n) if kind == "ccn" else None)
-        net = MLP(info, [np.ones(s, np.float32) for s in info.layer_shapes()],
-                  [np.ones((s[0], s[2]), np.float32) for s in info.layer_shapes()])
-        q = np.zeros((3, n))
-        CompiledMLP(net).slots(q)
-        if kind == "cpn":
-            cpn = CPN(net)
-            CompiledCPN(cpn).predicts_free(q)
-        else:
-            ccn = CCN(net, -np.ones(n), np.ones(n))
-            CompiledCCN(ccn)(q)
-    CompiledNets(cpn, ccn, 2).propose_shorten(q)
+        return mlp_kernels.propose_shorten(q0, *self._step)

@@ -106,9 +106,10 @@ class Pipeline:
             self._hand_kernels = glove_kernels
             table = effector.kernel_table()
             self._hand_retargets = table is not None  # the kernel computes the effector's joints too
-            self._hand_table = table if table is not None else np.zeros((5, 0))
-            self._hand_limits = np.array([MAX_JOINT_ROTATION**2, MIN_FLEXION, MAX_FLEXION, MAX_ABDUCTION, TWIST_NOISE])
-            glove_kernels.warm()  # load them from numba's cache now, not in a live loop's first steps
+            self._glove = glove_kernels.GloveTable(
+                FRAME_TURN, np.array([MAX_JOINT_ROTATION**2, MIN_FLEXION, MAX_FLEXION, MAX_ABDUCTION, TWIST_NOISE]),
+                table if table is not None else np.zeros((5, 0)))
+            glove_kernels.prepare_rows(np.zeros((1, 45)), *self._glove)  # load it from numba's cache now
 
     def model_hashes(self) -> dict[str, str] | None:
         """{role: sha256} of the model files the pipeline runs (a session records them, eval compares);
@@ -196,7 +197,7 @@ class Pipeline:
                     rows[i] = hand_values(s.names, s.positions)
                 except KeyError:
                     rows[i] = np.nan  # missing components: glove_invalid, as a non-finite sample
-        codes, angles, joints = self._hand_kernels.prepare_rows(rows, FRAME_TURN, self._hand_limits, self._hand_table)
+        codes, angles, joints = self._hand_kernels.prepare_rows(rows, *self._glove)
         if n == 1:
             if codes[0]:
                 return [HandInput(self._hand_kernels.FLAG_NAMES[codes[0]])]

@@ -103,19 +103,24 @@ class SweptCheck:
             self._clear_cache = (b"", False)
 
     def _compiled_tables(self) -> tuple | None:
-        """The swept kernels' tables (teleprev/kernels/swept.py), or None where the checkers are not the
-        compiled ones (geometry other than boxes): then the numpy check runs."""
-        plain, grown = self.checker._args, self.grown._args  # FK tables, collision tables, the two margins
-        if plain is None or grown is None:
+        """The swept kernels' arguments after their own (teleprev/kernels/swept.py: SweptTable, FkTable,
+        SweptShapes, Margins, the scratch point), or None where the checkers are not the compiled ones
+        (geometry other than boxes): then the numpy check runs."""
+        if self.checker.kernel_tables is None or self.grown.kernel_tables is None:
             return None
-        g, p = grown[3:9], plain[3:9]
-        if not all(np.array_equal(g[i], p[i]) for i in (0, 3, 5)):  # same links, boxes per link and pairs
+        fk, p, margins = self.checker.kernel_tables
+        g = self.grown.kernel_tables[1]
+        if not all(np.array_equal(a, b) for a, b in ((g.shape_link, p.shape_link), (g.links, p.links),
+                                                       (g.pairs, p.pairs))):  # same links, boxes per link and pairs
             return None
         self._point = np.empty(len(self.model.joint_names))
-        return (np.ascontiguousarray(self.reach, dtype=np.float64), self.clearance / 2 if self.clearance > 0 else 0.0,
-                START_STEP_M, *plain[:3], p[0],
-                np.ascontiguousarray(np.stack([g[1], p[1]])), np.ascontiguousarray(np.stack([g[2], p[2]])), p[3],
-                np.ascontiguousarray(np.stack([g[4], p[4]])), p[5], *plain[9:], self._point)
+        table = swept_kernels.SweptTable(np.ascontiguousarray(self.reach, dtype=np.float64),
+                                         self.clearance / 2 if self.clearance > 0 else 0.0, START_STEP_M)
+        shapes = swept_kernels.SweptShapes(
+            p.shape_link, np.ascontiguousarray(np.stack([g.shape_local, p.shape_local])),
+            np.ascontiguousarray(np.stack([g.shape_size, p.shape_size])), p.links,
+            np.ascontiguousarray(np.stack([g.spheres, p.spheres])), p.pairs)
+        return (*table, *fk, *shapes, *margins, self._point)
 
     def motion_bound(self, q0: np.ndarray, q1: np.ndarray) -> float:
         """Metres: no point of any link moves further than this on the segment q0 -> q1."""
@@ -240,11 +245,3 @@ class SweptCheck:
         elif cache >= 2:
             self._clear_cache = (end.tobytes(), cache == 3)
         return float(lo)
-
-
-def warm(robot: str = "leap_hand_right") -> None:
-    """Compile the swept kernels into numba's on-disk cache (or load them): scripts/setup.sh runs it."""
-    from teleprev.robot.model import load_robot
-
-    hand = load_robot(robot)
-    SweptCheck(hand, SelfCollisionChecker(hand), 0.003, compiled=True)

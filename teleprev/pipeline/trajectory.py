@@ -20,7 +20,8 @@ from functools import cached_property
 
 import numpy as np
 
-from teleprev.kernels.motion import ESTIMATE_GIVEN, ESTIMATE_NONE, arm_plan, arm_sample, hand_command, warm
+from teleprev.kernels.motion import (ESTIMATE_GIVEN, ESTIMATE_NONE, ArmLimits, HandLimits, arm_plan, arm_sample,
+                                     hand_command)
 
 REST_VELOCITY = 1e-6  # rad/s: below this (and no acceleration) a joint is at rest
 REST_ACCELERATION = 1e-5
@@ -80,7 +81,9 @@ class ArmGenerator:
         # Each joint on its own time-optimal profile: tracking a moving target, not a straight joint path.
         self._inp.synchronization = Synchronization.No
         self._zero = [0.0] * n
-        warm()  # load the kernels from numba's cache now, not in a live loop's first steps (a rig without a HandLimiter too)
+        self._limits = ArmLimits(self.velocity, self.lower, self.upper, self.acceleration)
+        # load the kernels from numba's cache now, not in a live loop's first steps
+        self.follow(JointMotion.rest(self.lower), self.plan(JointMotion.rest(self.lower), self.upper, 0.01), 0.01)
 
     def plan(self, s: JointMotion, target: np.ndarray, dt: float, speed_frac: float = 1.0,
              estimate: int = ESTIMATE_NONE, before: np.ndarray | None = None, before_v: np.ndarray | None = None,
@@ -95,7 +98,7 @@ class ArmGenerator:
         target = _vector(target)
         return arm_plan(_vector(s.q), _vector(s.v), target, estimate, target if before is None else _vector(before),
                         target if before_v is None else _vector(before_v), float(gap), float(keep), float(ahead),
-                        float(dt), float(speed_frac), self.velocity, self.lower, self.upper, self.acceleration)
+                        float(dt), float(speed_frac), *self._limits)
 
     def follow(self, s: JointMotion, plan: np.ndarray, dt: float, tol: float = 0.0) -> tuple | None:
         """`dt` seconds along the time-optimal profile of `plan` (ArmGenerator.plan's rows), or None where ruckig
@@ -156,7 +159,9 @@ class HandLimiter:
         self.upper = _vector(upper)
         self.velocity = _vector(velocity)
         self.acceleration = _vector(acceleration)
-        warm()  # load the kernels from numba's cache now, not in a live loop's first steps
+        self._limits = HandLimits(self.lower, self.upper, self.velocity, self.acceleration, BRAKE_FRACTION)
+        q = self.lower  # load the kernel from numba's cache now, not in a live loop's first steps
+        self.command(q, q, q, ESTIMATE_NONE, None, None, 0.0, 0.01, 0.01)
 
     def track(self, q: np.ndarray, v: np.ndarray, target: np.ndarray, target_v: np.ndarray | None, dt: float,
               dt_before: float, speed_frac: float = 1.0) -> tuple[np.ndarray, np.ndarray]:
@@ -192,8 +197,7 @@ class HandLimiter:
         tracking = target is not None
         return hand_command(q, _vector(v), tracking, _vector(target) if tracking else q, estimate,
                             q if before is None else _vector(before), q if before_v is None else _vector(before_v),
-                            float(keep), float(dt), float(dt_before), float(speed_frac), self.lower, self.upper,
-                            self.velocity, self.acceleration, BRAKE_FRACTION)
+                            float(keep), float(dt), float(dt_before), float(speed_frac), *self._limits)
 
 
 def _vector(x) -> np.ndarray:

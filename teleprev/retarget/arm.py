@@ -45,6 +45,9 @@ class ArmRetargeter:
         self.hi = np.array(workspace_max, dtype=float)
         self.m = np.eye(3) if suit_to_robot is None else np.array(suit_to_robot, dtype=float)
         if ik.compiled:  # load the kernels from numba's cache now, not in a live loop's first steps
+            from teleprev.kernels.ik import Workspace
+
+            self._workspace = Workspace(self.m, float(self.scale), self.lo, self.hi)
             q = ik.chain.neutral()
             pose = ik.pose(q)
             self.solve(self.anchor(pose, q), pose, q)
@@ -71,23 +74,14 @@ class ArmRetargeter:
         """ik_kernels.arm_target_into's inputs. The anchor's arrays (anchor() made them) and m, lo, hi are
         writeable float64 already; the wrist is copied, since a read-only or other-typed array would make
         numba compile another signature (seconds, in the live loop)."""
-        return (anchor.wrist, anchor.tcp, np.array(wrist, dtype=np.float64), self.m, float(self.scale), self.lo,
-                self.hi)
+        return anchor.wrist, anchor.tcp, np.array(wrist, dtype=np.float64), *self._workspace
 
     def solve(self, anchor: Anchor, wrist: np.ndarray, q_start: np.ndarray) -> tuple[IkResult, bool]:
         if self.ik.compiled:  # target and IK in one compiled call (ik_kernels.arm_solve)
             from teleprev.kernels import ik as ik_kernels
             q, converged, iterations, pos_err, rot_err, clipped = ik_kernels.arm_solve(
                 *self._kernel_args(anchor, wrist), np.array(q_start, dtype=np.float64),
-                *self.ik.kernel_args())
+                *self.ik.kernel_args)
             return IkResult(q, converged, iterations, pos_err, rot_err), bool(clipped)
         target, clipped = self.target(anchor, wrist)
         return self.ik.solve(target, q_start), clipped
-
-
-def warm(robot: str = "xarm6", tip: str = "link_eef") -> None:
-    """Compile the compiled retargeter's kernels (ik_kernels.arm_target_into, arm_solve) into numba's on-disk
-    cache, or load them from it, for the argument types the pipeline passes."""
-    from teleprev.robot.model import load_robot
-
-    ArmRetargeter(ArmIK(load_robot(robot), tip, compiled=True))  # the constructors load the kernels

@@ -225,18 +225,19 @@ class SelfCollisionChecker(FclSelfCollisionChecker):
     The compiled test runs once per configuration with both margins (kernels.*_margins: FK, box poses
     and bounding spheres once, each axis compared with +MARGIN and -MARGIN): the answers of `_loose`
     (CompiledSelfCollisionChecker with +MARGIN: FCL's contacts and more) and of the same checker with
-    -MARGIN (fewer) at once. `_args` holds the kernels' arguments (the swept check takes its tables).
+    -MARGIN (fewer) at once. `kernel_tables` holds the kernels' tables (the swept check takes them too).
     """
 
     def __init__(self, model: RobotModel, exclusions: Exclusions | None = None):
         super().__init__(model, exclusions)
         self._loose = None
+        self.kernel_tables = None  # (FkTable, BoxTable, Margins) where the compiled check runs
         self._args = None
         if all(s.kind == "box" for n in self.link_names for s in model.links[n].collisions):
             self._loose = CompiledSelfCollisionChecker(model, self.exclusions)  # FCL's contacts and more
-            # the kernels' arguments after q, built once: FK tables, collision tables, the two margins
-            self._args = (*self._loose.kinematics.tables, *self._loose._tables(), self._loose.margin,
-                          -boxes_kernels.MARGIN)
+            self.kernel_tables = (self._loose.kinematics.table, self._loose.boxes,
+                                  collision_kernels.Margins(self._loose.margin, -boxes_kernels.MARGIN))
+            self._args = tuple(x for table in self.kernel_tables for x in table)  # the kernels' arguments after q
             self._n_labels = len(self.link_names)
             q = model.neutral()  # load the kernels from numba's cache now, not in a live loop's first steps
             self.check(q), self.collides(q), self.first_collision(q[None]), self.pair_matrix(q[None])
@@ -275,16 +276,9 @@ class SelfCollisionChecker(FclSelfCollisionChecker):
         q = np.atleast_2d(q)
         world = self._loose.kinematics.world(q) if world is None else world  # (one kernel fewer to compile)
         world = np.ascontiguousarray(world, dtype=np.float64).reshape(-1, *world.shape[-3:])
-        hits, unsure = collision_kernels.pair_matrix_margins_world(world, *self._args[3:])
+        _, boxes, margins = self.kernel_tables
+        hits, unsure = collision_kernels.pair_matrix_margins_world(world, *boxes, *margins)
         unsure = np.flatnonzero(unsure)
         if len(unsure):
             hits[unsure] = super().pair_matrix(q[unsure])
         return hits
-
-
-def warm(robot: str = "leap_hand_right") -> None:
-    """Compile SelfCollisionChecker's kernels (both margins in one pass) into numba's on-disk cache (or load
-    them): building one calls check, collides, first_collision and pair_matrix (the batch FK too)."""
-    from teleprev.robot.model import load_robot
-
-    SelfCollisionChecker(load_robot(robot))

@@ -60,13 +60,13 @@ class CompiledSelfCollisionChecker:
             corners = np.concatenate(corners)
             centre = (corners.min(axis=0) + corners.max(axis=0)) / 2
             sphere.append([*centre, np.linalg.norm(corners - centre, axis=1).max()])
-        self._shape_link = np.array([model.link_index[self.link_names[i]] for i in shape_link], dtype=np.int64)
-        self._shape_local = np.ascontiguousarray(local, dtype=np.float64).reshape(-1, 3, 4)
-        self._shape_size = np.array(size, dtype=np.float64).reshape(-1, 4)
-        self._spheres = np.array(sphere, dtype=np.float64).reshape(-1, 4)
+        shape_link_rows = np.array([model.link_index[self.link_names[i]] for i in shape_link], dtype=np.int64)
+        shape_local = np.ascontiguousarray(local, dtype=np.float64).reshape(-1, 3, 4)
+        shape_size = np.array(size, dtype=np.float64).reshape(-1, 4)
+        spheres = np.array(sphere, dtype=np.float64).reshape(-1, 4)
         # Per checked link: its model link and its run of boxes (boxes were gathered link by link).
         shape_link = np.array(shape_link, dtype=np.int64)
-        self._links = np.array(
+        links = np.array(
             [(model.link_index[n], np.searchsorted(shape_link, k), np.searchsorted(shape_link, k, side="right"))
              for k, n in enumerate(self.link_names)], dtype=np.int64,
         ).reshape(-1, 3)
@@ -80,35 +80,32 @@ class CompiledSelfCollisionChecker:
             if frozenset((a, b)) not in excluded
         )
         self._pairs = np.array([(link_pos[a], link_pos[b]) for a, b in self.link_pairs], dtype=np.int64).reshape(-1, 2)
-
-    # The kernels' collision tables, in their argument order.
-    def _tables(self):
-        return self._shape_link, self._shape_local, self._shape_size, self._links, self._spheres, self._pairs
+        self.boxes = collision_kernels.BoxTable(shape_link_rows, shape_local, shape_size, links, spheres, self._pairs)
+        # SelfCollisionChecker's two-margin kernels (kernels.*_margins) with both margins `margin`: their
+        # answers are then never MARGINS_UNSURE, and those of this one margin.
+        self._margins = collision_kernels.Margins(self.margin, self.margin)
+        self._args = (*self.kinematics.table, *self.boxes, *self._margins)
 
     @staticmethod
     def _q(q) -> np.ndarray:
         return np.ascontiguousarray(q, dtype=np.float64)
 
     # ---- public (SelfCollisionChecker's API) ---------------------------------------------------
-    # SelfCollisionChecker's two-margin kernels (kernels.*_margins) with both margins `margin`: their
-    # answers are then never MARGINS_UNSURE, and those of this one margin.
-    def _margin_args(self) -> tuple:
-        return (*self.kinematics.tables, *self._tables(), self.margin, self.margin)
 
     def check(self, q: np.ndarray) -> CollisionReport:
         """All colliding link pairs and the per-link labels of one configuration."""
         labels = np.zeros(len(self.link_names), dtype=bool)
         index = np.empty(len(self.link_pairs), dtype=np.int64)
-        n = collision_kernels.check_margins(self._q(q), *self._margin_args(), False, labels, index)
+        n = collision_kernels.check_margins(self._q(q), *self._args, False, labels, index)
         return CollisionReport(labels, tuple([self.link_pairs[i] for i in index[:n].tolist()]))
 
     def collides(self, q: np.ndarray) -> bool:
         """Whether one configuration is in self-collision; stops at the first contact."""
-        return bool(collision_kernels.collides_margins(self._q(q), *self._margin_args()) > 0)
+        return bool(collision_kernels.collides_margins(self._q(q), *self._args) > 0)
 
     def first_collision(self, q: np.ndarray, start: int = 0) -> int | None:
         """Index of the first configuration of the batch q (N, n), from `start` on, in self-collision."""
-        k = collision_kernels.first_colliding_margins(self._q(q), start, *self._margin_args())[0]
+        k = collision_kernels.first_colliding_margins(self._q(q), start, *self._args)[0]
         return None if k < 0 else int(k)
 
     def pair_matrix(self, q: np.ndarray, world: np.ndarray | None = None) -> np.ndarray:
@@ -119,7 +116,7 @@ class CompiledSelfCollisionChecker:
         if world is None:
             world = self.kinematics.world(np.atleast_2d(self._q(q)))
         world = np.ascontiguousarray(world, dtype=np.float64).reshape(-1, *world.shape[-3:])
-        return collision_kernels.pair_matrix_margins_world(world, *self._tables(), self.margin, self.margin)[0]
+        return collision_kernels.pair_matrix_margins_world(world, *self.boxes, *self._margins)[0]
 
     def labels(self, q: np.ndarray, world: np.ndarray | None = None) -> np.ndarray:
         """(N, m) bool per-link labels for a batch of configurations."""
@@ -127,20 +124,3 @@ class CompiledSelfCollisionChecker:
 
     def labels_from_pairs(self, pairs: np.ndarray) -> np.ndarray:
         return link_labels(pairs, self._pairs, len(self.link_names))
-
-
-def warm(robot: str = "leap_hand_right") -> None:
-    """Compile every kernel this checker and the compiled FK call into numba's on-disk cache (or load it):
-    SelfCollisionChecker's two-margin kernels (teleprev.robot.collision.warm) and the FK of one
-    configuration and of a batch."""
-    from teleprev.robot.model import load_robot
-
-    model = load_robot(robot)
-    checker = CompiledSelfCollisionChecker(model)
-    q = model.neutral()
-    checker.check(q)
-    checker.collides(q)
-    qs = np.stack([q, q])
-    checker.first_collision(qs)
-    checker.pair_matrix(qs)  # the batch FK, then pair_matrix_margins_world
-    checker.kinematics.world(q)

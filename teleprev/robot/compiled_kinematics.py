@@ -15,7 +15,7 @@ def _skew(a: np.ndarray) -> np.ndarray:
 
 
 class CompiledKinematics:
-    """The kernels' FK tables for one model: link_int (L, 3), link_num (L, 2), link_terms (L, 4, 3, 4)."""
+    """The kernels' FK table for one model (fk_kernels.FkTable)."""
 
     def __init__(self, model: RobotModel):
         self.model = model
@@ -44,18 +44,15 @@ class CompiledKinematics:
             else:
                 self.link_int[i, 1] = model.joint_index[j.mimic.joint]
                 self.link_num[i] = (j.mimic.multiplier, j.mimic.offset)
-
-    @property
-    def tables(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        return self.link_int, self.link_num, self.link_terms
+        self.table = fk_kernels.FkTable(self.link_int, self.link_num, self.link_terms)
 
     def world(self, q: np.ndarray) -> np.ndarray:
         """Link transforms (L, 4, 4) of one configuration (n,), or (N, L, 4, 4) of a batch (N, n)."""
         q = np.ascontiguousarray(q, dtype=np.float64)
         if q.ndim == 1:
-            return fk_kernels.fk(q, self.link_int, self.link_num, self.link_terms)
+            return fk_kernels.fk(q, *self.table)
         flat = q.reshape(-1, q.shape[-1])
-        world = fk_kernels.fk_batch(flat, self.link_int, self.link_num, self.link_terms)
+        world = fk_kernels.fk_batch(flat, *self.table)
         return world.reshape(q.shape[:-1] + world.shape[1:])
 
     def fk(self, q: np.ndarray) -> LinkPoses:

@@ -70,26 +70,25 @@ class ArmIK:
         self._axes = np.array([j.axis for j in self.chain.joints])
         self._revolute = np.array([j.type != "prismatic" for j in self.chain.joints])
         self._all_revolute = bool(self._revolute.all())
-        self._kernel_tables = self._compiled_tables() if compiled else None
-        if compiled:  # load the kernel from numba's cache now, not in a live loop's first steps
-            q = self.chain.neutral()
+        self.kernel_args: tuple = ()  # compiled: ik_kernels.ik_solve's arguments after target and q_start
+        if compiled:
+            self.kernel_args = self._kernel_args()
+            q = self.chain.neutral()  # load the kernel from numba's cache now, not in a live loop's first steps
             self.solve(self.pose(q), q)
 
-    def _compiled_tables(self) -> tuple:
-        """The kernel's arm tables, in ik_kernels.ik_solve's argument order from the FK tables to the limits
-        (imports numba: only a compiled ArmIK builds them)."""
+    def _kernel_args(self) -> tuple:
+        """The compiled solver's tables and settings: FkTable, IkChain, IkSettings (imports numba: only a
+        compiled ArmIK builds them)."""
+        from teleprev.kernels.ik import IkChain, IkSettings
         from teleprev.robot.compiled_kinematics import CompiledKinematics
 
         c = np.ascontiguousarray
-        return (*CompiledKinematics(self.chain).tables, int(self._tip_index), c(self.tcp, dtype=np.float64),
-                c(self._joint_links, dtype=np.int64), c(self._axes, dtype=np.float64), c(self._revolute, dtype=np.bool_),
-                c(self.chain.lower, dtype=np.float64), c(self.chain.upper, dtype=np.float64))
-
-    def kernel_args(self) -> tuple:
-        """The compiled solver's tables and settings (ik_kernels.ik_solve's arguments after target and q_start);
-        a compiled ArmIK only (its tables are built in __init__)."""
-        return (*self._kernel_tables, float(self.position_tolerance), float(self.rotation_tolerance),
-                int(self.max_iterations), float(self.damping), float(self.max_step), bool(self.retry))
+        chain = IkChain(int(self._tip_index), c(self.tcp, dtype=np.float64), c(self._joint_links, dtype=np.int64),
+                        c(self._axes, dtype=np.float64), c(self._revolute, dtype=np.bool_),
+                        c(self.chain.lower, dtype=np.float64), c(self.chain.upper, dtype=np.float64))
+        settings = IkSettings(float(self.position_tolerance), float(self.rotation_tolerance), int(self.max_iterations),
+                              float(self.damping), float(self.max_step), bool(self.retry))
+        return (*CompiledKinematics(self.chain).table, *chain, *settings)
 
     def pose(self, q: np.ndarray) -> np.ndarray:
         """The TCP pose (4x4) for arm joints q."""
@@ -115,7 +114,7 @@ class ArmIK:
             # fresh writeable float64 copies: a read-only array (a decoded message) would make numba compile
             # another signature, seconds in the live loop
             q, converged, iterations, pos_err, rot_err = ik_kernels.ik_solve(
-                np.array(target, dtype=np.float64), np.array(q_start, dtype=np.float64), *self.kernel_args())
+                np.array(target, dtype=np.float64), np.array(q_start, dtype=np.float64), *self.kernel_args)
             return IkResult(q, converged, iterations, pos_err, rot_err)
         result = self._solve(target, q_start, self.max_step)
         if not result.converged and self.retry:

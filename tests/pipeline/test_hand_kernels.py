@@ -134,7 +134,7 @@ def test_the_compiled_leap_retargeting_is_the_numpy_one(pipelines, rng):
 def test_the_bounds_are_the_pipelines(pipelines):
     """Each bound sits where the kernel reads it (hand_kernels' index names), not only in the same order."""
     _, p = pipelines["leap_hand"]
-    limits = p._hand_limits
+    limits = p._glove.limits
     assert limits[hand_kernels.MAX_ROTATION_SQ] == MAX_JOINT_ROTATION**2
     assert limits[hand_kernels.MIN_FLEXION] == MIN_FLEXION and limits[hand_kernels.MAX_FLEXION] == MAX_FLEXION
     assert limits[hand_kernels.MAX_ABDUCTION] == MAX_ABDUCTION and limits[hand_kernels.TWIST_NOISE] == TWIST_NOISE
