@@ -37,7 +37,7 @@ def compiled_inference(hand, checker, corrector, models, n: int) -> dict:
     single-configuration correct() after prepare (the live step's path), numpy vs compiled."""
     from teleprev.noncollision.corrector import Corrector
 
-    fast = Corrector.load(models, hand, checker, compiled=True)
+    fast = Corrector.load(models, hand, checker)
     nets = fast._nets
     q = hand.sample_uniform(8 * n, np.random.default_rng(SEED + 1))
     q = q[checker.pair_matrix(q).any(axis=1)][:n]
@@ -72,15 +72,15 @@ def main() -> None:
     args = p.parse_args()
 
     from teleprev.noncollision import evaluate, sampling
-    from teleprev.noncollision.corrector import Corrector
     from teleprev.noncollision.projection import project
+    from teleprev.pipeline.numpy_arithmetic import NumpyCorrector
     from teleprev.robot.collision import SelfCollisionChecker
     from teleprev.robot.model import load_robot
 
     quick = args.quick
     hand = load_robot("leap_hand_right")
     checker = SelfCollisionChecker(hand)
-    corrector = Corrector.load(args.models, hand, checker)
+    corrector = NumpyCorrector.load(args.models, hand, checker)  # the numpy networks, against the compiled ones
     cpn, ccn = corrector.cpn, corrector.ccn
     rng = np.random.default_rng(SEED)
     figures: dict = {}

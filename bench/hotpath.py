@@ -155,7 +155,7 @@ def prepare_hand_figures(quick: bool, rng) -> dict:
     """Pipeline.prepare_hands per glove sample, numpy vs compiled, for the LEAP Hand (angles, retargeting,
     exact check) and a parallel gripper (the angles only), alone and in a batch."""
     from teleprev.human.smplx import HAND_POSE_NAMES, hand_pose_from_angles
-    from teleprev.live.build import build_pipeline
+    from teleprev.assembly import build_pipeline
     from teleprev.messages import JointSample
     from teleprev.rig import default_rig_path, load_rig
 
@@ -165,7 +165,7 @@ def prepare_hand_figures(quick: bool, rng) -> dict:
               for k in range(n)]
     figures = {}
     for label, rig in (("", default_rig_path()), ("gripper_", default_rig_path().parent / "sim_gripper.toml")):
-        old, new = (build_pipeline(load_rig(rig), compiled=c) for c in (False, True))
+        old, new = (build_pipeline(load_rig(rig), session_format=f) for f in (2, 3))
         for g in gloves[:50]:  # load the kernels, warm the caches
             old.prepare_hands([g]), new.prepare_hands([g])
         t_old, t_new = [], []

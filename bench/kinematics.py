@@ -81,9 +81,10 @@ def main() -> None:
 
     # The pipeline's arm solve (ArmRetargeter: target, then IK from the constant-velocity warm start) and
     # IK alone, numpy against compiled on the same targets, interleaved so that both see the same noise.
+    from teleprev.pipeline.numpy_arithmetic import NumpyArmIK, NumpyArmRetargeter
     from teleprev.retarget.arm import ArmRetargeter
 
-    numpy_arm, compiled_arm = ArmRetargeter(ArmIK(arm, "link_eef")), ArmRetargeter(ArmIK(arm, "link_eef", compiled=True))
+    numpy_arm, compiled_arm = NumpyArmRetargeter(NumpyArmIK(arm, "link_eef")), ArmRetargeter(ArmIK(arm, "link_eef"))
     q_home = np.array([0.0, -0.3, -0.6, 0.0, 0.9, 0.0])
     anchor = numpy_arm.anchor(np.eye(4), q_home)
     wrists = []  # the wrist poses that ask for the targets (identity anchor wrist, no scale or frame change)

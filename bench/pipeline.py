@@ -45,7 +45,7 @@ def operator_inputs(task: str, seconds: float, seed: int = 0):
 
 def step_timing(seconds: float) -> dict:
     from teleprev.messages import JointSample
-    from teleprev.live.build import build_pipeline
+    from teleprev.assembly import build_pipeline
     from teleprev.pipeline.step import PipelineState, StepInputs
     from teleprev.rig import load_rig
 

@@ -5,7 +5,7 @@
 Re-runs the fixture sessions (tests/fixtures/sim_v*.mcap) to collect the hand's command segments as the
 pipeline checks them (Motion.hand_step: the step, then the way to its stop point; the stop-short
 bisection where the step is not free), then replays exactly those calls, in order, through the numpy
-SweptCheck and the compiled one (SweptCheck(compiled=True): one kernel per segment, FCL within the
+SweptCheck (NumpySweptCheck, formats 2) and the compiled one (SweptCheck: one kernel per segment, FCL within the
 margin) in the same run, and counts the answers on which they differ (must be 0). Also random segments
 from inside the margin, zero-length and long ones.
 
@@ -77,6 +77,7 @@ def recorded_calls() -> tuple[list[list[tuple]], list[tuple], float]:
 
 def main() -> None:
     args = common.parser(__doc__).parse_args()
+    from teleprev.pipeline.numpy_arithmetic import NumpySweptCheck
     from teleprev.pipeline.swept import SweptCheck
     from teleprev.robot.collision import SelfCollisionChecker
     from teleprev.robot.model import load_robot
@@ -84,8 +85,8 @@ def main() -> None:
     steps, hand_steps, clearance = recorded_calls()
     hand = load_robot("leap_hand_right")
     plain = SelfCollisionChecker(hand)
-    numpy_swept = SweptCheck(hand, plain, clearance, compiled=False)
-    compiled_swept = SweptCheck(hand, plain, clearance, compiled=True)
+    numpy_swept = NumpySweptCheck(hand, plain, clearance)
+    compiled_swept = SweptCheck(hand, plain, clearance)
 
     def replay(swept):
         """Each recorded call in order (the clearance cache sees what it sees live): answers, per-call and

@@ -1,7 +1,15 @@
-"""Assemble a Pipeline from a rig: robot, IK chain, calibration, end effector and Corrector."""
+"""Assemble a Pipeline from a rig: robot, IK chain, calibration, end effector and Corrector, with the
+arithmetic of a session format.
+
+Live recording builds the current format's pipeline; `teleprev eval` builds the one a session was recorded
+with, so that it re-runs bit for bit. This is the one place where a format chooses its arithmetic
+(`_arithmetic`): formats 1 and 2 the numpy classes of teleprev/pipeline/numpy_arithmetic.py, format 1
+without motion limits, format 3 on the compiled classes.
+"""
 
 from __future__ import annotations
 
+from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
@@ -21,6 +29,29 @@ from teleprev.robot.ik import ArmIK
 from teleprev.robot.collision import SelfCollisionChecker
 from teleprev.robot.limits import arm_limits, effector_limits
 from teleprev.robot.model import RobotModel, load_robot
+from teleprev.topics import COMPILED_FORMAT_VERSION, FORMAT_VERSION, MOTION_FORMAT_VERSION
+
+
+@dataclass(frozen=True)
+class Arithmetic:
+    """The classes whose arithmetic a session format was computed with."""
+
+    motion: bool  # acceleration and jerk limits on the commands (format 2 on)
+    arm_ik: type = ArmIK
+    arm_retargeter: type = ArmRetargeter
+    swept_check: type = SweptCheck
+    corrector: type | None = None  # None: teleprev.noncollision.corrector.Corrector (loaded with the rigs that have one)
+    pipeline: type = Pipeline
+
+
+def _arithmetic(session_format: int) -> Arithmetic:
+    motion = session_format >= MOTION_FORMAT_VERSION
+    if session_format >= COMPILED_FORMAT_VERSION:
+        return Arithmetic(motion)
+    from teleprev.pipeline import numpy_arithmetic as old
+
+    return Arithmetic(motion, old.NumpyArmIK, old.NumpyArmRetargeter, old.NumpySweptCheck, old.NumpyCorrector,
+                      old.NumpyPipeline)
 
 def rig_calibration(rig: Rig) -> Calibration:
     return load_calibration(rig.resolve(rig.rig.calibration) if rig.rig.calibration else None)
@@ -79,31 +110,29 @@ def build_motion(rig: Rig, ik: ArmIK, arm_speed: np.ndarray, effector, swept: Sw
 
 
 def build_pipeline(rig: Rig, models: str | Path | None = None, calibration: Calibration | None = None,
-                   motion: bool = True, compiled: bool = True) -> Pipeline:
-    """`motion`: acceleration and jerk limits on the commands (teleprev/pipeline/motion.py); sessions
-    recorded before them (format version 1) are re-run with motion=False. `compiled`: the compiled hot
-    path's arithmetic (IK, CPN/CCN, hand preparation, swept check); sessions recorded before it (format
-    versions 1 and 2) are re-run with compiled=False, the numpy arithmetic that recorded them."""
+                   session_format: int = FORMAT_VERSION) -> Pipeline:
+    """The rig's pipeline, computing as sessions of `session_format` were computed (default: the format
+    `record` writes now)."""
+    how = _arithmetic(session_format)
     cfg = rig.pipeline
     calibration = calibration if calibration is not None else rig_calibration(rig)
     robot = load_robot(rig.rig.robot)
     # Tracking: a bounded number of iterations and no cold-start retry, so an unreachable target costs a
     # bounded step; the best effort within the limits is flagged and the next step continues from it.
-    ik = ArmIK(robot, cfg.tcp_link or rig.effector.tcp_link, position_tolerance=cfg.ik_position_tolerance,
-               rotation_tolerance=cfg.ik_rotation_tolerance, max_iterations=cfg.ik_iterations, retry=False,
-               compiled=compiled)
-    arm_speed = _capped_speed(rig, "arm_speed", ik.chain.velocity_limit) if motion else np.minimum(ik.chain.velocity_limit, cfg.arm_speed)
+    ik = how.arm_ik(robot, cfg.tcp_link or rig.effector.tcp_link, position_tolerance=cfg.ik_position_tolerance,
+                    rotation_tolerance=cfg.ik_rotation_tolerance, max_iterations=cfg.ik_iterations, retry=False)
+    arm_speed = (_capped_speed(rig, "arm_speed", ik.chain.velocity_limit) if how.motion
+                 else np.minimum(ik.chain.velocity_limit, cfg.arm_speed))
     max_dt = cfg.max_command_dt_ms / 1000.0
     arm_guard = JointGuard(ik.chain.lower, ik.chain.upper, arm_speed, max_dt)
-    arm = ArmRetargeter(ik, cfg.wrist_scale, cfg.workspace_min, cfg.workspace_max, calibration.suit_to_robot())
-    effector, swept = build_effector(rig, robot, cfg, max_dt, calibration, models, motion, compiled)
-    return Pipeline(cfg, arm, arm_guard, effector, build_motion(rig, ik, arm_speed, effector, swept) if motion else None,
-                    compiled=compiled)
+    arm = how.arm_retargeter(ik, cfg.wrist_scale, cfg.workspace_min, cfg.workspace_max, calibration.suit_to_robot())
+    effector, swept = build_effector(rig, robot, cfg, max_dt, calibration, models, how)
+    return how.pipeline(cfg, arm, arm_guard, effector,
+                        build_motion(rig, ik, arm_speed, effector, swept) if how.motion else None)
 
 
 def build_effector(rig: Rig, robot: RobotModel, cfg: PipelineConfig, max_dt: float, calibration: Calibration,
-                   models: str | Path | None = None, motion: bool = True,
-                   compiled: bool = True) -> tuple[Effector, SweptCheck | None]:
+                   models: str | Path | None, how: Arithmetic) -> tuple[Effector, SweptCheck | None]:
     """The pipeline's side of the rig's end effector, chosen by its row of the table, and (for a hand
     with self-collision, when motion limits are on) the swept check its commands go through."""
     spec = rig.effector
@@ -112,14 +141,14 @@ def build_effector(rig: Rig, robot: RobotModel, cfg: PipelineConfig, max_dt: flo
 
         hand = load_robot(spec.hand_urdf)
         swept = checker = None
-        if motion:
+        if how.motion:
             # The clearance is part of "collision-free" from the Corrector on: its exact check runs on the
             # hand's shapes grown by half the margin, so targets keep it, and the guard checks the motion.
-            swept = SweptCheck(hand, SelfCollisionChecker(hand), hand_clearance_m(rig), compiled=compiled)
+            swept = how.swept_check(hand, SelfCollisionChecker(hand), hand_clearance_m(rig))
             checker = swept.grown
             _capped_speed(rig, "hand_speed", hand.velocity_limit)
-        corrector = Corrector.load(models_dir(rig, models), hand, checker, compiled=compiled)
-        return LeapEffector(spec, hand, corrector, cfg, max_dt, calibration.leap_map(), compiled=compiled), swept
+        corrector = (how.corrector or Corrector).load(models_dir(rig, models), hand, checker)
+        return LeapEffector(spec, hand, corrector, cfg, max_dt, calibration.leap_map()), swept
     if spec.is_switch:
         return VacuumEffector(spec, cfg, max_dt), None
     return GripperEffector(spec, robot, cfg, max_dt), None

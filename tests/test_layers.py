@@ -21,7 +21,7 @@ LAYERS: list[tuple[str, ...]] = [
     ("teleprev.robot", "teleprev.human", "teleprev.session"),
     ("teleprev.devices", "teleprev.retarget", "teleprev.noncollision"),
     ("teleprev.pipeline",),
-    ("teleprev.rig",),
+    ("teleprev.rig", "teleprev.assembly"),
     ("teleprev.preview", "teleprev.export", "teleprev.study"),
     ("teleprev.live",),
     ("teleprev.evaluation",),

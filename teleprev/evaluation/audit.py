@@ -149,7 +149,7 @@ def audit_stream(topic: str, side: str, limits: dict, t_ns: np.ndarray, q: np.nd
 
 
 def audit_session(path: str | Path, rig_path: str | Path | None = None) -> AuditReport:
-    from teleprev.live.build import motion_limits
+    from teleprev.assembly import motion_limits
     from teleprev.session.reader import SessionReader
 
     path = Path(path)
@@ -194,7 +194,7 @@ def audit_dataset(root: str | Path, rig_path: str | Path | None) -> AuditReport:
     when no name matches and the action has exactly the rig's arm + end-effector joints, by position."""
     import pyarrow.parquet as pq
 
-    from teleprev.live.build import motion_limits
+    from teleprev.assembly import motion_limits
     from teleprev.rig import load_rig
 
     root = Path(root)

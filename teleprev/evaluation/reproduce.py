@@ -21,7 +21,7 @@ from threadpoolctl import threadpool_limits
 from teleprev import numeric_platform
 from teleprev.errors import SessionError
 from teleprev.messages import Event, JointSample
-from teleprev.live.build import build_pipeline, rig_calibration
+from teleprev.assembly import build_pipeline, rig_calibration
 from teleprev.pipeline.driver import RECORDED_JOINT_TOPICS, InputTopics, PipelineDriver, recorded_names, recorded_values
 from teleprev.pipeline.step import Pipeline, StepResult
 from teleprev.retarget.calibration import load_calibration_text
@@ -60,46 +60,37 @@ class Rerun:
     notes: list[str] = field(default_factory=list)
 
 
-def _format_version(meta: dict) -> int:
+def recorded_format(meta: dict) -> int:
+    """The session format a session was recorded in (the "teleprev" metadata record): eval re-runs it with
+    that format's arithmetic (teleprev.assembly.build_pipeline), so it reproduces bit for bit."""
     try:
         return int(meta.get("teleprev", {}).get("format_version", topics.FORMAT_VERSION))
     except ValueError:
         return topics.FORMAT_VERSION
 
 
-def recorded_with_motion(meta: dict) -> bool:
-    """Whether the session's commands went through the motion limits (format 2 on); older sessions are
-    re-run as they were recorded, with the speed caps alone."""
-    return _format_version(meta) >= topics.MOTION_FORMAT_VERSION
-
-
-def recorded_compiled(meta: dict) -> bool:
-    """Whether the session was computed by the compiled hot path (format 3 on); older sessions are re-run
-    with the numpy arithmetic that recorded them, so they still reproduce bit for bit."""
-    return _format_version(meta) >= topics.COMPILED_FORMAT_VERSION
-
-
 def _pipeline_for(reader: SessionReader, path: Path, models, rig_path):
     meta = reader.metadata
-    motion, compiled = recorded_with_motion(meta), recorded_compiled(meta)
+    session_format = recorded_format(meta)
     if rig_path:
         rig = load_rig(rig_path)
-        return build_pipeline(rig, models, rig_calibration(rig), motion=motion, compiled=compiled), f"rig file {rig_path}"
+        return build_pipeline(rig, models, rig_calibration(rig), session_format), f"rig file {rig_path}"
     if not meta.get("rig", {}).get("toml"):
         raise SessionError("the session does not carry its rig (metadata 'rig'); pass --config RIG", str(path))
     calibration_toml = meta.get("calibration", {}).get("toml", "")
     # a recorded rig is anchored at its session's folder (teleprev.rig.load_recorded_rig): part of the key
-    key = (meta["rig"]["toml"], str(path.resolve().parent), calibration_toml, str(models) if models else None, motion, compiled)
+    key = (meta["rig"]["toml"], str(path.resolve().parent), calibration_toml, str(models) if models else None,
+           session_format)
     if key not in _BUILT:
         rig = load_recorded_rig(meta, path)
         calibration = load_calibration_text(calibration_toml, f"{path}: recorded calibration")
         if len(_BUILT) >= 8:
             _BUILT.pop(next(iter(_BUILT)))
-        _BUILT[key] = build_pipeline(rig, models, calibration, motion=motion, compiled=compiled)
+        _BUILT[key] = build_pipeline(rig, models, calibration, session_format)
     return _BUILT[key], "recorded in the session"
 
 
-# Pipelines built from recorded rigs, by (rig, session folder, calibration, models, motion, compiled): the sessions
+# Pipelines built from recorded rigs, by (rig, session folder, calibration, models, format): the sessions
 # of a corpus mostly share one rig, and building one (rig plugins, URDFs, models, checkers) costs about
 # 0.1 s. A Pipeline keeps no state between steps (PipelineState does), so sessions can share one.
 _BUILT: dict[tuple, Pipeline] = {}

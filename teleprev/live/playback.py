@@ -13,7 +13,7 @@ from rich.text import Text
 
 from teleprev.errors import ConfigError, DeviceError
 from teleprev.messages import JointSample
-from teleprev.live.build import build_pipeline, rig_calibration
+from teleprev.assembly import build_pipeline, rig_calibration
 from teleprev.preview.keys import KeyReader
 from teleprev.preview.robot_view import Layer, RobotView
 from teleprev.live.player import ROUNDING, Player, load_playback, safe_speed, smooth, validate

@@ -19,7 +19,7 @@ from pathlib import Path
 
 from teleprev import __version__, numeric_platform
 from teleprev.errors import ConfigError
-from teleprev.live.build import build_pipeline, rig_calibration
+from teleprev.assembly import build_pipeline, rig_calibration
 from teleprev.pipeline.driver import InputTopics, PipelineDriver
 from teleprev.live.device_rows import DeviceRow
 from teleprev.rig import Rig, load_rig

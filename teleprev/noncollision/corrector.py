@@ -17,9 +17,10 @@ Taking as little of the CCN's correction as the checker allows keeps the output 
 the input only just collides, so a smooth input trajectory entering or leaving collision gives a smooth
 output (the full proposal would jump by the CCN's safety margin), and it lowers the deviation.
 Every answer has passed the exact checker (the anchor was checked when it became the anchor), so no
-path returns a colliding configuration. No torch: this runs in every pipeline step. compiled=True (sessions
-of format 3 on): the CPN / CCN inference runs in numba kernels (noncollision/compiled.py), the CCN step
-(proposal and bisection) in one call; compiled=False: the numpy networks, as sessions before recorded.
+path returns a colliding configuration. No torch: this runs in every pipeline step. The CPN / CCN
+inference runs in numba kernels (noncollision/compiled.py), the CCN step (proposal and bisection) in one
+call; sessions of formats 1 and 2 were corrected with the numpy networks
+(teleprev/pipeline/numpy_arithmetic.py: NumpyCorrector).
 """
 
 from __future__ import annotations
@@ -30,7 +31,7 @@ from pathlib import Path
 import numpy as np
 
 from teleprev.errors import ModelError
-from teleprev.noncollision.mlp import CCN, CPN, SCORE_BAND, file_sha256, load_model
+from teleprev.noncollision.mlp import CCN, CPN, file_sha256, load_model
 from teleprev.noncollision.projection import ProjectionSettings, descend
 from teleprev.robot.collision import SelfCollisionChecker
 from teleprev.robot.collision_report import CollisionReport
@@ -103,8 +104,7 @@ def find_models(models_dir: Path, model: RobotModel) -> tuple[Path, Path]:
 
 class Corrector:
     def __init__(self, model: RobotModel, checker: SelfCollisionChecker, cpn: CPN, ccn: CCN,
-                 settings: CorrectorSettings = CorrectorSettings(), files: dict[str, Path] | None = None,
-                 compiled: bool = False):
+                 settings: CorrectorSettings = CorrectorSettings(), files: dict[str, Path] | None = None):
         self.model = model
         self.checker = checker
         self.cpn = cpn
@@ -114,23 +114,24 @@ class Corrector:
         self.neutral = model.neutral()
         if checker.collides(self.neutral):
             raise ModelError("the neutral (open) hand is in self-collision, so there is no safe fallback pose", str(model.urdf_path))
-        self._nets = None  # compiled: the kernels' CPN, CCN and fused CCN step (noncollision/compiled.py)
-        self._cpn = cpn  # what the fallback asks: the numpy CPN, or the compiled one (same gradient)
-        if compiled:
-            from teleprev.noncollision.compiled import CompiledNets
-
-            self._nets = CompiledNets(cpn, ccn, settings.shorten_levels)
-            self._cpn = self._nets.cpn
-            # load the kernels from numba's cache now, not in a live loop's first steps
-            self._nets.propose_shorten(self.neutral[None])
-            self._cpn.predicts_free(self.neutral[None])
         s = np.linspace(0.0, 1.0, settings.segment_points + 1)[1:]
         self._segment = s[:, None]
         self._extend = np.linspace(1.0, 2.0, 9)[1:, None]
+        self._load_networks()
+
+    def _load_networks(self) -> None:
+        """The kernels' CPN, CCN and fused CCN step (noncollision/compiled.py), loaded from numba's cache now,
+        not in a live loop's first steps; `_cpn` is what the fallback asks (the compiled CPN, whose gradient
+        is the numpy one's)."""
+        from teleprev.noncollision.compiled import CompiledNets
+
+        self._nets = CompiledNets(self.cpn, self.ccn, self.settings.shorten_levels)
+        self._cpn = self._nets.cpn
+        self._nets.propose_shorten(self.neutral[None])
+        self._cpn.predicts_free(self.neutral[None])
 
     @classmethod
-    def load(cls, models_dir: Path | None, model: RobotModel, checker: SelfCollisionChecker | None = None,
-             compiled: bool = False) -> "Corrector":
+    def load(cls, models_dir: Path | None, model: RobotModel, checker: SelfCollisionChecker | None = None) -> "Corrector":
         """The CPN and CCN for `model` from `models_dir` (None: the shipped models/ folder)."""
         from teleprev.paths import data_dir
 
@@ -144,8 +145,7 @@ class Corrector:
                 f"trained against another CPN than {cpn_path.name}; retrain the CCN (`teleprev collision train-ccn`)",
                 str(ccn_path),
             )
-        return cls(model, checker, cpn, CCN(ccn_net, model.lower, model.upper), files={"cpn": cpn_path, "ccn": ccn_path},
-                   compiled=compiled)
+        return cls(model, checker, cpn, CCN(ccn_net, model.lower, model.upper), files={"cpn": cpn_path, "ccn": ccn_path})
 
     def model_hashes(self) -> dict[str, str]:
         """{role: sha256} of the weight files loaded (a session records them, eval compares them)."""
@@ -156,10 +156,7 @@ class Corrector:
         """The part of `correct` that depends on the input alone, for inputs (N, n): each clipped to the
         limits and checked exactly, and for a batch also the correction itself unless it falls back (that
         needs the previous output). The same answers as `correct` alone: the batch check answers as the
-        single one, the CCN runs per input, and the CPN's batched scores decide only where they are
-        further than SCORE_BAND from the threshold (batched float32 sums differ from single ones in the
-        last bits), the single network elsewhere. Compiled: a row's arithmetic does not depend on its
-        batch, so the batched kernel answers as the single path does, with no band to re-decide."""
+        single one, and a row's arithmetic in the kernels does not depend on its batch."""
         q_in = np.asarray(q, dtype=float)
         if q_in.ndim != 2 or q_in.shape[1:] != self.model.lower.shape or not np.isfinite(q_in).all():
             raise ValueError(f"expected rows of {len(self.model.lower)} finite joint values, got "
@@ -167,35 +164,10 @@ class Corrector:
         q0 = self.model.clip(q_in)
         if len(q0) == 1:
             return [Prepared(q_in[0], q0[0], self.checker.check(q0[0]))]
-        pairs = self.checker.pair_matrix(q0)
-        if self._nets is not None:
-            return self._prepare_compiled(q_in, q0, pairs)
-        labels = self.checker.labels_from_pairs(pairs)
-        names = self.checker.link_pairs
-        out = [Prepared(q_in[i], q0[i], CollisionReport(labels[i], tuple(names[k] for k in np.flatnonzero(pairs[i]))))
-               for i in range(len(q0))]
-        rows = [i for i, p in enumerate(out) if p.report.colliding]
-        if not rows:
-            return out
-        proposals = [self.ccn(q0[i]) for i in rows]
-        steps = 2 ** self.settings.shorten_levels
-        fractions = np.arange(1, steps) / steps
-        points = np.stack([q0[i] + fractions[:, None] * (p - q0[i]) for i, p in zip(rows, proposals)])
-        scores = self.cpn.score(points.reshape(-1, points.shape[-1])).reshape(len(rows), steps - 1)
-        for i, proposal, point, score in zip(rows, proposals, points, scores):
-            def free(k: int) -> bool:
-                s = float(score[k - 1])
-                if abs(s - self.cpn.free_below) > SCORE_BAND * (1.0 + abs(s)):
-                    return s < self.cpn.free_below
-                return self.cpn.predicts_free(point[k - 1])
+        return self._prepare_batch(q_in, q0, self.checker.pair_matrix(q0))
 
-            shorter = self._shortest_predicted_free(q0[i], proposal, free)
-            answer = self._ccn_answer(q_in[i], shorter, proposal, out[i].report)
-            out[i] = Prepared(q_in[i], q0[i], out[i].report, proposal, answer)
-        return out
-
-    def _prepare_compiled(self, q_in: np.ndarray, q0: np.ndarray, pairs: np.ndarray) -> list[Prepared]:
-        """prepare's batch, compiled (the kernels answer a row as alone): every answer that needs no
+    def _prepare_batch(self, q_in: np.ndarray, q0: np.ndarray, pairs: np.ndarray) -> list[Prepared]:
+        """prepare's batch (the kernels answer a row as alone): every answer that needs no
         previous output, computed for the whole batch at once. The CCN step runs for all colliding rows
         in one kernel call; the shortened proposals are checked exactly in one batched pass, the full
         proposals only for the rows whose shortened one collides (or was not found); deviations in one
@@ -262,13 +234,7 @@ class Corrector:
             return Correction(q0, "untouched", (), float(np.abs(q0 - q_in).max()))
         proposal = prepared.proposal
         if proposal is None:
-            if self._nets is not None:
-                proposals, shortened, his = self._nets.propose_shorten(q0[None])
-                proposal = proposals[0]
-                shorter = None if his[0] == self._nets.steps else shortened[0]
-            else:
-                proposal = self.ccn(q0)
-                shorter = self._shortest_predicted_free(q0, proposal, None)
+            proposal, shorter = self._propose(q0)
             answer = self._ccn_answer(q_in, shorter, proposal, report)
             if answer is not None:
                 return answer
@@ -286,19 +252,11 @@ class Corrector:
             return Correction(proposal, "ccn", links, float(np.abs(proposal - q_in).max()))
         return None
 
-    def _shortest_predicted_free(self, q0: np.ndarray, proposal: np.ndarray, free=None) -> np.ndarray | None:
-        """The smallest fraction k / 2**shorten_levels of the correction the CPN predicts free, by bisection
-        (one CPN call per level, unless `free(k)` answers for the CPN: Corrector.prepare's batch)."""
-        steps = 2 ** self.settings.shorten_levels
-        lo, hi = 0, steps  # in units of 1 / 2**levels; hi: the full proposal
-        delta = proposal - q0
-        while hi - lo > 1:
-            mid = (lo + hi) // 2
-            if free(mid) if free is not None else self.cpn.predicts_free(q0 + (mid / steps) * delta):
-                hi = mid
-            else:
-                lo = mid
-        return None if hi == steps else q0 + (hi / steps) * delta
+    def _propose(self, q0: np.ndarray) -> tuple[np.ndarray, np.ndarray | None]:
+        """The CCN's proposal for q0, and the smallest fraction k / 2**shorten_levels of its correction the
+        CPN predicts free (None: only the full one), in one kernel call."""
+        proposals, shortened, his = self._nets.propose_shorten(q0[None])
+        return proposals[0], None if his[0] == self._nets.steps else shortened[0]
 
     # ---- fallback -------------------------------------------------------------------------------
     def _anchor(self, previous: np.ndarray | None) -> np.ndarray:

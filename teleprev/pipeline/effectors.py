@@ -64,7 +64,7 @@ class Effector(ABC):
 
 class LeapEffector(Effector):
     def __init__(self, spec: EndEffector, hand: RobotModel, corrector: Corrector, cfg: PipelineConfig, max_dt: float,
-                 mapping: dict[str, JointMap] | None = None, compiled: bool = False):
+                 mapping: dict[str, JointMap] | None = None):
         # the Corrector and the guard work in the URDF's joint order, which the table's must therefore be
         if hand.joint_names != spec.joints:
             raise UrdfError(f"the {spec.name!r} row of the end-effector table names joints {list(spec.joints)}, "
@@ -73,8 +73,7 @@ class LeapEffector(Effector):
         self.model = hand
         self.names = spec.joints
         self.retarget = LeapRetargeter(hand, mapping)
-        # compiled (sessions of format 3 on): the glove kernel retargets with the angles, by this table
-        self._table = self.retarget.table() if compiled else None
+        self._table = self.retarget.table()  # the glove kernel retargets with the angles, by this table
         self.corrector = corrector
         speed = np.minimum(hand.velocity_limit, cfg.hand_speed)
         self.guard = JointGuard(hand.lower, hand.upper, speed, max_dt, checker=corrector.checker)

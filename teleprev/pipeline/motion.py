@@ -80,20 +80,16 @@ class Motion:
             return evolve(state, mode="preview", motion=evolve(m, stopping=True), **reset), ""
         if mode != "execute":
             return state, f"unknown mode {mode!r}"
-        arm_q = p.measured(inputs.arm, p.arm_names)
-        eff_q = p.measured(inputs.effector, p.effector_names)
-        if arm_q is None or eff_q is None:
-            return state, "no measured state from the arm or the end effector"
-        if state.arm_q is None or state.effector_q is None:
-            return state, "nothing previewed yet (waiting for glove and suit)"
+        start = p.engage_start(state, inputs)
+        if isinstance(start, str):
+            return state, start
         if state.motion is not None and state.arm_cmd is not None:
             # Still braking from the last execute: carry on from where the commands are.
             return evolve(state, mode="execute", motion=evolve(state.motion, stopping=False), engaging=True), ""
-        arm_q = np.clip(arm_q, p.arm_guard.lower, p.arm_guard.upper)
-        eff_q = np.clip(eff_q, p.effector.guard.lower, p.effector.guard.upper)
-        if not p.effector.guard.valid(eff_q):
-            return state, ("the end effector's measured state is not a valid command (self-collision, or closer "
-                           "than the clearance margin?)")
+        arm_q, eff_q = start
+        refused = p.invalid_start(eff_q)
+        if refused:
+            return state, refused
         m = MotionState(arm=JointMotion.rest(arm_q), hand_v=np.zeros_like(eff_q) if self.hand is not None else None)
         return evolve(state, mode="execute", arm_cmd=arm_q, effector_cmd=eff_q, cmd_ns=inputs.t_ns, engaging=True,
                        motion=m), ""

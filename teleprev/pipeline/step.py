@@ -21,7 +21,8 @@ from typing import Any
 
 import numpy as np
 
-from teleprev.human.smplx import FRAME_TURN, TWIST_NOISE, angles_from_hand_pose, hand_pose_from_values, hand_values
+from teleprev.human.smplx import FRAME_TURN, TWIST_NOISE, hand_values
+from teleprev.kernels import glove as glove_kernels
 from teleprev.messages import JointSample, PoseSample
 from teleprev.pipeline.config import PipelineConfig
 from teleprev.pipeline.effectors import Effector
@@ -88,11 +89,13 @@ class StepResult:
 
 
 class Pipeline:
+    """The step of sessions of format 3 on: compiled glove preparation, arm IK and Corrector, commands kept
+    to the motion limits by `motion`. Older formats' arithmetic: teleprev/pipeline/numpy_arithmetic.py."""
+
     def __init__(self, cfg: PipelineConfig, arm: ArmRetargeter, arm_guard: JointGuard, effector: Effector,
-                 motion: Motion | None = None, compiled: bool = False):
+                 motion: Motion | None):
         self.cfg = cfg
-        self.compiled = compiled  # the compiled hot path (sessions of format 3 on); False: the numpy arithmetic
-        self.motion = motion  # teleprev.pipeline.motion.Motion: limits on acceleration and jerk (None: speed caps only)
+        self.motion = motion  # teleprev.pipeline.motion.Motion: limits on acceleration and jerk
         self.arm = arm
         self.arm_names = arm.ik.joint_names
         self.arm_guard = arm_guard
@@ -100,16 +103,12 @@ class Pipeline:
         self.effector_names = effector.names
         self._stale_ns = int(cfg.stale_ms * 1e6)
         self._last_wrist: tuple = (None, "", None)  # (sample, flag, pose): a cache, the step stays pure
-        if compiled:
-            from teleprev.kernels import glove as glove_kernels
-
-            self._hand_kernels = glove_kernels
-            table = effector.kernel_table()
-            self._hand_retargets = table is not None  # the kernel computes the effector's joints too
-            self._glove = glove_kernels.GloveTable(
-                FRAME_TURN, np.array([MAX_JOINT_ROTATION**2, MIN_FLEXION, MAX_FLEXION, MAX_ABDUCTION, TWIST_NOISE]),
-                table if table is not None else np.zeros((5, 0)))
-            glove_kernels.prepare_rows(np.zeros((1, 45)), *self._glove)  # load it from numba's cache now
+        table = effector.kernel_table()
+        self._hand_retargets = table is not None  # the glove kernel computes the effector's joints too
+        self._glove = glove_kernels.GloveTable(
+            FRAME_TURN, np.array([MAX_JOINT_ROTATION**2, MIN_FLEXION, MAX_FLEXION, MAX_ABDUCTION, TWIST_NOISE]),
+            table if table is not None else np.zeros((5, 0)))
+        glove_kernels.prepare_rows(np.zeros((1, 45)), *self._glove)  # load it from numba's cache now
 
     def model_hashes(self) -> dict[str, str] | None:
         """{role: sha256} of the model files the pipeline runs (a session records them, eval compares);
@@ -131,59 +130,11 @@ class Pipeline:
     def prepare_hands(self, samples: list[JointSample]) -> list[HandInput]:
         """What each glove sample gives before any pipeline state: finger angles (or why none) and the
         end effector's state-independent work on them. One sample (the live step) or a session's worth at
-        once (eval, ahead of the sequential pass): element-wise array arithmetic, so each row's bits are
-        the same either way (tests/pipeline/test_prepared.py)."""
-        if self.compiled:
-            return self._prepare_compiled(samples)
-        n = len(samples)
-        if n == 1:
-            return [self._prepare_hand(samples[0])]
-        out = [HandInput() for _ in range(n)]
-        poses = np.zeros((n, 15, 3))
-        valid = np.ones(n, dtype=bool)
-        for i, s in enumerate(samples):
-            try:
-                poses[i] = hand_pose_from_values(s.names, s.positions)
-            except KeyError:
-                out[i], valid[i] = HandInput("glove_invalid"), False
-        finite = np.isfinite(poses).all(axis=(1, 2))
-        in_range = np.einsum("nij,nij->ni", poses, poses).max(axis=1) <= MAX_JOINT_ROTATION**2
-        for i in np.flatnonzero(valid & ~(finite & in_range)):
-            out[i] = HandInput("glove_invalid" if not finite[i] else "glove_out_of_range")
-        rows = np.flatnonzero(valid & finite & in_range)
-        if not len(rows):
-            return out
-        flexion, abduction = angles_from_hand_pose(poses[rows])
-        bent = ((flexion.max(axis=1) > MAX_FLEXION) | (flexion.min(axis=1) < MIN_FLEXION)
-                | (abs(abduction).max(axis=1) > MAX_ABDUCTION))
-        ok = np.flatnonzero(~bent)
-        prepared = self.effector.prepare(flexion[ok], abduction[ok])
-        for k in np.flatnonzero(bent):
-            out[rows[k]] = HandInput("glove_out_of_range")
-        for j, k in enumerate(ok):
-            out[rows[k]] = HandInput("", flexion[k], abduction[k], prepared[j])
-        return out
-
-    def _prepare_hand(self, s: JointSample) -> HandInput:
-        """prepare_hands for one sample, without the batch's bookkeeping (the live step's case)."""
-        try:
-            pose = hand_pose_from_values(s.names, s.positions)
-        except KeyError:
-            return HandInput("glove_invalid")
-        if not np.isfinite(pose).all():
-            return HandInput("glove_invalid")
-        if np.einsum("ij,ij->i", pose, pose).max() > MAX_JOINT_ROTATION**2:
-            return HandInput("glove_out_of_range")
-        flexion, abduction = angles_from_hand_pose(pose)
-        if flexion.max() > MAX_FLEXION or flexion.min() < MIN_FLEXION or abs(abduction).max() > MAX_ABDUCTION:
-            return HandInput("glove_out_of_range")
-        return HandInput("", flexion, abduction, self.effector.prepare(flexion[None], abduction[None])[0])
-
-    def _prepare_compiled(self, samples: list[JointSample]) -> list[HandInput]:
-        """prepare_hands in compiled code (teleprev/kernels/glove.py): decode, checks, angles and
-        (for an effector with a kernel table) the retargeted joints, by one row code for one sample and for
-        many, so each sample's bits are the same either way; then the effector's preparation of the rows
-        that passed (the Corrector's exact check, for the LEAP Hand)."""
+        once (eval, ahead of the sequential pass). In compiled code (teleprev/kernels/glove.py): decode,
+        checks, angles and (for an effector with a kernel table) the retargeted joints, by one row code for
+        one sample and for many, so each sample's bits are the same either way
+        (tests/pipeline/test_prepared.py); then the effector's preparation of the rows that passed (the
+        Corrector's exact check, for the LEAP Hand)."""
         n = len(samples)
         if n == 1:  # the live step's case
             try:
@@ -197,14 +148,14 @@ class Pipeline:
                     rows[i] = hand_values(s.names, s.positions)
                 except KeyError:
                     rows[i] = np.nan  # missing components: glove_invalid, as a non-finite sample
-        codes, angles, joints = self._hand_kernels.prepare_rows(rows, *self._glove)
+        codes, angles, joints = glove_kernels.prepare_rows(rows, *self._glove)
         if n == 1:
             if codes[0]:
-                return [HandInput(self._hand_kernels.FLAG_NAMES[codes[0]])]
+                return [HandInput(glove_kernels.FLAG_NAMES[codes[0]])]
             flexion, abduction = angles[:, :15], angles[:, 15:]
             prepared = self.effector.prepare(flexion, abduction, joints if self._hand_retargets else None)
             return [HandInput("", flexion[0], abduction[0], prepared[0])]
-        out = [HandInput(self._hand_kernels.FLAG_NAMES[c]) if c else None for c in codes.tolist()]
+        out = [HandInput(glove_kernels.FLAG_NAMES[c]) if c else None for c in codes.tolist()]
         ok = np.flatnonzero(codes == 0)
         if len(ok):
             flexion, abduction = angles[ok, :15], angles[ok, 15:]
@@ -258,27 +209,27 @@ class Pipeline:
     # ---- mode ----------------------------------------------------------------------------------
     def set_mode(self, state: PipelineState, mode: str, inputs: StepInputs) -> tuple[PipelineState, str]:
         """Switch preview/execute (or "estop"); returns the new state and "" or why the switch was refused."""
-        if self.motion is not None:
-            return self.motion.set_mode(self, state, mode, inputs)
-        if mode == state.mode:
-            return state, ""
-        if mode == "preview":
-            # Re-anchor at the next step: the preview starts again from where the robot is.
-            return evolve(state, mode="preview", anchor=None, arm_q=None, arm_q_before=None, arm_solved_ns=-1,
-                           arm_cmd=None, effector_cmd=None, engaging=False), ""
-        if mode != "execute":
-            return state, f"unknown mode {mode!r}"
+        return self.motion.set_mode(self, state, mode, inputs)
+
+    def engage_start(self, state: PipelineState, inputs: StepInputs) -> tuple[np.ndarray, np.ndarray] | str:
+        """Where an engage would start: the measured arm and end effector within their limits, or why it
+        cannot (no measured state, nothing previewed yet). `invalid_start` says whether the end effector's
+        may be commanded (its check can be long: the callers ask it last)."""
         arm_q = self.measured(inputs.arm, self.arm_names)
         eff_q = self.measured(inputs.effector, self.effector_names)
         if arm_q is None or eff_q is None:
-            return state, "no measured state from the arm or the end effector"
+            return "no measured state from the arm or the end effector"
         if state.arm_q is None or state.effector_q is None:
-            return state, "nothing previewed yet (waiting for glove and suit)"
-        arm_q = np.clip(arm_q, self.arm_guard.lower, self.arm_guard.upper)
-        eff_q = np.clip(eff_q, self.effector.guard.lower, self.effector.guard.upper)
-        if not self.effector.guard.valid(eff_q):
-            return state, "the end effector's measured state is not a valid command (self-collision?)"
-        return evolve(state, mode="execute", arm_cmd=arm_q, effector_cmd=eff_q, cmd_ns=inputs.t_ns, engaging=True), ""
+            return "nothing previewed yet (waiting for glove and suit)"
+        return (np.clip(arm_q, self.arm_guard.lower, self.arm_guard.upper),
+                np.clip(eff_q, self.effector.guard.lower, self.effector.guard.upper))
+
+    def invalid_start(self, eff_q: np.ndarray) -> str:
+        """"" or why the end effector's measured state (within its limits) is no command to start from."""
+        if self.effector.guard.valid(eff_q):
+            return ""
+        return ("the end effector's measured state is not a valid command (in self-collision, or closer than the "
+                "clearance margin?)")
 
     # ---- step ----------------------------------------------------------------------------------
     def step(self, state: PipelineState, inputs: StepInputs) -> StepResult:
@@ -325,28 +276,16 @@ class Pipeline:
 
         new = evolve(state, step=state.step + 1, anchor=anchor, arm_q=arm_q, arm_q_before=arm_q_before,
                       arm_solved_ns=solved_ns, effector_q=effector_q)
-        arm_cmd = eff_cmd = None
-        if self.motion is not None:
-            new, arm_cmd, eff_cmd = self.motion.commands(self, state, new, inputs, arm_q if arm_fresh else None,
-                                                         effector_q if angles is not None else None, flags)
-        elif state.mode == "execute":
-            dt = (inputs.t_ns - state.cmd_ns) / 1e9 if state.cmd_ns is not None else 0.0
-            frac = self.cfg.engage_speed_frac if state.engaging else 1.0
-            if arm_fresh:
-                arm_cmd = self.arm_guard.step(state.arm_cmd, arm_q, dt, frac)
-            if angles is not None:
-                eff_cmd = self.effector.guard.step(state.effector_cmd, effector_q, dt, frac, target_valid=True)
-            if arm_cmd is not None or eff_cmd is not None:
-                a = arm_cmd if arm_cmd is not None else state.arm_cmd
-                e = eff_cmd if eff_cmd is not None else state.effector_cmd
-                engaging = state.engaging and not (
-                    np.max(np.abs(a - arm_q)) < ENGAGED_TOL and np.max(np.abs(e - effector_q)) < ENGAGED_TOL
-                )
-                new = evolve(new, arm_cmd=a, effector_cmd=e, cmd_ns=inputs.t_ns, engaging=engaging)
-            if state.engaging:
-                flags.append("engaging")
+        new, arm_cmd, eff_cmd = self._commands(state, new, inputs, arm_q if arm_fresh else None,
+                                               effector_q if angles is not None else None, flags)
         report["flags"] = flags
         return StepResult(new, retargeted, corrected, arm_q if arm_fresh else None, arm_cmd, eff_cmd, report)
+
+    def _commands(self, state: PipelineState, new: PipelineState, inputs: StepInputs, arm_target, effector_target,
+                  flags: list[str]):
+        """(new state, arm command or None, effector command or None) for this step's fresh targets (None
+        where the input was unusable)."""
+        return self.motion.commands(self, state, new, inputs, arm_target, effector_target, flags)
 
     def idle_step(self, state: PipelineState, inputs: StepInputs) -> StepResult | None:
         """Between trigger samples: a step that only brakes moving commands, when no step came for a while."""

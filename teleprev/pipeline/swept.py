@@ -14,9 +14,10 @@ segment) then proves every configuration on the segment keeps at least c/2 betwe
 the segment is within half a spacing of a checked one, where two links moved at most M/n <= c/2 towards
 each other. The end point itself keeps the full c.
 
-SweptCheck(compiled=True) (sessions of format 3 on) runs a segment in one numba kernel
-(teleprev/kernels/swept.py, swept_*): the bound, the points, the checks in order, the end point's, and
-last_free_on_segment's bisection. Per configuration it decides as SelfCollisionChecker does (the
+SweptCheck runs a segment in one numba kernel (teleprev/kernels/swept.py, swept_*) where the geometry is
+all boxes: the bound, the points, the checks in order, the end point's, and last_free_on_segment's
+bisection; otherwise, and for sessions of format 2 (teleprev/pipeline/numpy_arithmetic.py), the numpy
+check. Per configuration it decides as SelfCollisionChecker does (the
 compiled box test with its margin turned either way) and hands the ones within the margin back to FCL
 here, so its answers are the numpy check's (tests/pipeline/test_swept.py); only the bound's last bit
 may differ (a summation order), which can change the number of points only at an exact tie.
@@ -85,16 +86,15 @@ def reach_table(model: RobotModel, link_names: tuple[str, ...]) -> np.ndarray:
 
 
 class SweptCheck:
-    def __init__(self, model: RobotModel, checker: SelfCollisionChecker, clearance_m: float, compiled: bool = False):
+    def __init__(self, model: RobotModel, checker: SelfCollisionChecker, clearance_m: float):
         self.model = model
-        self.compiled = compiled  # the compiled segment check (sessions of format 3 on); False: the numpy one
         self.checker = checker
         self.clearance = float(clearance_m)
         self.grown = (SelfCollisionChecker(inflated_model(model, self.clearance / 2), checker.exclusions)
                       if self.clearance > 0 else checker)
         self.reach = reach_table(model, checker.link_names)
         self._clear_cache: tuple[bytes, bool] = (b"", False)  # the last end point checked (pure: a cache)
-        self._kernel_args = self._compiled_tables() if compiled else None
+        self._kernel_args = self._compiled_tables()
         if self._kernel_args is not None:  # load the kernels from numba's cache now, not in a live loop's first steps
             q = model.neutral()
             self._segment_free_compiled(q, q + 1e-3)

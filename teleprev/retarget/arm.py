@@ -20,8 +20,6 @@ import numpy as np
 from teleprev.robot.ik import ArmIK, IkResult
 
 
-_EYE4 = np.eye(4)
-
 
 @dataclass(frozen=True)
 class Anchor:
@@ -38,37 +36,30 @@ class ArmRetargeter:
         workspace_max=(np.inf,) * 3,
         suit_to_robot: np.ndarray | None = None,
     ):
+        from teleprev.kernels.ik import Workspace
+
         self.ik = ik
         self.scale = scale
-        # own float64 copies: the compiled path hands these to numba as they are
+        # own float64 copies: the kernels take these as they are
         self.lo = np.array(workspace_min, dtype=float)
         self.hi = np.array(workspace_max, dtype=float)
         self.m = np.eye(3) if suit_to_robot is None else np.array(suit_to_robot, dtype=float)
-        if ik.compiled:  # load the kernels from numba's cache now, not in a live loop's first steps
-            from teleprev.kernels.ik import Workspace
-
-            self._workspace = Workspace(self.m, float(self.scale), self.lo, self.hi)
-            q = ik.chain.neutral()
-            pose = ik.pose(q)
-            self.solve(self.anchor(pose, q), pose, q)
-            self.target(self.anchor(pose, q), pose)
+        self._workspace = Workspace(self.m, float(self.scale), self.lo, self.hi)
+        q = ik.chain.neutral()  # load the kernels from numba's cache now, not in a live loop's first steps
+        pose = ik.pose(q)
+        self.solve(self.anchor(pose, q), pose, q)
+        self.target(self.anchor(pose, q), pose)
 
     def anchor(self, wrist: np.ndarray, arm_q: np.ndarray) -> Anchor:
         return Anchor(np.array(wrist, dtype=float), self.ik.pose(arm_q))
 
     def target(self, anchor: Anchor, wrist: np.ndarray) -> tuple[np.ndarray, bool]:
-        """The TCP target pose, and whether the workspace box clipped it."""
-        if self.ik.compiled:  # the same products in compiled code (ik_kernels.arm_target_into)
-            from teleprev.kernels import ik as ik_kernels
-            t = np.empty((4, 4))
-            clipped = ik_kernels.arm_target_into(*self._kernel_args(anchor, wrist), t)
-            return t, bool(clipped)
-        m = self.m
-        t = _EYE4.copy()
-        desired = anchor.tcp[:3, 3] + self.scale * (m @ (wrist[:3, 3] - anchor.wrist[:3, 3]))
-        t[:3, 3] = np.clip(desired, self.lo, self.hi)
-        t[:3, :3] = m @ wrist[:3, :3] @ anchor.wrist[:3, :3].T @ m.T @ anchor.tcp[:3, :3]
-        return t, bool((t[:3, 3] != desired).any())
+        """The TCP target pose, and whether the workspace box clipped it (ik_kernels.arm_target_into)."""
+        from teleprev.kernels import ik as ik_kernels
+
+        t = np.empty((4, 4))
+        clipped = ik_kernels.arm_target_into(*self._kernel_args(anchor, wrist), t)
+        return t, bool(clipped)
 
     def _kernel_args(self, anchor: Anchor, wrist: np.ndarray) -> tuple:
         """ik_kernels.arm_target_into's inputs. The anchor's arrays (anchor() made them) and m, lo, hi are
@@ -77,11 +68,10 @@ class ArmRetargeter:
         return anchor.wrist, anchor.tcp, np.array(wrist, dtype=np.float64), *self._workspace
 
     def solve(self, anchor: Anchor, wrist: np.ndarray, q_start: np.ndarray) -> tuple[IkResult, bool]:
-        if self.ik.compiled:  # target and IK in one compiled call (ik_kernels.arm_solve)
-            from teleprev.kernels import ik as ik_kernels
-            q, converged, iterations, pos_err, rot_err, clipped = ik_kernels.arm_solve(
-                *self._kernel_args(anchor, wrist), np.array(q_start, dtype=np.float64),
-                *self.ik.kernel_args)
-            return IkResult(q, converged, iterations, pos_err, rot_err), bool(clipped)
-        target, clipped = self.target(anchor, wrist)
-        return self.ik.solve(target, q_start), clipped
+        """The target and the IK in one compiled call (ik_kernels.arm_solve): the solution, and whether the
+        workspace box clipped the target."""
+        from teleprev.kernels import ik as ik_kernels
+
+        q, converged, iterations, pos_err, rot_err, clipped = ik_kernels.arm_solve(
+            *self._kernel_args(anchor, wrist), np.array(q_start, dtype=np.float64), *self.ik.kernel_args)
+        return IkResult(q, converged, iterations, pos_err, rot_err), bool(clipped)

@@ -66,7 +66,7 @@ def test_a_format_2_session_reruns_with_the_numpy_arithmetic_bit_for_bit():
 
     reader = SessionReader(FIXTURE_V2)
     assert reader.metadata["teleprev"]["format_version"] == "2"
-    assert reproduce.recorded_with_motion(reader.metadata) and not reproduce.recorded_compiled(reader.metadata)
+    assert reproduce.recorded_format(reader.metadata) == 2
     result = evaluate([FIXTURE_V2])
     session = result.report["sessions"][0]
     r = result.reruns[0]
@@ -83,7 +83,7 @@ def test_a_format_3_session_reruns_with_the_compiled_arithmetic_bit_for_bit():
 
     reader = SessionReader(FIXTURE_V3)
     assert reader.metadata["teleprev"]["format_version"] == "3"
-    assert reproduce.recorded_with_motion(reader.metadata) and reproduce.recorded_compiled(reader.metadata)
+    assert reproduce.recorded_format(reader.metadata) == 3
     result = evaluate([FIXTURE_V3])
     session = result.report["sessions"][0]
     r = result.reruns[0]

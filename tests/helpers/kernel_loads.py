@@ -12,7 +12,7 @@ PRELUDE = textwrap.dedent("""
 
     import teleprev.kernels
     from teleprev.human.smplx import HAND_POSE_NAMES
-    from teleprev.live.build import build_pipeline
+    from teleprev.assembly import build_pipeline
     from teleprev.messages import JointSample, PoseSample
     from teleprev.pipeline.step import PipelineState, StepInputs
     from teleprev.rig import load_rig

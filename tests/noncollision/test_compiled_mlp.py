@@ -1,6 +1,6 @@
 """Compiled CPN / CCN inference (teleprev/kernels/mlp.py): agrees with the numpy networks to float32
-rounding, answers a row the same bits whatever batch it is in, and Corrector(compiled=True) keeps every
-guarantee of the numpy one (every answer passes the exact checker; prepare-then-correct == correct)."""
+rounding, answers a row the same bits whatever batch it is in, and the Corrector on them keeps every
+guarantee of the numpy one (NumpyCorrector, formats 1 and 2) (every answer passes the exact checker; prepare-then-correct == correct)."""
 
 import numpy as np
 import pytest
@@ -8,18 +8,19 @@ import pytest
 from teleprev.noncollision.compiled import CompiledCCN, CompiledCPN, CompiledMLP, CompiledNets
 from teleprev.noncollision.corrector import Corrector
 from teleprev.noncollision.mlp import CCN, CPN
+from teleprev.pipeline.numpy_arithmetic import NumpyCorrector
 
 from tests.noncollision.test_mlp import _random_net
 
 
 @pytest.fixture(scope="module")
 def shipped(hand, hand_checker):
-    return Corrector.load(None, hand, hand_checker)
+    return NumpyCorrector.load(None, hand, hand_checker)
 
 
 @pytest.fixture(scope="module")
 def compiled_corrector(hand, hand_checker):
-    return Corrector.load(None, hand, hand_checker, compiled=True)
+    return Corrector.load(None, hand, hand_checker)
 
 
 @pytest.fixture(scope="module")
@@ -105,7 +106,7 @@ def test_fused_step_bisects_as_the_numpy_corrector_would(shipped, colliding):
     """propose_shorten picks the fraction that _shortest_predicted_free picks, asking the compiled CPN."""
     nets = CompiledNets(shipped.cpn, shipped.ccn, 2)
     proposals, shortened, his = nets.propose_shorten(colliding[:200])
-    probe = Corrector(shipped.model, shipped.checker, nets.cpn, shipped.ccn)  # bisection with the compiled CPN
+    probe = NumpyCorrector(shipped.model, shipped.checker, nets.cpn, shipped.ccn)  # bisection with the compiled CPN
     for q0, p, s, hi in zip(colliding[:200], proposals, shortened, his):
         expected = probe._shortest_predicted_free(q0, p)
         if expected is None:
@@ -137,7 +138,7 @@ def test_compiled_fallback_never_collides(hand, hand_checker, shipped, colliding
     net = shipped.ccn.net
     zero = MLP(net.info, net.w[:-1] + [np.zeros_like(net.w[-1])],
                [b[:, 0, :] for b in net.b[:-1]] + [np.zeros_like(net.b[-1][:, 0, :])])
-    forced = Corrector(hand, hand_checker, shipped.cpn, CCN(zero, hand.lower, hand.upper), compiled=True)
+    forced = Corrector(hand, hand_checker, shipped.cpn, CCN(zero, hand.lower, hand.upper))
     outs = [forced.correct(q) for q in colliding[:100]]
     assert all(r.action == "fallback" for r in outs)
     _assert_valid(hand, hand_checker, np.array([r.q for r in outs]))

@@ -9,7 +9,7 @@ import pytest
 from tests.helpers.sessions import RIGS, record_sim
 from teleprev.errors import UrdfError
 from teleprev.evaluation.reproduce import rerun_session
-from teleprev.live.build import build_pipeline
+from teleprev.assembly import build_pipeline
 from teleprev.paths import data_dir
 from teleprev.pipeline.effectors import Effector, LeapEffector
 from teleprev.rig import load_rig

@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from teleprev.human.smplx import HAND_POSE_NAMES, TWIST_NOISE, hand_pose_from_angles, hand_pose_from_values, hand_values
-from teleprev.live.build import build_pipeline
+from teleprev.assembly import build_pipeline
 from teleprev.messages import JointSample
 from teleprev.kernels import glove as hand_kernels
 from teleprev.pipeline.step import MAX_ABDUCTION, MAX_FLEXION, MAX_JOINT_ROTATION, MIN_FLEXION
@@ -20,7 +20,7 @@ SIM_RIGS = {"leap_hand": "sim.toml", "parallel_gripper": "sim_gripper.toml", "va
 @pytest.fixture(scope="module")
 def pipelines():
     """{effector: (numpy pipeline, compiled pipeline)} for each end effector's sim rig."""
-    return {name: (build_pipeline(load_rig(RIGS / rig), compiled=False), build_pipeline(load_rig(RIGS / rig), compiled=True))
+    return {name: (build_pipeline(load_rig(RIGS / rig), session_format=2), build_pipeline(load_rig(RIGS / rig)))
             for name, rig in SIM_RIGS.items()}
 
 

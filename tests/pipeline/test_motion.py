@@ -10,7 +10,7 @@ import pytest
 
 from tests.helpers.pipeline_inputs import inputs
 from teleprev.errors import ConfigError
-from teleprev.live.build import build_pipeline
+from teleprev.assembly import build_pipeline
 from teleprev.pipeline.config import PipelineConfig
 from teleprev.pipeline.step import PipelineState
 from teleprev.rig import Rig, RigSection, load_rig_text

@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 
 from teleprev.human.smplx import HAND_POSE_NAMES, JOINT_FRAMES, hand_pose_from_angles
-from teleprev.live.build import build_pipeline
+from teleprev.assembly import build_pipeline
 from teleprev.messages import JointSample, Logged
 from teleprev.pipeline.driver import InputTopics, PipelineDriver
 from teleprev.rig import load_rig
@@ -15,11 +15,11 @@ from teleprev.transforms import axis_angle_to_matrix, matrix_to_axis_angle
 from tests.helpers.pipeline_inputs import ARM_HOME, RATE_HZ, wrist_sample
 
 
-@pytest.fixture(scope="module", params=[True, False], ids=["compiled", "numpy"])
+@pytest.fixture(scope="module", params=[3, 2], ids=["compiled", "numpy"])
 def pipeline(request):
     # the default rig: LEAP Hand, shipped CPN/CCN, motion limits; the compiled hot path (format 3) and the
     # numpy arithmetic that formats 1 and 2 re-run with
-    return build_pipeline(load_rig(), compiled=request.param)
+    return build_pipeline(load_rig(), session_format=request.param)
 
 
 def _twisted(pose: np.ndarray, twist: float) -> np.ndarray:

@@ -1,6 +1,6 @@
 """The pure pipeline step: preview sends nothing, execute ramps and follows within limits, bad input holds.
 
-These run the speed-capped pipeline that sessions of format 1 were recorded with (motion=False);
+These run the speed-capped pipeline that sessions of format 1 were recorded with (session_format=1);
 tests/pipeline/test_motion.py covers the acceleration and jerk limits of newer sessions."""
 
 import dataclasses
@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 
 from tests.helpers.pipeline_inputs import inputs
-from teleprev.live.build import build_pipeline
+from teleprev.assembly import build_pipeline
 from teleprev.pipeline.config import PipelineConfig
 from teleprev.pipeline.step import PipelineState
 from teleprev.rig import Rig, RigSection
@@ -21,7 +21,7 @@ def _rig(end_effector: str, robot: str, **pipeline) -> Rig:
 
 @pytest.fixture(scope="module")
 def gripper_pipeline():
-    return build_pipeline(_rig("parallel_gripper", "xarm6_parallel_gripper"), motion=False)
+    return build_pipeline(_rig("parallel_gripper", "xarm6_parallel_gripper"), session_format=1)
 
 
 def _run(p, steps, engage_at=None, state=None, make=None):
@@ -121,7 +121,7 @@ def test_the_step_is_deterministic(gripper_pipeline):
 
 
 def test_vacuum_switches_with_hysteresis_in_the_pipeline():
-    p = build_pipeline(_rig("vacuum", "xarm6_vacuum"), motion=False)
+    p = build_pipeline(_rig("vacuum", "xarm6_vacuum"), session_format=1)
     flex = [0.0, 0.5, 1.0, 0.8, 0.7, 0.5, 0.8, 1.0]
     state, on = PipelineState(), []
     for k, f in enumerate(flex):

@@ -4,6 +4,7 @@ through a collision between two free end points is caught, and the clearance mar
 import numpy as np
 import pytest
 
+from teleprev.pipeline.numpy_arithmetic import NumpySweptCheck
 from teleprev.pipeline.swept import SweptCheck
 from teleprev.robot.collision import SelfCollisionChecker
 from teleprev.robot.model import load_robot
@@ -88,12 +89,12 @@ def test_the_clearance_is_distance_between_links(swept):
     assert checked
 
 
-# ---- the compiled check (SweptCheck(compiled=True), teleprev/kernels/swept.py) gives the numpy check's answers
+# ---- the compiled check (SweptCheck, teleprev/kernels/swept.py) gives the numpy check's answers (NumpySweptCheck)
 @pytest.fixture(scope="module")
 def pair():
     hand = load_robot("leap_hand_right")
     plain = SelfCollisionChecker(hand)
-    return SweptCheck(hand, plain, 0.003), SweptCheck(hand, plain, 0.003, compiled=True)
+    return NumpySweptCheck(hand, plain, 0.003), SweptCheck(hand, plain, 0.003)
 
 
 def _agree(numpy_swept, compiled_swept, segments, monkeypatch):
@@ -144,7 +145,7 @@ def test_compiled_check_asks_fcl_within_the_margin(pair, monkeypatch):
 
     numpy_swept, compiled_swept = pair
     hand = numpy_swept.model
-    unsure = SweptCheck(hand, numpy_swept.checker, 0.003, compiled=True)
+    unsure = SweptCheck(hand, numpy_swept.checker, 0.003)
     args = list(unsure._kernel_args)
     args[-2] = -1.0  # the tight test's margin: no contact is ever certain
     unsure._kernel_args = tuple(args)

@@ -1,4 +1,4 @@
-"""The compiled arm IK (ArmIK(compiled=True), ik_kernels.ik_solve) against the numpy solver it replaces.
+"""The compiled arm IK (ArmIK, ik_kernels.ik_solve) against the numpy solver formats 1 and 2 ran (NumpyArmIK).
 
 Same algorithm, so the same answers to rounding: the 6x6 system is solved by Cholesky instead of numpy's
 LU, so the last bits differ, but convergence, iteration counts and joint values agree, every result is
@@ -11,6 +11,7 @@ import sys
 import numpy as np
 import pytest
 
+from teleprev.pipeline.numpy_arithmetic import NumpyArmIK, NumpyArmRetargeter
 from teleprev.retarget.arm import ArmRetargeter
 from teleprev.robot.ik import ArmIK
 from teleprev.robot.model import load_robot
@@ -19,7 +20,7 @@ from teleprev.transforms import axis_angle_to_matrix, rotation_error
 
 @pytest.fixture(scope="module")
 def iks(xarm6):
-    return ArmIK(xarm6, "link_eef"), ArmIK(xarm6, "link_eef", compiled=True)
+    return NumpyArmIK(xarm6, "link_eef"), ArmIK(xarm6, "link_eef")
 
 
 def _bits(result) -> tuple:
@@ -119,7 +120,7 @@ def test_same_inputs_give_the_same_bits(xarm6, iks, rng):
         cases.append((compiled_ik.pose(q_true), start))
     first = [_bits(compiled_ik.solve(t, s)) for t, s in cases]
     again = [_bits(compiled_ik.solve(t, s)) for t, s in cases]
-    other = ArmIK(xarm6, "link_eef", compiled=True)
+    other = ArmIK(xarm6, "link_eef")
     assert first == again == [_bits(other.solve(t, s)) for t, s in cases]
 
 
@@ -130,7 +131,7 @@ def test_same_bits_in_another_process(xarm6, iks):
         "from teleprev.robot.ik import ArmIK\n"
         "from teleprev.robot.model import load_robot\n"
         "arm = load_robot('xarm6')\n"
-        "ik = ArmIK(arm, 'link_eef', compiled=True)\n"
+        "ik = ArmIK(arm, 'link_eef')\n"
         "qs = np.random.default_rng(7).uniform(arm.lower, arm.upper, (20, 2, 6))\n"
         "print(b''.join(ik.solve(ik.pose(a), b).q.tobytes() for a, b in qs).hex())\n"
     )
@@ -144,8 +145,8 @@ def test_tcp_offset_and_a_prismatic_joint_match_numpy(rng):
     robot = load_robot("xarm6_parallel_gripper")
     tcp = np.eye(4)
     tcp[:3, 3] = [0.01, -0.02, 0.1]
-    numpy_ik = ArmIK(robot, "gripper_driver", tcp=tcp)
-    compiled_ik = ArmIK(robot, "gripper_driver", tcp=tcp, compiled=True)
+    numpy_ik = NumpyArmIK(robot, "gripper_driver", tcp=tcp)
+    compiled_ik = ArmIK(robot, "gripper_driver", tcp=tcp)
     assert not numpy_ik._revolute.all()
     chain = numpy_ik.chain
     agree = 0
@@ -178,8 +179,8 @@ def test_rotation_error_kernel_matches_numpy_near_zero_and_pi(rng):
 
 # ---- the wrist-to-arm retargeter on the compiled IK ------------------------------------------------
 def _retargeters(xarm6, **kwargs):
-    numpy_arm = ArmRetargeter(ArmIK(xarm6, "link_eef"), **kwargs)
-    return numpy_arm, ArmRetargeter(ArmIK(xarm6, "link_eef", compiled=True), **kwargs)
+    numpy_arm = NumpyArmRetargeter(NumpyArmIK(xarm6, "link_eef"), **kwargs)
+    return numpy_arm, ArmRetargeter(ArmIK(xarm6, "link_eef"), **kwargs)
 
 
 def _wrist(rng, spread):
