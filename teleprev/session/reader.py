@@ -17,9 +17,12 @@ from typing import Iterable, Iterator
 import numpy as np
 
 from teleprev.errors import SessionError
-from teleprev.messages import Event, Logged
+from teleprev.messages import Logged
 from teleprev.session import records as mr
 from teleprev.session.codec import JointStatesDecoder, decoder_for
+from teleprev.session.episodes import Episode, episodes_from
+from teleprev.session.joint_table import JointTable
+from teleprev.session.scan_index import index_by_scan
 from teleprev.topics import EPISODE
 
 _END = 1 << 64
@@ -37,23 +40,6 @@ class TopicInfo:
     message_count: int
     first_ns: int | None  # log time of the first and last message (None without messages)
     last_ns: int | None
-
-
-@dataclass(frozen=True, slots=True)
-class Episode:
-    """An episode as its /events/episode messages describe it; times are the events' stamp_ns.
-    `stop_ns` is None when the session ended (or was cut short) before the episode was stopped."""
-
-    index: int
-    task: str
-    start_ns: int
-    stop_ns: int | None
-    discarded: bool
-    outcome: str | None
-
-    @property
-    def duration_s(self) -> float | None:
-        return None if self.stop_ns is None else (self.stop_ns - self.start_ns) / 1e9
 
 
 class SessionReader:
@@ -80,7 +66,7 @@ class SessionReader:
                 raise SessionError(f"the file is cut short or damaged ({exc}); run `teleprev recover {where}` "
                                    "to rewrite what it holds into a valid session", where) from None
             if summary is None or (not summary.chunks and summary.statistics and summary.statistics.message_count):
-                summary = self._index_by_scan()  # written without a summary, or without chunk indexes
+                summary = index_by_scan(self._f, self.file_bytes, self.path)  # written without a summary, or without chunk indexes
             self._mm = mmap.mmap(self._f.fileno(), 0, access=mmap.ACCESS_READ)  # chunks are read without copies
         except BaseException:
             self._f.close()
@@ -505,82 +491,7 @@ class SessionReader:
         """Episodes from /events/episode: start, stop, discard and outcome events by episode index."""
         if EPISODE not in self._by_topic:
             return []
-        found: dict[int, dict] = {}
-        for msg in self.messages([EPISODE]):
-            ev = msg.payload
-            if not isinstance(ev, Event):
-                raise SessionError(f"{EPISODE} holds {type(ev).__name__} messages, expected episode events",
-                                   str(self.path))
-            kind, index = ev.data.get("event"), ev.data.get("episode")
-            where = f"{EPISODE} at log time {msg.log_time_ns}"
-            if not isinstance(index, int):
-                raise SessionError(f"{where}: episode index {index!r} is not an integer", str(self.path))
-            ep = found.get(index)
-            if kind == "start":
-                if ep is not None:
-                    raise SessionError(f"{where}: episode {index} started twice", str(self.path))
-                found[index] = {"index": index, "task": str(ev.data.get("task") or ""), "start_ns": ev.stamp_ns,
-                                "stop_ns": None, "discarded": False, "outcome": ev.data.get("outcome")}
-                continue
-            if ep is None:
-                raise SessionError(f"{where}: {kind!r} for episode {index}, which never started", str(self.path))
-            if kind == "stop":
-                ep["stop_ns"] = ev.stamp_ns
-            elif kind == "discard":
-                ep["discarded"] = True
-                if ep["stop_ns"] is None:
-                    ep["stop_ns"] = ev.stamp_ns
-            elif kind == "outcome":
-                ep["outcome"] = ev.data.get("outcome")
-            else:
-                raise SessionError(f"{where}: unknown episode event {kind!r}", str(self.path))
-            if ev.data.get("task") and not ep["task"]:
-                ep["task"] = str(ev.data["task"])
-        return [Episode(**found[i]) for i in sorted(found)]
-
-    # --- files without a summary section ---
-
-    def _index_by_scan(self) -> mr.SummarySection:
-        """Index a complete MCAP written without a summary by reading it through once."""
-        out = mr.SummarySection()
-        counts: dict[int, int] = {}
-        scan = mr.Scan(self._f, self.file_bytes)
-        for offset, op, body in scan.records():
-            try:
-                if op == mr.CHUNK:
-                    chunk = mr.parse_chunk(body, 0, len(body))
-                    buf = mr.decompress(chunk)
-                    for iop, b, e in mr.iter_records(buf):
-                        if iop == mr.SCHEMA:
-                            s = mr.parse_schema(buf, b, e)
-                            out.schemas[s.id] = s
-                        elif iop == mr.CHANNEL:
-                            c = mr.parse_channel(buf, b, e)
-                            out.channels[c.id] = c
-                        elif iop == mr.MESSAGE:
-                            cid = mr._U16.unpack_from(buf, b)[0]
-                            counts[cid] = counts.get(cid, 0) + 1
-                    out.chunks.append(mr.ChunkIndex(chunk.start_ns, chunk.end_ns, offset, 9 + len(body), {}, 0,
-                                                    chunk.compression))
-                elif op == mr.SCHEMA:
-                    s = mr.parse_schema(body, 0, len(body))
-                    out.schemas[s.id] = s
-                elif op == mr.CHANNEL:
-                    c = mr.parse_channel(body, 0, len(body))
-                    out.channels[c.id] = c
-                elif op == mr.MESSAGE:
-                    raise SessionError("messages outside chunks are not supported; run `teleprev recover` on it "
-                                       "to rewrite it chunked", str(self.path))
-                elif op == mr.METADATA:
-                    out.metadata.append((mr.parse_metadata(body, 0, len(body))[0], offset, 9 + len(body)))
-            except mr.McapFormatError as exc:
-                raise SessionError(f"record at byte {offset} is damaged: {exc}", str(self.path)) from None
-        if scan.stop != "footer":
-            raise SessionError(f"the file is cut short ({scan.stop}); run `teleprev recover {self.path}`",
-                               str(self.path))
-        out.statistics = mr.Statistics(sum(counts.values()), len(out.schemas), len(out.channels), 0,
-                                       len(out.metadata), len(out.chunks), 0, 0, counts)
-        return out
+        return episodes_from(self.messages([EPISODE]), self.path)
 
     # --- lifecycle ---
 
@@ -608,33 +519,6 @@ class SessionReader:
 
     def __exit__(self, *exc) -> None:
         self.close()
-
-
-class JointTable:
-    """A foxglove.JointStates topic read by SessionReader.messages(tables=...): each message's stamp_ns
-    and positions, in the order messages() would have yielded the messages."""
-
-    __slots__ = ("stamp_ns", "positions")
-
-    def __init__(self) -> None:
-        self.stamp_ns: list[int] = []
-        self.positions: list[np.ndarray] = []
-
-    def __len__(self) -> int:
-        return len(self.stamp_ns)
-
-    def append(self, stamp_ns: int, positions: np.ndarray) -> None:
-        self.stamp_ns.append(stamp_ns)
-        self.positions.append(positions)
-
-    def extend_in_order(self, stamps: list[int], positions: list[np.ndarray], indices: list[int]) -> None:
-        """Append messages decoded in file order, taking them in `indices` order."""
-        if indices == list(range(len(stamps))):
-            self.stamp_ns.extend(stamps)
-            self.positions.extend(positions)
-        else:
-            self.stamp_ns.extend([stamps[k] for k in indices])
-            self.positions.extend([positions[k] for k in indices])
 
 
 class _Order:
