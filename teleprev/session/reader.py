@@ -7,7 +7,6 @@ SessionError pointing at `teleprev recover`.
 
 from __future__ import annotations
 
-import mmap
 import os
 from dataclasses import dataclass
 from functools import cached_property
@@ -19,7 +18,9 @@ import numpy as np
 from teleprev.errors import SessionError
 from teleprev.messages import Logged
 from teleprev.session import records as mr
+from teleprev.session.chunk_file import ChunkFile
 from teleprev.session.codec import JointStatesDecoder, decoder_for
+from teleprev.session.damage import damaged_chunks, data_section_intact
 from teleprev.session.episodes import Episode, episodes_from
 from teleprev.session.joint_table import JointTable
 from teleprev.session.scan_index import index_by_scan
@@ -56,23 +57,25 @@ class SessionReader:
         self.file_bytes = self.path.stat().st_size
         if self.file_bytes == 0:
             raise SessionError("empty file (the recording never started writing)", where)
-        self._f = open(self.path, "rb")
+        f = open(self.path, "rb")
         try:
-            if self._f.read(len(mr.MAGIC)) != mr.MAGIC:
+            if f.read(len(mr.MAGIC)) != mr.MAGIC:
                 raise SessionError("not an MCAP file (no MCAP magic at the start)", where)
             try:
-                summary = mr.read_summary(self._f, self.file_bytes)
+                summary = mr.read_summary(f, self.file_bytes)
             except mr.McapFormatError as exc:
                 raise SessionError(f"the file is cut short or damaged ({exc}); run `teleprev recover {where}` "
                                    "to rewrite what it holds into a valid session", where) from None
             if summary is None or (not summary.chunks and summary.statistics and summary.statistics.message_count):
-                summary = index_by_scan(self._f, self.file_bytes, self.path)  # written without a summary, or without chunk indexes
-            self._mm = mmap.mmap(self._f.fileno(), 0, access=mmap.ACCESS_READ)  # chunks are read without copies
+                summary = index_by_scan(f, self.file_bytes, self.path)  # written without a summary, or without chunk indexes
+            chunks = sorted(summary.chunks, key=lambda c: (c.start_ns, c.offset))
+            self._file = ChunkFile(f, self.path, min((c.start_ns for c in chunks), default=None),
+                                   verify_crc=verify_crc)
         except BaseException:
-            self._f.close()
+            f.close()
             raise
         self._summary = summary
-        self._chunks = sorted(summary.chunks, key=lambda c: (c.start_ns, c.offset))
+        self._chunks = chunks
         self._by_topic: dict[str, list[int]] = {}
         for ch in summary.channels.values():
             self._by_topic.setdefault(ch.topic, []).append(ch.id)
@@ -85,7 +88,7 @@ class SessionReader:
         out: dict[str, dict[str, str]] = {}
         for name, offset, _length in self._summary.metadata:
             try:
-                body = mr.read_record(self._f, offset, mr.METADATA)
+                body = mr.read_record(self._file.f, offset, mr.METADATA)
                 rec_name, data = mr.parse_metadata(body, 0, len(body))
             except mr.McapFormatError as exc:
                 raise SessionError(f"metadata record {name!r} is damaged: {exc}", str(self.path)) from None
@@ -139,35 +142,17 @@ class SessionReader:
     def _index_times(self) -> dict[int, np.ndarray]:
         per_channel: dict[int, list[np.ndarray]] = {}
         for chunk in sorted(self._chunks, key=lambda c: c.offset):
-            index = self._message_index(chunk)
+            index = self._file.message_index(chunk)
             if index is not None:
                 for ch, entries in index.items():
                     per_channel.setdefault(ch, []).append(entries[:, 0].astype(np.int64))
             else:  # no message index: read the chunk itself
                 times: dict[int, list[int]] = {}
-                for ch, t in self._chunk_messages(chunk):
+                for ch, t in self._file.message_times(chunk):
                     times.setdefault(ch, []).append(t)
                 for ch, ts in times.items():
                     per_channel.setdefault(ch, []).append(np.array(ts, dtype=np.int64))
         return {ch: np.concatenate(v) for ch, v in per_channel.items()}
-
-    def _message_index(self, chunk: mr.ChunkIndex) -> dict[int, np.ndarray] | None:
-        """The chunk's message indexes: channel -> (n, 2) uint64 [log_time, record offset in the
-        chunk], or None when the file has none for this chunk."""
-        if not (chunk.message_index_length and chunk.message_index_offsets):
-            return None
-        start = min(chunk.message_index_offsets.values())
-        out = {}
-        try:
-            block = mr.read_exact(self._f, start, chunk.message_index_length)
-            for op, b, e in mr.iter_records(block):
-                if op == mr.MESSAGE_INDEX:
-                    ch, entries = mr.parse_message_index(block[b:e])
-                    out[ch] = entries
-        except mr.McapFormatError as exc:
-            raise SessionError(f"message index of the chunk at byte {chunk.offset} is damaged: {exc}",
-                               str(self.path)) from None
-        return out
 
     # --- messages ---
 
@@ -205,7 +190,7 @@ class SessionReader:
                     yield from self._decode_batch(batch, reading)
                 yield from self._decode_group(group, reading)
             batch = []
-            self.release_pages()
+            self._file.release_pages()
         if batch:
             yield from self._decode_batch(batch, reading)
 
@@ -311,7 +296,7 @@ class SessionReader:
 
     def _locate(self, chunk: mr.ChunkIndex, reading: _Reading) -> _Located:
         """The chunk's messages on wanted channels in [lo, hi), as bytes, and their order."""
-        buf = self._chunk_records(chunk)
+        buf = self._file.records(chunk)
         located = self._locate_indexed(chunk, buf, reading.wanted, reading.lo, reading.hi)
         if located is None:
             located = self._locate_sequential(chunk, buf, reading.wanted, reading.lo, reading.hi)
@@ -338,7 +323,7 @@ class SessionReader:
         """Per channel, the wanted messages' bytes, and the (channel, index, log time) order, found
         through the message index with numpy; None when the chunk has no usable index (then the chunk
         is parsed record by record). Every index entry is checked against the record it points at."""
-        index = self._message_index(chunk)
+        index = self._file.message_index(chunk)
         if index is None:
             return None
         sel = [(ch, e) for ch, e in index.items() if ch in wanted]
@@ -381,7 +366,7 @@ class SessionReader:
         per_channel: dict[int, list[bytes]] = {}
         order: list[tuple[int, int, int]] = []  # (channel, index in that channel's list, log time)
         head = mr.MESSAGE_HEADER.unpack_from
-        for op, b, e in self._records(chunk, buf):
+        for op, b, e in self._file.iter_records(chunk, buf):
             if op == mr.MESSAGE:
                 ch, _seq, t, _pub = head(buf, b)
                 if ch in wanted and lo <= t < hi:
@@ -392,16 +377,6 @@ class SessionReader:
                     datas.append(buf[b + 22:e])
         order.sort(key=_third)  # stable: file order for equal times
         return per_channel, _Order.of(order)
-
-    def _records(self, chunk, buf: bytes):
-        try:
-            for op, b, e in mr.iter_records(buf):
-                if op == mr.MESSAGE and e - b < 22:
-                    raise mr.McapFormatError("message record too short", b - 9)
-                yield op, b, e
-        except mr.McapFormatError as exc:
-            raise SessionError(f"chunk at byte {chunk.offset} holds a malformed record: {exc}",
-                               str(self.path)) from None
 
     def _decode_all(self, decoder, batch, datas: list[bytes], topic: str, channel: int, order: _Order):
         """`batch(datas)` (or `decoder` on each message when batch is None); when that fails, the error
@@ -418,72 +393,21 @@ class SessionReader:
                                    str(self.path)) from None
         raise SessionError(f"messages on {topic} do not decode", str(self.path))
 
-    def _chunk_records(self, chunk: mr.ChunkIndex) -> bytes:
-        try:
-            return self._read_chunk(chunk)
-        except mr.McapFormatError as exc:
-            raise SessionError(f"the chunk {self.describe_chunk(chunk)} is damaged ({exc}); "
-                               f"`teleprev recover {self.path}` keeps everything else", str(self.path)) from None
-
-    def _read_chunk(self, chunk: mr.ChunkIndex) -> bytes:
-        body = parsed = None
-        try:
-            body = mr.record_at(self._mm, chunk.offset, mr.CHUNK)
-            parsed = mr.parse_chunk(body, 0, len(body))
-            return mr.decompress(parsed, check_crc=self.verify_crc)
-        finally:  # views into the mapping must go before close() can unmap it
-            if parsed is not None and isinstance(parsed.data, memoryview):
-                parsed.data.release()
-            if body is not None:
-                body.release()
+    # --- damage ---
 
     def describe_chunk(self, chunk: mr.ChunkIndex) -> str:
         """Where a chunk is, in the words a user needs: its log times from the session's start."""
-        t0 = self.start_ns or 0
-        return (f"at byte {chunk.offset}, log time {(chunk.start_ns - t0) / 1e9:.3f}-"
-                f"{(chunk.end_ns - t0) / 1e9:.3f} s into the session")
+        return self._file.describe(chunk)
 
     def data_section_intact(self) -> bool | None:
         """Whether the bytes before the summary still match the CRC the writer stored in the data-end
         record (None when the file has none): reads the whole data section once."""
-        import struct
-        import zlib
-
-        try:
-            _, summary_start, _ = mr.read_footer(self._f, self.file_bytes)
-            end_at = (summary_start or self.file_bytes - mr.FOOTER_RECORD_SIZE - len(mr.MAGIC)) - 13  # DataEnd: 1+8+4
-            op, length, crc = struct.unpack("<BQI", mr.read_exact(self._f, end_at, 13))
-        except (mr.McapFormatError, struct.error):
-            return None
-        if op != mr.DATA_END or length != 4 or not crc:
-            return None
-        view = memoryview(self._mm)[:end_at]
-        try:
-            return zlib.crc32(view) == crc
-        finally:
-            view.release()
-            self.release_pages()
+        return data_section_intact(self._file, self.file_bytes)
 
     def damaged_chunks(self) -> list[tuple[mr.ChunkIndex, str]]:
         """Every chunk that does not read back whole (CRC, compression, records), with why; reads the
         whole file once."""
-        out = []
-        for chunk in sorted(self._chunks, key=lambda c: c.offset):
-            try:
-                buf = self._read_chunk(chunk)
-                for op, b, e in mr.iter_records(buf):
-                    if op == mr.MESSAGE and e - b < 22:
-                        raise mr.McapFormatError("message record too short", b - 9)
-            except mr.McapFormatError as exc:
-                out.append((chunk, str(exc)))
-            self.release_pages()
-        return out
-
-    def _chunk_messages(self, chunk: mr.ChunkIndex) -> list[tuple[int, int]]:
-        """(channel, log_time) of every message in the chunk, in file order."""
-        buf = self._chunk_records(chunk)
-        head = mr.MESSAGE_HEADER.unpack_from
-        return [head(buf, b)[0:3:2] for op, b, e in self._records(chunk, buf) if op == mr.MESSAGE]
+        return damaged_chunks(self._file, self._chunks)
 
     # --- episodes ---
 
@@ -496,23 +420,11 @@ class SessionReader:
     # --- lifecycle ---
 
     def release_pages(self) -> None:
-        """Drop the file's pages from this process's resident set (they stay in the kernel's page cache).
-
-        The whole file is memory-mapped, so every page read would otherwise stay resident until the
-        reader closes and the process would grow with the session's length; messages() calls this every
-        few chunks, so long sessions read in flat memory."""
-        if hasattr(mmap, "MADV_DONTNEED"):
-            try:
-                self._mm.madvise(mmap.MADV_DONTNEED)
-            except (OSError, ValueError):  # closed, or refused: only memory accounting is at stake
-                pass
+        """Drop the file's pages from this process's resident set (see ChunkFile.release_pages)."""
+        self._file.release_pages()
 
     def close(self) -> None:
-        try:
-            self._mm.close()
-        except BufferError:  # a view still held by an error on its way up: unmapped when that goes
-            pass
-        self._f.close()
+        self._file.close()
 
     def __enter__(self) -> SessionReader:
         return self
