@@ -125,13 +125,19 @@ def _failures(path: Path) -> int:
 
 def _non_finite(path: Path) -> int:
     bad = 0
-    for msg in SessionReader(path).messages():
-        p = msg.payload
-        if isinstance(p, JointSample):
-            bad += int((~np.isfinite(np.asarray(p.positions, float))).sum())
-        elif isinstance(p, PoseSample):
-            bad += int((~np.isfinite(np.concatenate([p.position, p.orientation]))).sum())
+    with SessionReader(path) as reader:
+        for msg in reader.messages():
+            p = msg.payload
+            if isinstance(p, JointSample):
+                bad += int((~np.isfinite(np.asarray(p.positions, float))).sum())
+            elif isinstance(p, PoseSample):
+                bad += int((~np.isfinite(np.concatenate([p.position, p.orientation]))).sum())
     return bad
+
+
+def _glove_samples(path: Path) -> int:
+    with SessionReader(path) as reader:
+        return reader.topics[GLOVE].message_count
 
 
 def fuzz(folder: Path, n: int, rate: float) -> dict:
@@ -158,7 +164,7 @@ def fuzz(folder: Path, n: int, rate: float) -> dict:
     deaths = dead + _failures(path)
     counts = summarize(path).device_counts["glove"]
     return {"sent": sent, "read": read, "good": good, "seconds": seconds, "deaths": deaths, "non_finite": _non_finite(path),
-            "glove_samples": SessionReader(path).topics[GLOVE].message_count,
+            "glove_samples": _glove_samples(path),
             "skipped": sum(v for k, v in counts.items() if k not in ("received", "lost_input", "loop_dropped",
                                                                     "sink_errors", "failures") and not k.startswith("lost_")),
             "lost": device_lost(counts)}
@@ -193,7 +199,7 @@ def flood(folder: Path, n: int) -> dict:
     path = folder / "flood.mcap"
     s = summarize(path)
     c = s.device_counts["glove"]
-    recorded = SessionReader(path).topics[GLOVE].message_count
+    recorded = _glove_samples(path)
     recorder_dropped = next((st.dropped or 0) + (st.errors or 0) for st in s.streams if st.topic == GLOVE)
     counted = device_lost(c) + recorder_dropped
     missing = sent - recorded

@@ -86,11 +86,11 @@ def tracking_lag_ms(path: Path) -> float | None:
     from teleprev import topics
     from teleprev.session.reader import SessionReader
 
-    reader = SessionReader(path)
-    steady = {m.payload.stamp_ns for m in reader.messages([topics.STEP_REPORT])
-              if m.payload.data.get("mode") == "execute" and not ({"engaging", "arm_stopping"} & set(m.payload.data.get("flags", [])))}
-    tt, target = stream(reader, topics.ARM_TARGET)
-    tc, command = stream(reader, topics.COMMAND_ARM)
+    with SessionReader(path) as reader:
+        steady = {m.payload.stamp_ns for m in reader.messages([topics.STEP_REPORT])
+                  if m.payload.data.get("mode") == "execute" and not ({"engaging", "arm_stopping"} & set(m.payload.data.get("flags", [])))}
+        tt, target = stream(reader, topics.ARM_TARGET)
+        tc, command = stream(reader, topics.COMMAND_ARM)
     keep = np.array([t in steady for t in tc.tolist()], dtype=bool)
     if keep.sum() < 50 or len(tt) < 50:
         return None
@@ -113,9 +113,9 @@ def stop_distances(path: Path) -> list[float]:
     from teleprev import topics
     from teleprev.session.reader import SessionReader
 
-    reader = SessionReader(path)
-    flags = {m.payload.stamp_ns: set(m.payload.data.get("flags", [])) for m in reader.messages([topics.STEP_REPORT])}
-    tc, command = stream(reader, topics.COMMAND_ARM)
+    with SessionReader(path) as reader:
+        flags = {m.payload.stamp_ns: set(m.payload.data.get("flags", [])) for m in reader.messages([topics.STEP_REPORT])}
+        tc, command = stream(reader, topics.COMMAND_ARM)
     stopping = np.array([bool({"stopping", "arm_stopping", "idle_stop"} & flags.get(t, set())) for t in tc.tolist()])
     out = []
     k = 0

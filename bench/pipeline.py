@@ -102,7 +102,8 @@ def preview_rate(seconds: float) -> dict:
             stats = run_script(rec, seconds, 1, 1.0, console, "side", fps=60.0)
         finally:
             rec.stop()
-        steps = SessionReader(out).topics["/pipeline/report"].message_count
+        with SessionReader(out) as reader:
+            steps = reader.topics["/pipeline/report"].message_count
         step_ns = rec.loop.stats.step_ns
     return {
         "preview_fps": stats.fps(),

@@ -293,14 +293,15 @@ def sync_error(tmp: Path, seconds: float) -> dict:
     truth = rec.context.shared["sim.truth"]
     worst: dict[str, float] = {}
     missing = 0
-    for msg in SessionReader(path).messages():
-        if parse_device_topic(msg.topic) is None:
-            continue
-        true_ns = truth.true_ns(msg.topic, msg.payload.stamp_ns)
-        if true_ns is None:
-            missing += 1
-            continue
-        worst[msg.topic] = max(worst.get(msg.topic, 0.0), abs(msg.payload.stamp_ns - true_ns) / 1e6)
+    with SessionReader(path) as reader:
+        for msg in reader.messages():
+            if parse_device_topic(msg.topic) is None:
+                continue
+            true_ns = truth.true_ns(msg.topic, msg.payload.stamp_ns)
+            if true_ns is None:
+                missing += 1
+                continue
+            worst[msg.topic] = max(worst.get(msg.topic, 0.0), abs(msg.payload.stamp_ns - true_ns) / 1e6)
     return {"sync_err_ms_max": max(worst.values()), "sync_err_ms_by_stream": worst, "sync_unmatched": missing}
 
 

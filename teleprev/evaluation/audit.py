@@ -153,21 +153,21 @@ def audit_session(path: str | Path, rig_path: str | Path | None = None) -> Audit
     from teleprev.session.reader import SessionReader
 
     path = Path(path)
-    reader = SessionReader(path)
-    limits = motion_limits(recorded_rig(path, reader.metadata, rig_path))
-    report = AuditReport(str(path))
-    for topic, side in ((topics.COMMAND_ARM, "arm"), (topics.COMMAND_HAND, "hand")):
-        t, q, names = _joint_samples(reader, topic) if topic in reader.topics else (np.zeros(0, np.int64), None, ())
-        if len(t) and names != limits[side]["names"]:
-            raise SessionError(f"{topic} commands joints {names}, the rig's robot has {limits[side]['names']}", str(path))
-        report.streams.append(audit_stream(topic, side, limits, t, q))
-    hand_limits = limits["hand"]
-    state_topics = [tp for tp in reader.topics if tp.startswith("/hand/") and tp.endswith("/state")]
-    if state_topics and hand_limits.get("checker") is not None:
-        _, q, _ = _joint_samples(reader, state_topics[0])
-        report.hand_state_samples = len(q)
-        report.hand_state_colliding = int(hand_limits["checker"].pair_matrix(q).any(axis=1).sum()) if len(q) else 0
-    return report
+    with SessionReader(path) as reader:
+        limits = motion_limits(recorded_rig(path, reader.metadata, rig_path))
+        report = AuditReport(str(path))
+        for topic, side in ((topics.COMMAND_ARM, "arm"), (topics.COMMAND_HAND, "hand")):
+            t, q, names = _joint_samples(reader, topic) if topic in reader.topics else (np.zeros(0, np.int64), None, ())
+            if len(t) and names != limits[side]["names"]:
+                raise SessionError(f"{topic} commands joints {names}, the rig's robot has {limits[side]['names']}", str(path))
+            report.streams.append(audit_stream(topic, side, limits, t, q))
+        hand_limits = limits["hand"]
+        state_topics = [tp for tp in reader.topics if tp.startswith("/hand/") and tp.endswith("/state")]
+        if state_topics and hand_limits.get("checker") is not None:
+            _, q, _ = _joint_samples(reader, state_topics[0])
+            report.hand_state_samples = len(q)
+            report.hand_state_colliding = int(hand_limits["checker"].pair_matrix(q).any(axis=1).sum()) if len(q) else 0
+        return report
 
 
 def is_dataset(path: Path) -> bool:

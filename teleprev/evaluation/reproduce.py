@@ -159,7 +159,11 @@ def _table(values: Sequence[np.ndarray | None], width: int) -> np.ndarray:
 def rerun_session(path: str | Path, models: str | Path | None = None, rig_path: str | Path | None = None) -> Rerun:
     path = Path(path)
     started = time.perf_counter()
-    reader = SessionReader(path)
+    with SessionReader(path) as reader:
+        return _rerun(reader, path, models, rig_path, started)
+
+
+def _rerun(reader: SessionReader, path: Path, models, rig_path, started: float) -> Rerun:
     meta = reader.metadata
     pipeline, rig_source = _pipeline_for(reader, path, models, rig_path)
     try:

@@ -57,7 +57,11 @@ def _stream(reader: SessionReader, topic: str, lo: int, hi: int) -> tuple[dict[i
 
 
 def load_playback(path, episode: int | None = None) -> Playback:
-    reader = SessionReader(path)
+    with SessionReader(path) as reader:
+        return _playback(reader, path, episode)
+
+
+def _playback(reader: SessionReader, path, episode: int | None) -> Playback:
     lo, hi = 0, 1 << 63
     if episode is not None:
         eps = {e.index: e for e in reader.episodes()}

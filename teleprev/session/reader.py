@@ -1,13 +1,15 @@
 """Reads a recorded session back: metadata, topics, messages decoded into teleprev payloads, episodes.
 
-Messages come in log_time order (ties in file order), a few chunks at a time (see _BATCH_CHUNKS), so
-memory stays bounded by a few chunks. A file cut short by a crash has no summary: opening it raises
-SessionError pointing at `teleprev recover`.
+SessionReader opens the file and answers from its summary (metadata, topics, times); the rest is done by
+one module each: ordered_messages (messages in log_time order, ties in file order, a few chunks at a
+time so memory stays bounded), chunk_batches (decoding consecutive chunks together), chunk_lookup (which
+chunks, and where in them, the wanted messages are), chunk_file (a chunk's records, CRC checked),
+damage (what `info` verifies), episodes, and scan_index (files written without a summary). A file cut
+short by a crash has no summary: opening it raises SessionError pointing at `teleprev recover`.
 """
 
 from __future__ import annotations
 
-import mmap
 import os
 from dataclasses import dataclass
 from functools import cached_property
@@ -17,16 +19,19 @@ from typing import Iterable, Iterator
 import numpy as np
 
 from teleprev.errors import SessionError
-from teleprev.messages import Event, Logged
+from teleprev.messages import Logged
 from teleprev.session import records as mr
+from teleprev.session.chunk_file import ChunkFile
 from teleprev.session.codec import JointStatesDecoder, decoder_for
+from teleprev.session.damage import damaged_chunks, data_section_intact
+from teleprev.session.episodes import Episode, episodes_from
+from teleprev.session.joint_table import JointTable
+from teleprev.session.message_selection import ReadRequest
+from teleprev.session.ordered_messages import ordered_messages
+from teleprev.session.scan_index import index_by_scan
 from teleprev.topics import EPISODE
 
 _END = 1 << 64
-_BATCH_CHUNKS = 8  # chunks decoded together at most (each channel's messages of them in one batch),
-_BATCH_BYTES = 8 << 20  # and their compressed bytes at most; release_pages after each batch
-_I64_END = (1 << 63) - 1  # log times beyond int64 (year 2262) are not expected
-_HEAD_BYTES = np.arange(23)  # a message record's opcode, length, channel, sequence and log time
 
 
 @dataclass(frozen=True, slots=True)
@@ -37,23 +42,6 @@ class TopicInfo:
     message_count: int
     first_ns: int | None  # log time of the first and last message (None without messages)
     last_ns: int | None
-
-
-@dataclass(frozen=True, slots=True)
-class Episode:
-    """An episode as its /events/episode messages describe it; times are the events' stamp_ns.
-    `stop_ns` is None when the session ended (or was cut short) before the episode was stopped."""
-
-    index: int
-    task: str
-    start_ns: int
-    stop_ns: int | None
-    discarded: bool
-    outcome: str | None
-
-    @property
-    def duration_s(self) -> float | None:
-        return None if self.stop_ns is None else (self.stop_ns - self.start_ns) / 1e9
 
 
 class SessionReader:
@@ -70,23 +58,25 @@ class SessionReader:
         self.file_bytes = self.path.stat().st_size
         if self.file_bytes == 0:
             raise SessionError("empty file (the recording never started writing)", where)
-        self._f = open(self.path, "rb")
+        f = open(self.path, "rb")
         try:
-            if self._f.read(len(mr.MAGIC)) != mr.MAGIC:
+            if f.read(len(mr.MAGIC)) != mr.MAGIC:
                 raise SessionError("not an MCAP file (no MCAP magic at the start)", where)
             try:
-                summary = mr.read_summary(self._f, self.file_bytes)
+                summary = mr.read_summary(f, self.file_bytes)
             except mr.McapFormatError as exc:
                 raise SessionError(f"the file is cut short or damaged ({exc}); run `teleprev recover {where}` "
                                    "to rewrite what it holds into a valid session", where) from None
             if summary is None or (not summary.chunks and summary.statistics and summary.statistics.message_count):
-                summary = self._index_by_scan()  # written without a summary, or without chunk indexes
-            self._mm = mmap.mmap(self._f.fileno(), 0, access=mmap.ACCESS_READ)  # chunks are read without copies
+                summary = index_by_scan(f, self.file_bytes, self.path)  # written without a summary, or without chunk indexes
+            chunks = sorted(summary.chunks, key=lambda c: (c.start_ns, c.offset))
+            self._file = ChunkFile(f, self.path, min((c.start_ns for c in chunks), default=None),
+                                   verify_crc=verify_crc)
         except BaseException:
-            self._f.close()
+            f.close()
             raise
         self._summary = summary
-        self._chunks = sorted(summary.chunks, key=lambda c: (c.start_ns, c.offset))
+        self._chunks = chunks
         self._by_topic: dict[str, list[int]] = {}
         for ch in summary.channels.values():
             self._by_topic.setdefault(ch.topic, []).append(ch.id)
@@ -99,7 +89,7 @@ class SessionReader:
         out: dict[str, dict[str, str]] = {}
         for name, offset, _length in self._summary.metadata:
             try:
-                body = mr.read_record(self._f, offset, mr.METADATA)
+                body = mr.read_record(self._file.f, offset, mr.METADATA)
                 rec_name, data = mr.parse_metadata(body, 0, len(body))
             except mr.McapFormatError as exc:
                 raise SessionError(f"metadata record {name!r} is damaged: {exc}", str(self.path)) from None
@@ -153,35 +143,17 @@ class SessionReader:
     def _index_times(self) -> dict[int, np.ndarray]:
         per_channel: dict[int, list[np.ndarray]] = {}
         for chunk in sorted(self._chunks, key=lambda c: c.offset):
-            index = self._message_index(chunk)
+            index = self._file.message_index(chunk)
             if index is not None:
                 for ch, entries in index.items():
                     per_channel.setdefault(ch, []).append(entries[:, 0].astype(np.int64))
             else:  # no message index: read the chunk itself
                 times: dict[int, list[int]] = {}
-                for ch, t in self._chunk_messages(chunk):
+                for ch, t in self._file.message_times(chunk):
                     times.setdefault(ch, []).append(t)
                 for ch, ts in times.items():
                     per_channel.setdefault(ch, []).append(np.array(ts, dtype=np.int64))
         return {ch: np.concatenate(v) for ch, v in per_channel.items()}
-
-    def _message_index(self, chunk: mr.ChunkIndex) -> dict[int, np.ndarray] | None:
-        """The chunk's message indexes: channel -> (n, 2) uint64 [log_time, record offset in the
-        chunk], or None when the file has none for this chunk."""
-        if not (chunk.message_index_length and chunk.message_index_offsets):
-            return None
-        start = min(chunk.message_index_offsets.values())
-        out = {}
-        try:
-            block = mr.read_exact(self._f, start, chunk.message_index_length)
-            for op, b, e in mr.iter_records(block):
-                if op == mr.MESSAGE_INDEX:
-                    ch, entries = mr.parse_message_index(block[b:e])
-                    out[ch] = entries
-        except mr.McapFormatError as exc:
-            raise SessionError(f"message index of the chunk at byte {chunk.offset} is damaged: {exc}",
-                               str(self.path)) from None
-        return out
 
     # --- messages ---
 
@@ -206,40 +178,7 @@ class SessionReader:
         lo = 0 if start_ns is None else int(start_ns)
         hi = _END if end_ns is None else int(end_ns)
         wanted = frozenset(decoders)
-        reading = _Reading(decoders, names, lo, hi, wanted, tabled)
-        batch: list[mr.ChunkIndex] = []  # consecutive chunks that overlap no other: decoded together
-        for group in self._chunk_groups(lo, hi, wanted):
-            if len(group) == 1:
-                batch.append(group[0])
-                if len(batch) < _BATCH_CHUNKS and sum(c.length for c in batch) < _BATCH_BYTES:
-                    continue
-                yield from self._decode_batch(batch, reading)
-            else:
-                if batch:
-                    yield from self._decode_batch(batch, reading)
-                yield from self._decode_group(group, reading)
-            batch = []
-            self.release_pages()
-        if batch:
-            yield from self._decode_batch(batch, reading)
-
-    def _chunk_groups(self, lo: int, hi: int, wanted) -> Iterator[list[mr.ChunkIndex]]:
-        """The chunks that may hold wanted messages in [lo, hi), in time order, as groups of chunks that
-        overlap in time (most groups are one chunk)."""
-        group: list = []
-        group_end = -1
-        for chunk in self._chunks:
-            if chunk.end_ns < lo or chunk.start_ns >= hi:
-                continue
-            if chunk.message_index_offsets and wanted.isdisjoint(chunk.message_index_offsets):
-                continue
-            if group and chunk.start_ns >= group_end:
-                yield group
-                group = []
-            group.append(chunk)
-            group_end = max(group_end, chunk.end_ns) if len(group) > 1 else chunk.end_ns
-        if group:
-            yield group
+        yield from ordered_messages(self._file, self._chunks, ReadRequest(decoders, names, lo, hi, wanted, tabled))
 
     def _table_channels(self, tables: dict[str, JointTable], decoders) -> dict[int, JointTable]:
         """channel id -> the table its messages go to."""
@@ -281,223 +220,21 @@ class SessionReader:
             names[i] = ch.topic
         return decoders, names
 
-    def _decode_group(self, group, reading: _Reading) -> Iterator[Logged]:
-        if len(group) == 1:
-            yield from self._decode_chunk(group[0], reading)
-            return
-        # Chunks overlapping in time: merge them (a stable sort keeps file order for equal times). Tabled
-        # topics are decoded as messages here too, then appended to their tables in the merged order.
-        merged = [m for c in sorted(group, key=lambda c: c.offset)
-                  for m in self._decode_chunk(c, reading.untabled())]
-        merged.sort(key=_logged_time)
-        by_topic = {self._summary.channels[ch].topic: table for ch, table in reading.tabled.items()}
-        for m in merged:
-            table = by_topic.get(m.topic)
-            if table is None:
-                yield m
-            else:
-                table.append(m.payload.stamp_ns, m.payload.positions)
-
-    def _decode_batch(self, chunks: list[mr.ChunkIndex], reading: _Reading) -> Iterator[Logged]:
-        """Consecutive chunks that overlap no other, each channel's messages of all of them decoded in one
-        batch; what decoding them chunk by chunk gives, errors included: a chunk that does not read is
-        raised after the messages of the chunks before it, and a message that does not decode sends the
-        batch back to chunk by chunk, which fails where it always did."""
-        located, error = [], None
-        for chunk in chunks:
-            try:
-                located.append(self._locate(chunk, reading))
-            except SessionError as exc:
-                error = exc
-                break
-        try:
-            messages = self._decode_located(_Located.join(located), reading)
-        except SessionError:
-            for one in located:
-                yield from self._decode_located(one, reading)
-        else:
-            yield from messages
-        if error is not None:
-            raise error
-
-    def _decode_chunk(self, chunk: mr.ChunkIndex, reading: _Reading) -> list[Logged]:
-        return self._decode_located(self._locate(chunk, reading), reading)
-
-    def _locate(self, chunk: mr.ChunkIndex, reading: _Reading) -> _Located:
-        """The chunk's messages on wanted channels in [lo, hi), as bytes, and their order."""
-        buf = self._chunk_records(chunk)
-        located = self._locate_indexed(chunk, buf, reading.wanted, reading.lo, reading.hi)
-        if located is None:
-            located = self._locate_sequential(chunk, buf, reading.wanted, reading.lo, reading.hi)
-        return _Located(*located)
-
-    def _decode_located(self, located: _Located, reading: _Reading) -> list[Logged]:
-        """The located messages decoded, in log time order (file order for equal times); those of tabled
-        channels go to their tables instead, once every channel has decoded. Each channel's messages
-        are decoded together (see JointStatesDecoder.batch)."""
-        names = reading.names
-        order = located.order
-        decoded, tabled = {}, []
-        for ch, datas in located.per_channel.items():
-            decoder, table = reading.decoders[ch], reading.tabled.get(ch)
-            if table is None:
-                decoded[ch] = self._decode_all(decoder, getattr(decoder, "batch", None), datas, names[ch], ch, order)
-            else:
-                tabled.append((table, ch, self._decode_all(decoder, decoder.columns, datas, names[ch], ch, order)))
-        for table, ch, (stamps, positions) in tabled:
-            table.extend_in_order(stamps, positions, order.indices(ch))
-        return [Logged(names[c], t, decoded[c][k]) for c, k, t in order.entries(exclude=reading.tabled)]
-
-    def _locate_indexed(self, chunk, buf: bytes, wanted, lo: int, hi: int):
-        """Per channel, the wanted messages' bytes, and the (channel, index, log time) order, found
-        through the message index with numpy; None when the chunk has no usable index (then the chunk
-        is parsed record by record). Every index entry is checked against the record it points at."""
-        index = self._message_index(chunk)
-        if index is None:
-            return None
-        sel = [(ch, e) for ch, e in index.items() if ch in wanted]
-        if not sel:
-            return {}, _Order.empty()
-        entries = np.concatenate([e for _, e in sel]).astype(np.int64)
-        chans = np.concatenate([np.full(len(e), ch, dtype=np.int64) for ch, e in sel])
-        ks = np.concatenate([np.arange(len(e)) for _, e in sel])
-        times, offs = entries[:, 0], entries[:, 1]
-        keep = None
-        if lo > 0 or hi < _I64_END:
-            keep = (times >= min(lo, _I64_END)) & (times < min(hi, _I64_END))
-        if keep is not None:
-            times, offs, chans = times[keep], offs[keep], chans[keep]
-        n = len(buf)
-        if len(offs) and (offs.min() < 0 or offs.max() + 9 + 22 > n):
-            return None
-        a = np.frombuffer(buf, np.uint8)
-        head = a[offs[:, None] + _HEAD_BYTES]  # opcode, length (8), channel (2), sequence (4), log time (8)
-        lengths = np.ascontiguousarray(head[:, 1:9]).view("<u8")[:, 0].astype(np.int64)
-        channel = np.ascontiguousarray(head[:, 9:11]).view("<u2")[:, 0]
-        logged = np.ascontiguousarray(head[:, 15:23]).view("<u8")[:, 0].astype(np.int64)
-        ends = offs + 9 + lengths
-        if not ((head[:, 0] == mr.MESSAGE).all() and (lengths >= 22).all() and (ends <= n).all()
-                and (channel == chans).all() and (logged == times).all()):
-            return None
-        # the entries come channel after channel: one run of each wanted channel with messages left
-        run_starts = np.flatnonzero(np.diff(chans, prepend=-1))
-        run_ends = [*run_starts[1:].tolist(), len(chans)]
-        starts, stops = (offs + 31).tolist(), ends.tolist()
-        per_channel: dict[int, list[bytes]] = {}
-        for a, b in zip(run_starts.tolist(), run_ends):
-            per_channel[int(chans[a])] = [buf[s0:e0] for s0, e0 in zip(starts[a:b], stops[a:b])]
-        if keep is not None:  # renumber within each channel after filtering
-            ks = np.arange(len(chans)) - np.repeat(run_starts, np.diff([*run_starts.tolist(), len(chans)]))
-        ordering = np.lexsort((offs, times))
-        return per_channel, _Order(chans[ordering], ks[ordering], times[ordering])
-
-    def _locate_sequential(self, chunk, buf: bytes, wanted, lo: int, hi: int):
-        per_channel: dict[int, list[bytes]] = {}
-        order: list[tuple[int, int, int]] = []  # (channel, index in that channel's list, log time)
-        head = mr.MESSAGE_HEADER.unpack_from
-        for op, b, e in self._records(chunk, buf):
-            if op == mr.MESSAGE:
-                ch, _seq, t, _pub = head(buf, b)
-                if ch in wanted and lo <= t < hi:
-                    datas = per_channel.get(ch)
-                    if datas is None:
-                        datas = per_channel[ch] = []
-                    order.append((ch, len(datas), t))
-                    datas.append(buf[b + 22:e])
-        order.sort(key=_third)  # stable: file order for equal times
-        return per_channel, _Order.of(order)
-
-    def _records(self, chunk, buf: bytes):
-        try:
-            for op, b, e in mr.iter_records(buf):
-                if op == mr.MESSAGE and e - b < 22:
-                    raise mr.McapFormatError("message record too short", b - 9)
-                yield op, b, e
-        except mr.McapFormatError as exc:
-            raise SessionError(f"chunk at byte {chunk.offset} holds a malformed record: {exc}",
-                               str(self.path)) from None
-
-    def _decode_all(self, decoder, batch, datas: list[bytes], topic: str, channel: int, order: _Order):
-        """`batch(datas)` (or `decoder` on each message when batch is None); when that fails, the error
-        names the first message that does not decode."""
-        try:
-            return batch(datas) if batch is not None else [decoder(d) for d in datas]
-        except (ValueError, IndexError, TypeError, KeyError):
-            pass
-        for data, t in zip(datas, order.times_by_index(channel)):  # find the message that does not decode
-            try:
-                decoder(data)
-            except (ValueError, IndexError, TypeError, KeyError) as exc:
-                raise SessionError(f"message on {topic} at log time {t} does not decode: {exc}",
-                                   str(self.path)) from None
-        raise SessionError(f"messages on {topic} do not decode", str(self.path))
-
-    def _chunk_records(self, chunk: mr.ChunkIndex) -> bytes:
-        try:
-            return self._read_chunk(chunk)
-        except mr.McapFormatError as exc:
-            raise SessionError(f"the chunk {self.describe_chunk(chunk)} is damaged ({exc}); "
-                               f"`teleprev recover {self.path}` keeps everything else", str(self.path)) from None
-
-    def _read_chunk(self, chunk: mr.ChunkIndex) -> bytes:
-        body = parsed = None
-        try:
-            body = mr.record_at(self._mm, chunk.offset, mr.CHUNK)
-            parsed = mr.parse_chunk(body, 0, len(body))
-            return mr.decompress(parsed, check_crc=self.verify_crc)
-        finally:  # views into the mapping must go before close() can unmap it
-            if parsed is not None and isinstance(parsed.data, memoryview):
-                parsed.data.release()
-            if body is not None:
-                body.release()
+    # --- damage ---
 
     def describe_chunk(self, chunk: mr.ChunkIndex) -> str:
         """Where a chunk is, in the words a user needs: its log times from the session's start."""
-        t0 = self.start_ns or 0
-        return (f"at byte {chunk.offset}, log time {(chunk.start_ns - t0) / 1e9:.3f}-"
-                f"{(chunk.end_ns - t0) / 1e9:.3f} s into the session")
+        return self._file.describe(chunk)
 
     def data_section_intact(self) -> bool | None:
         """Whether the bytes before the summary still match the CRC the writer stored in the data-end
         record (None when the file has none): reads the whole data section once."""
-        import struct
-        import zlib
-
-        try:
-            _, summary_start, _ = mr.read_footer(self._f, self.file_bytes)
-            end_at = (summary_start or self.file_bytes - mr.FOOTER_RECORD_SIZE - len(mr.MAGIC)) - 13  # DataEnd: 1+8+4
-            op, length, crc = struct.unpack("<BQI", mr.read_exact(self._f, end_at, 13))
-        except (mr.McapFormatError, struct.error):
-            return None
-        if op != mr.DATA_END or length != 4 or not crc:
-            return None
-        view = memoryview(self._mm)[:end_at]
-        try:
-            return zlib.crc32(view) == crc
-        finally:
-            view.release()
-            self.release_pages()
+        return data_section_intact(self._file, self.file_bytes)
 
     def damaged_chunks(self) -> list[tuple[mr.ChunkIndex, str]]:
         """Every chunk that does not read back whole (CRC, compression, records), with why; reads the
         whole file once."""
-        out = []
-        for chunk in sorted(self._chunks, key=lambda c: c.offset):
-            try:
-                buf = self._read_chunk(chunk)
-                for op, b, e in mr.iter_records(buf):
-                    if op == mr.MESSAGE and e - b < 22:
-                        raise mr.McapFormatError("message record too short", b - 9)
-            except mr.McapFormatError as exc:
-                out.append((chunk, str(exc)))
-            self.release_pages()
-        return out
-
-    def _chunk_messages(self, chunk: mr.ChunkIndex) -> list[tuple[int, int]]:
-        """(channel, log_time) of every message in the chunk, in file order."""
-        buf = self._chunk_records(chunk)
-        head = mr.MESSAGE_HEADER.unpack_from
-        return [head(buf, b)[0:3:2] for op, b, e in self._records(chunk, buf) if op == mr.MESSAGE]
+        return damaged_chunks(self._file, self._chunks)
 
     # --- episodes ---
 
@@ -505,237 +242,19 @@ class SessionReader:
         """Episodes from /events/episode: start, stop, discard and outcome events by episode index."""
         if EPISODE not in self._by_topic:
             return []
-        found: dict[int, dict] = {}
-        for msg in self.messages([EPISODE]):
-            ev = msg.payload
-            if not isinstance(ev, Event):
-                raise SessionError(f"{EPISODE} holds {type(ev).__name__} messages, expected episode events",
-                                   str(self.path))
-            kind, index = ev.data.get("event"), ev.data.get("episode")
-            where = f"{EPISODE} at log time {msg.log_time_ns}"
-            if not isinstance(index, int):
-                raise SessionError(f"{where}: episode index {index!r} is not an integer", str(self.path))
-            ep = found.get(index)
-            if kind == "start":
-                if ep is not None:
-                    raise SessionError(f"{where}: episode {index} started twice", str(self.path))
-                found[index] = {"index": index, "task": str(ev.data.get("task") or ""), "start_ns": ev.stamp_ns,
-                                "stop_ns": None, "discarded": False, "outcome": ev.data.get("outcome")}
-                continue
-            if ep is None:
-                raise SessionError(f"{where}: {kind!r} for episode {index}, which never started", str(self.path))
-            if kind == "stop":
-                ep["stop_ns"] = ev.stamp_ns
-            elif kind == "discard":
-                ep["discarded"] = True
-                if ep["stop_ns"] is None:
-                    ep["stop_ns"] = ev.stamp_ns
-            elif kind == "outcome":
-                ep["outcome"] = ev.data.get("outcome")
-            else:
-                raise SessionError(f"{where}: unknown episode event {kind!r}", str(self.path))
-            if ev.data.get("task") and not ep["task"]:
-                ep["task"] = str(ev.data["task"])
-        return [Episode(**found[i]) for i in sorted(found)]
-
-    # --- files without a summary section ---
-
-    def _index_by_scan(self) -> mr.SummarySection:
-        """Index a complete MCAP written without a summary by reading it through once."""
-        out = mr.SummarySection()
-        counts: dict[int, int] = {}
-        scan = mr.Scan(self._f, self.file_bytes)
-        for offset, op, body in scan.records():
-            try:
-                if op == mr.CHUNK:
-                    chunk = mr.parse_chunk(body, 0, len(body))
-                    buf = mr.decompress(chunk)
-                    for iop, b, e in mr.iter_records(buf):
-                        if iop == mr.SCHEMA:
-                            s = mr.parse_schema(buf, b, e)
-                            out.schemas[s.id] = s
-                        elif iop == mr.CHANNEL:
-                            c = mr.parse_channel(buf, b, e)
-                            out.channels[c.id] = c
-                        elif iop == mr.MESSAGE:
-                            cid = mr._U16.unpack_from(buf, b)[0]
-                            counts[cid] = counts.get(cid, 0) + 1
-                    out.chunks.append(mr.ChunkIndex(chunk.start_ns, chunk.end_ns, offset, 9 + len(body), {}, 0,
-                                                    chunk.compression))
-                elif op == mr.SCHEMA:
-                    s = mr.parse_schema(body, 0, len(body))
-                    out.schemas[s.id] = s
-                elif op == mr.CHANNEL:
-                    c = mr.parse_channel(body, 0, len(body))
-                    out.channels[c.id] = c
-                elif op == mr.MESSAGE:
-                    raise SessionError("messages outside chunks are not supported; run `teleprev recover` on it "
-                                       "to rewrite it chunked", str(self.path))
-                elif op == mr.METADATA:
-                    out.metadata.append((mr.parse_metadata(body, 0, len(body))[0], offset, 9 + len(body)))
-            except mr.McapFormatError as exc:
-                raise SessionError(f"record at byte {offset} is damaged: {exc}", str(self.path)) from None
-        if scan.stop != "footer":
-            raise SessionError(f"the file is cut short ({scan.stop}); run `teleprev recover {self.path}`",
-                               str(self.path))
-        out.statistics = mr.Statistics(sum(counts.values()), len(out.schemas), len(out.channels), 0,
-                                       len(out.metadata), len(out.chunks), 0, 0, counts)
-        return out
+        return episodes_from(self.messages([EPISODE]), self.path)
 
     # --- lifecycle ---
 
     def release_pages(self) -> None:
-        """Drop the file's pages from this process's resident set (they stay in the kernel's page cache).
-
-        The whole file is memory-mapped, so every page read would otherwise stay resident until the
-        reader closes and the process would grow with the session's length; messages() calls this every
-        few chunks, so long sessions read in flat memory."""
-        if hasattr(mmap, "MADV_DONTNEED"):
-            try:
-                self._mm.madvise(mmap.MADV_DONTNEED)
-            except (OSError, ValueError):  # closed, or refused: only memory accounting is at stake
-                pass
+        """Drop the file's pages from this process's resident set (see ChunkFile.release_pages)."""
+        self._file.release_pages()
 
     def close(self) -> None:
-        try:
-            self._mm.close()
-        except BufferError:  # a view still held by an error on its way up: unmapped when that goes
-            pass
-        self._f.close()
+        self._file.close()
 
     def __enter__(self) -> SessionReader:
         return self
 
     def __exit__(self, *exc) -> None:
         self.close()
-
-
-class JointTable:
-    """A foxglove.JointStates topic read by SessionReader.messages(tables=...): each message's stamp_ns
-    and positions, in the order messages() would have yielded the messages."""
-
-    __slots__ = ("stamp_ns", "positions")
-
-    def __init__(self) -> None:
-        self.stamp_ns: list[int] = []
-        self.positions: list[np.ndarray] = []
-
-    def __len__(self) -> int:
-        return len(self.stamp_ns)
-
-    def append(self, stamp_ns: int, positions: np.ndarray) -> None:
-        self.stamp_ns.append(stamp_ns)
-        self.positions.append(positions)
-
-    def extend_in_order(self, stamps: list[int], positions: list[np.ndarray], indices: list[int]) -> None:
-        """Append messages decoded in file order, taking them in `indices` order."""
-        if indices == list(range(len(stamps))):
-            self.stamp_ns.extend(stamps)
-            self.positions.extend(positions)
-        else:
-            self.stamp_ns.extend([stamps[k] for k in indices])
-            self.positions.extend([positions[k] for k in indices])
-
-
-class _Order:
-    """Wanted messages of one or more chunks in log time order (file order for equal times): per message its
-    channel, its index among that channel's messages in file order, and its log time (int64 arrays)."""
-
-    __slots__ = ("channels", "indices_", "times")
-
-    def __init__(self, channels: np.ndarray, indices: np.ndarray, times: np.ndarray):
-        self.channels, self.indices_, self.times = channels, indices, times
-
-    @classmethod
-    def empty(cls) -> _Order:
-        none = np.zeros(0, dtype=np.int64)
-        return cls(none, none, none)
-
-    @classmethod
-    def of(cls, entries: list[tuple[int, int, int]]) -> _Order:
-        if not entries:
-            return cls.empty()
-        channels, indices, times = zip(*entries)
-        try:
-            log_times = np.array(times, dtype=np.int64)
-        except OverflowError:  # log times past int64 (year 2262): kept as Python integers
-            log_times = np.array(times, dtype=object)
-        return cls(np.array(channels, dtype=np.int64), np.array(indices, dtype=np.int64), log_times)
-
-    def after(self, counts: dict[int, int]) -> _Order:
-        """This order with each channel's indices moved past `counts[channel]` earlier messages."""
-        if not any(counts.values()):
-            return self
-        shift = np.zeros(max(counts) + 1, dtype=np.int64)
-        shift[list(counts)] = list(counts.values())
-        return _Order(self.channels, self.indices_ + shift[self.channels], self.times)
-
-    @classmethod
-    def concat(cls, orders: list[_Order]) -> _Order:
-        return cls(*(np.concatenate(column) for column in zip(*((o.channels, o.indices_, o.times) for o in orders))))
-
-    def entries(self, exclude=()) -> Iterator[tuple[int, int, int]]:
-        """(channel, index, log time) in order, leaving out the channels in `exclude`."""
-        channels, indices, times = self.channels, self.indices_, self.times
-        if exclude:
-            keep = ~np.isin(channels, list(exclude))
-            channels, indices, times = channels[keep], indices[keep], times[keep]
-        return zip(channels.tolist(), indices.tolist(), times.tolist())
-
-    def indices(self, channel: int) -> list[int]:
-        """The channel's messages (their indices in file order) in log time order."""
-        return self.indices_[self.channels == channel].tolist()
-
-    def times_by_index(self, channel: int) -> list[int]:
-        """The log times of the channel's messages in file order."""
-        mine = self.channels == channel
-        out = np.empty(int(mine.sum()), dtype=self.times.dtype)
-        out[self.indices_[mine]] = self.times[mine]
-        return out.tolist()
-
-
-@dataclass(frozen=True, slots=True)
-class _Located:
-    """Wanted messages of one or more chunks: per channel their bytes in file order, and their order."""
-
-    per_channel: dict[int, list[bytes]]
-    order: _Order
-
-    @classmethod
-    def join(cls, parts: list[_Located]) -> _Located:
-        """Chunks that follow each other in time, as one: each channel's messages in chunk order."""
-        if not parts:
-            return cls({}, _Order.empty())
-        if len(parts) == 1:
-            return parts[0]
-        per_channel: dict[int, list[bytes]] = {}
-        orders = []
-        for part in parts:
-            orders.append(part.order.after({ch: len(per_channel.get(ch, ())) for ch in part.per_channel}))
-            for ch, datas in part.per_channel.items():
-                per_channel.setdefault(ch, []).extend(datas)
-        return cls(per_channel, _Order.concat(orders))
-
-
-@dataclass(frozen=True, slots=True)
-class _Reading:
-    """What one messages() call reads: decoders and topic names by channel, the log time window, the
-    wanted channels and the tabled ones."""
-
-    decoders: dict
-    names: dict[int, str]
-    lo: int
-    hi: int
-    wanted: frozenset
-    tabled: dict[int, JointTable]
-
-    def untabled(self) -> _Reading:
-        return _Reading(self.decoders, self.names, self.lo, self.hi, self.wanted, {})
-
-
-def _third(entry) -> int:
-    return entry[2]
-
-
-def _logged_time(msg: Logged) -> int:
-    return msg.log_time_ns

@@ -18,10 +18,14 @@ class FoxgloveReader:
         self._session = SessionReader(path)
         self.path = self._session.path
         self.recipe = recipe
-        self.topics = self._session.topics
         ours = {"rig": {"robot": recipe.robot_type}, "session": {"task": recipe.section.task},
                 "import": {"source": str(self.path), "format": "foxglove"}}
-        self.metadata = {**self._session.metadata, **ours}
+        try:  # a damaged index or metadata record raises here: the file is closed before the error goes up
+            self.topics = self._session.topics
+            self.metadata = {**self._session.metadata, **ours}
+        except BaseException:
+            self._session.close()
+            raise
         self.start_ns = self._session.start_ns
         self.end_ns = self._session.end_ns
 

@@ -1,0 +1,64 @@
+"""A session's episodes, from its /events/episode messages: start, stop, discard and outcome by index."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Iterable
+
+from teleprev.errors import SessionError
+from teleprev.messages import Event, Logged
+from teleprev.topics import EPISODE
+
+
+@dataclass(frozen=True, slots=True)
+class Episode:
+    """An episode as its /events/episode messages describe it; times are the events' stamp_ns.
+    `stop_ns` is None when the session ended (or was cut short) before the episode was stopped."""
+
+    index: int
+    task: str
+    start_ns: int
+    stop_ns: int | None
+    discarded: bool
+    outcome: str | None
+
+    @property
+    def duration_s(self) -> float | None:
+        return None if self.stop_ns is None else (self.stop_ns - self.start_ns) / 1e9
+
+
+def episodes_from(messages: Iterable[Logged], path: Path) -> list[Episode]:
+    """Episodes from the /events/episode messages of the session at `path`, in log time order."""
+    found: dict[int, dict] = {}
+    for msg in messages:
+        ev = msg.payload
+        if not isinstance(ev, Event):
+            raise SessionError(f"{EPISODE} holds {type(ev).__name__} messages, expected episode events",
+                               str(path))
+        kind, index = ev.data.get("event"), ev.data.get("episode")
+        where = f"{EPISODE} at log time {msg.log_time_ns}"
+        if not isinstance(index, int):
+            raise SessionError(f"{where}: episode index {index!r} is not an integer", str(path))
+        ep = found.get(index)
+        if kind == "start":
+            if ep is not None:
+                raise SessionError(f"{where}: episode {index} started twice", str(path))
+            found[index] = {"index": index, "task": str(ev.data.get("task") or ""), "start_ns": ev.stamp_ns,
+                            "stop_ns": None, "discarded": False, "outcome": ev.data.get("outcome")}
+            continue
+        if ep is None:
+            raise SessionError(f"{where}: {kind!r} for episode {index}, which never started", str(path))
+        if kind == "stop":
+            ep["stop_ns"] = ev.stamp_ns
+        elif kind == "discard":
+            ep["discarded"] = True
+            if ep["stop_ns"] is None:
+                ep["stop_ns"] = ev.stamp_ns
+        elif kind == "outcome":
+            ep["outcome"] = ev.data.get("outcome")
+        else:
+            raise SessionError(f"{where}: unknown episode event {kind!r}", str(path))
+        if ev.data.get("task") and not ep["task"]:
+            ep["task"] = str(ev.data["task"])
+    return [Episode(**found[i]) for i in sorted(found)]
