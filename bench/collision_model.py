@@ -73,7 +73,7 @@ def main() -> None:
 
     from teleprev.noncollision import evaluate, sampling
     from teleprev.noncollision.projection import project
-    from teleprev.pipeline.numpy_arithmetic import NumpyCorrector
+    from teleprev.pipeline.older_formats import NumpyCorrector
     from teleprev.robot.collision import SelfCollisionChecker
     from teleprev.robot.model import load_robot
 

@@ -81,7 +81,7 @@ def main() -> None:
 
     # The pipeline's arm solve (ArmRetargeter: target, then IK from the constant-velocity warm start) and
     # IK alone, numpy against compiled on the same targets, interleaved so that both see the same noise.
-    from teleprev.pipeline.numpy_arithmetic import NumpyArmIK, NumpyArmRetargeter
+    from teleprev.pipeline.older_formats import NumpyArmIK, NumpyArmRetargeter
     from teleprev.retarget.arm import ArmRetargeter
 
     numpy_arm, compiled_arm = NumpyArmRetargeter(NumpyArmIK(arm, "link_eef")), ArmRetargeter(ArmIK(arm, "link_eef"))

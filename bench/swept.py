@@ -77,7 +77,7 @@ def recorded_calls() -> tuple[list[list[tuple]], list[tuple], float]:
 
 def main() -> None:
     args = common.parser(__doc__).parse_args()
-    from teleprev.pipeline.numpy_arithmetic import NumpySweptCheck
+    from teleprev.pipeline.older_formats import NumpySweptCheck
     from teleprev.pipeline.swept import SweptCheck
     from teleprev.robot.collision import SelfCollisionChecker
     from teleprev.robot.model import load_robot

@@ -3,7 +3,7 @@ arithmetic of a session format.
 
 Live recording builds the current format's pipeline; `teleprev eval` builds the one a session was recorded
 with, so that it re-runs bit for bit. This is the one place where a format chooses its arithmetic
-(`_arithmetic`): formats 1 and 2 the numpy classes of teleprev/pipeline/numpy_arithmetic.py, format 1
+(`_arithmetic`): formats 1 and 2 the numpy classes of teleprev/pipeline/older_formats.py, format 1
 without motion limits, format 3 on the compiled classes.
 """
 
@@ -48,7 +48,7 @@ def _arithmetic(session_format: int) -> Arithmetic:
     motion = session_format >= MOTION_FORMAT_VERSION
     if session_format >= COMPILED_FORMAT_VERSION:
         return Arithmetic(motion)
-    from teleprev.pipeline import numpy_arithmetic as old
+    from teleprev.pipeline import older_formats as old
 
     return Arithmetic(motion, old.NumpyArmIK, old.NumpyArmRetargeter, old.NumpySweptCheck, old.NumpyCorrector,
                       old.NumpyPipeline)

@@ -20,7 +20,7 @@ Every answer has passed the exact checker (the anchor was checked when it became
 path returns a colliding configuration. No torch: this runs in every pipeline step. The CPN / CCN
 inference runs in numba kernels (noncollision/compiled.py), the CCN step (proposal and bisection) in one
 call; sessions of formats 1 and 2 were corrected with the numpy networks
-(teleprev/pipeline/numpy_arithmetic.py: NumpyCorrector).
+(teleprev/pipeline/older_formats.py: NumpyCorrector).
 """
 
 from __future__ import annotations

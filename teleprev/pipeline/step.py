@@ -90,7 +90,7 @@ class StepResult:
 
 class Pipeline:
     """The step of sessions of format 3 on: compiled glove preparation, arm IK and Corrector, commands kept
-    to the motion limits by `motion`. Older formats' arithmetic: teleprev/pipeline/numpy_arithmetic.py."""
+    to the motion limits by `motion`. Older formats' arithmetic: teleprev/pipeline/older_formats.py."""
 
     def __init__(self, cfg: PipelineConfig, arm: ArmRetargeter, arm_guard: JointGuard, effector: Effector,
                  motion: Motion | None):

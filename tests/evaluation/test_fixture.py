@@ -61,7 +61,7 @@ def test_sessions_of_one_rig_share_a_pipeline_and_rerun_the_same():
     assert [list(f) for f in first.flags] == [list(f) for f in second.flags]
 
 
-def test_a_format_2_session_reruns_with_the_numpy_arithmetic_bit_for_bit():
+def test_a_format_2_session_reruns_with_the_older_formats_bit_for_bit():
     from teleprev.evaluation import reproduce
 
     reader = SessionReader(FIXTURE_V2)

@@ -8,7 +8,7 @@ import pytest
 from teleprev.noncollision.compiled import CompiledCCN, CompiledCPN, CompiledMLP, CompiledNets
 from teleprev.noncollision.corrector import Corrector
 from teleprev.noncollision.mlp import CCN, CPN
-from teleprev.pipeline.numpy_arithmetic import NumpyCorrector
+from teleprev.pipeline.older_formats import NumpyCorrector
 
 from tests.noncollision.test_mlp import _random_net
 

@@ -4,7 +4,7 @@ through a collision between two free end points is caught, and the clearance mar
 import numpy as np
 import pytest
 
-from teleprev.pipeline.numpy_arithmetic import NumpySweptCheck
+from teleprev.pipeline.older_formats import NumpySweptCheck
 from teleprev.pipeline.swept import SweptCheck
 from teleprev.robot.collision import SelfCollisionChecker
 from teleprev.robot.model import load_robot

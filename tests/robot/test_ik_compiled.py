@@ -11,7 +11,7 @@ import sys
 import numpy as np
 import pytest
 
-from teleprev.pipeline.numpy_arithmetic import NumpyArmIK, NumpyArmRetargeter
+from teleprev.pipeline.older_formats import NumpyArmIK, NumpyArmRetargeter
 from teleprev.retarget.arm import ArmRetargeter
 from teleprev.robot.ik import ArmIK
 from teleprev.robot.model import load_robot
