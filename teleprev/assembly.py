@@ -4,7 +4,8 @@ arithmetic of a session format.
 Live recording builds the current format's pipeline; `teleprev eval` builds the one a session was recorded
 with, so that it re-runs bit for bit. This is the one place where a format chooses its arithmetic
 (`_arithmetic`): formats 1 and 2 the numpy classes of teleprev/pipeline/older_formats.py, format 1
-without motion limits, format 3 on the compiled classes.
+without motion limits; format 3 the compiled classes, commands made by each step; format 4 on the
+commands sampled by the paced sender from the step's targets (`build_planner`).
 """
 
 from __future__ import annotations
@@ -29,7 +30,7 @@ from teleprev.robot.ik import ArmIK
 from teleprev.robot.collision import SelfCollisionChecker
 from teleprev.robot.limits import arm_limits, effector_limits
 from teleprev.robot.model import RobotModel, load_robot
-from teleprev.topics import COMPILED_FORMAT_VERSION, FORMAT_VERSION, MOTION_FORMAT_VERSION
+from teleprev.topics import COMPILED_FORMAT_VERSION, FORMAT_VERSION, MOTION_FORMAT_VERSION, PLANNED_FORMAT_VERSION
 
 
 @dataclass(frozen=True)
@@ -46,10 +47,12 @@ class Arithmetic:
 
 def _arithmetic(session_format: int) -> Arithmetic:
     motion = session_format >= MOTION_FORMAT_VERSION
-    if session_format >= COMPILED_FORMAT_VERSION:
+    if session_format >= PLANNED_FORMAT_VERSION:
         return Arithmetic(motion)
     from teleprev.pipeline import older_formats as old
 
+    if session_format >= COMPILED_FORMAT_VERSION:
+        return Arithmetic(motion, pipeline=old.StepCommandsPipeline)
     return Arithmetic(motion, old.NumpyArmIK, old.NumpyArmRetargeter, old.NumpySweptCheck, old.NumpyCorrector,
                       old.NumpyPipeline)
 

@@ -13,8 +13,11 @@ What the pipeline computed and sent:
     /pipeline/corrected       JointSample   after the Corrector (always collision-free)
     /pipeline/arm_target      JointSample   arm joints from IK
     /pipeline/report          Event         teleprev.StepReport: corrector action, flags, latency
-    /command/arm              JointSample   arm command actually sent (execute mode only)
+    /command/arm              JointSample   arm command actually sent (execute mode only), stamped with the
+                                            instant the sender sent it; velocities: the command's velocity
     /command/hand             JointSample   end-effector command actually sent (execute mode only)
+    /command/tick             Event         teleprev.CommandTick: per tick of the paced sender (format 4),
+                                            the last update it had adopted, its lateness and flags
     /tf                       TransformsSample   robot link frames (for Foxglove's URDF panel)
     /robot_description        RobotDescription   the rig's URDF (ROS 2 std_msgs/String), once at the start;
                                                  the file also carries it as an attachment <robot>.urdf
@@ -28,13 +31,16 @@ Events:
 
 from __future__ import annotations
 
-FORMAT_VERSION = 3  # session layout version, written to the "teleprev" metadata record
+FORMAT_VERSION = 4  # session layout version, written to the "teleprev" metadata record
 # Format 2: commands go through the motion limits (teleprev/pipeline/motion.py); idle steps may command
 # between trigger samples; a ModeSwitch with reason "estop" stops commanding at once.
 MOTION_FORMAT_VERSION = 2
 # Format 3: the pipeline's arithmetic is the compiled hot path (IK, CPN/CCN, hand preparation, swept
 # check), whose last bits differ from the numpy code that recorded formats 1 and 2.
 COMPILED_FORMAT_VERSION = 3
+# Format 4: the commands are sampled by the paced sender at the instant it sends them, from the pipeline
+# steps' targets (teleprev/pipeline/planner.py); /command/tick records which targets each tick had.
+PLANNED_FORMAT_VERSION = 4
 
 TASKS_RECORD = "tasks"  # metadata record: task id -> the task as a natural-language instruction
 TF = "/tf"
@@ -45,6 +51,7 @@ ARM_TARGET = "/pipeline/arm_target"
 STEP_REPORT = "/pipeline/report"
 COMMAND_ARM = "/command/arm"
 COMMAND_HAND = "/command/hand"
+COMMAND_TICK = "/command/tick"
 EPISODE = "/events/episode"
 MODE = "/events/mode"
 DEVICE_EVENT = "/events/device"
@@ -100,9 +107,17 @@ EVENT_SCHEMAS: dict[str, dict] = {
     ),
     "teleprev.ModeSwitch": _schema(
         "teleprev.ModeSwitch",
-        "The pipeline's gate changed mode: preview (robot does not move) or execute.",
-        {"mode": {"type": "string", "enum": ["preview", "execute"]}, "reason": _STR},
+        "The pipeline's gate changed mode: preview (robot does not move) or execute. halt: nothing more was "
+        "sent at once (an e-stop, or an actuator that failed), instead of braking to rest.",
+        {"mode": {"type": "string", "enum": ["preview", "execute"]}, "reason": _STR, "halt": {"type": "boolean"}},
         ["mode"],
+    ),
+    "teleprev.CommandTick": _schema(
+        "teleprev.CommandTick",
+        "One tick of the paced command sender: the commands on /command/arm and /command/hand with the same "
+        "stamp were sampled from the pipeline's updates up to `seq`; `late_ms`: how late the tick woke.",
+        {"seq": _INT, "late_ms": _NUM, "flags": {"type": "array", "items": _STR}, "active": {"type": "boolean"}},
+        ["seq", "late_ms"],
     ),
     "teleprev.DeviceEvent": _schema(
         "teleprev.DeviceEvent",

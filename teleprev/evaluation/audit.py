@@ -8,13 +8,15 @@ rig's [pipeline] keys, else teleprev/robot/limits.py and the URDF):
     speed      first divided difference on the command stamps
     accel      2 x the second divided difference (an acceleration the commands pass through, between them)
     jerk       6 x the third divided difference (arm)
+               (teleprev/pipeline/derivatives.py: the definition eval and the benches use too)
     collisions hand commands in self-collision (exact check, plain shapes), and hand command segments
                that pass through one (checked at link motions of at most SWEPT_STEP_M)
 
 and, for the hand's measured state, how many samples were in self-collision. Ratios are measured /
-limit: above 1 is a violation (a tolerance of 1e-6 absorbs rounding). Runs of commands more than
-the pipeline's RESUME_GAP_NS apart are measured separately (a new engage starts from rest). A dataset's actions are taken
-as commands sent at its frames' timestamps, each episode on its own.
+limit: above 1 is a violation (a tolerance of 1e-6 absorbs rounding). Commands more than RESUME_GAP_NS
+apart start a new run, measured as the controller sees it: from rest on the last command before the pause
+(a stream that resumes with a jump fails). A dataset's actions are taken as commands sent at its frames'
+timestamps, each episode on its own.
 """
 
 from __future__ import annotations
@@ -26,8 +28,7 @@ from pathlib import Path
 import numpy as np
 
 from teleprev import topics
-from teleprev.pipeline.derivatives import divided_differences, runs
-from teleprev.pipeline.motion import RESUME_GAP_NS
+from teleprev.pipeline.derivatives import RESUME_GAP_NS, runs, stream_peaks
 from teleprev.errors import SessionError
 
 SWEPT_STEP_M = 0.0005
@@ -90,18 +91,11 @@ def _runs(t_ns: np.ndarray) -> list[slice]:
     return runs(t_ns, RESUME_GAP_NS)
 
 
-def _measure(audit: StreamAudit, t_ns: np.ndarray, q: np.ndarray, lower: np.ndarray, upper: np.ndarray) -> None:
+def _measure(audit: StreamAudit, t_ns: np.ndarray, q: np.ndarray, lower: np.ndarray, upper: np.ndarray,
+             from_rest: bool) -> None:
     audit.commands = len(t_ns)
     audit.position_outside = int(((q < lower - 1e-9) | (q > upper + 1e-9)).any(axis=1).sum())
-    for run in _runs(t_ns):
-        if run.stop - run.start < 2:
-            continue
-        v, a, j = divided_differences(t_ns[run], q[run])
-        audit.speed_max = max(audit.speed_max, float(np.abs(v).max()))
-        if len(a):
-            audit.accel_max = max(audit.accel_max, float(np.abs(a).max()))
-        if len(j):
-            audit.jerk_max = max(audit.jerk_max, float(np.abs(j).max()))
+    audit.speed_max, audit.accel_max, audit.jerk_max = stream_peaks(t_ns, q, from_rest).worst()
 
 
 def swept_colliding(checker, reach: np.ndarray, q: np.ndarray, step_m: float = SWEPT_STEP_M) -> int:
@@ -135,13 +129,15 @@ def recorded_rig(path: Path, meta: dict, rig_path: str | Path | None):
     return rig
 
 
-def audit_stream(topic: str, side: str, limits: dict, t_ns: np.ndarray, q: np.ndarray | None) -> StreamAudit:
-    """One command stream (stamps, positions in the order of limits[side]['names']) against its limits."""
+def audit_stream(topic: str, side: str, limits: dict, t_ns: np.ndarray, q: np.ndarray | None,
+                 from_rest: bool = True) -> StreamAudit:
+    """One command stream (stamps, positions in the order of limits[side]['names']) against its limits;
+    `from_rest`: each run as a controller starts it (commands; not a dataset's actions)."""
     lim = limits[side]
     audit = StreamAudit(topic, speed_limit=float(lim["velocity"].min()), accel_limit=float(lim["acceleration"]),
                         jerk_limit=lim.get("jerk"))
     if len(t_ns):
-        _measure(audit, t_ns, q, lim["lower"], lim["upper"])
+        _measure(audit, t_ns, q, lim["lower"], lim["upper"], from_rest)
         if side == "hand" and lim.get("checker") is not None:
             audit.colliding = int(lim["checker"].pair_matrix(q).any(axis=1).sum())
             audit.swept_colliding = sum(swept_colliding(lim["checker"], lim["reach"], q[run]) for run in _runs(t_ns))
@@ -243,8 +239,8 @@ def audit_dataset(root: str | Path, rig_path: str | Path | None) -> AuditReport:
         rows = np.flatnonzero(episodes == ep)
         rows = rows[np.argsort(stamps[rows], kind="stable")]
         t = stamps[rows] + int(ep) * 3_600_000_000_000  # episodes an hour apart: never one run
-        merge(arm, audit_stream("action[arm]", "arm", limits, t, action[rows][:, arm_cols]))
-        merge(hand, audit_stream("action[end effector]", "hand", limits, t, action[rows][:, hand_cols]))
+        merge(arm, audit_stream("action[arm]", "arm", limits, t, action[rows][:, arm_cols], from_rest=False))
+        merge(hand, audit_stream("action[end effector]", "hand", limits, t, action[rows][:, hand_cols], from_rest=False))
     report.streams = [arm, hand]
     return report
 

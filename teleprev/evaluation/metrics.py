@@ -5,8 +5,9 @@
     collision_after_frac       hand commands in self-collision, by the exact checker (must be 0)
     deviation_mean_rad/_max    max |corrected - retargeted| over joints, mean and worst over steps
     untouched/ccn/fallback     what the Corrector did, as counts
-    arm_speed_max, hand_speed_max      rad/s (m/s for a gripper) between consecutive commands
-    arm_jerk_max, hand_jerk_max        rad/s^3, third differences of commands at their own spacing
+    arm_speed_max, hand_speed_max      rad/s (m/s for a gripper), arm_accel_max, hand_accel_max, arm_jerk_max,
+    hand_jerk_max                      of the commands by divided differences on their stamps, each run from
+                                       rest (teleprev/pipeline/derivatives.py: the definition audit uses)
     latency_ms_p50/_p99        pipeline step time in this re-run
     held_frac                  steps whose input was flagged and held (stale, invalid, out of range)
     reproduced                 re-run equals recorded, bit for bit, on every command and corrected target
@@ -18,7 +19,9 @@ import json
 
 import numpy as np
 
+from teleprev.evaluation.command_tracks import CommandTrack
 from teleprev.evaluation.reproduce import Rerun
+from teleprev.pipeline.derivatives import stream_peaks
 from teleprev import topics
 
 HOLD_FLAGS = {"glove_stale", "glove_invalid", "glove_out_of_range", "suit_stale", "suit_invalid", "suit_out_of_range"}
@@ -29,32 +32,17 @@ def _same(a: np.ndarray, b: np.ndarray) -> bool:
     return a.shape == b.shape and bool(np.all((a == b) | (np.isnan(a) & np.isnan(b))))
 
 
-MAX_RUN_GAP_S = 0.05  # commands further apart than this belong to different runs (e.g. before/after preview)
+def _peaks(track: CommandTrack) -> tuple[float, float, float]:
+    """Speed, acceleration and jerk peaks of the re-run commands of a track."""
+    have = ~np.isnan(track.rerun).any(axis=1)
+    if have.sum() < 2:
+        return 0.0, 0.0, 0.0
+    return stream_peaks(track.t_ns[have], track.rerun[have]).worst()
 
 
-def _motion(t_ns: np.ndarray, q: np.ndarray) -> tuple[float, float]:
-    """Max speed and jerk over the rows of q that hold a command, within runs of consecutive commands."""
-    have = ~np.isnan(q).any(axis=1)
-    t, q = t_ns[have], q[have]
-    speed = jerk = 0.0
-    if len(t) < 2:
-        return speed, jerk
-    dt = np.diff(t) / 1e9  # difference the integer nanoseconds first: epoch seconds in float64 lose ~1e-7 s
-    breaks = np.flatnonzero(dt > MAX_RUN_GAP_S) + 1
-    for tr, qr in zip(np.split(t, breaks), np.split(q, breaks)):
-        if len(tr) < 2:
-            continue
-        d = np.diff(tr) / 1e9
-        v = np.diff(qr, axis=0) / d[:, None]
-        speed = max(speed, float(np.abs(v).max()))
-        if len(tr) >= 4:
-            a = np.diff(v, axis=0) / d[1:, None]
-            jerk = max(jerk, float(np.abs(np.diff(a, axis=0) / d[2:, None]).max()))
-    return speed, jerk
-
-
-def step_metrics(r: Rerun, rows: np.ndarray, hand_collides: np.ndarray | None) -> dict:
-    """Metrics over the steps selected by the boolean mask `rows`."""
+def step_metrics(r: Rerun, rows: np.ndarray, hand_collides: np.ndarray | None, span: tuple[int, int]) -> dict:
+    """Metrics over the steps selected by the boolean mask `rows`, and the commands stamped within `span`
+    (start, stop)."""
     n = int(rows.sum())
     out: dict = {"steps": n}
     if n == 0:
@@ -66,20 +54,22 @@ def step_metrics(r: Rerun, rows: np.ndarray, hand_collides: np.ndarray | None) -
     dev = np.nanmax(np.abs(fixed[stepped] - retargeted[stepped]), axis=1) if stepped.any() else np.zeros(0)
     dev = dev[~np.isnan(dev)]
     out["collision_before_frac"] = float(np.isin(action, ("ccn", "fallback")).sum() / max(corrected.sum(), 1))
+    arm, hand = (r.commands[k].select(*span) for k in (topics.COMMAND_ARM, topics.COMMAND_HAND))
     if hand_collides is not None:
-        commanded = ~np.isnan(r.rerun[topics.COMMAND_HAND][rows]).any(axis=1)
-        out["collision_after_frac"] = float(hand_collides[rows][commanded].sum() / max(commanded.sum(), 1))
+        inside = (r.commands[topics.COMMAND_HAND].t_ns >= span[0]) & (r.commands[topics.COMMAND_HAND].t_ns < span[1])
+        commanded = ~np.isnan(hand.rerun).any(axis=1)
+        out["collision_after_frac"] = float(hand_collides[inside][commanded].sum() / max(commanded.sum(), 1))
     out["deviation_mean_rad"] = float(dev.mean()) if len(dev) else 0.0
     out["deviation_max_rad"] = float(dev.max()) if len(dev) else 0.0
     for name in ("untouched", "ccn", "fallback"):
         out[name] = int((action == name).sum())
-    out["arm_speed_max"], out["arm_jerk_max"] = _motion(r.t_ns[rows], r.rerun[topics.COMMAND_ARM][rows])
-    out["hand_speed_max"], out["hand_jerk_max"] = _motion(r.t_ns[rows], r.rerun[topics.COMMAND_HAND][rows])
+    out["arm_speed_max"], out["arm_accel_max"], out["arm_jerk_max"] = _peaks(arm)
+    out["hand_speed_max"], out["hand_accel_max"], out["hand_jerk_max"] = _peaks(hand)
     lat = r.latency_ns[rows] / 1e6
     out["latency_ms_p50"], out["latency_ms_p99"] = float(np.percentile(lat, 50)), float(np.percentile(lat, 99))
     flags = [r.flags[i] for i in np.flatnonzero(rows)]
     out["held_frac"] = float(sum(bool(HOLD_FLAGS & set(f)) for f in flags) / n)
-    out["reproduced"] = all(_same(r.rerun[k][rows], r.recorded[k][rows]) for k in (topics.COMMAND_ARM, topics.COMMAND_HAND, topics.CORRECTED))
+    out["reproduced"] = _same(r.rerun[topics.CORRECTED][rows], r.recorded[topics.CORRECTED][rows]) and arm.same() and hand.same()
     return out
 
 
@@ -99,14 +89,15 @@ def dropped_inputs(meta: dict) -> int:
 
 def session_metrics(r: Rerun, checker=None) -> dict:
     """{"overall": {...}, "episodes": [{...}, ...]} for one re-run session."""
-    hand_cmd = r.rerun[topics.COMMAND_HAND]
+    hand_cmd = r.commands[topics.COMMAND_HAND].rerun
     collides = None
     if checker is not None:
-        collides = np.zeros(len(r.t_ns), dtype=bool)
+        collides = np.zeros(len(hand_cmd), dtype=bool)
         have = np.flatnonzero(~np.isnan(hand_cmd).any(axis=1))
         if len(have):
             collides[have] = checker.pair_matrix(hand_cmd[have]).any(axis=1)
-    overall = step_metrics(r, np.ones(len(r.t_ns), dtype=bool), collides)
+    everything = (np.iinfo(np.int64).min, np.iinfo(np.int64).max)
+    overall = step_metrics(r, np.ones(len(r.t_ns), dtype=bool), collides, everything)
     overall["dropped_inputs"] = dropped_inputs(r.metadata)
     overall["duration_s"] = r.duration_s
     overall["rerun_wall_s"] = r.wall_s
@@ -114,6 +105,6 @@ def session_metrics(r: Rerun, checker=None) -> dict:
     episodes = []
     for ep in r.episodes:
         stop = ep.stop_ns if ep.stop_ns is not None else np.iinfo(np.int64).max
-        m = step_metrics(r, (r.t_ns >= ep.start_ns) & (r.t_ns < stop), collides)
+        m = step_metrics(r, (r.t_ns >= ep.start_ns) & (r.t_ns < stop), collides, (ep.start_ns, stop))
         episodes.append({"episode": ep.index, "task": ep.task, "discarded": ep.discarded, "outcome": ep.outcome, **m})
     return {"overall": overall, "episodes": episodes}

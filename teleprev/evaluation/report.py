@@ -124,6 +124,7 @@ _SHOWN = (
     ("collision_after_frac", "hand commands in collision", "{:.1%}"), ("deviation_mean_rad", "correction mean (rad)", "{:.4f}"),
     ("deviation_max_rad", "correction max (rad)", "{:.4f}"), ("untouched", "untouched", "{}"), ("ccn", "ccn", "{}"),
     ("fallback", "fallback", "{}"), ("arm_speed_max", "arm speed max (rad/s)", "{:.3f}"), ("hand_speed_max", "hand speed max", "{:.3f}"),
+    ("arm_accel_max", "arm acceleration max (rad/s^2)", "{:.3g}"), ("hand_accel_max", "hand acceleration max", "{:.3g}"),
     ("arm_jerk_max", "arm jerk max (rad/s^3)", "{:.3g}"), ("hand_jerk_max", "hand jerk max", "{:.3g}"),
     ("latency_ms_p50", "step p50 (ms)", "{:.3f}"), ("latency_ms_p99", "step p99 (ms)", "{:.3f}"), ("held_frac", "held input", "{:.1%}"),
     ("dropped_inputs", "dropped inputs", "{}"), ("reproduced", "reproduces the recording", "{}"),

@@ -22,6 +22,8 @@ from teleprev import numeric_platform
 from teleprev.errors import SessionError
 from teleprev.messages import Event, JointSample
 from teleprev.assembly import build_pipeline, rig_calibration
+from teleprev.evaluation.command_tracks import CommandTrack, RecordedTick, replay_ticks, track
+from teleprev.pipeline.planner import CommandPlanner
 from teleprev.pipeline.driver import RECORDED_JOINT_TOPICS, InputTopics, PipelineDriver, recorded_names, recorded_values
 from teleprev.pipeline.step import Pipeline, StepResult
 from teleprev.retarget.calibration import load_calibration_text
@@ -58,6 +60,7 @@ class Rerun:
     input_messages: int
     wall_s: float = 0.0
     notes: list[str] = field(default_factory=list)
+    commands: dict[str, CommandTrack] = field(default_factory=dict)  # COMMAND_ARM / COMMAND_HAND, on their stamps
 
 
 def recorded_format(meta: dict) -> int:
@@ -183,8 +186,10 @@ def _rerun(reader: SessionReader, path: Path, models, rig_path, started: float) 
     # inputs; an output topic of another schema comes through as messages and is skipped, as before.
     tables = {k: JointTable() for k in RECORDED_JOINT_TOPICS
               if reader.schemas.get(k) == JOINT_STATES}
-    streamed = [inputs.hand, inputs.wrist, inputs.arm, inputs.effector, topics.MODE,
+    streamed = [inputs.hand, inputs.wrist, inputs.arm, inputs.effector, topics.MODE, topics.COMMAND_TICK,
                 *(k for k in RECORDED_JOINT_TOPICS if k not in tables)]
+    planned = pipeline.plans_commands
+    updates, ticks = [], []  # format 4: the planner's updates the re-run makes, and the recorded ticks
     n_inputs = 0
     # One BLAS thread: the batched CPN is a few hundred rows, where threads cost more than they give (on a
     # busy machine or with -j workers, many times more); single configurations never use them anyway.
@@ -195,9 +200,15 @@ def _rerun(reader: SessionReader, path: Path, models, rig_path, started: float) 
                 if isinstance(msg.payload, JointSample):
                     recorded_by_stamp[msg.topic][msg.payload.stamp_ns] = msg.payload.positions
                 continue
+            if msg.topic == topics.COMMAND_TICK:
+                if isinstance(msg.payload, Event):
+                    ticks.append(RecordedTick(msg.payload.stamp_ns, int(msg.payload.data.get("seq", 0))))
+                continue
             n_inputs += 1
             t0 = time.perf_counter_ns()
             result = driver.advance(msg, hand_input)
+            if planned:
+                updates += driver.take_updates()
             if result is not None:
                 steps.add(msg.log_time_ns, result, time.perf_counter_ns() - t0)
     for k, table in tables.items():
@@ -209,9 +220,19 @@ def _rerun(reader: SessionReader, path: Path, models, rig_path, started: float) 
     recorded = {k: _table([recorded_by_stamp[k].get(s) for s in t_keys], widths[k]) for k in RECORDED_JOINT_TOPICS}
     notes = []
     stepped = set(t_keys)
-    extra = {k: len(set(recorded_by_stamp[k]) - stepped) for k in RECORDED_JOINT_TOPICS}
+    extra = {k: len(set(recorded_by_stamp[k]) - stepped) for k in RECORDED_JOINT_TOPICS
+             if not (planned and k in (topics.COMMAND_ARM, topics.COMMAND_HAND))}
     if any(extra.values()):
         notes.append(f"recorded outputs at times the re-run never stepped: { {k: v for k, v in extra.items() if v} }")
+    commands = {}
+    if planned:
+        arm_rerun, hand_rerun = replay_ticks(CommandPlanner.for_pipeline(pipeline), updates, ticks)
+        sides = {topics.COMMAND_ARM: arm_rerun, topics.COMMAND_HAND: hand_rerun}
+    else:
+        sides = {k: {s: row for s, row in zip(t_keys, rows[k]) if row is not None}
+                 for k in (topics.COMMAND_ARM, topics.COMMAND_HAND)}
+    for k, rerun_side in sides.items():
+        commands[k] = track(rerun_side, recorded_by_stamp[k], widths[k])
     recorded_platform = meta.get("session", {}).get("numeric_platform")
     if recorded_platform and recorded_platform != numeric_platform.describe():
         notes.append(f"recorded on numeric platform {recorded_platform!r}, re-run on {numeric_platform.describe()!r}: "
@@ -221,5 +242,5 @@ def _rerun(reader: SessionReader, path: Path, models, rig_path, started: float) 
         arm_names, eff_names,
         pipeline.effector.spec, rerun, recorded, reader.episodes(), meta, _models_match(meta, pipeline), rig_source,
         reader.duration_s, n_inputs,
-        time.perf_counter() - started, notes,
+        time.perf_counter() - started, notes, commands,
     )

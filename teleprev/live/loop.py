@@ -2,10 +2,20 @@
 
 Device reader threads (devices/runner.py) hand samples to a bounded queue; one loop thread takes them in
 arrival order, gives each a strictly increasing log time on the session clock (its host receive time),
-records it, feeds the pipeline driver, sends the guarded commands to the arm and the end effector,
-publishes the robot's frames on /tf, and carries out the operator's controls (mode switches, episodes).
-Because the loop is the only place where order is decided, replaying a session's raw streams in
-log-time order meets the pipeline with exactly the inputs it met live.
+records it, feeds the pipeline driver, passes the step's targets and every accepted mode switch to the
+paced command sender (teleprev/live/sender.py), publishes the robot's frames on /tf, and carries out the
+operator's controls (mode switches, episodes). Because the loop is the only place where order is
+decided, replaying a session's raw streams in log-time order meets the pipeline with exactly the inputs
+it met live.
+
+The commands do not wait for this loop: the sender samples them on its own clock, in its own process. A
+relay thread here takes each tick it reports, passes its commands to the arm and the end effector (the
+actuators' `send`), and queues the tick for the loop to record (/command/arm, /command/hand and
+/command/tick, stamped with the instant the sender sent them).
+
+After a device fails, nothing engages by itself: the session goes back to preview (an actuator that
+failed: nothing more is sent at once, its controller has stopped it; another device: the commands brake to
+rest), records why, and refuses an unattended engage until the operator engages with a key.
 
 The terminal preview reads `snapshot`, which the loop replaces (never mutates) after every change.
 """
@@ -47,6 +57,7 @@ class LoopSnapshot:
     message: str = ""  # the last refusal or warning, for the operator
     commands_sent: int = 0
     dropped: int = 0
+    fault: str = ""  # why the session stays in preview until the operator engages
 
 
 @dataclass
@@ -68,6 +79,9 @@ class LoopStats:
     command_errors: Counter = field(default_factory=Counter)
     step_ns: list[int] = field(default_factory=list)  # pipeline step durations (bounded)
     device_failures: Counter = field(default_factory=Counter)  # "error" device events, per device
+    late_ns: list[int] = field(default_factory=list)  # how late each of the sender's ticks woke (bounded)
+    ticks: int = 0
+    engages: int = 0  # accepted switches to execute
 
 
 class SessionLoop:
@@ -81,9 +95,11 @@ class SessionLoop:
         tf_period_ns: int = 0,
         queue_size: int = 4096,
         on_episode_start: Callable[[str], None] | None = None,
+        sender=None,
     ):
         """`log` receives every message to record (Recorder.log); `actuators` maps "arm" and "hand" to the
-        ActuatorPorts that pass commands on; `frames` (a FramePublisher) turns measured joints into /tf."""
+        ActuatorPorts that pass commands on; `frames` (a FramePublisher) turns measured joints into /tf;
+        `sender` (a started CommandSender) makes the commands of a format 4 pipeline."""
         self.clock = clock
         self._log = log
         self.driver = driver
@@ -99,6 +115,12 @@ class SessionLoop:
         self._last_tf_ns = 0
         self._thread: threading.Thread | None = None
         self.halted = ""  # why the session may no longer execute (e.g. the recording failed)
+        self.sender = sender
+        self.sender_active = False  # the sender is commanding (executing, or braking to rest)
+        self._relay_thread: threading.Thread | None = None
+        self._stopping = False
+        self.fault = ""  # why the session stays in preview until the operator engages (a device failed)
+        self._fault_told = False
 
     # ---- producers (any thread) ----------------------------------------------------------------
     def sink(self, sample: Sample, receive_ns: int) -> None:
@@ -118,12 +140,44 @@ class SessionLoop:
     def start(self) -> None:
         self._thread = threading.Thread(target=self._run, name="session-loop", daemon=True)
         self._thread.start()
+        if self.sender is not None:
+            self._relay_thread = threading.Thread(target=self._relay, name="command-relay", daemon=True)
+            self._relay_thread.start()
 
     def stop(self, timeout: float = 5.0) -> None:
-        """Process everything queued so far, then stop."""
+        """Stop the sender, process everything queued so far (its last ticks too), then stop."""
+        self._stopping = True
+        if self.sender is not None:
+            self.sender.stop()
+            if self._relay_thread:
+                self._relay_thread.join(timeout)
         self._queue.put((None, _STOP))
         if self._thread:
             self._thread.join(timeout)
+
+    # ---- the relay thread ------------------------------------------------------------------------
+    def _relay(self) -> None:
+        """The sender's ticks: their commands to the actuators at once, then to the loop to record."""
+        from teleprev.live.sender import SentTick
+
+        while True:
+            items = self.sender.receive(0.2)
+            if items is None:  # the sender has gone
+                self.sender_active = False
+                if not self._stopping:
+                    self.control("halt", why="the command sender stopped")
+                return
+            for item in items:
+                if not isinstance(item, SentTick):
+                    continue
+                tick = item.tick
+                self.sender_active = tick.active
+                received = self.clock.now_ns()
+                for kind, names, q, v in (("arm", self._arm_names, tick.arm, tick.arm_v),
+                                          ("hand", self._effector_names, tick.hand, tick.hand_v)):
+                    if q is not None:
+                        self._send(kind, JointSample(tick.t_ns, names, q, v))
+                self._queue.put((received, item))
 
     def _run(self) -> None:
         while True:
@@ -132,8 +186,10 @@ class SessionLoop:
                 return
             if receive_ns is None:
                 self._control(*item)
-            else:
+            elif isinstance(item, Sample):
                 self._sample(item, receive_ns)
+            else:
+                self._tick(item, receive_ns)
 
     # ---- the loop thread -------------------------------------------------------------------------
     def _stamp(self, receive_ns: int | None = None) -> int:
@@ -174,6 +230,7 @@ class SessionLoop:
             return
         if len(self.stats.step_ns) < 100_000:
             self.stats.step_ns.append(time.perf_counter_ns() - started)
+        self._pass_updates()
         for topic, payload in out.logged:
             self._log(Logged(topic, self._stamp(), payload))
         self._send("arm", out.arm_command)
@@ -186,16 +243,53 @@ class SessionLoop:
             commands_sent=sum(self.stats.commands_sent.values()), dropped=sum(self.stats.dropped.values()),
         )
 
+    def _pass_updates(self) -> None:
+        """The planner's updates the driver made (format 4), to the sender."""
+        if self.driver is not None and self.sender is not None:
+            for update in self.driver.take_updates():
+                self.sender.send(update)
+
+    def _tick(self, item, receive_ns: int) -> None:
+        """Record one of the sender's ticks: its commands and which updates it had (CommandTick)."""
+        tick = item.tick
+        stats = self.stats
+        stats.ticks += 1
+        if len(stats.late_ns) < 1_000_000:
+            stats.late_ns.append(item.late_ns)
+        for topic, names, q, v in ((topics.COMMAND_ARM, self._arm_names, tick.arm, tick.arm_v),
+                                   (topics.COMMAND_HAND, self._effector_names, tick.hand, tick.hand_v)):
+            if q is not None:
+                self._log(Logged(topic, self._stamp(receive_ns), JointSample(tick.t_ns, names, q, v)))
+        data = {"seq": tick.seq, "late_ms": item.late_ns / 1e6, "flags": list(tick.flags), "active": tick.active}
+        self._log(Logged(topics.COMMAND_TICK, self._stamp(), Event(tick.t_ns, "teleprev.CommandTick", data)))
+        self.snapshot = replace(self.snapshot, commands_sent=sum(stats.commands_sent.values()))
+
+    @property
+    def _arm_names(self) -> tuple[str, ...]:
+        return self.driver.pipeline.arm_names
+
+    @property
+    def _effector_names(self) -> tuple[str, ...]:
+        return self.driver.pipeline.effector_names
+
     def _device_failed(self, data: dict) -> None:
-        """A device failed: count it, tell the operator and, in execute, go back to preview, which brakes
-        the commands to rest within their limits (a recorded mode switch, so a replay does the same)."""
+        """A device failed: count it, tell the operator, go back to preview (a recorded mode switch, so a
+        replay does the same) and stay there until the operator engages. An actuator that failed has been
+        stopped by its controller: nothing more is sent (halt). Another device: the commands brake to rest
+        within their limits."""
         name = str(data.get("device", ""))
         self.stats.device_failures[name] += 1
         message = f"device {name} failed: {data.get('message', '')}"
-        if self.driver is not None and self.driver.mode == "execute":
-            self._control("mode", {"mode": "preview", "reason": f"device {name} failed"})
-            message += "; the robot brakes to rest, back in PREVIEW"
-        self.snapshot = replace(self.snapshot, message=message)
+        actuator = name in {getattr(p, "name", None) for p in self.actuators.values()}
+        self.fault, self._fault_told = message, False
+        if self.driver is not None and (self.driver.mode == "execute" or (actuator and self.sender_active)):
+            switch = {"mode": "preview", "reason": f"device {name} failed"}
+            if actuator:
+                switch["halt"] = True
+            self._control("mode", switch)
+            message += ("; nothing more is sent to the robot" if actuator else "; the robot brakes to rest") + \
+                ", back in PREVIEW (press space to engage again)"
+        self.snapshot = replace(self.snapshot, message=message, fault=self.fault)
 
     def _send(self, kind: str, command: JointSample | None) -> None:
         """Through an ActuatorPort: never raises; a device that is down or refuses is counted, not retried."""
@@ -236,14 +330,26 @@ class SessionLoop:
             t = self._stamp(now)
             if self.halted and mode == "execute":
                 refused = self.halted
+            elif self.fault and mode == "execute" and data.get("reason") == "script":
+                refused = f"{self.fault} (an unattended session does not engage again after a fault)"
+                if not self._fault_told:  # why it stays in preview, once per fault
+                    self._fault_told = True
+                    self._event(topics.OPERATOR, "teleprev.OperatorEvent", {"event": "engage_refused", "detail": refused}, now)
             else:
-                refused = self.driver.request_mode(mode, t) if self.driver else "no pipeline"
+                halt = bool(data.get("halt"))
+                refused = self.driver.request_mode("estop" if halt else mode, t) if self.driver else "no pipeline"
             if refused:
                 message = f"cannot switch to {mode}: {refused}"
             else:
                 # An e-stop is recorded as a switch to preview for the reason "estop" (a replay repeats it).
                 switch = {"mode": "preview", "reason": "estop"} if mode == "estop" else {"mode": mode, "reason": data.get("reason", "key")}
+                if data.get("halt"):
+                    switch["halt"] = True
                 self._log(Logged(topics.MODE, t, Event(t, "teleprev.ModeSwitch", switch)))
+                self._pass_updates()
+                if mode == "execute":
+                    self.stats.engages += 1
+                    self.fault = ""  # the operator engaged again
         elif action in ("start", "stop", "discard", "outcome"):
             tracker = self.episodes
             if action == "start":
@@ -264,5 +370,5 @@ class SessionLoop:
         self.snapshot = replace(
             self.snapshot, mode=self.driver.mode if self.driver else "preview", episode=self.episodes.index,
             episode_active=self.episodes.active, task=self.episodes.task, episode_started_ns=self.episodes.started_ns,
-            message=message or self.snapshot.message,
+            message=message or self.snapshot.message, fault=self.fault,
         )

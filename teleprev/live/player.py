@@ -23,7 +23,7 @@ from teleprev.errors import DeviceError, SessionError
 from teleprev.messages import JointSample
 from teleprev.pipeline.derivatives import divided_differences, runs
 from teleprev.pipeline.guard import JointGuard
-from teleprev.pipeline.motion import RESUME_GAP_NS
+from teleprev.pipeline.derivatives import RESUME_GAP_NS
 from teleprev.pipeline.trajectory import JointMotion
 from teleprev import topics
 from teleprev.session.reader import SessionReader

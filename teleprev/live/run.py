@@ -96,7 +96,9 @@ ENGAGE_RETRY_S = 0.25
 def run_script(recording: LiveSession, duration: float, episodes: int, engage_after: float | None,
                console: Console | None = None, view: str = "side", fps: float = 25.0) -> PreviewStats:
     """Unattended: `episodes` episodes filling `duration` seconds, each engaging after `engage_after` s (asked
-    again every ENGAGE_RETRY_S while the pipeline refuses, until the episode's end)."""
+    again every ENGAGE_RETRY_S while the pipeline refuses, until the episode's end). An episode engages once:
+    after a fault has sent it back to preview it stays there (the loop refuses an unattended engage after
+    a fault until the operator engages with a key)."""
     stats = PreviewStats()
     loop = recording.loop
     dashboard = make_dashboard(recording, view) if console is not None else None
@@ -113,7 +115,8 @@ def run_script(recording: LiveSession, duration: float, episodes: int, engage_af
         plan.append((t0 + length - 1e-3, "stop", {}))
     if live:
         live.start()
-    engage_until, asked = None, 0.0  # an engage the pipeline refused (e.g. nothing previewed yet) is asked again
+    # an engage the pipeline refused (e.g. nothing previewed yet) is asked again, until one is accepted
+    engage_until, asked, engaged_before = None, 0.0, 0
     try:
         while True:
             elapsed = time.perf_counter() - start
@@ -122,9 +125,10 @@ def run_script(recording: LiveSession, duration: float, episodes: int, engage_af
                 loop.control(action, **kwargs)
                 if action == "mode":
                     engage_until = plan[0][0] if kwargs["mode"] == "execute" and plan else None
-                    asked = elapsed
-            if engage_until is not None and loop.snapshot.mode != "execute" and elapsed < engage_until \
-                    and elapsed - asked >= ENGAGE_RETRY_S:
+                    asked, engaged_before = elapsed, loop.stats.engages
+            if engage_until is not None and loop.stats.engages > engaged_before:
+                engage_until = None  # engaged: this episode asks no more
+            if engage_until is not None and elapsed < engage_until and elapsed - asked >= ENGAGE_RETRY_S:
                 loop.control("mode", mode="execute", reason="script")
                 asked = elapsed
             if (elapsed >= duration and not plan) or recording.failure:

@@ -90,6 +90,9 @@ class LiveSession:
             if self.view is not None:
                 self.view.close()
             raise
+        from teleprev.live.sender import CommandSender
+        from teleprev.pipeline.planner import CommandPlanner
+
         self.loop = SessionLoop(
             self.clock, self._log, self.driver,
             frames=FramePublisher(self.robot, sensor_frames(rig, self.robot, rig_calibration(rig))),
@@ -97,6 +100,7 @@ class LiveSession:
         )
         self.runners = {name: DeviceRunner(dev, self.loop.sink, self.clock) for name, dev in self.devices.items()}
         self.loop.actuators = {kind: ActuatorPort(self.devices[first[kind]], self.runners[first[kind]]) for kind in ("arm", "hand")}
+        self.sender = CommandSender(CommandPlanner.for_pipeline(self.pipeline), self.clock, rig.pipeline.command_rate_hz)
         self.summary = None
 
     def _recording_failed(self, exc: OSError) -> None:
@@ -121,10 +125,9 @@ class LiveSession:
         start = time.monotonic()
         asked = False
         while time.monotonic() < start + timeout_s:
-            state = self.driver.state
-            if state.mode == "preview" and (state.motion is None or not state.motion.moving):
+            if self.driver.state.mode == "preview" and not self.loop.sender_active:
                 return True
-            if not asked and state.mode != "preview" and time.monotonic() > start + 0.25:
+            if not asked and self.driver.state.mode != "preview" and time.monotonic() > start + 0.25:
                 # no switch to preview was on its way (the caller's would have arrived by now): ask for one
                 self.loop.control("mode", mode="preview", reason="stop")
                 asked = True
@@ -169,6 +172,8 @@ class LiveSession:
         return meta
 
     def start(self) -> "LiveSession":
+        self.sender.start()  # forked first, before this session starts any thread
+        self.loop.sender = self.sender
         self.recorder.start()
         t = self.clock.now_ns()  # first in the file, so that Foxglove's URDF layer has the robot from the start
         self._log(Logged(topics.ROBOT_DESCRIPTION, t, RobotDescription(t, self.robot.urdf_path.read_text())))
@@ -188,9 +193,13 @@ class LiveSession:
         self.loop.control("stop")
         self.loop.stop()
         stats = self.loop.stats
+        status = self.sender.status
         extra = {"loop": {"dropped": json.dumps(dict(stats.dropped)), "commands_sent": json.dumps(dict(stats.commands_sent)),
                           "command_errors": json.dumps(dict(stats.command_errors)),
                           "device_failures": json.dumps(dict(stats.device_failures))},
+                 "sender": {"rate_hz": f"{1e9 / self.sender.period_ns:g}", "ticks": str(stats.ticks),
+                            "realtime": "true" if status and status.realtime else "false",
+                            "detail": status.detail if status else "", "dropped_updates": str(self.sender.dropped_updates)},
                  "devices": {name: json.dumps(counts) for name, counts in self.device_counts().items()}}
         try:
             self.summary = self.recorder.close(extra)

@@ -22,6 +22,7 @@ class PipelineConfig:
     hand_speed: float = 6.0  # rad/s cap on hand command steps (the URDF's limit is 8.48)
     engage_speed_frac: float = 0.5  # fraction of the caps used while ramping to the preview on engage
     max_command_dt_ms: float = 25.0  # a gap between commands longer than this still allows only this much motion
+    command_rate_hz: float = 120.0  # the paced sender's rate: commands to the arm and the end effector per second
     ik_iterations: int = 10  # per step; tracking continues from a best effort within limits next step
     ik_position_tolerance: float = 1e-3  # metres: well under a human wrist's tremor
     ik_rotation_tolerance: float = 1e-2  # radians
@@ -40,6 +41,8 @@ class PipelineConfig:
     def __post_init__(self):
         if self.gripper_joint not in HAND_JOINTS:
             raise ValueError(f"gripper_joint must be an SMPL-X hand joint ({', '.join(HAND_JOINTS)}), got {self.gripper_joint!r}")
+        if not 10 <= self.command_rate_hz <= 1000:
+            raise ValueError(f"command_rate_hz must be in [10, 1000], got {self.command_rate_hz!r}")
         if not 0 <= self.tf_rate_hz < float("inf"):
             raise ValueError(f"tf_rate_hz must be >= 0 (0: every arm state sample), got {self.tf_rate_hz!r}")
         for key in ("arm_speed", "hand_speed", "arm_acceleration", "arm_jerk", "hand_acceleration"):

@@ -8,11 +8,12 @@ switches through a driver built from the same rig and models reproduces the reco
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 
 from teleprev.messages import Event, JointSample, Logged, PoseSample
+from teleprev.pipeline.planner import ModeUpdate, TargetUpdate
 from teleprev.pipeline.step import HandInput, Pipeline, PipelineState, StepInputs, StepResult
 from teleprev import topics
 
@@ -74,6 +75,17 @@ class PipelineDriver:
         self.latest: dict[str, object] = {}
         self.last_result: StepResult | None = None
         self._names = recorded_names(pipeline)
+        self._seq = 0  # the planner's updates, numbered in the order they are made (format 4)
+        self._updates: list[TargetUpdate | ModeUpdate] = []
+
+    def take_updates(self) -> list[TargetUpdate | ModeUpdate]:
+        """The planner's updates made since the last call, in order (format 4; none for older formats)."""
+        out, self._updates = self._updates, []
+        return out
+
+    def _queue(self, update) -> None:
+        self._seq += 1
+        self._updates.append(replace(update, seq=self._seq))
 
     @property
     def mode(self) -> str:
@@ -94,8 +106,12 @@ class PipelineDriver:
         return out
 
     def request_mode(self, mode: str, t_ns: int) -> str:
-        """Switch preview/execute at log time t_ns; returns "" or why it was refused."""
-        self.state, refused = self.pipeline.set_mode(self.state, mode, self._inputs(t_ns))
+        """Switch preview/execute (or "estop") at log time t_ns; returns "" or why it was refused. An accepted
+        switch of a format 4 pipeline makes the planner's ModeUpdate."""
+        inputs = self._inputs(t_ns)
+        self.state, refused = self.pipeline.set_mode(self.state, mode, inputs)
+        if not refused and self.pipeline.plans_commands:
+            self._queue(self.pipeline.mode_update(mode, inputs, 0))
         return refused
 
     def feed(self, msg: Logged, hand_input: HandInput | None = None) -> Outputs:
@@ -113,10 +129,11 @@ class PipelineDriver:
                 self.latest[topic] = payload
         elif topic == topics.MODE and isinstance(payload, Event):
             # A recorded switch: it was accepted live, and the same state accepts it again.
-            mode = "estop" if payload.data.get("reason") == "estop" else payload.data.get("mode", "")
+            data = payload.data
+            mode = "estop" if data.get("reason") == "estop" or data.get("halt") else data.get("mode", "")
             self.request_mode(mode, msg.log_time_ns)
             return None
-        if topic == self.topics.arm and self.pipeline.motion is not None:
+        if topic == self.topics.arm and not self.pipeline.plans_commands and self.pipeline.motion is not None:
             # The trigger device may have gone quiet with the commands still moving: the arm's state
             # samples keep the clock going so that the commands brake to rest instead of freezing.
             result = self.pipeline.idle_step(self.state, self._inputs(msg.log_time_ns))
@@ -127,6 +144,8 @@ class PipelineDriver:
         if result is not None:
             self.state = result.state
             self.last_result = result
+            if result.update is not None:
+                self._queue(result.update)
         return result
 
     def _outputs(self, result: StepResult, t: int) -> Outputs:

@@ -19,6 +19,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from teleprev.pipeline.derivatives import RESUME_GAP_NS
 from teleprev.pipeline.frozen import evolve
 from teleprev.kernels.motion import (ESTIMATE_BLEND, ESTIMATE_GIVEN, ESTIMATE_HELD, ESTIMATE_NONE, ESTIMATE_RAW,
                                        ESTIMATE_ZERO)
@@ -28,7 +29,6 @@ ENGAGED_TOL = 0.02  # rad (m for a gripper): the engage ramp is over once the co
 # targets (a human wrist often moves the target faster than the ramp's half speed, so a tight tolerance never ends it)
 FEEDFORWARD_MAX_GAP_NS = 100_000_000  # wrist samples further apart than this give no velocity estimate
 EXTRAPOLATE_MAX_NS = 50_000_000
-RESUME_GAP_NS = 60_000_000  # commands further apart than this: the arm has stopped at the last one (sim.arm agrees)
 RESUME_STEP_S = 0.01  # the first step after such a pause (the sim arm's state period)
 FEEDFORWARD_TAU_NS = 30e6  # smoothing of the target velocity estimate (IK jitters by its tolerance)
 

@@ -1,14 +1,18 @@
-"""The numpy arithmetic that computed sessions of formats 1 and 2, kept so that they re-run bit for bit.
+"""The arithmetic that computed sessions of formats 1 to 3, kept so that they re-run bit for bit.
 
-From format 3 on, the pipeline's arithmetic is compiled (teleprev/kernels/); its last bits differ from
-numpy's (Cholesky against LU, libm's sin/cos/atan2 against numpy's, float32 sums in a fixed order against
-OpenBLAS's), so `teleprev eval` re-runs an older session with these classes, each the current one with
-the numpy arithmetic in place of the kernels:
+Up to format 3 a pipeline step made its commands itself, at the glove's rate (StepCommandsPipeline: the
+commands kept to the motion limits by Motion, formats 2 and 3); from format 4 on the paced sender samples
+them from the step's targets (teleprev/pipeline/planner.py). Up to format 2 the arithmetic was numpy's,
+whose last bits differ from the compiled kernels' of format 3 on (Cholesky against LU, libm's
+sin/cos/atan2 against numpy's, float32 sums in a fixed order against OpenBLAS's), so `teleprev eval`
+re-runs those sessions with these classes, each the current one with the numpy arithmetic in place of the
+kernels:
 
     NumpyArmIK           damped least squares with numpy's solver          (robot/ik.py: ArmIK)
     NumpyArmRetargeter   the wrist-to-TCP target in numpy                  (retarget/arm.py: ArmRetargeter)
     NumpySweptCheck      every segment by the numpy check                  (pipeline/swept.py: SweptCheck)
     NumpyCorrector       the numpy CPN and CCN                             (noncollision/corrector.py)
+    StepCommandsPipeline commands made by each step (formats 2 and 3)       (pipeline/step.py: Pipeline)
     NumpyPipeline        the glove preparation in numpy, and format 1's     (pipeline/step.py: Pipeline)
                          commands: speed caps alone, no motion limits
 
@@ -26,7 +30,7 @@ from teleprev.noncollision.corrector import Corrector, Prepared
 from teleprev.noncollision.mlp import SCORE_BAND
 from teleprev.pipeline.frozen import evolve
 from teleprev.pipeline.step import (ENGAGED_TOL, MAX_ABDUCTION, MAX_FLEXION, MAX_JOINT_ROTATION, MIN_FLEXION, HandInput,
-                                    Pipeline, PipelineState, StepInputs)
+                                    Pipeline, PipelineState, StepInputs, StepResult)
 from teleprev.pipeline.swept import SweptCheck
 from teleprev.retarget.arm import Anchor, ArmRetargeter
 from teleprev.robot.collision_report import CollisionReport
@@ -179,7 +183,29 @@ class NumpyCorrector(Corrector):
         return None if hi == steps else q0 + (hi / steps) * delta
 
 
-class NumpyPipeline(Pipeline):
+class StepCommandsPipeline(Pipeline):
+    """Formats 2 and 3: each step makes its commands (Motion.commands), at the glove's rate; the arm's state
+    samples brake them between steps (idle steps) when the glove goes quiet."""
+
+    plans_commands = False
+
+    def set_mode(self, state: PipelineState, mode: str, inputs: StepInputs) -> tuple[PipelineState, str]:
+        return self.motion.set_mode(self, state, mode, inputs)
+
+    def _outputs(self, state: PipelineState, new: PipelineState, inputs: StepInputs, arm_target, effector_target,
+                 flags: list[str]):
+        new, arm_cmd, eff_cmd = self.motion.commands(self, state, new, inputs, arm_target, effector_target, flags)
+        return new, arm_cmd, eff_cmd, None
+
+    def idle_step(self, state: PipelineState, inputs: StepInputs) -> StepResult | None:
+        """Between trigger samples: a step that only brakes moving commands, when no step came for a while."""
+        if self.motion is None or not self.motion.idle_due(state, inputs.t_ns):
+            return None
+        new, arm_cmd, eff_cmd, report = self.motion.idle(self, state, inputs)
+        return StepResult(new, None, None, None, arm_cmd, eff_cmd, report)
+
+
+class NumpyPipeline(StepCommandsPipeline):
     """The glove preparation in numpy (element-wise array arithmetic: a batch gives each row the bits it
     gets alone); without a Motion (format 1), commands under the speed caps alone."""
 
@@ -249,10 +275,10 @@ class NumpyPipeline(Pipeline):
             return state, refused
         return evolve(state, mode="execute", arm_cmd=arm_q, effector_cmd=eff_q, cmd_ns=inputs.t_ns, engaging=True), ""
 
-    def _commands(self, state: PipelineState, new: PipelineState, inputs: StepInputs, arm_target, effector_target,
-                  flags: list[str]):
+    def _outputs(self, state: PipelineState, new: PipelineState, inputs: StepInputs, arm_target, effector_target,
+                 flags: list[str]):
         if self.motion is not None:
-            return super()._commands(state, new, inputs, arm_target, effector_target, flags)
+            return super()._outputs(state, new, inputs, arm_target, effector_target, flags)
         arm_cmd = eff_cmd = None
         if state.mode == "execute":
             arm_q, effector_q = new.arm_q, new.effector_q
@@ -271,4 +297,4 @@ class NumpyPipeline(Pipeline):
                 new = evolve(new, arm_cmd=a, effector_cmd=e, cmd_ns=inputs.t_ns, engaging=engaging)
             if state.engaging:
                 flags.append("engaging")
-        return new, arm_cmd, eff_cmd
+        return new, arm_cmd, eff_cmd, None

@@ -1,16 +1,16 @@
-"""One pipeline step: human pose in, robot targets and (in execute mode) guarded commands out.
+"""One pipeline step: human pose in, robot targets out.
 
-    glove hand pose --retarget--> effector joints --Corrector--> collision-free target --guard--> command
-    suit wrist pose --relative to the anchor--> TCP target --IK--> arm joints ------------guard--> command
+    glove hand pose --retarget--> effector joints --Corrector--> collision-free target --+
+    suit wrist pose --relative to the anchor--> TCP target --IK--> arm joints ------------+--> TargetUpdate
 
 `Pipeline.step(state, inputs)` is a pure function of its arguments: the same state and inputs give the
-same outputs bit for bit, which is what lets `teleprev eval` re-run recorded sessions exactly. In preview
-mode it computes everything and commands nothing; switching to execute starts an engage ramp from the
-robot's measured joints to the previewed target at a fraction of the speed caps, after which the robot
-follows at the full caps. Inputs that are missing, stale, non-finite or implausible hold the last valid
-target and are flagged; nothing computed from them is sent. With a Motion (teleprev/pipeline/motion.py,
-sessions of format 2 on) the commands also keep to acceleration and jerk limits and brake to rest
-instead of freezing; its state is PipelineState.motion.
+same outputs bit for bit, which is what lets `teleprev eval` re-run recorded sessions exactly. Its targets
+(with their velocity, estimated from the targets before) go to the command planner as a TargetUpdate; the
+paced sender samples the commands from them at the instant it sends (teleprev/pipeline/planner.py,
+session format 4). In preview the planner commands nothing; an accepted switch to execute
+(`set_mode`, then `mode_update`) starts from the robot's measured joints. Inputs that are missing, stale,
+non-finite or implausible give no target for their side and are flagged; nothing computed from them is
+sent. Sessions of formats 1 to 3 made their commands in the step itself (teleprev/pipeline/older_formats.py).
 """
 
 from __future__ import annotations
@@ -28,7 +28,8 @@ from teleprev.pipeline.config import PipelineConfig
 from teleprev.pipeline.effectors import Effector
 from teleprev.pipeline.frozen import evolve
 from teleprev.pipeline.guard import JointGuard
-from teleprev.pipeline.motion import Motion
+from teleprev.pipeline.motion import FEEDFORWARD_TAU_NS, Motion
+from teleprev.pipeline.planner import EstimateState, ModeUpdate, TargetEstimates, TargetUpdate
 from teleprev.retarget.arm import Anchor, ArmRetargeter
 
 # Human plausibility limits: beyond these a glove or suit is broken, not bending.
@@ -70,11 +71,11 @@ class PipelineState:
     arm_q_before: np.ndarray | None = None  # the one before: with arm_q, a constant-velocity IK warm start
     arm_solved_ns: int = -1  # stamp of the wrist sample arm_q solves, when it converged (else -1)
     effector_q: np.ndarray | None = None  # last effector target (collision-free for a hand)
-    arm_cmd: np.ndarray | None = None  # last commands sent (execute mode)
+    arm_cmd: np.ndarray | None = None  # formats 1 to 3: the last commands sent (execute mode)
     effector_cmd: np.ndarray | None = None
     cmd_ns: int | None = None
     engaging: bool = False
-    motion: Any = None  # teleprev.pipeline.motion.MotionState, when the pipeline has a Motion
+    motion: Any = None  # formats 2 and 3: Motion's MotionState; format 4: the targets' EstimateState
 
 
 @dataclass(frozen=True)
@@ -83,19 +84,22 @@ class StepResult:
     retargeted: np.ndarray | None = None
     corrected: np.ndarray | None = None
     arm_target: np.ndarray | None = None
-    arm_command: np.ndarray | None = None
+    arm_command: np.ndarray | None = None  # formats 1 to 3: the step's own commands
     effector_command: np.ndarray | None = None
     report: dict = field(default_factory=dict)
+    update: TargetUpdate | None = None  # format 4: the targets for the command planner
 
 
 class Pipeline:
-    """The step of sessions of format 3 on: compiled glove preparation, arm IK and Corrector, commands kept
-    to the motion limits by `motion`. Older formats' arithmetic: teleprev/pipeline/older_formats.py."""
+    """The step of sessions of format 4: compiled glove preparation, arm IK and Corrector; targets for the
+    command planner, whose limits are `motion`'s. Older formats: teleprev/pipeline/older_formats.py."""
+
+    plans_commands = True  # its commands come from the planner (format 4); False: from the step itself
 
     def __init__(self, cfg: PipelineConfig, arm: ArmRetargeter, arm_guard: JointGuard, effector: Effector,
                  motion: Motion | None):
         self.cfg = cfg
-        self.motion = motion  # teleprev.pipeline.motion.Motion: limits on acceleration and jerk
+        self.motion = motion  # teleprev.pipeline.motion.Motion: the limits on acceleration and jerk
         self.arm = arm
         self.arm_names = arm.ik.joint_names
         self.arm_guard = arm_guard
@@ -109,6 +113,7 @@ class Pipeline:
             FRAME_TURN, np.array([MAX_JOINT_ROTATION**2, MIN_FLEXION, MAX_FLEXION, MAX_ABDUCTION, TWIST_NOISE]),
             table if table is not None else np.zeros((5, 0)))
         glove_kernels.prepare_rows(np.zeros((1, 45)), *self._glove)  # load it from numba's cache now
+        self._estimates = TargetEstimates(cfg.arm_feedforward, FEEDFORWARD_TAU_NS)
 
     def model_hashes(self) -> dict[str, str] | None:
         """{role: sha256} of the model files the pipeline runs (a session records them, eval compares);
@@ -208,21 +213,51 @@ class Pipeline:
 
     # ---- mode ----------------------------------------------------------------------------------
     def set_mode(self, state: PipelineState, mode: str, inputs: StepInputs) -> tuple[PipelineState, str]:
-        """Switch preview/execute (or "estop"); returns the new state and "" or why the switch was refused."""
-        return self.motion.set_mode(self, state, mode, inputs)
+        """Switch preview/execute (or "estop"); returns the new state and "" or why the switch was refused.
+        A switch to preview re-anchors at the next step: the preview starts again from where the robot is."""
+        if mode == state.mode and mode != "estop":
+            return state, ""
+        if mode in ("preview", "estop"):
+            return evolve(state, mode="preview", anchor=None, arm_q=None, arm_q_before=None, arm_solved_ns=-1,
+                          engaging=False), ""
+        if mode != "execute":
+            return state, f"unknown mode {mode!r}"
+        start = self.engage_start(state, inputs)
+        if isinstance(start, str):
+            return state, start
+        refused = self.invalid_start(start[1])
+        if refused:
+            return state, refused
+        return evolve(state, mode="execute"), ""
 
-    def engage_start(self, state: PipelineState, inputs: StepInputs) -> tuple[np.ndarray, np.ndarray] | str:
-        """Where an engage would start: the measured arm and end effector within their limits, or why it
-        cannot (no measured state, nothing previewed yet). `invalid_start` says whether the end effector's
-        may be commanded (its check can be long: the callers ask it last)."""
+    def mode_update(self, mode: str, inputs: StepInputs, seq: int) -> ModeUpdate:
+        """What an accepted switch (set_mode's) tells the planner: execute from the measured state, preview,
+        or halt (an e-stop, or a failed actuator: nothing more is sent)."""
+        if mode == "execute":
+            arm, hand = self.measured_start(inputs)
+            return ModeUpdate(seq, inputs.t_ns, mode, arm, hand)
+        return ModeUpdate(seq, inputs.t_ns, "halt" if mode == "estop" else "preview")
+
+    def measured_start(self, inputs: StepInputs) -> tuple[np.ndarray, np.ndarray] | str:
+        """The measured arm and end effector within their limits (where an engage starts), or why there
+        are none."""
         arm_q = self.measured(inputs.arm, self.arm_names)
         eff_q = self.measured(inputs.effector, self.effector_names)
         if arm_q is None or eff_q is None:
             return "no measured state from the arm or the end effector"
-        if state.arm_q is None or state.effector_q is None:
-            return "nothing previewed yet (waiting for glove and suit)"
         return (np.clip(arm_q, self.arm_guard.lower, self.arm_guard.upper),
                 np.clip(eff_q, self.effector.guard.lower, self.effector.guard.upper))
+
+    def engage_start(self, state: PipelineState, inputs: StepInputs) -> tuple[np.ndarray, np.ndarray] | str:
+        """measured_start, or why an engage cannot start (no measured state, nothing previewed yet).
+        `invalid_start` says whether the end effector's may be commanded (its check can be long: the
+        callers ask it last)."""
+        start = self.measured_start(inputs)
+        if isinstance(start, str):
+            return start
+        if state.arm_q is None or state.effector_q is None:
+            return "nothing previewed yet (waiting for glove and suit)"
+        return start
 
     def invalid_start(self, eff_q: np.ndarray) -> str:
         """"" or why the end effector's measured state (within its limits) is no command to start from."""
@@ -276,20 +311,25 @@ class Pipeline:
 
         new = evolve(state, step=state.step + 1, anchor=anchor, arm_q=arm_q, arm_q_before=arm_q_before,
                       arm_solved_ns=solved_ns, effector_q=effector_q)
-        new, arm_cmd, eff_cmd = self._commands(state, new, inputs, arm_q if arm_fresh else None,
-                                               effector_q if angles is not None else None, flags)
+        arm_target, effector_target = arm_q if arm_fresh else None, effector_q if angles is not None else None
+        new, arm_cmd, eff_cmd, update = self._outputs(state, new, inputs, arm_target, effector_target, flags)
         report["flags"] = flags
-        return StepResult(new, retargeted, corrected, arm_q if arm_fresh else None, arm_cmd, eff_cmd, report)
+        return StepResult(new, retargeted, corrected, arm_target, arm_cmd, eff_cmd, report, update)
 
-    def _commands(self, state: PipelineState, new: PipelineState, inputs: StepInputs, arm_target, effector_target,
-                  flags: list[str]):
-        """(new state, arm command or None, effector command or None) for this step's fresh targets (None
-        where the input was unusable)."""
-        return self.motion.commands(self, state, new, inputs, arm_target, effector_target, flags)
+    def _outputs(self, state: PipelineState, new: PipelineState, inputs: StepInputs, arm_target, effector_target,
+                 flags: list[str]):
+        """(new state, arm command, effector command, update) for this step's fresh targets (None where the
+        input was unusable): no commands, the targets with their velocity estimates for the planner."""
+        est = new.motion if new.motion is not None else EstimateState()
+        arm_v = hand_v = None
+        arm_ns = inputs.wrist.stamp_ns if arm_target is not None else 0
+        if arm_target is not None:
+            arm_v, est = self._estimates.arm(est, arm_target, arm_ns)
+        if effector_target is not None:
+            hand_v, est = self._estimates.hand(est, effector_target, inputs.t_ns)
+        update = TargetUpdate(0, inputs.t_ns, arm_target, arm_v, arm_ns, effector_target, hand_v)
+        return evolve(new, motion=est), None, None, update
 
     def idle_step(self, state: PipelineState, inputs: StepInputs) -> StepResult | None:
-        """Between trigger samples: a step that only brakes moving commands, when no step came for a while."""
-        if self.motion is None or not self.motion.idle_due(state, inputs.t_ns):
-            return None
-        new, arm_cmd, eff_cmd, report = self.motion.idle(self, state, inputs)
-        return StepResult(new, None, None, None, arm_cmd, eff_cmd, report)
+        """Format 4 has none: the planner's own ticks brake commands whose targets stopped coming."""
+        return None

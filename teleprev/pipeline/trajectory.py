@@ -126,6 +126,20 @@ class ArmGenerator:
             return self.stop(s, dt), False
         return out[0], out[1]
 
+    def stop_position(self, s: JointMotion) -> np.ndarray:
+        """Where the hardest stop the limits allow (stop's profile) comes to rest from s."""
+        inp = self._inp
+        velocity = np.maximum(self.velocity, np.abs(s.v)).tolist()
+        inp.current_velocity = s.v.tolist()
+        inp.current_acceleration = s.a.tolist()
+        inp.max_velocity = velocity
+        inp.min_velocity = [-m for m in velocity]
+        inp.control_interface = self._velocity_interface
+        inp.current_position = self._zero
+        if self._otg.calculate(inp, self._traj).value < 0:
+            return s.q
+        return s.q + np.array(self._traj.at_time(self._traj.duration)[0])
+
     def stop(self, s: JointMotion, dt: float) -> JointMotion:
         """A controlled stop: velocity and acceleration brought to zero within the limits."""
         inp = self._inp

@@ -22,11 +22,12 @@ def record_sim(out: Path, rig: str = "sim.toml", seconds: float = 3.0, episodes:
             if engage_after is not None:
                 time.sleep(engage_after)
                 end = time.monotonic() + seconds - engage_after
-                rec.loop.control("mode", mode="execute", reason="test")
+                engaged = rec.loop.stats.engages
+                rec.loop.control("mode", mode="execute", reason="script")
                 while time.monotonic() < end:  # refused (e.g. nothing previewed yet under load): ask again
-                    time.sleep(min(0.25, max(0.0, end - time.monotonic())))
-                    if rec.loop.snapshot.mode != "execute" and time.monotonic() < end:
-                        rec.loop.control("mode", mode="execute", reason="test")
+                    time.sleep(min(0.25, max(0.0, end - time.monotonic())))  # until engaged, as `record` does
+                    if rec.loop.stats.engages == engaged and time.monotonic() < end:
+                        rec.loop.control("mode", mode="execute", reason="script")
             else:
                 time.sleep(seconds)
             rec.loop.control("mode", mode="preview", reason="test")

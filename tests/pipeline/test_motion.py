@@ -26,7 +26,7 @@ def _rig(end_effector="parallel_gripper", robot="xarm6_parallel_gripper", **pipe
 
 @pytest.fixture(scope="module")
 def pipeline():
-    return build_pipeline(_rig())
+    return build_pipeline(_rig(), session_format=3)  # format 3: commands made at each step (Motion)
 
 
 def derivatives(t_ns, q):
@@ -169,7 +169,7 @@ def test_the_motion_step_is_deterministic(pipeline):
 
 
 def test_limits_come_from_the_rig_before_the_table():
-    p = build_pipeline(_rig(arm_acceleration=4.0, arm_jerk=100.0))
+    p = build_pipeline(_rig(arm_acceleration=4.0, arm_jerk=100.0), session_format=3)
     _, results = run(p, 500, engage_at=100)
     t, q = commands(results)
     v, a, j = derivatives(t, q)

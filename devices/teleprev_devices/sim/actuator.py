@@ -27,7 +27,7 @@ A = TypeVar("A", bound=ActuatorSettings)
 class SimActuator(SimDevice[A], Actuator[A], stream="state", payload="joints"):
     """Joint state on /<kind>/<name>/state. Subclasses set, in __init__ after this one: joint_names,
     lower, upper and max_velocity (`use_urdf_joints` sets all four), home and max_acceleration. A command
-    takes effect from the first state step after it was received."""
+    takes effect from the first state step at or after its stamp (the instant it was sent)."""
 
     def __init__(self, name: str, settings: A, context: DeviceContext):
         super().__init__(name, settings, context)
@@ -83,10 +83,11 @@ class SimActuator(SimDevice[A], Actuator[A], stream="state", payload="joints"):
         with self._lock:
             target = (self._commands[-1][1] if self._commands else self.follower.target).copy()
             target[[self._index[n] for n in command.names]] = positions
-            self._commands.append((self.context.clock.now_ns(), target))
+            # servo mode runs a command from the instant it was sent (its stamp), however late it arrived
+            self._commands.append((command.stamp_ns, target))
 
     def _advance(self, true_ns: int) -> None:
-        """Integrate up to true_ns in steps of the state period, each with the latest command received by then."""
+        """Integrate up to true_ns in steps of the state period, each with the latest command sent by then."""
         if self._stepped_ns is None:
             self._stepped_ns = true_ns
             return

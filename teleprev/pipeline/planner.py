@@ -1,0 +1,327 @@
+"""Commands sampled at the instant they are sent: the arithmetic of the paced command sender (format 4).
+
+From session format 4 on, a pipeline step makes no commands. It hands the planner its targets (a
+TargetUpdate: the arm's IK solution and the hand's corrected joints, each with the velocity the step
+estimated from the targets before it) and every accepted mode switch (a ModeUpdate). The planner runs on
+the sender's clock (teleprev/live/sender.py): at each tick it adopts the updates that have arrived, then
+samples the motion at the tick's own instant. A late tick samples further along, so it is never followed
+by a catch-up burst, and nothing the session loop does (or fails to do in time) reaches the commands
+other than through their targets.
+
+    arm    a jerk-limited profile (ruckig) from the last command's position, velocity and acceleration
+           towards the target moved on by its velocity to this instant (at most EXTRAPOLATE_MAX_NS; then
+           the target held there, met at rest), sampled at the tick; a profile whose stop (braking as
+           hard as the limits allow from the sampled state) would pass a joint limit is not taken: the
+           arm brakes instead, so it never needs holding at a limit
+    hand   the acceleration cap, each command segment checked for self-collision with the clearance
+           (Motion's hand step, one tick long)
+    stale  a target older than the pipeline's stale limit: that side brakes to rest, then holds
+    pause  ticks further apart than RESUME_GAP_NS (the sender starved): the arm stood at the last
+           command meanwhile, so the next commands start from rest there, one short step in
+    engage from the measured state at rest (ModeUpdate "execute"), at the engage fraction of the speed
+           caps until the commands meet the targets; while braking after a switch to preview, an
+           engage carries on from where the commands are
+    preview both sides brake to rest within their limits, then nothing more is sent
+    halt   nothing more is sent at once (an e-stop; an actuator that failed: its controller stopped it)
+
+In execute every tick sends both sides, holding where there is nothing to move to, so a controller never
+sees a paused stream while engaged. The planner is deterministic: the same updates adopted at the same
+ticks give the same commands bit for bit, which is how `teleprev eval` re-runs a format 4 session (each
+tick's record names the last update it had adopted).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from teleprev.kernels.motion import ESTIMATE_GIVEN, ESTIMATE_HELD, ESTIMATE_NONE
+from teleprev.pipeline.derivatives import RESUME_GAP_NS
+from teleprev.pipeline.frozen import evolve
+from teleprev.pipeline.motion import ENGAGED_TOL, EXTRAPOLATE_MAX_NS, FEEDFORWARD_MAX_GAP_NS, RESUME_STEP_S, Motion
+from teleprev.pipeline.trajectory import PLAN_GOAL, JointMotion
+
+
+@dataclass(frozen=True)
+class TargetUpdate:
+    """One pipeline step's targets for the planner. A side's target is None where its input was unusable
+    (missing, stale, invalid): that side brakes."""
+
+    seq: int
+    t_ns: int  # the step's log time: its inputs' time
+    arm: np.ndarray | None = None  # IK solution
+    arm_v: np.ndarray | None = None  # its velocity, estimated from the wrist samples before (None: none)
+    arm_ns: int = 0  # the stamp of the wrist sample it solves: extrapolated from there
+    hand: np.ndarray | None = None  # the end effector's target (the Corrector's, for a hand)
+    hand_v: np.ndarray | None = None
+
+
+@dataclass(frozen=True)
+class ModeUpdate:
+    """An accepted mode switch: "execute" (from `arm` / `hand`, the measured state within the limits),
+    "preview" (brake to rest, then send nothing) or "halt" (send nothing more, at once)."""
+
+    seq: int
+    t_ns: int
+    mode: str
+    arm: np.ndarray | None = None
+    hand: np.ndarray | None = None
+
+
+@dataclass(frozen=True)
+class Tick:
+    """What one tick sent: the commands (None: that side sent nothing) at the tick's instant t_ns, the last
+    update adopted by then, and flags saying why the commands are as they are."""
+
+    t_ns: int
+    seq: int
+    arm: np.ndarray | None
+    arm_v: np.ndarray | None
+    hand: np.ndarray | None
+    hand_v: np.ndarray | None
+    flags: tuple[str, ...] = ()
+    active: bool = True  # the planner still commands after this tick (False: it came to rest in preview)
+
+
+@dataclass
+class _Side:
+    """The commands of one side: position, velocity (and acceleration, for the arm's JointMotion)."""
+
+    motion: JointMotion | None = None  # the arm
+    q: np.ndarray | None = None  # the hand (or gripper / vacuum)
+    v: np.ndarray | None = None
+
+
+@dataclass
+class PlannerState:
+    mode: str = "preview"  # "preview" | "execute"
+    active: bool = False  # commanding (executing, or braking after a switch to preview)
+    engaging: bool = False
+    last_ns: int | None = None  # the last tick that sent
+    dt_before: float = 0.0  # the interval before it (the hand cap's span)
+    arm: _Side = field(default_factory=_Side)
+    hand: _Side = field(default_factory=_Side)
+    target: TargetUpdate | None = None  # the latest adopted
+    seq: int = 0  # the last update adopted
+
+
+class CommandPlanner:
+    """Samples the commands at each tick from the adopted updates (see the module docstring)."""
+
+    def __init__(self, motion: Motion, effector_guard, engage_speed_frac: float, stale_ns: int):
+        self.motion = motion
+        self.arm = motion.arm  # ArmGenerator
+        self.hand = motion.hand  # HandLimiter, or None (a switch: its guard's step)
+        self.effector_guard = effector_guard
+        self.engage_speed_frac = engage_speed_frac
+        self.stale_ns = stale_ns
+        self.state = PlannerState()
+        self._reach = self._stop_reach()
+
+    @classmethod
+    def for_pipeline(cls, pipeline) -> "CommandPlanner":
+        """The planner of a format 4 pipeline: its Motion's limits, its end effector's guard, its config."""
+        cfg = pipeline.cfg
+        return cls(pipeline.motion, pipeline.effector.guard, cfg.engage_speed_frac, int(cfg.stale_ms * 1e6))
+
+    @property
+    def active(self) -> bool:
+        return self.state.active
+
+    def adopt(self, update: TargetUpdate | ModeUpdate) -> None:
+        s = self.state
+        s.seq = update.seq
+        if isinstance(update, TargetUpdate):
+            s.target = update
+        elif update.mode == "halt":
+            self.state = PlannerState(seq=s.seq, target=s.target)
+        elif update.mode == "preview":
+            s.mode, s.engaging = "preview", False
+        elif update.mode == "execute":
+            if s.mode == "execute":
+                return
+            s.mode, s.engaging = "execute", True
+            if not s.active:  # from rest at the measured state (braking: carry on from the commands)
+                s.arm = _Side(motion=JointMotion.rest(np.asarray(update.arm, dtype=float)))
+                s.hand = _Side(q=np.asarray(update.hand, dtype=float), v=np.zeros(len(update.hand)))
+                s.active, s.last_ns, s.dt_before = True, None, 0.0
+
+    def tick(self, t_ns: int) -> Tick | None:
+        """The commands at t_ns, or None while the planner sends nothing."""
+        s = self.state
+        if not s.active:
+            return None
+        flags: list[str] = []
+        if s.last_ns is None:  # the first command of an engage: where the robot is
+            s.last_ns = t_ns
+            return self._sent(t_ns, flags)
+        gap = t_ns - s.last_ns
+        if gap <= 0:
+            return None
+        dt = gap / 1e9
+        if gap > RESUME_GAP_NS:
+            # No command went out for this long (the sender starved): a servo-mode arm has stood at the last
+            # command meanwhile, so carry on from rest there, one short step in (the controller takes the
+            # next command as the start of a new stream).
+            s.arm.motion = JointMotion.rest(s.arm.motion.q)
+            s.hand.v = np.zeros_like(s.hand.v)
+            dt, s.dt_before = RESUME_STEP_S, 0.0
+            flags.append("commands_resumed")
+        executing = s.mode == "execute"
+        if not executing:
+            flags.append("stopping")
+        frac = self.engage_speed_frac if s.engaging else 1.0
+        target = s.target if executing else None
+        if target is not None and t_ns - target.t_ns > self.stale_ns:
+            flags.append("targets_stale")
+            target = None
+        arm_reached = self._arm(target, t_ns, dt, frac, flags)
+        hand_reached = self._hand(target, t_ns, dt, frac, flags)
+        s.dt_before = dt
+        s.last_ns = t_ns
+        if s.engaging:
+            flags.append("engaging")
+            if arm_reached and hand_reached:
+                s.engaging = False
+        if not executing and self._at_rest():
+            s.active = False  # came to rest after a switch to preview: this is the last command
+        return self._sent(t_ns, flags)
+
+    def _sent(self, t_ns: int, flags: list[str]) -> Tick:
+        s = self.state
+        m = s.arm.motion
+        return Tick(t_ns, s.seq, m.q, m.v, s.hand.q, s.hand.v, tuple(flags), s.active)
+
+    def _at_rest(self) -> bool:
+        s = self.state
+        return s.arm.motion.at_rest and not s.hand.v.any()
+
+    # ---- the arm ---------------------------------------------------------------------------------
+    def _arm(self, target: TargetUpdate | None, t_ns: int, dt: float, frac: float, flags: list[str]) -> bool:
+        """One tick of the arm; whether it meets its target (within the engage tolerance)."""
+        side = self.state.arm
+        m = side.motion
+        if target is None or target.arm is None:
+            if not m.at_rest:
+                side.motion = self._brake(m, dt, flags)
+                if self.state.mode == "execute":
+                    flags.append("arm_stopping")
+            return True
+        goal, estimate, velocity, ahead = target.arm, ESTIMATE_NONE, None, 0.0
+        if target.arm_v is not None:
+            lead = max(t_ns - target.arm_ns, 0)
+            if lead <= EXTRAPOLATE_MAX_NS:  # the moving target, moved on to now, met moving with it
+                estimate, velocity, ahead = ESTIMATE_HELD, target.arm_v, lead / 1e9
+            else:  # no newer target for a while: where the extrapolation stops, met at rest
+                goal = target.arm + target.arm_v * (EXTRAPOLATE_MAX_NS / 1e9)
+        plan = self.arm.plan(m, goal, dt, frac, estimate, None, velocity, 0.0, 0.0, ahead)
+        out = self.arm.follow(m, plan, dt, ENGAGED_TOL)
+        if out is None:  # ruckig found no profile: brake instead
+            side.motion = self._brake(m, dt, flags)
+            return False
+        following, reached, _, held, close = out
+        if held or not self._stops_inside(following):
+            # This sample would need more room than is left before a joint limit to brake: brake now,
+            # which (by the same test at every tick before) stops inside the limits.
+            side.motion = self._brake(m, dt, flags)
+            flags.append("arm_limit_braking")
+            return bool(np.abs(side.motion.q - plan[PLAN_GOAL]).max() < ENGAGED_TOL)
+        side.motion = following
+        return bool(reached or close)
+
+    def _brake(self, m: JointMotion, dt: float, flags: list[str]) -> JointMotion:
+        """The hardest stop the limits allow, dt on; held inside the joint limits as a last resort (never
+        needed while every profile taken stops inside them: flagged "arm_limit_held")."""
+        out = self.arm.stop(m, dt)
+        inside = np.minimum(np.maximum(out.q, self.arm.lower), self.arm.upper)
+        if not (inside == out.q).all():
+            flags.append("arm_limit_held")
+            return JointMotion.rest(inside)
+        return out
+
+    def _stop_reach(self) -> np.ndarray:
+        """Per joint, a bound on how far it can travel while braking from any velocity within its cap: the
+        exact stop (ruckig) is computed only for joints closer to a limit than this."""
+        v, a, j = self.arm.velocity, self.arm.acceleration, self.arm.jerk
+        return 1.5 * v * (v / a + 2.0 * a / j) + 1e-3
+
+    def _stops_inside(self, m: JointMotion) -> bool:
+        """Whether braking as hard as the limits allow from m ends inside every joint limit."""
+        towards_upper = (m.v > 0) | (m.a > 0)
+        room = np.where(towards_upper, self.arm.upper - m.q, m.q - self.arm.lower)
+        if (room > self._reach).all():
+            return True
+        end = self.arm.stop_position(m)
+        return bool(((end >= self.arm.lower) & (end <= self.arm.upper)).all())
+
+    # ---- the hand --------------------------------------------------------------------------------
+    def _hand(self, target: TargetUpdate | None, t_ns: int, dt: float, frac: float, flags: list[str]) -> bool:
+        """One tick of the end effector; whether it meets its target (within the engage tolerance)."""
+        side = self.state.hand
+        goal = None if target is None else target.hand
+        if self.hand is None:  # a switch (the vacuum): its guard steps to the target
+            if goal is not None:
+                side.q = self.effector_guard.step(side.q, goal, dt, frac, target_valid=True)
+            return goal is None or bool(np.abs(side.q - goal).max() < ENGAGED_TOL)
+        if goal is None and not side.v.any():
+            return True
+        estimate, goal_v = ESTIMATE_NONE, None
+        if goal is not None:
+            if target.hand_v is not None:
+                lead = min(max(t_ns - target.t_ns, 0), EXTRAPOLATE_MAX_NS) / 1e9
+                goal, estimate, goal_v = goal + target.hand_v * lead, ESTIMATE_GIVEN, target.hand_v
+        elif self.state.mode == "execute":
+            flags.append("hand_stopping")
+        side.q, side.v, _ = self.motion._hand_move(side.q, side.v, goal, estimate, None, goal_v, 0.0, dt,
+                                                   self.state.dt_before, frac, flags)
+        return goal is None or bool(np.abs(side.q - goal).max() < ENGAGED_TOL)
+
+
+class TargetEstimates:
+    """The velocity of a step's targets, estimated from the targets before (smoothed: IK solutions jitter
+    by its tolerance from sample to sample), for the planner's feed-forward. Kept in PipelineState (as
+    `motion`), so the step stays a pure function."""
+
+    def __init__(self, feedforward: bool, tau_ns: float):
+        self.feedforward = feedforward
+        self.tau_ns = tau_ns
+
+    def arm(self, est: EstimateState, target: np.ndarray, stamp: int) -> tuple[np.ndarray | None, EstimateState]:
+        """(velocity estimate, new state) for an arm target solving the wrist sample stamped `stamp`."""
+        if not self.feedforward:
+            return None, est
+        if stamp == est.arm_ns:  # the same wrist sample as last step: the same estimate
+            return est.arm_v, est
+        v = _blend(est.arm_q, est.arm_v, target, stamp - est.arm_ns, self.tau_ns)
+        return v, evolve(est, arm_ns=stamp, arm_q=target, arm_v=v)
+
+    def hand(self, est: EstimateState, target: np.ndarray, t_ns: int) -> tuple[np.ndarray | None, EstimateState]:
+        if not self.feedforward:
+            return None, est
+        v = _blend(est.hand_q, est.hand_v, target, t_ns - est.hand_ns, self.tau_ns)
+        return v, evolve(est, hand_ns=t_ns, hand_q=target, hand_v=v)
+
+
+@dataclass(frozen=True)
+class EstimateState:
+    arm_ns: int = -1
+    arm_q: np.ndarray | None = None
+    arm_v: np.ndarray | None = None
+    hand_ns: int = -1
+    hand_q: np.ndarray | None = None
+    hand_v: np.ndarray | None = None
+
+
+def _blend(before_q, before_v, q, gap_ns: int, tau_ns: float) -> np.ndarray:
+    """(q - before) / gap, blended with the estimate before by exp(-gap / tau); zero without a usable
+    target before (none, or further back than FEEDFORWARD_MAX_GAP_NS)."""
+    if before_q is None or not 0 < gap_ns <= FEEDFORWARD_MAX_GAP_NS:
+        return np.zeros_like(q)
+    raw = (q - before_q) / (gap_ns / 1e9)
+    if before_v is None:
+        return raw
+    keep = math.exp(-gap_ns / tau_ns)
+    return keep * before_v + (1.0 - keep) * raw
+
