@@ -209,6 +209,7 @@ class LeapHand(PolledActuator[LeapSettings], kind="hand", sdk_module="dynamixel_
                          where=f"device {name!r} (LEAP Hand on {settings.port})")
         self.bus: DynamixelBus = bus or SdkDynamixelBus(settings.port)
         self._polls = 0
+        self._retried = 0
 
     def endpoint(self) -> str:
         return f"serial {self.settings.port}"
@@ -239,8 +240,22 @@ class LeapHand(PolledActuator[LeapSettings], kind="hand", sdk_module="dynamixel_
     def _close(self) -> None:
         self.bus.close()
 
+    def counters(self) -> dict[str, int]:
+        return {**super().counters(), "retried_reads": self._retried}
+
+    def _sync_read(self, field: tuple[int, int]) -> dict[int, int]:
+        """A sync read, tried twice: one reply lost or late is the bus's ordinary noise, two in a row a fault."""
+        try:
+            return self.bus.sync_read(list(MOTOR_IDS), *field)
+        except DeviceError as first:
+            self._retried += 1
+            try:
+                return self.bus.sync_read(list(MOTOR_IDS), *field)
+            except DeviceError:
+                raise first from None  # what went wrong first (a second try on a dead port says less)
+
     def _check_hardware(self) -> None:
-        status = self.bus.sync_read(list(MOTOR_IDS), *HARDWARE_ERROR_STATUS)
+        status = self._sync_read(HARDWARE_ERROR_STATUS)
         bad = [i for i in MOTOR_IDS if status[i]]
         if bad:
             raise DeviceError(hardware_error(bad[0], status[bad[0]]) + (f" (also motors {bad[1:]})" if bad[1:] else ""),
@@ -250,7 +265,7 @@ class LeapHand(PolledActuator[LeapSettings], kind="hand", sdk_module="dynamixel_
         self._polls += 1
         if self._polls % self.settings.hardware_check_every == 0:
             self._check_hardware()
-        raw = self.bus.sync_read(list(MOTOR_IDS), *PRESENT_POSITION)
+        raw = self._sync_read(PRESENT_POSITION)
         return angles_from_ticks(np.array([signed32(raw[i]) for i in MOTOR_IDS]))
 
     def _write(self, target: np.ndarray) -> None:
