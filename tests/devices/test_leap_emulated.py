@@ -5,6 +5,7 @@ injected fault stopping the hand's commands with one line naming the motor and w
 from __future__ import annotations
 
 import struct
+import sys
 import time
 
 import numpy as np
@@ -21,8 +22,13 @@ from tests.helpers.hardware import CommandStream, EventLog
 
 @pytest.fixture(scope="module")
 def bus():
+    # The emulated bus shares this process's GIL with the SDK's busy-waiting reads; a real motor answers
+    # whatever the host does, so threads take turns often enough for it to answer inside the SDK's 34 ms.
+    interval = sys.getswitchinterval()
+    sys.setswitchinterval(0.0005)
     with DynamixelBus().start() as b:
         yield b
+    sys.setswitchinterval(interval)
 
 
 class Session:
