@@ -212,6 +212,12 @@ class DynamixelBus:
 
     # ---- the bus ---------------------------------------------------------------------------------------
     def _serve(self, master: int) -> None:
+        # Real motors answer within microseconds whatever the host does, and dynamixel-sdk waits only 34 ms:
+        # where allowed (root), this thread answers before the host's other work (it mostly sleeps in select).
+        try:
+            os.sched_setscheduler(threading.get_native_id(), os.SCHED_FIFO, os.sched_param(10))
+        except (OSError, AttributeError):
+            pass
         reader = wire.PacketReader()
         while not self._stop.is_set():
             try:
