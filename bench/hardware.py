@@ -206,6 +206,9 @@ def main() -> None:
         "session_s": round(session_s, 1),
         "camera_frames_per_s": round(frames_2s / 2.0, 1),
     }
+    for name, log in (("xarm", arm_log), ("leap", hand_log)):
+        for e in log.of("error")[:1]:
+            print(f"{name} session: {e['message']}", file=sys.stderr)  # why a session was not ok
     for kind, named, message in outcomes:
         if not named:
             print(f"silent or unnamed: {kind}: {message!r}", file=sys.stderr)

@@ -6,7 +6,6 @@ from __future__ import annotations
 import math
 import sys
 import time
-import types
 
 import numpy as np
 import pytest
