@@ -19,7 +19,7 @@ LAYERS: list[tuple[str, ...]] = [
     ("teleprev.errors", "teleprev.paths", "teleprev.config", "teleprev.numeric_platform", "teleprev.transforms",
      "teleprev.clock", "teleprev.topics", "teleprev.messages", "teleprev.corpus", "teleprev.kernels"),
     ("teleprev.robot", "teleprev.human", "teleprev.session"),
-    ("teleprev.devices", "teleprev.retarget", "teleprev.noncollision"),
+    ("teleprev.devices", "teleprev.retarget", "teleprev.noncollision", "teleprev.emulators"),
     ("teleprev.pipeline",),
     ("teleprev.rig", "teleprev.assembly"),
     ("teleprev.preview", "teleprev.export", "teleprev.study"),

@@ -12,6 +12,12 @@ the motors' positions differ by pi: position = angle + pi, 4096 ticks per turn (
 current-based position control (operating mode 5) with kP / kD (x0.75 on the side-to-side joints 0, 4
 and 8) and a current limit, as the LEAP Hand's own driver sets them. The plugin talks to the bus
 through DynamixelBus, a five-call interface; SdkDynamixelBus is the real one.
+
+A fault stops the hand's commands and says which motor and what: a Hardware Error Status bit
+(overload, overheating, input voltage: the motor turned its torque off; checked every
+hardware_check_every-th poll and before the torque comes on), a motor that does not answer, a corrupted
+reply, the adapter unplugged. The session keeps recording; the runner reconnects once the hand answers
+again. `teleprev devices emulate leap` runs an emulated bus to try a rig against.
 """
 
 from __future__ import annotations
@@ -24,12 +30,20 @@ import numpy as np
 
 from teleprev.devices import DeviceContext, DeviceError, PolledActuator
 
+try:  # pyserial flushing a port whose adapter is gone raises termios.error, which is no OSError
+    from termios import error as _TermiosError
+
+    PORT_ERRORS: tuple[type[BaseException], ...] = (OSError, _TermiosError)
+except ImportError:  # Windows
+    PORT_ERRORS = (OSError,)
+
 # Control table (protocol 2.0, XC330/XM430 series): address, size in bytes.
 OPERATING_MODE = (11, 1)
 TORQUE_ENABLE = (64, 1)
 POSITION_D_GAIN = (80, 2)
 POSITION_I_GAIN = (82, 2)
 POSITION_P_GAIN = (84, 2)
+HARDWARE_ERROR_STATUS = (70, 1)
 GOAL_CURRENT = (102, 2)
 GOAL_POSITION = (116, 4)
 PRESENT_POSITION = (132, 4)
@@ -39,6 +53,9 @@ TICKS_PER_TURN = 4096
 MOTOR_IDS = tuple(range(16))
 SIDE_TO_SIDE = (0, 4, 8)
 BAUDRATE = 4_000_000
+HARDWARE_ERRORS = {0x01: "input voltage error", 0x04: "overheating", 0x08: "motor encoder error",
+                   0x10: "electrical shock", 0x20: "overload"}  # Hardware Error Status bits (e-Manual)
+ALERT = 0x80  # bit 7 of a status packet's error byte: the motor has a hardware error
 
 
 def ticks_from_angles(q: np.ndarray) -> np.ndarray:
@@ -48,6 +65,12 @@ def ticks_from_angles(q: np.ndarray) -> np.ndarray:
 
 def angles_from_ticks(ticks: np.ndarray) -> np.ndarray:
     return np.asarray(ticks, dtype=float) * (2 * math.pi / TICKS_PER_TURN) - math.pi
+
+
+def hardware_error(motor: int, bits: int) -> str:
+    names = ", ".join(n for b, n in HARDWARE_ERRORS.items() if bits & b) or "an unknown bit"
+    return (f"motor {motor}: hardware error: {names} (Hardware Error Status 0x{bits:02x}); the motor turned its "
+            "torque off and the hand's commands stopped: find the cause, then power-cycle the hand")
 
 
 def signed32(value: int) -> int:
@@ -76,6 +99,9 @@ class SdkDynamixelBus:
         self._sdk = sdk
         self.port = None
 
+    def _gone(self, exc: Exception) -> DeviceError:
+        return DeviceError(f"the serial port stopped working (adapter unplugged?): {exc}", self.where)
+
     def open(self) -> None:
         sdk = self._sdk or LeapHand.import_sdk()
         self._sdk = sdk
@@ -84,27 +110,49 @@ class SdkDynamixelBus:
         try:
             opened = self.port.openPort() and self.port.setBaudRate(self.baudrate)
         except Exception as exc:  # pyserial raises when the device node is missing or busy
+            self.port = None
             raise DeviceError(f"cannot open the serial port ({exc})", self.where) from None
         if not opened:
             raise DeviceError(f"cannot open the serial port at {self.baudrate} baud", self.where)
 
-    def _result(self, result: int, error: int, what: str) -> None:
-        if result != self._sdk.COMM_SUCCESS:
-            raise DeviceError(f"{what}: {self.packet.getTxRxResult(result)}", self.where)
-        if error:
-            raise DeviceError(f"{what}: {self.packet.getRxPacketError(error)}", self.where)
+    def _no_answer(self, result: int, motor: int | None, what: str) -> DeviceError:
+        who = f"motor {motor}" if motor is not None else "a motor"
+        if result == self._sdk.COMM_RX_TIMEOUT:
+            said = f"{who} did not answer {what} (no status packet in time: unpowered, its cable, or another ID)"
+        elif result == self._sdk.COMM_RX_CORRUPT:
+            said = f"{who} sent a corrupted reply to {what} (bad CRC: noise, a loose cable, or the wrong baud rate)"
+        else:
+            said = f"{who}: {what}: {self.packet.getTxRxResult(result)}"
+        return DeviceError(said, self.where)
 
     def write(self, ids, address, size, values) -> None:
         call = {1: self.packet.write1ByteTxRx, 2: self.packet.write2ByteTxRx, 4: self.packet.write4ByteTxRx}[size]
         for i, v in zip(ids, values):
-            result, error = call(self.port, i, address, int(v))
-            self._result(result, error, f"motor {i}: writing {int(v)} at address {address}")
+            try:
+                result, error = call(self.port, i, address, int(v))
+            except PORT_ERRORS as exc:
+                raise self._gone(exc) from None
+            what = f"writing {int(v)} at address {address}"
+            if result != self._sdk.COMM_SUCCESS:
+                raise self._no_answer(result, i, what)
+            if error & ALERT:
+                bits, _, _ = self.packet.read1ByteTxRx(self.port, i, HARDWARE_ERROR_STATUS[0])
+                raise DeviceError(hardware_error(i, bits), self.where)
+            if error:
+                raise DeviceError(f"motor {i}: {what}: {self.packet.getRxPacketError(error)}", self.where)
 
     def sync_read(self, ids, address, size) -> dict[int, int]:
         group = self._sdk.GroupSyncRead(self.port, self.packet, address, size)
         for i in ids:
             group.addParam(i)
-        self._result(group.txRxPacket(), 0, f"sync read at address {address}")
+        try:
+            result = group.txRxPacket()
+        except PORT_ERRORS as exc:
+            raise self._gone(exc) from None
+        if result != self._sdk.COMM_SUCCESS:
+            # the group reads the motors in turn and stops at the first that fails: the first without data
+            failed = next((i for i in ids if not group.data_dict.get(i)), None)
+            raise self._no_answer(result, failed, f"the sync read at address {address}")
         missing = [i for i in ids if not group.isAvailable(i, address, size)]
         if missing:
             raise DeviceError(f"motors {missing} did not answer the sync read at address {address}", self.where)
@@ -114,12 +162,20 @@ class SdkDynamixelBus:
         group = self._sdk.GroupSyncWrite(self.port, self.packet, address, size)
         for i, v in zip(ids, values):
             group.addParam(i, list(int(v).to_bytes(size, "little", signed=False)))
-        self._result(group.txPacket(), 0, f"sync write at address {address}")
+        try:
+            result = group.txPacket()
+        except PORT_ERRORS as exc:
+            raise self._gone(exc) from None
+        if result != self._sdk.COMM_SUCCESS:
+            raise DeviceError(f"sync write at address {address}: {self.packet.getTxRxResult(result)}", self.where)
 
     def close(self) -> None:
         port, self.port = self.port, None
         if port is not None and getattr(port, "is_open", True):
-            port.closePort()
+            try:
+                port.closePort()
+            except PORT_ERRORS:
+                pass  # the adapter is already gone
 
 
 @dataclass
@@ -129,6 +185,7 @@ class LeapSettings:
     kp: int = 600
     kd: int = 200
     current_limit_ma: int = 350  # Lite 350, Full 550 (XC330 goal current is in mA)
+    hardware_check_every: int = 9  # polls between reads of the motors' Hardware Error Status (10 Hz at 90 Hz)
 
     def __post_init__(self):
         if not self.port:
@@ -139,6 +196,8 @@ class LeapSettings:
             raise ValueError(f"kp and kd must be 0..16383, got {self.kp} and {self.kd}")
         if not 0 < self.current_limit_ma <= 1000:
             raise ValueError(f"current_limit_ma must be 1..1000, got {self.current_limit_ma}")
+        if not 1 <= self.hardware_check_every <= 1000:
+            raise ValueError(f"hardware_check_every must be 1..1000, got {self.hardware_check_every}")
 
 
 class LeapHand(PolledActuator[LeapSettings], kind="hand", sdk_module="dynamixel_sdk", extra="leap"):
@@ -149,6 +208,8 @@ class LeapHand(PolledActuator[LeapSettings], kind="hand", sdk_module="dynamixel_
         super().__init__(name, settings, context, robot, tuple(str(i) for i in MOTOR_IDS),
                          where=f"device {name!r} (LEAP Hand on {settings.port})")
         self.bus: DynamixelBus = bus or SdkDynamixelBus(settings.port)
+        self._polls = 0
+        self._retried = 0
 
     def endpoint(self) -> str:
         return f"serial {self.settings.port}"
@@ -164,6 +225,7 @@ class LeapHand(PolledActuator[LeapSettings], kind="hand", sdk_module="dynamixel_
             return [round(0.75 * g) if i in SIDE_TO_SIDE else g for i in ids]
 
         self.bus.write(ids, *TORQUE_ENABLE, [0] * 16)  # the operating mode only changes with torque off
+        self._check_hardware()
         self.bus.write(ids, *OPERATING_MODE, [CURRENT_BASED_POSITION] * 16)
         self.bus.write(ids, *POSITION_P_GAIN, gains(s.kp))
         self.bus.write(ids, *POSITION_I_GAIN, [0] * 16)
@@ -178,8 +240,32 @@ class LeapHand(PolledActuator[LeapSettings], kind="hand", sdk_module="dynamixel_
     def _close(self) -> None:
         self.bus.close()
 
+    def counters(self) -> dict[str, int]:
+        return {**super().counters(), "retried_reads": self._retried}
+
+    def _sync_read(self, field: tuple[int, int]) -> dict[int, int]:
+        """A sync read, tried twice: one reply lost or late is the bus's ordinary noise, two in a row a fault."""
+        try:
+            return self.bus.sync_read(list(MOTOR_IDS), *field)
+        except DeviceError as first:
+            self._retried += 1
+            try:
+                return self.bus.sync_read(list(MOTOR_IDS), *field)
+            except DeviceError:
+                raise first from None  # what went wrong first (a second try on a dead port says less)
+
+    def _check_hardware(self) -> None:
+        status = self._sync_read(HARDWARE_ERROR_STATUS)
+        bad = [i for i in MOTOR_IDS if status[i]]
+        if bad:
+            raise DeviceError(hardware_error(bad[0], status[bad[0]]) + (f" (also motors {bad[1:]})" if bad[1:] else ""),
+                              self.where)
+
     def _poll(self) -> np.ndarray:
-        raw = self.bus.sync_read(list(MOTOR_IDS), *PRESENT_POSITION)
+        self._polls += 1
+        if self._polls % self.settings.hardware_check_every == 0:
+            self._check_hardware()
+        raw = self._sync_read(PRESENT_POSITION)
         return angles_from_ticks(np.array([signed32(raw[i]) for i in MOTOR_IDS]))
 
     def _write(self, target: np.ndarray) -> None:

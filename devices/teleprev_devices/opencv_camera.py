@@ -9,9 +9,12 @@ published as JPEG on /camera/<name>/image.
     fps = 30.0                 # camera: requested rate; file: 0 plays at the file's own rate
     jpeg_quality = 85
     loop = false               # file: start over at the end (otherwise the stream ends: a gap)
+    stall_timeout_s = 1.0      # stream URL: no frame for this long is a stall
 
 A live frame is stamped when read() got it from the driver; a file's frames are paced at their rate on
-the session clock and stamped at their due time.
+the session clock and stamped at their due time. A network stream (rtsp://, http:// MJPEG, ...) that
+stalls for stall_timeout_s, or that the server ends, is a device error naming which; the runner then
+opens it again every reconnect period, so the camera comes back with the server.
 """
 
 from __future__ import annotations
@@ -33,6 +36,7 @@ class OpenCVSettings:
     fps: float = 0.0  # 0: the file's rate, or the camera's default (nominally 30)
     jpeg_quality: int = 85
     loop: bool = False
+    stall_timeout_s: float = 1.0
 
     def __post_init__(self):
         if isinstance(self.source, int) and self.source < 0:
@@ -43,6 +47,8 @@ class OpenCVSettings:
             raise ValueError(f"width and height must both be 0 (as delivered) or 16..8192, got {self.width}x{self.height}")
         if not 0 <= self.fps <= 1000:
             raise ValueError(f"fps must be 0..1000, got {self.fps}")
+        if not 0.05 <= self.stall_timeout_s <= 60:
+            raise ValueError(f"stall_timeout_s must be 0.05..60, got {self.stall_timeout_s}")
         if not 1 <= self.jpeg_quality <= 100:
             raise ValueError(f"jpeg_quality must be 1..100, got {self.jpeg_quality}")
 
@@ -84,7 +90,12 @@ class OpenCVCamera(Device[OpenCVSettings], kind="camera"):
         s = self.settings
         if self.path is not None and not self.path.is_file():
             raise DeviceError(f"no such video file: {self.path}", self.where)
-        cap = cv2.VideoCapture(s.source if self.is_camera else str(self.path or s.source))
+        if self.is_url:  # bounded waits: a stream that stalls must not hold the reader forever
+            timeout_ms = int(s.stall_timeout_s * 1000)
+            cap = cv2.VideoCapture(s.source, cv2.CAP_FFMPEG, [cv2.CAP_PROP_OPEN_TIMEOUT_MSEC, max(timeout_ms, 2000),
+                                                              cv2.CAP_PROP_READ_TIMEOUT_MSEC, timeout_ms])
+        else:
+            cap = cv2.VideoCapture(s.source if self.is_camera else str(self.path or s.source))
         if not cap.isOpened():
             cap.release()
             what = f"camera index {s.source}" if self.is_camera else (f"stream {s.source}" if self.is_url else f"video file {self.path}")
@@ -119,9 +130,16 @@ class OpenCVCamera(Device[OpenCVSettings], kind="camera"):
                 return []
             if not wait_until_due(clock, self._next_ns, timeout_s):
                 return []
+        asked = time.monotonic()
         ok, frame = self._cap.read()
         stamp = self._next_ns if self.period_ns else clock.now_ns()
         if not ok or frame is None:
+            if self.is_url:  # FFmpeg gives up on the stream after a stall or its end: open it again
+                waited = time.monotonic() - asked
+                if waited >= 0.9 * self.settings.stall_timeout_s:
+                    raise DeviceError(f"the stream stalled: no frame for {waited:.1f} s (stall_timeout_s = "
+                                      f"{self.settings.stall_timeout_s:g})", self.where)
+                raise DeviceError("the stream ended (the server closed it)", self.where)
             return self._no_frame()
         self._failed_reads = 0
         if self.period_ns:

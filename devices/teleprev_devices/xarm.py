@@ -9,18 +9,41 @@
 The plugin talks to the controller through XArmLink, a five-call interface; SdkXArmLink is the real
 one (xarm.wrapper.XArmAPI, imported when the device connects). Servo mode is motion_enable +
 set_mode(1) + set_state(0); commands are streamed with set_servo_angle_j in radians and the controller
-runs the latest one at full speed, so every command is checked here first: finite, inside the URDF's
-limits, and at most max_step_rad from the previous target (refused and counted otherwise).
+runs the latest one at once, so every command is checked here first: finite, inside the URDF's limits,
+at most max_step_rad from the previous target, and (on the commands' stamps) under the acceleration and
+jerk limits of a servo-mode stream (teleprev.devices.ServoStreamRule, the rule the sim arm faults by).
+
+A fault stops the commands and is one line naming it: a controller error with its code and meaning
+(collision, joint limit, e-stop: cleared on the arm by the operator, never from here), a lost
+connection, a report stream gone quiet for report_timeout_s, a reply slower than reply_timeout_s.
+`teleprev devices emulate xarm` runs an emulated controller to try a rig against.
 """
 
 from __future__ import annotations
 
+import time
 from dataclasses import dataclass
 from typing import Callable, Protocol
 
 import numpy as np
 
-from teleprev.devices import DeviceContext, DeviceError, PolledActuator
+from teleprev.devices import DeviceContext, DeviceError, DeviceFault, PolledActuator, ServoStreamRule
+
+# What the SDK's own return codes mean (xarm.x3.code.APIState), in words for the operator.
+SDK_CODES = {
+    -1: "not connected",
+    -2: "the arm is not enabled",
+    -8: "a value is out of range",
+    1: "the controller has an error latched",
+    2: "the controller has a warning latched",
+    3: "no reply in time",
+    4: "a reply of the wrong length", 5: "a reply out of sequence", 6: "a reply of another protocol",
+    7: "a reply to another command",
+    8: "the command could not be sent (connection lost)",
+    9: "the arm is not ready to move",
+    10: "the controller refused the command as invalid",
+    12: "a parameter the controller refused",
+}
 
 
 class XArmLink(Protocol):
@@ -34,18 +57,57 @@ class XArmLink(Protocol):
 
 
 class SdkXArmLink:
-    """XArmLink over xarm.wrapper.XArmAPI. `api_factory` stands in for XArmAPI (tests)."""
+    """XArmLink over xarm.wrapper.XArmAPI (`api_factory`: a subclass of it, say).
 
-    def __init__(self, host: str, dof: int, api_factory: Callable | None = None):
+    The controller pushes a report (state, mode, error and warning codes) every 200 ms on port 30002,
+    which the SDK reads on its own thread; a report older than `report_timeout_s` is a fault, since the
+    controller's errors would then go unseen. Every request waits at most `reply_timeout_s` for its reply.
+    """
+
+    def __init__(self, host: str, dof: int, api_factory: Callable | None = None, reply_timeout_s: float = 0.1,
+                 report_timeout_s: float = 1.0):
         self.host = host
         self.dof = dof
         self.where = f"xArm controller {host}"
+        self.reply_timeout_s = reply_timeout_s
+        self.report_timeout_s = report_timeout_s
         self._factory = api_factory
         self.api = None
+        self._last_report = 0.0
+        self._reported_error = 0
+
+    def _on_report(self, report: dict) -> None:
+        self._last_report = time.monotonic()
+        self._reported_error = int(report.get("error_code", 0) or 0)
+
+    def _controller_error(self, code: int) -> str:
+        try:
+            from xarm.core.config.x_code import ControllerError
+
+            meaning = ControllerError(code).title["en"]
+        except Exception:  # an SDK without the table still gets the code
+            meaning = "see the controller's error table"
+        return f"controller error {code}: {meaning}"
+
+    def _fail(self, call: str, code: int) -> DeviceError:
+        """The DeviceError for an SDK call that returned `code`: the controller's own error where it has one."""
+        if code == 1 or (code == 9 and self.api is not None and self.api.connected):
+            status, (error, _warn) = self.api.get_err_warn_code()
+            if status == 0 and error:
+                return DeviceError(f"{self._controller_error(error)}; the arm stopped (clear it on the arm once "
+                                   "you know why, then reconnect)", self.where)
+        if code in (-1, 8) or (self.api is not None and not self.api.connected):
+            return DeviceError("connection lost: the controller closed TCP port 502 (power, cable, or another "
+                               "client took over)", self.where)
+        if code == 3:
+            return DeviceError(f"{call}: no reply within {self.reply_timeout_s:g} s (SDK code 3): the controller is "
+                               "slow, or the connection is gone", self.where)
+        return DeviceError(f"{call} returned SDK code {code} ({SDK_CODES.get(code, 'see xarm.x3.code.APIState')})",
+                           self.where)
 
     def _check(self, code, call: str) -> None:
         if code != 0:
-            raise DeviceError(f"{call} returned code {code} (controller error {getattr(self.api, 'error_code', '?')})", self.where)
+            raise self._fail(call, code)
 
     def connect(self) -> None:
         factory = self._factory or XArm.import_sdk("xarm.wrapper").XArmAPI
@@ -53,34 +115,51 @@ class SdkXArmLink:
             self.api = factory(self.host, is_radian=True, do_not_open=True)
             self.api.connect()
         except Exception as exc:
-            raise DeviceError(f"cannot connect ({exc})", self.where) from None
+            self.api = None
+            raise DeviceError(f"cannot connect ({exc}; is the control box on and reachable on port 502?)",
+                              self.where) from None
         if not self.api.connected:
             raise DeviceError("cannot connect (is the control box on and reachable on port 502?)", self.where)
-        axis = getattr(self.api, "axis", self.dof)
+        axis = self.api.axis
         if axis != self.dof:
             self.disconnect()
             raise DeviceError(f"the controller drives a {axis}-joint arm but the rig says dof = {self.dof}", self.where)
+        self._last_report = time.monotonic()  # the report stream has report_timeout_s to start
+        self.api.register_report_callback(self._on_report)
+        self.api.set_timeout(self.reply_timeout_s)
 
     def enable_servo_mode(self) -> None:
         # An error the controller latched (collision, limit, e-stop) is the operator's to clear, on purpose:
         # clearing it from here could restart an arm that just stopped for a reason.
-        if getattr(self.api, "error_code", 0):
-            raise DeviceError(f"the controller reports error code {self.api.error_code}; clear it on the arm "
-                              "(UFactory Studio or clean_error) and check why it stopped", self.where)
+        status, (error, _warn) = self.api.get_err_warn_code()
+        self._check(status, "get_err_warn_code")
+        if error:
+            raise DeviceError(f"{self._controller_error(error)}; clear it on the arm (UFactory Studio or "
+                              "clean_error) once you know why it stopped", self.where)
         self._check(self.api.motion_enable(enable=True), "motion_enable(True)")
         self._check(self.api.set_mode(1), "set_mode(1)")
         self._check(self.api.set_state(0), "set_state(0)")
 
-    def joint_angles(self) -> list[float]:
+    def _healthy(self) -> None:
         if not self.api.connected:
-            raise DeviceError("connection lost", self.where)
+            raise self._fail("", -1)
+        silent = time.monotonic() - self._last_report
+        if silent > self.report_timeout_s:
+            raise DeviceError(f"the controller's report stream (port 30002) sent nothing for {silent:.1f} s "
+                              f"(limit {self.report_timeout_s:g} s): its errors would go unseen", self.where)
+        if self._reported_error:
+            raise DeviceError(f"{self._controller_error(self._reported_error)}; the arm stopped (clear it on the "
+                              "arm once you know why, then reconnect)", self.where)
+
+    def joint_angles(self) -> list[float]:
+        self._healthy()
         code, angles = self.api.get_servo_angle(is_radian=True)
         self._check(code, "get_servo_angle")
         return list(angles)[: self.dof]
 
     def servo_angle_j(self, angles: list[float]) -> None:
         if not self.api.connected:
-            raise DeviceError("connection lost", self.where)
+            raise self._fail("set_servo_angle_j", -1)
         self._check(self.api.set_servo_angle_j(list(angles), is_radian=True), "set_servo_angle_j")
 
     def disconnect(self) -> None:
@@ -95,6 +174,10 @@ class XArmSettings:
     dof: int = 6
     rate_hz: float = 100.0
     max_step_rad: float = 0.2  # largest change of any joint from one command to the next
+    max_acceleration: float = 10.0  # rad/s^2 and rad/s^3: a command stream past these (+10%, on the commands'
+    max_jerk: float = 500.0  # stamps) stops the commands, as it would fault the sim arm
+    reply_timeout_s: float = 0.1  # a controller reply slower than this is a fault
+    report_timeout_s: float = 1.0  # the report stream (5 Hz) silent for this long is a fault
 
     def __post_init__(self):
         if not self.host:
@@ -105,6 +188,11 @@ class XArmSettings:
             raise ValueError(f"rate_hz must be in (0, 100] (the controller is best polled at <= 100 Hz), got {self.rate_hz}")
         if not 0 < self.max_step_rad <= 0.5:
             raise ValueError(f"max_step_rad must be in (0, 0.5], got {self.max_step_rad}")
+        if not (self.max_acceleration > 0 and self.max_jerk > 0):
+            raise ValueError(f"max_acceleration and max_jerk must be > 0, got {self.max_acceleration} and {self.max_jerk}")
+        if not (0 < self.reply_timeout_s <= 5 and 0 < self.report_timeout_s <= 10):
+            raise ValueError("reply_timeout_s must be in (0, 5] and report_timeout_s in (0, 10], got "
+                             f"{self.reply_timeout_s} and {self.report_timeout_s}")
 
 
 class XArm(PolledActuator[XArmSettings], kind="arm", sdk_module="xarm", extra="xarm"):
@@ -113,7 +201,9 @@ class XArm(PolledActuator[XArmSettings], kind="arm", sdk_module="xarm", extra="x
     def __init__(self, name: str, settings: XArmSettings, context: DeviceContext, link: XArmLink | None = None):
         super().__init__(name, settings, context, context.robot, tuple(f"joint{i}" for i in range(1, settings.dof + 1)),
                          where=f"device {name!r} (xArm {settings.host})")
-        self.link: XArmLink = link or SdkXArmLink(settings.host, settings.dof)
+        self.link: XArmLink = link or SdkXArmLink(settings.host, settings.dof, reply_timeout_s=settings.reply_timeout_s,
+                                                  report_timeout_s=settings.report_timeout_s)
+        self.rule = ServoStreamRule(self.joint_names, settings.max_acceleration, settings.max_jerk, self.period_ns)
 
     def endpoint(self) -> str:
         return f"xArm {self.settings.host}"
@@ -123,6 +213,7 @@ class XArm(PolledActuator[XArmSettings], kind="arm", sdk_module="xarm", extra="x
 
     def _start(self) -> np.ndarray:
         self.link.enable_servo_mode()
+        self.rule.reset()
         return self._poll()
 
     def _close(self) -> None:
@@ -134,12 +225,16 @@ class XArm(PolledActuator[XArmSettings], kind="arm", sdk_module="xarm", extra="x
             raise DeviceError(f"the controller sent an unusable joint state {q.tolist()}", self.where)
         return q
 
-    def _refuse(self, target: np.ndarray) -> None:
+    def _refuse(self, target: np.ndarray, stamp_ns: int) -> None:
         step = np.abs(target - self._target)
         if step.max() > self.settings.max_step_rad:
             j = int(step.argmax())
             raise DeviceError(f"command refused: {self.joint_names[j]} would jump {step[j]:.3f} rad "
                               f"(max_step_rad = {self.settings.max_step_rad:g})", self.where)
+        broken = self.rule.check(stamp_ns, target, lambda: (self._target, np.zeros_like(self._target)))
+        if broken:
+            raise DeviceFault(f"command refused, commands stopped: {broken.describe()}, which would fault the "
+                              "controller; nothing more is sent until the arm is reconnected", self.where)
 
     def _write(self, target: np.ndarray) -> None:
         self.link.servo_angle_j(target.tolist())

@@ -7,7 +7,8 @@ from typing import Optional
 
 import typer
 
-app = typer.Typer(help="Device plugins: list what is installed, check a rig's devices.", no_args_is_help=True)
+app = typer.Typer(help="Device plugins: list what is installed, check a rig's devices, emulate hardware.",
+                  no_args_is_help=True)
 
 
 @app.command("list")
@@ -116,6 +117,62 @@ def check(
         console.print(f"[bold red]{bad} of {len(loaded.devices)} devices did not stream cleanly[/]")
         raise typer.Exit(1)
     console.print(f"[bold green]all {len(loaded.devices)} devices streaming[/]")
+
+
+@app.command("emulate")
+def emulate(
+    what: str = typer.Argument(..., help="xarm (a control box on HOST, ports 502 and 30001-30002) | leap (the LEAP "
+                                         "Hand's Dynamixel bus on a pseudo-terminal)"),
+    host: str = typer.Option("127.0.0.1", help="xarm: the loopback address to serve on (127.x.y.z)."),
+    dof: int = typer.Option(6, help="xarm: 6 or 7 joints."),
+    port: Optional[Path] = typer.Option(None, help="leap: the path the bus appears at (default: a temporary one)."),
+    seconds: float = typer.Option(0.0, min=0.0, help="Stop after this long (0: at Ctrl-C)."),
+) -> None:
+    """Run an emulated xArm controller or LEAP Hand bus that the real SDKs drive, and print the rig keys that
+    point at it: paste them into a rig to dry-run it (`teleprev devices check`, `teleprev record`)."""
+    import os
+    import signal
+    import threading
+    import time
+
+    from rich.console import Console
+
+    from teleprev.errors import TeleprevError
+
+    console = Console()
+    stop = threading.Event()
+    try:  # a device answers in microseconds whatever the host does; an emulator only as soon as it is scheduled
+        os.nice(-5)
+    except OSError:
+        pass
+    try:
+        if what == "xarm":
+            from teleprev.emulators.xarm_controller import XArmController
+
+            emulator = XArmController(host=host, dof=dof).start()
+            keys, about = emulator.rig_keys(), f"an xArm{dof} controller on {emulator.host} (ports 502, 30001, 30002)"
+        elif what == "leap":
+            from teleprev.emulators.dynamixel_bus import DynamixelBus
+
+            emulator = DynamixelBus(port).start()
+            keys, about = emulator.rig_keys(), f"a LEAP Hand's Dynamixel bus (16 motors) at {emulator.port}"
+        else:
+            console.print(f"[red]nothing to emulate called {what!r}: xarm or leap[/]")
+            raise typer.Exit(2)
+    except (TeleprevError, ValueError) as exc:
+        console.print(f"[red]{exc}[/]", highlight=False)
+        raise typer.Exit(2)
+    for sig in (signal.SIGINT, signal.SIGTERM):
+        signal.signal(sig, lambda *_: stop.set())
+    console.print(f"emulating {about}; rig keys:", highlight=False)
+    print(keys, flush=True)
+    console.print("Ctrl-C stops it." if not seconds else f"stops in {seconds:g} s.")
+    deadline = time.monotonic() + seconds if seconds else float("inf")
+    try:
+        while not stop.is_set() and time.monotonic() < deadline:
+            stop.wait(0.2)
+    finally:
+        emulator.stop()
 
 
 def _skipped(skipped: dict[str, int]) -> str:

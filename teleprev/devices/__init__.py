@@ -18,8 +18,9 @@ from teleprev import transforms
 from teleprev.clock import ClockSync, SessionClock
 from teleprev.devices.contract import KINDS, Actuator, Device, DeviceContext, NoSettings, StreamSpec
 from teleprev.devices.pacing import wait_until_due
-from teleprev.devices.polled import JointLimits, PolledActuator, PolledSettings
+from teleprev.devices.polled import DeviceFault, JointLimits, PolledActuator, PolledSettings
 from teleprev.devices.registry import GROUP, available, load_plugin
+from teleprev.devices.servo_limits import FAULT_TOLERANCE, ServoStreamRule, ServoViolation
 from teleprev.devices.runner import ActuatorPort, DeviceRunner, RunnerStats, Sink, default_gap_s
 from teleprev.errors import ConfigError, DeviceError, SessionError, TeleprevError
 from teleprev.human import smplx
@@ -55,7 +56,7 @@ def __getattr__(name: str) -> Any:
 __all__ = [
     # the contract
     "KINDS", "Actuator", "Device", "DeviceContext", "NoSettings", "StreamSpec", "wait_until_due",
-    "JointLimits", "PolledActuator", "PolledSettings",
+    "DeviceFault", "JointLimits", "PolledActuator", "PolledSettings", "FAULT_TOLERANCE", "ServoStreamRule", "ServoViolation",
     # running and finding plugins
     "ActuatorPort", "DeviceRunner", "RunnerStats", "Sink", "default_gap_s", "GROUP", "available", "load_plugin",
     # samples, time and topics

@@ -4,6 +4,11 @@ every command checked again before it leaves the host.
 The pipeline's command guard already keeps commands inside the joint limits; JointLimits is the second
 line (defense in depth): a command that names unknown joints, has a non-finite value or lies outside
 the URDF's limits is refused with a DeviceError, counted, and never sent.
+
+A write that fails (the controller refused the command, the link broke) or a command the device must not
+follow (`_refuse` raising DeviceFault) stops the device's commands: every later send() raises, and the
+next read() raises the fault, so the runner records an `error` event (the session goes back to preview)
+and reconnects; connecting again clears it, and the device then says what it needs first.
 """
 
 from __future__ import annotations
@@ -64,6 +69,11 @@ class JointLimits:
         return target
 
 
+class DeviceFault(DeviceError):
+    """Raised by `_refuse` for a command the device must not follow at all (not just this once): it stops
+    the device's commands until it is reconnected."""
+
+
 class PolledSettings(Protocol):
     rate_hz: float  # how often the state is polled
 
@@ -92,6 +102,7 @@ class PolledActuator(Actuator[P]):
         self._target: np.ndarray | None = None
         self._refused = 0
         self._next_ns = 0
+        self._fault: DeviceError | None = None  # what stopped the commands, until the next connect
 
     @abstractmethod
     def _open(self) -> None:
@@ -113,8 +124,9 @@ class PolledActuator(Actuator[P]):
     def _write(self, target: np.ndarray) -> None:
         """Send a full target that passed every check."""
 
-    def _refuse(self, target: np.ndarray) -> None:
-        """Raise DeviceError to refuse a target the limits allow (default: refuse nothing more)."""
+    def _refuse(self, target: np.ndarray, stamp_ns: int) -> None:
+        """Raise DeviceError to refuse a target the limits allow (default: refuse nothing more), DeviceFault
+        to also stop the commands. `stamp_ns` is the instant the command is meant for."""
 
     def connect(self) -> None:
         with self._lock:
@@ -125,6 +137,7 @@ class PolledActuator(Actuator[P]):
                 self._close()
                 raise
             self._target = np.clip(q, self.limits.lower, self.limits.upper)  # the first command is checked against it
+            self._fault = None
             self._connected = True
             self._next_ns = self.context.clock.now_ns()
 
@@ -147,6 +160,8 @@ class PolledActuator(Actuator[P]):
         with self._lock:
             if not self._connected:
                 raise DeviceError("not connected", self.where)
+            if self._fault is not None:
+                raise self._fault
             before = clock.now_ns()
             q = self._poll()
             after = clock.now_ns()
@@ -158,11 +173,22 @@ class PolledActuator(Actuator[P]):
         with self._lock:
             if not self._connected:
                 raise DeviceError("not connected: command dropped", self.where)
+            if self._fault is not None:
+                raise DeviceError(f"command dropped: the commands stopped after a fault ({self._fault.message})",
+                                  self.where)
             try:
                 target = self.limits.target(command, self._target, self.where)
-                self._refuse(target)
+                self._refuse(target, command.stamp_ns)
+            except DeviceFault as fault:
+                self._refused += 1
+                self._fault = fault
+                raise
             except DeviceError:
                 self._refused += 1
                 raise
-            self._write(target)
+            try:
+                self._write(target)
+            except DeviceError as fault:
+                self._fault = fault
+                raise
             self._target = target

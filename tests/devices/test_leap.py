@@ -1,12 +1,11 @@
-"""leap.hand through a test double at the DynamixelBus interface, and SdkDynamixelBus against a stand-in
-dynamixel_sdk module."""
+"""leap.hand through a test double at the DynamixelBus interface (the real dynamixel-sdk against the emulated
+bus: test_leap_emulated.py)."""
 
 from __future__ import annotations
 
 import math
 import sys
 import time
-import types
 
 import numpy as np
 import pytest
@@ -29,6 +28,7 @@ class BusDouble:
         self.regs: dict[tuple[int, int], int] = {}
         for i in range(16):
             self.regs[(i, 132)] = 2048 if ticks is None else ticks[i]
+            self.regs[(i, 70)] = 0  # Hardware Error Status
         self.log: list[tuple] = []
         self.unplugged = False
         self.is_open = False
@@ -121,7 +121,7 @@ def test_commands_outside_the_limits_are_refused_and_never_written():
         h.send(JointSample(0, ("0",), np.array([np.inf])))
     with pytest.raises(DeviceError, match="unknown joints"):
         h.send(JointSample(0, ("16",), np.array([0.0])))
-    assert len(bus.log) == n and h.counters() == {"refused_commands": 3}
+    assert len(bus.log) == n and h.counters() == {"refused_commands": 3, "retried_reads": 0}
 
 
 def test_reads_are_capped_near_90_hz():
@@ -148,98 +148,6 @@ def test_a_bus_fault_is_a_device_error():
     assert not bus.is_open
     with pytest.raises(DeviceError, match="not connected"):
         h.send(JointSample(0, ("0",), np.array([0.1])))
-
-
-def fake_sdk(missing_motor=None, open_ok=True):
-    """A stand-in for the dynamixel_sdk module with the calls SdkDynamixelBus makes."""
-    sdk = types.SimpleNamespace(COMM_SUCCESS=0, sent=[], writes=[])
-
-    class PortHandler:
-        def __init__(self, name):
-            self.name, self.is_open = name, False
-
-        def openPort(self):
-            if not open_ok:
-                raise OSError(2, "could not open port /dev/ttyUSB9")
-            self.is_open = True
-            return True
-
-        def setBaudRate(self, baud):
-            sdk.baud = baud
-            return True
-
-        def closePort(self):
-            self.is_open = False
-
-    class Packet:
-        def write1ByteTxRx(self, port, i, address, value):
-            sdk.writes.append((i, address, value))
-            return (0, 0) if i != missing_motor else (-3001, 0)
-
-        write2ByteTxRx = write4ByteTxRx = write1ByteTxRx
-
-        def getTxRxResult(self, result):
-            return "[TxRxResult] There is no status packet!"
-
-        def getRxPacketError(self, error):
-            return "hardware error"
-
-    class GroupSyncRead:
-        def __init__(self, port, packet, address, size):
-            self.ids = []
-
-        def addParam(self, i):
-            self.ids.append(i)
-            return True
-
-        def txRxPacket(self):
-            return 0
-
-        def isAvailable(self, i, address, size):
-            return i != missing_motor
-
-        def getData(self, i, address, size):
-            return 2048 + i
-
-    class GroupSyncWrite:
-        def __init__(self, port, packet, address, size):
-            self.address, self.params = address, {}
-
-        def addParam(self, i, data):
-            self.params[i] = data
-            return True
-
-        def txPacket(self):
-            sdk.sent.append((self.address, dict(self.params)))
-            return 0
-
-    sdk.PortHandler, sdk.GroupSyncRead, sdk.GroupSyncWrite = PortHandler, GroupSyncRead, GroupSyncWrite
-    sdk.PacketHandler = lambda version: Packet()
-    return sdk
-
-
-def test_sdk_bus_opens_at_4_mbaud_and_packs_little_endian():
-    sdk = fake_sdk()
-    bus = SdkDynamixelBus("/dev/ttyUSB0", sdk=sdk)
-    bus.open()
-    assert sdk.baud == 4_000_000
-    assert bus.sync_read([0, 1], 132, 4) == {0: 2048, 1: 2049}
-    bus.sync_write([3], 116, 4, [3072])
-    assert sdk.sent[-1] == (116, {3: [0x00, 0x0C, 0x00, 0x00]})
-    port = bus.port
-    bus.close()
-    assert bus.port is None and not port.is_open
-
-
-def test_sdk_bus_errors_name_the_port_and_motor():
-    with pytest.raises(DeviceError, match=r"/dev/ttyUSB9.*cannot open the serial port"):
-        SdkDynamixelBus("/dev/ttyUSB9", sdk=fake_sdk(open_ok=False)).open()
-    bus = SdkDynamixelBus("/dev/ttyUSB0", sdk=fake_sdk(missing_motor=7))
-    bus.open()
-    with pytest.raises(DeviceError, match=r"motors \[7\] did not answer"):
-        bus.sync_read(list(range(16)), 132, 4)
-    with pytest.raises(DeviceError, match=r"motor 7: writing 5 at address 11: .*no status packet"):
-        bus.write(list(range(16)), 11, 1, [5] * 16)
 
 
 def test_missing_sdk_is_a_clear_error(monkeypatch):

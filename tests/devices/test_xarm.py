@@ -1,4 +1,5 @@
-"""xarm.arm through a test double at the XArmLink interface, and SdkXArmLink against a stand-in XArmAPI."""
+"""xarm.arm through a test double at the XArmLink interface (the real SDK against the emulated controller:
+test_xarm_emulated.py)."""
 
 from __future__ import annotations
 
@@ -72,7 +73,7 @@ def test_connect_enables_servo_mode_and_reads_state():
 
 def test_commands_are_checked_then_streamed_in_radians():
     link = LinkDouble()
-    a = arm(link)
+    a = arm(link, max_acceleration=1e9, max_jerk=1e12)  # these commands jump; the stream rule has its own test
     a.connect()
     target = np.array(HOME) + 0.05
     a.send(cmd(target))
@@ -147,80 +148,6 @@ def test_settings_errors_name_the_table(tmp_path):
     rig.write_text('[devices.arm]\nplugin = "xarm.arm"\nhost = "10.0.0.2"\nrate_hz = 250.0\n')
     with pytest.raises(ConfigError, match=r"rate_hz must be in \(0, 100\]"):
         load_rig(rig)
-
-
-class FakeXArmAPI:
-    """Stands in for xarm.wrapper.XArmAPI: same call names and return codes."""
-
-    instances: list = []
-    axis = 6
-
-    def __init__(self, port, is_radian=False, do_not_open=False):
-        self.port, self.is_radian, self.do_not_open = port, is_radian, do_not_open
-        self.connected = False
-        self.error_code = 0
-        self.calls = []
-        FakeXArmAPI.instances.append(self)
-
-    def connect(self):
-        self.connected = True
-
-    def disconnect(self):
-        self.connected = False
-
-    def motion_enable(self, enable=True, servo_id=None):
-        self.calls.append(("motion_enable", enable))
-        return 0
-
-    def set_mode(self, mode=0):
-        self.calls.append(("set_mode", mode))
-        return 0
-
-    def set_state(self, state=0):
-        self.calls.append(("set_state", state))
-        return 0
-
-    def get_servo_angle(self, servo_id=None, is_radian=None):
-        return 0, HOME + [0.0]
-
-    def set_servo_angle_j(self, angles, speed=None, mvacc=None, mvtime=None, is_radian=None):
-        self.calls.append(("set_servo_angle_j", tuple(angles), is_radian))
-        return 1 if angles[0] > 3 else 0
-
-
-def test_sdk_link_sets_servo_mode_in_order_and_uses_radians():
-    link = SdkXArmLink("10.0.0.2", 6, api_factory=FakeXArmAPI)
-    link.connect()
-    api = link.api
-    assert api.port == "10.0.0.2" and api.is_radian
-    link.enable_servo_mode()
-    assert api.calls == [("motion_enable", True), ("set_mode", 1), ("set_state", 0)]
-    assert link.joint_angles() == HOME
-    link.servo_angle_j([0.1] * 6)
-    assert api.calls[-1] == ("set_servo_angle_j", (0.1,) * 6, True)
-    with pytest.raises(DeviceError, match="set_servo_angle_j returned code 1"):
-        link.servo_angle_j([3.5] * 6)
-    api.connected = False
-    with pytest.raises(DeviceError, match="connection lost"):
-        link.joint_angles()
-
-
-def test_sdk_link_checks_the_arm_has_the_configured_joints():
-    class SevenAxis(FakeXArmAPI):
-        axis = 7
-
-    with pytest.raises(DeviceError, match="7-joint arm but the rig says dof = 6"):
-        SdkXArmLink("10.0.0.2", 6, api_factory=SevenAxis).connect()
-    assert not FakeXArmAPI.instances[-1].connected
-
-
-def test_sdk_link_refuses_to_clear_a_latched_controller_error():
-    link = SdkXArmLink("10.0.0.2", 6, api_factory=FakeXArmAPI)
-    link.connect()
-    link.api.error_code = 31
-    with pytest.raises(DeviceError, match="error code 31"):
-        link.enable_servo_mode()
-    assert link.api.calls == []
 
 
 def test_missing_sdk_is_a_clear_error(monkeypatch):

@@ -12,11 +12,10 @@ and the figure, which the runner records as an error event on /events/device; re
 from __future__ import annotations
 
 import re
-from collections import deque
 
 import numpy as np
 
-from teleprev.devices import DeviceContext, DeviceError, JointSample
+from teleprev.devices import DeviceContext, DeviceError, JointSample, ServoStreamRule
 from teleprev_devices.sim.actuator import ActuatorSettings, SimActuator
 from teleprev_devices.sim.device import timing
 from teleprev_devices.sim.world import DEFAULT_HOME
@@ -38,8 +37,6 @@ class ArmSettings(ActuatorSettings):
                              f"got {self.max_velocity}, {self.max_acceleration} and {self.max_jerk}")
 
 
-FAULT_TOLERANCE = 0.10  # a command over the acceleration or jerk limit by more than this faults
-STREAM_GAP_NS = 60_000_000  # commands further apart than this start a new stream (from the arm as it is: at rest)
 
 
 class SimArm(SimActuator[ArmSettings], kind="arm"):
@@ -56,7 +53,7 @@ class SimArm(SimActuator[ArmSettings], kind="arm"):
         self.max_acceleration = np.inf  # servo mode: the target at once, rate-limited only
         self.fault = ""  # the latched controller fault ("": none)
         self._fault_raised = False
-        self._history: deque[tuple[int, np.ndarray]] = deque(maxlen=3)  # the last commands (stamp, positions)
+        self._rule = ServoStreamRule(joints, settings.max_acceleration, settings.max_jerk, self.period_ns)
 
     def _open(self) -> None:
         first = getattr(self, "follower", None) is None
@@ -64,37 +61,13 @@ class SimArm(SimActuator[ArmSettings], kind="arm"):
         if first:
             self.world.set_home(dict(zip(self.joint_names, self.home)))
         self.fault, self._fault_raised = "", False
-        self._history.clear()
+        self._rule.reset()
 
     def _check(self, stamp_ns: int, target: np.ndarray) -> str:
-        """"" or the fault this command raises: acceleration and jerk by divided differences on the stamps."""
-        h = self._history
-        if not h or stamp_ns - h[-1][0] > STREAM_GAP_NS:
-            # A new stream starts from the arm as it is, extrapolated back at its velocity, one state period
-            # apart. After a pause that is at rest on the last command (servo mode ran it at once), whatever
-            # the simulated follower says: starved of CPU, its state can be that of the pause's start.
-            if h:
-                q, v = h[-1][1].copy(), np.zeros_like(h[-1][1])
-            else:
-                q, v = self.follower.q.copy(), self.follower.v.copy()
-            h.clear()
-            for k in (3, 2, 1):
-                h.append((stamp_ns - k * self.period_ns, q - v * (k - 1) * self.period_ns / 1e9))
-        if stamp_ns <= h[-1][0]:
-            return ""
-        t = [(s - stamp_ns) / 1e9 for s, _ in h] + [0.0]  # differences of integer ns: epoch seconds lose ~1e-7 s
-        q = [p for _, p in h] + [target]
-        f1 = [(q[i + 1] - q[i]) / (t[i + 1] - t[i]) for i in range(3)]
-        f2 = [(f1[i + 1] - f1[i]) / (t[i + 2] - t[i]) for i in range(2)]
-        f3 = (f2[1] - f2[0]) / (t[3] - t[0])
-        h.append((stamp_ns, target))
-        for what, value, limit, unit in (("accelerates", 2.0 * f2[1], self.settings.max_acceleration, "rad/s^2"),
-                                         ("jerks", 6.0 * f3, self.settings.max_jerk, "rad/s^3")):
-            j = int(np.argmax(np.abs(value)))
-            if abs(value[j]) > limit * (1.0 + FAULT_TOLERANCE):
-                return (f"controller fault: the command stamped {stamp_ns / 1e9:.3f} s {what} {self.joint_names[j]} "
-                        f"at {abs(value[j]):.4g} {unit} (limit {limit:g} + {FAULT_TOLERANCE:.0%}); the arm stopped")
-        return ""
+        """"" or the fault this command raises (teleprev.devices.ServoStreamRule: acceleration and jerk by
+        divided differences on the stamps)."""
+        broken = self._rule.check(stamp_ns, target, lambda: (self.follower.q, self.follower.v))
+        return f"controller fault: {broken.describe()}; the arm stopped" if broken else ""
 
     def send(self, command: JointSample) -> None:
         if self.fault:

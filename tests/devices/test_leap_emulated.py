@@ -1,0 +1,124 @@
+"""leap.hand through the real dynamixel-sdk (and pyserial) against the emulated Dynamixel bus on a
+pseudo-terminal (teleprev/emulators): a session, the control table as the e-Manual gives it, and each
+injected fault stopping the hand's commands with one line naming the motor and what happened."""
+
+from __future__ import annotations
+
+import struct
+import sys
+import time
+
+import numpy as np
+import pytest
+
+import dynamixel_sdk as sdk  # the real SDK: scripts/test.sh installs the leap extra (a missing one fails here)
+from teleprev.clock import SessionClock
+from teleprev.devices import DeviceContext, DeviceRunner
+from teleprev.emulators import dynamixel_wire as wire
+from teleprev.emulators.dynamixel_bus import DynamixelBus
+from teleprev_devices.leap import LeapHand, LeapSettings, ticks_from_angles
+from tests.helpers.hardware import CommandStream, EventLog
+
+
+@pytest.fixture(scope="module")
+def bus():
+    # The emulated bus shares this process's GIL with the SDK's busy-waiting reads; a real motor answers
+    # whatever the host does, so threads take turns often enough for it to answer inside the SDK's 34 ms.
+    interval = sys.getswitchinterval()
+    sys.setswitchinterval(0.0005)
+    with DynamixelBus().start() as b:
+        yield b
+    sys.setswitchinterval(interval)
+
+
+class Session:
+    def __init__(self, bus):
+        self.clock = SessionClock()
+        self.hand = LeapHand("hand", LeapSettings(port=bus.port), DeviceContext(self.clock))
+        self.log = EventLog()
+        self.runner = DeviceRunner(self.hand, self.log.sink, self.clock, reconnect_s=0.1).start()
+        assert self.log.wait(lambda: self.log.count("connected") == 1), self.log.events
+        self.stream = CommandStream(self.hand, self.clock, rate_hz=90.0, amplitude=0.3, period_s=2.0,
+                                    joints=slice(1, 4)).start()
+
+    def stop(self):
+        self.stream.stop()
+        self.runner.stop()
+
+
+@pytest.fixture
+def session(bus):
+    s = Session(bus)
+    yield s
+    s.stop()
+    bus.operator_clear()
+
+
+def test_a_hand_session_through_the_sdk(bus, session):
+    writes = bus.goal_writes
+    time.sleep(1.0)
+    assert bus.goal_writes - writes >= 75 and session.stream.failed == 0, session.stream.last_error
+    assert session.log.states >= 75 and session.log.count("error") == 0
+    m = bus.motors[2]
+    assert m.get(wire.OPERATING_MODE) == 5 and m.get(wire.TORQUE_ENABLE) == 1  # current-based position, torque on
+    assert m.get(wire.GOAL_CURRENT) == 350 and m.get(wire.POSITION_P_GAIN) == 600
+    assert bus.motors[0].get(wire.POSITION_P_GAIN) == 450  # side-to-side joints at 0.75 kP
+    # the motors follow the goals, and the state read back is theirs
+    q = np.asarray(session.log.last_state.positions)
+    assert q[2] > 0.05  # joint 2 flexed by the commands (up to 0.6 rad)
+    assert abs(ticks_from_angles(q)[2] - bus.positions()[2]) < 60
+    assert bus.corrupt_requests == 0
+
+
+@pytest.mark.parametrize("fault, said", [
+    ("overload", "motor 5: hardware error: overload (Hardware Error Status 0x20); the motor turned its torque off"),
+    ("overheating", "motor 5: hardware error: overheating (Hardware Error Status 0x04)"),
+    ("input_voltage", "motor 5: hardware error: input voltage error (Hardware Error Status 0x01)"),
+    ("silent", "motor 5 did not answer the sync read"),
+    ("bad_crc", "sent a corrupted reply to the sync read at address"),
+    ("unplug", "the serial port stopped working (adapter unplugged?)"),
+])
+def test_a_fault_stops_the_commands_and_names_the_motor(bus, session, fault, said):
+    log = session.log
+    time.sleep(0.2)
+    bus.inject(fault, motor=5)
+    assert log.wait(lambda: log.count("error") >= 1, timeout_s=3.0), log.events
+    first = log.of("error")[0]["message"]
+    assert said in first and "\n" not in first, first
+    time.sleep(0.1)
+    writes = bus.goal_writes
+    time.sleep(0.4)
+    assert bus.goal_writes == writes  # the hand's commands stopped
+    assert session.stream.failed > 0 and session.runner.is_alive()  # the device is kept, and tried again
+    bus.operator_clear()
+    assert log.wait(lambda: log.count("connected") == 2, timeout_s=5.0), log.events
+    assert log.wait(lambda: bus.goal_writes > writes + 20, timeout_s=3.0)  # commanded again
+
+
+def test_the_control_table_through_the_sdk(bus):
+    port = sdk.PortHandler(bus.port)
+    ph = sdk.PacketHandler(2.0)
+    assert port.openPort() and port.setBaudRate(4_000_000)
+    try:
+        model, result, error = ph.ping(port, 7)
+        assert (model, result, error) == (wire.XC330_T288, sdk.COMM_SUCCESS, 0)
+        assert ph.write1ByteTxRx(port, 7, 64, 1) == (sdk.COMM_SUCCESS, 0)  # torque on
+        assert ph.write1ByteTxRx(port, 7, 11, 3) == (sdk.COMM_SUCCESS, wire.ACCESS_ERROR)  # EEPROM: refused
+        assert ph.write4ByteTxRx(port, 7, 116, 2200) == (sdk.COMM_SUCCESS, 0)
+        time.sleep(0.05)
+        group = sdk.GroupSyncRead(port, ph, 126, 10)  # present current, velocity and position in one read
+        for i in range(16):
+            assert group.addParam(i)
+        assert group.txRxPacket() == sdk.COMM_SUCCESS
+        current, velocity, position = struct.unpack("<hiI", bytes(group.data_dict[7]))
+        assert 2048 < position <= 2200 and velocity >= 0 and current > 0
+        assert ph.write1ByteTxRx(port, 7, 64, 0) == (sdk.COMM_SUCCESS, 0)
+        assert ph.ping(port, 16)[1] == sdk.COMM_RX_TIMEOUT  # no motor 16 on the hand
+    finally:
+        port.closePort()
+
+
+def test_a_port_that_is_not_there(tmp_path):
+    hand = LeapHand("hand", LeapSettings(port=str(tmp_path / "ttyUSB9")), DeviceContext(SessionClock()))
+    with pytest.raises(Exception, match=r"Dynamixel bus .*ttyUSB9: cannot open the serial port"):
+        hand.connect()

@@ -1,0 +1,110 @@
+"""Driving the real actuator plugins (xarm.arm, leap.hand) against the emulators, for tests and bench/hardware.py.
+
+    log = EventLog()
+    runner = DeviceRunner(device, log.sink, clock, reconnect_s=0.1).start()
+    stream = CommandStream(device, clock, amplitude=0.05).start()    # smooth stamped commands at 100 Hz
+    log.wait(lambda: log.count("error") >= 1)
+"""
+
+from __future__ import annotations
+
+import threading
+import time
+from typing import Callable
+
+import numpy as np
+
+from teleprev import topics
+from teleprev.errors import DeviceError
+from teleprev.messages import JointSample
+
+
+class EventLog:
+    """A runner's sink: device events and the last state sample, with the times they arrived."""
+
+    def __init__(self):
+        self.events: list[dict] = []
+        self.states: int = 0
+        self.last_state: JointSample | None = None
+        self._lock = threading.Lock()
+
+    def sink(self, sample, receive_ns: int) -> None:
+        with self._lock:
+            if sample.topic == topics.DEVICE_EVENT:
+                self.events.append({**sample.payload.data, "t": time.monotonic()})
+            else:
+                self.states += 1
+                self.last_state = sample.payload
+
+    def of(self, event: str) -> list[dict]:
+        with self._lock:
+            return [e for e in self.events if e["event"] == event]
+
+    def count(self, event: str) -> int:
+        return len(self.of(event))
+
+    def wait(self, done: Callable[[], bool], timeout_s: float = 5.0) -> bool:
+        deadline = time.monotonic() + timeout_s
+        while time.monotonic() < deadline:
+            if done():
+                return True
+            time.sleep(0.01)
+        return done()
+
+
+class CommandStream:
+    """Sends `device` a command every 1/rate_hz s from its own thread, stamped when it is sent: the joints
+    start where the device is and move by amplitude * (1 - cos(w t)) (at rest at t = 0, so the stream
+    keeps far inside the servo rule's acceleration and jerk limits). Counts sent and failed commands;
+    `latency_ms` holds, for each command, the time until the device's state showed it (when `log` given)."""
+
+    def __init__(self, device, clock, rate_hz: float = 100.0, amplitude: float = 0.05, period_s: float = 4.0,
+                 joints: slice = slice(None)):
+        self.device, self.clock = device, clock
+        self.period_s = 1.0 / rate_hz
+        self.amplitude, self.omega = amplitude, 2 * np.pi / period_s
+        self.joints = joints
+        self.sent = 0
+        self.failed = 0
+        self.last_error = ""
+        self.send_s: list[float] = []
+        self._stop = threading.Event()
+        self._thread = threading.Thread(target=self._run, name="command-stream", daemon=True)
+
+    def start(self) -> CommandStream:
+        self._thread.start()
+        return self
+
+    def stop(self) -> None:
+        self._stop.set()
+        self._thread.join(5.0)
+
+    def _run(self) -> None:
+        names = self.device.joint_names
+        start, t0 = None, 0.0
+        next_t = time.monotonic()
+        while not self._stop.is_set():
+            now = time.monotonic()
+            if now < next_t:
+                time.sleep(next_t - now)
+                continue
+            next_t += self.period_s
+            if next_t < now:  # fell behind (a stall): start again from now instead of bursting
+                next_t = now + self.period_s
+            target = getattr(self.device, "_target", None)
+            if start is None or target is None:
+                if target is None:
+                    continue
+                start, t0 = np.array(target, dtype=float), now
+            q = start.copy()
+            q[self.joints] += self.amplitude * (1 - np.cos(self.omega * (now - t0)))
+            t = time.perf_counter()
+            try:
+                self.device.send(JointSample(self.clock.now_ns(), names, q))
+                self.sent += 1
+                self.send_s.append(time.perf_counter() - t)
+            except DeviceError as exc:
+                self.failed += 1
+                self.last_error = str(exc)
+                start = None  # after a fault the device starts again from where it is
+                time.sleep(0.02)
