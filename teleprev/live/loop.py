@@ -34,6 +34,7 @@ import numpy as np
 from teleprev.devices.contract import Actuator, Device
 from teleprev.messages import Event, JointSample, Logged, PoseSample, Sample
 from teleprev.pipeline.driver import PipelineDriver
+from teleprev.pipeline.planner import ModeUpdate
 from teleprev import topics
 from teleprev.clock import SessionClock
 from teleprev.live.episodes import EpisodeTracker
@@ -117,6 +118,7 @@ class SessionLoop:
         self.halted = ""  # why the session may no longer execute (e.g. the recording failed)
         self.sender = sender
         self.sender_active = False  # the sender is commanding (executing, or braking to rest)
+        self._mode_seq = 0  # the last mode switch passed to the sender
         self._relay_thread: threading.Thread | None = None
         self._stopping = False
         self.fault = ""  # why the session stays in preview until the operator engages (a device failed)
@@ -171,7 +173,8 @@ class SessionLoop:
                 if not isinstance(item, SentTick):
                     continue
                 tick = item.tick
-                self.sender_active = tick.active
+                if tick.seq >= self._mode_seq:  # (a tick from before the last mode switch says nothing now)
+                    self.sender_active = tick.active
                 received = self.clock.now_ns()
                 for kind, names, q, v in (("arm", self._arm_names, tick.arm, tick.arm_v),
                                           ("hand", self._effector_names, tick.hand, tick.hand_v)):
@@ -247,6 +250,12 @@ class SessionLoop:
         """The planner's updates the driver made (format 4), to the sender."""
         if self.driver is not None and self.sender is not None:
             for update in self.driver.take_updates():
+                if isinstance(update, ModeUpdate):
+                    self._mode_seq = update.seq
+                    if update.mode == "halt":
+                        self.sender_active = False  # the planner sends nothing more from its next tick
+                    elif update.mode == "execute":
+                        self.sender_active = True
                 self.sender.send(update)
 
     def _tick(self, item, receive_ns: int) -> None:
