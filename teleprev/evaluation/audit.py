@@ -28,6 +28,7 @@ from pathlib import Path
 import numpy as np
 
 from teleprev import topics
+from teleprev.evaluation.controller_resets import ActuatorHistory
 from teleprev.pipeline.derivatives import RESUME_GAP_NS, runs, stream_peaks
 from teleprev.errors import SessionError
 
@@ -92,10 +93,10 @@ def _runs(t_ns: np.ndarray) -> list[slice]:
 
 
 def _measure(audit: StreamAudit, t_ns: np.ndarray, q: np.ndarray, lower: np.ndarray, upper: np.ndarray,
-             from_rest: bool) -> None:
+             from_rest: bool, rests) -> None:
     audit.commands = len(t_ns)
     audit.position_outside = int(((q < lower - 1e-9) | (q > upper + 1e-9)).any(axis=1).sum())
-    audit.speed_max, audit.accel_max, audit.jerk_max = stream_peaks(t_ns, q, from_rest).worst()
+    audit.speed_max, audit.accel_max, audit.jerk_max = stream_peaks(t_ns, q, from_rest, rests=rests).worst()
 
 
 def swept_colliding(checker, reach: np.ndarray, q: np.ndarray, step_m: float = SWEPT_STEP_M) -> int:
@@ -129,15 +130,39 @@ def recorded_rig(path: Path, meta: dict, rig_path: str | Path | None):
     return rig
 
 
+def actuator_history(reader, side: str, names: tuple[str, ...]) -> ActuatorHistory:
+    """The measured states and (re)connections of the session's actuator of one side ("arm", "hand")."""
+    from teleprev.messages import Event, JointSample
+
+    history = ActuatorHistory()
+    kind = "arm" if side == "arm" else "hand"
+    states = sorted(tp for tp in reader.topics if tp.startswith(f"/{kind}/") and tp.endswith("/state"))
+    if not states:
+        return history
+    device = states[0].split("/")[2]
+    wanted = [states[0]] + ([topics.DEVICE_EVENT] if topics.DEVICE_EVENT in reader.topics else [])
+    for msg in reader.messages(wanted):
+        p = msg.payload
+        if isinstance(p, JointSample):
+            try:
+                history.add_state(p.stamp_ns, [p.positions[p.names.index(n)] for n in names])
+            except ValueError:
+                continue
+        elif isinstance(p, Event) and p.data.get("device") == device and p.data.get("event") == "connected":
+            history.connects_ns.append(msg.log_time_ns)
+    return history
+
+
 def audit_stream(topic: str, side: str, limits: dict, t_ns: np.ndarray, q: np.ndarray | None,
-                 from_rest: bool = True) -> StreamAudit:
+                 from_rest: bool = True, rests=None) -> StreamAudit:
     """One command stream (stamps, positions in the order of limits[side]['names']) against its limits;
-    `from_rest`: each run as a controller starts it (commands; not a dataset's actions)."""
+    `from_rest`: each run as a controller starts it (commands; not a dataset's actions), `rests`: where
+    (ActuatorHistory.for_stream)."""
     lim = limits[side]
     audit = StreamAudit(topic, speed_limit=float(lim["velocity"].min()), accel_limit=float(lim["acceleration"]),
                         jerk_limit=lim.get("jerk"))
     if len(t_ns):
-        _measure(audit, t_ns, q, lim["lower"], lim["upper"], from_rest)
+        _measure(audit, t_ns, q, lim["lower"], lim["upper"], from_rest, rests)
         if side == "hand" and lim.get("checker") is not None:
             audit.colliding = int(lim["checker"].pair_matrix(q).any(axis=1).sum())
             audit.swept_colliding = sum(swept_colliding(lim["checker"], lim["reach"], q[run]) for run in _runs(t_ns))
@@ -156,7 +181,8 @@ def audit_session(path: str | Path, rig_path: str | Path | None = None) -> Audit
             t, q, names = _joint_samples(reader, topic) if topic in reader.topics else (np.zeros(0, np.int64), None, ())
             if len(t) and names != limits[side]["names"]:
                 raise SessionError(f"{topic} commands joints {names}, the rig's robot has {limits[side]['names']}", str(path))
-            report.streams.append(audit_stream(topic, side, limits, t, q))
+            history = actuator_history(reader, side, limits[side]["names"]) if len(t) else None
+            report.streams.append(audit_stream(topic, side, limits, t, q, rests=history.for_stream(t) if history else None))
         hand_limits = limits["hand"]
         state_topics = [tp for tp in reader.topics if tp.startswith("/hand/") and tp.endswith("/state")]
         if state_topics and hand_limits.get("checker") is not None:

@@ -32,12 +32,15 @@ def _same(a: np.ndarray, b: np.ndarray) -> bool:
     return a.shape == b.shape and bool(np.all((a == b) | (np.isnan(a) & np.isnan(b))))
 
 
-def _peaks(track: CommandTrack) -> tuple[float, float, float]:
-    """Speed, acceleration and jerk peaks of the re-run commands of a track."""
+def _peaks(track: CommandTrack, history, span: tuple[int, int]) -> tuple[float, float, float]:
+    """Speed, acceleration and jerk peaks of the re-run commands of a track that end within span, each run
+    measured whole, from where its controller starts it (the actuator's history)."""
     have = ~np.isnan(track.rerun).any(axis=1)
     if have.sum() < 2:
         return 0.0, 0.0, 0.0
-    return stream_peaks(track.t_ns[have], track.rerun[have]).worst()
+    t = track.t_ns[have]
+    return stream_peaks(t, track.rerun[have], rests=history.for_stream(t) if history is not None else None,
+                        window=span).worst()
 
 
 def step_metrics(r: Rerun, rows: np.ndarray, hand_collides: np.ndarray | None, span: tuple[int, int]) -> dict:
@@ -63,8 +66,9 @@ def step_metrics(r: Rerun, rows: np.ndarray, hand_collides: np.ndarray | None, s
     out["deviation_max_rad"] = float(dev.max()) if len(dev) else 0.0
     for name in ("untouched", "ccn", "fallback"):
         out[name] = int((action == name).sum())
-    out["arm_speed_max"], out["arm_accel_max"], out["arm_jerk_max"] = _peaks(arm)
-    out["hand_speed_max"], out["hand_accel_max"], out["hand_jerk_max"] = _peaks(hand)
+    for side, k in (("arm", topics.COMMAND_ARM), ("hand", topics.COMMAND_HAND)):
+        peaks = _peaks(r.commands[k], r.actuators.get(k), span)
+        out[f"{side}_speed_max"], out[f"{side}_accel_max"], out[f"{side}_jerk_max"] = peaks
     lat = r.latency_ns[rows] / 1e6
     out["latency_ms_p50"], out["latency_ms_p99"] = float(np.percentile(lat, 50)), float(np.percentile(lat, 99))
     flags = [r.flags[i] for i in np.flatnonzero(rows)]

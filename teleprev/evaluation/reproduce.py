@@ -23,6 +23,7 @@ from teleprev.errors import SessionError
 from teleprev.messages import Event, JointSample
 from teleprev.assembly import build_pipeline, rig_calibration
 from teleprev.evaluation.command_tracks import CommandTrack, RecordedTick, replay_ticks, track
+from teleprev.evaluation.controller_resets import ActuatorHistory
 from teleprev.pipeline.planner import CommandPlanner
 from teleprev.pipeline.driver import RECORDED_JOINT_TOPICS, InputTopics, PipelineDriver, recorded_names, recorded_values
 from teleprev.pipeline.step import Pipeline, StepResult
@@ -61,6 +62,7 @@ class Rerun:
     wall_s: float = 0.0
     notes: list[str] = field(default_factory=list)
     commands: dict[str, CommandTrack] = field(default_factory=dict)  # COMMAND_ARM / COMMAND_HAND, on their stamps
+    actuators: dict[str, ActuatorHistory] = field(default_factory=dict)  # per command topic: measured states, resets
 
 
 def recorded_format(meta: dict) -> int:
@@ -187,7 +189,13 @@ def _rerun(reader: SessionReader, path: Path, models, rig_path, started: float) 
     tables = {k: JointTable() for k in RECORDED_JOINT_TOPICS
               if reader.schemas.get(k) == JOINT_STATES}
     streamed = [inputs.hand, inputs.wrist, inputs.arm, inputs.effector, topics.MODE, topics.COMMAND_TICK,
-                *(k for k in RECORDED_JOINT_TOPICS if k not in tables)]
+                topics.DEVICE_EVENT, *(k for k in RECORDED_JOINT_TOPICS if k not in tables)]
+    # the actuators' measured states and resets: where a controller starts a stream (metrics' derivatives)
+    histories = {topics.COMMAND_ARM: ActuatorHistory(), topics.COMMAND_HAND: ActuatorHistory()}
+    measured = {inputs.arm: (histories[topics.COMMAND_ARM], arm_names),
+                inputs.effector: (histories[topics.COMMAND_HAND], eff_names)}
+    devices = {inputs.arm.split("/")[2]: histories[topics.COMMAND_ARM],
+               inputs.effector.split("/")[2]: histories[topics.COMMAND_HAND]}
     planned = pipeline.plans_commands
     updates, ticks = [], []  # format 4: the planner's updates the re-run makes, and the recorded ticks
     n_inputs = 0
@@ -204,6 +212,16 @@ def _rerun(reader: SessionReader, path: Path, models, rig_path, started: float) 
                 if isinstance(msg.payload, Event):
                     ticks.append(RecordedTick(msg.payload.stamp_ns, int(msg.payload.data.get("seq", 0))))
                 continue
+            if msg.topic == topics.DEVICE_EVENT:
+                data = msg.payload.data if isinstance(msg.payload, Event) else {}
+                if data.get("event") == "connected" and data.get("device") in devices:
+                    devices[data["device"]].connects_ns.append(msg.log_time_ns)
+                continue
+            if msg.topic in measured and isinstance(msg.payload, JointSample):
+                history, names = measured[msg.topic]
+                q = pipeline.measured(msg.payload, names)
+                if q is not None:
+                    history.add_state(msg.payload.stamp_ns, q)
             n_inputs += 1
             t0 = time.perf_counter_ns()
             result = driver.advance(msg, hand_input)
@@ -242,5 +260,5 @@ def _rerun(reader: SessionReader, path: Path, models, rig_path, started: float) 
         arm_names, eff_names,
         pipeline.effector.spec, rerun, recorded, reader.episodes(), meta, _models_match(meta, pipeline), rig_source,
         reader.duration_s, n_inputs,
-        time.perf_counter() - started, notes, commands,
+        time.perf_counter() - started, notes, commands, histories,
     )

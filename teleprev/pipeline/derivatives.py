@@ -8,8 +8,9 @@ definition that `teleprev audit`, `teleprev eval` and the benches use.
 A stream is split where its commands are more than RESUME_GAP_NS apart (a pause). A servo-mode controller
 takes the first command after a pause, and the first of all, as the start of a new stream from the arm at
 rest where it stands (sim.arm does, and so does teleprev.devices.ServoStreamRule): so each run is measured
-from three commands at rest on the last command before it (on its own first command, for the first run),
-one controller cycle (RESUME_PERIOD_NS) apart, ahead of its own. A stream that resumes with a jump reads as
+from three commands at rest on the last command before it, one controller cycle (RESUME_PERIOD_NS) apart,
+ahead of its own. Where the stream's caller knows better (`rests`: the arm's measured state where its
+controller was reset in the pause, or before the first run), that is where the run starts from. A stream that resumes with a jump reads as
 the acceleration the controller sees. A dataset's actions are no command stream a controller starts: they
 are measured per episode without that lead-in (`from_rest=False`).
 """
@@ -55,24 +56,34 @@ class StreamPeaks:
             self.jerk.max(initial=0.0))
 
 
-def stream_peaks(t_ns: np.ndarray, q: np.ndarray, from_rest: bool = True, gap_ns: int = RESUME_GAP_NS) -> StreamPeaks:
+def stream_peaks(t_ns: np.ndarray, q: np.ndarray, from_rest: bool = True, gap_ns: int = RESUME_GAP_NS,
+                 rests=None, window: tuple[int, int] | None = None) -> StreamPeaks:
     """The speed, acceleration and jerk peaks of commands q (N, joints) at stamps t_ns (sorted), each run
-    measured alone and (from_rest) from rest where the stream stood (see the module docstring)."""
+    measured alone and (from_rest) from rest where the stream stood (see the module docstring);
+    `rests(k, start_ns, last)`: where run k (starting at start_ns, after the command `last`, None for the
+    first) starts from instead, or None. `window` (lo, hi): only the differences that end at a command
+    stamped in [lo, hi) count (an episode of a longer stream, measured as the stream ran)."""
     t_ns = np.asarray(t_ns, dtype=np.int64)
     q = np.asarray(q, dtype=float).reshape(len(t_ns), -1)
     width = q.shape[1]
     peaks = [np.zeros(width), np.zeros(width), np.zeros(width)]
     pieces = runs(t_ns, gap_ns)
-    before = q[0] if len(q) else None
-    for run in pieces:
+    last = None
+    for k, run in enumerate(pieces):
         t, x = t_ns[run], q[run]
+        before = rests(k, int(t[0]), last) if rests is not None else None
+        if before is None:
+            before = x[0] if last is None else last
         if from_rest:
             lead = t[0] - RESUME_PERIOD_NS * np.arange(3, 0, -1, dtype=np.int64)
             t, x = np.concatenate([lead, t]), np.concatenate([np.repeat(before[None], 3, axis=0), x])
-        before = q[run][-1]
+        last = x[-1]
         if len(t) < 2:
             continue
         for k, values in enumerate(divided_differences(t, x)):
+            if window is not None:
+                ends = t[k + 1:]
+                values = values[(ends >= window[0]) & (ends < window[1])]
             if len(values):
                 peaks[k] = np.maximum(peaks[k], np.abs(values).max(axis=0))
     return StreamPeaks(*peaks, runs=len(pieces))

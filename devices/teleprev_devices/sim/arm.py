@@ -29,12 +29,15 @@ class ArmSettings(ActuatorSettings):
     max_velocity: float = 0.0  # rad/s for every joint; 0: the URDF's velocity limits
     max_acceleration: float = 10.0  # rad/s^2: commands beyond this (+10%) fault the controller
     max_jerk: float = 500.0  # rad/s^3: likewise
+    fault_after_s: float = 0.0  # a controller fault (a collision stop) this long after the first command, once; 0: none
 
     def __post_init__(self):
         super().__post_init__()
         if self.max_velocity < 0 or self.max_acceleration <= 0 or self.max_jerk <= 0:
             raise ValueError("max_velocity must be >= 0, max_acceleration and max_jerk > 0, "
                              f"got {self.max_velocity}, {self.max_acceleration} and {self.max_jerk}")
+        if not 0 <= self.fault_after_s < 1e6:
+            raise ValueError(f"fault_after_s must be >= 0 (0: no injected fault), got {self.fault_after_s}")
 
 
 
@@ -62,6 +65,8 @@ class SimArm(SimActuator[ArmSettings], kind="arm"):
             self.world.set_home(dict(zip(self.joint_names, self.home)))
         self.fault, self._fault_raised = "", False
         self._rule.reset()
+        if first:
+            self._first_command_ns, self._injected_done = None, False
 
     def _check(self, stamp_ns: int, target: np.ndarray) -> str:
         """"" or the fault this command raises (teleprev.devices.ServoStreamRule: acceleration and jerk by
@@ -75,12 +80,25 @@ class SimArm(SimActuator[ArmSettings], kind="arm"):
         super().send(command)
         with self._lock:
             target = self._commands[-1][1]
-            fault = self._check(command.stamp_ns, target)
+            fault = self._check(command.stamp_ns, target) or self._injected(command.stamp_ns)
             if fault:
                 self.fault = fault
                 self._commands.clear()
                 self.follower.set_target(self.follower.q)
                 self.follower.v[:] = 0.0
+
+    def _injected(self, stamp_ns: int) -> str:
+        """The fault `fault_after_s` asks for, when it is due (once per session)."""
+        after = self.settings.fault_after_s
+        if after <= 0 or self._injected_done:
+            return ""
+        if self._first_command_ns is None:
+            self._first_command_ns = stamp_ns
+        if stamp_ns - self._first_command_ns < after * 1e9:
+            return ""
+        self._injected_done = True
+        return (f"controller fault: collision detected at {stamp_ns / 1e9:.3f} s (injected: fault_after_s = "
+                f"{after:g}); the arm stopped")
 
     def read(self, timeout_s: float):
         if self.fault and not self._fault_raised:

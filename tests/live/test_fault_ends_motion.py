@@ -1,0 +1,56 @@
+"""After a controller fault nothing moves until the operator says so: an unattended session engages once
+per episode and never again after the fault (the refusal is recorded), nothing more is sent to the
+stopped arm, and an operator's engage starts from the measured state at rest, within the limits."""
+
+import time
+
+import numpy as np
+
+from teleprev import topics
+from teleprev.evaluation.audit import audit_session
+from teleprev.live.run import run_script
+from teleprev.live.session import LiveSession, RecordOptions
+from teleprev.rig import default_rig_path
+from teleprev.session.reader import SessionReader
+
+
+def _faulting_rig(tmp_path, after_s: float):
+    text = default_rig_path().read_text().replace('plugin = "sim.arm"', f'plugin = "sim.arm"\nfault_after_s = {after_s}')
+    rig = tmp_path / "rig.toml"
+    rig.write_text(text)
+    return rig
+
+
+def test_a_fault_mid_episode_ends_the_motion_until_the_operator_engages(tmp_path):
+    out = tmp_path / "s.mcap"
+    rec = LiveSession(RecordOptions(out=out, rig=_faulting_rig(tmp_path, 1.0)))
+    rec.start()
+    try:
+        run_script(rec, duration=6.0, episodes=2, engage_after=0.8)  # the second episode would engage at 3.8 s
+        assert rec.loop.stats.engages == 1 and rec.loop.fault
+        deadline = time.monotonic() + 3.0
+        while rec.loop.stats.engages < 2 and time.monotonic() < deadline:
+            rec.loop.control("mode", mode="execute")  # the operator's key (again while the arm reconnects)
+            time.sleep(0.25)
+        time.sleep(1.0)
+    finally:
+        rec.stop()
+    assert rec.loop.stats.engages == 2
+    with SessionReader(out) as reader:
+        modes = [(m.log_time_ns, m.payload.data) for m in reader.messages([topics.MODE])]
+        refused = [m.payload.data for m in reader.messages([topics.OPERATOR])]
+        ticks = [m.payload.stamp_ns for m in reader.messages([topics.COMMAND_TICK])]
+        arm = [(m.payload.stamp_ns, m.payload.positions) for m in reader.messages([topics.COMMAND_ARM])]
+        states = [(m.log_time_ns, m.payload.positions) for m in reader.messages(["/arm/arm/state"])]
+    halts = [t for t, d in modes if d.get("halt")]
+    engages = [t for t, d in modes if d["mode"] == "execute"]
+    assert len(halts) == 1 and [d["reason"] for _, d in modes if d.get("halt")] == ["device arm failed"]
+    assert len(engages) == 2 and engages[0] < halts[0] < engages[1]
+    assert [r["event"] for r in refused] == ["engage_refused"]  # the second episode's engage, once
+    # nothing was sent between the fault and the operator's engage
+    assert not [t for t in ticks if halts[0] < t < engages[1]]
+    # the re-engage starts where the arm stands, at rest
+    first = next(q for t, q in arm if t > engages[1])
+    measured = [q for t, q in states if t <= engages[1]][-1]  # the driver's latest when the switch came
+    assert np.abs(first - measured).max() < 1e-9
+    assert audit_session(out).ok
