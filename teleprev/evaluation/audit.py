@@ -49,6 +49,7 @@ class StreamAudit:
     jerk_limit: float | None = None
     colliding: int | None = None  # commands in self-collision (hand)
     swept_colliding: int | None = None  # command segments through a self-collision (hand)
+    rounding: dict[str, float] = field(default_factory=dict)  # per check: how much the values' storage may add
 
     @property
     def ratios(self) -> dict[str, float]:
@@ -60,7 +61,7 @@ class StreamAudit:
 
     @property
     def violations(self) -> list[str]:
-        out = [f"{k} {v:.3f} x the limit" for k, v in self.ratios.items() if v > 1.0 + TOLERANCE]
+        out = [f"{k} {v:.3f} x the limit" for k, v in self.ratios.items() if v > 1.0 + TOLERANCE + self.rounding.get(k, 0.0)]
         if self.position_outside:
             out.append(f"{self.position_outside} commands outside the joint limits")
         if self.colliding:
@@ -258,6 +259,10 @@ def audit_dataset(root: str | Path, rig_path: str | Path | None) -> AuditReport:
     episodes = np.asarray(table["episode_index"], dtype=np.int64)
     stamps = np.round(np.asarray(table["timestamp"], dtype=float) * 1e9).astype(np.int64)
     action = np.asarray(table["action"], dtype=float)
+    # The actions are stored as float32: rounded, each value moves by up to half an ulp, which a divided
+    # difference of order k at the frames' spacing h can grow to 2^k x that / h^k.
+    half_ulp = 2.0 ** -24 * (float(np.abs(action).max()) if action.size else 0.0)
+    spacing = np.diff(np.unique(stamps)).min() / 1e9 if len(np.unique(stamps)) > 1 else 1.0
     report = AuditReport(str(root), note=note)
     arm = StreamAudit("action[arm]")
     hand = StreamAudit("action[end effector]")
@@ -267,6 +272,11 @@ def audit_dataset(root: str | Path, rig_path: str | Path | None) -> AuditReport:
         t = stamps[rows] + int(ep) * 3_600_000_000_000  # episodes an hour apart: never one run
         merge(arm, audit_stream("action[arm]", "arm", limits, t, action[rows][:, arm_cols], from_rest=False))
         merge(hand, audit_stream("action[end effector]", "hand", limits, t, action[rows][:, hand_cols], from_rest=False))
+    for total in (arm, hand):
+        for name, order, limit in (("speed", 1, total.speed_limit), ("accel", 2, total.accel_limit),
+                                   ("jerk", 3, total.jerk_limit)):
+            if limit:
+                total.rounding[name] = 2 ** order * half_ulp / spacing ** order / limit
     report.streams = [arm, hand]
     return report
 

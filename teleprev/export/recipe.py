@@ -28,9 +28,12 @@ rig has several of its kind ("arm_state:left"), otherwise the one device (or the
 is taken. A stream may also be given by its topic ("/arm/left/state").
 
 A feature's `timing` is "action" for features named action / action.*, "observation" otherwise:
-observations use the latest sample at or before the frame's time, actions the command sent right after
-it (see timeline.py). `timing = "next"` derives an action from a state stream: the value the stream
-has at the next frame's time (where the robot went), for recordings without commands.
+observations use the latest sample at or before the frame's time, actions the commanded trajectory at
+the frame's time (the commands sampled where the frames are, see timeline.py), so a dataset's actions
+keep the robot's motion limits at the dataset's fps. `timing = "sent"` takes instead the first command
+sent in the frame (the raw command stream, as recorded), and `timing = "next"` derives an action from a
+state stream: the value the stream has at the next frame's time (where the robot went), for recordings
+without commands.
 """
 
 from __future__ import annotations
@@ -98,7 +101,7 @@ class ExportSection:
 class FeatureSpec:
     name: str
     streams: tuple[str, ...]
-    timing: Literal["", "observation", "action", "next"] = ""  # "": by the name (see the module doc)
+    timing: Literal["", "observation", "action", "sent", "next"] = ""  # "": by the name (see the module doc)
 
     def __post_init__(self):
         if not self.name or not self.streams:
@@ -107,7 +110,7 @@ class FeatureSpec:
     @property
     def is_action(self) -> bool:
         if self.timing:
-            return self.timing in ("action", "next")
+            return self.timing in ("action", "sent", "next")
         return self.name == "action" or self.name.startswith("action.")
 
 
@@ -185,6 +188,7 @@ class ResolvedFeature:
     is_action: bool
     sources: tuple[Source, ...]
     next_frame: bool = False  # timing "next": the stream's value at the next frame (an action derived from states)
+    sent: bool = False  # timing "sent": the first command sent in the frame (the raw command stream)
 
     @property
     def is_image(self) -> bool:
@@ -221,7 +225,8 @@ def resolve(recipe: Recipe, session_topics: dict, metadata: dict[str, dict[str, 
             for s in images:
                 out.append(ResolvedFeature(spec.name.replace("{camera}", s.prefix), False, (s,)))
         elif sources:
-            out.append(ResolvedFeature(spec.name, spec.is_action, tuple(sources), spec.timing == "next"))
+            out.append(ResolvedFeature(spec.name, spec.is_action, tuple(sources), spec.timing == "next",
+                                       spec.timing == "sent"))
     names = [f.name for f in out]
     dup = next((n for n in names if names.count(n) > 1), None)
     if dup:

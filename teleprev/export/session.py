@@ -19,6 +19,8 @@ from teleprev.export.recipe import IMAGE, Recipe, ResolvedFeature, resolve
 from teleprev.export.report import EpisodeReport, SessionReport
 from teleprev.export.streams import probe_joint_names, read_episode
 from teleprev.export.timeline import EpisodePlan, plan_episode
+from teleprev import topics
+from teleprev.robot.effectors import EFFECTORS
 from teleprev.topics import TASKS_RECORD
 
 _NS = 1_000_000_000
@@ -241,14 +243,50 @@ def _export_episode(source: SessionSource, dataset, settings: ExportSettings, ep
 
 
 def _timing(f: ResolvedFeature, s) -> bool | str:
-    """How a feature's stream is looked up (see plan_episode): False, True (an action) or "next"."""
+    """How a feature's stream is looked up (see plan_episode): False (an observation), "trajectory" (an
+    action: the commanded trajectory at the frame's time), True (the first command sent in the frame) or
+    "next"."""
     if s.schema == IMAGE or not f.is_action:
         return False
-    return "next" if f.next_frame else True
+    return "next" if f.next_frame else True if f.sent else "trajectory"
 
 
 def _key(topic: str, timing: bool | str) -> str:
-    return f"{topic}|{'next' if timing == 'next' else 'action' if timing else 'observation'}"
+    return f"{topic}|{timing if isinstance(timing, str) else 'sent' if timing else 'observation'}"
+
+
+def _interpolation(source: SessionSource, topic: str, stream) -> str:
+    """How a command stream moves between its commands: the arm's jerk-limited profile (cubic Hermite on
+    the recorded positions and velocities), a switch's step (hold), else straight segments (the hand's
+    commands: each one a segment from the last, as the swept check saw it)."""
+    if topic == topics.COMMAND_ARM and stream.velocities is not None:
+        return "hermite"
+    effector = EFFECTORS.get(source.reader.metadata.get("rig", {}).get("end_effector", ""))
+    if topic == topics.COMMAND_HAND and effector is not None and effector.is_switch:
+        return "hold"
+    return "linear"
+
+
+def _sampled(stream, look, frames: np.ndarray, kind: str) -> np.ndarray:
+    """The values of a trajectory lookup at the frames: between two commands as `kind` says, else the
+    command itself (held)."""
+    i = look.index[frames]
+    j = look.next[frames]
+    values = stream.values[i].copy()
+    between = np.flatnonzero(j >= 0)
+    if not len(between) or kind == "hold":
+        return values
+    a, b, s = i[between], j[between], look.frac[frames][between][:, None]
+    p0, p1 = stream.values[a], stream.values[b]
+    if kind == "hermite":
+        h = ((stream.stamps[b] - stream.stamps[a]) / 1e9)[:, None]
+        v0, v1 = stream.velocities[a], stream.velocities[b]
+        s2, s3 = s * s, s * s * s
+        values[between] = ((2 * s3 - 3 * s2 + 1) * p0 + (s3 - 2 * s2 + s) * h * v0 + (3 * s2 - 2 * s3) * p1
+                           + (s3 - s2) * h * v1)
+    else:
+        values[between] = p0 + s * (p1 - p0)
+    return values
 
 
 def _describe(plan: EpisodePlan, stamps: dict[str, np.ndarray], labels: dict[str, str], start_ns: int, fps: int,
@@ -289,7 +327,10 @@ def _write_pieces(source: SessionSource, dataset, plan: EpisodePlan, joints, cam
         for s in f.sources:
             key = _key(s.topic, _timing(f, s))
             look = plan.lookups[key]
-            cols.append(joints[s.topic].values[look.index[frames_all]])
+            if look.next is not None:
+                cols.append(_sampled(joints[s.topic], look, frames_all, _interpolation(source, s.topic, joints[s.topic])))
+            else:
+                cols.append(joints[s.topic].values[look.index[frames_all]])
             align.append(look.err_ns[frames_all])
         matrices[f.name] = np.concatenate(cols, axis=1).astype(np.float32)
     images = _ImageStream(source, plan, cams, frames_all, ref_key, window)

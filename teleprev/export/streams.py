@@ -21,6 +21,7 @@ class JointStream:
     names: tuple[str, ...]  # column order of `values`
     stamps: np.ndarray  # int64, ascending
     values: np.ndarray  # float64 (n, len(names))
+    velocities: np.ndarray | None = None  # float64 (n, len(names)), where every sample carries them
 
 
 @dataclass
@@ -37,21 +38,30 @@ class _Growing:
         self.n = 0
         self.stamps = np.empty(1024, dtype=np.int64)
         self.values = np.empty((1024, width), dtype=np.float64)
+        self.velocities = np.empty((1024, width), dtype=np.float64)
+        self.every_velocity = True  # every sample so far carried velocities
 
-    def add(self, stamp: int, row) -> None:
+    def add(self, stamp: int, row, velocity=None) -> None:
         if self.n == len(self.stamps):
             self.stamps = np.resize(self.stamps, 2 * self.n)
             self.values = np.resize(self.values, (2 * self.n, self.values.shape[1]))
+            self.velocities = np.resize(self.velocities, (2 * self.n, self.values.shape[1]))
         self.stamps[self.n] = stamp
         self.values[self.n] = row
+        if velocity is None or len(velocity) != self.values.shape[1]:
+            self.every_velocity = False
+        else:
+            self.velocities[self.n] = velocity
         self.n += 1
 
-    def arrays(self) -> tuple[np.ndarray, np.ndarray]:
+    def arrays(self) -> tuple[np.ndarray, np.ndarray, np.ndarray | None]:
         stamps, values = self.stamps[: self.n], self.values[: self.n]
+        velocities = self.velocities[: self.n] if self.every_velocity and self.n else None
         if self.n > 1 and np.any(np.diff(stamps) < 0):
             order = np.argsort(stamps, kind="stable")
             stamps, values = stamps[order], values[order]
-        return stamps, values
+            velocities = None if velocities is None else velocities[order]
+        return stamps, values, velocities
 
 
 def probe_joint_names(reader, topic: str, schema: str) -> tuple[str, ...]:
@@ -86,7 +96,7 @@ def read_episode(reader, joint_topics: dict[str, tuple[str, ...]], camera_topics
         elif type(p) is JointSample:
             names = joint_topics[t]
             if p.names == names:
-                joints[t].add(p.stamp_ns, p.positions)
+                joints[t].add(p.stamp_ns, p.positions, p.velocities)
             else:
                 joints[t].add(p.stamp_ns, _reorder(p, names, index[t], t, msg.log_time_ns, where))
         elif type(p) is PoseSample:
@@ -95,8 +105,8 @@ def read_episode(reader, joint_topics: dict[str, tuple[str, ...]], camera_topics
             raise SessionError(f"{t} at log time {msg.log_time_ns}: unexpected {type(p).__name__} message", where)
     out_j = {}
     for t, g in joints.items():
-        stamps, values = g.arrays()
-        out_j[t] = JointStream(t, joint_topics[t], stamps, values)
+        stamps, values, velocities = g.arrays()
+        out_j[t] = JointStream(t, joint_topics[t], stamps, values, velocities)
     out_c = {}
     for t, stamps in cams.items():
         s = np.asarray(stamps, dtype=np.int64)

@@ -10,9 +10,13 @@ reference camera's first frame in the episode (the episode's start without a cam
 - Observations (state, other cameras, extras): the latest sample at or before t_k, never a later one;
   older than `max_gap` is a gap.
 - Derived actions ("next"): the latest sample at or before t_{k+1}, the state the robot reached.
-- Actions: the first command at or after t_k and before the next frame's time (the command sent after
-  the observation, as lerobot's record loop pairs them); if none was sent in that window, the last
-  one before t_k while it is not older than `max_gap` (the robot keeps its last target); else a gap.
+- Actions: the commanded trajectory at the frame's grid time g_k (the dataset's own timestamp): between
+  the commands sent before and after it (interpolated by the exporter: `Lookup.next` and `frac`), where
+  they are at most `max_gap` apart; after the last command, that command while it is not older than
+  `max_gap` (the robot keeps its last target); else a gap.
+- Sent actions (timing "sent", the raw command stream): the first command at or after t_k and before the
+  next frame's time (the command sent after the observation, as lerobot's record loop pairs them); if
+  none was sent in that window, the last one before t_k while it is not older than `max_gap`.
 
 The alignment error of a frame is the distance between t_k and the samples it uses. Frames where some
 stream has a gap are left out: at the ends of an episode they are trimmed, inside they split it.
@@ -31,11 +35,14 @@ _NS = 1_000_000_000
 @dataclass(frozen=True)
 class Lookup:
     """For every frame: the index of the sample used (-1: none), its distance to the frame's time,
-    and whether the stream covers the frame (no gap)."""
+    and whether the stream covers the frame (no gap). A trajectory lookup also gives the sample after
+    (`next`, -1: none: the sample itself holds) and how far between the two the frame's time lies."""
 
     index: np.ndarray
     err_ns: np.ndarray
     ok: np.ndarray
+    next: np.ndarray | None = None
+    frac: np.ndarray | None = None
 
 
 @dataclass(frozen=True)
@@ -133,6 +140,26 @@ def act(stamps: np.ndarray, times: np.ndarray, fps: int, max_gap_ns: int) -> Loo
     return Lookup(index, err, after | held_ok)
 
 
+def trajectory(stamps: np.ndarray, times: np.ndarray, max_gap_ns: int) -> Lookup:
+    """The commanded trajectory at each time: between the commands at or before and after it, where they
+    are at most max_gap apart; after the last one, that one while it is at most max_gap old."""
+    n = len(stamps)
+    if n == 0:
+        zeros = np.zeros(len(times), dtype=np.int64)
+        return Lookup(zeros - 1, zeros, np.zeros(len(times), dtype=bool), zeros - 1, np.zeros(len(times)))
+    i = np.searchsorted(stamps, times, side="right") - 1
+    has = i >= 0
+    ic = np.maximum(i, 0)
+    j = np.minimum(ic + 1, n - 1)
+    span = stamps[j] - stamps[ic]
+    between = has & (i + 1 < n) & (span <= max_gap_ns) & (span > 0)
+    age = np.where(has, times - stamps[ic], 0)
+    frac = np.where(between, age / np.where(span > 0, span, 1), 0.0)
+    err = np.where(between, np.minimum(age, stamps[j] - times), age)
+    ok = between | (has & (age <= max_gap_ns))  # else: the last command held while it is not too old
+    return Lookup(i, err, ok, np.where(between, j, -1), frac)
+
+
 def next_times(times: np.ndarray, fps: int) -> np.ndarray:
     """Each frame's next frame time (the last frame's: one period later)."""
     out = np.empty_like(times)
@@ -153,8 +180,9 @@ def plan_episode(
     min_frames: int,
 ) -> EpisodePlan:
     """Frames, lookups, gaps and pieces of one episode. `streams` maps a name to (sorted stamps,
-    timing): False an observation, True an action, "next" the observation at the next frame's time;
-    the reference camera is `ref_name` with stamps `ref` (None: fixed clock)."""
+    timing): False an observation, "trajectory" an action (the commanded trajectory at the frame's grid
+    time), True (or "sent") the first command sent in the frame, "next" the observation at the next
+    frame's time; the reference camera is `ref_name` with stamps `ref` (None: fixed clock)."""
     frames = frame_grid(ref, start_ns, stop_ns, fps, max_gap_ns)
     lookups: dict[str, Lookup] = {}
     if ref_name is not None and frames.camera is not None:
@@ -163,6 +191,8 @@ def plan_episode(
         stamps = np.asarray(stamps, dtype=np.int64)
         if timing == "next":
             lookups[name] = observe(stamps, next_times(frames.time_ns, fps), max_gap_ns)
+        elif timing == "trajectory":
+            lookups[name] = trajectory(stamps, frames.grid_ns, max_gap_ns)
         elif timing:
             lookups[name] = act(stamps, frames.time_ns, fps, max_gap_ns)
         else:

@@ -4,8 +4,10 @@ DataLoader, their videos decoded with PyAV.
 
 Expected values are worked out from the source session alone: every synthetic camera frame carries
 its frame number as black and white blocks, so a decoded dataset frame says which recorded frame it
-is, hence its time; the state must be the latest recorded sample at or before that time and the action
-the first command sent at or after it.
+is, hence its time; the state must be the latest recorded sample at or before that time, and the action
+the commanded trajectory at the frame's grid time (the episode's first frame + its index / fps: the
+dataset's own timestamp), between the commands sent around it (or, with the sent_commands recipe, the
+first command sent at or after the frame's time).
 """
 
 import re
@@ -79,6 +81,17 @@ class Source:
         assert i >= 0
         return values[i], t - stamps[i]
 
+    def trajectory(self, topic, g):
+        """The commands at time g: straight between the two around it (commands without velocities) when
+        they are at most 100 ms apart, else the last one before it (held)."""
+        stamps, values = self.streams[topic]
+        i = np.searchsorted(stamps, g, side="right") - 1
+        assert i >= 0
+        if i + 1 < len(stamps) and stamps[i + 1] - stamps[i] <= 100_000_000:
+            s = (g - stamps[i]) / (stamps[i + 1] - stamps[i])
+            return values[i] + s * (values[i + 1] - values[i]), min(g - stamps[i], stamps[i + 1] - g)
+        return values[i], g - stamps[i]
+
     def command(self, topic, t, t_next):
         """The first command sent in [t, t_next); if none, the last one before t (the robot holds it)."""
         stamps, values = self.streams[topic]
@@ -131,6 +144,9 @@ def test_a_session_loads_back_with_its_episodes_features_tasks_values_and_images
         images.extend(frames.permute(0, 2, 3, 1).numpy())
     assert len(images) == len(ds)
     numbers = [read_frame_code(img) for img in images]
+    first_stamp = {}  # per episode: its first frame's camera time, where its frame grid starts
+    for i in range(len(ds)):
+        first_stamp.setdefault(int(rows["episode_index"][i]), src.frames[numbers[i]][0])
     worst_err, worst_psnr = 0, np.inf
     for i in range(len(ds)):
         e = int(rows["episode_index"][i])
@@ -145,9 +161,11 @@ def test_a_session_loads_back_with_its_episodes_features_tasks_values_and_images
         arm, arm_age = src.latest(ARM, stamp)
         hand, hand_age = src.latest(HAND, stamp)
         np.testing.assert_array_equal(rows["observation.state"][i], np.concatenate([arm, hand]).astype(np.float32))
-        cmd_arm, arm_wait = src.command("/command/arm", stamp, t_next)
-        cmd_hand, hand_wait = src.command("/command/hand", stamp, t_next)
-        np.testing.assert_array_equal(rows["action"][i], np.concatenate([cmd_arm, cmd_hand]).astype(np.float32))
+        grid = first_stamp[e] + int(rows["frame_index"][i]) * 1_000_000_000 // FPS
+        cmd_arm, arm_wait = src.trajectory("/command/arm", grid)
+        cmd_hand, hand_wait = src.trajectory("/command/hand", grid)
+        np.testing.assert_allclose(rows["action"][i], np.concatenate([cmd_arm, cmd_hand]).astype(np.float32),
+                                   rtol=0, atol=2e-7)
         worst_err = max(worst_err, arm_age, hand_age, arm_wait, hand_wait)
     # and LeRobotDataset's own items at chosen frames: the same values, task and picture
     for i in sorted({0, len(ds) // 3, len(ds) // 2, len(ds) - 1, int(ds.meta.episodes[1]["dataset_from_index"])}):
@@ -160,6 +178,32 @@ def test_a_session_loads_back_with_its_episodes_features_tasks_values_and_images
     assert worst_psnr >= 30.0
     assert worst_err <= 1e9 / FPS / 2  # 100 Hz arm, 90 Hz hand, 120 Hz commands: within half a frame
     assert report.align_err_ms == pytest.approx(worst_err / 1e6, abs=1e-6)
+
+
+def test_the_sent_commands_recipe_keeps_the_first_command_sent_in_each_frame(sessions, tmp_path):
+    from lerobot.datasets.lerobot_dataset import LeRobotDataset
+
+    root = tmp_path / "lab" / "sent"
+    export(ExportOptions([sessions.a], "lab/sent", root, load_recipe("sent_commands")))
+    ds = LeRobotDataset("lab/sent", root=root, video_backend="pyav")
+    src = Source(sessions.a)
+    rows = ds.hf_dataset.with_format("numpy")[:]
+    from lerobot.datasets.video_utils import decode_video_frames
+
+    checked = 0
+    for e, ep in enumerate(ds.meta.episodes):
+        lo, n = int(ep["dataset_from_index"]), int(ep["length"])
+        t0 = float(ep[f"videos/{CAM}/from_timestamp"])
+        frames = decode_video_frames(root / ds.meta.get_video_file_path(e, CAM), [t0 + k / FPS for k in range(n)], 1e-4,
+                                     backend="pyav", return_uint8=True)
+        numbers = [read_frame_code(img) for img in frames.permute(0, 2, 3, 1).numpy()]
+        for k in range(n - 1):
+            stamp, t_next = src.frames[numbers[k]][0], src.frames[numbers[k + 1]][0]
+            cmd = np.concatenate([src.command("/command/arm", stamp, t_next)[0],
+                                  src.command("/command/hand", stamp, t_next)[0]])
+            np.testing.assert_array_equal(rows["action"][lo + k], cmd.astype(np.float32))
+            checked += 1
+    assert checked > 60
 
 
 @pytest.mark.filterwarnings("ignore:This process .* is multi-threaded, use of fork:DeprecationWarning")

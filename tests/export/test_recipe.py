@@ -100,5 +100,5 @@ def test_mixed_or_unnamed_camera_features_are_refused(tmp_path):
 
 
 def test_an_unknown_recipe_lists_the_shipped_ones():
-    with pytest.raises(ConfigError, match=r"no such recipe file \(recipes in .*datasets/recipes: default, with_glove"):
+    with pytest.raises(ConfigError, match=r"no such recipe file \(recipes in .*datasets/recipes: default, sent_commands, with_glove"):
         load_recipe("nope")

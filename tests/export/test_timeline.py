@@ -107,3 +107,32 @@ def test_a_lower_dataset_rate_takes_every_n_th_camera_frame(fps):
     # grid points run to half a dataset period past the last camera frame (89): the last one takes it
     assert np.array_equal(f.camera.index, np.minimum(np.arange(len(f.time_ns)) * step, 89))
     assert np.all(np.abs(f.time_ns - f.grid_ns) * 2 * fps <= 1_000_000_000)
+
+
+def test_actions_sample_the_commanded_trajectory_between_the_commands():
+    """A jerk-limited arm profile is piecewise cubic: between two commands that carry their positions and
+    velocities, the cubic Hermite sampled at the frames is the profile itself; the hand's commands are
+    straight segments; a switch steps."""
+    from types import SimpleNamespace
+
+    from teleprev.export.session import _sampled
+    from teleprev.export.timeline import trajectory
+
+    stamps = np.arange(0, 400_000_000, 8_333_333, dtype=np.int64)
+    t = stamps / 1e9
+    q = (2.0 + 0.5 * t - 3.0 * t**2 + 4.0 * t**3)[:, None]
+    v = (0.5 - 6.0 * t + 12.0 * t**2)[:, None]
+    frames = np.arange(0, 350_000_000, 33_333_333, dtype=np.int64) + 1_234_567
+    look = trajectory(stamps, frames, max_gap_ns=100_000_000)
+    assert look.ok.all() and (look.next >= 0).all()
+    stream = SimpleNamespace(stamps=stamps, values=q, velocities=v)
+    g = frames / 1e9
+    exact = 2.0 + 0.5 * g - 3.0 * g**2 + 4.0 * g**3
+    np.testing.assert_allclose(_sampled(stream, look, np.arange(len(frames)), "hermite")[:, 0], exact, atol=1e-12)
+    straight = _sampled(stream, look, np.arange(len(frames)), "linear")[:, 0]
+    assert np.abs(straight - exact).max() > 1e-6  # (a chord, not the curve)
+    held = _sampled(stream, look, np.arange(len(frames)), "hold")[:, 0]
+    np.testing.assert_array_equal(held, q[look.index, 0])
+    # a command older than max_gap holds no frame; a gap between commands holds the last one while fresh
+    late = trajectory(stamps, np.array([stamps[-1] + 50_000_000, stamps[-1] + 150_000_000]), max_gap_ns=100_000_000)
+    assert late.ok.tolist() == [True, False] and (late.next == -1).all()
