@@ -88,6 +88,14 @@ def info(
         head.add_row("lost before recording", f"[bold red]{sum(lost.values())}[/] ({detail}; see devices)" if detail else "0")
     if s.preview_only:
         head.add_row("commands", f"[yellow]none[/]: {PREVIEW_ONLY}")
+    if s.sender is not None:
+        c = s.sender
+        rate = f"{c.rate_hz:g} Hz, " if c.rate_hz else ""
+        priority = {True: "real-time priority", False: "[yellow]no real-time priority[/]", None: ""}[c.realtime]
+        style = "green" if c.gap_ms_max <= 25.0 else "bold red"
+        head.add_row("command sender", f"{rate}{priority}: {c.ticks} ticks, late p50 {c.late_ms_p50:.2f} / p99 "
+                     f"{c.late_ms_p99:.2f} / max {c.late_ms_max:.2f} ms; longest gap between commands "
+                     f"[{style}]{c.gap_ms_max:.1f} ms[/]")
     failures = s.device_failures
     if failures:
         head.add_row("failed devices", "[bold red]" + ", ".join(f"{d} ({n}x)" for d, n in sorted(failures.items()))

@@ -17,7 +17,7 @@ from teleprev.errors import SessionError
 from teleprev.messages import Event
 from teleprev.session.reader import Episode, SessionReader
 from teleprev.session.recorder import RECORDER_RECORD
-from teleprev.topics import COMMAND_ARM, COMMAND_HAND, DEVICE_EVENT
+from teleprev.topics import COMMAND_ARM, COMMAND_HAND, COMMAND_TICK, DEVICE_EVENT, MODE
 
 GAP_FACTOR = 3.0  # a gap is an interval longer than this many median periods
 PREVIEW_ONLY = ("the robot was never engaged: the whole session ran in PREVIEW, so no command was sent or recorded "
@@ -60,6 +60,38 @@ class DeviceEventInfo:
 
 
 @dataclass
+class SenderSummary:
+    """The paced command sender's timing in a session (format 4): from its ticks (/command/tick)."""
+
+    ticks: int
+    rate_hz: float | None
+    realtime: bool | None  # it ran with real-time priority (None: not recorded)
+    late_ms_p50: float
+    late_ms_p99: float
+    late_ms_max: float
+    gap_ms_max: float  # the longest interval between two commands of one engaged run (stamps)
+
+    @classmethod
+    def from_ticks(cls, stamps: list[int], late_ms: list[float], active: list[bool], engages_ns: list[int],
+                   meta: dict[str, str]) -> "SenderSummary":
+        late = np.asarray(late_ms, dtype=float)
+        gap = 0.0
+        if len(stamps) > 1:
+            t = np.asarray(stamps, dtype=np.int64)
+            starts = np.searchsorted(t, np.asarray(engages_ns, dtype=np.int64), side="left")
+            same_run = np.asarray(active[:-1], dtype=bool)  # a tick after an inactive one starts a new run
+            starts = starts[(starts > 0) & (starts < len(t))]
+            same_run[starts - 1] = False  # so does the first after an engage
+            d = np.diff(t)[same_run]
+            gap = float(d.max()) / 1e6 if len(d) else 0.0
+        realtime = meta.get("realtime")
+        rate = meta.get("rate_hz")
+        return cls(len(stamps), float(rate) if rate else None, None if realtime is None else realtime == "true",
+                   float(np.percentile(late, 50)) if len(late) else 0.0,
+                   float(np.percentile(late, 99)) if len(late) else 0.0, float(late.max()) if len(late) else 0.0, gap)
+
+
+@dataclass
 class SessionSummary:
     path: Path
     file_bytes: int
@@ -77,6 +109,7 @@ class SessionSummary:
     # Per device (the "devices" metadata record a live session writes when it closes): samples received,
     # the device's lost_/skipped counters, lost_input (their total), loop_dropped, sink_errors, failures.
     device_counts: dict[str, dict[str, int]] = field(default_factory=dict)
+    sender: SenderSummary | None = None  # format 4: the paced command sender's timing
 
     @property
     def duration_s(self) -> float:
@@ -162,6 +195,21 @@ def summarize(path: str | os.PathLike) -> SessionSummary:
                     d = ev.data
                     device_events.append(DeviceEventInfo(msg.log_time_ns, str(d.get("device", "")),
                                                          str(d.get("event", "")), str(d.get("message", ""))))
+        sender = None
+        if COMMAND_TICK in reader.topics:
+            stamps, late, active, engages = [], [], [], []
+            for msg in reader.messages([COMMAND_TICK, MODE]):
+                ev = msg.payload
+                if not isinstance(ev, Event):
+                    continue
+                if msg.topic == MODE:
+                    if ev.data.get("mode") == "execute":
+                        engages.append(msg.log_time_ns)
+                    continue
+                stamps.append(ev.stamp_ns)
+                late.append(float(ev.data.get("late_ms", 0.0)))
+                active.append(bool(ev.data.get("active", True)))
+            sender = SenderSummary.from_ticks(stamps, late, active, engages, meta.get("sender", {}))
         has_counters = bool(counters)
         return SessionSummary(
             reader.path, reader.file_bytes, reader.start_ns, reader.end_ns,
@@ -170,6 +218,7 @@ def summarize(path: str | os.PathLike) -> SessionSummary:
             sum(s.dropped or 0 for s in streams) if has_counters else None,
             [f"{k[6:]}: {v}" for k, v in counters.items() if k.startswith("error ")],
             {name: _counters(value, reader.path, f"device {name}") for name, value in meta.get("devices", {}).items()},
+            sender,
         )
 
 

@@ -147,3 +147,28 @@ def test_truncated_file_points_at_recover(recorded, tmp_path):
     proc = subprocess.run([sys.executable, "-m", "teleprev.cli.app", "info", str(cut)], capture_output=True,
                           text=True, cwd=ROOT)
     assert proc.returncode == 2 and "teleprev recover" in proc.stderr and "Traceback" not in proc.stderr
+
+
+def test_info_reports_the_command_senders_timing(tmp_path):
+    """Format 4: the sender's ticks give its lateness and the longest gap between commands of one engaged
+    run (a pause while in preview, between two engages, is none)."""
+    tick = lambda t, late, active=True: Logged(T.COMMAND_TICK, t, Event(t, "teleprev.CommandTick", {  # noqa: E731
+        "seq": 1, "late_ms": late, "flags": [], "active": active}))
+    mode = lambda t, m: Logged(T.MODE, t, Event(t, "teleprev.ModeSwitch", {"mode": m}))  # noqa: E731
+    period = 8_333_333
+    msgs = [mode(T0, "execute")] + [tick(T0 + k * period, 0.05 + 0.01 * (k % 7)) for k in range(1, 200)]
+    msgs.append(tick(T0 + 200 * period + 30 * MS, 30.0))  # one tick 30 ms late: a 38 ms gap
+    msgs += [tick(T0 + (201 + k) * period + 30 * MS, 0.05, active=k < 49) for k in range(50)]  # braked, stopped
+    msgs += [mode(T0 + 4_000 * MS, "execute")] + [tick(T0 + 4_000 * MS + k * period, 0.05) for k in range(1, 50)]
+    path = tmp_path / "s.mcap"
+    rec = Recorder(path, {"sender": {"rate_hz": "120", "realtime": "true"}})
+    rec.start()
+    for m in sorted(msgs, key=lambda m: m.log_time_ns):
+        rec.log(m)
+    rec.close()
+    s = summarize(path).sender
+    assert s.ticks == 299 and s.rate_hz == 120.0 and s.realtime is True
+    assert s.late_ms_max == 30.0 and s.late_ms_p50 == pytest.approx(0.05, abs=0.02)
+    assert s.gap_ms_max == pytest.approx(period / 1e6 + 30.0, abs=1e-6)
+    out = " ".join(CliRunner().invoke(app, ["info", str(path)]).output.split())
+    assert "command sender 120 Hz, real-time priority: 299 ticks" in out and "38.3 ms" in out
