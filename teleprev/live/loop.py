@@ -138,6 +138,10 @@ class SessionLoop:
         the robot to rest, and execute is refused from then on). Controls are never dropped."""
         self._queue.put((None, (action, data)))
 
+    def backlog(self) -> int:
+        """Samples and controls waiting for the loop thread (it is behind when this grows)."""
+        return self._queue.qsize()
+
     # ---- lifecycle -----------------------------------------------------------------------------
     def start(self) -> None:
         self._thread = threading.Thread(target=self._run, name="session-loop", daemon=True)

@@ -1,7 +1,10 @@
 """Driving a LiveSession: from the keyboard with the terminal preview, or from a script (unattended).
 
 The preview redraws on the main thread while the session loop runs on its own; the redraw rate is
-measured and kept in `PreviewStats` so the pipeline benchmark can report it.
+measured and kept in `PreviewStats` so the pipeline benchmark can report it. The commands never wait for
+the preview (the paced sender has a process of its own), and the preview gives up frame rate before the
+session loop falls behind: `PreviewPacer` keeps drawing to at most a fifth of a core and waits longer
+while the loop has a backlog.
 """
 
 from __future__ import annotations
@@ -32,6 +35,29 @@ class PreviewStats:
     def fps(self) -> float:
         elapsed = time.perf_counter() - self.started
         return self.frames / elapsed if elapsed > 0 else 0.0
+
+
+class PreviewPacer:
+    """When to draw the next frame: at `fps` at most, drawing at most RENDER_SHARE of the time, and slower
+    (doubling the interval, up to MAX_INTERVAL_S) while the session loop has more than BACKLOG waiting;
+    back to `fps` as it catches up."""
+
+    RENDER_SHARE = 0.2
+    BACKLOG = 32
+    MAX_INTERVAL_S = 1.0
+
+    def __init__(self, fps: float, backlog=lambda: 0):
+        self.base = 1.0 / fps
+        self.interval = self.base
+        self.backlog = backlog
+
+    def wait_after(self, render_s: float) -> float:
+        """Seconds to wait after a frame that took render_s to draw."""
+        if self.backlog() > self.BACKLOG:
+            self.interval = min(self.MAX_INTERVAL_S, 2.0 * self.interval)
+        else:
+            self.interval = max(self.base, 0.5 * self.interval)
+        return max(0.0, max(self.interval, render_s / self.RENDER_SHARE) - render_s)
 
 
 def make_dashboard(recording: LiveSession, view: str) -> Dashboard:
@@ -80,13 +106,14 @@ def run_interactive(recording: LiveSession, console: Console, view: str, fps: fl
             while not quit_flag and not recording.failure:  # nobody watches a screen: end at once
                 time.sleep(0.1)
             return stats
+        pacer = PreviewPacer(fps, recording.loop.backlog)
         with Live(console=console, auto_refresh=False, screen=console.is_terminal, transient=False) as live:
             while not quit_flag:
                 t = time.perf_counter()
                 live.update(_frame(dashboard, recording, console), refresh=True)
                 stats.frames += 1
                 stats.render_s.append(time.perf_counter() - t)
-                time.sleep(max(0.0, 1.0 / fps - (time.perf_counter() - t)))
+                time.sleep(pacer.wait_after(time.perf_counter() - t))
     return stats
 
 
@@ -104,6 +131,7 @@ def run_script(recording: LiveSession, duration: float, episodes: int, engage_af
     dashboard = make_dashboard(recording, view) if console is not None else None
     live = Live(console=console, auto_refresh=False, transient=False) if dashboard is not None else None
     length = duration / max(episodes, 1)
+    pacer = PreviewPacer(fps, loop.backlog)
     start = time.perf_counter()
     plan = []  # (time offset, action, kwargs)
     for k in range(max(episodes, 1)):
@@ -138,7 +166,7 @@ def run_script(recording: LiveSession, duration: float, episodes: int, engage_af
                 live.update(_frame(dashboard, recording, console), refresh=True)
                 stats.frames += 1
                 stats.render_s.append(time.perf_counter() - t)
-                time.sleep(max(0.0, 1.0 / fps - (time.perf_counter() - t)))
+                time.sleep(min(pacer.wait_after(time.perf_counter() - t), ENGAGE_RETRY_S))
             else:
                 time.sleep(0.01)
     finally:
