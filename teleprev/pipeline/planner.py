@@ -13,8 +13,8 @@ other than through their targets.
            the target held there, met at rest), sampled at the tick; a profile whose stop (braking as
            hard as the limits allow from the sampled state) would pass a joint limit is not taken: the
            arm brakes instead, so it never needs holding at a limit
-    hand   the acceleration cap, each command segment checked for self-collision with the clearance
-           (Motion's hand step, one tick long)
+    hand   the acceleration cap towards the target (where the Corrector put it, met moving with it), each
+           command segment checked for self-collision with the clearance (Motion's hand step, one tick long)
     stale  a target older than the pipeline's stale limit: that side brakes to rest, then holds
     pause  ticks further apart than RESUME_GAP_NS (the sender starved): the arm stood at the last
            command meanwhile, so the next commands start from rest there, one short step in
@@ -270,8 +270,9 @@ class CommandPlanner:
         estimate, goal_v = ESTIMATE_NONE, None
         if goal is not None:
             if target.hand_v is not None:
-                lead = min(max(t_ns - target.t_ns, 0), EXTRAPOLATE_MAX_NS) / 1e9
-                goal, estimate, goal_v = goal + target.hand_v * lead, ESTIMATE_GIVEN, target.hand_v
+                # met moving at its velocity, where the Corrector put it: moved on, it could leave the
+                # clearance the Corrector kept, and the swept check would brake for it
+                estimate, goal_v = ESTIMATE_GIVEN, target.hand_v
         elif self.state.mode == "execute":
             flags.append("hand_stopping")
         side.q, side.v, _ = self.motion._hand_move(side.q, side.v, goal, estimate, None, goal_v, 0.0, dt,

@@ -50,7 +50,7 @@ def unity_quat(axis, angle):
     return quat_from_axis_angle(axis / np.linalg.norm(axis) * angle)
 
 
-def arm_messages(root_pos=(0, 0, 0), root_quat=(0, 0, 0, 1), elbow_quat=(0, 0, 0, 1), t=None):
+def arm_messages(root_pos=(0, 0, 0), root_quat=(0, 0, 0, 1), elbow_quat=(0, 0, 0, 1), t=None, hand_quat=(0, 0, 0, 1)):
     msgs = [
         bone("root", root_pos, root_quat, address="/VMC/Ext/Root/Pos"),
         bone("Hips", (0, 0.9, 0)),
@@ -59,7 +59,7 @@ def arm_messages(root_pos=(0, 0, 0), root_quat=(0, 0, 0, 1), elbow_quat=(0, 0, 0
         bone("RightShoulder", (0.02, 0.2, 0)),
         bone("RightUpperArm", (0.1, 0, 0)),
         bone("RightLowerArm", (0.3, 0, 0), elbow_quat),
-        bone("RightHand", (0.25, 0, 0)),
+        bone("RightHand", (0.25, 0, 0), hand_quat),
     ]
     if t is not None:
         msgs.append(msg("/VMC/Ext/T", t, types="d"))
@@ -70,10 +70,12 @@ def arm_frame(**kw):
     return bundle(*arm_messages(**kw))
 
 
-def finger_messages(flexion: float) -> list:
-    """Every right finger bone curled by `flexion` rad (a negative turn about Unity z)."""
-    q = unity_quat([0, 0, 1], -flexion)
-    return [bone(f"Right{f}{p}", (0.03, 0, 0), q) for f in FINGERS for p in ("Proximal", "Intermediate", "Distal")]
+def finger_messages(flexion) -> list:
+    """Every right finger bone curled by `flexion` rad (a negative turn about Unity z): one angle for all,
+    or one per finger (FINGERS' order)."""
+    per_finger = np.broadcast_to(np.asarray(flexion, dtype=float), (len(FINGERS),))
+    return [bone(f"Right{f}{p}", (0.03, 0, 0), unity_quat([0, 0, 1], -a)) for f, a in zip(FINGERS, per_finger)
+            for p in ("Proximal", "Intermediate", "Distal")]
 
 
 def rig_text(port: int, glove_timeout_s: float = 0.0, allow: tuple[str, ...] = ()) -> str:
@@ -118,6 +120,8 @@ class VmcSender:
         self._thread.start()
         return self
 
+    skip_late = False  # a frame due while the one before was late is dropped, not sent in a burst (a device's clock)
+
     def _run(self, rate_hz: float, seconds: float | None) -> None:
         start, k = time.monotonic(), 0
         while not self._stop.is_set() and (seconds is None or k < seconds * rate_hz):
@@ -125,6 +129,8 @@ class VmcSender:
                 extra, self._extra = self._extra, []
             for d in extra:
                 self.send(d)
+            if self.skip_late:
+                k = max(k, int((time.monotonic() - start) * rate_hz))
             self.send(self.frame(k, rate_hz))
             self.sent += 1
             k += 1
@@ -196,3 +202,88 @@ def fuzz_datagram(rng, good: bytes) -> bytes:
         return bundle(root, *arm_messages()[1:], msg("/VMC/Ext/T", 1.0, types="d")).dgram
     return bundle(msg("/VMC/Ext/Bone/Pos", "RightHand", *rng.normal(size=7).tolist(), types="s" + "f" * 7),
                   msg("/VMC/Ext/T", "noon", types="s")).dgram  # a bad time beside a good bone
+
+
+def _min_jerk(s: np.ndarray) -> np.ndarray:
+    """The minimum-jerk profile from 0 to 1 over s in [0, 1] (how people reach)."""
+    s = np.clip(s, 0.0, 1.0)
+    return s**3 * (10 - 15 * s + 6 * s**2)
+
+
+class HumanLikeSender(VmcSender):
+    """A glove and suit moving as a person does: the hand closing and opening in grasps of varying depth,
+    pace and finger timing (minimum-jerk strokes, the fingers not quite together), a physiological tremor
+    (about 10 Hz, a few milliradians), and the wrist reaching between points some 10 cm apart with a
+    little rotation, each reach its own minimum-jerk stroke. Deterministic for a seed; frames keep to the
+    wall clock (a late one is skipped, as a device's own clock would)."""
+
+    skip_late = True
+
+    def __init__(self, port: int, seed: int = 0, **kw):
+        super().__init__(port, **kw)
+        rng = np.random.default_rng(seed)
+        self._grasps = self._strokes(rng, 120.0, 0.6, 1.6, lambda r: r.uniform(0.2, 1.3))
+        self._reaches = self._strokes(rng, 120.0, 0.7, 1.8, lambda r: r.uniform(-0.1, 0.1, 3))
+        self._twists = self._strokes(rng, 120.0, 0.8, 2.0, lambda r: r.uniform(-0.35, 0.35))
+        self._finger_delay = rng.uniform(0.0, 0.12, len(FINGERS))
+        self._finger_gain = rng.uniform(0.8, 1.1, len(FINGERS))
+        self._tremor_phase = rng.uniform(0, 2 * np.pi, len(FINGERS))
+
+    @staticmethod
+    def _strokes(rng, seconds: float, shortest: float, longest: float, draw) -> list[tuple[float, float, object, object]]:
+        """(start, end, from, to) strokes back to back, each held a moment before the next."""
+        out, t, value = [], 0.0, draw(rng) * 0
+        while t < seconds:
+            length = rng.uniform(shortest, longest)
+            target = draw(rng)
+            out.append((t, t + length, value, target))
+            t += length + rng.uniform(0.05, 0.6)
+            value = target
+        return out
+
+    @staticmethod
+    def _at(strokes, t: float):
+        for start, end, a, b in strokes:
+            if t < start:
+                return a
+            if t <= end:
+                return a + (b - a) * _min_jerk(np.array((t - start) / (end - start)))
+        return strokes[-1][3]
+
+    def frame(self, k: int, rate_hz: float) -> bytes:
+        t = k / rate_hz
+        flex = np.array([self._at(self._grasps, t - d) for d in self._finger_delay]) * self._finger_gain
+        flex = flex + 0.004 * np.sin(2 * np.pi * 10.0 * t + self._tremor_phase)
+        reach = np.asarray(self._at(self._reaches, t), dtype=float)
+        twist = float(self._at(self._twists, t))
+        return bundle(*arm_messages(root_pos=tuple(reach), hand_quat=tuple(unity_quat([1, 0, 0], twist)), t=100.0 + t),
+                      *finger_messages(flex)).dgram
+
+
+class WristTwister(VmcSender):
+    """An operator turning the wrist about the forearm at `rate` rad/s, to `reach` rad one way, holding,
+    then to `reach` the other way, and back again, the hand half closed: past where the arm's last joint
+    ends, one way or the other, so it drives that joint into its limit."""
+
+    skip_late = True
+
+    def __init__(self, port: int, rate: float = 1.5, reach: float = 2.6, hold: float = 1.5, **kw):
+        super().__init__(port, **kw)
+        self.rate, self.reach, self.hold = rate, reach, hold
+
+    def twist(self, t: float) -> float:
+        leg = self.reach / self.rate
+        plan = [(1.0, 0.0), (leg, self.reach), (self.hold, self.reach), (2 * leg, -self.reach),
+                (self.hold, -self.reach), (leg, 0.0)]
+        start, value = 0.0, 0.0
+        for length, to in plan:
+            if t < start + length:
+                return value + (to - value) * (t - start) / length
+            start, value = start + length, to
+        return value
+
+    def frame(self, k: int, rate_hz: float) -> bytes:
+        t = (k / rate_hz) % 16.0
+        twist = self.twist(t)
+        return bundle(*arm_messages(hand_quat=tuple(unity_quat([1, 0, 0], twist)), t=100.0 + t),
+                      *finger_messages(0.5)).dgram
