@@ -1,6 +1,7 @@
 """Corpus figures: export and eval of 8 sessions with 2 workers against 1, and what Ray costs.
 
     python bench/corpus.py [--json] [--quick] [--no-ray] [--only eval|export] [--eval-s S] [--export-s S] [--runs N]
+                           [--encoder-threads 0,1]
 
 Every timing is a whole `teleprev` command in a fresh process (`python -m teleprev.cli.app ...`), as a
 user runs it: interpreter start, imports (lerobot's for export), workers' start, the sessions, and for
@@ -27,6 +28,10 @@ Figures:
                                     2 / that on the sessions, before the serial merge and lerobot's import
   *_wall_s                          the commands' wall times behind the ratios (best of two runs, 1 and 2
                                     workers alternating, since other work shares the cores)
+  export_sessions_per_min_workers{N}_threads{T}
+                                    with --encoder-threads: export's sessions per minute with N workers and
+                                    each worker's video encoder capped at T threads (0: the encoder's own
+                                    choice, one per core), the recipe's [video] threads
 The machine's cores are shared: cpu_count and the load average before the runs say how busy it was.
 
 Each command also pays costs that do not shrink with workers: the interpreter and imports (lerobot's
@@ -128,6 +133,8 @@ def main() -> None:
     p.add_argument("--eval-s", type=float, default=None, help="length of each eval session in seconds (default 20)")
     p.add_argument("--export-s", type=float, default=None, help="length of each export session in seconds (default 30)")
     p.add_argument("--runs", type=int, default=None, help="runs of each command, best kept (default 2)")
+    p.add_argument("--encoder-threads", default="", help="export again with the encoder capped at each of these "
+                   "thread counts (comma-separated; 0: the encoder's own choice)")
     args = p.parse_args()
     eval_s, export_s, size = (6.0, 6.0, (320, 240)) if args.quick else (20.0, 30.0, (640, 480))
     eval_s, export_s = args.eval_s or eval_s, args.export_s or export_s
@@ -156,6 +163,16 @@ def main() -> None:
                         if n == 1:  # (a fork server's workers are not the command's children: not counted)
                             figures[key.replace("wall_s", "cores_busy")] = BUSY[-1]
                     shutil.rmtree(tmp / f"ds{n}", ignore_errors=True)
+        for threads in [int(t) for t in args.encoder_threads.split(",") if t.strip()] if "export" in commands else []:
+            recipe = tmp / f"threads{threads}.toml"
+            recipe.write_text((ROOT / "datasets" / "recipes" / "default.toml").read_text().replace(
+                "[video]\n", f"[video]\nthreads = {threads}\n", 1))
+            for n in (1, 2):
+                best = float("inf")
+                for _ in range(runs):
+                    best = min(best, timed([*argv["export"](n), "--recipe", str(recipe)]))
+                    shutil.rmtree(tmp / f"ds{n}", ignore_errors=True)
+                figures[f"export_sessions_per_min_workers{n}_threads{threads}"] = SESSIONS * 60.0 / best
         for command in commands:
             figures[f"corpus_speedup_2_workers_{command}"] = walls[f"{command}_wall_s_workers1"] / walls[f"{command}_wall_s_workers2"]
         figures["corpus_speedup_2_workers"] = min(figures[f"corpus_speedup_2_workers_{c}"] for c in commands)

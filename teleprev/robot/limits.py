@@ -10,6 +10,20 @@ are here, beside it, per arm and per end effector:
 
 A rig sets `arm_acceleration`, `arm_jerk`, `hand_acceleration` and `hand_clearance_mm` in [pipeline];
 a key left out takes the value here. A robot that is not in this table needs the keys in the rig.
+
+The LEAP Hand's numbers, from its motors: every joint is a Dynamixel XC330-M288-T (ROBOTIS e-Manual:
+gear 288.35:1, 0.517 N.m/A at the output, stall 0.93 N.m at 1.8 A and no-load 81 rev/min = 8.48 rad/s at
+5 V, the URDF's velocity), run in current-based position control with a current limit of 350 mA (Lite) or
+550 mA (Full). At the limit a joint has 0.18 N.m (Lite) or 0.28 N.m (Full); on the motor's speed-torque
+line it turns at most 8.48 x (1 - 0.18 / 0.93) = 6.8 rad/s while giving it (5.9 rad/s for the Full), so
+`hand_speed` 6.0 rad/s (pipeline/config.py) keeps torque in hand. Its acceleration is that torque over the
+joint's inertia, dominated by the rotor's reflected through the gear (288^2), which ROBOTIS does not
+publish: a coreless motor of this class has a mechanical time constant of 5 to 10 ms, that is an output
+inertia of tau_m x 0.93 N.m / 8.48 rad/s = 0.55 to 1.1 g.m^2, and so 165 to 330 rad/s^2 (Lite) or 260 to
+520 rad/s^2 (Full). 200 rad/s^2 lies inside the Lite hand's range. What the cap costs in lag
+(bench/realtime.py, hand_lag_ms_p50, and the README) is small beside the swept check's braking near the
+clearance margin: on 20 s sim sessions /command/hand followed the retargeted fingers with a median lag of
+67, 62 and 117 ms at 100, 200 and 400 rad/s^2.
 """
 
 from __future__ import annotations
