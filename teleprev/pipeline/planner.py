@@ -118,7 +118,7 @@ class CommandPlanner:
         self.engage_speed_frac = engage_speed_frac
         self.stale_ns = stale_ns
         self.state = PlannerState()
-        self._reach = self._stop_reach()
+        self._limits = tuple(x.tolist() for x in (self.arm.lower, self.arm.upper, self.arm.acceleration, self.arm.jerk))
 
     @classmethod
     def for_pipeline(cls, pipeline) -> "CommandPlanner":
@@ -241,17 +241,21 @@ class CommandPlanner:
             return JointMotion.rest(inside)
         return out
 
-    def _stop_reach(self) -> np.ndarray:
-        """Per joint, a bound on how far it can travel while braking from any velocity within its cap: the
-        exact stop (ruckig) is computed only for joints closer to a limit than this."""
-        v, a, j = self.arm.velocity, self.arm.acceleration, self.arm.jerk
-        return 1.5 * v * (v / a + 2.0 * a / j) + 1e-3
-
     def _stops_inside(self, m: JointMotion) -> bool:
-        """Whether braking as hard as the limits allow from m ends inside every joint limit."""
-        towards_upper = (m.v > 0) | (m.a > 0)
-        room = np.where(towards_upper, self.arm.upper - m.q, m.q - self.arm.lower)
-        if (room > self._reach).all():
+        """Whether braking as hard as the limits allow from m ends inside every joint limit. The exact stop
+        (ruckig) is computed only where a joint is closer to a limit than a bound on its braking distance:
+        its speed grown by what its acceleration adds while the jerk turns it round, held while it does,
+        then braked at the acceleration limit (twice that, and a millimetre radian, for margin)."""
+        lower, upper, acc, jerk = self._limits
+        for q, v, a, lo, hi, amax, jmax in zip(m.q.tolist(), m.v.tolist(), m.a.tolist(), lower, upper, acc, jerk):
+            up = v > 0 or (v == 0 and a > 0)
+            speed, push = (v, max(a, 0.0)) if up else (-v, max(-a, 0.0))
+            turn = (push + amax) / jmax
+            peak = speed + push * push / (2.0 * jmax)
+            reach = 2.0 * (peak * turn + peak * peak / (2.0 * amax)) + 1e-3
+            if (hi - q if up else q - lo) <= reach:
+                break  # (floats: a few microseconds where numpy's calls cost tens)
+        else:
             return True
         end = self.arm.stop_position(m)
         return bool(((end >= self.arm.lower) & (end <= self.arm.upper)).all())
