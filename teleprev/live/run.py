@@ -3,7 +3,7 @@
 The preview redraws on the main thread while the session loop runs on its own; the redraw rate is
 measured and kept in `PreviewStats` so the pipeline benchmark can report it. The commands never wait for
 the preview (the paced sender has a process of its own), and the preview gives up frame rate before the
-session loop falls behind: `PreviewPacer` keeps drawing to at most a fifth of a core and waits longer
+session loop falls behind: `PreviewPacer` keeps drawing to at most half a core and waits longer
 while the loop has a backlog.
 """
 
@@ -42,7 +42,7 @@ class PreviewPacer:
     (doubling the interval, up to MAX_INTERVAL_S) while the session loop has more than BACKLOG waiting;
     back to `fps` as it catches up."""
 
-    RENDER_SHARE = 0.2
+    RENDER_SHARE = 0.5
     BACKLOG = 32
     MAX_INTERVAL_S = 1.0
 
