@@ -133,17 +133,10 @@ class CommandSender:
             os.close(self._from_sender)
             self._from_sender = None
             return None
-        self._buffer += chunk
-        out = []
-        while len(self._buffer) >= _HEADER.size:
-            (size,) = _HEADER.unpack_from(self._buffer)
-            if len(self._buffer) < _HEADER.size + size:
-                break
-            item = pickle.loads(self._buffer[_HEADER.size:_HEADER.size + size])
-            self._buffer = self._buffer[_HEADER.size + size:]
+        out, self._buffer = _frames(self._buffer + chunk)
+        for item in out:
             if isinstance(item, SenderStatus):
                 self.status = item
-            out.append(item)
         return out
 
     def stop(self, timeout_s: float = 2.0) -> None:
@@ -163,6 +156,18 @@ class CommandSender:
             os.kill(self.pid, signal.SIGKILL)
             os.waitpid(self.pid, 0)
         self.pid = None
+
+
+def _frames(buffer: bytes) -> tuple[list, bytes]:
+    """The whole length-prefixed pickles at the start of `buffer`, and what is left of it."""
+    out = []
+    while len(buffer) >= _HEADER.size:
+        (size,) = _HEADER.unpack_from(buffer)
+        if len(buffer) < _HEADER.size + size:
+            break
+        out.append(pickle.loads(buffer[_HEADER.size:_HEADER.size + size]))
+        buffer = buffer[_HEADER.size + size:]
+    return out, buffer
 
 
 def _enlarge(fd: int) -> None:
@@ -237,12 +242,8 @@ class _Sender:
             if not chunk:
                 return False
             self.inbox += chunk
-        while len(self.inbox) >= _HEADER.size:
-            (size,) = _HEADER.unpack_from(self.inbox)
-            if len(self.inbox) < _HEADER.size + size:
-                break
-            update = pickle.loads(self.inbox[_HEADER.size:_HEADER.size + size])
-            self.inbox = self.inbox[_HEADER.size + size:]
+        updates, self.inbox = _frames(self.inbox)
+        for update in updates:
             if update == _STOP:
                 return False
             self.planner.adopt(update)

@@ -126,8 +126,10 @@ class ArmGenerator:
             return self.stop(s, dt), False
         return out[0], out[1]
 
-    def stop_position(self, s: JointMotion) -> np.ndarray:
-        """Where the hardest stop the limits allow (stop's profile) comes to rest from s."""
+    def _plan_stop(self, s: JointMotion) -> bool:
+        """ruckig's hardest stop from s (velocity and acceleration to zero within the limits) into the
+        trajectory, in the frame where s stands at the origin; False where it finds none (which positive
+        limits never give)."""
         inp = self._inp
         velocity = np.maximum(self.velocity, np.abs(s.v)).tolist()
         inp.current_velocity = s.v.tolist()
@@ -136,21 +138,17 @@ class ArmGenerator:
         inp.min_velocity = [-m for m in velocity]
         inp.control_interface = self._velocity_interface
         inp.current_position = self._zero
-        if self._otg.calculate(inp, self._traj).value < 0:
+        return self._otg.calculate(inp, self._traj).value >= 0
+
+    def stop_position(self, s: JointMotion) -> np.ndarray:
+        """Where the hardest stop the limits allow (stop's profile) comes to rest from s."""
+        if not self._plan_stop(s):
             return s.q
         return s.q + np.array(self._traj.at_time(self._traj.duration)[0])
 
     def stop(self, s: JointMotion, dt: float) -> JointMotion:
         """A controlled stop: velocity and acceleration brought to zero within the limits."""
-        inp = self._inp
-        velocity = np.maximum(self.velocity, np.abs(s.v)).tolist()
-        inp.current_velocity = s.v.tolist()
-        inp.current_acceleration = s.a.tolist()
-        inp.max_velocity = velocity
-        inp.min_velocity = [-m for m in velocity]
-        inp.control_interface = self._velocity_interface
-        inp.current_position = self._zero
-        if self._otg.calculate(inp, self._traj).value < 0:  # cannot happen with positive limits; hold rather than guess
+        if not self._plan_stop(s):  # cannot happen with positive limits; hold rather than guess
             return JointMotion.rest(s.q)
         p, w, a = self._traj.at_time(dt if dt > 0.0 else 0.0)
         # The frame of a target at rest, as in plan: "+ 0.0" turns -0.0 into 0.0, which the recorded commands did.

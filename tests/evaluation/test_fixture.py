@@ -61,33 +61,18 @@ def test_sessions_of_one_rig_share_a_pipeline_and_rerun_the_same():
     assert [list(f) for f in first.flags] == [list(f) for f in second.flags]
 
 
-def test_a_format_2_session_reruns_with_the_older_formats_bit_for_bit():
+@pytest.mark.parametrize("fixture,version", [(FIXTURE_V2, 2), (FIXTURE_V3, 3)], ids=["format2", "format3"])
+def test_an_older_format_reruns_with_its_own_arithmetic_bit_for_bit(fixture, version):
     from teleprev.evaluation import reproduce
 
-    reader = SessionReader(FIXTURE_V2)
-    assert reader.metadata["teleprev"]["format_version"] == "2"
-    assert reproduce.recorded_format(reader.metadata) == 2
-    result = evaluate([FIXTURE_V2])
+    reader = SessionReader(fixture)
+    assert reader.metadata["teleprev"]["format_version"] == str(version)
+    assert reproduce.recorded_format(reader.metadata) == version
+    result = evaluate([fixture])
     session = result.report["sessions"][0]
     r = result.reruns[0]
     assert (~np.isnan(r.rerun["/command/arm"]).any(axis=1)).sum() > 500
+    assert (~np.isnan(r.rerun["/command/hand"]).any(axis=1)).sum() > 300
     assert "ccn" in set(r.corrector)  # the CCN's arithmetic is part of what must reproduce
-    if not r.models_match:
-        pytest.skip(f"bit identity not checked: the shipped models are not the ones {FIXTURE_V2.name} was "
-                    f"recorded with (models_match={r.models_match})")
+    assert r.models_match, f"the shipped models are not the ones {fixture.name} was recorded with"
     assert session["bit_identical"]
-
-
-def test_a_format_3_session_reruns_with_the_compiled_arithmetic_bit_for_bit():
-    from teleprev.evaluation import reproduce
-
-    reader = SessionReader(FIXTURE_V3)
-    assert reader.metadata["teleprev"]["format_version"] == "3"
-    assert reproduce.recorded_format(reader.metadata) == 3
-    result = evaluate([FIXTURE_V3])
-    session = result.report["sessions"][0]
-    r = result.reruns[0]
-    assert (~np.isnan(r.rerun["/command/arm"]).any(axis=1)).sum() > 500
-    assert (~np.isnan(r.rerun["/command/hand"]).any(axis=1)).sum() > 500
-    assert "ccn" in set(r.corrector)
-    assert r.models_match and session["bit_identical"]

@@ -51,7 +51,9 @@ def test_an_emulated_rig_records_exports_replays_to_the_arm_and_audits(tmp_path)
         record = subprocess.Popen([*CLI, "record", str(rig), "--out", str(out), "--duration", "9", "--engage-after",
                                    "1", "--no-preview"], stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True,
                                   env=ENV)
-        assert wait_for(lambda: len(box.commands) > 150, 60), "the arm was never commanded"
+        if not wait_for(lambda: len(box.commands) > 150, 60):
+            record.kill()
+            raise AssertionError(f"the arm was commanded {len(box.commands)} times: {record.communicate()[0]}")
         assert bus.goal_writes > 50
         box.inject("collision")  # mid-episode, in execute
         commanded = len(box.commands)
