@@ -58,4 +58,5 @@ def report(title: str, figures: dict, targets: dict | None = None, as_json: bool
         table.add_row(escape(key), escape(shown), escape(targets.get(key, "")))
     Console(stderr=as_json).print(table)
     if as_json:
-        print(json.dumps(figures))
+        # a figure a run could not measure is null, not NaN (which strict JSON readers refuse)
+        print(json.dumps({k: None if isinstance(v, float) and v != v else v for k, v in figures.items()}))
