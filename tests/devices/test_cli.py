@@ -145,13 +145,11 @@ def test_a_rig_missing_a_device_kind_says_which(tmp_path):
 
 
 def test_cli_prints_rig_errors_as_one_line(tmp_path):
-    import subprocess
-    import sys
+    from tests.helpers.cli import teleprev
 
     rig = tmp_path / "rig.toml"
     rig.write_text('[devices.suit]\nplugin = "vmc.suit"\nhost = "not-an-ip"\n')
-    result = subprocess.run([sys.executable, "-m", "teleprev.cli.app", "devices", "check", str(rig)],
-                            capture_output=True, text=True, timeout=60)
+    result = teleprev("devices", "check", rig)
     assert result.returncode == 2
     assert "error:" in result.stderr and "[devices.suit]" in result.stderr and "host must be an IPv4 address" in result.stderr
     assert "Traceback" not in result.stderr

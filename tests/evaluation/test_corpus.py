@@ -15,6 +15,8 @@ from teleprev.corpus.executor import FAULT_ENV, LocalExecutor
 from teleprev.corpus.sessions import resolve_sessions
 from teleprev.evaluation.corpus import PRELOAD, EvalJob, badness, eval_one, evaluate_corpus
 
+pytestmark = pytest.mark.usefixtures("forkserver")  # workers fork with lerobot and eval imported
+
 TIMING = {"latency_ms_p50", "latency_ms_p99", "rerun_wall_s", "realtime_x"}  # the only figures that may differ
 
 

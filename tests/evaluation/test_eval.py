@@ -1,13 +1,12 @@
 """teleprev eval: bit-identical re-runs, metrics, the regression gate, plots."""
 
 import json
-import subprocess
-import sys
 
 import numpy as np
 import pytest
 
 from tests.helpers.sessions import record_sim
+from tests.helpers.cli import teleprev
 from teleprev.evaluation.evaluate import evaluate
 from teleprev.evaluation.report import Tolerance, Tolerances, compare
 
@@ -50,15 +49,14 @@ def test_a_perturbed_calibration_does_not_reproduce_and_says_what_moved(gripper_
 
 def test_regression_gate_passes_its_own_baseline_and_fails_past_a_tolerance(gripper_session, tmp_path):
     report = tmp_path / "baseline.json"
-    run = [sys.executable, "-m", "teleprev.cli.app", "eval", str(gripper_session)]
-    assert subprocess.run(run + ["--out", str(report)], capture_output=True).returncode == 0
-    same = subprocess.run(run + ["--baseline", str(report)], capture_output=True, text=True)
+    assert teleprev("eval", gripper_session, "--out", report).returncode == 0
+    same = teleprev("eval", gripper_session, "--baseline", report)
     assert same.returncode == 0 and "no regression" in same.stdout
     # a baseline whose hand moved much less: today's hand speed is a regression past 10 %
     data = json.loads(report.read_text())
     data["overall"]["hand_speed_max"] *= 0.5
     report.write_text(json.dumps(data))
-    worse = subprocess.run(run + ["--baseline", str(report)], capture_output=True, text=True)
+    worse = teleprev("eval", gripper_session, "--baseline", report)
     assert worse.returncode == 1
     assert "hand_speed_max" in worse.stdout and "regression" in worse.stdout
 

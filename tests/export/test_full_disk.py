@@ -7,6 +7,7 @@ import os
 
 from teleprev.export.synthetic import EpisodeSpec, SyntheticSession, write_session
 from tests.export.test_killed_export import tree
+from tests.helpers.cli import teleprev
 from tests.helpers.faults import fsize_limit, has_traceback, run_cli, small_disk
 
 
@@ -15,7 +16,7 @@ def test_append_on_a_full_disk_leaves_the_dataset_as_it_was(tmp_path):
     b = write_session(tmp_path / "b.mcap", SyntheticSession((EpisodeSpec("pour", 6.0),), seed=52))
     with small_disk(tmp_path, 6_000_000) as (disk, preexec):
         root = disk / "ds"
-        run = run_cli(["export", a, "--repo-id", "lab/full", "--root", root], timeout=300)
+        run = teleprev("export", a, "--repo-id", "lab/full", "--root", root)  # the dataset to append to
         assert run.returncode == 0, run.stderr
         before = tree(root)
         if preexec is None:  # a real small file system: fill it up to leave 150 kB

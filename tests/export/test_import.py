@@ -5,8 +5,6 @@ lerobot's own LeRobotDataset."""
 from __future__ import annotations
 
 import json
-import subprocess
-import sys
 from pathlib import Path
 
 import numpy as np
@@ -19,6 +17,7 @@ from teleprev.export.foreign.samples import (ARM, T0_NS, ForeignSpec, gripper_q,
                                              write_ros2)
 from teleprev.export.recipe import load_recipe
 from teleprev.export.synthetic import arm_q, read_frame_code
+from tests.helpers.cli import teleprev
 
 ROOT = Path(__file__).resolve().parents[2]
 TWO = ForeignSpec(episodes=((0.0, 2.0), (3.0, 5.0)))
@@ -134,9 +133,7 @@ streams = ["/camera/front"]
     recipe_path = _recipe(tmp_path, f'episodes = "file"\ntask = "reach"\nurdf = "{ROOT / "urdf" / "xarm6.urdf"}"', features)
     recipe = load_import_recipe(recipe_path)
     assert recipe.urdf_joints == ARM and recipe.robot_type  # joint names (and the robot) from the URDF
-    out = subprocess.run([sys.executable, "-m", "teleprev.cli.app", "import", str(path), "--recipe", str(recipe_path),
-                          "--repo-id", "t/fox", "--root", str(tmp_path / "out"), "--json"],
-                         capture_output=True, text=True, cwd=ROOT, timeout=300)
+    out = teleprev("import", path, "--recipe", recipe_path, "--repo-id", "t/fox", "--root", tmp_path / "out", "--json")
     assert out.returncode == 0, out.stderr
     summary = json.loads(out.stdout.strip().splitlines()[-1])
     assert summary["total_episodes"] == 1 and 55 <= summary["total_frames"] <= 61

@@ -1,28 +1,21 @@
 """A session recorded without ever engaging: record, info and export all say why it has no commands."""
 
-import subprocess
-import sys
-
 from teleprev.session.summary import PREVIEW_ONLY, summarize
-
-
-def cli(*args):
-    return subprocess.run([sys.executable, "-m", "teleprev.cli.app", *map(str, args)], capture_output=True, text=True,
-                          timeout=120)
+from tests.helpers.cli import teleprev as cli
 
 
 def test_a_preview_only_session_is_explained_by_record_info_and_export(tmp_path):
     out = tmp_path / "p.mcap"
-    run = cli("record", "--out", out, "--duration", "1.5", "--no-preview")  # unattended, no --engage-after
+    run = cli("record", "--out", out, "--duration", "1.5", "--no-preview", columns=80)  # unattended, no --engage-after
     assert run.returncode == 0, run.stderr
     said = " ".join(run.stdout.split())
     assert f"preview only: {PREVIEW_ONLY}" in said
 
     assert summarize(out).preview_only
-    info = " ".join(cli("info", out).stdout.split())
+    info = " ".join(cli("info", out, columns=80).stdout.split())
     assert f"commands none: {PREVIEW_ONLY}" in info
 
-    export = cli("export", out, "--repo-id", "lab/p", "--root", tmp_path / "ds")
+    export = cli("export", out, "--repo-id", "lab/p", "--root", tmp_path / "ds", columns=80)
     assert export.returncode != 0
     err = " ".join(export.stderr.split())
     assert "is not in this session" in err and PREVIEW_ONLY in err

@@ -2,8 +2,6 @@
 --smooth, which re-commands it through the pipeline's jerk-limited generator; commands are stamped with
 when they run, so playing faster cannot hide accelerations; the engage ramp keeps the limits too."""
 
-import subprocess
-import sys
 import threading
 from pathlib import Path
 
@@ -11,6 +9,7 @@ import numpy as np
 import pytest
 
 from teleprev.errors import ConfigError
+from tests.helpers.cli import teleprev
 from teleprev.live import playback
 from teleprev.live.playback import build_player
 from teleprev.pipeline.derivatives import divided_differences
@@ -42,8 +41,7 @@ def _play_to_sim_arm(smoothed: bool):
 
 
 def test_the_cli_refuses_to_send_a_session_that_fails_the_audit_to_the_robot():
-    run = subprocess.run([sys.executable, "-m", "teleprev.cli.app", "replay", str(FIXTURE), "--episode", "0", "--to", "arm",
-                          "--rig", str(SIM_RIG), "--no-preview", "--engage-after", "0.1"], capture_output=True, text=True, timeout=120)
+    run = teleprev("replay", FIXTURE, "--episode", "0", "--to", "arm", "--rig", SIM_RIG, "--no-preview", "--engage-after", "0.1")
     assert run.returncode == 1, run.stdout + run.stderr
     said = " ".join(run.stdout.split())  # rich wraps lines
     assert "fails the audit" in said and "--smooth" in said and "accel" in said

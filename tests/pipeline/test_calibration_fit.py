@@ -57,12 +57,10 @@ def test_bad_calibration_files_are_named(tmp_path):
 
 def test_calibrate_command_on_the_sim_rig_writes_a_usable_file(tmp_path):
     """The guided command, unattended: the simulated operator holds each pose when asked."""
-    import subprocess
-    import sys
+    from tests.helpers.cli import teleprev
 
     out = tmp_path / "cal.toml"
-    run = subprocess.run([sys.executable, "-m", "teleprev.cli.app", "calibrate", "--out", str(out), "--hold", "0.6", "--seconds", "0.5"],
-                         capture_output=True, text=True, timeout=120)
+    run = teleprev("calibrate", "--out", out, "--hold", "0.6", "--seconds", "0.5")
     assert run.returncode == 0, run.stderr
     assert "[rig] calibration" in run.stdout
     cal = load_calibration(out)

@@ -9,7 +9,8 @@ import pytest
 
 from teleprev.session.reader import SessionReader
 from teleprev.session.records import parse_chunk
-from tests.helpers.faults import chunk_spans, damage_chunk, flip_byte, has_traceback, mcap_opens, run_cli
+from tests.helpers.cli import teleprev
+from tests.helpers.faults import chunk_spans, damage_chunk, flip_byte, has_traceback, mcap_opens
 from tests.helpers.sessions import record_sim
 
 
@@ -61,16 +62,16 @@ def test_export_info_and_eval_name_the_damaged_chunk(session, tmp_path, damage):
     why = "CRC mismatch" if damage == "crc" else "zstd chunk does not decompress"
 
     root = tmp_path / "out"
-    run = run_cli(["export", path, "--repo-id", "lab/x", "--root", root], timeout=300)
+    run = teleprev("export", path, "--repo-id", "lab/x", "--root", root)
     line = _one_error_line(run)
     assert run.returncode == 2 and span in line and why in line and "teleprev recover" in line
     assert not root.exists() and not list(tmp_path.glob(".out.export-*"))
 
-    run = run_cli(["info", path])
+    run = teleprev("info", path)
     line = _one_error_line(run)
     assert run.returncode == 2 and span in line and why in line
 
-    run = run_cli(["eval", path, "--out", tmp_path / "report.json"], timeout=300)
+    run = teleprev("eval", path, "--out", tmp_path / "report.json")
     assert run.returncode == 1 and not has_traceback(run.stdout + run.stderr)
     assert span.split()[-2] in run.stdout.replace("\n", " ")  # the damaged range, in the failed-session list
 
@@ -80,7 +81,7 @@ def test_recover_keeps_everything_but_the_damaged_chunk(session, tmp_path):
     spans = chunk_spans(path)
     start, end = damage_chunk(path, 1)
     out = tmp_path / "saved.mcap"
-    run = run_cli(["recover", path, "-o", out])
+    run = teleprev("recover", path, "-o", out)
     assert run.returncode == 0 and not has_traceback(run.stdout + run.stderr), run.stderr
     assert "damaged" in run.stdout and "lost" in run.stdout
     assert mcap_opens(out)
@@ -103,11 +104,11 @@ def test_a_changed_byte_outside_the_chunks_is_named_and_recover_loses_nothing(se
                            ("summary", summary_start + 30, "summary CRC mismatch")):
         path = _copy(session, tmp_path, f"{name}.mcap")
         flip_byte(path, at, 0x04)
-        run = run_cli(["info", path])
+        run = teleprev("info", path)
         line = _one_error_line(run)
         assert run.returncode == 2 and said in line, line
         out = tmp_path / f"{name}.saved.mcap"
-        run = run_cli(["recover", path, "-o", out])
+        run = teleprev("recover", path, "-o", out)
         assert run.returncode == 0, run.stderr
         with SessionReader(session) as clean, SessionReader(out) as saved:
             assert {t: i.message_count for t, i in saved.topics.items()} == {t: i.message_count for t, i in clean.topics.items()}
