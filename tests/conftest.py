@@ -46,3 +46,23 @@ def forkserver():
     multiprocessing.get_context("forkserver").set_forkserver_preload(
         ["teleprev.corpus.orphans", *EVAL_PRELOAD, *EXPORT_PRELOAD])
     server.ensure_running()
+
+
+@pytest.fixture(scope="session")
+def sim_session(tmp_path_factory):
+    """A fresh recording on the default sim rig (one pick_place episode of 3 s, engaged 0.5 s in), shared by
+    the tests that read one; a test that changes a session copies it first."""
+    from tests.helpers.sessions import record_sim
+
+    path = tmp_path_factory.mktemp("sim_session") / "clean.mcap"
+    record_sim(path, seconds=3.0, engage_after=0.5)
+    return path
+
+
+@pytest.fixture(scope="session")
+def sim_corpus(tmp_path_factory):
+    """A folder of three short sim sessions, a.mcap, b.mcap and c.mcap (tests.helpers.sessions.record_corpus),
+    shared by the corpus tests (which only read it)."""
+    from tests.helpers.sessions import record_corpus
+
+    return record_corpus(tmp_path_factory.mktemp("corpus"))

@@ -6,18 +6,15 @@ from pathlib import Path
 
 import pytest
 
-from tests.helpers.sessions import record_sim
 from tests.helpers.cli import teleprev
 from teleprev.evaluation.audit import audit_session
 
 FIXTURE = Path(__file__).parents[1] / "fixtures" / "sim_v1.mcap"
 
 
-@pytest.fixture(scope="module")
-def session(tmp_path_factory):
-    path = tmp_path_factory.mktemp("audit") / "s.mcap"
-    record_sim(path, "sim.toml", seconds=4.0, engage_after=1.0)
-    return path
+@pytest.fixture
+def session(sim_session):
+    return sim_session
 
 
 def test_a_new_session_passes_the_audit(session):

@@ -22,9 +22,5 @@ def test_a_preview_only_session_is_explained_by_record_info_and_export(tmp_path)
     assert not (tmp_path / "ds").exists()
 
 
-def test_an_engaged_session_is_not_called_preview_only(tmp_path):
-    from tests.helpers.sessions import record_sim
-
-    out = tmp_path / "e.mcap"
-    record_sim(out, seconds=1.5, engage_after=0.5)
-    assert not summarize(out).preview_only
+def test_an_engaged_session_is_not_called_preview_only(sim_session):
+    assert not summarize(sim_session).preview_only

@@ -90,12 +90,8 @@ def test_smoothed_at_half_speed_is_generated_for_the_played_time():
     assert np.abs(jerk).max() <= player.motion.arm.jerk.max() * (1 + 1e-3)
 
 
-def test_a_fresh_recording_replays_to_the_sim_robot_without_a_fault(tmp_path):
-    from tests.helpers.sessions import record_sim
-
-    session = tmp_path / "s.mcap"
-    record_sim(session, "sim.toml", seconds=3.0, engage_after=0.8)
-    player, runners, tap, rig, message = build_player(session, 0, 2.0, "sim")
+def test_a_fresh_recording_replays_to_the_sim_robot_without_a_fault(sim_session):
+    player, runners, tap, rig, message = build_player(sim_session, 0, 2.0, "sim")
     assert player.speed == 1.0  # recorded at the limits: 2x would break them
     hand_steps = int(player.p.sent("effector").sum())
     _play(player, runners)

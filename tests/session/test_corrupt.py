@@ -11,14 +11,11 @@ from teleprev.session.reader import SessionReader
 from teleprev.session.records import parse_chunk
 from tests.helpers.cli import teleprev
 from tests.helpers.faults import chunk_spans, damage_chunk, flip_byte, has_traceback, mcap_opens
-from tests.helpers.sessions import record_sim
 
 
-@pytest.fixture(scope="module")
-def session(tmp_path_factory):
-    path = tmp_path_factory.mktemp("corrupt") / "clean.mcap"
-    record_sim(path, seconds=3.0, engage_after=0.5)
-    return path
+@pytest.fixture
+def session(sim_session):
+    return sim_session  # never changed here: every damage is done to a copy
 
 
 def _copy(session, tmp_path, name):
