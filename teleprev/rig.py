@@ -78,6 +78,19 @@ class Rig:
     frames: dict[str, SensorFrame] = field(default_factory=dict)  # [frames.<name>]: sensors in the robot's tree
     tasks: dict[str, str] = field(default_factory=dict)  # [tasks]: task id -> the instruction in words
 
+    def check_task(self, task: str, where: str) -> None:
+        """Refuse a task label that a device of this rig has to act out and does not know (a simulated
+        operator knows five; a device whose settings have `episode_tasks()` names what it knows)."""
+        import difflib
+
+        for d in self.devices.values():
+            known = d.settings.episode_tasks() if hasattr(d.settings, "episode_tasks") else ()
+            if known and task not in known:
+                close = difflib.get_close_matches(task, known, 1)
+                hint = f"; did you mean {close[0]!r}?" if close else ""
+                raise ConfigError(f"task {task!r} is not one device {d.name!r} ({d.plugin}) performs: "
+                                  f"{', '.join(known)}{hint}", where)
+
     def task_text(self, task: str) -> str:
         """The natural-language instruction of a task id ([tasks]); the id itself when the rig has none."""
         return self.tasks.get(task, task)
@@ -202,7 +215,9 @@ def parse_rig(data: dict, path: Path | None, where: str | None = None) -> Rig:
         if name != "suit" and (name not in devices or devices[name].kind != "camera"):
             raise ConfigError("names no camera of this rig (a [frames] table is a camera device's name, or suit)",
                               f"{where} [frames.{name}]")
-    return Rig(path.resolve() if path else None, rig, pipeline, devices, data, frames, tasks)
+    out = Rig(path.resolve() if path else None, rig, pipeline, devices, data, frames, tasks)
+    out.check_task(rig.task, f"{where} [rig].task")
+    return out
 
 
 @dataclass(frozen=True)

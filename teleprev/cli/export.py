@@ -7,11 +7,12 @@ the command.
 from __future__ import annotations
 
 from pathlib import Path
-from typing import List, Optional
+from typing import List, Literal, Optional
 
 import typer
 
 DEFAULT_ROOT = Path("datasets") / "out"  # beside sessions/, where `teleprev record` writes by default
+Codec = Literal["h264", "hevc", "av1"]
 
 
 def export(
@@ -20,7 +21,8 @@ def export(
     repo_id: str = typer.Option(..., "--repo-id", help="Dataset name, e.g. lab/pick_place.", show_default=False),
     root: Optional[Path] = typer.Option(None, "--root", help="Dataset folder (default: ./datasets/out/<repo-id>).",
                                         show_default=False),
-    fps: int = typer.Option(0, "--fps", help="Frames per second (default: the recipe's, else the reference camera's rate)."),
+    fps: int = typer.Option(0, "--fps", min=0, help="Frames per second (default: the recipe's, else the reference camera's rate).",
+                            show_default=False),
     recipe: str = typer.Option("default", "--recipe", help="Recipe file, or the name of one in datasets/recipes/ (default, with_glove)."),
     append: bool = typer.Option(False, "--append", help="Add the sessions to an existing dataset (LeRobot's resume)."),
     include_discarded: bool = typer.Option(False, "--include-discarded", help="Export episodes the operator discarded too."),
@@ -29,8 +31,8 @@ def export(
                                       help="Run the sessions on Ray: alone, start a local instance (with -j CPUs, default "
                                            "all); auto, HOST:PORT or ray://HOST:PORT: join that cluster. Needs `uv sync "
                                            "--extra ray`.", show_default=False),
-    codec: Optional[str] = typer.Option(None, "--codec", help="Video codec: h264, hevc or av1 (default: the recipe's, h264).",
-                                        show_default=False),
+    codec: Optional[Codec] = typer.Option(None, "--codec", help="Video codec (default: the recipe's, h264).",
+                                          show_default=False),
     crf: Optional[int] = typer.Option(None, "--crf", help="Video quality: lower is better and larger (h264 default 23).",
                                       show_default=False),
     preset: Optional[str] = typer.Option(None, "--preset", help="Encoder preset (x264: ultrafast..veryslow; av1: 0..13).",

@@ -19,6 +19,7 @@ from typing import Callable
 from teleprev.errors import ConfigError, SessionError, out_of_space
 from teleprev.export import dataset as D
 from teleprev.export.recipe import Recipe
+from teleprev.export.repo_id import check_repo_id
 from teleprev.export.report import ExportReport, SessionReport, folder_size
 from teleprev.export.space import space_error
 from teleprev.export.swap import clean_stale
@@ -39,6 +40,9 @@ class ExportOptions:
     video: VideoSettings | None = None  # None: the recipe's
     ray: str | None = None  # run the sessions on Ray: "local" (a new local instance), "auto", "HOST:PORT"
     open_reader: Callable | None = None  # files that are not teleprev sessions (teleprev/export/foreign/); one process
+
+    def __post_init__(self):
+        check_repo_id(self.repo_id)
 
 
 def export(options: ExportOptions, report: Reporter = no_progress) -> ExportReport:
