@@ -34,7 +34,8 @@ def replay(
     from teleprev.errors import ConfigError
     from teleprev.preview.keys import KeyReader
 
-    if to != "preview" and engage_after is None and not KeyReader(print).is_terminal:
+    waits_for_a_key = to == "sim" or (to == "arm" and rig is not None)  # (--to arm without --rig: refused below)
+    if waits_for_a_key and engage_after is None and not KeyReader(print).is_terminal:
         raise ConfigError(f"--to {to} waits for space to engage the robot, and there is no terminal to press it in: "
                           "pass --engage-after SECONDS")
     console = Console()
