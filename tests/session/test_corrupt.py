@@ -7,6 +7,7 @@ import shutil
 
 import pytest
 
+from teleprev.errors import SessionError
 from teleprev.session.reader import SessionReader
 from teleprev.session.records import parse_chunk
 from tests.helpers.cli import teleprev
@@ -109,3 +110,50 @@ def test_a_changed_byte_outside_the_chunks_is_named_and_recover_loses_nothing(se
         assert run.returncode == 0, run.stderr
         with SessionReader(session) as clean, SessionReader(out) as saved:
             assert {t: i.message_count for t, i in saved.topics.items()} == {t: i.message_count for t, i in clean.topics.items()}
+
+
+def _metadata_record(path, name: str) -> tuple[int, int]:
+    """(offset, length) of the metadata record `name`, from the file's summary."""
+    from teleprev.session import records as mr
+
+    with open(path, "rb") as f:
+        summary = mr.read_summary(f, path.stat().st_size)
+    return next((offset, length) for n, offset, length in summary.metadata if n == name)
+
+
+def test_a_changed_byte_in_the_task_text_is_an_error_not_a_dataset(session, tmp_path):
+    """The data section's CRC covers the metadata records: export and eval check it before they use them."""
+    path = _copy(session, tmp_path, "tasks.mcap")
+    offset, length = _metadata_record(path, "tasks")
+    data = path.read_bytes()
+    at = data.index(b"and", offset, offset + length)  # "pick up the cube and place it ..."
+    flip_byte(path, at + 1, 0x01)  # "aod"
+    for args in (["export", path, "--repo-id", "lab/t", "--root", tmp_path / "ds"], ["info", path]):
+        run = teleprev(*args)
+        line = _one_error_line(run)
+        assert run.returncode == 2 and "outside the chunks" in line and "teleprev recover" in line, line
+    assert not (tmp_path / "ds").exists()
+    run = teleprev("eval", path)
+    assert run.returncode == 1 and "outside the chunks" in " ".join(run.stdout.split())
+
+
+def test_a_metadata_length_past_the_end_of_the_file_is_named_not_allocated(session, tmp_path):
+    """A length field changed to petabytes, in a file without the data section's CRC to catch it first."""
+    import struct
+
+    from teleprev.session import records as mr
+
+    path = _copy(session, tmp_path, "length.mcap")
+    offset, _ = _metadata_record(path, "rig")
+    with open(path, "r+b") as f:
+        f.seek(offset + 1)
+        f.write(struct.pack("<Q", 1 << 50))
+        _, summary_start, _ = mr.read_footer(f, path.stat().st_size)
+        f.seek(summary_start - 4)
+        f.write(b"\0\0\0\0")  # the data-end record's CRC: 0, none
+    with pytest.raises(SessionError, match=r"metadata record 'rig' is damaged: 1125899906842624 bytes at byte \d+ run "
+                                           r"past the end of the file"):
+        with SessionReader(path) as reader:
+            reader.metadata
+    run = teleprev("eval", path)
+    assert run.returncode == 1 and not has_traceback(run.stdout + run.stderr) and "MemoryError" not in run.stdout
