@@ -139,6 +139,7 @@ def _as_json(report) -> dict:
         "total_episodes": report.total_episodes, "total_frames": report.total_frames,
         "wall_s": round(report.wall_s, 3), "startup_s": round(report.startup_s, 3), "realtime_x": round(report.realtime_x, 2),
         "max_align_err_ms": round(report.align_err_ms, 3), "size_bytes": report.size_bytes, "failed": report.failed,
+        "skipped": report.skipped,
         "cleaned": report.cleaned,
         "sessions": [{
             "session": s.session, "source_episodes": s.source_episodes, "episodes": s.lerobot_episodes,

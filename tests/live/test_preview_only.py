@@ -1,10 +1,12 @@
 """A session recorded without ever engaging: record, info and export all say why it has no commands."""
 
+import json
+
 from teleprev.session.summary import PREVIEW_ONLY, summarize
 from tests.helpers.cli import teleprev as cli
 
 
-def test_a_preview_only_session_is_explained_by_record_info_and_export(tmp_path):
+def test_a_preview_only_session_is_explained_by_record_info_and_export(tmp_path, sim_session):
     out = tmp_path / "p.mcap"
     run = cli("record", "--out", out, "--duration", "1.5", "--no-preview", columns=80)  # unattended, no --engage-after
     assert run.returncode == 0, run.stderr
@@ -20,6 +22,15 @@ def test_a_preview_only_session_is_explained_by_record_info_and_export(tmp_path)
     err = " ".join(export.stderr.split())
     assert "is not in this session" in err and PREVIEW_ONLY in err
     assert not (tmp_path / "ds").exists()
+
+    # among other sessions it is left out and listed, and does not stop them
+    export = cli("export", out, sim_session, "--repo-id", "lab/two", "--root", tmp_path / "two", "--json")
+    assert export.returncode == 0, export.stderr
+    summary = json.loads(export.stdout.strip().splitlines()[-1])
+    assert summary["skipped"] == {str(out): "recorded in preview only: no commands to export"}
+    assert [s["session"] for s in summary["sessions"]] == [str(sim_session)] and summary["total_episodes"] == 1
+    shown = " ".join(cli("export", out, sim_session, "--repo-id", "lab/three", "--root", tmp_path / "three").stdout.split())
+    assert f"1 session(s) skipped: {out}: recorded in preview only" in shown
 
 
 def test_an_engaged_session_is_not_called_preview_only(sim_session):
