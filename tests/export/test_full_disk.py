@@ -31,3 +31,13 @@ def test_append_on_a_full_disk_leaves_the_dataset_as_it_was(tmp_path):
         assert ("no space left" in lines[0] or "size limit" in lines[0]) and "MB free" in lines[0] and "needs about" in lines[0] and str(root) in lines[0]
         assert tree(root) == before  # byte for byte
         assert not list(disk.glob(".ds.export-*"))  # the partial export is gone
+
+
+def test_the_video_encoder_failing_on_a_full_disk_says_nothing_of_its_own(tmp_path):
+    """The encoder thread's failure (here the file-size limit hits the video first) reaches the user as the
+    export's one line, without the thread's own log line before it."""
+    b = write_session(tmp_path / "b.mcap", SyntheticSession((EpisodeSpec("pour", 6.0),), seed=52))
+    run = run_cli(["export", b, "--repo-id", "lab/full", "--root", tmp_path / "ds"], preexec_fn=fsize_limit(400_000),
+                  timeout=300)
+    lines = [line for line in run.stderr.splitlines() if line.strip()]
+    assert run.returncode == 2 and len(lines) == 1 and "size limit" in lines[0], run.stderr
