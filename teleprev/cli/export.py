@@ -11,6 +11,8 @@ from typing import List, Literal, Optional
 
 import typer
 
+from teleprev.cli.tables import print_table
+
 DEFAULT_ROOT = Path("datasets") / "out"  # beside sessions/, where `teleprev record` writes by default
 Codec = Literal["h264", "hevc", "av1"]
 
@@ -178,7 +180,7 @@ def print_report(console, report, as_json: bool, details: str) -> None:
         return
     from teleprev.export.report import export_notes, summary_table
 
-    console.print(summary_table(report))
+    print_table(console, summary_table(report))
     for line in export_notes(report):
         console.print(line, highlight=False)
     console.print(f"[green]done:[/] {report.total_episodes} episodes, {report.total_frames} frames in {report.root} "

@@ -29,8 +29,9 @@ def test_a_preview_only_session_is_explained_by_record_info_and_export(tmp_path,
     summary = json.loads(export.stdout.strip().splitlines()[-1])
     assert summary["skipped"] == {str(out): "recorded in preview only: no commands to export"}
     assert [s["session"] for s in summary["sessions"]] == [str(sim_session)] and summary["total_episodes"] == 1
-    shown = " ".join(cli("export", out, sim_session, "--repo-id", "lab/three", "--root", tmp_path / "three").stdout.split())
-    assert f"1 session(s) skipped: {out}: recorded in preview only" in shown
+    table = cli("export", out, sim_session, "--repo-id", "lab/three", "--root", tmp_path / "three", columns=80).stdout
+    assert "…" not in table and sim_session.name in table  # 80 columns: the summary widens rather than cut a cell
+    assert f"1 session(s) skipped: {out}: recorded in preview only" in " ".join(table.split())
 
 
 def test_an_engaged_session_is_not_called_preview_only(sim_session):
