@@ -136,17 +136,25 @@ def audit(
 
 
 class _SessionBar:
-    """A transient bar of sessions evaluated (a corpus can take a while); nothing for one session."""
+    """Progress of the sessions evaluated (a corpus, or plots, can take a while): a transient bar on a
+    terminal (none for one session); elsewhere (piped, a log file) a line as each session is done."""
 
     def __init__(self, console, total: int):
         from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn
 
-        self.total = total
+        self.console, self.total, self.done = console, total, 0
+        self.lines = not console.is_terminal
         self.progress = Progress(TextColumn("evaluating"), BarColumn(), MofNCompleteColumn(), TimeElapsedColumn(),
-                                 console=console, transient=True, disable=total < 2)
+                                 console=console, transient=True, disable=total < 2 or self.lines)
         self.task = None
+        self.started = 0.0
 
     def __enter__(self):
+        import time
+
+        self.started = time.perf_counter()
+        if self.lines:
+            self.console.print(f"evaluating {self.total} session(s)", highlight=False)
         self.progress.__enter__()
         self.task = self.progress.add_task("sessions", total=self.total)
         return self
@@ -155,4 +163,11 @@ class _SessionBar:
         self.progress.__exit__(*exc)
 
     def __call__(self, outcome) -> None:
+        import time
+
+        self.done += 1
         self.progress.advance(self.task)
+        if self.lines:
+            how = "done" if outcome.ok else "failed"
+            self.console.print(f"  {self.done}/{self.total} {Path(outcome.label).name}: {how} "
+                               f"({time.perf_counter() - self.started:.1f} s)", highlight=False)

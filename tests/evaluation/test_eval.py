@@ -52,6 +52,7 @@ def test_regression_gate_passes_its_own_baseline_and_fails_past_a_tolerance(grip
     assert teleprev("eval", gripper_session, "--out", report).returncode == 0
     same = teleprev("eval", gripper_session, "--baseline", report)
     assert same.returncode == 0 and "no regression" in same.stdout
+    assert "evaluating 1 session(s)" in same.stdout and "1/1 gripper.mcap: done" in same.stdout  # progress, piped
     # a baseline whose hand moved much less: today's hand speed is a regression past 10 %
     data = json.loads(report.read_text())
     data["overall"]["hand_speed_max"] *= 0.5
@@ -71,8 +72,13 @@ def test_compare_names_each_metric_and_how_far_it_moved():
 
 
 def test_plots_are_written_per_episode(gripper_session, tmp_path):
-    from teleprev.evaluation.plots import plot_episodes
+    from teleprev.evaluation.plots import changed_spans, effector_unit, plot_episodes
 
     result = evaluate([gripper_session])
     paths = plot_episodes(result.reruns[0], tmp_path)
     assert len(paths) == 2 and all(p.stat().st_size > 5000 and p.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n" for p in paths)
+    # the Corrector's changes are drawn as one span per run of changed steps (a line per step took a minute)
+    t = np.arange(8) * 0.01
+    changed = np.array([0, 1, 1, 0, 0, 1, 0, 1], dtype=bool)
+    assert changed_spans(t, changed) == [(0.01, 0.03), (0.05, 0.06), (0.07, 0.07)]
+    assert effector_unit("parallel_gripper") == "m (jaw opening)" and effector_unit("leap_hand") == "rad"
