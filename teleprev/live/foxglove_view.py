@@ -23,6 +23,7 @@ import numpy as np
 
 from teleprev import topics as T
 from teleprev.errors import ConfigError
+from teleprev.live.foxglove_front import SubprotocolFront
 from teleprev.messages import Event, ImageSample, JointSample, Logged, PoseSample, RobotDescription, TransformsSample
 from teleprev.session.codec import encode, schema_for
 from teleprev.topics import ROBOT_DESCRIPTION
@@ -57,12 +58,17 @@ class FoxgloveView:
         self._latched: dict[str, Logged] = {}
         for topic, payload in (channels or {}).items():
             self.declare(topic, payload)
-        try:
-            self._server = foxglove.start_server(name="teleprev", host=HOST, port=port, context=self._context,
+        try:  # foxglove-sdk's server on a private port, behind the front that accepts both protocol names
+            self._server = foxglove.start_server(name="teleprev", host=HOST, port=0, context=self._context,
                                                  server_listener=_Listener())
         except Exception as exc:  # foxglove raises its own error types for a port in use or refused
-            raise ConfigError(f"cannot start the Foxglove server on {HOST}:{port} ({exc})") from None
-        self.port = self._server.port
+            raise ConfigError(f"cannot start the Foxglove server on {HOST} ({exc})") from None
+        try:
+            self._front = SubprotocolFront(HOST, port, self._server.port)
+        except OSError as exc:
+            self._server.stop()
+            raise ConfigError(f"cannot start the Foxglove server on {HOST}:{port} ({exc.strerror or exc})") from None
+        self.port = self._front.port
         self.queue_size = queue_size
         self.dropped = 0
         self.errors: dict[str, str] = {}
@@ -96,6 +102,7 @@ class FoxgloveView:
     def close(self) -> None:
         self._queue.put(_STOP)
         self._thread.join(5.0)
+        self._front.close()
         self._server.stop()
 
     def _run(self) -> None:

@@ -28,7 +28,8 @@ WANTED = {"/robot_description", "/tf", "/arm/arm/state", "/camera/cam_front/imag
           "/glove/glove/hand", "/pipeline/corrected"}
 
 
-async def _watch(port: int, seconds: float, connect_within: float = 20.0) -> tuple[dict, dict]:
+async def _watch(port: int, seconds: float, connect_within: float = 20.0,
+                 protocol: str = "foxglove.sdk.v1") -> tuple[dict, dict]:
     """Connect, subscribe to every channel as it is advertised, and collect for `seconds` or until the server
     goes away: returns (channels by topic, messages (log time, payload bytes) by topic)."""
     import websockets
@@ -36,7 +37,8 @@ async def _watch(port: int, seconds: float, connect_within: float = 20.0) -> tup
     deadline = time.monotonic() + connect_within
     while True:
         try:
-            ws = await websockets.connect(f"ws://127.0.0.1:{port}", subprotocols=["foxglove.sdk.v1"], max_size=None)
+            ws = await websockets.connect(f"ws://127.0.0.1:{port}", subprotocols=[protocol], max_size=None)
+            assert ws.subprotocol == protocol
             break
         except OSError:
             if time.monotonic() > deadline:
@@ -145,7 +147,8 @@ def test_the_port_is_optional_and_a_busy_port_is_refused_clearly():
         first.close()
 
 
-def test_a_late_joiner_gets_the_robot_and_the_mode_once_each():
+@pytest.mark.parametrize("protocol", ["foxglove.sdk.v1", "foxglove.websocket.v1"])  # new, and older Studio / Lichtblick
+def test_a_late_joiner_gets_the_robot_and_the_mode_once_each(protocol):
     """What was published before a client connected and does not come again (the URDF, the mode) is sent
     to it when it subscribes: once, not twice."""
     from teleprev import topics
@@ -157,7 +160,7 @@ def test_a_late_joiner_gets_the_robot_and_the_mode_once_each():
         view.log(Logged(topics.ROBOT_DESCRIPTION, 1, RobotDescription(0, "<robot name='r'/>")))
         view.log(Logged(topics.MODE, 5, mode))
         time.sleep(0.2)  # published to nobody
-        channels, got = asyncio.run(_watch(view.port, 1.5))
+        channels, got = asyncio.run(_watch(view.port, 1.5, protocol=protocol))
     finally:
         view.close()
     assert [_decode(channels[topics.ROBOT_DESCRIPTION], d).urdf for _, d in got[topics.ROBOT_DESCRIPTION]] == ["<robot name='r'/>"]
