@@ -25,7 +25,12 @@ if ! "$PY" -m uv --version >/dev/null 2>&1; then
   echo "installing uv for $PY" >&2
   "$PY" -m pip install --quiet --disable-pip-version-check uv
 fi
-"$PY" -m uv sync --frozen --python "$PY" --quiet "$@"
+# --inexact: an extra installed before (test.sh's ray) stays when this runs without it (demo.sh).
+# TELEPREV_SETUP_DRY_RUN=1 only says what uv would change (tests/test_scripts.py).
+if [ -n "${TELEPREV_SETUP_DRY_RUN:-}" ]; then
+  exec "$PY" -m uv sync --frozen --inexact --python "$PY" --dry-run "$@"
+fi
+"$PY" -m uv sync --frozen --inexact --python "$PY" --quiet "$@"
 # Compile every numba kernel (teleprev/kernels/) into numba's on-disk cache
 # now, so that no record or eval pays the seconds of compiling; `teleprev --help` never loads them.
 .venv/bin/python -c 'from teleprev.kernels import warm; warm()'

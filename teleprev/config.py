@@ -7,6 +7,7 @@ through `from_table`, so unknown keys and wrong types are reported the same way 
 from __future__ import annotations
 
 import dataclasses
+import math
 import tomllib
 import types
 import typing
@@ -47,6 +48,9 @@ def _convert(value: Any, tp: Any, where: str) -> Any:
     if tp is Any:
         return value
     if origin in (Union, types.UnionType):
+        values = [a for a in args if a is not type(None)]
+        if value is not None and len(values) == 1:  # an optional value: say what is wrong with it
+            return _convert(value, values[0], where)
         for arg in args:
             try:
                 return _convert(value, arg, where)
@@ -83,6 +87,8 @@ def _convert(value: Any, tp: Any, where: str) -> Any:
     if tp is float:
         if isinstance(value, bool) or not isinstance(value, (int, float)):
             raise ConfigError(f"expected a number, got {value!r}", where)
+        if not math.isfinite(value):  # TOML has nan and inf; no setting means either
+            raise ConfigError(f"expected a finite number, got {value!r}", where)
         return float(value)
     if tp is int:
         if isinstance(value, bool) or not isinstance(value, int):

@@ -17,6 +17,7 @@ The default rig (rigs/sim.toml) is all simulated devices.
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -29,7 +30,10 @@ from teleprev.errors import ConfigError
 from teleprev.paths import data_dir, inside
 from teleprev.pipeline.config import PipelineConfig
 from teleprev.robot.effectors import EffectorName, EndEffector, end_effector
+from teleprev.robot.limits import arm_limits, effector_limits
 from teleprev.robot.model import load_robot, resolve_urdf
+
+FRAME_REACH_M = 100.0  # a sensor further than this from its parent is a typo (a lab is smaller)
 
 @dataclass(frozen=True)
 class RigSection:
@@ -57,6 +61,14 @@ class SensorFrame:
     def __post_init__(self):
         if self.rpy is not None and self.look_at is not None:
             raise ValueError("give rpy or look_at, not both")
+        for key in ("xyz", "look_at"):
+            value = getattr(self, key)
+            if value is not None and not all(abs(v) <= FRAME_REACH_M for v in value):
+                raise ValueError(f"{key} must be within ±{FRAME_REACH_M:g} m of the parent frame (metres), got {list(value)}")
+        if self.rpy is not None and not all(abs(v) <= 2 * math.pi for v in self.rpy):
+            raise ValueError(f"rpy is in radians, each within ±2π; got {list(self.rpy)} (degrees?)")
+        if self.look_at is not None and tuple(self.look_at) == tuple(self.xyz):
+            raise ValueError("look_at is the frame's own position: a camera cannot look at itself")
 
 
 @dataclass(frozen=True)
@@ -77,6 +89,19 @@ class Rig:
     raw: dict = field(default_factory=dict)  # the file's content, recorded as session metadata
     frames: dict[str, SensorFrame] = field(default_factory=dict)  # [frames.<name>]: sensors in the robot's tree
     tasks: dict[str, str] = field(default_factory=dict)  # [tasks]: task id -> the instruction in words
+
+    def check_task(self, task: str, where: str) -> None:
+        """Refuse a task label that a device of this rig has to act out and does not know (a simulated
+        operator knows five; a device whose settings have `episode_tasks()` names what it knows)."""
+        import difflib
+
+        for d in self.devices.values():
+            known = d.settings.episode_tasks() if hasattr(d.settings, "episode_tasks") else ()
+            if known and task not in known:
+                close = difflib.get_close_matches(task, known, 1)
+                hint = f"; did you mean {close[0]!r}?" if close else ""
+                raise ConfigError(f"task {task!r} is not one device {d.name!r} ({d.plugin}) performs: "
+                                  f"{', '.join(known)}{hint}", where)
 
     def task_text(self, task: str) -> str:
         """The natural-language instruction of a task id ([tasks]); the id itself when the rig has none."""
@@ -180,6 +205,7 @@ def parse_rig(data: dict, path: Path | None, where: str | None = None) -> Rig:
                           "delete the line", f"{where} [pipeline]")
     pipeline = from_table(PipelineConfig, data.get("pipeline", {}), f"{where} [pipeline]")
     _check_robot(rig, pipeline, where)
+    _check_motion_limits(rig, pipeline, where)
     devices_table = data.get("devices", {})
     if not isinstance(devices_table, dict) or not devices_table:
         raise ConfigError("no devices: add at least one [devices.<name>] table", where)
@@ -196,18 +222,18 @@ def parse_rig(data: dict, path: Path | None, where: str | None = None) -> Rig:
             raise ConfigError(f"plugin {table['plugin']!r} declares no valid kind", dwhere)
         settings = from_table(cls.Settings, settings_table, dwhere)
         devices[name] = DeviceEntry(name, table["plugin"], cls.kind, cls, settings)
-    frames = from_table(_Frames, {"frames": data.get("frames", {})}, f"{where} [frames]").frames
+    frames_table = data.get("frames", {})
+    if not isinstance(frames_table, dict):
+        raise ConfigError("expected [frames.<name>] tables", f"{where} [frames]")
+    frames = {name: from_table(SensorFrame, table, f"{where} [frames.{name}]") for name, table in frames_table.items()}
     tasks = from_table(_Tasks, {"tasks": data.get("tasks", {})}, f"{where}").tasks
     for name in frames:
         if name != "suit" and (name not in devices or devices[name].kind != "camera"):
             raise ConfigError("names no camera of this rig (a [frames] table is a camera device's name, or suit)",
                               f"{where} [frames.{name}]")
-    return Rig(path.resolve() if path else None, rig, pipeline, devices, data, frames, tasks)
-
-
-@dataclass(frozen=True)
-class _Frames:
-    frames: dict[str, SensorFrame] = field(default_factory=dict)
+    out = Rig(path.resolve() if path else None, rig, pipeline, devices, data, frames, tasks)
+    out.check_task(rig.task, f"{where} [rig].task")
+    return out
 
 
 @dataclass(frozen=True)
@@ -222,3 +248,26 @@ def _check_robot(rig: RigSection, pipeline: PipelineConfig, where: str) -> None:
         raise ConfigError(f"no such robot {rig.robot!r} (a URDF path, or the name of one in urdf/)", f"{where} [rig].robot")
     if pipeline.tcp_link and pipeline.tcp_link not in load_robot(urdf).links:
         raise ConfigError(f"the robot {rig.robot!r} has no link {pipeline.tcp_link!r}", f"{where} [pipeline].tcp_link")
+
+
+# Motion limits of a robot that teleprev/robot/limits.py does not know: no arm or hand goes past these.
+MAX_ARM_ACCELERATION, MAX_ARM_JERK, MAX_HAND_ACCELERATION = 100.0, 10_000.0, 2000.0
+
+
+def _check_motion_limits(rig: RigSection, pipeline: PipelineConfig, where: str) -> None:
+    """A motion limit may tighten the robot's own (teleprev/robot/limits.py), never loosen it: a looser one
+    sends commands the controller faults on. For a robot the table lacks, a bound no robot goes past."""
+    arm, effector = arm_limits(rig.robot), effector_limits(rig.end_effector)
+    for key, row, bound, unit in (
+        ("arm_acceleration", arm.acceleration if arm else None, MAX_ARM_ACCELERATION, "rad/s²"),
+        ("arm_jerk", arm.jerk if arm else None, MAX_ARM_JERK, "rad/s³"),
+        ("hand_acceleration", effector.acceleration if effector else None, MAX_HAND_ACCELERATION, "rad/s² (m/s² for a gripper)"),
+    ):
+        value = getattr(pipeline, key)
+        if value is None:
+            continue
+        if row is not None and value > row:
+            raise ConfigError(f"{value:g} {unit} is looser than the robot's own limit ({row:g}, "
+                              "teleprev/robot/limits.py); a rig may only tighten it", f"{where} [pipeline].{key}")
+        if value > bound:
+            raise ConfigError(f"{value:g} {unit} is more than any robot takes (at most {bound:g})", f"{where} [pipeline].{key}")

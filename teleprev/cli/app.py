@@ -99,21 +99,58 @@ def foxglove_port_default(argv: list[str]) -> list[str]:
     return out
 
 
+def plain_help(command) -> None:
+    """Help without type labels that say nothing to a user: a flag takes no value (typer shows "<bool>"),
+    and a list argument's name already says it takes several (typer shows "<list[str]>")."""
+    for param in getattr(command, "params", ()):
+        if getattr(param, "is_flag", False):
+            param.metavar = ""
+        elif param.param_type_name == "argument" and param.nargs != 1:
+            param.display_type_rich = lambda ctx: None
+    made = command.get_help_option  # --help is made (and kept) when help is asked for
+
+    def help_option(ctx, made=made):
+        option = made(ctx)
+        if option is not None:
+            option.metavar = ""
+        return option
+
+    command.get_help_option = help_option
+    for sub in getattr(command, "commands", {}).values():
+        plain_help(sub)
+
+
 def main() -> None:
-    """Entry point: user-facing errors print one clear line instead of a traceback."""
+    """Entry point: user-facing errors, and usage errors (an unknown option, a value that is not one of its
+    choices or out of its range), print one clear line instead of a traceback or a usage panel."""
+    from rich.console import Console
+    from rich.markup import escape
+
     from teleprev.errors import TeleprevError
 
+    command = typer.main.get_command(app)
+    plain_help(command)
     try:
-        app(args=foxglove_port_default(ray_address_default(sys.argv[1:])))
+        code = command.main(args=foxglove_port_default(ray_address_default(sys.argv[1:])), prog_name="teleprev",
+                            standalone_mode=False)
     except TeleprevError as exc:
-        from rich.console import Console
-        from rich.markup import escape
-
         # escape: "[devices.suit]" in a message is where the error is, not rich markup
         Console(stderr=True).print(f"[bold red]error:[/] {escape(str(exc))}", highlight=False, soft_wrap=True)
         sys.exit(2)
+    except typer.TyperException as exc:
+        context = getattr(exc, "ctx", None)
+        if type(exc).__name__ == "NoArgsIsHelpError":  # a bare group: its help is on the screen already
+            sys.exit(exc.exit_code)
+        where = f" (see {context.command_path} --help)" if context is not None else ""
+        message = exc.format_message().replace("Value error, ", "")  # typer's wording for a value not among the choices
+        Console(stderr=True).print(f"[bold red]error:[/] {escape(message)}{escape(where)}",
+                                   highlight=False, soft_wrap=True)
+        sys.exit(exc.exit_code)
+    except typer.Abort:  # end of input at a prompt
+        sys.exit(1)
     except KeyboardInterrupt:
         sys.exit(130)
+    sys.exit(code if isinstance(code, int) else 0)
 
 
 if __name__ == "__main__":

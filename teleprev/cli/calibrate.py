@@ -37,6 +37,7 @@ def calibrate(
     from teleprev.clock import SessionClock
 
     console = Console()
+    _check_before_the_first_pose(out, hold, seconds)
     r = load_rig(rig)
     r.require("glove", "suit")
     clock = SessionClock()
@@ -82,6 +83,39 @@ def calibrate(
         for runner in runners:
             runner.stop()
     cal = compute(np.array(held["open"]["hand"]), np.array(held["fist"]["hand"]), np.array(held["neutral"]["wrist"]), operator)
-    path = write_calibration(cal, out)
+    try:
+        path = write_calibration(cal, out)
+    except OSError as exc:  # the folder went away or filled up since the check: the poses are not lost
+        from teleprev.errors import ConfigError
+        from teleprev.retarget.calibration import calibration_toml
+
+        print(calibration_toml(cal))
+        raise ConfigError(f"could not write the calibration ({exc.strerror or exc}); it is printed above: save it "
+                          "as a .toml file", str(out)) from None
     console.print(f"wrote {path}: suit yaw {np.degrees(cal.calibration.suit_yaw):.1f} deg; "
                   f"reference it from the rig with \\[rig] calibration = \"{path}\"")
+
+
+def _check_before_the_first_pose(out: Path, hold: Optional[float], seconds: float) -> None:
+    """What would lose the operator's three poses, refused before the first: no terminal to press Enter in,
+    or an --out that cannot be written (its folder is created now)."""
+    import os
+
+    from teleprev.errors import ConfigError
+    from teleprev.preview.keys import KeyReader
+
+    if hold is None and not KeyReader(print).is_terminal:
+        raise ConfigError("calibrate asks you to press Enter at each pose, and there is no terminal to press it in: "
+                          "run it in a terminal, or pass --hold SECONDS")
+    if hold is not None and not 0 <= hold < float("inf"):
+        raise ConfigError(f"--hold must be 0 or more seconds, got {hold:g}")
+    if not 0 < seconds < float("inf"):
+        raise ConfigError(f"--seconds must be a positive number of seconds, got {seconds:g}")
+    if out.is_dir():
+        raise ConfigError("is a folder; --out names the calibration file to write, e.g. calib/ada.toml", str(out))
+    try:
+        out.parent.mkdir(parents=True, exist_ok=True)
+    except OSError as exc:
+        raise ConfigError(f"cannot create the folder for --out ({exc.strerror or exc})", str(out.parent)) from None
+    if not os.access(out.parent, os.W_OK) or (out.exists() and not os.access(out, os.W_OK)):
+        raise ConfigError("cannot be written (permission denied)", str(out if out.exists() else out.parent))

@@ -7,6 +7,8 @@ from typing import Optional
 
 import typer
 
+from teleprev.cli.tables import print_table
+
 app = typer.Typer(help="Device plugins: list what is installed, check a rig's devices, emulate hardware.",
                   no_args_is_help=True)
 
@@ -89,12 +91,13 @@ def check(
                       ("Hz/nominal", "right"), ("latency ms\nmed/max", "right"), ("errors", "right"),
                       ("lost", "right")):
         table.add_column(col, justify=just, no_wrap=True)
-    table.add_column("last error", overflow="fold", min_width=10)
     bad = 0
+    said: list[str] = []  # each device's last error, under the table: a long message never squeezes it
     for name, entry in loaded.devices.items():
         if name in failed:
             bad += 1
-            table.add_row(name, entry.plugin, entry.kind, "[bold red]not opened[/]", "0", "", "", "1", "", failed[name])
+            table.add_row(name, entry.plugin, entry.kind, "[bold red]not opened[/]", "0", "", "", "1", "")
+            said.append(f"  {name}: {failed[name]}")
             continue
         s = stats[name]
         healthy = s.received > 0 and s.state == "ok"
@@ -107,9 +110,12 @@ def check(
             f"{s.latency_ms:.1f}/{s.latency_max_ms:.1f}" if s.received else "",
             f"{'[red]' if s.errors else ''}{s.errors}{'[/]' if s.errors else ''}",
             f"{'[red]' if s.sink_errors else ''}{s.sink_errors}{'[/]' if s.sink_errors else ''}",
-            s.last_error or _skipped(s.skipped),
         )
-    console.print(table)
+        if s.last_error or _skipped(s.skipped):
+            said.append(f"  {name}: {s.last_error or _skipped(s.skipped)}")
+    print_table(console, table)
+    for line in said:
+        console.print(line, highlight=False, markup=False, soft_wrap=True)
     for e in events:
         if e["event"] in ("error", "gap", "disconnected"):
             console.print(f"  {e['device']}: {e['event']}: {e.get('message', '')}", highlight=False, markup=False)

@@ -7,11 +7,14 @@ the command.
 from __future__ import annotations
 
 from pathlib import Path
-from typing import List, Optional
+from typing import List, Literal, Optional
 
 import typer
 
+from teleprev.cli.tables import print_table
+
 DEFAULT_ROOT = Path("datasets") / "out"  # beside sessions/, where `teleprev record` writes by default
+Codec = Literal["h264", "hevc", "av1"]
 
 
 def export(
@@ -20,7 +23,8 @@ def export(
     repo_id: str = typer.Option(..., "--repo-id", help="Dataset name, e.g. lab/pick_place.", show_default=False),
     root: Optional[Path] = typer.Option(None, "--root", help="Dataset folder (default: ./datasets/out/<repo-id>).",
                                         show_default=False),
-    fps: int = typer.Option(0, "--fps", help="Frames per second (default: the recipe's, else the reference camera's rate)."),
+    fps: int = typer.Option(0, "--fps", min=0, help="Frames per second (default: the recipe's, else the reference camera's rate).",
+                            show_default=False),
     recipe: str = typer.Option("default", "--recipe", help="Recipe file, or the name of one in datasets/recipes/ (default, with_glove)."),
     append: bool = typer.Option(False, "--append", help="Add the sessions to an existing dataset (LeRobot's resume)."),
     include_discarded: bool = typer.Option(False, "--include-discarded", help="Export episodes the operator discarded too."),
@@ -29,8 +33,8 @@ def export(
                                       help="Run the sessions on Ray: alone, start a local instance (with -j CPUs, default "
                                            "all); auto, HOST:PORT or ray://HOST:PORT: join that cluster. Needs `uv sync "
                                            "--extra ray`.", show_default=False),
-    codec: Optional[str] = typer.Option(None, "--codec", help="Video codec: h264, hevc or av1 (default: the recipe's, h264).",
-                                        show_default=False),
+    codec: Optional[Codec] = typer.Option(None, "--codec", help="Video codec (default: the recipe's, h264).",
+                                          show_default=False),
     crf: Optional[int] = typer.Option(None, "--crf", help="Video quality: lower is better and larger (h264 default 23).",
                                       show_default=False),
     preset: Optional[str] = typer.Option(None, "--preset", help="Encoder preset (x264: ultrafast..veryslow; av1: 0..13).",
@@ -137,6 +141,7 @@ def _as_json(report) -> dict:
         "total_episodes": report.total_episodes, "total_frames": report.total_frames,
         "wall_s": round(report.wall_s, 3), "startup_s": round(report.startup_s, 3), "realtime_x": round(report.realtime_x, 2),
         "max_align_err_ms": round(report.align_err_ms, 3), "size_bytes": report.size_bytes, "failed": report.failed,
+        "skipped": report.skipped,
         "cleaned": report.cleaned,
         "sessions": [{
             "session": s.session, "source_episodes": s.source_episodes, "episodes": s.lerobot_episodes,
@@ -175,7 +180,7 @@ def print_report(console, report, as_json: bool, details: str) -> None:
         return
     from teleprev.export.report import export_notes, summary_table
 
-    console.print(summary_table(report))
+    print_table(console, summary_table(report))
     for line in export_notes(report):
         console.print(line, highlight=False)
     console.print(f"[green]done:[/] {report.total_episodes} episodes, {report.total_frames} frames in {report.root} "

@@ -10,7 +10,7 @@ from typing import List, Optional
 
 import typer
 
-from teleprev.cli.export import DEFAULT_ROOT, print_report, run_stoppable
+from teleprev.cli.export import DEFAULT_ROOT, Codec, print_report, run_stoppable
 
 
 def import_(
@@ -21,10 +21,11 @@ def import_(
     repo_id: str = typer.Option(..., "--repo-id", help="Dataset name, e.g. lab/pick_place.", show_default=False),
     root: Optional[Path] = typer.Option(None, "--root", help="Dataset folder (default: ./datasets/out/<repo-id>).",
                                         show_default=False),
-    fps: int = typer.Option(0, "--fps", help="Frames per second (default: the recipe's, else the reference camera's rate)."),
+    fps: int = typer.Option(0, "--fps", min=0, help="Frames per second (default: the recipe's, else the reference camera's rate).",
+                            show_default=False),
     append: bool = typer.Option(False, "--append", help="Add the files to an existing dataset."),
-    codec: Optional[str] = typer.Option(None, "--codec", help="Video codec: h264, hevc or av1 (default: the recipe's).",
-                                        show_default=False),
+    codec: Optional[Codec] = typer.Option(None, "--codec", help="Video codec (default: the recipe's).",
+                                          show_default=False),
     as_json: bool = typer.Option(False, "--json", help="Print the summary as one JSON object instead of a table."),
 ) -> None:
     """Import robot recordings (ROS 2 MCAP, rosbag2, Foxglove MCAP) into a LeRobot dataset."""

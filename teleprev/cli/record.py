@@ -3,11 +3,12 @@
 from __future__ import annotations
 
 from pathlib import Path
-from typing import Optional
+from typing import Literal, Optional
 
 import typer
 
 TASKS_HELP = "Task label of the episodes (the sim operator performs it): pick_place, hang, pour, box_rotation, cup_stack."
+View = Literal["front", "side", "top"]  # the robot views of the terminal preview
 
 
 def record(
@@ -15,15 +16,15 @@ def record(
     out: Optional[Path] = typer.Option(None, "--out", "-o", help="Session file to write (default: sessions/<time>_<task>.mcap)."),
     task: str = typer.Option("", "--task", "-t", help=TASKS_HELP),
     task_text: str = typer.Option("", "--task-text", help="The task as an instruction in words, e.g. 'pick up the cube and "
-                                  "place it in the bowl' (default: the rig's [tasks] entry); exports give it to the "
+                                  "place it in the bowl' (default: the rig's \\[tasks] entry); exports give it to the "
                                   "policy, the id stays in the session."),
     duration: Optional[float] = typer.Option(None, "--duration", help="Run unattended for this many seconds, then stop."),
-    episodes: int = typer.Option(1, "--episodes", help="Unattended: split the duration into this many episodes."),
+    episodes: int = typer.Option(1, "--episodes", min=1, help="Unattended: split the duration into this many episodes."),
     engage_after: Optional[float] = typer.Option(
         None, "--engage-after", help="Unattended: switch to execute this many seconds into each episode (default: stay in preview)."
     ),
     preview: bool = typer.Option(True, "--preview/--no-preview", help="Show the terminal preview (--no-preview runs headless)."),
-    view: str = typer.Option("side", "--view", help="Robot view: front, side or top."),
+    view: View = typer.Option("side", "--view", help="Robot view."),
     fps: float = typer.Option(25.0, "--fps", help="Terminal preview redraws per second."),
     models: Optional[Path] = typer.Option(None, "--models", help="Folder with CPN/CCN weights (default: the rig's, else models/)."),
     operator: str = typer.Option("", "--operator", help="Operator name, stored with the session."),
@@ -44,6 +45,7 @@ def record(
     from teleprev.live.session import RecordOptions, LiveSession, default_session_path
     from teleprev.live.run import run_interactive, run_script, print_summary
 
+    check_options(rig, task, duration, engage_after, connect_timeout)
     console = Console()
     preview = preview and console.is_terminal  # a redrawn screen in a log file is noise: headless there
     options = RecordOptions(
@@ -84,3 +86,18 @@ def record(
         raise typer.Exit(1)
     if recording.loop.stats.device_failures:
         raise typer.Exit(1)  # a device failed during the session: the summary above says which
+
+
+def check_options(rig: Optional[Path], task: str, duration: Optional[float], engage_after: Optional[float],
+                  connect_timeout: float) -> None:
+    """The values no device has to be opened to refuse: one line each (teleprev.errors.ConfigError)."""
+    from teleprev.errors import ConfigError
+    from teleprev.rig import load_rig
+
+    for name, value in (("--duration", duration), ("--connect-timeout", connect_timeout)):
+        if value is not None and not 0 < value < float("inf"):
+            raise ConfigError(f"{name} must be a positive number of seconds, got {value:g}")
+    if engage_after is not None and not 0 <= engage_after < float("inf"):
+        raise ConfigError(f"--engage-after must be 0 or more seconds, got {engage_after:g}")
+    if task:
+        load_rig(rig).check_task(task, "--task")

@@ -3,19 +3,21 @@
 from __future__ import annotations
 
 from pathlib import Path
-from typing import Optional
+from typing import Literal, Optional
 
 import typer
+
+from teleprev.cli.record import View
 
 
 def replay(
     session: Path = typer.Argument(..., help="Session file (.mcap)."),
     episode: Optional[int] = typer.Option(None, "--episode", "-e", help="Play one episode (default: the whole session)."),
     speed: float = typer.Option(1.0, "--speed", "-x", min=0.01, help="Playback speed multiple (capped so no joint exceeds its limit)."),
-    to: str = typer.Option("preview", "--to", help="preview (screen only), sim (the simulated robot) or arm (the rig's robot)."),
+    to: Literal["preview", "sim", "arm"] = typer.Option("preview", "--to", help="preview (screen only), sim (the simulated robot) or arm (the rig's robot)."),
     rig: Optional[Path] = typer.Option(None, "--rig", help="Rig whose robot receives the commands with --to arm (default: the recorded rig)."),
     engage_after: Optional[float] = typer.Option(None, "--engage-after", help="Engage automatically after this many seconds (else press space)."),
-    view: str = typer.Option("side", "--view", help="Robot view: front, side or top."),
+    view: View = typer.Option("side", "--view", help="Robot view."),
     preview: bool = typer.Option(True, "--preview/--no-preview", help="Show the terminal preview."),
     smooth: bool = typer.Option(False, "--smooth", help="Send the commands as the pipeline's jerk-limited generator re-commands them (needed with --to arm for a session that fails `teleprev audit`)."),
     foxglove: Optional[int] = typer.Option(None, "--foxglove", metavar="[PORT]", help="Also play the session's topics "
@@ -29,8 +31,13 @@ def replay(
 
     from teleprev.live.playback import play
 
-    if to not in ("preview", "sim", "arm"):
-        raise typer.BadParameter("--to must be preview, sim or arm")
+    from teleprev.errors import ConfigError
+    from teleprev.preview.keys import KeyReader
+
+    waits_for_a_key = to == "sim" or (to == "arm" and rig is not None)  # (--to arm without --rig: refused below)
+    if waits_for_a_key and engage_after is None and not KeyReader(print).is_terminal:
+        raise ConfigError(f"--to {to} waits for space to engage the robot, and there is no terminal to press it in: "
+                          "pass --engage-after SECONDS")
     console = Console()
     if to == "arm" and not smooth:
         from teleprev.evaluation.audit import audit_session
@@ -129,17 +136,25 @@ def audit(
 
 
 class _SessionBar:
-    """A transient bar of sessions evaluated (a corpus can take a while); nothing for one session."""
+    """Progress of the sessions evaluated (a corpus, or plots, can take a while): a transient bar on a
+    terminal (none for one session); elsewhere (piped, a log file) a line as each session is done."""
 
     def __init__(self, console, total: int):
         from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn
 
-        self.total = total
+        self.console, self.total, self.done = console, total, 0
+        self.lines = not console.is_terminal
         self.progress = Progress(TextColumn("evaluating"), BarColumn(), MofNCompleteColumn(), TimeElapsedColumn(),
-                                 console=console, transient=True, disable=total < 2)
+                                 console=console, transient=True, disable=total < 2 or self.lines)
         self.task = None
+        self.started = 0.0
 
     def __enter__(self):
+        import time
+
+        self.started = time.perf_counter()
+        if self.lines:
+            self.console.print(f"evaluating {self.total} session(s)", highlight=False)
         self.progress.__enter__()
         self.task = self.progress.add_task("sessions", total=self.total)
         return self
@@ -148,4 +163,11 @@ class _SessionBar:
         self.progress.__exit__(*exc)
 
     def __call__(self, outcome) -> None:
+        import time
+
+        self.done += 1
         self.progress.advance(self.task)
+        if self.lines:
+            how = "done" if outcome.ok else "failed"
+            self.console.print(f"  {self.done}/{self.total} {Path(outcome.label).name}: {how} "
+                               f"({time.perf_counter() - self.started:.1f} s)", highlight=False)

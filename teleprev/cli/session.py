@@ -6,6 +6,8 @@ from pathlib import Path
 
 import typer
 
+from teleprev.cli.tables import print_table
+
 SESSION_ARG = typer.Argument(..., help="A session file (.mcap).", show_default=False)
 
 
@@ -23,18 +25,6 @@ def _size(n: int) -> str:
             return f"{n:.0f} {unit}" if unit == "B" else f"{n:.1f} {unit}"
         n /= 1024
     return str(n)
-
-
-def _print_table(console, table) -> None:
-    """Never truncate a number or a topic: widen past the terminal if the table needs it."""
-    from rich.measure import Measurement
-
-    need = Measurement.get(console, console.options.update_width(10_000), table).maximum
-    if need > console.width:
-        from rich.console import Console
-
-        console = Console(width=need, file=console.file)
-    console.print(table)
 
 
 _NOT_SKIPPED = ("received", "loop_dropped", "sink_errors", "failures")
@@ -118,7 +108,7 @@ def info(
             f"[yellow]{st.gaps}[/]" if st.gaps else "0", dropped,
             f"[red]{st.backwards}[/]" if st.backwards else "0",
         )
-    _print_table(console, table)
+    print_table(console, table)
     for line in s.recorder_errors:
         console.print(f"[red]rejected[/] {line}", highlight=False)
 
@@ -136,7 +126,7 @@ def info(
                                                      "loop_dropped")),
                         f"[yellow]{skipped}[/]" if skipped else "0",
                         f"[bold red]{c.get('failures', 0)}[/]" if c.get("failures") else "0")
-        _print_table(console, dev)
+        print_table(console, dev)
 
     if s.device_events:
         ev = Table(title="device events", title_justify="left", box=box.SIMPLE_HEAD, pad_edge=False)
@@ -144,7 +134,7 @@ def info(
             ev.add_column(col)
         for d in s.device_events:
             ev.add_row(f"{(d.log_time_ns - s.start_ns) / 1e9:.3f} s", d.device, d.event, d.message)
-        _print_table(console, ev)
+        print_table(console, ev)
 
     ep = Table(title="episodes", title_justify="left", box=box.SIMPLE_HEAD, pad_edge=False)
     for col, just in (("#", "right"), ("task", "left"), ("start", "right"), ("duration s", "right"),
@@ -157,7 +147,7 @@ def info(
             "[yellow]yes[/]" if e.discarded else "no", e.outcome or "-",
         )
     if s.episodes:
-        _print_table(console, ep)
+        print_table(console, ep)
     else:
         console.print("episodes: none")
 
@@ -199,7 +189,7 @@ def recover(
     table.add_column("messages", justify="right")
     for topic, n in r.messages.items():
         table.add_row(topic, str(n))
-    _print_table(console, table)
+    print_table(console, table)
     span = f"{r.span_s:.3f} s ({_time(r.start_ns)} .. {_time(r.end_ns)})" if r.start_ns is not None else "no messages"
     extra = f", {r.salvaged} of them from a cut-off chunk" if r.salvaged else ""
     console.print(f"saved {r.total} messages{extra}, spanning {span}; metadata records: "

@@ -45,9 +45,9 @@ def study(
     out: Optional[Path] = typer.Option(None, "--out", "-o", help="Folder for the CSV tables, table_iii.md and the plots."),
     task: Optional[str] = typer.Option(None, "--task", help="Only this task's episodes in execution time, success rate and Table III "
                                        "(practice time and ratings are per condition)."),
-    with_preview: list[str] = typer.Option([], "--with-preview", help="A condition that is 'w/ preview' in Table III (repeatable; "
+    with_preview: list[str] = typer.Option([], "--with-preview", metavar="<str>", help="A condition that is 'w/ preview' in Table III (repeatable; "
                                            "replaces the automatic match of 'w/ preview', 'with preview', ...)."),
-    without_preview: list[str] = typer.Option([], "--without-preview", help="A condition that is 'w/o preview' (repeatable)."),
+    without_preview: list[str] = typer.Option([], "--without-preview", metavar="<str>", help="A condition that is 'w/o preview' (repeatable)."),
 ) -> None:
     """Execution time, success rate, practice time and Likert ratings per condition and end effector; Table III."""
     from rich.console import Console

@@ -1,4 +1,6 @@
-"""One PNG per episode: recorded vs re-run hand joints, with the steps the Corrector changed marked."""
+"""One PNG per episode (what the re-run commanded, arm and end effector, with units; the retargeted target
+against the corrected one; the steps the Corrector changed shaded; how far the re-run is from the recording),
+and corpus.png for many sessions."""
 
 from __future__ import annotations
 
@@ -9,8 +11,24 @@ import numpy as np
 from teleprev.evaluation.reproduce import Rerun
 from teleprev import topics
 
+GROUP = 4  # end-effector joints per panel (a LEAP Hand finger)
 
-def plot_episodes(r: Rerun, out_dir: str | Path, max_joints: int = 8) -> list[Path]:
+
+def effector_unit(effector_name: str) -> str:
+    return {"parallel_gripper": "m (jaw opening)", "vacuum": "on (1) / off (0)"}.get(effector_name, "rad")
+
+
+def changed_spans(t: np.ndarray, changed: np.ndarray) -> list[tuple[float, float]]:
+    """(start, end) times of each run of consecutive changed steps (a run of one step spans to the next)."""
+    if not changed.any():
+        return []
+    edges = np.diff(np.r_[0, changed.astype(np.int8), 0])
+    starts, ends = np.flatnonzero(edges == 1), np.flatnonzero(edges == -1)
+    nxt = np.r_[t[1:], t[-1]]
+    return [(float(t[a]), float(nxt[b - 1])) for a, b in zip(starts, ends)]
+
+
+def plot_episodes(r: Rerun, out_dir: str | Path) -> list[Path]:
     import matplotlib
 
     matplotlib.use("Agg")
@@ -20,25 +38,47 @@ def plot_episodes(r: Rerun, out_dir: str | Path, max_joints: int = 8) -> list[Pa
     out_dir.mkdir(parents=True, exist_ok=True)
     paths = []
     spans = [(e.index, e.task, e.start_ns, e.stop_ns) for e in r.episodes] or [(0, "session", int(r.t_ns[0]), None)]
-    stream, names = (topics.CORRECTED, r.effector_names)
+    eff_names = r.effector_names
+    groups = [list(range(k, min(k + GROUP, len(eff_names)))) for k in range(0, len(eff_names), GROUP)]
+    unit = effector_unit(r.effector.name)
     for index, task, start, stop in spans:
         rows = (r.t_ns >= start) & (r.t_ns < (stop if stop is not None else np.iinfo(np.int64).max))
         if not rows.any():
             continue
         t = (r.t_ns[rows] - start) / 1e9
-        recorded, rerun = r.recorded[stream][rows], r.rerun[stream][rows]
-        changed = np.isin(r.corrector[rows], ("ccn", "fallback"))
-        joints = list(range(min(len(names), max_joints)))
-        fig, axes = plt.subplots(len(joints), 1, figsize=(10, 1.4 * len(joints) + 0.8), sharex=True, squeeze=False)
-        for ax, j in zip(axes[:, 0], joints):
-            ax.plot(t, recorded[:, j], color="0.6", lw=2.5, label="recorded")
-            ax.plot(t, rerun[:, j], color="tab:blue", lw=1.0, label="re-run")
-            for x in t[changed]:
-                ax.axvline(x, color="tab:red", alpha=0.08, lw=1)
-            ax.set_ylabel(names[j], rotation=0, labelpad=18)
-        axes[0, 0].legend(loc="upper right", fontsize=8)
-        axes[0, 0].set_title(f"{r.session.name}: episode {index} ({task}) - {stream}; red: steps the Corrector changed")
-        axes[-1, 0].set_xlabel("seconds into the episode")
+        shaded = changed_spans(t, np.isin(r.corrector[rows], ("ccn", "fallback")))
+        fig, axes = plt.subplots(2 + len(groups), 1, figsize=(11, 2.1 * (2 + len(groups)) + 0.6), sharex=True,
+                                 squeeze=False, height_ratios=[3] + [3] * len(groups) + [1.4])
+        axes = axes[:, 0]
+        arm_ax, diff_ax = axes[0], axes[-1]
+        for j, name in enumerate(r.arm_names):
+            arm_ax.plot(t, r.recorded[topics.COMMAND_ARM][rows][:, j], color="0.82", lw=3)
+            arm_ax.plot(t, r.rerun[topics.COMMAND_ARM][rows][:, j], lw=1.1, label=name)
+        arm_ax.set_ylabel("arm command\n(rad)")
+        arm_ax.legend(loc="upper right", fontsize=7, ncol=len(r.arm_names))
+        for ax, group in zip(axes[1:-1], groups):
+            for j in group:
+                line, = ax.plot(t, r.rerun[topics.CORRECTED][rows][:, j], lw=1.1, label=eff_names[j])
+                ax.plot(t, r.rerun[topics.RETARGETED][rows][:, j], lw=0.9, ls="--", color=line.get_color())
+            ax.set_ylabel(f"end effector\n({unit})")
+            ax.legend(loc="upper right", fontsize=7, ncol=len(group), title_fontsize=7,
+                      title="solid: corrected, dashed: retargeted")
+        for topic, label in ((topics.COMMAND_ARM, "arm command"), (topics.CORRECTED, "corrected")):
+            gap = np.abs(r.rerun[topic][rows] - r.recorded[topic][rows])
+            worst = np.where(np.isnan(gap).all(axis=1), np.nan, np.nanmax(np.nan_to_num(gap, nan=0.0), axis=1))
+            diff_ax.plot(t, worst, lw=1.0, label=label)
+        same = all(np.array_equal(r.rerun[k][rows], r.recorded[k][rows], equal_nan=True)
+                   for k in (topics.COMMAND_ARM, topics.CORRECTED))
+        diff_ax.set_ylabel("|re-run −\nrecorded|")
+        diff_ax.legend(loc="upper right", fontsize=7, ncol=2,
+                       title="re-run = recording, bit for bit" if same else "re-run differs from the recording",
+                       title_fontsize=7)
+        for ax in axes:
+            for a, b in shaded:
+                ax.axvspan(a, b, color="tab:red", alpha=0.12, lw=0)
+        axes[0].set_title(f"{r.session.name}: episode {index} ({task}); shaded: steps the Corrector changed "
+                          f"({len(shaded)} spans)", fontsize=10)
+        axes[-1].set_xlabel("seconds into the episode")
         fig.tight_layout()
         path = out_dir / f"{r.session.stem}_episode{index}.png"
         fig.savefig(path, dpi=80)

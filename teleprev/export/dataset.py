@@ -42,6 +42,7 @@ class Staging:
     def commit(self) -> None:
         """Move the built dataset to the target; an existing target (appending, or an empty folder) is
         replaced in one step."""
+        usual_modes(self.dataset)
         if self.target.exists():
             replace_dir(self.dataset, self.target, self.dir)
         else:
@@ -50,6 +51,18 @@ class Staging:
 
     def abort(self) -> None:
         shutil.rmtree(self.dir, ignore_errors=True)
+
+
+def usual_modes(root: Path) -> None:
+    """Give every file and folder under root the mode the user's umask gives new ones: lerobot writes the
+    videos it concatenates through tempfile, whose files are private (0600), so a dataset of several
+    episodes had videos nobody else could read."""
+    umask = os.umask(0o022)  # reading the umask means setting it: set it straight back
+    os.umask(umask)
+    for path in [root, *root.rglob("*")]:
+        wanted = (0o777 if path.is_dir() else 0o666) & ~umask
+        if not path.is_symlink() and path.stat().st_mode & 0o777 != wanted:
+            path.chmod(wanted)
 
 
 def read_info(root: Path) -> dict:

@@ -130,7 +130,7 @@ class _EncoderThread(threading.Thread):
                 container = None
             self.results.put(("ok", stats.get_statistics() if sampled >= 2 else None))
         except Exception as exc:  # reported to the exporter through the result queue
-            log.error("encoder thread for %s failed: %s", self.path.name, exc)
+            log.debug("encoder thread for %s failed: %s", self.path.name, exc)  # the export says it, once
             if container is not None:
                 with contextlib.suppress(Exception):
                     container.close()

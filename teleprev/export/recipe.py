@@ -209,11 +209,12 @@ def resolve(recipe: Recipe, session_topics: dict, metadata: dict[str, dict[str, 
     except json.JSONDecodeError:
         inputs = {}
     out: list[ResolvedFeature] = []
+    what = "file" if "import" in metadata else "session"  # a recording teleprev did not make is no session
     for spec in recipe.feature:
         fwhere = f"{where}: feature {spec.name!r}"
         sources: list[Source] = []
         for entry in spec.streams:
-            sources.extend(_sources(entry, schemas, devices, inputs, fwhere))
+            sources.extend(_sources(entry, schemas, devices, inputs, fwhere, what))
         images = [s for s in sources if s.schema == IMAGE]
         if images and len(images) != len(sources):
             raise ConfigError(f"mixes camera and joint streams ({', '.join(spec.streams)}); give cameras their own feature",
@@ -236,12 +237,14 @@ def resolve(recipe: Recipe, session_topics: dict, metadata: dict[str, dict[str, 
     return out
 
 
-def _sources(entry: str, schemas: dict[str, str], devices: dict[str, list[str]], inputs: dict, where: str) -> list[Source]:
+def _sources(entry: str, schemas: dict[str, str], devices: dict[str, list[str]], inputs: dict, where: str,
+             what: str = "session") -> list[Source]:
     role_name, device = _parse_stream(entry, where)
     if not role_name:  # a topic
         topic = device
         if topic not in schemas:
-            raise SessionError(f"no topic {topic} in this session", where)
+            has = ", ".join(sorted(schemas)) if schemas else "none"
+            raise SessionError(f"no topic {topic} in this {what} (its topics: {has})", where)
         if schemas[topic] not in (JOINTS, POSE, IMAGE):
             raise SessionError(f"{topic} holds {schemas[topic]} messages, expected {JOINTS}, {POSE} or {IMAGE}"
                                f"{_import_hint(schemas[topic])}", where)

@@ -67,6 +67,7 @@ class ExportReport:
     total_episodes: int = 0  # in the dataset after the export (appending: with the earlier ones)
     total_frames: int = 0
     failed: dict[str, str] = field(default_factory=dict)  # session -> why it was left out (its task failed)
+    skipped: dict[str, str] = field(default_factory=dict)  # session -> why it was not exported (no commands)
     cleaned: list[str] = field(default_factory=list)  # what was cleaned up after earlier, killed exports
 
     @property
@@ -140,6 +141,11 @@ def export_notes(report: ExportReport) -> list[str]:
         speed += f"; {report.startup_s:.1f} s of it loading lerobot, {report.duration_s / working:.1f}x without"
     lines.append(f"exported {report.duration_s:.1f} s of recording in {report.wall_s:.1f} s ({speed}); "
                  f"the dataset now holds {report.total_episodes} episodes, {report.size_bytes / 1e6:.1f} MB")
+    if report.skipped:
+        from rich.markup import escape
+
+        lines.append(f"[yellow]{len(report.skipped)} session(s) skipped[/]:")
+        lines += [f"  {escape(session)}: {escape(why)}" for session, why in report.skipped.items()]
     if report.failed:
         lines.append(f"[red]{len(report.failed)} session(s) failed and were left out[/] (export them again with --append):")
         from rich.markup import escape

@@ -19,6 +19,7 @@ from typing import Callable
 from teleprev.errors import ConfigError, SessionError, out_of_space
 from teleprev.export import dataset as D
 from teleprev.export.recipe import Recipe
+from teleprev.export.repo_id import check_repo_id
 from teleprev.export.report import ExportReport, SessionReport, folder_size
 from teleprev.export.space import space_error
 from teleprev.export.swap import clean_stale
@@ -39,6 +40,9 @@ class ExportOptions:
     video: VideoSettings | None = None  # None: the recipe's
     ray: str | None = None  # run the sessions on Ray: "local" (a new local instance), "auto", "HOST:PORT"
     open_reader: Callable | None = None  # files that are not teleprev sessions (teleprev/export/foreign/); one process
+
+    def __post_init__(self):
+        check_repo_id(self.repo_id)
 
 
 def export(options: ExportOptions, report: Reporter = no_progress) -> ExportReport:
@@ -63,7 +67,9 @@ def export(options: ExportOptions, report: Reporter = no_progress) -> ExportRepo
 
     parallel = options.open_reader is None and (options.ray is not None or (options.workers > 1 and len(options.sessions) > 1))
     executor = _local_workers(options) if parallel else None  # started now: lerobot loads while the sessions are checked
-    sources = _open_all(options, fps)
+    sources, skipped = _open_all(options, fps)
+    if skipped:
+        options = replace(options, sessions=[p for p in options.sessions if str(p) not in skipped])
     try:
         first = sources[0]
         fps = first.dataset_fps()
@@ -107,7 +113,7 @@ def export(options: ExportOptions, report: Reporter = no_progress) -> ExportRepo
     finally:
         for s in sources:
             s.close()
-    out = ExportReport(target, options.repo_id, fps, reports, failed=failed, cleaned=cleaned)
+    out = ExportReport(target, options.repo_id, fps, reports, failed=failed, cleaned=cleaned, skipped=skipped)
     out.total_episodes = int(totals.get("total_episodes", 0))
     out.total_frames = int(totals.get("total_frames", 0))
     out.size_bytes = folder_size(target)
@@ -116,16 +122,35 @@ def export(options: ExportOptions, report: Reporter = no_progress) -> ExportRepo
     return out
 
 
-def _open_all(options: ExportOptions, fps: int) -> list[SessionSource]:
+def _open_all(options: ExportOptions, fps: int) -> tuple[list[SessionSource], dict[str, str]]:
+    """Every session opened for export; of several, one recorded in preview only (it has no commands for
+    the recipe's actions) is left out and listed (session -> why) rather than stopping the others."""
     sources: list[SessionSource] = []
+    skipped: dict[str, str] = {}
     try:
         for path in options.sessions:
-            sources.append(SessionSource(Path(path), options.recipe, fps, options.open_reader))
+            try:
+                sources.append(SessionSource(Path(path), options.recipe, fps, options.open_reader))
+            except SessionError:
+                if len(options.sessions) > 1 and options.open_reader is None and _preview_only(Path(path)):
+                    skipped[str(path)] = "recorded in preview only: no commands to export"
+                    continue
+                raise
+        if not sources:  # every one of them: the first says why
+            SessionSource(Path(options.sessions[0]), options.recipe, fps).close()
     except BaseException:
         for s in sources:
             s.close()
         raise
-    return sources
+    return sources, skipped
+
+
+def _preview_only(path: Path) -> bool:
+    from teleprev.session.reader import SessionReader
+    from teleprev.session.summary import is_preview_only
+
+    with SessionReader(path) as reader:
+        return is_preview_only(reader.schemas)
 
 
 def _check_same(s: SessionSource, first: SessionSource, features: dict, fps: int, robot: str) -> None:

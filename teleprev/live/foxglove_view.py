@@ -2,14 +2,14 @@
 every message the session file gets, on the same topics with the same schemas (the robot included:
 /robot_description and /tf). Open it in Foxglove with "Open connection", ws://127.0.0.1:<port>.
 
-Every topic a recording will have is declared when the view starts, before a client can connect: a
-client connected while a channel appears can have its subscription to it refused ("unknown channel",
-seen with foxglove-sdk 0.30), and a Foxglove window opened before the camera's first frame would then
-show no camera.
+Every topic a recording or a replay will have is declared before the server starts, so before a client
+can connect: a client connected while channels appear can have its subscriptions to some of them refused
+("unknown channel", seen with foxglove-sdk 0.30: a replay then showed no /tf one time in three), and a
+Foxglove window opened before the camera's first frame would show no camera.
 
 Publishing never holds up the session: `log()` queues the message (a full queue drops it and counts
-it) and one thread encodes and sends. /robot_description is sent once per session, so it is sent again
-whenever a client subscribes to it (a Foxglove window opened mid-session still gets the robot).
+it) and one thread encodes and sends. What a late joiner needs is latched: /robot_description (sent once
+per session) and the last /events/mode are sent again to each client when it subscribes to them, once.
 """
 
 from __future__ import annotations
@@ -23,6 +23,7 @@ import numpy as np
 
 from teleprev import topics as T
 from teleprev.errors import ConfigError
+from teleprev.live.foxglove_front import SubprotocolFront
 from teleprev.messages import Event, ImageSample, JointSample, Logged, PoseSample, RobotDescription, TransformsSample
 from teleprev.session.codec import encode, schema_for
 from teleprev.topics import ROBOT_DESCRIPTION
@@ -32,8 +33,13 @@ HOST = "127.0.0.1"  # loopback only: reach it from another machine through an SS
 _STOP = object()
 
 
+LATCHED = (ROBOT_DESCRIPTION, T.MODE)  # topics whose last message a client gets when it subscribes
+
+
 class FoxgloveView:
-    def __init__(self, port: int = DEFAULT_PORT, queue_size: int = 4096):
+    def __init__(self, port: int = DEFAULT_PORT, channels: dict[str, object] | None = None, queue_size: int = 4096):
+        """A server on 127.0.0.1:`port` (0: any free port) with `channels` (topic -> a payload of its type,
+        see session_channels and file_channels) declared before it starts."""
         import foxglove
         from foxglove.websocket import ServerListener
 
@@ -41,28 +47,31 @@ class FoxgloveView:
 
         class _Listener(ServerListener):
             def on_subscribe(self, client, channel) -> None:
-                if channel.topic == ROBOT_DESCRIPTION and view._urdf is not None:
-                    view._queue.put(view._urdf)
-                    # and once more shortly after: foxglove-sdk may call this before the client's sink takes
-                    # messages (its PR #533), which would drop the first copy
-                    again = threading.Timer(0.5, view._queue.put, args=(view._urdf,))
-                    again.daemon = True
-                    again.start()
+                latched = view._latched.get(channel.topic)
+                if latched is not None:
+                    view._queue.put(latched)
 
         if not 0 <= port <= 65535:
             raise ConfigError(f"--foxglove: {port} is not a TCP port (0..65535)")
         self._context = foxglove.Context()
-        try:
-            self._server = foxglove.start_server(name="teleprev", host=HOST, port=port, context=self._context,
+        self._channels: dict[str, object] = {}
+        self._latched: dict[str, Logged] = {}
+        for topic, payload in (channels or {}).items():
+            self.declare(topic, payload)
+        try:  # foxglove-sdk's server on a private port, behind the front that accepts both protocol names
+            self._server = foxglove.start_server(name="teleprev", host=HOST, port=0, context=self._context,
                                                  server_listener=_Listener())
         except Exception as exc:  # foxglove raises its own error types for a port in use or refused
-            raise ConfigError(f"cannot start the Foxglove server on {HOST}:{port} ({exc})") from None
-        self.port = self._server.port
+            raise ConfigError(f"cannot start the Foxglove server on {HOST} ({exc})") from None
+        try:
+            self._front = SubprotocolFront(HOST, port, self._server.port)
+        except OSError as exc:
+            self._server.stop()
+            raise ConfigError(f"cannot start the Foxglove server on {HOST}:{port} ({exc.strerror or exc})") from None
+        self.port = self._front.port
         self.queue_size = queue_size
         self.dropped = 0
         self.errors: dict[str, str] = {}
-        self._urdf: Logged | None = None
-        self._channels: dict[str, object] = {}
         self._queue: queue.SimpleQueue = queue.SimpleQueue()
         self._thread = threading.Thread(target=self._run, name="foxglove-view", daemon=True)
         self._thread.start()
@@ -73,7 +82,7 @@ class FoxgloveView:
 
     def declare(self, topic: str, payload) -> None:
         """Create a topic's channel now, with the schema `payload` (any message of its type) is recorded with.
-        Call before the first log()."""
+        Declared after the server started, a client may not get it (see the module's notes)."""
         from foxglove import Channel, Schema
 
         if topic not in self._channels:
@@ -83,8 +92,8 @@ class FoxgloveView:
 
     def log(self, msg: Logged) -> None:
         """Queue a message to publish; never blocks (a full queue drops it)."""
-        if isinstance(msg.payload, RobotDescription):
-            self._urdf = msg
+        if msg.topic in LATCHED:
+            self._latched[msg.topic] = msg
         if self._queue.qsize() >= self.queue_size:
             self.dropped += 1
             return
@@ -93,6 +102,7 @@ class FoxgloveView:
     def close(self) -> None:
         self._queue.put(_STOP)
         self._thread.join(5.0)
+        self._front.close()
         self._server.stop()
 
     def _run(self) -> None:
@@ -117,29 +127,37 @@ _EVENTS = {T.EPISODE: "teleprev.EpisodeEvent", T.MODE: "teleprev.ModeSwitch", T.
            T.OPERATOR: "teleprev.OperatorEvent", T.STEP_REPORT: "teleprev.StepReport"}
 
 
-def declare_session(view: FoxgloveView, device_streams) -> None:
-    """Declare the topics of a live recording: the devices' streams (StreamSpec), the pipeline's, /tf, the
-    events and the robot description."""
-    for spec in device_streams:
-        if spec.payload in _EXAMPLES:
-            view.declare(spec.topic, _EXAMPLES[spec.payload])
-    view.declare(ROBOT_DESCRIPTION, RobotDescription(0, ""))
-    view.declare(T.TF, TransformsSample(0, ()))
+def session_channels(device_streams) -> dict[str, object]:
+    """The topics of a live recording, each with a payload of its type: the devices' streams (StreamSpec),
+    the pipeline's, /tf, the events and the robot description."""
+    out: dict[str, object] = {spec.topic: _EXAMPLES[spec.payload] for spec in device_streams if spec.payload in _EXAMPLES}
+    out[ROBOT_DESCRIPTION] = RobotDescription(0, "")
+    out[T.TF] = TransformsSample(0, ())
     for topic in (T.RETARGETED, T.CORRECTED, T.ARM_TARGET, T.COMMAND_ARM, T.COMMAND_HAND):
-        view.declare(topic, _EXAMPLES["joints"])
+        out[topic] = _EXAMPLES["joints"]
     for topic, schema in _EVENTS.items():
-        view.declare(topic, Event(0, schema))
+        out[topic] = Event(0, schema)
+    return out
 
 
-def declare_file(view: FoxgloveView, path: Path) -> None:
-    """Declare the topics of a recorded session, each with the schema of its first message."""
+def declare_session(view: FoxgloveView, device_streams) -> None:
+    """Declare a live recording's topics on a running view (FoxgloveView(port, session_channels(...))
+    declares them before a client can connect)."""
+    for topic, payload in session_channels(device_streams).items():
+        view.declare(topic, payload)
+
+
+def file_channels(path: Path) -> dict[str, object]:
+    """The topics of a recorded session, each with its first message's payload (its schema)."""
     from teleprev.session.reader import SessionReader
 
+    out: dict[str, object] = {}
     with SessionReader(path) as reader:
         for topic in reader.topics:
             first = next(iter(reader.messages([topic])), None)
             if first is not None:
-                view.declare(topic, first.payload)
+                out[topic] = first.payload
+    return out
 
 
 def stream_session(view: FoxgloveView, path: Path, start_ns: int | None, stop_ns: int | None, speed: float,

@@ -101,10 +101,9 @@ def _start_view(port: int | None, session: Path, player: Player, console: Consol
     starts playing. Returns (view, stop event, thread) or None."""
     if port is None:
         return None
-    from teleprev.live.foxglove_view import FoxgloveView, declare_file, stream_session
+    from teleprev.live.foxglove_view import FoxgloveView, file_channels, stream_session
 
-    view = FoxgloveView(port)
-    declare_file(view, session)
+    view = FoxgloveView(port, file_channels(session))
     stop = threading.Event()
     p = player.p
     lo, hi = int(p.t_ns[0]) - 1_000_000_000, int(p.t_ns[-1]) + 1_000_000_000  # the window around the played steps

@@ -10,6 +10,8 @@ from dataclasses import dataclass
 
 from teleprev.human.smplx import HAND_JOINTS
 
+REACH_M = 5.0  # no arm this drives reaches further from its base
+
 
 @dataclass(frozen=True)
 class PipelineConfig:
@@ -39,6 +41,17 @@ class PipelineConfig:
     hand_clearance_mm: float | None = None  # distance kept between the hand's links along each command segment
 
     def __post_init__(self):
+        lo, hi = self.workspace_min, self.workspace_max
+        if not all(-REACH_M <= a < b <= REACH_M for a, b in zip(lo, hi)):
+            raise ValueError(f"workspace_min must be below workspace_max on every axis, both within ±{REACH_M:g} m "
+                             f"of the arm's base; got {list(lo)} and {list(hi)}")
+        if not 0 < self.wrist_scale <= 10:
+            raise ValueError(f"wrist_scale must be in (0, 10], got {self.wrist_scale!r}")
+        for key in ("stale_ms", "max_command_dt_ms"):
+            if not 0 < getattr(self, key) <= 10_000:
+                raise ValueError(f"{key} must be in (0, 10000] ms, got {getattr(self, key)!r}")
+        if not 0 < self.engage_speed_frac <= 1:
+            raise ValueError(f"engage_speed_frac must be in (0, 1], got {self.engage_speed_frac!r}")
         if self.gripper_joint not in HAND_JOINTS:
             raise ValueError(f"gripper_joint must be an SMPL-X hand joint ({', '.join(HAND_JOINTS)}), got {self.gripper_joint!r}")
         if not 10 <= self.command_rate_hz <= 1000:

@@ -1,7 +1,9 @@
-"""The record screen: mode banner, robot views, the hand close-up, device health, and the keys.
+"""The record screen: mode banner, robot views, the hand close-up, the camera, device health, and the keys.
 
-Built fresh from a LoopSnapshot and the device rows on every redraw. In a small terminal the robot views
-shrink, then go, and the banner, episode and device table stay.
+Built fresh from a LoopSnapshot and the device rows on every redraw. What fits is chosen by priority:
+the banner, the keys (every one of them, on as many lines as the width needs), the episode line and the
+device table always; the pictures share what is left, the robot first, then the hand, then the camera,
+each only where it has room to be read (at 80x24: robot, hand and camera side by side).
 """
 
 from __future__ import annotations
@@ -10,18 +12,19 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 from rich.console import Group, RenderableType
-from rich.layout import Layout
 from rich.panel import Panel
 from rich.table import Table
 from rich.text import Text
 
+from teleprev.preview.camera_view import CameraView
 from teleprev.preview.robot_view import Layer, RobotView
 
 if TYPE_CHECKING:  # the preview renders what the live session hands it; it never imports the live session
     from teleprev.live.device_rows import DeviceRow
     from teleprev.live.loop import LoopSnapshot
 
-KEYS = "[b]space[/] preview/execute   [b]x[/] e-stop   [b]s[/] start episode   [b]n[/] next episode   [b]d[/] discard   [b]y[/]/[b]f[/] success/failure   [b]r[/] ready   [b]q[/] quit"
+KEYS = (("space", "preview/execute"), ("x", "e-stop"), ("s", "start episode"), ("n", "next episode"),
+        ("d", "discard"), ("y/f", "success/failure"), ("r", "ready"), ("q", "quit"))
 PREVIEW_STYLE = "bold black on yellow"
 EXECUTE_STYLE = "bold white on red"
 REAL_STYLE = "grey70"
@@ -32,6 +35,28 @@ FIXED_STYLE = "bold magenta"
 def mode_banner(mode: str, width: int) -> Text:
     label = "  EXECUTE: the robot follows you  " if mode == "execute" else "  PREVIEW: the robot holds still  "
     text = Text(label.center(max(width, len(label))), style=EXECUTE_STYLE if mode == "execute" else PREVIEW_STYLE, justify="center")
+    return text
+
+
+def key_lines(width: int) -> Text:
+    """Every key and what it does, centred, on as many lines as `width` needs (none is ever cut off)."""
+    lines: list[list[tuple[str, str]]] = [[]]
+    used = 0
+    for key, what in KEYS:
+        size = len(key) + 1 + len(what) + (3 if lines[-1] else 0)
+        if lines[-1] and used + size > width:
+            lines.append([])
+            used, size = 0, size - 3
+        lines[-1].append((key, what))
+        used += size
+    text = Text(justify="center")
+    for n, line in enumerate(lines):
+        for k, (key, what) in enumerate(line):
+            text.append("   " if k else "")
+            text.append(key, style="bold")
+            text.append(f" {what}")
+        if n < len(lines) - 1:
+            text.append("\n")
     return text
 
 
@@ -71,9 +96,13 @@ def device_table(rows: list[DeviceRow]) -> Table:
 class Dashboard:
     """Holds the views (their scale stays fixed between frames) and renders a screen for a given size."""
 
+    MIN_ROBOT = (30, 8)  # cols, rows of a robot view that still reads as a robot (inside its panel)
+    MIN_SIDE = (18, 6)  # the same for the hand and the camera
+
     def __init__(self, robot_view: RobotView, hand_view: RobotView | None, arm_names, effector_names, robot_model):
         self.robot_view = robot_view
         self.hand_view = hand_view
+        self.camera_view = CameraView()
         self.arm_names = tuple(arm_names)
         self.effector_names = tuple(effector_names)
         self.model = robot_model
@@ -114,23 +143,38 @@ class Dashboard:
         caption = Text(f"hand: {action}" + (f" ({', '.join(sorted(fixed))})" if fixed else ""), style=FIXED_STYLE if fixed else "")
         return Group(caption, self.hand_view.render(layers, cols, rows - 1))
 
-    def render(self, snap: LoopSnapshot, devices: list[DeviceRow], width: int, height: int, now_ns: int) -> RenderableType:
-        top = Group(mode_banner(snap.mode, width - 2), episode_line(snap, now_ns))
+    def render(self, snap: LoopSnapshot, devices: list[DeviceRow], width: int, height: int, now_ns: int,
+               camera=None) -> RenderableType:
+        """The screen for a terminal of width x height; `camera` is the latest frame (an ImageSample) of the
+        camera to show, or None."""
+        episode = episode_line(snap, now_ns)
+        keys = key_lines(width)
         table = device_table(devices)
-        keys = Text.from_markup(KEYS, justify="center")
-        view_rows = height - 9 - len(devices)
-        if width < 60 or view_rows < 8:  # too small for pictures: status only
-            return Group(top, table, keys)
-        layout = Layout()
-        layout.split_column(Layout(top, name="top", size=3), Layout(name="body"), Layout(keys, name="keys", size=1))
-        if self.hand_view is not None and width >= 100:
-            robot_cols, hand_cols = int((width - 6) * 0.62), int((width - 6) * 0.38)
-            body = Layout()
-            body.split_row(
-                Layout(Panel(self.robot_panel(snap, robot_cols, view_rows), title=f"robot ({self.robot_view.view})")),
-                Layout(Panel(self.hand_panel(snap, hand_cols, view_rows), title="hand")),
-            )
-        else:
-            body = Layout(Panel(self.robot_panel(snap, width - 4, view_rows), title=f"robot ({self.robot_view.view})"))
-        layout["body"].split_column(Layout(body), Layout(table, size=len(devices) + 1))
-        return layout
+        fixed = 1 + len(episode.plain.splitlines()) + len(keys.plain.splitlines()) + len(devices) + 1
+        body_rows = height - fixed
+        rows, cols = body_rows - 2, width  # inside the panels' borders (their widths include theirs)
+        if rows < self.MIN_ROBOT[1] or cols < self.MIN_ROBOT[0] + 2:  # too small for pictures: status only
+            return Group(mode_banner(snap.mode, width), episode, table, keys)
+        sides = []
+        if self.hand_view is not None:
+            sides.append(("hand", lambda c, r: self.hand_panel(snap, c, r)))
+        if camera is not None:
+            sides.append(("camera", lambda c, r: self.camera_view.render(camera, c, r)))
+        # the robot gets two shares of the width, each side panel one (at least its minimum), while the robot
+        # still has its own minimum; the camera goes first, then the hand
+        while sides:
+            side = max(self.MIN_SIDE[0] + 2, cols // (len(sides) + 2))
+            if cols - len(sides) * side >= self.MIN_ROBOT[0] + 2 and rows >= self.MIN_SIDE[1]:
+                break
+            sides.pop()
+        side = max(self.MIN_SIDE[0] + 2, cols // (len(sides) + 2)) if sides else 0
+        robot_cols = cols - len(sides) * side
+        body = Table.grid(padding=0)
+        body.add_column(width=robot_cols)
+        for _ in sides:
+            body.add_column(width=side)
+        body.add_row(
+            Panel(self.robot_panel(snap, robot_cols - 2, rows), title=f"robot ({self.robot_view.view})", padding=0,
+                  height=body_rows),
+            *(Panel(draw(side - 2, rows), title=title, padding=0, height=body_rows) for title, draw in sides))
+        return Group(mode_banner(snap.mode, width), episode, body, table, keys)

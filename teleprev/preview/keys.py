@@ -21,8 +21,16 @@ class KeyReader:
         self._thread: threading.Thread | None = None
         self._saved = None
 
+    @property
+    def is_terminal(self) -> bool:
+        """Whether keys can be read: the stream is a terminal (not a pipe, a file, or no file at all)."""
+        try:
+            return os.isatty(self.stream.fileno())
+        except (AttributeError, OSError, ValueError):  # no fileno (io.UnsupportedOperation is both), or closed
+            return False
+
     def __enter__(self) -> "KeyReader":
-        if not (hasattr(self.stream, "fileno") and os.isatty(self.stream.fileno())):
+        if not self.is_terminal:
             return self
         import termios
         import tty

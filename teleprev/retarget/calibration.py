@@ -77,17 +77,26 @@ def parse_calibration(data: dict, where: str) -> Calibration:
 
 
 def write_calibration(cal: Calibration, path: str | Path) -> Path:
+    """Write the calibration file (its folder is created if need be)."""
     path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    path.write_text(calibration_toml(cal))
+    return path
+
+
+def calibration_toml(cal: Calibration) -> str:
+    """The calibration file's text."""
+    import json
+
     lines = [
         "# Operator calibration written by `teleprev calibrate`; a rig points at it with [rig] calibration = ...",
         "[calibration]",
         f"suit_yaw = {float(cal.calibration.suit_yaw)!r}",
         f'created = "{cal.calibration.created or _dt.datetime.now().isoformat(timespec="seconds")}"',
-        f'operator = "{cal.calibration.operator}"',
+        f"operator = {json.dumps(cal.calibration.operator)}",  # a TOML basic string: JSON's escapes
         "",
     ]
     for name in sorted(cal.joints, key=int):
         j = cal.joints[name]
         lines += [f'[joints."{name}"]', f"scale = {float(j.scale)!r}", f"offset = {float(j.offset)!r}", ""]
-    path.write_text("\n".join(lines))
-    return path
+    return "\n".join(lines)

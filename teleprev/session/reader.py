@@ -85,7 +85,14 @@ class SessionReader:
 
     @cached_property
     def metadata(self) -> dict[str, dict[str, str]]:
-        """Metadata records by name (a later record of the same name updates an earlier one)."""
+        """Metadata records by name (a later record of the same name updates an earlier one). Metadata records
+        carry no CRC of their own: the data section's (which holds them) is checked first, when the file has
+        one, so a changed byte in a rig or a task text is an error, never a value passed on."""
+        if self._summary.metadata and self.data_section_intact() is False and not self.damaged_chunks():
+            # (a damaged chunk explains the mismatch; reading it is the error that names it)
+            raise SessionError("bytes outside the chunks (a metadata record or a message index) were changed: the "
+                               f"data section's CRC does not match; `teleprev recover {self.path}` rebuilds the file",
+                               str(self.path))
         out: dict[str, dict[str, str]] = {}
         for name, offset, _length in self._summary.metadata:
             try:
@@ -228,7 +235,11 @@ class SessionReader:
 
     def data_section_intact(self) -> bool | None:
         """Whether the bytes before the summary still match the CRC the writer stored in the data-end
-        record (None when the file has none): reads the whole data section once."""
+        record (None when the file has none): reads the whole data section once (3 GB/s), then remembers."""
+        return self._data_section_intact
+
+    @cached_property
+    def _data_section_intact(self) -> bool | None:
         return data_section_intact(self._file, self.file_bytes)
 
     def damaged_chunks(self) -> list[tuple[mr.ChunkIndex, str]]:

@@ -7,6 +7,7 @@ stops making sense, so both use this module. Every parse checks bounds and raise
 
 from __future__ import annotations
 
+import os
 import struct
 import zlib
 from dataclasses import dataclass, field
@@ -254,6 +255,12 @@ def iter_records(buf, pos: int = 0, end: int | None = None):
 
 
 def read_exact(f, offset: int, n: int) -> bytes:
+    """`n` bytes at `offset`; a length that runs past the end of the file (a damaged length field) is an
+    error before anything is read, never an allocation of that size."""
+    f.seek(0, os.SEEK_END)
+    size = f.tell()
+    if offset < 0 or n < 0 or offset + n > size:
+        raise McapFormatError(f"{n} bytes at byte {offset} run past the end of the file ({size} bytes)", offset)
     f.seek(offset)
     data = f.read(n)
     if len(data) != n:

@@ -12,7 +12,6 @@ from pathlib import Path
 
 import pytest
 
-from tests.helpers.sessions import record_corpus
 from teleprev.corpus.executor import FAULT_ENV, RAY_MISSING, RayExecutor, make_executor
 from teleprev.errors import ConfigError
 
@@ -33,9 +32,9 @@ def cluster():
     ray.shutdown()
 
 
-@pytest.fixture(scope="module")
-def corpus(tmp_path_factory):
-    return record_corpus(tmp_path_factory.mktemp("corpus"))
+@pytest.fixture
+def corpus(sim_corpus):
+    return sim_corpus
 
 
 @needs_ray

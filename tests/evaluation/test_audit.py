@@ -2,23 +2,19 @@
 caps only) does not, and the command exits 1 saying why."""
 
 import json
-import subprocess
-import sys
 from pathlib import Path
 
 import pytest
 
-from tests.helpers.sessions import record_sim
+from tests.helpers.cli import teleprev
 from teleprev.evaluation.audit import audit_session
 
 FIXTURE = Path(__file__).parents[1] / "fixtures" / "sim_v1.mcap"
 
 
-@pytest.fixture(scope="module")
-def session(tmp_path_factory):
-    path = tmp_path_factory.mktemp("audit") / "s.mcap"
-    record_sim(path, "sim.toml", seconds=4.0, engage_after=1.0)
-    return path
+@pytest.fixture
+def session(sim_session):
+    return sim_session
 
 
 def test_a_new_session_passes_the_audit(session):
@@ -32,8 +28,7 @@ def test_a_new_session_passes_the_audit(session):
 
 def test_the_cli_fails_the_old_session_and_writes_json(session, tmp_path):
     out = tmp_path / "audit.json"
-    run = subprocess.run([sys.executable, "-m", "teleprev.cli.app", "audit", str(session), str(FIXTURE), "--json", str(out)],
-                         capture_output=True, text=True, timeout=120)
+    run = teleprev("audit", session, FIXTURE, "--json", out)
     assert run.returncode == 1, run.stdout + run.stderr
     assert "audit failed" in run.stdout and "accel" in run.stdout
     data = json.loads(out.read_text())

@@ -10,17 +10,18 @@ from pathlib import Path
 
 import pytest
 
-from tests.helpers.sessions import record_corpus
 from teleprev.corpus.executor import FAULT_ENV, LocalExecutor
 from teleprev.corpus.sessions import resolve_sessions
 from teleprev.evaluation.corpus import PRELOAD, EvalJob, badness, eval_one, evaluate_corpus
 
+pytestmark = pytest.mark.usefixtures("forkserver")  # workers fork with lerobot and eval imported
+
 TIMING = {"latency_ms_p50", "latency_ms_p99", "rerun_wall_s", "realtime_x"}  # the only figures that may differ
 
 
-@pytest.fixture(scope="module")
-def corpus(tmp_path_factory):
-    return record_corpus(tmp_path_factory.mktemp("corpus"))
+@pytest.fixture
+def corpus(sim_corpus):
+    return sim_corpus
 
 
 def figures(report: dict) -> dict:

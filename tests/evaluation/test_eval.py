@@ -1,13 +1,12 @@
 """teleprev eval: bit-identical re-runs, metrics, the regression gate, plots."""
 
 import json
-import subprocess
-import sys
 
 import numpy as np
 import pytest
 
 from tests.helpers.sessions import record_sim
+from tests.helpers.cli import teleprev
 from teleprev.evaluation.evaluate import evaluate
 from teleprev.evaluation.report import Tolerance, Tolerances, compare
 
@@ -51,15 +50,15 @@ def test_a_perturbed_calibration_does_not_reproduce_and_says_what_moved(gripper_
 
 def test_regression_gate_passes_its_own_baseline_and_fails_past_a_tolerance(gripper_session, tmp_path):
     report = tmp_path / "baseline.json"
-    run = [sys.executable, "-m", "teleprev.cli.app", "eval", str(gripper_session)]
-    assert subprocess.run(run + ["--out", str(report)], capture_output=True).returncode == 0
-    same = subprocess.run(run + ["--baseline", str(report)], capture_output=True, text=True)
+    assert teleprev("eval", gripper_session, "--out", report).returncode == 0
+    same = teleprev("eval", gripper_session, "--baseline", report)
     assert same.returncode == 0 and "no regression" in same.stdout
+    assert "evaluating 1 session(s)" in same.stdout and "1/1 gripper.mcap: done" in same.stdout  # progress, piped
     # a baseline whose hand moved much less: today's hand speed is a regression past 10 %
     data = json.loads(report.read_text())
     data["overall"]["hand_speed_max"] *= 0.5
     report.write_text(json.dumps(data))
-    worse = subprocess.run(run + ["--baseline", str(report)], capture_output=True, text=True)
+    worse = teleprev("eval", gripper_session, "--baseline", report)
     assert worse.returncode == 1
     assert "hand_speed_max" in worse.stdout and "regression" in worse.stdout
 
@@ -74,8 +73,13 @@ def test_compare_names_each_metric_and_how_far_it_moved():
 
 
 def test_plots_are_written_per_episode(gripper_session, tmp_path):
-    from teleprev.evaluation.plots import plot_episodes
+    from teleprev.evaluation.plots import changed_spans, effector_unit, plot_episodes
 
     result = evaluate([gripper_session])
     paths = plot_episodes(result.reruns[0], tmp_path)
     assert len(paths) == 2 and all(p.stat().st_size > 5000 and p.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n" for p in paths)
+    # the Corrector's changes are drawn as one span per run of changed steps (a line per step took a minute)
+    t = np.arange(8) * 0.01
+    changed = np.array([0, 1, 1, 0, 0, 1, 0, 1], dtype=bool)
+    assert changed_spans(t, changed) == [(0.01, 0.03), (0.05, 0.06), (0.07, 0.07)]
+    assert effector_unit("parallel_gripper") == "m (jaw opening)" and effector_unit("leap_hand") == "rad"

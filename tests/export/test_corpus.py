@@ -10,6 +10,8 @@ from teleprev.export.recipe import load_recipe
 from teleprev.export.run import ExportOptions, export
 from teleprev.export.synthetic import EpisodeSpec, SyntheticSession, write_session
 
+pytestmark = pytest.mark.usefixtures("forkserver")  # workers fork with lerobot and eval imported
+
 
 @pytest.fixture(scope="module")
 def corpus(tmp_path_factory):

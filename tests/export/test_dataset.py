@@ -273,6 +273,7 @@ def test_discarded_episodes_on_request_and_gaps_that_drop_or_fail(sessions, tmp_
     assert not (tmp_path / "c2").exists() and leftovers(tmp_path / "c2") == []
 
 
+@pytest.mark.usefixtures("forkserver")  # workers fork with lerobot imported
 def test_workers_export_the_same_dataset_merged_with_lerobots_aggregation(sessions, appended, tmp_path):
     root, _, _ = appended
     par = tmp_path / "par"

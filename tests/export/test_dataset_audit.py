@@ -2,13 +2,12 @@
 own exports (joints by name) and anyone's (joints by position)."""
 
 import json
-import subprocess
-import sys
 from pathlib import Path
 
 import numpy as np
 import pytest
 
+from tests.helpers.cli import teleprev
 from tests.helpers.sessions import record_sim
 from teleprev.evaluation.audit import audit_path
 
@@ -16,8 +15,7 @@ RIGS = Path(__file__).parents[2] / "rigs"
 
 
 def _cli(*args):
-    return subprocess.run([sys.executable, "-m", "teleprev.cli.app", *map(str, args)], capture_output=True, text=True,
-                          timeout=300)
+    return teleprev(*args, columns=80)
 
 
 @pytest.fixture(scope="module")

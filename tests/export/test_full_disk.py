@@ -7,6 +7,7 @@ import os
 
 from teleprev.export.synthetic import EpisodeSpec, SyntheticSession, write_session
 from tests.export.test_killed_export import tree
+from tests.helpers.cli import teleprev
 from tests.helpers.faults import fsize_limit, has_traceback, run_cli, small_disk
 
 
@@ -15,7 +16,7 @@ def test_append_on_a_full_disk_leaves_the_dataset_as_it_was(tmp_path):
     b = write_session(tmp_path / "b.mcap", SyntheticSession((EpisodeSpec("pour", 6.0),), seed=52))
     with small_disk(tmp_path, 6_000_000) as (disk, preexec):
         root = disk / "ds"
-        run = run_cli(["export", a, "--repo-id", "lab/full", "--root", root], timeout=300)
+        run = teleprev("export", a, "--repo-id", "lab/full", "--root", root)  # the dataset to append to
         assert run.returncode == 0, run.stderr
         before = tree(root)
         if preexec is None:  # a real small file system: fill it up to leave 150 kB
@@ -30,3 +31,13 @@ def test_append_on_a_full_disk_leaves_the_dataset_as_it_was(tmp_path):
         assert ("no space left" in lines[0] or "size limit" in lines[0]) and "MB free" in lines[0] and "needs about" in lines[0] and str(root) in lines[0]
         assert tree(root) == before  # byte for byte
         assert not list(disk.glob(".ds.export-*"))  # the partial export is gone
+
+
+def test_the_video_encoder_failing_on_a_full_disk_says_nothing_of_its_own(tmp_path):
+    """The encoder thread's failure (here the file-size limit hits the video first) reaches the user as the
+    export's one line, without the thread's own log line before it."""
+    b = write_session(tmp_path / "b.mcap", SyntheticSession((EpisodeSpec("pour", 6.0),), seed=52))
+    run = run_cli(["export", b, "--repo-id", "lab/full", "--root", tmp_path / "ds"], preexec_fn=fsize_limit(400_000),
+                  timeout=300)
+    lines = [line for line in run.stderr.splitlines() if line.strip()]
+    assert run.returncode == 2 and len(lines) == 1 and "size limit" in lines[0], run.stderr

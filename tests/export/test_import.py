@@ -5,8 +5,7 @@ lerobot's own LeRobotDataset."""
 from __future__ import annotations
 
 import json
-import subprocess
-import sys
+import os
 from pathlib import Path
 
 import numpy as np
@@ -19,6 +18,7 @@ from teleprev.export.foreign.samples import (ARM, T0_NS, ForeignSpec, gripper_q,
                                              write_ros2)
 from teleprev.export.recipe import load_recipe
 from teleprev.export.synthetic import arm_q, read_frame_code
+from tests.helpers.cli import teleprev
 
 ROOT = Path(__file__).resolve().parents[2]
 TWO = ForeignSpec(episodes=((0.0, 2.0), (3.0, 5.0)))
@@ -65,6 +65,10 @@ def test_ros2_mcap_events_resampled_to_one_fps_with_derived_actions(tmp_path):
                                         '"joint6","gripper"]', ROS_FEATURES))
     report = import_files([bag], recipe, "t/x", tmp_path / "out")
     assert report.total_episodes == 2
+    umask = os.umask(0o022)
+    os.umask(umask)
+    modes = {p.relative_to(tmp_path).as_posix(): oct(p.stat().st_mode & 0o777) for p in (tmp_path / "out").rglob("*")}
+    assert set(modes.values()) <= {oct(0o666 & ~umask), oct(0o777 & ~umask)}, modes  # readable as usual
     ds = _load(tmp_path / "out")
     assert ds.meta.robot_type == "xarm6" and ds.fps == 30
     assert list(ds.meta.tasks.index) == ["pick up the cube and place it in the bowl"]
@@ -134,14 +138,13 @@ streams = ["/camera/front"]
     recipe_path = _recipe(tmp_path, f'episodes = "file"\ntask = "reach"\nurdf = "{ROOT / "urdf" / "xarm6.urdf"}"', features)
     recipe = load_import_recipe(recipe_path)
     assert recipe.urdf_joints == ARM and recipe.robot_type  # joint names (and the robot) from the URDF
-    out = subprocess.run([sys.executable, "-m", "teleprev.cli.app", "import", str(path), "--recipe", str(recipe_path),
-                          "--repo-id", "t/fox", "--root", str(tmp_path / "out"), "--json"],
-                         capture_output=True, text=True, cwd=ROOT, timeout=300)
+    out = teleprev("import", path, "--recipe", recipe_path, "--repo-id", "t/fox", "--root", tmp_path / "out", "--json")
     assert out.returncode == 0, out.stderr
     summary = json.loads(out.stdout.strip().splitlines()[-1])
     assert summary["total_episodes"] == 1 and 55 <= summary["total_frames"] <= 61
     ds = _load(tmp_path / "out", "t/fox")
-    assert ds.meta.features["observation.state"]["names"] == [f"joints.{j}" for j in ARM] + ["joints.gripper"]
+    # the URDF's joints in its order: the recorded gripper, which the URDF lacks, is not a feature
+    assert ds.meta.features["observation.state"]["names"] == [f"joints.{j}" for j in ARM]
     t = _column(ds, "timestamp").reshape(-1)
     state = _column(ds, "observation.state")
     assert np.abs(state[:, :6] - arm_q(t)).max() < 0.01
@@ -153,7 +156,8 @@ def test_bad_import_recipes_and_files_say_what_is_wrong(tmp_path):
     with pytest.raises(SessionError, match=r"\[import.joints\] /joint_states: no joints \['elbow'\]"):
         import_files([bag], missing, "t/x", tmp_path / "out1")
     no_topic = load_import_recipe(_recipe(tmp_path, "", '[[feature]]\nname = "observation.state"\nstreams = ["/arm"]'))
-    with pytest.raises(SessionError, match="no topic /arm in this session"):
+    with pytest.raises(SessionError, match=r"no topic /arm in this file \(its topics: /camera/front/image, /ee_pose, "
+                                           r"/episode_events, /joint_states, /tf, /tf/tool0\)"):
         import_files([bag], no_topic, "t/x", tmp_path / "out2")
     with pytest.raises(ConfigError, match='episodes = "events" needs events_topic'):
         load_import_recipe(_recipe(tmp_path, 'episodes = "events"', ROS_FEATURES))
@@ -172,3 +176,50 @@ def test_header_stamps_on_another_clock_are_refused_until_log_time_is_chosen(tmp
     logged = load_import_recipe(_recipe(tmp_path, 'timestamps = "log"', ROS_FEATURES))
     report = import_files([bag], logged, "t/x", tmp_path / "out2")
     assert report.total_episodes == 1 and 40 <= report.total_frames <= 46
+
+
+def test_foxglove_joint_states_follow_the_recipes_joints_and_order(tmp_path):
+    """As the ROS path does: [import.joints] picks and orders them (recorded: the arm, then the gripper)."""
+    from teleprev.export.foreign.foxglove import FoxgloveReader
+
+    path = write_foxglove_mcap(tmp_path / "fox.mcap", ForeignSpec(episodes=((0.0, 0.5),)))
+    pick = '"/joints" = ["gripper", "joint6", "joint1"]'
+    state = '[[feature]]\nname = "observation.state"\nstreams = ["/joints"]'
+    recipe = load_import_recipe(_recipe(tmp_path, f'episodes = "file"\n[import.joints]\n{pick}', state))
+    reader = FoxgloveReader(path, recipe)
+    try:
+        first = next(iter(reader.messages(["/joints"])))
+    finally:
+        reader.close()
+    t = (first.payload.stamp_ns - T0_NS) / 1e9
+    assert first.payload.names == ("gripper", "joint6", "joint1")
+    np.testing.assert_allclose(first.payload.positions, [gripper_q(t), arm_q(t)[5], arm_q(t)[0]], atol=1e-9)
+    missing = load_import_recipe(_recipe(tmp_path, 'episodes = "file"\n[import.joints]\n"/joints" = ["joint7"]', state))
+    reader = FoxgloveReader(path, missing)
+    try:
+        with pytest.raises(SessionError, match=r"\[import.joints\] /joints: no joints \['joint7'\]"):
+            reader.joint_names("/joints")
+    finally:
+        reader.close()
+
+
+def test_a_bag_that_stores_no_message_definitions_reads_with_the_standard_ones(tmp_path):
+    """ROS 2 Humble's sqlite3 bags store no message definitions; an empty one used to fail with the rosbags
+    library's hint to its own API ("Instantiate AnyReader with a default_typestore")."""
+    import sqlite3
+
+    def without_definitions(name, spec):
+        bag = write_ros2(tmp_path / name, spec, storage="sqlite3")
+        with sqlite3.connect(next(bag.glob("*.db3"))) as db:
+            db.execute("delete from message_definitions")
+        return bag
+
+    state = '[[feature]]\nname = "observation.state"\nstreams = ["/joint_states"]\n'
+    recipe = load_import_recipe(_recipe(tmp_path, 'episodes = "file"\nurdf = "xarm6"', state + state.replace(
+        "observation.state", "action") + 'timing = "next"\n'))
+    report = import_files([without_definitions("humble", ForeignSpec(episodes=((0.0, 1.0),)))], recipe, "t/h",
+                          tmp_path / "out")
+    assert report.total_episodes == 1 and report.total_frames > 20
+    with pytest.raises(SessionError) as exc:  # recorded, but nothing was published
+        import_files([without_definitions("empty", ForeignSpec(episodes=((0.0, 0.0),), events=False))], recipe, "t/e", tmp_path / "e")
+    assert "typestore" not in str(exc.value) and "holds no messages" in str(exc.value), str(exc.value)

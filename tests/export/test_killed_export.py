@@ -17,7 +17,8 @@ import pytest
 from teleprev.export.dataset import Staging
 from teleprev.export.swap import FAULT_ENV, clean_stale
 from teleprev.export.synthetic import EpisodeSpec, SyntheticSession, write_session
-from tests.helpers.faults import ROOT, alive, has_traceback, run_cli, start_cli, workers_of
+from tests.helpers.cli import teleprev
+from tests.helpers.faults import ROOT, alive, has_traceback, start_cli, workers_of
 
 
 def tree(root: Path) -> dict[str, str]:
@@ -109,7 +110,7 @@ def test_workers_die_with_a_killed_export_and_the_next_export_cleans_up(sessions
     assert workers and not [p for p in workers if alive(p)], "a worker outlived its parent"
     assert not root.exists() and len(list(tmp_path.glob(".killed.export-*"))) == 1
 
-    run = run_cli(["export", sessions[0], "--repo-id", "lab/killed", "--root", root], timeout=300)
+    run = teleprev("export", sessions[0], "--repo-id", "lab/killed", "--root", root)  # here: no second lerobot import
     assert run.returncode == 0 and not has_traceback(run.stdout + run.stderr), run.stderr
     assert "left by a killed export" in run.stdout
     assert not list(tmp_path.glob(".killed.export-*")) and (root / "meta" / "info.json").is_file()
@@ -117,7 +118,7 @@ def test_workers_die_with_a_killed_export_and_the_next_export_cleans_up(sessions
 
 def test_sigterm_or_sighup_stop_an_append_and_leave_the_dataset_as_it_was(sessions, tmp_path):
     root = tmp_path / "kept"
-    run = run_cli(["export", sessions[0], "--repo-id", "lab/kept", "--root", root], timeout=300)
+    run = teleprev("export", sessions[0], "--repo-id", "lab/kept", "--root", root)
     assert run.returncode == 0, run.stderr
     before = tree(root)
     for sig in (signal.SIGTERM, signal.SIGHUP):

@@ -12,14 +12,11 @@ from teleprev.errors import ConfigError
 from teleprev.rig import default_rig_path, load_rig_text
 from teleprev.robot.model import load_robot
 from teleprev.transforms import quat_to_matrix
-from tests.helpers.sessions import record_sim
 
 
-@pytest.fixture(scope="module")
-def session(tmp_path_factory):
-    path = tmp_path_factory.mktemp("scene") / "s.mcap"
-    record_sim(path, seconds=1.5, engage_after=0.5)
-    return path
+@pytest.fixture
+def session(sim_session):
+    return sim_session
 
 
 def _read(path):

@@ -1,13 +1,12 @@
 """`teleprev record` end to end on the default (LEAP) sim rig: what reaches the robot, and the screen."""
 
 import io
-import subprocess
-import sys
 
 import numpy as np
 import pytest
 from rich.console import Console
 
+from tests.helpers.cli import teleprev
 from tests.helpers.sessions import record_sim, record_what_is_sent
 from teleprev.robot.collision import SelfCollisionChecker
 from teleprev.robot.model import load_robot
@@ -74,10 +73,7 @@ def test_executed_commands_keep_to_the_acceleration_and_jerk_limits_and_the_arm_
 
 def test_unattended_record_cli_writes_every_stream(tmp_path):
     out = tmp_path / "cli.mcap"
-    run = subprocess.run(
-        [sys.executable, "-m", "teleprev.cli.app", "record", "--out", str(out), "--duration", "4", "--episodes", "2",
-         "--engage-after", "1", "--task", "pour"], capture_output=True, text=True, timeout=120,
-    )
+    run = teleprev("record", "--out", out, "--duration", "4", "--episodes", "2", "--engage-after", "1", "--task", "pour")
     assert run.returncode == 0, run.stderr
     reader = SessionReader(out)
     have = set(reader.topics)

@@ -2,8 +2,6 @@
 --smooth, which re-commands it through the pipeline's jerk-limited generator; commands are stamped with
 when they run, so playing faster cannot hide accelerations; the engage ramp keeps the limits too."""
 
-import subprocess
-import sys
 import threading
 from pathlib import Path
 
@@ -11,6 +9,7 @@ import numpy as np
 import pytest
 
 from teleprev.errors import ConfigError
+from tests.helpers.cli import teleprev
 from teleprev.live import playback
 from teleprev.live.playback import build_player
 from teleprev.pipeline.derivatives import divided_differences
@@ -42,8 +41,7 @@ def _play_to_sim_arm(smoothed: bool):
 
 
 def test_the_cli_refuses_to_send_a_session_that_fails_the_audit_to_the_robot():
-    run = subprocess.run([sys.executable, "-m", "teleprev.cli.app", "replay", str(FIXTURE), "--episode", "0", "--to", "arm",
-                          "--rig", str(SIM_RIG), "--no-preview", "--engage-after", "0.1"], capture_output=True, text=True, timeout=120)
+    run = teleprev("replay", FIXTURE, "--episode", "0", "--to", "arm", "--rig", SIM_RIG, "--no-preview", "--engage-after", "0.1")
     assert run.returncode == 1, run.stdout + run.stderr
     said = " ".join(run.stdout.split())  # rich wraps lines
     assert "fails the audit" in said and "--smooth" in said and "accel" in said
@@ -92,12 +90,8 @@ def test_smoothed_at_half_speed_is_generated_for_the_played_time():
     assert np.abs(jerk).max() <= player.motion.arm.jerk.max() * (1 + 1e-3)
 
 
-def test_a_fresh_recording_replays_to_the_sim_robot_without_a_fault(tmp_path):
-    from tests.helpers.sessions import record_sim
-
-    session = tmp_path / "s.mcap"
-    record_sim(session, "sim.toml", seconds=3.0, engage_after=0.8)
-    player, runners, tap, rig, message = build_player(session, 0, 2.0, "sim")
+def test_a_fresh_recording_replays_to_the_sim_robot_without_a_fault(sim_session):
+    player, runners, tap, rig, message = build_player(sim_session, 0, 2.0, "sim")
     assert player.speed == 1.0  # recorded at the limits: 2x would break them
     hand_steps = int(player.p.sent("effector").sum())
     _play(player, runners)

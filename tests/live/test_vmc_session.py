@@ -3,8 +3,6 @@ counted and skipped without ending anything, and a device that fails stops the r
 
 from __future__ import annotations
 
-import subprocess
-import sys
 import time
 
 import numpy as np
@@ -13,6 +11,7 @@ from teleprev import topics
 from teleprev.live.session import LiveSession, RecordOptions
 from teleprev.session.reader import SessionReader
 from teleprev.session.summary import device_lost, summarize
+from tests.helpers.cli import teleprev
 from tests.helpers.vmc import VmcSender, bone, bundle, finger_messages, free_port, msg, rig_text
 
 GLOVE, SUIT = "/glove/glove/hand", "/suit/suit/wrist"
@@ -105,16 +104,14 @@ def test_record_names_a_device_that_failed_and_exits_1(tmp_path):
     rig.write_text(rig_text(port, glove_timeout_s=0.3))
     out = tmp_path / "s.mcap"
     sender = VmcSender(port).start(rate_hz=60.0, seconds=2.0)
-    proc = subprocess.run(
-        [sys.executable, "-m", "teleprev.cli.app", "record", str(rig), "--out", str(out), "--duration", "5",
-         "--engage-after", "1", "--no-preview"], capture_output=True, text=True, timeout=120)
+    proc = teleprev("record", rig, "--out", out, "--duration", "5", "--engage-after", "1", "--no-preview", columns=80)
     sender.stop()
     assert proc.returncode == 1, proc.stdout + proc.stderr
     said = " ".join(proc.stdout.split())
     assert "device glove failed" in said and "no VMC frames" in said
     s = summarize(out)
     assert list(s.device_failures) == ["glove"]
-    info = subprocess.run([sys.executable, "-m", "teleprev.cli.app", "info", str(out)], capture_output=True, text=True)
+    info = teleprev("info", out, columns=80)
     assert "failed devices" in info.stdout and f"glove ({s.device_failures['glove']}x)" in info.stdout
 
 
@@ -124,9 +121,7 @@ def test_headless_record_whose_devices_never_connect_fails_within_the_connect_ti
     rig.write_text(rig_text(port).replace('plugin = "sim.hand"', 'plugin = "leap.hand"\nport = "/dev/no-such-u2d2"'))
     out = tmp_path / "s.mcap"
     t0 = time.monotonic()
-    proc = subprocess.run(
-        [sys.executable, "-m", "teleprev.cli.app", "record", str(rig), "--out", str(out), "--duration", "60",
-         "--connect-timeout", "1", "--no-preview"], capture_output=True, text=True, timeout=120)
+    proc = teleprev("record", rig, "--out", out, "--duration", "60", "--connect-timeout", "1", "--no-preview", columns=80)
     took = time.monotonic() - t0
     assert proc.returncode == 1, proc.stdout + proc.stderr
     err = " ".join(proc.stderr.split())
@@ -184,6 +179,5 @@ def test_a_flood_loses_frames_and_every_lost_one_is_counted_per_device(tmp_path)
     screen.print(device_table(list(rows.values())))
     line = next(ln for ln in screen.export_text().splitlines() if ln.split()[:1] == ["glove"])
     assert str(glove["lost_input"]) in line.split()
-    info = " ".join(subprocess.run([sys.executable, "-m", "teleprev.cli.app", "info", str(out)], capture_output=True,
-                                   text=True, env={"COLUMNS": "200", **__import__("os").environ}).stdout.split())
+    info = " ".join(teleprev("info", out).stdout.split())
     assert "socket overruns" in info and f"glove {len(frames) - missing}" in info

@@ -56,16 +56,16 @@ def test_bad_calibration_files_are_named(tmp_path):
 
 
 def test_calibrate_command_on_the_sim_rig_writes_a_usable_file(tmp_path):
-    """The guided command, unattended: the simulated operator holds each pose when asked."""
-    import subprocess
-    import sys
+    """The guided command, unattended: the simulated operator holds each pose when asked. The README's
+    `--out calib/ada.toml` names a folder that does not exist yet: it is made."""
+    from tests.helpers.cli import teleprev
 
-    out = tmp_path / "cal.toml"
-    run = subprocess.run([sys.executable, "-m", "teleprev.cli.app", "calibrate", "--out", str(out), "--hold", "0.6", "--seconds", "0.5"],
-                         capture_output=True, text=True, timeout=120)
+    out = tmp_path / "calib" / "ada.toml"
+    run = teleprev("calibrate", "--out", out, "--hold", "0.6", "--seconds", "0.5", "--operator", 'Ada "A." L')
     assert run.returncode == 0, run.stderr
     assert "[rig] calibration" in run.stdout
     cal = load_calibration(out)
+    assert cal.calibration.operator == 'Ada "A." L'
     # the sim's fist closes well past its open hand, so the flexion joints got real scales
     assert all(0.5 < cal.joints[j].scale < 3.0 and cal.joints[j].scale != 1.0 for j in ("1", "2", "5", "6", "9", "10"))
     assert abs(cal.calibration.suit_yaw) < 0.2  # the sim operator faces the robot

@@ -7,17 +7,16 @@ import shutil
 
 import pytest
 
+from teleprev.errors import SessionError
 from teleprev.session.reader import SessionReader
 from teleprev.session.records import parse_chunk
-from tests.helpers.faults import chunk_spans, damage_chunk, flip_byte, has_traceback, mcap_opens, run_cli
-from tests.helpers.sessions import record_sim
+from tests.helpers.cli import teleprev
+from tests.helpers.faults import chunk_spans, damage_chunk, flip_byte, has_traceback, mcap_opens
 
 
-@pytest.fixture(scope="module")
-def session(tmp_path_factory):
-    path = tmp_path_factory.mktemp("corrupt") / "clean.mcap"
-    record_sim(path, seconds=3.0, engage_after=0.5)
-    return path
+@pytest.fixture
+def session(sim_session):
+    return sim_session  # never changed here: every damage is done to a copy
 
 
 def _copy(session, tmp_path, name):
@@ -61,16 +60,16 @@ def test_export_info_and_eval_name_the_damaged_chunk(session, tmp_path, damage):
     why = "CRC mismatch" if damage == "crc" else "zstd chunk does not decompress"
 
     root = tmp_path / "out"
-    run = run_cli(["export", path, "--repo-id", "lab/x", "--root", root], timeout=300)
+    run = teleprev("export", path, "--repo-id", "lab/x", "--root", root)
     line = _one_error_line(run)
     assert run.returncode == 2 and span in line and why in line and "teleprev recover" in line
     assert not root.exists() and not list(tmp_path.glob(".out.export-*"))
 
-    run = run_cli(["info", path])
+    run = teleprev("info", path)
     line = _one_error_line(run)
     assert run.returncode == 2 and span in line and why in line
 
-    run = run_cli(["eval", path, "--out", tmp_path / "report.json"], timeout=300)
+    run = teleprev("eval", path, "--out", tmp_path / "report.json")
     assert run.returncode == 1 and not has_traceback(run.stdout + run.stderr)
     assert span.split()[-2] in run.stdout.replace("\n", " ")  # the damaged range, in the failed-session list
 
@@ -80,7 +79,7 @@ def test_recover_keeps_everything_but_the_damaged_chunk(session, tmp_path):
     spans = chunk_spans(path)
     start, end = damage_chunk(path, 1)
     out = tmp_path / "saved.mcap"
-    run = run_cli(["recover", path, "-o", out])
+    run = teleprev("recover", path, "-o", out)
     assert run.returncode == 0 and not has_traceback(run.stdout + run.stderr), run.stderr
     assert "damaged" in run.stdout and "lost" in run.stdout
     assert mcap_opens(out)
@@ -103,11 +102,58 @@ def test_a_changed_byte_outside_the_chunks_is_named_and_recover_loses_nothing(se
                            ("summary", summary_start + 30, "summary CRC mismatch")):
         path = _copy(session, tmp_path, f"{name}.mcap")
         flip_byte(path, at, 0x04)
-        run = run_cli(["info", path])
+        run = teleprev("info", path)
         line = _one_error_line(run)
         assert run.returncode == 2 and said in line, line
         out = tmp_path / f"{name}.saved.mcap"
-        run = run_cli(["recover", path, "-o", out])
+        run = teleprev("recover", path, "-o", out)
         assert run.returncode == 0, run.stderr
         with SessionReader(session) as clean, SessionReader(out) as saved:
             assert {t: i.message_count for t, i in saved.topics.items()} == {t: i.message_count for t, i in clean.topics.items()}
+
+
+def _metadata_record(path, name: str) -> tuple[int, int]:
+    """(offset, length) of the metadata record `name`, from the file's summary."""
+    from teleprev.session import records as mr
+
+    with open(path, "rb") as f:
+        summary = mr.read_summary(f, path.stat().st_size)
+    return next((offset, length) for n, offset, length in summary.metadata if n == name)
+
+
+def test_a_changed_byte_in_the_task_text_is_an_error_not_a_dataset(session, tmp_path):
+    """The data section's CRC covers the metadata records: export and eval check it before they use them."""
+    path = _copy(session, tmp_path, "tasks.mcap")
+    offset, length = _metadata_record(path, "tasks")
+    data = path.read_bytes()
+    at = data.index(b"and", offset, offset + length)  # "pick up the cube and place it ..."
+    flip_byte(path, at + 1, 0x01)  # "aod"
+    for args in (["export", path, "--repo-id", "lab/t", "--root", tmp_path / "ds"], ["info", path]):
+        run = teleprev(*args)
+        line = _one_error_line(run)
+        assert run.returncode == 2 and "outside the chunks" in line and "teleprev recover" in line, line
+    assert not (tmp_path / "ds").exists()
+    run = teleprev("eval", path)
+    assert run.returncode == 1 and "outside the chunks" in " ".join(run.stdout.split())
+
+
+def test_a_metadata_length_past_the_end_of_the_file_is_named_not_allocated(session, tmp_path):
+    """A length field changed to petabytes, in a file without the data section's CRC to catch it first."""
+    import struct
+
+    from teleprev.session import records as mr
+
+    path = _copy(session, tmp_path, "length.mcap")
+    offset, _ = _metadata_record(path, "rig")
+    with open(path, "r+b") as f:
+        f.seek(offset + 1)
+        f.write(struct.pack("<Q", 1 << 50))
+        _, summary_start, _ = mr.read_footer(f, path.stat().st_size)
+        f.seek(summary_start - 4)
+        f.write(b"\0\0\0\0")  # the data-end record's CRC: 0, none
+    with pytest.raises(SessionError, match=r"metadata record 'rig' is damaged: 1125899906842624 bytes at byte \d+ run "
+                                           r"past the end of the file"):
+        with SessionReader(path) as reader:
+            reader.metadata
+    run = teleprev("eval", path)
+    assert run.returncode == 1 and not has_traceback(run.stdout + run.stderr) and "MemoryError" not in run.stdout

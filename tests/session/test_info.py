@@ -4,9 +4,6 @@ and clear errors for files that are not sessions."""
 from __future__ import annotations
 
 import json
-import subprocess
-import sys
-from pathlib import Path
 
 import numpy as np
 import pytest
@@ -19,8 +16,8 @@ from teleprev import topics as T
 from teleprev.session.reader import Episode, SessionReader
 from teleprev.session.recorder import Recorder
 from teleprev.session.summary import summarize
+from tests.helpers.cli import teleprev
 
-ROOT = Path(__file__).resolve().parent.parent
 T0 = 1_750_000_000_000_000_000
 MS = 1_000_000
 GLOVE, ARM, HAND = "/glove/right/hand", "/arm/xarm/state", "/hand/leap/state"
@@ -144,8 +141,7 @@ def test_truncated_file_points_at_recover(recorded, tmp_path):
         summarize(cut)
     assert f"teleprev recover {cut}" in str(exc.value) and str(cut) in str(exc.value)
     # Through the real entry point: one line on stderr, exit status 2, no traceback.
-    proc = subprocess.run([sys.executable, "-m", "teleprev.cli.app", "info", str(cut)], capture_output=True,
-                          text=True, cwd=ROOT)
+    proc = teleprev("info", cut)
     assert proc.returncode == 2 and "teleprev recover" in proc.stderr and "Traceback" not in proc.stderr
 
 

@@ -113,5 +113,5 @@ def test_a_foxglove_import_refused_at_its_metadata_closes_the_file(session):
     session.write_bytes(bytes(data))
     recipe = load_import_recipe("foxglove_arm")
     with nothing_left_open(session):
-        with pytest.raises(SessionError, match="damaged"):
+        with pytest.raises(SessionError, match="metadata record"):
             FoxgloveReader(session, recipe)

@@ -9,7 +9,8 @@ import pytest
 
 from teleprev.errors import ConfigError
 from teleprev.rig import default_rig_path, load_recorded_rig
-from tests.helpers.faults import has_traceback, run_cli
+from tests.helpers.cli import teleprev
+from tests.helpers.faults import has_traceback
 from tests.helpers.study_sessions import scripted
 
 
@@ -39,7 +40,7 @@ def test_survey_replace_never_writes_where_the_metadata_points(tmp_path):
     before = digest(victim)
     session = crafted(tmp_path / "crafted.mcap", study={"survey_sidecar": "victim.mcap"})
     for replace in ([], ["--replace"]):
-        run = run_cli(["survey", session, "--answers", "1,2,3,4,5", *replace])
+        run = teleprev("survey", session, "--answers", "1,2,3,4,5", *replace)
         assert run.returncode == 0 and not has_traceback(run.stdout + run.stderr), run.stderr
     assert digest(victim) == before  # the other recording is untouched
     assert (tmp_path / "crafted.survey.json").is_file()
@@ -61,7 +62,7 @@ def test_a_recorded_rig_is_confined_to_its_sessions_folder(tmp_path, key, value,
     with pytest.raises(ConfigError, match=message):
         load_recorded_rig(meta, tmp_path / "s.mcap")
     session = crafted(tmp_path / f"{key}.mcap", rig=meta["rig"])
-    run = run_cli(["audit", session])
+    run = teleprev("audit", session)
     assert run.returncode == 2 and message in run.stderr and not has_traceback(run.stderr), run.stderr
 
 
@@ -73,7 +74,7 @@ def test_a_recorded_rig_is_anchored_at_the_session_not_at_the_path_it_names(tmp_
 
 def test_replay_to_the_arm_needs_a_rig_from_the_user(tmp_path):
     session = crafted(tmp_path / "r.mcap", rig={"toml": default_rig_path().read_text(), "path": ""})
-    run = run_cli(["replay", session, "--to", "arm"])
+    run = teleprev("replay", session, "--to", "arm")
     assert run.returncode == 2 and "--to arm needs --rig" in run.stderr, run.stderr
 
 

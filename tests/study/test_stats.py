@@ -5,9 +5,6 @@ they hold only metadata and events, so every expected value below follows from t
 """
 
 import csv
-import os
-import subprocess
-import sys
 
 import pytest
 
@@ -19,6 +16,7 @@ from teleprev.study import survey
 from teleprev.study.facts import session_facts
 from teleprev.study.stats import ColumnMap, Summary, group, preview_column, table_iii
 from tests.helpers.study_sessions import S, scripted
+from tests.helpers.cli import teleprev
 
 def study_sessions(d):
     ok, fail = "success", "failure"
@@ -135,8 +133,7 @@ def test_conditions_map_to_table_iii_columns(text, column):
 
 def test_study_cli_prints_and_writes_tables_and_plots(paths, tmp_path):
     out = tmp_path / "out"
-    run = subprocess.run([sys.executable, "-m", "teleprev.cli.app", "study", *map(str, paths), str(paths[0]), "--out", str(out)],
-                         capture_output=True, text=True, timeout=120, env={**os.environ, "COLUMNS": "250"})
+    run = teleprev("study", *paths, paths[0], "--out", out, columns=250)
     assert run.returncode == 0, run.stderr
     text = run.stdout
     assert "Table III" in text and "23.0 ± 3.0" in text and "14.0 ± 2.0" in text and "-9.0" in text
@@ -170,11 +167,9 @@ def test_study_cli_prints_and_writes_tables_and_plots(paths, tmp_path):
 
 def test_study_cli_task_filter_and_no_data(paths, tmp_path):
     out = tmp_path / "out"
-    run = subprocess.run([sys.executable, "-m", "teleprev.cli.app", "study", str(paths[-1]), "--out", str(out)],
-                         capture_output=True, text=True, timeout=120, env={**os.environ, "COLUMNS": "200"})
+    run = teleprev("study", paths[-1], "--out", out)
     assert run.returncode == 0, run.stderr
     assert "likert.png not written" in run.stdout and "practice_time.png not written" in run.stdout
     assert not (out / "likert.png").exists()
-    run = subprocess.run([sys.executable, "-m", "teleprev.cli.app", "study", str(paths[-1]), "--task", "pick_place"],
-                         capture_output=True, text=True, timeout=120)
+    run = teleprev("study", paths[-1], "--task", "pick_place", columns=80)
     assert run.returncode == 2 and "--task" in run.stderr and "'pick_place'" in run.stderr and "their tasks: pour" in run.stderr

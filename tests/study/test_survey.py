@@ -3,12 +3,10 @@ without touching the recording or what was stored before; and one study from rea
 
 import hashlib
 import json
-import os
-import subprocess
-import sys
 import time
 
 import pytest
+from tests.helpers.cli import teleprev
 from tests.helpers.sessions import RIGS
 from tests.helpers.study_sessions import scripted
 
@@ -22,8 +20,7 @@ from teleprev.study.questionnaire import QUESTIONS, parse_answer
 
 
 def cli(*args, stdin=None):
-    return subprocess.run([sys.executable, "-m", "teleprev.cli.app", *map(str, args)], input=stdin, capture_output=True,
-                          text=True, timeout=120, env={**os.environ, "COLUMNS": "200"})
+    return teleprev(*args, stdin=stdin or "")
 
 
 def digest(path):

@@ -41,10 +41,13 @@ class TimingSettings:
     def __post_init__(self):
         if not (0 < self.rate_hz <= 2000):
             raise ValueError(f"rate_hz must be in (0, 2000], got {self.rate_hz}")
-        if self.latency_ms < 0 or self.jitter_ms < 0:
-            raise ValueError(f"latency_ms and jitter_ms must be >= 0, got {self.latency_ms} and {self.jitter_ms}")
-        if abs(self.clock_drift_ppm) > 1000:
+        for key in ("latency_ms", "jitter_ms"):  # a second or more is no device's transport
+            if not 0 <= getattr(self, key) <= 1000:
+                raise ValueError(f"{key} must be in [0, 1000] ms, got {getattr(self, key)}")
+        if not abs(self.clock_drift_ppm) <= 1000:
             raise ValueError(f"clock_drift_ppm must be within ±1000, got {self.clock_drift_ppm}")
+        if not abs(self.clock_offset_s) <= 1e6:  # a device clock days apart from the host's is still fine
+            raise ValueError(f"clock_offset_s must be within ±1e6 s, got {self.clock_offset_s}")
         log = PurePath(self.truth_log)
         if self.truth_log and (log.is_absolute() or ".." in log.parts):  # a rig file never writes outside its folder
             raise ValueError(f"truth_log must be a path inside the rig file's folder, got {self.truth_log!r}")

@@ -9,6 +9,7 @@ from typing import ClassVar, TypeVar
 from teleprev.devices import DeviceContext
 from teleprev_devices.sim.device import NoiseBlock, SimDevice, TimingSettings
 from teleprev_devices.sim.operator import shared_operator, task_mode
+from teleprev_devices.sim.tasks import TASKS
 
 
 @dataclass
@@ -20,6 +21,11 @@ class OperatorSettings(TimingSettings):
     def __post_init__(self):
         super().__post_init__()
         task_mode(self.task)
+
+    def episode_tasks(self) -> tuple[str, ...]:
+        """The task labels an episode may carry (teleprev.rig.Rig.check_task): following the episode's task,
+        the operator knows these five; with a fixed task or "cycle" it ignores the label, so any goes."""
+        return TASKS if task_mode(self.task)[1] == "follow" else ()
 
 
 O = TypeVar("O", bound=OperatorSettings)

@@ -21,7 +21,7 @@ from pathlib import Path
 from typing import Literal
 
 from teleprev.config import from_table, read_toml
-from teleprev.errors import ConfigError
+from teleprev.errors import ConfigError, SessionError
 from teleprev.export.recipe import Recipe, recipe_from_table
 from teleprev.paths import data_dir
 
@@ -59,6 +59,22 @@ class ImportRecipe:
     def joint_order(self, topic: str) -> tuple[str, ...]:
         """The joints a stream is given with (empty: as recorded)."""
         return tuple(self.section.joints.get(topic, ())) or self.urdf_joints
+
+    def select_joints(self, topic: str, seen: tuple[str, ...], where: str) -> tuple[str, ...]:
+        """The joints a joint stream that has `seen` (in their recorded order) is given with: the recipe's
+        [import.joints] list (each must be there) or the URDF's joints it has, in that order; every joint as
+        recorded when the recipe names neither."""
+        wanted = self.joint_order(topic)
+        if not wanted:
+            return seen
+        missing = [n for n in wanted if n not in seen]
+        if self.section.joints.get(topic) and missing:
+            raise SessionError(f"[import.joints] {topic}: no joints {missing} in this stream (it has {list(seen)})", where)
+        names = tuple(n for n in wanted if n in seen)
+        if not names:
+            raise SessionError(f"{topic} has none of the URDF's joints (it has {list(seen)}, the URDF {list(wanted)})",
+                               where)
+        return names
 
 
 def load_import_recipe(which: str | Path) -> ImportRecipe:

@@ -53,11 +53,17 @@ class RosBagReader:
         self.path = Path(path)
         self.recipe = recipe
         self._use_header = recipe.section.timestamps == "header"
-        try:
-            self._bag = AnyReader([self.path])
+        from rosbags.typesys import Stores, get_typestore
+
+        try:  # the standard types for a bag that stores no definitions (ROS 2 Humble's sqlite3 bags)
+            self._bag = AnyReader([self.path], default_typestore=get_typestore(Stores.LATEST))
             self._bag.open()
         except Exception as exc:  # rosbags raises several kinds (its own, OSError, KeyError...) for unreadable files
             raise SessionError(f"not a readable ROS 2 recording ({exc})", str(self.path)) from None
+        if not self._bag.message_count:
+            topics = ", ".join(sorted({c.topic for c in self._bag.connections})) or "none"
+            self.close()
+            raise SessionError(f"the recording holds no messages (its topics: {topics})", str(self.path))
         self._conns: dict[str, list] = {}
         for c in self._bag.connections:
             self._conns.setdefault(c.topic, []).append(c)
@@ -209,19 +215,7 @@ class RosBagReader:
                 break
         if not seen:
             raise SessionError(f"{topic} has no joint states", str(self.path))
-        wanted = self.recipe.joint_order(topic)
-        explicit = bool(self.recipe.section.joints.get(topic))
-        if wanted:
-            missing = [n for n in wanted if n not in seen]
-            if explicit and missing:
-                raise SessionError(f"[import.joints] {topic}: no joints {missing} in this stream "
-                                   f"(it has {list(seen)})", str(self.path))
-            names = tuple(n for n in wanted if n in seen)
-            if not names:
-                raise SessionError(f"{topic} has none of the URDF's joints (it has {list(seen)}, the URDF "
-                                   f"{list(wanted)})", str(self.path))
-        else:
-            names = tuple(seen)
+        names = self.recipe.select_joints(topic, tuple(seen), str(self.path))
         self._names[topic] = names
         return names
 

@@ -1,0 +1,89 @@
+"""A camera frame as a small colour picture in the terminal: each cell is two pixels, the upper half block
+"▀" in the upper pixel's colour on the lower pixel's. Operators watch the scene, so the preview shows it.
+
+Frames arrive compressed (JPEG/PNG); one is decoded at a quarter of its size (libjpeg scales while it
+decodes, so a 640x480 frame costs about a millisecond) and only when a newer frame is shown.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from rich.style import Style
+from rich.text import Text
+
+HALF = "▀"
+
+
+class CameraView:
+    def __init__(self) -> None:
+        self._stamp: int | None = None
+        self._rgb: np.ndarray | None = None
+
+    def rgb(self, sample) -> np.ndarray | None:
+        """The frame of an ImageSample as RGB (decoded at a quarter size; None if it does not decode)."""
+        if sample is None:
+            return None
+        if sample.stamp_ns != self._stamp:
+            import cv2
+
+            if getattr(sample, "format", "jpeg") == "raw":
+                self._rgb = np.asarray(sample.data)
+            else:
+                bgr = cv2.imdecode(np.frombuffer(sample.data, np.uint8), cv2.IMREAD_REDUCED_COLOR_4)
+                self._rgb = None if bgr is None else bgr[:, :, ::-1]
+            self._stamp = sample.stamp_ns
+        return self._rgb
+
+    def render(self, sample, cols: int, rows: int):
+        rgb = self.rgb(sample)
+        if rgb is None:
+            return Text("no camera frame yet", style="dim")
+        return picture(rgb, cols, rows)
+
+
+def fit(height: int, width: int, cols: int, rows: int) -> tuple[int, int]:
+    """(cols, rows) of the largest picture of that aspect in cols x rows cells (a cell is two pixels high)."""
+    scale = min(cols / width, 2 * rows / height)
+    return max(1, int(width * scale)), max(1, int(height * scale / 2))
+
+
+class Picture:
+    """`rows` lines of `cols` half blocks, each with its two pixels' colours (quantized to 5 bits a channel,
+    so that neighbouring cells share Style objects and runs of equal cells print as one segment)."""
+
+    _styles: dict[bytes, Style] = {}
+
+    def __init__(self, top: np.ndarray, bottom: np.ndarray):
+        self.top, self.bottom = top & 0xF8, bottom & 0xF8
+
+    def __rich_console__(self, console, options):
+        from rich.color import Color
+        from rich.segment import Segment
+
+        rows, cols = self.top.shape[:2]
+        cells = np.concatenate([self.top, self.bottom], axis=2).reshape(rows, cols, 6)
+        for r in range(rows):
+            line = cells[r]
+            same = np.r_[False, (line[1:] == line[:-1]).all(axis=1)]
+            starts = np.flatnonzero(~same).tolist() + [cols]
+            for a, b in zip(starts[:-1], starts[1:]):
+                key = line[a].tobytes()
+                style = self._styles.get(key)
+                if style is None:
+                    t, u = line[a][:3].tolist(), line[a][3:].tolist()
+                    style = self._styles[key] = Style(color=Color.from_rgb(*t), bgcolor=Color.from_rgb(*u))
+                yield Segment(HALF * (b - a), style)
+            yield Segment.line()
+
+    def __rich_measure__(self, console, options):
+        from rich.measure import Measurement
+
+        return Measurement(self.top.shape[1], self.top.shape[1])
+
+
+def picture(rgb: np.ndarray, cols: int, rows: int) -> Picture:
+    import cv2
+
+    w, h = fit(rgb.shape[0], rgb.shape[1], cols, rows)
+    small = cv2.resize(np.ascontiguousarray(rgb), (w, 2 * h), interpolation=cv2.INTER_AREA)
+    return Picture(small[0::2], small[1::2])
