@@ -44,6 +44,7 @@ def record(
     from teleprev.cli.signals import StopSignals
     from teleprev.live.session import RecordOptions, LiveSession, default_session_path
     from teleprev.live.run import run_interactive, run_script, print_summary
+    from teleprev import topics
 
     check_options(rig, task, duration, engage_after, connect_timeout)
     console = Console()
@@ -83,6 +84,11 @@ def record(
         errors = Console(stderr=True)
         for line in unconnected:
             errors.print(f"[bold red]error:[/] {escape(line)}", highlight=False, soft_wrap=True)
+        raise typer.Exit(1)
+    if recording.loop.failure:
+        Console(stderr=True).print(f"[bold red]error:[/] {escape(recording.loop.failure)} (the robot was braked to "
+                                   f"rest; the traceback is in {escape(str(options.out))}, {topics.OPERATOR})",
+                                   highlight=False, soft_wrap=True)
         raise typer.Exit(1)
     if recording.loop.stats.device_failures:
         raise typer.Exit(1)  # a device failed during the session: the summary above says which

@@ -140,13 +140,6 @@ def session_channels(device_streams) -> dict[str, object]:
     return out
 
 
-def declare_session(view: FoxgloveView, device_streams) -> None:
-    """Declare a live recording's topics on a running view (FoxgloveView(port, session_channels(...))
-    declares them before a client can connect)."""
-    for topic, payload in session_channels(device_streams).items():
-        view.declare(topic, payload)
-
-
 def file_channels(path: Path) -> dict[str, object]:
     """The topics of a recorded session, each with its first message's payload (its schema)."""
     from teleprev.session.reader import SessionReader

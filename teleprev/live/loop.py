@@ -25,6 +25,7 @@ from __future__ import annotations
 import queue
 import threading
 import time
+import traceback
 from collections import Counter
 from dataclasses import dataclass, field, replace
 from typing import Any, Callable
@@ -32,7 +33,7 @@ from typing import Any, Callable
 import numpy as np
 
 from teleprev.devices.contract import Actuator, Device
-from teleprev.messages import Event, JointSample, Logged, PoseSample, Sample
+from teleprev.messages import Event, ImageSample, JointSample, Logged, PoseSample, Sample
 from teleprev.pipeline.driver import PipelineDriver
 from teleprev.pipeline.planner import ModeUpdate
 from teleprev import topics
@@ -59,6 +60,7 @@ class LoopSnapshot:
     commands_sent: int = 0
     dropped: int = 0
     fault: str = ""  # why the session stays in preview until the operator engages
+    camera: Any = None  # the latest ImageSample of the first camera heard from, for the preview
 
 
 @dataclass
@@ -111,11 +113,13 @@ class SessionLoop:
         self.stats = LoopStats()
         self.episodes = EpisodeTracker()
         self.snapshot = LoopSnapshot(session_started_ns=clock.now_ns())
+        self._camera_topic: str | None = None
         self._queue: queue.Queue = queue.Queue(maxsize=queue_size)
         self._last_ns = 0
         self._last_tf_ns = 0
         self._thread: threading.Thread | None = None
         self.halted = ""  # why the session may no longer execute (e.g. the recording failed)
+        self.failure = ""  # why the loop no longer runs the pipeline (it raised), or ""
         self.sender = sender
         self.sender_active = False  # the sender is commanding (executing, or braking to rest)
         self._mode_seq = 0  # the last mode switch passed to the sender
@@ -191,12 +195,29 @@ class SessionLoop:
             receive_ns, item = self._queue.get()
             if item is _STOP:
                 return
-            if receive_ns is None:
-                self._control(*item)
-            elif isinstance(item, Sample):
-                self._sample(item, receive_ns)
-            else:
-                self._tick(item, receive_ns)
+            try:
+                if receive_ns is None:
+                    self._control(*item)
+                elif isinstance(item, Sample):
+                    self._sample(item, receive_ns)
+                else:
+                    self._tick(item, receive_ns)
+            except Exception as exc:  # a bug must neither leave the arm moving nor end the recording
+                self._failed(exc)
+
+    def _failed(self, exc: Exception) -> None:
+        """The pipeline raised: brake the robot to rest and refuse execute (halt), keep recording the
+        devices without the pipeline, and say why (`failure`; the traceback is in the file)."""
+        if self.failure:
+            return
+        self.failure = f"the session loop failed: {type(exc).__name__}: {exc}"
+        try:
+            self._event(topics.OPERATOR, "teleprev.OperatorEvent",
+                        {"event": "loop_failed", "detail": "".join(traceback.format_exception(exc))})
+            self._control("halt", {"why": self.failure})
+        except Exception:
+            if self.sender is not None:  # the halt itself failed: stop sending at once
+                self.sender.stop()
 
     # ---- the loop thread -------------------------------------------------------------------------
     def _stamp(self, receive_ns: int | None = None) -> int:
@@ -227,7 +248,10 @@ class SessionLoop:
         counter.latency_ns = t - getattr(payload, "stamp_ns", t)
         if sample.topic == topics.DEVICE_EVENT and payload.data.get("event") == "error":
             self._device_failed(payload.data)
-        if self.driver is None:
+        if isinstance(payload, ImageSample) and self._camera_topic in (None, sample.topic):
+            self._camera_topic = sample.topic
+            self.snapshot = replace(self.snapshot, camera=payload)
+        if self.driver is None or self.failure:
             return
         started = time.perf_counter_ns()
         out = self.driver.feed(msg)
@@ -341,6 +365,8 @@ class SessionLoop:
         if action == "mode":
             mode = data["mode"]
             t = self._stamp(now)
+            if self.driver is not None and mode == self.driver.mode and not data.get("halt") and not self.halted:
+                return  # already in it (a retried engage accepted meanwhile): nothing to switch or record
             if self.halted and mode == "execute":
                 refused = self.halted
             elif self.fault and mode == "execute" and data.get("reason") == "script":

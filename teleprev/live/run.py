@@ -94,7 +94,9 @@ def handle_key(recording: LiveSession, key: str, quit_flag: list) -> None:
 
 def _frame(dashboard: Dashboard, recording: LiveSession, console: Console):
     size = console.size
-    return dashboard.render(recording.loop.snapshot, recording.device_rows(), size.width, size.height, recording.clock.now_ns())
+    snap = recording.loop.snapshot
+    return dashboard.render(snap, recording.device_rows(), size.width, size.height, recording.clock.now_ns(),
+                            camera=snap.camera)
 
 
 def run_interactive(recording: LiveSession, console: Console, view: str, fps: float, show: bool = True) -> PreviewStats:

@@ -79,10 +79,10 @@ class LiveSession:
         urdf = Path(self.robot.urdf_path)
         self.view = None
         if options.foxglove is not None:
-            from teleprev.live.foxglove_view import FoxgloveView, declare_session
+            from teleprev.live.foxglove_view import FoxgloveView, session_channels
 
-            self.view = FoxgloveView(options.foxglove)
-            declare_session(self.view, [s for dev in self.devices.values() for s in dev.streams()])
+            # every channel declared before the server starts: a client that connects at once sees them all
+            self.view = FoxgloveView(options.foxglove, session_channels([s for dev in self.devices.values() for s in dev.streams()]))
         try:
             self.recorder = Recorder(out, self._metadata(), attachments={urdf.name: (URDF_MEDIA_TYPE, urdf.read_bytes())},
                                      on_failure=self._recording_failed)
@@ -111,10 +111,10 @@ class LiveSession:
 
     @property
     def failure(self) -> str:
-        """Why this session cannot go on (the recording failed), or ""."""
+        """Why this session cannot go on (the recording or the session loop failed), or ""."""
         exc = self.recorder.failure
         if exc is None:
-            return ""
+            return self.loop.failure
         from teleprev.errors import describe_os_error
 
         return f"recording failed ({describe_os_error(exc)})"
@@ -196,7 +196,7 @@ class LiveSession:
         status = self.sender.status
         extra = {"loop": {"dropped": json.dumps(dict(stats.dropped)), "commands_sent": json.dumps(dict(stats.commands_sent)),
                           "command_errors": json.dumps(dict(stats.command_errors)),
-                          "device_failures": json.dumps(dict(stats.device_failures))},
+                          "device_failures": json.dumps(dict(stats.device_failures)), "failure": self.loop.failure},
                  "sender": {"rate_hz": f"{1e9 / self.sender.period_ns:g}", "ticks": str(stats.ticks),
                             "realtime": "true" if status and status.realtime else "false",
                             "detail": status.detail if status else "", "dropped_updates": str(self.sender.dropped_updates)},

@@ -107,10 +107,12 @@ class PipelineDriver:
 
     def request_mode(self, mode: str, t_ns: int) -> str:
         """Switch preview/execute (or "estop") at log time t_ns; returns "" or why it was refused. An accepted
-        switch of a format 4 pipeline makes the planner's ModeUpdate."""
+        switch of a format 4 pipeline makes the planner's ModeUpdate; asking for the mode it is in already
+        changes nothing (an e-stop excepted)."""
         inputs = self._inputs(t_ns)
+        before = self.state.mode
         self.state, refused = self.pipeline.set_mode(self.state, mode, inputs)
-        if not refused and self.pipeline.plans_commands:
+        if not refused and self.pipeline.plans_commands and (mode == "estop" or self.state.mode != before):
             self._queue(self.pipeline.mode_update(mode, inputs, 0))
         return refused
 

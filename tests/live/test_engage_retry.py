@@ -25,3 +25,44 @@ def test_a_refused_engage_is_asked_again(tmp_path):
         summary = rec.stop()
     assert len(asked) >= 3
     assert summary.streams["/command/arm"].written > 50
+
+
+def test_an_engage_while_engaged_changes_nothing(tmp_path):
+    """A retried engage that arrives after the first was accepted (a busy machine) is neither counted nor
+    recorded (an unattended session engages once per episode), and the commands carry on unbroken."""
+    import time
+
+    import numpy as np
+
+    from teleprev import topics
+    from teleprev.assembly import motion_limits
+    from teleprev.pipeline.derivatives import stream_peaks
+    from teleprev.evaluation.audit import audit_session
+    from teleprev.session.reader import SessionReader
+
+    path = tmp_path / "s.mcap"
+    rec = LiveSession(RecordOptions(out=path))
+    rec.start()
+    try:
+        rec.loop.control("start", task="pick_place")
+        time.sleep(1.0)
+        for _ in range(4):  # the first engages; the others arrive while the arm moves
+            rec.loop.control("mode", mode="execute", reason="script")
+            time.sleep(0.5)
+        rec.loop.control("mode", mode="preview", reason="test")
+        rec.loop.control("stop")
+    finally:
+        rec.stop()
+    assert rec.loop.stats.engages == 1
+    with SessionReader(path) as reader:
+        switches = [m.payload.data["mode"] for m in reader.messages([topics.MODE])]
+        assert reader.topics[topics.COMMAND_ARM].message_count > 100
+        arm = [m.payload for m in reader.messages([topics.COMMAND_ARM])]
+    assert switches == ["execute", "preview"], switches
+    # the whole engaged stream as one run (the audit would start a run at each recorded engage)
+    peaks = stream_peaks(np.array([c.stamp_ns for c in arm]), np.array([c.positions for c in arm]))
+    limits = motion_limits(rec.rig)["arm"]
+    assert peaks.runs == 1 and peaks.acceleration.max() <= limits["acceleration"] * (1 + 1e-6), peaks
+    assert peaks.jerk.max() <= limits["jerk"] * (1 + 1e-6), peaks
+    report = audit_session(path)
+    assert report.ok, report.streams

@@ -1,0 +1,49 @@
+"""A bug in the pipeline (an exception in the session loop) while engaged: the robot brakes to rest within
+its limits, execute is refused from then on, the devices keep being recorded, and the session says why."""
+
+import time
+
+from teleprev import topics
+from teleprev.evaluation.audit import audit_session
+from teleprev.live.session import LiveSession, RecordOptions
+from teleprev.session.reader import SessionReader
+
+
+def test_an_exception_in_the_loop_brakes_the_robot_and_keeps_recording(tmp_path):
+    path = tmp_path / "s.mcap"
+    rec = LiveSession(RecordOptions(out=path))
+    rec.start()
+    try:
+        rec.loop.control("start", task="pick_place")
+        time.sleep(1.0)
+        rec.loop.control("mode", mode="execute", reason="script")
+        time.sleep(1.0)
+        assert rec.loop.stats.engages == 1
+
+        def broken(msg, *args):
+            raise FloatingPointError("a bug in the step")
+
+        rec.loop.driver.feed = broken
+        deadline = time.monotonic() + 5
+        while not rec.failure and time.monotonic() < deadline:
+            time.sleep(0.02)
+        failed_ns = rec.clock.now_ns()
+        rec.loop.control("mode", mode="execute", reason="key")  # the operator tries again: refused
+        time.sleep(1.0)
+        rec.loop.control("stop")
+    finally:
+        rec.stop()
+    assert rec.failure == "the session loop failed: FloatingPointError: a bug in the step"
+    assert rec.loop.stats.engages == 1
+    with SessionReader(path) as reader:
+        modes = [m.payload.data for m in reader.messages([topics.MODE])]
+        operator = [m.payload.data for m in reader.messages([topics.OPERATOR])]
+        after = [m.log_time_ns for m in reader.messages(["/glove/glove/hand"]) if m.log_time_ns > failed_ns]
+        commands = [m.log_time_ns for m in reader.messages([topics.COMMAND_ARM])]
+        assert reader.metadata["loop"]["failure"] == rec.failure
+    assert modes[-1] == {"mode": "preview", "reason": "halt"}, modes
+    assert [o["event"] for o in operator] == ["loop_failed"] and "FloatingPointError" in operator[0]["detail"]
+    assert len(after) > 30  # the glove was still recorded after the failure
+    assert commands and commands[-1] < failed_ns + 2_000_000_000  # braked to rest, then nothing more
+    report = audit_session(path)
+    assert report.ok, [s.violations for s in report.streams]
