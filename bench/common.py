@@ -23,6 +23,32 @@ def parser(description: str) -> argparse.ArgumentParser:
     return p
 
 
+def _spin() -> None:
+    while True:
+        pass
+
+
+class Load:
+    """`processes` busy processes (a spinning loop each) while inside the with block: the figures "with N
+    busy processes beside it" that the issues ask for, made inside the bench."""
+
+    def __init__(self, processes: int):
+        import multiprocessing as mp
+
+        self.procs = [mp.get_context("fork").Process(target=_spin, daemon=True) for _ in range(processes)]
+
+    def __enter__(self) -> "Load":
+        for p in self.procs:
+            p.start()
+        return self
+
+    def __exit__(self, *exc) -> None:
+        for p in self.procs:
+            p.terminate()
+        for p in self.procs:
+            p.join()
+
+
 def time_calls(fn, args_list, repeat: int = 1) -> list[float]:
     """Seconds per call of fn(*args) for each args in args_list (best of `repeat` per item)."""
     out = []

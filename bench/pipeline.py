@@ -1,7 +1,7 @@
 """Pipeline figures: one step's time over the sim operator's five tasks, how often the Corrector acted,
 the terminal preview's redraw rate while the pipeline runs at 120 Hz, and dex-retargeting for scale.
 
-    python bench/pipeline.py [--json] [--quick]
+    python bench/pipeline.py [--json] [--quick] [--busy N]
 
 Step timing drives the pure pipeline step directly (no device threads), with the default LEAP rig and
 the shipped models: the operator's glove at 120 Hz and suit at 60 Hz, execution engaged after 1 s, the
@@ -150,16 +150,21 @@ def dex_retargeting(seconds: float) -> dict:
 
 
 def main() -> None:
-    args = common.parser(__doc__).parse_args()
+    p = common.parser(__doc__)
+    p.add_argument("--busy", type=int, default=0, help="busy processes beside the step timing")
+    args = p.parse_args()
     seconds = 8.0 if args.quick else 30.0
-    figures = step_timing(seconds)
+    with common.Load(args.busy):
+        figures = step_timing(seconds)
+    figures["busy_processes"] = args.busy
     figures.update(preview_rate(4.0 if args.quick else 12.0))
     figures.update(dex_retargeting(10.0 if args.quick else 30.0))
     targets = {
         "step_ms_p50": "<= 0.1", "step_ms_p99": "<= 0.5", "corrected_frac": "reported", "fallback_frac": "reported",
         "preview_fps": ">= 20 (pipeline at 120 Hz)", "dexretargeting_ms_p50": "for comparison",
     }
-    common.report("bench/pipeline.py: one pipeline step (retarget + Corrector + IK + gate), one thread", figures, targets, args.json)
+    common.report(f"bench/pipeline.py: one pipeline step (retarget + Corrector + IK + gate), one thread, "
+                  f"{args.busy} busy processes beside it", figures, targets, args.json)
 
 
 if __name__ == "__main__":

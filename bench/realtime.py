@@ -56,28 +56,6 @@ TARGETS = {"loaded_sessions": ">= 10", "arm_faults": "0", "audit_failures": "0",
            "hand_tracking_r_min": "reported", "hand_lag_ms_p50": "reported"}
 
 
-# ---- the load ------------------------------------------------------------------------------------------
-def _busy() -> None:
-    while True:
-        pass
-
-
-class Load:
-    def __init__(self, processes: int):
-        self.procs = [mp.get_context("fork").Process(target=_busy, daemon=True) for _ in range(processes)]
-
-    def __enter__(self):
-        for p in self.procs:
-            p.start()
-        return self
-
-    def __exit__(self, *exc):
-        for p in self.procs:
-            p.terminate()
-        for p in self.procs:
-            p.join()
-
-
 # ---- sessions ------------------------------------------------------------------------------------------
 def _drain(fd: int, stop: threading.Event) -> None:
     while not stop.is_set():
@@ -370,7 +348,7 @@ def main() -> None:
     plan += [("fault", fault_rig(folder, 0.4 * seconds), None)]
     plan += [] if args.quick else [("limit", None, None)]
     results, recorded = [], []
-    with Load(args.busy):
+    with common.Load(args.busy):
         for k, (kind, rig, size) in enumerate(plan):
             out = folder / f"{k:02d}_{kind}.mcap"
             device = None
