@@ -34,6 +34,7 @@ import pickle
 import select
 import signal
 import struct
+import threading
 import time
 from dataclasses import dataclass
 
@@ -78,6 +79,10 @@ class CommandSender:
         self._from_sender: int | None = None  # read end of the ticks pipe
         self._buffer = b""
         self.dropped_updates = 0
+        # send() (the session loop) and stop() (the session's end) share the updates pipe: a send that met
+        # the closed descriptor raised EBADF, and a reused descriptor number could take an update's bytes
+        # into another file.
+        self._send_lock = threading.Lock()
 
     # ---- the session process ---------------------------------------------------------------------
     def start(self) -> "CommandSender":
@@ -110,14 +115,15 @@ class CommandSender:
     def send(self, update: TargetUpdate | ModeUpdate | str) -> bool:
         """Pass an update on; never blocks (a full pipe, which a living sender never lets happen, drops it
         and counts it)."""
-        if self._to_sender is None:
-            return False
         data = pickle.dumps(update, protocol=pickle.HIGHEST_PROTOCOL)
-        try:
-            os.write(self._to_sender, _HEADER.pack(len(data)) + data)
-        except (BlockingIOError, BrokenPipeError):
-            self.dropped_updates += 1
-            return False
+        with self._send_lock:
+            if self._to_sender is None:
+                return False
+            try:
+                os.write(self._to_sender, _HEADER.pack(len(data)) + data)
+            except (BlockingIOError, BrokenPipeError):
+                self.dropped_updates += 1
+                return False
         return True
 
     def receive(self, timeout_s: float) -> list[SentTick | SenderStatus] | None:
@@ -144,9 +150,10 @@ class CommandSender:
         if self.pid is None:
             return
         self.send(_STOP)
-        if self._to_sender is not None:
-            os.close(self._to_sender)
-            self._to_sender = None
+        with self._send_lock:
+            if self._to_sender is not None:
+                os.close(self._to_sender)
+                self._to_sender = None
         deadline = time.monotonic() + timeout_s
         while time.monotonic() < deadline:
             if os.waitpid(self.pid, os.WNOHANG)[0]:
