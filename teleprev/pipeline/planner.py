@@ -38,7 +38,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from teleprev.kernels.motion import ESTIMATE_GIVEN, ESTIMATE_HELD, ESTIMATE_NONE
-from teleprev.pipeline.derivatives import RESUME_GAP_NS
+from teleprev.pipeline.derivatives import RESUME_GAP_NS, RESUME_PERIOD_NS
 from teleprev.pipeline.frozen import evolve
 from teleprev.pipeline.motion import ENGAGED_TOL, EXTRAPOLATE_MAX_NS, FEEDFORWARD_MAX_GAP_NS, RESUME_STEP_S, Motion
 from teleprev.pipeline.trajectory import PLAN_GOAL, JointMotion
@@ -169,6 +169,11 @@ class CommandPlanner:
             s.hand.v = np.zeros_like(s.hand.v)
             dt, s.dt_before = RESUME_STEP_S, 0.0
             flags.append("commands_resumed")
+        elif s.dt_before == 0.0 and gap > RESUME_PERIOD_NS:
+            # The engage's first command was the stream's start: a controller (and the audit) takes the
+            # arm to have stood there one cycle before it. A second tick later than that cycle spans the
+            # cycle and its own step; capped over twice its own step, it would pass the hand's cap.
+            s.dt_before = RESUME_PERIOD_NS / 1e9
         executing = s.mode == "execute"
         if not executing:
             flags.append("stopping")

@@ -135,6 +135,22 @@ def test_stale_targets_brake_to_rest_then_hold_and_keep_sending(pipeline):
     assert np.array_equal(sent[-1].arm, sent[-2].arm) and not sent[-1].arm_v.any()
 
 
+@pytest.mark.parametrize("first_step_ns", [13_100_000, 25_000_000, 50_000_000])
+def test_a_late_first_step_after_an_engage_keeps_the_hand_cap(pipeline, first_step_ns):
+    """The tick after an engage's first command woke late: the hand, moving off at once towards a far
+    target, stays under its cap as the controller measures it (at rest one cycle before the first)."""
+    s = Script(pipeline)
+    t0 = 1_000_000_000
+    hand_goal = np.clip(np.full(len(pipeline.effector_names), 0.6), pipeline.motion.hand.lower,
+                        pipeline.motion.hand.upper)
+    events = [(t0, s.target(t0, HOME, hand=hand_goal)), (t0 + 1, s.mode("execute", t0 + 1))]
+    events += [(t0 + k * PERIOD + 2, s.target(t0 + k * PERIOD + 2, HOME, hand=hand_goal)) for k in range(1, 60)]
+    ticks = np.concatenate([[t0 + 1], t0 + 1 + first_step_ns + PERIOD * np.arange(60)])
+    sent = _run(_planner(pipeline), events, ticks)
+    assert np.abs(sent[1].hand).max() > 0  # the hand moved off at the late step
+    _within(pipeline, sent)
+
+
 def test_a_pause_in_the_ticks_starts_again_from_rest_where_the_commands_stood(pipeline):
     """A sender that starved for 120 ms: the controller stood at the last command meanwhile, so the next
     commands start from rest there (measured as the controller measures a resumed stream: within limits)."""
