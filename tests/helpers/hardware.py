@@ -16,6 +16,7 @@ import numpy as np
 
 from teleprev import topics
 from teleprev.errors import DeviceError
+from teleprev.devices.servo_limits import STREAM_GAP_NS
 from teleprev.messages import JointSample
 
 
@@ -80,8 +81,12 @@ class CommandStream:
         self._thread.join(5.0)
 
     def _run(self) -> None:
+        # Each position is a function of its own stamp: a thread preempted between reading the clock and
+        # sending would otherwise send a position that does not match its stamp, which the servo rule (it
+        # differentiates stamps) reads as a jerk. A stall longer than the rule's stream gap starts a new
+        # stream from rest, as the rule (and the controller) take it.
         names = self.device.joint_names
-        start, t0 = None, 0.0
+        start, t0, last, last_ns = None, 0, None, None
         next_t = time.monotonic()
         while not self._stop.is_set():
             now = time.monotonic()
@@ -92,19 +97,23 @@ class CommandStream:
             if next_t < now:  # fell behind (a stall): start again from now instead of bursting
                 next_t = now + self.period_s
             target = getattr(self.device, "_target", None)
-            if start is None or target is None:
-                if target is None:
-                    continue
-                start, t0 = np.array(target, dtype=float), now
+            if start is None and target is None:
+                continue
+            stamp = self.clock.now_ns()
+            if start is None:
+                start, t0 = np.array(target, dtype=float), stamp
+            elif last_ns is not None and stamp - last_ns > STREAM_GAP_NS:
+                start, t0 = last, stamp  # the rule sees a new stream, at rest on the last command
             q = start.copy()
-            q[self.joints] += self.amplitude * (1 - np.cos(self.omega * (now - t0)))
+            q[self.joints] += self.amplitude * (1 - np.cos(self.omega * (stamp - t0) / 1e9))
             t = time.perf_counter()
             try:
-                self.device.send(JointSample(self.clock.now_ns(), names, q))
+                self.device.send(JointSample(stamp, names, q))
                 self.sent += 1
                 self.send_s.append(time.perf_counter() - t)
+                last, last_ns = q, stamp
             except DeviceError as exc:
                 self.failed += 1
                 self.last_error = str(exc)
-                start = None  # after a fault the device starts again from where it is
+                start, last, last_ns = None, None, None  # after a fault the device starts again from where it is
                 time.sleep(0.02)

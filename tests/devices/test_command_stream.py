@@ -1,0 +1,60 @@
+"""The tests' command stream must stay inside the servo rule even when its thread is preempted: each
+position belongs to its own stamp, and a stall past the rule's stream gap starts again from rest."""
+
+from __future__ import annotations
+
+import threading
+import time
+
+import numpy as np
+
+from teleprev.devices.servo_limits import ServoStreamRule
+from tests.helpers.hardware import CommandStream
+
+
+class StallingClock:
+    """A session clock whose readings are delayed now and then, as a preempted thread's are: 15 ms every
+    5th reading and 90 ms (past the rule's 60 ms stream gap) every 23rd."""
+
+    def __init__(self):
+        self.readings = 0
+
+    def now_ns(self) -> int:
+        self.readings += 1
+        if self.readings % 23 == 0:
+            time.sleep(0.090)
+        elif self.readings % 5 == 0:
+            time.sleep(0.015)
+        return time.monotonic_ns()
+
+
+class JudgedArm:
+    """An actuator that judges every command by the servo rule, as the sim arm and the xArm plugin do."""
+
+    joint_names = tuple(f"joint{i}" for i in range(1, 7))
+
+    def __init__(self):
+        self._target = np.zeros(6)
+        self.rule = ServoStreamRule(self.joint_names, max_acceleration=10.0, max_jerk=500.0, period_ns=10_000_000)
+        self.broken = []
+        self.lock = threading.Lock()
+
+    def send(self, sample) -> None:
+        with self.lock:
+            broken = self.rule.check(sample.stamp_ns, np.asarray(sample.positions),
+                                     lambda: (self._target.copy(), np.zeros(6)))
+            if broken is not None:
+                self.broken.append(broken.describe())
+            self._target = np.asarray(sample.positions, dtype=float)
+
+
+def test_a_stream_whose_clock_stalls_stays_inside_the_servo_rule():
+    arm, clock = JudgedArm(), StallingClock()
+    stream = CommandStream(arm, clock, rate_hz=100.0, amplitude=0.05, period_s=1.0).start()
+    deadline = time.monotonic() + 20.0
+    while stream.sent < 120 and time.monotonic() < deadline:
+        time.sleep(0.05)
+    stream.stop()
+    assert stream.sent >= 120, f"only {stream.sent} commands sent"
+    assert clock.readings >= 46, "the clock never stalled past the stream gap"
+    assert arm.broken == []
