@@ -88,7 +88,7 @@ def test_a_fault_is_one_line_an_error_event_and_the_commands_stop(box, session, 
         assert len(box.commands) == received and box.requests[wire.CLEAN_ERR] == 0
         assert session.runner.stats().connects == 1
         box.operator_clear()
-    assert log.wait(lambda: log.count("connected") == 2, timeout_s=5.0), log.events
+    assert log.wait(lambda: log.count("connected") == 2, timeout_s=10.0), log.events  # the SDK reconnects
     received = len(box.commands)
     assert log.wait(lambda: len(box.commands) > received + 20, timeout_s=3.0)  # commanded again
     assert box.requests[wire.CLEAN_ERR] == 0

@@ -62,3 +62,14 @@ def record_what_is_sent(rec: LiveSession) -> dict[str, RecordingPort]:
     doubles = {k: RecordingPort(p) for k, p in rec.loop.actuators.items()}
     rec.loop.actuators = doubles
     return doubles
+
+
+def wait_opened(rec: LiveSession, timeout_s: float = 10.0) -> None:
+    """Wait until every device runner of a started session has opened its device: a datagram sent to a
+    VMC receiver before its socket is bound is lost where nothing can count it."""
+    deadline = time.monotonic() + timeout_s
+    while not all(r.connected for r in rec.runners.values()):
+        if time.monotonic() > deadline:
+            closed = [n for n, r in rec.runners.items() if not r.connected]
+            raise AssertionError(f"devices not opened within {timeout_s} s: {closed}")
+        time.sleep(0.01)

@@ -29,15 +29,18 @@ WANTED = {"/robot_description", "/tf", "/arm/arm/state", "/camera/cam_front/imag
 
 
 async def _watch(port: int, seconds: float, connect_within: float = 20.0,
-                 protocol: str = "foxglove.sdk.v1") -> tuple[dict, dict]:
-    """Connect, subscribe to every channel as it is advertised, and collect for `seconds` or until the server
-    goes away: returns (channels by topic, messages (log time, payload bytes) by topic)."""
+                 protocol: str = "foxglove.sdk.v1", enough=None) -> tuple[dict, dict]:
+    """Connect, subscribe to every channel as it is advertised, and collect for `seconds`, until the server
+    goes away or until `enough(got)`: returns (channels by topic, messages (log time, payload bytes) by
+    topic)."""
     import websockets
 
     deadline = time.monotonic() + connect_within
     while True:
         try:
-            ws = await websockets.connect(f"ws://127.0.0.1:{port}", subprotocols=[protocol], max_size=None)
+            # leaving mid-stream, the default 10 s close would wait for the server's backlog
+            ws = await websockets.connect(f"ws://127.0.0.1:{port}", subprotocols=[protocol], max_size=None,
+                                          close_timeout=1.0)
             assert ws.subprotocol == protocol
             break
         except OSError:
@@ -66,6 +69,8 @@ async def _watch(port: int, seconds: float, connect_within: float = 20.0,
             elif frame[0] == 0x01:  # message data: opcode, subscription id, log time, payload
                 sub, log_time = struct.unpack_from("<IQ", frame, 1)
                 got.setdefault(by_sub[sub], []).append((log_time, bytes(frame[13:])))
+                if enough is not None and enough(got):
+                    break
     finally:
         await ws.close()
     return channels, got
@@ -77,6 +82,13 @@ def _decode(channel: dict, data: bytes):
     return decoder_for(channel["schemaName"], channel["schemaEncoding"], schema, channel["encoding"])(data)
 
 
+def _enough(got: dict) -> bool:
+    """What test_record_serves_the_files_topics_live_with_the_robot checks, with some to spare (a fixed
+    window got too few camera images on a busy machine)."""
+    return (len(got.get("/tf", ())) > 60 and len(got.get("/arm/arm/state", ())) > 60
+            and len(got.get("/camera/cam_front/image", ())) > 12 and "/robot_description" in got)
+
+
 @pytest.fixture(scope="module")
 def live(tmp_path_factory):
     path = tmp_path_factory.mktemp("live") / "s.mcap"
@@ -84,7 +96,7 @@ def live(tmp_path_factory):
     result = {}
     rec.start()
     try:
-        watcher = threading.Thread(target=lambda: result.update(zip(("channels", "got"), asyncio.run(_watch(rec.view.port, 2.5)))))
+        watcher = threading.Thread(target=lambda: result.update(zip(("channels", "got"), asyncio.run(_watch(rec.view.port, 20.0, enough=_enough)))))
         watcher.start()
         rec.loop.control("start", task="pick_place")
         time.sleep(0.5)

@@ -12,6 +12,7 @@ from teleprev.live.session import LiveSession, RecordOptions
 from teleprev.session.reader import SessionReader
 from teleprev.session.summary import device_lost, summarize
 from tests.helpers.cli import teleprev
+from tests.helpers.sessions import wait_opened
 from tests.helpers.vmc import VmcSender, bone, bundle, finger_messages, free_port, msg, rig_text
 
 GLOVE, SUIT = "/glove/glove/hand", "/suit/suit/wrist"
@@ -29,6 +30,7 @@ def test_bad_bundles_are_counted_and_skipped_and_the_glove_and_suit_keep_recordi
     rec = LiveSession(RecordOptions(out=tmp_path / "s.mcap", rig=rig))
     rec.start()
     try:
+        wait_opened(rec)
         sender.start(rate_hz=60.0)
         time.sleep(0.5)
         finger = bone("RightIndexProximal", (0.03, 0, 0), (1e300, 0, 0, 1), double=True)
@@ -65,6 +67,7 @@ def test_a_glove_that_dies_mid_session_stops_the_robot(tmp_path):
     rec = LiveSession(RecordOptions(out=out, rig=rig))
     rec.start()
     try:
+        wait_opened(rec)
         sender.start(rate_hz=60.0)
         assert rec.wait_connected(5.0) == []
         rec.loop.control("start", task="pick_place")
@@ -146,6 +149,7 @@ def test_a_flood_loses_frames_and_every_lost_one_is_counted_per_device(tmp_path)
     rec = LiveSession(RecordOptions(out=tmp_path / "s.mcap", rig=rig))
     rec.start()
     try:
+        wait_opened(rec)
         for d in frames[:40]:  # a calm start: the sender's frame period is learnt
             sender.send(d)
             time.sleep(0.005)

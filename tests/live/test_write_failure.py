@@ -4,6 +4,7 @@ what was flushed stays readable, and `teleprev record` exits non-zero with one l
 from __future__ import annotations
 
 import os
+import threading
 import time
 
 import numpy as np
@@ -13,6 +14,22 @@ from teleprev.errors import SessionError
 from teleprev.session.recover import recover
 from tests.helpers.faults import has_traceback, run_cli, small_disk
 from tests.helpers.sessions import record_what_is_sent
+
+
+def fill_after_flush(writer, timeout_s: float = 5.0) -> None:
+    """Swap the session file for /dev/full right after the writer's next flush, on its own thread."""
+    swapped, flush = threading.Event(), writer.flush
+
+    def flush_then_fill():
+        flush()
+        if not swapped.is_set():
+            full = os.open("/dev/full", os.O_WRONLY)
+            os.dup2(full, writer._file.fileno())
+            os.close(full)
+            swapped.set()
+
+    writer.flush = flush_then_fill
+    assert swapped.wait(timeout_s), "the recorder did not flush"
 
 
 def test_a_full_disk_stops_the_robot_and_the_preview_says_why(tmp_path):
@@ -31,10 +48,10 @@ def test_a_full_disk_stops_the_robot_and_the_preview_says_why(tmp_path):
             time.sleep(0.5)
         time.sleep(0.5)
         assert rec.loop.snapshot.mode == "execute", rec.loop.snapshot.message
-        # From here every write the recorder makes fails with ENOSPC, as on a disk that just filled up.
-        full = os.open("/dev/full", os.O_WRONLY)
-        os.dup2(full, rec.recorder._writer._file.fileno())
-        os.close(full)
+        # From here every write the recorder makes fails with ENOSPC, as on a disk that just filled up. The
+        # swap lands right after a flush: between a flush's write and its fsync, fsync on /dev/full gives
+        # EINVAL (a character device cannot sync), which no full disk gives.
+        fill_after_flush(rec.recorder._writer)
         failed_at = time.monotonic()
         deadline = failed_at + 10
         while rec.loop.snapshot.mode != "preview" and time.monotonic() < deadline:
