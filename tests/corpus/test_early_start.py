@@ -19,6 +19,8 @@ FIXTURE = Path(__file__).parents[1] / "fixtures" / "sim_v2.mcap"
 # Replaces the first thing each command does after choosing its workers, and says whether a fork server
 # was running by then. Fork servers are per process: a fresh interpreter for each case.
 DRIVER = textwrap.dedent("""
+    import os
+    import signal
     import sys
     from multiprocessing import forkserver
 
@@ -26,7 +28,10 @@ DRIVER = textwrap.dedent("""
     import teleprev.export.run as run
 
     def first_work(*args, **kwargs):
-        print("server running:", forkserver._forkserver._forkserver_pid is not None, flush=True)
+        pid = forkserver._forkserver._forkserver_pid
+        print("server running:", pid is not None, flush=True)
+        if pid is not None:  # a server still in its preload would hold the test's pipe until lerobot's import is done
+            os.kill(pid, signal.SIGKILL)
         raise SystemExit(3)
 
     run._open_all = first_work
