@@ -92,9 +92,10 @@ class DynamixelBus(Protocol):
 class SdkDynamixelBus:
     """DynamixelBus over dynamixel_sdk (PortHandler, PacketHandler 2.0, GroupSyncRead/Write)."""
 
-    def __init__(self, port: str, baudrate: int = BAUDRATE, sdk=None):
+    def __init__(self, port: str, baudrate: int = BAUDRATE, sdk=None, reply_margin_ms: float = 0.0):
         self.port_name = port
         self.baudrate = baudrate
+        self.reply_margin_ms = reply_margin_ms
         self.where = f"Dynamixel bus {port}"
         self._sdk = sdk
         self.port = None
@@ -106,6 +107,8 @@ class SdkDynamixelBus:
         sdk = self._sdk or LeapHand.import_sdk()
         self._sdk = sdk
         self.port = sdk.PortHandler(self.port_name)
+        if self.reply_margin_ms:
+            _add_reply_margin(self.port, self.reply_margin_ms)
         self.packet = sdk.PacketHandler(2.0)
         try:
             opened = self.port.openPort() and self.port.setBaudRate(self.baudrate)
@@ -178,6 +181,19 @@ class SdkDynamixelBus:
                 pass  # the adapter is already gone
 
 
+def _add_reply_margin(port, margin_ms: float) -> None:
+    """Wait `margin_ms` longer than the SDK does for each status packet (its own wait is about 34 ms for a
+    sync read): every timeout the SDK sets on this port, it sets with the margin added."""
+    for name in ("setPacketTimeout", "setPacketTimeoutMillis"):
+        set_timeout = getattr(port, name)
+
+        def with_margin(value, set_timeout=set_timeout):
+            set_timeout(value)
+            port.packet_timeout += margin_ms
+
+        setattr(port, name, with_margin)
+
+
 @dataclass
 class LeapSettings:
     port: str = "/dev/ttyUSB0"  # the U2D2's serial device (COM3 on Windows)
@@ -186,6 +202,9 @@ class LeapSettings:
     kd: int = 200
     current_limit_ma: int = 350  # Lite 350, Full 550 (XC330 goal current is in mA)
     hardware_check_every: int = 9  # polls between reads of the motors' Hardware Error Status (10 Hz at 90 Hz)
+    # Added to the SDK's wait for a reply. Leave it out for real hardware (a motor answers in microseconds);
+    # an emulated bus that shares the host's cores with the session may need it (`teleprev devices emulate leap`).
+    reply_margin_ms: float = 0.0
 
     def __post_init__(self):
         if not self.port:
@@ -198,6 +217,8 @@ class LeapSettings:
             raise ValueError(f"current_limit_ma must be 1..1000, got {self.current_limit_ma}")
         if not 1 <= self.hardware_check_every <= 1000:
             raise ValueError(f"hardware_check_every must be 1..1000, got {self.hardware_check_every}")
+        if not 0 <= self.reply_margin_ms <= 1000:
+            raise ValueError(f"reply_margin_ms must be in [0, 1000], got {self.reply_margin_ms}")
 
 
 class LeapHand(PolledActuator[LeapSettings], kind="hand", sdk_module="dynamixel_sdk", extra="leap"):
@@ -207,7 +228,7 @@ class LeapHand(PolledActuator[LeapSettings], kind="hand", sdk_module="dynamixel_
         robot = context.robot if _has_joint(context.robot, "0") else "leap_hand_right"  # the hand alone otherwise
         super().__init__(name, settings, context, robot, tuple(str(i) for i in MOTOR_IDS),
                          where=f"device {name!r} (LEAP Hand on {settings.port})")
-        self.bus: DynamixelBus = bus or SdkDynamixelBus(settings.port)
+        self.bus: DynamixelBus = bus or SdkDynamixelBus(settings.port, reply_margin_ms=settings.reply_margin_ms)
         self._polls = 0
         self._retried = 0
 

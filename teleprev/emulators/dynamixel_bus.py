@@ -36,6 +36,7 @@ FAULTS = ("overload", "overheating", "input_voltage", "silent", "bad_crc", "unpl
 HARDWARE_FAULTS = {"overload": wire.OVERLOAD, "overheating": wire.OVERHEATING, "input_voltage": wire.INPUT_VOLTAGE}
 MOTOR_IDS = tuple(range(16))
 OPEN_HAND = 2048  # ticks: the LEAP Hand's flat open hand
+REPLY_MARGIN_MS = 150.0  # the rig keys' reply_margin_ms: the emulator shares the host's cores with the session
 NO_LOAD_SPEED = 65 * 4096 / 60  # ticks/s: about 65 rev/min at the output
 
 
@@ -172,7 +173,9 @@ class DynamixelBus:
         self.stop()
 
     def rig_keys(self, name: str = "hand") -> str:
-        return f'[devices.{name}]\nplugin = "leap.hand"\nport = "{self.port}"\n'
+        # The bus answers from a thread on this host's cores: the margin keeps a busy host from reading as
+        # a silent motor (a real bus needs none).
+        return f'[devices.{name}]\nplugin = "leap.hand"\nport = "{self.port}"\nreply_margin_ms = {REPLY_MARGIN_MS:g}\n'
 
     # ---- faults ---------------------------------------------------------------------------------------
     def inject(self, kind: str, motor: int = 0) -> None:

@@ -39,6 +39,7 @@ HOME = (0.0, -0.27, -0.11, 0.0, -0.85, -1.571)  # the sim arm's home: palm forwa
 FIRMWARE = "2.6.0"
 SERVO_WINDOW_S = (0.01, 0.03)  # a servo target is taken to be meant over the time since the last one, within these
 SPEED_TOLERANCE = 0.10
+REPLY_TIMEOUT_S = 0.3  # the rig keys' reply_timeout_s: the emulator shares the host's cores with the session
 IDLE_AFTER_S = 0.2  # a servo-mode arm with no new target for this long reports READY again
 
 
@@ -119,7 +120,10 @@ class XArmController:
         self.stop()
 
     def rig_keys(self, name: str = "arm") -> str:
-        return f'[devices.{name}]\nplugin = "xarm.arm"\nhost = "{self.host}"\ndof = {self.dof}\n'
+        # The controller answers from a thread on this host's cores: a busy host needs a longer reply
+        # timeout than a real controller's 0.1 s (the injected slow replies, 0.5 s, still fault).
+        return (f'[devices.{name}]\nplugin = "xarm.arm"\nhost = "{self.host}"\ndof = {self.dof}\n'
+                f'reply_timeout_s = {REPLY_TIMEOUT_S:g}\n')
 
     @property
     def connections(self) -> int:

@@ -15,8 +15,9 @@ import dynamixel_sdk as sdk  # the real SDK: scripts/test.sh installs the leap e
 from teleprev.clock import SessionClock
 from teleprev.devices import DeviceContext, DeviceRunner
 from teleprev.emulators import dynamixel_wire as wire
-from teleprev.emulators.dynamixel_bus import DynamixelBus
-from teleprev_devices.leap import LeapHand, LeapSettings, ticks_from_angles
+from teleprev.emulators.dynamixel_bus import REPLY_MARGIN_MS, DynamixelBus
+from teleprev.errors import DeviceError
+from teleprev_devices.leap import LeapHand, LeapSettings, SdkDynamixelBus, ticks_from_angles
 from tests.helpers.hardware import CommandStream, EventLog
 
 
@@ -34,7 +35,9 @@ def bus():
 class Session:
     def __init__(self, bus):
         self.clock = SessionClock()
-        self.hand = LeapHand("hand", LeapSettings(port=bus.port), DeviceContext(self.clock))
+        # the margin the emulator's rig keys give: the bus answers from a thread of this busy process
+        self.hand = LeapHand("hand", LeapSettings(port=bus.port, reply_margin_ms=REPLY_MARGIN_MS),
+                             DeviceContext(self.clock))
         self.log = EventLog()
         self.runner = DeviceRunner(self.hand, self.log.sink, self.clock, reconnect_s=0.1).start()
         assert self.log.wait(lambda: self.log.count("connected") == 1), self.log.events
@@ -122,3 +125,28 @@ def test_a_port_that_is_not_there(tmp_path):
     hand = LeapHand("hand", LeapSettings(port=str(tmp_path / "ttyUSB9")), DeviceContext(SessionClock()))
     with pytest.raises(Exception, match=r"Dynamixel bus .*ttyUSB9: cannot open the serial port"):
         hand.connect()
+
+
+def _silent_read_s(bus, margin_ms: float) -> float:
+    """How long a sync read of a silent motor waits before the SDK gives up, with `margin_ms` added."""
+    link = SdkDynamixelBus(bus.port, reply_margin_ms=margin_ms)
+    link.open()
+    try:
+        t = time.monotonic()
+        with pytest.raises(DeviceError, match="motor 3 did not answer"):
+            link.sync_read([3], 132, 4)  # present position
+        return time.monotonic() - t
+    finally:
+        link.close()
+
+
+def test_a_reply_margin_waits_longer_for_a_silent_motor_and_still_faults(bus):
+    bus.inject("silent", motor=3)
+    try:
+        plain, margined = _silent_read_s(bus, 0.0), _silent_read_s(bus, 150.0)
+    finally:
+        bus.operator_clear()
+    assert plain < 0.15  # the SDK's own wait: about 34 ms
+    assert margined - plain > 0.12  # 150 ms more, give or take the host's scheduling
+    with pytest.raises(ValueError, match="reply_margin_ms"):
+        LeapSettings(port=bus.port, reply_margin_ms=-1)
