@@ -49,6 +49,18 @@ class Load:
             p.join()
 
 
+def steal_ms() -> float | None:
+    """The hypervisor's steal time so far, all CPUs (/proc/stat): CPU time the host gave to other machines
+    while this one wanted it. No priority inside the machine wins it back, so the benches print it beside
+    their timing figures. None where the kernel does not count it."""
+    try:
+        with open("/proc/stat") as f:
+            fields = f.readline().split()
+        return int(fields[8]) * 1000.0 / os.sysconf("SC_CLK_TCK")
+    except (OSError, IndexError, ValueError):
+        return None
+
+
 def time_calls(fn, args_list, repeat: int = 1) -> list[float]:
     """Seconds per call of fn(*args) for each args in args_list (best of `repeat` per item)."""
     out = []

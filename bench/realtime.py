@@ -357,18 +357,22 @@ def main() -> None:
                 rig = vmc_rig(folder, port)
                 device = ExternalDevice(HumanLikeSender(port, seed=k) if kind == "vmc_human" else WristTwister(port))
                 device.__enter__()
+            stolen = common.steal_ms()
             try:
                 code = record(rig, out, seconds, 2, 1.5 if kind == "limit" or args.quick else 3.0, size)
             finally:
                 if device is not None:
                     device.__exit__()
+            after = common.steal_ms()
             m = measure(out, kind, kind == "fault")
             m["returncode"] = code
+            m["steal_ms"] = None if stolen is None or after is None else after - stolen
             results.append(m)
             recorded.append(out)
             print(f"{out.name}: rc {code}, faults {m['arm_faults']}, audit {'ok' if m['audit_ok'] else 'FAILED'}, "
                   f"gap {m['gap_ms']:.1f} ms, late p99 {m['late_ms_p99']:.2f} ms, accel x{m['accel_ratio']:.3f}, "
-                  f"jerk x{m['jerk_ratio']:.3f}, reproduces {m['bit_identical']}", file=sys.stderr, flush=True)
+                  f"jerk x{m['jerk_ratio']:.3f}, reproduces {m['bit_identical']}, host steal {m['steal_ms']} ms",
+                  file=sys.stderr, flush=True)
         mech = mechanisms(5.0 if args.quick else 10.0)
     export_ratio = export_audit([r for r, m in zip(recorded, results) if m["kind"] == "sim"][:2], folder)
     rs = [r for m in results for r in m["hand_r"]]
@@ -391,6 +395,7 @@ def main() -> None:
         "hand_lag_ms_p50": float(np.median(lags)) if lags else float("nan"),
         "sender_realtime": all(bool(m["realtime"]) for m in results),
         "busy_processes": args.busy,
+        "host_steal_ms_max": max((m["steal_ms"] for m in results if m["steal_ms"] is not None), default=None),
         **mech,
     }
     common.report(f"bench/realtime.py: {len(results)} sessions of {seconds:g} s beside {args.busy} busy processes",
