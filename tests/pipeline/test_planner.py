@@ -151,6 +151,33 @@ def test_a_late_first_step_after_an_engage_keeps_the_hand_cap(pipeline, first_st
     _within(pipeline, sent)
 
 
+def test_a_joint_braking_onto_its_limit_is_held_there_alone(pipeline):
+    """The last resort of a brake: joint6 a hair past its lower limit's way while joint4 brakes fast. Only
+    joint6 is held at its limit; joint4 goes on braking within the acceleration limit (holding the whole
+    arm at rest at once had commanded 89 rad/s^2 on joint4 under load)."""
+    from teleprev.pipeline.trajectory import JointMotion
+
+    arm = pipeline.motion.arm
+    planner = _planner(pipeline)
+    s = Script(pipeline)
+    t0 = 1_000_000_000
+    planner.adopt(s.target(t0, HOME))
+    planner.adopt(s.mode("execute", t0 + 1))
+    first = planner.tick(t0 + 1)
+    q = HOME.copy()
+    q[5] = arm.lower[5] + 1e-7
+    v = np.zeros(6)
+    v[3], v[5] = 0.8, -0.05
+    planner.state.arm.motion = JointMotion(q, v, np.zeros(6))
+    planner.adopt(s.mode("preview", t0 + 2))
+    out = planner.tick(t0 + 1 + PERIOD)
+    assert "arm_limit_held" in out.flags
+    assert out.arm[5] == arm.lower[5] and out.arm_v[5] == 0.0
+    assert out.arm_v[3] > 0.5  # joint4 still braking, not stopped at once
+    assert abs(out.arm_v[3] - 0.8) <= arm.acceleration[3] * PERIOD / 1e9 * (1 + 1e-9)
+    assert first is not None
+
+
 def test_a_pause_in_the_ticks_starts_again_from_rest_where_the_commands_stood(pipeline):
     """A sender that starved for 120 ms: the controller stood at the last command meanwhile, so the next
     commands start from rest there (measured as the controller measures a resumed stream: within limits)."""
