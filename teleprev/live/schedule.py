@@ -58,11 +58,10 @@ class EpisodeTimes:
         return MARKS[self.marks[episode % len(self.marks)]] if self.marks else None
 
     def describe(self) -> str:
-        """The plan in one line (`teleprev info`)."""
-        engage = "stays in preview" if self.engage_after_s is None else f"engages after {self.engage_after_s:g} s"
+        """The plan in one line (`teleprev info`): "4 x 1.5 s, resets 1 s, engage after 0.3 s, marks yf-"."""
+        engage = "preview only" if self.engage_after_s is None else f"engage after {self.engage_after_s:g} s"
         marks = f", marks {self.marks}" if self.marks else ""
-        return (f"{self.episodes} episode(s) of {self.episode_s:g} s, resets of {self.reset_s:g} s "
-                f"({self.total_s:g} s in all); each {engage}{marks}")
+        return f"{self.episodes} x {self.episode_s:g} s, resets {self.reset_s:g} s, {engage}{marks}"
 
     def to_record(self, rest_s: float) -> dict[str, str]:
         """The metadata record (strings); rest_s: how long before an episode's end it switches to preview."""
