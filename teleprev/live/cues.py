@@ -65,7 +65,7 @@ class Cues:
         except queue.Full:
             pass
 
-    def close(self, timeout_s: float = 2.0) -> None:
+    def close(self, timeout_s: float = 0.5) -> None:
         """Let what is queued be said (up to timeout_s), then stop the thread."""
         if self._thread is not None:
             try:
