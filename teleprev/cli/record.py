@@ -19,7 +19,18 @@ def record(
                                   "place it in the bowl' (default: the rig's \\[tasks] entry); exports give it to the "
                                   "policy, the id stays in the session."),
     duration: Optional[float] = typer.Option(None, "--duration", help="Run unattended for this many seconds, then stop."),
-    episodes: int = typer.Option(1, "--episodes", min=1, help="Unattended: split the duration into this many episodes."),
+    episodes: int = typer.Option(1, "--episodes", min=1, help="With --duration: split it into this many episodes; "
+                                 "with --episode-time: record this many timed episodes."),
+    episode_time: Optional[float] = typer.Option(
+        None, "--episode-time", help="Timed episodes of this many seconds each (instead of --duration), with "
+                                     "--reset-time between them; keys n, d, a still work."),
+    reset_time: Optional[float] = typer.Option(
+        None, "--reset-time", help="With --episode-time: seconds of reset between episodes, the robot in preview (default 0)."),
+    marks: Optional[str] = typer.Option(
+        None, "--marks", help="With --episode-time: mark the episodes success (y), failure (f) or not (-) in turn, "
+                              "one character per episode, cycling (e.g. yf-)."),
+    cues: bool = typer.Option(True, "--cues/--no-cues", help="With --episode-time: the terminal bell, and spoken "
+                                                             "words where spd-say, espeak or say is installed, at each boundary."),
     engage_after: Optional[float] = typer.Option(
         None, "--engage-after", help="Unattended: switch to execute this many seconds into each episode (default: stay in preview)."
     ),
@@ -43,27 +54,36 @@ def record(
 
     from teleprev.cli.signals import StopSignals
     from teleprev.live.session import RecordOptions, LiveSession, default_session_path
-    from teleprev.live.run import run_interactive, run_script, print_summary
+    from teleprev.live.cues import Cues
+    from teleprev.live.run import run_interactive, run_script, run_timed, print_summary
     from teleprev import topics
 
-    check_options(rig, task, duration, engage_after, connect_timeout)
+    plan = check_options(rig, task, duration, engage_after, connect_timeout, episodes, episode_time, reset_time, marks)
     console = Console()
     preview = preview and console.is_terminal  # a redrawn screen in a log file is noise: headless there
     options = RecordOptions(
         out=out or default_session_path(task), rig=rig, models=models, task=task, task_text=task_text,
         operator=operator, participant=participant, condition=condition, practice=practice,
-        connect_timeout_s=connect_timeout, foxglove=foxglove,
+        connect_timeout_s=connect_timeout, foxglove=foxglove, episode_plan=plan,
     )
     unconnected: list[str] = []
     with StopSignals() as signals:
         recording = LiveSession(options)
         if recording.view is not None:
             console.print(f"Foxglove: open connection {recording.view.url}", highlight=False)
+        if plan is not None and plan.engage_after_s is not None and \
+                plan.engage_after_s + recording.preview_lead_s >= plan.episode_s:
+            console.print(f"[yellow]warning:[/] episodes of {plan.episode_s:g} s leave no time to engage after "
+                          f"{plan.engage_after_s:g} s: the robot is back in preview {recording.preview_lead_s:.2f} s "
+                          "before each end, so it stays in preview", highlight=False)
         try:
             recording.start()
-            if duration is not None or not preview:  # nobody watches the device table: a dead rig must fail
-                unconnected = recording.wait_connected()
-            if not unconnected and duration is not None:
+            if duration is not None or plan is not None or not preview:  # nobody watches the device table, or
+                unconnected = recording.wait_connected()  # the clock runs: a dead rig must fail
+            if not unconnected and plan is not None:
+                run_timed(recording, plan, console if preview else None, view, fps,
+                          cues=Cues.for_terminal(console.file) if cues else Cues(None, None))
+            elif not unconnected and duration is not None:
                 run_script(recording, duration, episodes, engage_after, console if preview else None, view, fps)
             elif not unconnected:
                 run_interactive(recording, console, view, fps, show=preview)
@@ -95,10 +115,25 @@ def record(
 
 
 def check_options(rig: Optional[Path], task: str, duration: Optional[float], engage_after: Optional[float],
-                  connect_timeout: float) -> None:
-    """The values no device has to be opened to refuse: one line each (teleprev.errors.ConfigError)."""
+                  connect_timeout: float, episodes: int = 1, episode_time: Optional[float] = None,
+                  reset_time: Optional[float] = None, marks: Optional[str] = None):
+    """The values no device has to be opened to refuse: one line each (teleprev.errors.ConfigError).
+    Returns the plan of timed episodes (--episode-time), or None."""
     from teleprev.errors import ConfigError
+    from teleprev.live.schedule import EpisodeTimes
     from teleprev.rig import load_rig
+
+    plan = None
+    if episode_time is not None:
+        if duration is not None:
+            raise ConfigError("--episode-time and --duration both set how long the session runs: pass one "
+                              "(--duration splits itself evenly into --episodes)")
+        plan = EpisodeTimes(episodes, episode_time, 0.0 if reset_time is None else reset_time, engage_after,
+                            marks or "").check()
+    else:
+        for name, value in (("--reset-time", reset_time), ("--marks", marks)):
+            if value is not None:
+                raise ConfigError(f"{name} goes with --episode-time (timed episodes)")
 
     for name, value in (("--duration", duration), ("--connect-timeout", connect_timeout)):
         if value is not None and not 0 < value < float("inf"):
@@ -107,3 +142,4 @@ def check_options(rig: Optional[Path], task: str, duration: Optional[float], eng
         raise ConfigError(f"--engage-after must be 0 or more seconds, got {engage_after:g}")
     if task:
         load_rig(rig).check_task(task, "--task")
+    return plan

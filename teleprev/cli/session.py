@@ -27,6 +27,20 @@ def _size(n: int) -> str:
     return str(n)
 
 
+def _plan_line(record: dict[str, str]) -> str:
+    """The timed-episodes plan a session was recorded to, in one line (its fields as they are, where the
+    record does not read as a plan)."""
+    from rich.markup import escape
+
+    from teleprev.live.schedule import EpisodeTimes
+
+    try:
+        line = EpisodeTimes.from_record(record).describe()
+    except (KeyError, ValueError):
+        line = ", ".join(f"{k}={v}" for k, v in sorted(record.items()))
+    return escape(line)
+
+
 _NOT_SKIPPED = ("received", "loop_dropped", "sink_errors", "failures")
 
 
@@ -60,6 +74,9 @@ def info(
     for key in ("operator", "task", "participant", "condition"):
         if sess.get(key):
             head.add_row(key, sess[key])
+    plan = s.metadata.get("episode_plan")
+    if plan:
+        head.add_row("episode plan", _plan_line(plan))
     if tp:
         version, fmt = tp.get("software_version", "?"), tp.get("format_version", "?")
         head.add_row("recorded by", f"teleprev {version} (format {fmt})")

@@ -127,6 +127,7 @@ class SessionLoop:
         self._stopping = False
         self.fault = ""  # why the session stays in preview until the operator engages (a device failed)
         self._fault_told = False
+        self.held = ""  # why execute is refused for now (a reset between timed episodes), or ""
 
     # ---- producers (any thread) ----------------------------------------------------------------
     def sink(self, sample: Sample, receive_ns: int) -> None:
@@ -139,7 +140,10 @@ class SessionLoop:
     def control(self, action: str, **data) -> None:
         """For the operator (keys) and scripts: 'mode' (mode=), 'start' (task=), 'stop', 'discard',
         'outcome' (success=), 'operator' (event=, detail=), 'halt' (why=: back to preview, which brakes
-        the robot to rest, and execute is refused from then on). Controls are never dropped."""
+        the robot to rest, and execute is refused from then on), 'hold' (why=: the same until a 'hold'
+        with why="" lifts it; timed episodes' resets). 'start', 'stop' and 'discard' take at_ns=: the
+        session-clock instant the episode event is stamped with (when a schedule or a key asked for it,
+        however late the loop gets to it; default: when the loop does). Controls are never dropped."""
         self._queue.put((None, (action, data)))
 
     def backlog(self) -> int:
@@ -225,9 +229,10 @@ class SessionLoop:
         self._last_ns = max(t, self._last_ns + 1)
         return self._last_ns
 
-    def _event(self, topic: str, schema: str, data: dict, t_ns: int | None = None) -> int:
+    def _event(self, topic: str, schema: str, data: dict, t_ns: int | None = None, stamp_ns: int | None = None) -> int:
+        """Log an event at t_ns (made strictly increasing), stamped stamp_ns (default: its log time)."""
         t = self._stamp(t_ns)
-        self._log(Logged(topic, t, Event(t, schema, data)))
+        self._log(Logged(topic, t, Event(t if stamp_ns is None else stamp_ns, schema, data)))
         return t
 
     def _sample(self, sample: Sample, receive_ns: int) -> None:
@@ -362,6 +367,9 @@ class SessionLoop:
         if action == "halt":
             self.halted = data["why"]
             action, data, message = "mode", {"mode": "preview", "reason": "halt"}, f"{self.halted}: robot stopped"
+        elif action == "hold":
+            self.held = data.get("why", "")
+            action, data = ("mode", {"mode": "preview", "reason": data.get("reason", "hold")}) if self.held else ("", {})
         if action == "mode":
             mode = data["mode"]
             t = self._stamp(now)
@@ -369,6 +377,8 @@ class SessionLoop:
                 return  # already in it (a retried engage accepted meanwhile): nothing to switch or record
             if self.halted and mode == "execute":
                 refused = self.halted
+            elif self.held and mode == "execute":
+                refused = self.held
             elif self.fault and mode == "execute" and data.get("reason") == "script":
                 refused = f"{self.fault} (an unattended session does not engage again after a fault)"
                 if not self._fault_told:  # why it stays in preview, once per fault
@@ -391,19 +401,21 @@ class SessionLoop:
                     self.fault = ""  # the operator engaged again
         elif action in ("start", "stop", "discard", "outcome"):
             tracker = self.episodes
+            at = data.get("at_ns")
+            at = now if at is None else int(at)
             if action == "start":
                 task = data.get("task") or tracker.task or ""
-                events = tracker.start(task, now)
+                events = tracker.start(task, at)
                 if self.on_episode_start:
                     self.on_episode_start(task)
             elif action == "stop":
-                events = tracker.stop(now)
+                events = tracker.stop(at)
             elif action == "discard":
-                events = tracker.discard(now)
+                events = tracker.discard(at)
             else:
                 events = tracker.outcome(bool(data.get("success", True)))
             for e in events:
-                self._event(topics.EPISODE, "teleprev.EpisodeEvent", e, now)
+                self._event(topics.EPISODE, "teleprev.EpisodeEvent", e, now, stamp_ns=at)
         elif action == "operator":
             self._event(topics.OPERATOR, "teleprev.OperatorEvent", {"event": data.get("event", ""), "detail": data.get("detail", "")}, now)
         self.snapshot = replace(

@@ -1,4 +1,5 @@
-"""Driving a LiveSession: from the keyboard with the terminal preview, or from a script (unattended).
+"""Driving a LiveSession: from the keyboard with the terminal preview, from a script (unattended), or
+through a plan of timed episodes (run_timed: the keys still work, and so does an unattended run).
 
 The preview redraws on the main thread while the session loop runs on its own; the redraw rate is
 measured and kept in `PreviewStats` so the pipeline benchmark can report it. The commands never wait for
@@ -9,7 +10,9 @@ while the loop has a backlog.
 
 from __future__ import annotations
 
+import threading
 import time
+from collections import deque
 from dataclasses import dataclass, field
 
 from rich.console import Console
@@ -19,6 +22,8 @@ from teleprev.preview.dashboard import Dashboard
 from teleprev.preview.keys import KeyReader
 from teleprev.preview.robot_view import RobotView
 from teleprev.robot.model import load_robot
+from teleprev.live.cues import Cues
+from teleprev.live.schedule import EpisodeTimes, Period, Schedule
 from teleprev.live.session import LiveSession
 from teleprev.session.summary import PREVIEW_ONLY, device_lost
 
@@ -83,6 +88,10 @@ def handle_key(recording: LiveSession, key: str, quit_flag: list) -> None:
         loop.control("start", task=recording.task)
     elif key == "d":
         loop.control("discard")
+    elif key == "a":  # the running (or last) episode discarded, and recorded again from now
+        loop.control("mode", mode="preview")
+        loop.control("discard")
+        loop.control("start", task=recording.task)
     elif key in ("y", "f"):
         loop.control("outcome", success=key == "y")
     elif key == "r":
@@ -92,11 +101,11 @@ def handle_key(recording: LiveSession, key: str, quit_flag: list) -> None:
         quit_flag.append(True)
 
 
-def _frame(dashboard: Dashboard, recording: LiveSession, console: Console):
+def _frame(dashboard: Dashboard, recording: LiveSession, console: Console, countdown=None):
     size = console.size
     snap = recording.loop.snapshot
     return dashboard.render(snap, recording.device_rows(), size.width, size.height, recording.clock.now_ns(),
-                            camera=snap.camera)
+                            camera=snap.camera, countdown=countdown)
 
 
 def run_interactive(recording: LiveSession, console: Console, view: str, fps: float, show: bool = True) -> PreviewStats:
@@ -122,6 +131,40 @@ def run_interactive(recording: LiveSession, console: Console, view: str, fps: fl
 ENGAGE_RETRY_S = 0.25
 
 
+class Engager:
+    """An unattended engage: execute asked for (reason "script", which the loop refuses after a fault
+    until the operator engages with a key), and asked again every ENGAGE_RETRY_S while the pipeline
+    refuses (e.g. nothing previewed yet), until one is accepted or the window closes. So an episode
+    engages once. Times are seconds on any clock the caller keeps to."""
+
+    def __init__(self, loop):
+        self.loop = loop
+        self.until: float | None = None
+        self._asked = 0.0
+        self._before = 0
+
+    def open(self, now: float, until: float) -> None:
+        self._before = self.loop.stats.engages
+        self.loop.control("mode", mode="execute", reason="script")
+        self.until, self._asked = until, now
+
+    def close(self) -> None:
+        self.until = None
+
+    def poll(self, now: float) -> None:
+        if self.until is None:
+            return
+        if self.loop.stats.engages > self._before or now >= self.until:
+            self.until = None  # engaged (this episode asks no more), or its window is over
+        elif now - self._asked >= ENGAGE_RETRY_S:
+            self.loop.control("mode", mode="execute", reason="script")
+            self._asked = now
+
+    def next_s(self) -> float | None:
+        """When poll has something to do next (None: nothing)."""
+        return None if self.until is None else min(self._asked + ENGAGE_RETRY_S, self.until)
+
+
 def run_script(recording: LiveSession, duration: float, episodes: int, engage_after: float | None,
                console: Console | None = None, view: str = "side", fps: float = 25.0) -> PreviewStats:
     """Unattended: `episodes` episodes filling `duration` seconds, each engaging after `engage_after` s (asked
@@ -136,6 +179,7 @@ def run_script(recording: LiveSession, duration: float, episodes: int, engage_af
     pacer = PreviewPacer(fps, loop.backlog)
     start = time.perf_counter()
     plan = []  # (time offset, action, kwargs)
+    engager = Engager(loop)
     for k in range(max(episodes, 1)):
         t0 = k * length
         plan.append((t0, "start", {"task": recording.task}))
@@ -145,22 +189,18 @@ def run_script(recording: LiveSession, duration: float, episodes: int, engage_af
         plan.append((t0 + length - 1e-3, "stop", {}))
     if live:
         live.start()
-    # an engage the pipeline refused (e.g. nothing previewed yet) is asked again, until one is accepted
-    engage_until, asked, engaged_before = None, 0.0, 0
     try:
         while True:
             elapsed = time.perf_counter() - start
             while plan and plan[0][0] <= elapsed:
                 _, action, kwargs = plan.pop(0)
-                loop.control(action, **kwargs)
+                if action == "mode" and kwargs["mode"] == "execute":
+                    engager.open(elapsed, plan[0][0] if plan else elapsed)
+                    continue
                 if action == "mode":
-                    engage_until = plan[0][0] if kwargs["mode"] == "execute" and plan else None
-                    asked, engaged_before = elapsed, loop.stats.engages
-            if engage_until is not None and loop.stats.engages > engaged_before:
-                engage_until = None  # engaged: this episode asks no more
-            if engage_until is not None and elapsed < engage_until and elapsed - asked >= ENGAGE_RETRY_S:
-                loop.control("mode", mode="execute", reason="script")
-                asked = elapsed
+                    engager.close()
+                loop.control(action, **kwargs)
+            engager.poll(elapsed)
             if (elapsed >= duration and not plan) or recording.failure:
                 break
             if live:
@@ -174,6 +214,201 @@ def run_script(recording: LiveSession, duration: float, episodes: int, engage_af
     finally:
         if live:
             live.stop()
+    return stats
+
+
+class TimedKeys:
+    """The operator's keys during timed episodes, each stamped on the session clock as it arrives (an
+    episode that `n` ends stops then, not when the runner gets round to it)."""
+
+    def __init__(self, clock):
+        self.clock = clock
+        self._keys: deque[tuple[int, str]] = deque()
+        self._arrived = threading.Event()
+
+    def press(self, key: str) -> int:
+        """For any thread (the terminal's key reader, a test); returns the key's stamp."""
+        t = self.clock.now_ns()
+        self._keys.append((t, key))
+        self._arrived.set()
+        return t
+
+    def wait(self, timeout_s: float) -> None:
+        """Until a key arrives, or at most timeout_s."""
+        self._arrived.wait(max(0.0, timeout_s))
+
+    def take(self) -> list[tuple[int, str]]:
+        """(stamp, key) of the keys pressed since the last take, in order."""
+        self._arrived.clear()
+        got = []
+        while self._keys:
+            got.append(self._keys.popleft())
+        return got
+
+
+RESTING = "the robot rests between timed episodes (n: start the next one now)"  # why execute is refused
+
+
+class TimedRun:
+    """run_timed's state: the schedule, the current period's engage and preview instants, the keys."""
+
+    def __init__(self, recording: LiveSession, plan: EpisodeTimes, cues: Cues, keys: TimedKeys):
+        self.recording, self.plan, self.cues, self.keys = recording, plan, cues, keys
+        self.loop = recording.loop
+        self.lead_ns = round(recording.preview_lead_s * 1e9)
+        self.engager = Engager(self.loop)
+        self.schedule = Schedule(plan, recording.clock.now_ns())
+        self.quit = False
+        self.unattended = plan.engage_after_s is not None  # False after an e-stop: the operator engages
+        self.engage_ns: int | None = None  # when the current episode asks to engage (None: not, or asked)
+        self.rest_ns: int | None = None  # when it switches to preview, so that the robot rests by its end
+        self.begin(self.schedule.current)
+
+    @property
+    def period(self) -> Period | None:
+        return self.schedule.current
+
+    def begin(self, period: Period | None) -> None:
+        """Start a period at its planned start (the previous one ended there)."""
+        if period is None:
+            self.cues.cue("done")
+            return
+        if period.kind == "reset":
+            self.cues.cue("reset")
+            return
+        self.loop.control("hold", why="")
+        self.loop.control("start", task=self.recording.task, at_ns=period.start_ns)
+        self.cues.cue(f"episode {period.number + 1}")
+        after = self.plan.engage_after_s
+        self.rest_ns = period.end_ns - self.lead_ns
+        engage_ns = period.start_ns + round(after * 1e9) if self.unattended else None
+        self.engage_ns = engage_ns if engage_ns is not None and engage_ns < self.rest_ns else None
+
+    def rest(self) -> None:
+        """Back to preview and refuse execute until the next episode (the robot brakes to rest)."""
+        self.engager.close()
+        self.engage_ns = self.rest_ns = None
+        self.loop.control("hold", why=RESTING, reason="schedule")
+
+    def end(self, at_ns: int | None = None, discard: bool = False) -> None:
+        """End the current period at its planned end or early at at_ns; the next one begins."""
+        period = self.period
+        at = period.end_ns if at_ns is None else at_ns
+        if period.kind == "episode":
+            self.rest()
+            self.loop.control("discard" if discard else "stop", at_ns=at)
+            mark = None if discard else self.plan.mark(period.number)
+            if mark is not None:
+                self.loop.control("outcome", success=mark)
+        self.begin(self.schedule.advance(at_ns))
+
+    def key(self, t_ns: int, key: str) -> None:
+        period = self.period
+        if key == "n" or (key == "s" and period.kind == "reset"):
+            self.end(t_ns)
+        elif key in ("d", "a"):
+            if key == "a":
+                self.schedule.redo()
+            if period.kind == "episode":
+                self.end(t_ns, discard=True)
+            else:
+                self.loop.control("discard", at_ns=t_ns)  # the last episode (its reset goes on)
+        elif key in ("q", "\x1b"):
+            if period.kind == "episode":
+                self.rest()
+                self.loop.control("stop", at_ns=t_ns)
+            self.quit = True
+        elif key != "s":  # (s during an episode: it is running already)
+            if key == "x":  # an e-stop: no episode engages by itself any more
+                self.unattended, self.engage_ns = False, None
+                self.engager.close()
+            handle_key(self.recording, key, [])
+
+    def _catch_up(self, t_ns: int) -> None:
+        """End every period that ended by t_ns, at its planned end."""
+        while not self.done and t_ns >= self.period.end_ns:
+            self.end()
+
+    def step(self, now_ns: int) -> int:
+        """Do what is due at now_ns; the next instant something will be (ns)."""
+        for t, key in self.keys.take():  # each key in the period it was pressed in, however late seen
+            self._catch_up(t)
+            if not self.done:
+                self.key(t, key)
+        self._catch_up(now_ns)
+        period = self.period
+        if period is None or self.quit:
+            return now_ns
+        if self.engage_ns is not None and now_ns >= self.engage_ns:
+            self.engager.open(now_ns / 1e9, self.rest_ns / 1e9)
+            self.engage_ns = None
+        if self.rest_ns is not None and now_ns >= self.rest_ns:
+            self.rest()
+        self.engager.poll(now_ns / 1e9)
+        due = [period.end_ns] + [t for t in (self.engage_ns, self.rest_ns) if t is not None]
+        retry = self.engager.next_s()
+        if retry is not None:
+            due.append(round(retry * 1e9))
+        return min(due)
+
+    @property
+    def done(self) -> bool:
+        return self.period is None or self.quit
+
+    def countdown(self, now_ns: int) -> tuple[str, float] | None:
+        period = self.period
+        return None if period is None else (self.schedule.label, period.left_s(now_ns))
+
+
+def run_timed(recording: LiveSession, plan: EpisodeTimes, console: Console | None = None, view: str = "side",
+              fps: float = 25.0, cues: Cues | None = None, keys: TimedKeys | None = None) -> PreviewStats:
+    """Timed episodes on a started LiveSession (opened with RecordOptions(episode_plan=plan), so that the
+    file keeps the plan): `plan.episodes` episodes of `plan.episode_s` seconds with `plan.reset_s` seconds
+    of reset between them, every boundary planned from the plan's start. Each episode engages
+    `plan.engage_after_s` into it as run_script's do (once; never after a fault), switches back to
+    preview `recording.preview_lead_s` before its end so that the robot rests by then, and stays in
+    preview through the reset (execute is refused there). Cues (bell, spoken words) at each boundary.
+    Keys (from the terminal, or pressed on `keys`): n ends the current period, d discards the running
+    (or last) episode, a discards it and records it again, the others as in run_interactive. `console`:
+    the terminal preview with a countdown (None: headless). Returns when the plan is done, q is pressed
+    or the session fails."""
+    if recording.options.episode_plan != plan:
+        raise ValueError("run_timed: open the LiveSession with RecordOptions(episode_plan=plan), so that the "
+                         "session keeps the plan it was recorded to")
+    plan.check()
+    stats = PreviewStats()
+    clock = recording.clock
+    keys = keys or TimedKeys(clock)
+    cues = cues or Cues.for_terminal(console.file if console is not None else None)
+    dashboard = make_dashboard(recording, view) if console is not None else None
+    live = Live(console=console, auto_refresh=False, transient=False) if dashboard is not None else None
+    pacer = PreviewPacer(fps, recording.loop.backlog)
+    run = TimedRun(recording, plan, cues, keys)
+    next_frame = 0.0
+    with KeyReader(keys.press):
+        if live:
+            live.start()
+        try:
+            while not run.done and not recording.failure:
+                due_ns = run.step(clock.now_ns())
+                if run.done:
+                    break
+                if live and time.perf_counter() >= next_frame:
+                    t = time.perf_counter()
+                    live.update(_frame(dashboard, recording, console, run.countdown(clock.now_ns())), refresh=True)
+                    stats.frames += 1
+                    stats.render_s.append(time.perf_counter() - t)
+                    next_frame = time.perf_counter() + pacer.wait_after(time.perf_counter() - t)
+                wait_s = (due_ns - clock.now_ns()) / 1e9
+                if live:
+                    wait_s = min(wait_s, next_frame - time.perf_counter())
+                keys.wait(min(wait_s, 0.1))  # a key wakes the run at once
+        finally:
+            if live:
+                live.stop()
+            run.engager.close()
+            recording.loop.control("hold", why="")
+            cues.close()
     return stats
 
 

@@ -6,7 +6,7 @@
     rec.summary                          # counts, drops, where the file is
 
 `teleprev record` drives one from the keyboard and the terminal preview, or from a script (--duration,
---episodes); tests and benchmarks drive it directly.
+--episodes; timed episodes: --episode-time, --reset-time); tests and benchmarks drive it directly.
 """
 
 from __future__ import annotations
@@ -29,9 +29,12 @@ from teleprev import topics
 from teleprev.clock import SessionClock
 from teleprev.live.frames import sensor_frames
 from teleprev.live.loop import SessionLoop
+from teleprev.live.schedule import PLAN_RECORD, EpisodeTimes
 from teleprev.messages import Logged, RobotDescription
 
 URDF_MEDIA_TYPE = "application/xml"  # the rig's URDF, attached to the session as <name>.urdf
+# What a switch to preview may wait for before it reaches the sender: a busy session loop (its queue)
+PREVIEW_SLACK_S = 0.1
 
 
 @dataclass
@@ -48,6 +51,7 @@ class RecordOptions:
     queue_size: int = 8192
     connect_timeout_s: float = 5.0  # unattended: every device must have sent something by then
     foxglove: int | None = None  # a live Foxglove view on this port of 127.0.0.1 (0: any free port)
+    episode_plan: EpisodeTimes | None = None  # timed episodes (run.run_timed): kept in the file's metadata
 
 
 def default_session_path(task: str) -> Path:
@@ -102,6 +106,13 @@ class LiveSession:
         self.loop.actuators = {kind: ActuatorPort(self.devices[first[kind]], self.runners[first[kind]]) for kind in ("arm", "hand")}
         self.sender = CommandSender(CommandPlanner.for_pipeline(self.pipeline), self.clock, rig.pipeline.command_rate_hz)
         self.summary = None
+
+    @property
+    def preview_lead_s(self) -> float:
+        """How long before a timed episode's end to switch to preview so that the robot is at rest by then:
+        the commands' braking bound, plus two of the sender's ticks and PREVIEW_SLACK_S for the switch to
+        reach it."""
+        return self.pipeline.motion.stop_time_bound() + 2.0 / self.rig.pipeline.command_rate_hz + PREVIEW_SLACK_S
 
     def _recording_failed(self, exc: OSError) -> None:
         """On the recorder's writer thread, the moment a write fails (the recorder has noted it, so
@@ -166,6 +177,8 @@ class LiveSession:
         if hashes is not None:
             meta["models"] = hashes
         meta["pipeline"] = {"inputs": json.dumps(self.driver.topics.__dict__)}
+        if o.episode_plan is not None:
+            meta[PLAN_RECORD] = o.episode_plan.to_record(self.preview_lead_s)
         # The post-condition questionnaire is answered after the file is closed: it goes in a sidecar
         # next to the session, which the session names here so that nothing recorded is rewritten.
         meta["study"] = {"survey_sidecar": Path(o.out).with_suffix(".survey.json").name}

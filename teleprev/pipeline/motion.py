@@ -65,6 +65,11 @@ class Motion:
         self.idle_after_ns = idle_after_ns
         self.feedforward_tau_ns = FEEDFORWARD_TAU_NS
 
+    def stop_time_bound(self) -> float:
+        """Seconds a switch to preview takes at most to bring the commands to rest (the slower side's
+        bound; a switch such as the vacuum's stops at once)."""
+        return max(self.arm.stop_time_bound(), self.hand.stop_time_bound() if self.hand is not None else 0.0)
+
     # ---- mode ----------------------------------------------------------------------------------
     def set_mode(self, p, state, mode: str, inputs):
         if mode == state.mode and mode != "estop":

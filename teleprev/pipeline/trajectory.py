@@ -146,6 +146,14 @@ class ArmGenerator:
             return s.q
         return s.q + np.array(self._traj.at_time(self._traj.duration)[0])
 
+    def stop_time_bound(self) -> float:
+        """Seconds the hardest stop takes at most, from any state the commands can be in (speed up to the
+        cap, accelerating as hard as allowed): the jerk turns the acceleration round (2 a/j, the speed
+        growing by a^2/2j meanwhile), the speed is braked at the acceleration limit, the jerk brings the
+        acceleration back to zero (a/j). The slowest joint's."""
+        a, j = self.acceleration, self.jerk
+        return float((3.0 * a / j + (self.velocity + a * a / (2.0 * j)) / a).max())
+
     def stop(self, s: JointMotion, dt: float) -> JointMotion:
         """A controlled stop: velocity and acceleration brought to zero within the limits."""
         if not self._plan_stop(s):  # cannot happen with positive limits; hold rather than guess
@@ -190,6 +198,11 @@ class HandLimiter:
         estimate = ESTIMATE_NONE if target_v is None else ESTIMATE_GIVEN
         rows, _ = self.command(q, v, target, estimate, None, target_v, 0.0, dt, dt_before, speed_frac)
         return rows[0], rows[1]
+
+    def stop_time_bound(self) -> float:
+        """Seconds braking takes at most from the speed cap, at the braking envelope's share of the
+        acceleration cap (the hardest stop uses all of it). The slowest joint's."""
+        return float((self.velocity / (BRAKE_FRACTION * self.acceleration)).max())
 
     def stop(self, q: np.ndarray, v: np.ndarray, dt: float, dt_before: float) -> tuple[np.ndarray, np.ndarray]:
         """One step of the hardest braking the cap allows (compiled: kernels.hand_command, not tracking)."""

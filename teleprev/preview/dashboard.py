@@ -1,8 +1,8 @@
 """The record screen: mode banner, robot views, the hand close-up, the camera, device health, and the keys.
 
 Built fresh from a LoopSnapshot and the device rows on every redraw. What fits is chosen by priority:
-the banner, the keys (every one of them, on as many lines as the width needs), the episode line and the
-device table always; the pictures share what is left, the robot first, then the hand, then the camera,
+the banner (with timed episodes' countdown of the current period), the keys (every one of them, on as
+many lines as the width needs), the episode line and the device table always; the pictures share what is left, the robot first, then the hand, then the camera,
 each only where it has room to be read (at 80x24: robot, hand and camera side by side).
 """
 
@@ -24,17 +24,32 @@ if TYPE_CHECKING:  # the preview renders what the live session hands it; it neve
     from teleprev.live.loop import LoopSnapshot
 
 KEYS = (("space", "preview/execute"), ("x", "e-stop"), ("s", "start episode"), ("n", "next episode"),
-        ("d", "discard"), ("y/f", "success/failure"), ("r", "ready"), ("q", "quit"))
+        ("d", "discard"), ("a", "discard, again"), ("y/f", "success/failure"), ("r", "ready"), ("q", "quit"))
 PREVIEW_STYLE = "bold black on yellow"
 EXECUTE_STYLE = "bold white on red"
 REAL_STYLE = "grey70"
 PREVIEW_ROBOT_STYLE = "cyan"
 FIXED_STYLE = "bold magenta"
+EPISODE_STYLE = "bold white on blue"
+COUNTDOWN_HINT = "(n: end it) "
 
 
-def mode_banner(mode: str, width: int) -> Text:
+def mode_banner(mode: str, width: int, countdown: tuple[str, float] | None = None) -> Text:
+    """The mode across the top line; timed episodes' countdown (period, seconds left) at its right end,
+    on the same line (the pictures keep their rows)."""
     label = "  EXECUTE: the robot follows you  " if mode == "execute" else "  PREVIEW: the robot holds still  "
-    text = Text(label.center(max(width, len(label))), style=EXECUTE_STYLE if mode == "execute" else PREVIEW_STYLE, justify="center")
+    style = EXECUTE_STYLE if mode == "execute" else PREVIEW_STYLE
+    if countdown is None:
+        return Text(label.center(max(width, len(label))), style=style, justify="center")
+    period, left_s = countdown
+    clock = f" {period}: {left_s:4.1f} s left "
+    if len(label) + len(clock) + len(COUNTDOWN_HINT) <= width:
+        clock += COUNTDOWN_HINT
+    if len(label) + len(clock) > width:
+        label = f" {mode.upper()} "
+    text = Text(no_wrap=True, overflow="crop")
+    text.append(label.center(max(width - len(clock), len(label))), style=style)
+    text.append(clock, style=EPISODE_STYLE if period.startswith("episode") else PREVIEW_STYLE)
     return text
 
 
@@ -144,9 +159,9 @@ class Dashboard:
         return Group(caption, self.hand_view.render(layers, cols, rows - 1))
 
     def render(self, snap: LoopSnapshot, devices: list[DeviceRow], width: int, height: int, now_ns: int,
-               camera=None) -> RenderableType:
+               camera=None, countdown: tuple[str, float] | None = None) -> RenderableType:
         """The screen for a terminal of width x height; `camera` is the latest frame (an ImageSample) of the
-        camera to show, or None."""
+        camera to show, or None; `countdown`: timed episodes' current period and its seconds left, or None."""
         episode = episode_line(snap, now_ns)
         keys = key_lines(width)
         table = device_table(devices)
@@ -154,7 +169,7 @@ class Dashboard:
         body_rows = height - fixed
         rows, cols = body_rows - 2, width  # inside the panels' borders (their widths include theirs)
         if rows < self.MIN_ROBOT[1] or cols < self.MIN_ROBOT[0] + 2:  # too small for pictures: status only
-            return Group(mode_banner(snap.mode, width), episode, table, keys)
+            return Group(mode_banner(snap.mode, width, countdown), episode, table, keys)
         sides = []
         if self.hand_view is not None:
             sides.append(("hand", lambda c, r: self.hand_panel(snap, c, r)))
@@ -177,4 +192,4 @@ class Dashboard:
             Panel(self.robot_panel(snap, robot_cols - 2, rows), title=f"robot ({self.robot_view.view})", padding=0,
                   height=body_rows),
             *(Panel(draw(side - 2, rows), title=title, padding=0, height=body_rows) for title, draw in sides))
-        return Group(mode_banner(snap.mode, width), episode, body, table, keys)
+        return Group(mode_banner(snap.mode, width, countdown), episode, body, table, keys)

@@ -31,6 +31,13 @@ def nothing_made(folder: Path) -> None:
     (["record", "--task", "pickplace", "--duration", "5"], "did you mean 'pick_place'?"),
     (["record", "--episodes", "0", "--duration", "5"], "'--episodes'"),
     (["record", "--duration", "-3"], "--duration must be a positive number of seconds, got -3"),
+    (["record", "--episode-time", "2", "--episodes", "0"], "'--episodes'"),
+    (["record", "--episode-time", "-1"], "--episode-time must be a positive number of seconds, got -1"),
+    (["record", "--episode-time", "2", "--reset-time", "nan"], "--reset-time must be 0 or more seconds, got nan"),
+    (["record", "--episode-time", "2", "--marks", "yfx"], "--marks takes y (success), f (failure) and - (unmarked)"),
+    (["record", "--episode-time", "2", "--engage-after", "2"], "less than --episode-time (2 s), got 2"),
+    (["record", "--episode-time", "2", "--duration", "5"], "--episode-time and --duration both set"),
+    (["record", "--reset-time", "1", "--duration", "5"], "--reset-time goes with --episode-time"),
     (["replay", FIXTURE, "--view", "diagonal"], "'diagonal' is not one of 'front', 'side', 'top'"),
     (["replay", FIXTURE, "--to", "robot"], "'robot' is not one of 'preview', 'sim', 'arm'"),
     (["replay", FIXTURE, "--to", "sim"], "pass --engage-after SECONDS"),  # no terminal to press space in

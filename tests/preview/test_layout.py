@@ -49,9 +49,9 @@ def camera_frame() -> ImageSample:
     return ImageSample(7, "cam_front", cv2.imencode(".jpg", image)[1].tobytes(), "jpeg")
 
 
-def screen(dashboard, width: int, height: int, camera=None) -> list[str]:
+def screen(dashboard, width: int, height: int, camera=None, countdown=None) -> list[str]:
     console = Console(file=io.StringIO(), width=width, height=height, record=True, color_system="truecolor")
-    console.print(dashboard.render(snapshot(16), DEVICES, width, height, 0, camera=camera))
+    console.print(dashboard.render(snapshot(16), DEVICES, width, height, 0, camera=camera, countdown=countdown))
     return console.export_text().rstrip("\n").splitlines()
 
 
@@ -75,6 +75,19 @@ def test_every_key_and_every_picture_fits(dashboard, width, height):
     braille = sum(0x2801 <= ord(c) <= 0x28FF for c in "".join(lines))
     assert braille > 150  # robot and hand drawn, not a blob
     assert sum(line.count("▀") for line in lines) >= 18 * 6  # the camera, in colour blocks
+
+
+@pytest.mark.parametrize("width, height", [(80, 24), (120, 45)])
+def test_the_countdown_of_timed_episodes_fits(dashboard, width, height):
+    lines = screen(dashboard, width, height, camera_frame(), countdown=("episode 2/4", 1.25))
+    assert len(lines) <= height and max(len(line) for line in lines) <= width
+    text = " ".join(" ".join(lines).split())
+    assert "episode 2/4: 1.2 s left" in text and all(f"{key} {what}" in text for key, what in KEYS)
+    for title in ("robot (side)", "hand", "camera"):
+        assert panel_width(lines, title) >= 20, title
+    assert sum(0x2801 <= ord(c) <= 0x28FF for c in "".join(lines)) > 150
+    small = " ".join(" ".join(screen(dashboard, 50, 14, countdown=("reset", 0.5))).split())
+    assert "reset: 0.5 s left" in small  # a small terminal keeps the countdown with the status
 
 
 def test_without_a_camera_the_robot_and_hand_share_the_width(dashboard):
