@@ -50,6 +50,18 @@ def export(
                                          show_default=False),
     max_gap_ms: Optional[float] = typer.Option(None, "--max-gap-ms", help="Longest silence of a stream that is not a gap.",
                                                show_default=False),
+    only: Optional[str] = typer.Option(None, "--only", help="Only episodes marked success (y), failure (f), or unmarked.",
+                                       show_default=False),
+    task: Optional[str] = typer.Option(None, "--task", help="Only episodes of this task (its id or instruction).",
+                                       show_default=False),
+    participant: Optional[str] = typer.Option(None, "--participant", help="Only sessions of this study participant.",
+                                              show_default=False),
+    condition: Optional[str] = typer.Option(None, "--condition", help="Only sessions of this study condition.",
+                                            show_default=False),
+    holdout: Optional[float] = typer.Option(None, "--holdout", help="Hold this fraction out as a second dataset, "
+                                            "<repo-id>_holdout, beside the first.", show_default=False),
+    split_by: str = typer.Option("session", "--split-by", help="Hold out whole sessions, or single episodes."),
+    seed: int = typer.Option(0, "--seed", help="Seed of the held-out draw (the same seed gives the same split)."),
     as_json: bool = typer.Option(False, "--json", help="Print the summary as one JSON object instead of a table."),
 ) -> None:
     """Export recorded sessions to a LeRobot dataset, one LeRobot episode per recorded episode."""
@@ -61,6 +73,7 @@ def export(
     from teleprev.errors import ConfigError
     from teleprev.export.recipe import load_recipe
     from teleprev.export.run import ExportOptions, export as run_export, with_video
+    from teleprev.export.selection import Selection
 
     if workers < 1:
         raise ConfigError(f"--workers must be at least 1, got {workers}")
@@ -78,11 +91,56 @@ def export(
     target = root if root is not None else DEFAULT_ROOT / repo_id
     options = ExportOptions(paths, repo_id, target, the_recipe, fps=fps, append=append,
                             include_discarded=include_discarded, workers=workers, video=video, ray=ray)
+    selection = Selection(only, task, participant, condition)
+    exports, counts = [options], {}
+    if selection.filters() or holdout is not None:
+        exports, counts = plan_exports(options, selection, holdout, split_by, seed)
     console = Console(stderr=as_json)
-    report = run_stoppable("export", target, lambda bars: run_export(options, bars), console)
-    print_report(console, report, as_json, f"video: {video.describe()}")
-    if report.failed:
+    failed = False
+    for opts in exports:
+        report = run_stoppable("export", opts.root, lambda bars: run_export(opts, bars), console)
+        report.selection = counts
+        print_report(console, report, as_json, f"video: {video.describe()}")
+        failed |= bool(report.failed)
+    if failed:
         raise typer.Exit(1)  # the rest is in the dataset; a script must still notice
+
+
+def plan_exports(options, selection, holdout: float | None, split_by: str, seed: int) -> tuple[list, dict[str, int]]:
+    """The export(s) a selection and a held-out split make, and how many episodes each filter kept.
+    Every refusal (nothing selected, a split that leaves a side empty, a target that is there or, with
+    --append, is not) comes before either dataset is written."""
+    from dataclasses import replace
+
+    from teleprev.errors import ConfigError
+    from teleprev.export.repo_id import check_repo_id
+    from teleprev.export.selection import by_session, read_facts, select, split
+
+    chosen = select(read_facts(options.sessions), selection, options.include_discarded)
+    counts = dict(chosen.counts)
+    if holdout is None:
+        return [replace(options, selected=by_session(chosen.kept), sessions=_with(options.sessions, chosen.kept))], counts
+    main, held = split(chosen.kept, holdout, split_by, seed)
+    held_id = f"{options.repo_id}_holdout"
+    check_repo_id(held_id)
+    held_root = Path(options.root).parent / f"{Path(options.root).name}_holdout"
+    for where in (Path(options.root), held_root):
+        there = where.exists() and (not where.is_dir() or any(where.iterdir()))
+        if options.append and not there:
+            raise ConfigError("--append with --holdout: there is no dataset here to append to (neither is written)",
+                              str(where))
+        if not options.append and there:
+            raise ConfigError("already exists; pass --append to add these sessions to it, or choose another --root "
+                              "(neither dataset is written)", str(where))
+    return [replace(options, selected=by_session(main), sessions=_with(options.sessions, main)),
+            replace(options, repo_id=held_id, root=held_root, selected=by_session(held),
+                    sessions=_with(options.sessions, held))], counts
+
+
+def _with(sessions: list, kept) -> list:
+    """The sessions that have an episode in `kept`, in their order."""
+    having = {f.session for f in kept}
+    return [p for p in sessions if str(p) in having]
 
 
 class _Bars:
@@ -143,6 +201,7 @@ def _as_json(report) -> dict:
         "max_align_err_ms": round(report.align_err_ms, 3), "size_bytes": report.size_bytes, "failed": report.failed,
         "skipped": report.skipped,
         "cleaned": report.cleaned,
+        "selection": report.selection,
         "sessions": [{
             "session": s.session, "source_episodes": s.source_episodes, "episodes": s.lerobot_episodes,
             "frames": s.frames, "duration_s": round(s.duration_s, 3), "notes": s.notes,
