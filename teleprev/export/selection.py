@@ -6,10 +6,11 @@ written, lerobot is not imported), so a selection that matches nothing is refuse
 from __future__ import annotations
 
 import random
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 
 from teleprev.errors import ConfigError
+from teleprev.export.repo_id import check_repo_id
 from teleprev.topics import TASKS_RECORD
 
 OUTCOMES = ("success", "failure", "unmarked")
@@ -133,3 +134,34 @@ def by_session(kept: list[EpisodeFacts]) -> dict[str, frozenset[int]]:
     for f in kept:
         out.setdefault(f.session, set()).add(f.index)
     return {s: frozenset(i) for s, i in out.items()}
+
+
+def plan_exports(options, selection, holdout: float | None, split_by: str, seed: int) -> tuple[list, dict[str, int]]:
+    """The export(s) a selection and a held-out split make, and how many episodes each filter kept.
+    Every refusal (nothing selected, a split that leaves a side empty, a target that is there or, with
+    --append, is not) comes before either dataset is written."""
+    chosen = select(read_facts(options.sessions), selection, options.include_discarded)
+    counts = dict(chosen.counts)
+    if holdout is None:
+        return [replace(options, selected=by_session(chosen.kept), sessions=_with(options.sessions, chosen.kept))], counts
+    main, held = split(chosen.kept, holdout, split_by, seed)
+    held_id = f"{options.repo_id}_holdout"
+    check_repo_id(held_id)
+    held_root = Path(options.root).parent / f"{Path(options.root).name}_holdout"
+    for where in (Path(options.root), held_root):
+        there = where.exists() and (not where.is_dir() or any(where.iterdir()))
+        if options.append and not there:
+            raise ConfigError("--append with --holdout: there is no dataset here to append to (neither is written)",
+                              str(where))
+        if not options.append and there:
+            raise ConfigError("already exists; pass --append to add these sessions to it, or choose another --root "
+                              "(neither dataset is written)", str(where))
+    return [replace(options, selected=by_session(main), sessions=_with(options.sessions, main)),
+            replace(options, repo_id=held_id, root=held_root, selected=by_session(held),
+                    sessions=_with(options.sessions, held))], counts
+
+
+def _with(sessions: list, kept) -> list:
+    """The sessions that have an episode in `kept`, in their order."""
+    having = {f.session for f in kept}
+    return [p for p in sessions if str(p) in having]
