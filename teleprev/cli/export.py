@@ -96,13 +96,18 @@ def export(
     if selection.filters() or holdout is not None:
         exports, counts = plan_exports(options, selection, holdout, split_by, seed)
     console = Console(stderr=as_json)
-    failed = False
+    reports = []
     for opts in exports:
         report = run_stoppable("export", opts.root, lambda bars: run_export(opts, bars), console)
         report.selection = counts
-        print_report(console, report, as_json, f"video: {video.describe()}")
-        failed |= bool(report.failed)
-    if failed:
+        reports.append(report)
+        if not as_json:
+            print_report(console, report, as_json, f"video: {video.describe()}")
+    if as_json:  # one JSON object, the held-out dataset's summary inside it
+        import json
+
+        typer.echo(json.dumps({**_as_json(reports[0]), **({"holdout": _as_json(reports[1])} if len(reports) > 1 else {})}))
+    if any(r.failed for r in reports):
         raise typer.Exit(1)  # the rest is in the dataset; a script must still notice
 
 

@@ -3,6 +3,7 @@ marked episodes (written with the session writer) exported through the CLI, the 
 with lerobot's own LeRobotDataset and its metadata API: which episodes, where each came from, and the
 per-frame next.done / next.success marks."""
 
+import json
 from pathlib import Path
 from types import SimpleNamespace
 
@@ -75,8 +76,6 @@ def test_filters_combine_and_unmarked_episodes_get_no_success_mark(marked, tmp_p
     ran = teleprev("export", marked.a, marked.b, "--repo-id", "t/mixed", "--root", root, "--participant", "p2",
                    "--task", "pour", "--json")
     assert ran.returncode == 0, ran.stderr
-    import json
-
     summary = json.loads(ran.stdout.strip().splitlines()[-1])
     assert summary["selection"] == {"recorded": 5, "--task pour": 2, "--participant p2": 1}
     ds = load("t/mixed", root)
@@ -100,8 +99,11 @@ def test_a_selection_that_matches_nothing_is_one_line_and_writes_nothing(marked,
 def test_holdout_writes_a_second_dataset_deterministic_for_a_seed(marked, tmp_path):
     root = tmp_path / "train"
     ran = teleprev("export", marked.a, marked.b, "--repo-id", "t/train", "--root", root, "--holdout", "0.25",
-                   "--split-by", "episode", "--seed", "7")
+                   "--split-by", "episode", "--seed", "7", "--json")
     assert ran.returncode == 0, ran.stderr + ran.stdout
+    summary = json.loads(ran.stdout.strip().splitlines()[-1])
+    assert (summary["total_episodes"], summary["holdout"]["total_episodes"]) == (4, 1)
+    assert summary["holdout"]["root"] == str(tmp_path / "train_holdout")
     train, held = load("t/train", root), load("t/train_holdout", tmp_path / "train_holdout")
     keys = lambda ds: [(e["source_session"], e["source_episode"]) for e in episodes_of(ds)]
     assert len(keys(held)) == 1 and len(keys(train)) == 4  # round(0.25 x 5)
