@@ -73,7 +73,7 @@ def export(
     from teleprev.errors import ConfigError
     from teleprev.export.recipe import load_recipe
     from teleprev.export.run import ExportOptions, export as run_export, with_video
-    from teleprev.export.selection import Selection, plan_exports
+    from teleprev.export.selection import SPLITS, Selection, plan_exports
 
     if workers < 1:
         raise ConfigError(f"--workers must be at least 1, got {workers}")
@@ -92,6 +92,8 @@ def export(
     options = ExportOptions(paths, repo_id, target, the_recipe, fps=fps, append=append,
                             include_discarded=include_discarded, workers=workers, video=video, ray=ray)
     selection = Selection(only, task, participant, condition)
+    if split_by not in SPLITS:
+        raise ConfigError(f"--split-by must be {' or '.join(SPLITS)}, got {split_by!r}")
     exports, counts = [options], {}
     if selection.filters() or holdout is not None:
         exports, counts = plan_exports(options, selection, holdout, split_by, seed)

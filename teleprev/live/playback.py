@@ -179,14 +179,17 @@ def play(session: Path, episode, speed: float, to: str, rig_path, engage_after, 
         thread.join(2.0)
         for r in runners:
             r.stop()
-        if recording is not None:
-            recording.close()
-            console.print(f"replay recorded in {out}", highlight=False)
         if live_view is not None:
             live_view[1].set()
             live_view[2].join(2.0)
             live_view[0].close()
+        if recording is not None:
+            recording.close()  # after the robot has its last command: a failed recording never stops it early
+            if not recording.error:
+                console.print(f"replay recorded in {out}", highlight=False)
     sent = sum(1 for phase, _, _ in player.state.sent if phase == "playing")
     console.print(f"played {len(p.t_ns)} steps at {player.speed:.2f}x to {to}; {sent} commands sent" + (f"; {message}" if message else ""))
     if player.state.message:  # the robot refused a command or went away: playback stopped there
         raise DeviceError(f"playback stopped: {player.state.message}")
+    if recording is not None:
+        recording.check()

@@ -10,7 +10,7 @@ import threading
 from pathlib import Path
 
 from teleprev import __version__, topics
-from teleprev.errors import ConfigError
+from teleprev.errors import ConfigError, SessionError, describe_os_error
 from teleprev.messages import Event, JointSample, Logged
 
 _COMMAND_TOPICS = {"arm": topics.COMMAND_ARM, "hand": topics.COMMAND_HAND}
@@ -38,12 +38,18 @@ class ReplayRecording:
                 "replay": {"source": str(source), "episode": "" if episode is None else str(episode)}}
         self.writer = McapSessionWriter(out, meta)
         self.started = False
+        self.error = ""  # why the recording stopped early ("" while it has not)
         self.playing = lambda: True  # whether the player is past its engage ramp (build_player sets it)
 
     def _write(self, topic: str, log_ns: int, payload) -> None:
         with self._lock:
-            if not self.writer.closed:
+            if self.writer.closed:
+                return
+            try:
                 self.writer.write(Logged(topic, log_ns, payload))
+            except OSError as exc:  # a full disk stops the recording, never the commands to the robot
+                self.error = describe_os_error(exc)
+                self.writer.abort()
 
     def _episode(self, event: str) -> None:
         now = self.clock.now_ns()
@@ -68,10 +74,20 @@ class ReplayRecording:
         self._write(topic, self.clock.now_ns(), sample)
 
     def close(self) -> None:
+        """Close the file (`error` says if the recording had to stop early)."""
         if self.started:
             self._episode("stop")
         with self._lock:
-            self.writer.close()
+            try:
+                self.writer.close()
+            except OSError as exc:
+                self.error = self.error or describe_os_error(exc)
+
+    def check(self) -> None:
+        """Raise SessionError if the recording had to stop early."""
+        if self.error:
+            raise SessionError(f"the replay's recording stopped early: {self.error} (what was flushed before is kept)",
+                               str(self.writer.path))
 
 
 class _Recorded:

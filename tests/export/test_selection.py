@@ -94,6 +94,9 @@ def test_a_selection_that_matches_nothing_is_one_line_and_writes_nothing(marked,
     assert not root.exists() and not list(tmp_path.glob(".none*"))
     bad = teleprev("export", marked.a, "--repo-id", "t/none", "--root", root, "--only", "great")
     assert bad.returncode == 2 and bad.stderr.strip() == "error: --only must be success, failure, unmarked, got 'great'"
+    by = teleprev("export", marked.a, "--repo-id", "t/none", "--root", root, "--holdout", "0.5", "--split-by", "file")
+    assert by.returncode == 2 and by.stderr.strip() == "error: --split-by must be session or episode, got 'file'"
+    assert not root.exists()
 
 
 def test_holdout_writes_a_second_dataset_deterministic_for_a_seed(marked, tmp_path):

@@ -3,6 +3,7 @@ dataset's `action` column played to the simulated robot through the session repl
 replay recorded as a session, read back, and audited; and the one-line refusals before anything opens."""
 
 import json
+import re
 import shutil
 from pathlib import Path
 
@@ -108,3 +109,26 @@ def test_bad_dataset_replays_are_one_line_before_anything_opens(sim_dataset, tmp
     out.write_bytes(b"")
     taken = teleprev(*base, "--episode", "0", "--config", SIM_RIG)
     assert taken.returncode == 2 and "teleprev does not overwrite a recording" in taken.stderr
+
+
+def test_a_recording_that_fails_never_stops_the_replay_and_says_so(sim_dataset, tmp_path, monkeypatch):
+    from teleprev.session.writer import McapSessionWriter
+
+    written = McapSessionWriter.write
+
+    def full_after_50(self, msg, count=[0]):
+        count[0] += 1
+        if count[0] > 50:
+            raise OSError(28, "No space left on device")
+        return written(self, msg)
+
+    monkeypatch.setattr(McapSessionWriter, "write", full_after_50)
+    out = tmp_path / "replay.mcap"
+    ran = teleprev("replay", sim_dataset, "--episode", "0", "--to", "sim", "--config", SIM_RIG, "--smooth",
+                   "--engage-after", "0", "--no-preview", "--out", out)
+    said = " ".join(ran.stdout.split())
+    assert ran.returncode == 2, ran.stderr + said
+    steps, sent = map(int, re.search(r"played (\d+) steps at 1.00x to sim; (\d+) commands sent", said).groups())
+    assert sent == 2 * steps  # every step still went to the arm and the hand
+    assert ran.stderr.strip() == (f"error: {out}: the replay's recording stopped early: no space left on this device "
+                                  "(what was flushed before is kept)")
