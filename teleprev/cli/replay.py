@@ -43,6 +43,8 @@ def replay(
         raise ConfigError("no such session file or dataset folder", str(session))
     if session.is_dir() and not (session / "meta" / "info.json").is_file():
         raise ConfigError("a folder that is not a LeRobot dataset (no meta/info.json)", str(session))
+    if session.is_dir() and foxglove is not None:
+        raise ConfigError("--foxglove plays a session's recorded topics, and a dataset has none", str(session))
     if out is not None:
         from teleprev.live.replay_recording import check_out
 

@@ -137,7 +137,7 @@ def _start_view(port: int | None, session: Path, player: Player, console: Consol
 def play(session: Path, episode, speed: float, to: str, rig_path, engage_after, console: Console, view: str, show: bool,
          smoothed: bool = False, foxglove: int | None = None, out: Path | None = None) -> None:
     player, runners, tap, rig, message, recording = build_player(session, episode, speed, to, rig_path, smoothed, out)
-    live_view = None if is_dataset(session) else _start_view(foxglove, session, player, console)
+    live_view = _start_view(foxglove, session, player, console)
     for r in runners:
         r.start()
     thread = threading.Thread(target=player.run, daemon=True)

@@ -103,6 +103,8 @@ def test_bad_dataset_replays_are_one_line_before_anything_opens(sim_dataset, tmp
                          "--no-preview", "--out", out)
     assert no_action.returncode == 2 and "not a LeRobot dataset with an 'action' feature" in no_action.stderr
     assert len(no_action.stderr.strip().splitlines()) == 1
+    fox = teleprev(*base, "--episode", "0", "--config", SIM_RIG, "--foxglove", "8765")
+    assert fox.returncode == 2 and "--foxglove plays a session's recorded topics, and a dataset has none" in fox.stderr
     not_dataset = teleprev("replay", tmp_path, "--episode", "0", "--to", "sim", "--config", SIM_RIG)
     assert not_dataset.returncode == 2 and "not a LeRobot dataset (no meta/info.json)" in not_dataset.stderr
     assert not out.exists()
