@@ -18,9 +18,13 @@ from tests.helpers.cli import teleprev
 SIM_RIG = Path(__file__).parents[2] / "rigs" / "sim.toml"
 
 
-def dataset_actions(root: Path, episode: int) -> tuple[np.ndarray, np.ndarray, list[str]]:
-    """(timestamps s, actions, names) of one episode, as lerobot loads them."""
+def dataset_actions(root: Path, episode: int, monkeypatch, cache: Path) -> tuple[np.ndarray, np.ndarray, list[str]]:
+    """(timestamps s, actions, names) of one episode, as lerobot loads them (offline, its table cache in `cache`)."""
+    import datasets
     from lerobot.datasets.lerobot_dataset import LeRobotDataset
+
+    monkeypatch.setenv("HF_HUB_OFFLINE", "1")
+    monkeypatch.setattr(datasets.config, "HF_DATASETS_CACHE", cache)
 
     ds = LeRobotDataset("lab/sim", root=root, video_backend="pyav", episodes=[episode])
     table = ds.hf_dataset.with_format("numpy")
@@ -36,13 +40,13 @@ def played(session: Path, topic: str) -> tuple[np.ndarray, np.ndarray, tuple[str
     return (t - t[0]) / 1e9, np.array([m.positions for m in msgs]), msgs[0].names
 
 
-def test_a_dataset_episode_replays_to_sim_recorded_as_a_session_that_passes_the_audit(sim_dataset, tmp_path):
+def test_a_dataset_episode_replays_to_sim_recorded_as_a_session_that_passes_the_audit(sim_dataset, tmp_path, monkeypatch):
     out = tmp_path / "replay.mcap"
     ran = teleprev("replay", sim_dataset, "--episode", "0", "--to", "sim", "--config", SIM_RIG, "--smooth",
                    "--engage-after", "0", "--no-preview", "--out", out)
     assert ran.returncode == 0, ran.stderr + ran.stdout
     assert f"replay recorded in {out}" in " ".join(ran.stdout.split())
-    ts, actions, names = dataset_actions(sim_dataset, 0)
+    ts, actions, names = dataset_actions(sim_dataset, 0, monkeypatch, tmp_path / "hf_cache")
     for topic, prefix in (("/command/arm", "arm"), ("/command/hand", "hand")):
         t, q, joints = played(out, topic)
         expected = actions[:, [names.index(f"{prefix}.{j}") for j in joints]]
