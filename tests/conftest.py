@@ -60,6 +60,18 @@ def sim_session(tmp_path_factory):
 
 
 @pytest.fixture(scope="session")
+def sim_dataset(sim_session, tmp_path_factory):
+    """sim_session exported with the default recipe as the LeRobot dataset lab/sim (its root), shared by the
+    tests that read one (and never change it)."""
+    from tests.helpers.cli import teleprev
+
+    root = tmp_path_factory.mktemp("sim_dataset") / "sim"
+    ran = teleprev("export", sim_session, "--repo-id", "lab/sim", "--root", root)
+    assert ran.returncode == 0, ran.stderr + ran.stdout
+    return root
+
+
+@pytest.fixture(scope="session")
 def sim_corpus(tmp_path_factory):
     """A folder of three short sim sessions, a.mcap, b.mcap and c.mcap (tests.helpers.sessions.record_corpus),
     shared by the corpus tests (which only read it)."""

@@ -50,6 +50,18 @@ def export(
                                          show_default=False),
     max_gap_ms: Optional[float] = typer.Option(None, "--max-gap-ms", help="Longest silence of a stream that is not a gap.",
                                                show_default=False),
+    only: Optional[str] = typer.Option(None, "--only", help="Only episodes marked success (y), failure (f), or unmarked.",
+                                       show_default=False),
+    task: Optional[str] = typer.Option(None, "--task", help="Only episodes of this task (its id or instruction).",
+                                       show_default=False),
+    participant: Optional[str] = typer.Option(None, "--participant", help="Only sessions of this study participant.",
+                                              show_default=False),
+    condition: Optional[str] = typer.Option(None, "--condition", help="Only sessions of this study condition.",
+                                            show_default=False),
+    holdout: Optional[float] = typer.Option(None, "--holdout", help="Hold this fraction out as a second dataset, "
+                                            "<repo-id>_holdout, beside the first.", show_default=False),
+    split_by: str = typer.Option("session", "--split-by", help="Hold out whole sessions, or single episodes."),
+    seed: int = typer.Option(0, "--seed", help="Seed of the held-out draw (the same seed gives the same split)."),
     as_json: bool = typer.Option(False, "--json", help="Print the summary as one JSON object instead of a table."),
 ) -> None:
     """Export recorded sessions to a LeRobot dataset, one LeRobot episode per recorded episode."""
@@ -61,6 +73,7 @@ def export(
     from teleprev.errors import ConfigError
     from teleprev.export.recipe import load_recipe
     from teleprev.export.run import ExportOptions, export as run_export, with_video
+    from teleprev.export.selection import SPLITS, Selection, plan_exports
 
     if workers < 1:
         raise ConfigError(f"--workers must be at least 1, got {workers}")
@@ -78,10 +91,25 @@ def export(
     target = root if root is not None else DEFAULT_ROOT / repo_id
     options = ExportOptions(paths, repo_id, target, the_recipe, fps=fps, append=append,
                             include_discarded=include_discarded, workers=workers, video=video, ray=ray)
+    selection = Selection(only, task, participant, condition)
+    if split_by not in SPLITS:
+        raise ConfigError(f"--split-by must be {' or '.join(SPLITS)}, got {split_by!r}")
+    exports, counts = [options], {}
+    if selection.filters() or holdout is not None:
+        exports, counts = plan_exports(options, selection, holdout, split_by, seed)
     console = Console(stderr=as_json)
-    report = run_stoppable("export", target, lambda bars: run_export(options, bars), console)
-    print_report(console, report, as_json, f"video: {video.describe()}")
-    if report.failed:
+    reports = []
+    for opts in exports:
+        report = run_stoppable("export", opts.root, lambda bars: run_export(opts, bars), console)
+        report.selection = counts
+        reports.append(report)
+        if not as_json:
+            print_report(console, report, as_json, f"video: {video.describe()}")
+    if as_json:  # one JSON object, the held-out dataset's summary inside it
+        import json
+
+        typer.echo(json.dumps({**_as_json(reports[0]), **({"holdout": _as_json(reports[1])} if len(reports) > 1 else {})}))
+    if any(r.failed for r in reports):
         raise typer.Exit(1)  # the rest is in the dataset; a script must still notice
 
 
@@ -143,6 +171,7 @@ def _as_json(report) -> dict:
         "max_align_err_ms": round(report.align_err_ms, 3), "size_bytes": report.size_bytes, "failed": report.failed,
         "skipped": report.skipped,
         "cleaned": report.cleaned,
+        "selection": report.selection,
         "sessions": [{
             "session": s.session, "source_episodes": s.source_episodes, "episodes": s.lerobot_episodes,
             "frames": s.frames, "duration_s": round(s.duration_s, 3), "notes": s.notes,

@@ -11,11 +11,13 @@ from teleprev.cli.record import View
 
 
 def replay(
-    session: Path = typer.Argument(..., help="Session file (.mcap)."),
+    session: Path = typer.Argument(..., help="Session file (.mcap), or a LeRobot dataset folder (its `action` column; "
+                                   "with --episode and --config)."),
     episode: Optional[int] = typer.Option(None, "--episode", "-e", help="Play one episode (default: the whole session)."),
     speed: float = typer.Option(1.0, "--speed", "-x", min=0.01, help="Playback speed multiple (capped so no joint exceeds its limit)."),
     to: Literal["preview", "sim", "arm"] = typer.Option("preview", "--to", help="preview (screen only), sim (the simulated robot) or arm (the rig's robot)."),
-    rig: Optional[Path] = typer.Option(None, "--rig", help="Rig whose robot receives the commands with --to arm (default: the recorded rig)."),
+    rig: Optional[Path] = typer.Option(None, "--rig", "--config", help="Rig whose robot receives the commands with --to arm, "
+                                       "and whose limits apply (default: the recorded rig; a dataset needs one)."),
     engage_after: Optional[float] = typer.Option(None, "--engage-after", help="Engage automatically after this many seconds (else press space)."),
     view: View = typer.Option("side", "--view", help="Robot view."),
     preview: bool = typer.Option(True, "--preview/--no-preview", help="Show the terminal preview."),
@@ -23,10 +25,13 @@ def replay(
     foxglove: Optional[int] = typer.Option(None, "--foxglove", metavar="[PORT]", help="Also play the session's topics "
                                            "live to Foxglove: a WebSocket server on 127.0.0.1:PORT (default 8765).",
                                            show_default=False),
+    out: Optional[Path] = typer.Option(None, "--out", "-o", help="Record the replay (what the robot was sent, and its "
+                                       "states) as a session here.", show_default=False),
 ) -> None:
-    """Play a session's commands back, on screen and optionally to the simulated or a real robot.
+    """Play a session's commands, or a LeRobot dataset episode's actions, back: on screen and optionally to the
+    simulated or a real robot.
 
-    A real robot (--to arm) gets only a session that passes `teleprev audit`, or one played --smooth."""
+    A real robot (--to arm) gets only commands that pass `teleprev audit`, or ones played --smooth."""
     from rich.console import Console
 
     from teleprev.live.playback import play
@@ -34,15 +39,28 @@ def replay(
     from teleprev.errors import ConfigError
     from teleprev.preview.keys import KeyReader
 
+    if not session.exists():
+        raise ConfigError("no such session file or dataset folder", str(session))
+    if session.is_dir() and not (session / "meta" / "info.json").is_file():
+        raise ConfigError("a folder that is not a LeRobot dataset (no meta/info.json)", str(session))
+    if session.is_dir() and foxglove is not None:
+        raise ConfigError("--foxglove plays a session's recorded topics, and a dataset has none", str(session))
+    if out is not None:
+        from teleprev.live.replay_recording import check_out
+
+        if to == "preview":
+            raise ConfigError("--out records what the robot is sent: add --to sim or --to arm")
+        check_out(out)
+
     waits_for_a_key = to == "sim" or (to == "arm" and rig is not None)  # (--to arm without --rig: refused below)
     if waits_for_a_key and engage_after is None and not KeyReader(print).is_terminal:
         raise ConfigError(f"--to {to} waits for space to engage the robot, and there is no terminal to press it in: "
                           "pass --engage-after SECONDS")
     console = Console()
     if to == "arm" and not smooth:
-        from teleprev.evaluation.audit import audit_session
+        from teleprev.evaluation.audit import audit_path
 
-        report = audit_session(session, rig)
+        report = audit_path(session, rig)
         if not report.ok:
             reasons = "; ".join(f"{s.topic}: {v}" for s in report.streams for v in s.violations)
             if report.hand_state_colliding:
@@ -50,7 +68,7 @@ def replay(
             console.print(f"[red]not replaying {session} to the robot: it fails the audit[/] ({reasons}). "
                           "Add --smooth to send it through the jerk-limited generator instead.")
             raise typer.Exit(1)
-    play(session, episode, speed, to, rig, engage_after, console, view, preview, smooth, foxglove)
+    play(session, episode, speed, to, rig, engage_after, console, view, preview, smooth, foxglove, out)
 
 
 def eval_(

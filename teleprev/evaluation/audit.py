@@ -31,6 +31,7 @@ from teleprev import topics
 from teleprev.evaluation.controller_resets import ActuatorHistory
 from teleprev.pipeline.derivatives import RESUME_GAP_NS, runs, stream_peaks
 from teleprev.errors import SessionError
+from teleprev.export.actions import is_dataset, read_actions
 
 SWEPT_STEP_M = 0.0005
 TOLERANCE = 1e-6
@@ -193,85 +194,30 @@ def audit_session(path: str | Path, rig_path: str | Path | None = None) -> Audit
         return report
 
 
-def is_dataset(path: Path) -> bool:
-    return (Path(path) / "meta" / "info.json").is_file()
-
-
-def _action_columns(names: list[str], joints: tuple[str, ...], prefix: str) -> list[int] | None:
-    """Where each joint sits among the action's names: "<prefix>.<joint>" (teleprev's exports), else
-    "<anything>.<joint>" or "<joint>" met exactly once; None if a joint is not found."""
-    out = []
-    for j in joints:
-        exact = [i for i, n in enumerate(names) if n == f"{prefix}.{j}"]
-        loose = [i for i, n in enumerate(names) if n == j or n.endswith("." + j)]
-        found = exact or (loose if len(loose) == 1 else [])
-        if not found:
-            return None
-        out.append(found[0])
-    return out
-
-
 def audit_dataset(root: str | Path, rig_path: str | Path | None) -> AuditReport:
-    """The `action` column of a LeRobot dataset (teleprev's or anyone's), per episode, as commands sent at
-    the frames' timestamps, against a rig's limits. Joints are matched by name ("arm.joint1" or "joint1");
-    when no name matches and the action has exactly the rig's arm + end-effector joints, by position."""
-    import pyarrow.parquet as pq
-
+    """The `action` column of a LeRobot dataset, per episode, as commands sent at the frames' timestamps,
+    against a rig's limits (joints matched as read_actions says)."""
     from teleprev.assembly import motion_limits
     from teleprev.rig import load_rig
 
     root = Path(root)
-    where = str(root / "meta" / "info.json")
     if rig_path is None:
         raise SessionError("a dataset does not carry its rig: pass --config RIG (the robot whose limits apply)", str(root))
     limits = motion_limits(load_rig(rig_path))
-    try:
-        info = json.loads((root / "meta" / "info.json").read_text())
-        feature = info["features"]["action"]
-    except (OSError, ValueError, KeyError) as e:
-        raise SessionError(f"not a LeRobot dataset with an 'action' feature ({type(e).__name__}: {e})", where) from None
-    names = feature.get("names")
-    if isinstance(names, dict):  # older datasets: {"motors": [...]}
-        names = next(iter(names.values()), None)
-    names = [str(n) for n in names] if names else [f"action.{i}" for i in range(int(feature["shape"][0]))]
-    arm_names, hand_names = limits["arm"]["names"], limits["hand"]["names"]
-    arm_cols = _action_columns(names, arm_names, "arm")
-    hand_cols = _action_columns(names, hand_names, "hand")
-    note = ""
-    if arm_cols is None or hand_cols is None:
-        if len(names) != len(arm_names) + len(hand_names):
-            raise SessionError(f"the action's {len(names)} names {names[:8]}{'...' if len(names) > 8 else ''} do not "
-                               f"name the rig's joints ({len(arm_names)} arm: {list(arm_names)}; {len(hand_names)} "
-                               f"end effector), and their number differs, so they cannot be matched by position", where)
-        arm_cols, hand_cols = list(range(len(arm_names))), list(range(len(arm_names), len(names)))
-        note = "joints matched by position (the action's names are not the rig's)"
-    files = sorted((root / "data").rglob("*.parquet"))
-    if not files:
-        raise SessionError("no data/*.parquet files", str(root))
-    table = {"episode_index": [], "timestamp": [], "action": []}
-    for f in files:
-        try:
-            part = pq.read_table(f, columns=list(table)).to_pydict()
-        except Exception as e:  # pyarrow raises many kinds for a damaged or foreign file
-            raise SessionError(f"cannot read the columns episode_index, timestamp, action ({e})", str(f)) from None
-        for k in table:
-            table[k].extend(part[k])
-    episodes = np.asarray(table["episode_index"], dtype=np.int64)
-    stamps = np.round(np.asarray(table["timestamp"], dtype=float) * 1e9).astype(np.int64)
-    action = np.asarray(table["action"], dtype=float)
+    data = read_actions(root, limits)
+    stamps, action = data.stamps, data.action
     # The actions are stored as float32: rounded, each value moves by up to half an ulp, which a divided
     # difference of order k at the frames' spacing h can grow to 2^k x that / h^k.
     half_ulp = 2.0 ** -24 * (float(np.abs(action).max()) if action.size else 0.0)
     spacing = np.diff(np.unique(stamps)).min() / 1e9 if len(np.unique(stamps)) > 1 else 1.0
-    report = AuditReport(str(root), note=note)
+    report = AuditReport(str(root), note=data.note)
     arm = StreamAudit("action[arm]")
     hand = StreamAudit("action[end effector]")
-    for ep in np.unique(episodes):
-        rows = np.flatnonzero(episodes == ep)
-        rows = rows[np.argsort(stamps[rows], kind="stable")]
-        t = stamps[rows] + int(ep) * 3_600_000_000_000  # episodes an hour apart: never one run
-        merge(arm, audit_stream("action[arm]", "arm", limits, t, action[rows][:, arm_cols], from_rest=False))
-        merge(hand, audit_stream("action[end effector]", "hand", limits, t, action[rows][:, hand_cols], from_rest=False))
+    for ep in np.unique(data.episodes):
+        t, q = data.episode(int(ep))
+        t = t + int(ep) * 3_600_000_000_000  # episodes an hour apart: never one run
+        merge(arm, audit_stream("action[arm]", "arm", limits, t, q[:, data.arm_cols], from_rest=False))
+        merge(hand, audit_stream("action[end effector]", "hand", limits, t, q[:, data.hand_cols], from_rest=False))
     for total in (arm, hand):
         for name, order, limit in (("speed", 1, total.speed_limit), ("accel", 2, total.accel_limit),
                                    ("jerk", 3, total.jerk_limit)):

@@ -11,6 +11,9 @@
     parallel.py   several sessions in worker processes, merged with lerobot's aggregation
     run.py        an export from start to summary: checks, staging, progress, report
     report.py     what an export did: episodes, frames, splits, alignment error, size
+    selection.py  which episodes: outcome marks, task, participant, condition, a held-out split
+    episode_meta.py  where each episode came from, as extra columns of lerobot's meta/episodes
+    actions.py    a dataset's `action` column read back without lerobot (audit, replay)
     synthetic.py  sessions with exactly known content, for tests, benchmarks and trying the exporter
 
 lerobot (and torch) are imported only inside the functions that write or read datasets.

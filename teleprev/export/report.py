@@ -69,6 +69,7 @@ class ExportReport:
     failed: dict[str, str] = field(default_factory=dict)  # session -> why it was left out (its task failed)
     skipped: dict[str, str] = field(default_factory=dict)  # session -> why it was not exported (no commands)
     cleaned: list[str] = field(default_factory=list)  # what was cleaned up after earlier, killed exports
+    selection: dict[str, int] = field(default_factory=dict)  # "recorded", then each filter: episodes left after it
 
     @property
     def frames(self) -> int:
@@ -135,6 +136,9 @@ def _session_notes(s: SessionReport) -> list[str]:
 def export_notes(report: ExportReport) -> list[str]:
     """One line per episode that was left out, split or trimmed, and the export's totals."""
     lines = [f"{Path(s.session).name} {note}" for s in report.sessions for note in _session_notes(s)]
+    if report.selection:
+        lines.append("selected: " + "; ".join(f"{label} {n}" if label == "recorded" else f"{label} kept {n}"
+                                              for label, n in report.selection.items()))
     speed = f"{report.realtime_x:.1f}x real time"
     if report.startup_s >= 0.1 * report.wall_s:
         working = max(report.wall_s - report.startup_s, 1e-9)

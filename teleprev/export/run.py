@@ -18,9 +18,11 @@ from typing import Callable
 
 from teleprev.errors import ConfigError, SessionError, out_of_space
 from teleprev.export import dataset as D
+from teleprev.export.episode_meta import rows_for, write_columns
 from teleprev.export.recipe import Recipe
 from teleprev.export.repo_id import check_repo_id
 from teleprev.export.report import ExportReport, SessionReport, folder_size
+from teleprev.export.selection import episode_facts
 from teleprev.export.space import space_error
 from teleprev.export.swap import clean_stale
 from teleprev.export.session import ExportSettings, Progress, Reporter, SessionSource, no_progress, export_session
@@ -40,6 +42,7 @@ class ExportOptions:
     video: VideoSettings | None = None  # None: the recipe's
     ray: str | None = None  # run the sessions on Ray: "local" (a new local instance), "auto", "HOST:PORT"
     open_reader: Callable | None = None  # files that are not teleprev sessions (teleprev/export/foreign/); one process
+    selected: dict[str, frozenset[int]] | None = None  # session -> its episodes to export (None: all; selection.py)
 
     def __post_init__(self):
         check_repo_id(self.repo_id)
@@ -68,6 +71,8 @@ def export(options: ExportOptions, report: Reporter = no_progress) -> ExportRepo
     parallel = options.open_reader is None and (options.ray is not None or (options.workers > 1 and len(options.sessions) > 1))
     executor = _local_workers(options) if parallel else None  # started now: lerobot loads while the sessions are checked
     sources, skipped = _open_all(options, fps)
+    facts = [f for s in sources for f in episode_facts(s.reader, s.path)]  # before workers: the readers close
+    first_episode = int(info.get("total_episodes", 0)) if info is not None else 0
     if skipped:
         options = replace(options, sessions=[p for p in options.sessions if str(p) not in skipped])
     try:
@@ -84,7 +89,7 @@ def export(options: ExportOptions, report: Reporter = no_progress) -> ExportRepo
             s.close()
         raise
 
-    settings = ExportSettings(fps, options.include_discarded)
+    settings = ExportSettings(fps, options.include_discarded, options.selected)
     staging = D.Staging(target)
     try:
         failed: dict[str, str] = {}
@@ -102,6 +107,7 @@ def export(options: ExportOptions, report: Reporter = no_progress) -> ExportRepo
             startup = time.perf_counter() - startup
             reports = _sequential(options, sources, staging, features, robot, fps, settings, video, report)
         _refuse_empty(reports)
+        write_columns(staging.dataset, first_episode, rows_for(reports, facts))
         totals = D.read_info(staging.dataset)
         staging.commit()
     except BaseException as exc:

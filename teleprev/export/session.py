@@ -26,6 +26,10 @@ from teleprev.topics import TASKS_RECORD
 _NS = 1_000_000_000
 DEFAULT_FPS = 30  # without a camera
 MARGIN_NS = _NS  # read this much before and after an episode: the state just before it, late frames
+# LeRobot's per-frame episode marks (as in its own datasets): done on an episode's last frame, success on
+# that frame of an episode the operator marked successful
+MARK_FEATURES = {"next.done": {"dtype": "bool", "shape": (1,), "names": None},
+                 "next.success": {"dtype": "bool", "shape": (1,), "names": None}}
 
 
 @dataclass
@@ -122,6 +126,7 @@ class SessionSource:
             else:
                 names = [f"{s.prefix}.{j}" for s in f.sources for j in self.names[s.topic]]
                 out[f.name] = {"dtype": "float32", "shape": (len(names),), "names": names}
+        out.update(MARK_FEATURES)
         return out
 
     def task_of(self, episode) -> str:
@@ -165,12 +170,16 @@ def _decode(data, topic: str, log_ns: int, where: str) -> np.ndarray:
 class ExportSettings:
     fps: int
     include_discarded: bool = False
+    selected: dict[str, frozenset[int]] | None = None  # session -> the episodes to export (None: every one)
 
 
 def export_session(source: SessionSource, dataset, settings: ExportSettings, report: Reporter = no_progress) -> SessionReport:
     """Write the session's episodes into `dataset` (a LeRobotDataset in write mode)."""
     name = str(source.path)
     episodes = source.reader.episodes()
+    if settings.selected is not None:
+        wanted = settings.selected.get(name, frozenset())
+        episodes = [ep for ep in episodes if ep.index in wanted]
     report(Progress("session", name, total=len(episodes)))
     result = SessionReport(name, len(episodes))
     end_ns = source.reader.end_ns or 0
@@ -238,7 +247,7 @@ def _export_episode(source: SessionSource, dataset, settings: ExportSettings, ep
         why = "too short after trimming" if plan.short else "no frame where every stream has a sample"
         rep.dropped = f"{why} ({'; '.join(rep.notes + rep.gaps)})"
         return rep
-    _write_pieces(source, dataset, plan, joints, cams, window, task, ref_key, report, rep)
+    _write_pieces(source, dataset, plan, joints, cams, window, task, ref_key, report, rep, ep.outcome == "success")
     return rep
 
 
@@ -313,7 +322,7 @@ def _describe(plan: EpisodePlan, stamps: dict[str, np.ndarray], labels: dict[str
 
 
 def _write_pieces(source: SessionSource, dataset, plan: EpisodePlan, joints, cams, window: tuple[int, int], task: str,
-                  ref_key, report: Reporter, rep: EpisodeReport) -> None:
+                  ref_key, report: Reporter, rep: EpisodeReport, success: bool) -> None:
     name = str(source.path)
     frames_all = np.concatenate([np.arange(a, b) for a, b in plan.pieces])
     report(Progress("episode", name, total=len(frames_all), episode=rep.index))
@@ -345,6 +354,9 @@ def _write_pieces(source: SessionSource, dataset, plan: EpisodePlan, joints, cam
             frame = {fname: m[row] for fname, m in matrices.items()}
             frame.update(imgs)
             frame["task"] = task
+            last = row + 1 == len(frames_all) or piece_of[row + 1] != piece_of[row]
+            frame["next.done"] = np.array([last])
+            frame["next.success"] = np.array([last and success and row + 1 == len(frames_all)])
             dataset.add_frame(frame)
             row += 1
             pending += 1

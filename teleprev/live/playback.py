@@ -16,7 +16,9 @@ from teleprev.messages import JointSample
 from teleprev.assembly import build_pipeline, rig_calibration
 from teleprev.preview.keys import KeyReader
 from teleprev.preview.robot_view import Layer, RobotView
-from teleprev.live.player import ROUNDING, Player, load_playback, safe_speed, smooth, validate
+from teleprev.export.actions import is_dataset
+from teleprev.live.player import ROUNDING, Player, load_dataset_playback, load_playback, safe_speed, smooth, validate
+from teleprev.live.replay_recording import ReplayRecording
 from teleprev.rig import load_recorded_rig, load_rig
 from teleprev.robot.model import load_robot
 from teleprev.clock import SessionClock
@@ -43,19 +45,33 @@ def _recorded_rig(session: Path):
     return rig
 
 
-def build_player(session: Path, episode, speed: float, to: str, rig_path=None, smoothed: bool = False):
-    """The player and what it drives; returns (player, runners, tap, rig, message). `smoothed`: play the
-    sequence as the pipeline's generator re-commands it (teleprev.live.player.smooth)."""
+def build_player(session: Path, episode, speed: float, to: str, rig_path=None, smoothed: bool = False, out=None):
+    """The player and what it drives; returns (player, runners, tap, rig, message, recording). `session`: a
+    session file or a LeRobot dataset folder (its `action` column); `smoothed`: play the sequence as the
+    pipeline's generator re-commands it (teleprev.live.player.smooth); `out`: record the replay there
+    (teleprev.live.replay_recording)."""
     from teleprev.devices.registry import load_plugin
     from teleprev.devices.runner import DeviceRunner
 
+    dataset = is_dataset(session)
     if to == "arm" and not rig_path:  # the hardware to drive comes from the user, never from a file's contents
         raise ConfigError("--to arm needs --rig RIG: the devices a session names are not opened from its metadata",
                           str(session))
+    if dataset and not rig_path:
+        raise ConfigError("a dataset does not carry its rig: pass --config RIG (the robot that plays its actions)",
+                          str(session))
+    if out is not None and to == "preview":
+        raise ConfigError("--out records what the robot is sent: add --to sim or --to arm")
     rig = load_rig(rig_path) if rig_path else _recorded_rig(session)
     pipeline = build_pipeline(rig, calibration=rig_calibration(rig) if rig_path else None)
     eff_guard = pipeline.effector.guard
-    playback = validate(load_playback(session, episode), pipeline.arm_guard, eff_guard)
+    if dataset:
+        from teleprev.assembly import motion_limits
+
+        loaded = load_dataset_playback(session, episode, motion_limits(rig))
+    else:
+        loaded = load_playback(session, episode)
+    playback = validate(loaded, pipeline.arm_guard, eff_guard)
     if smoothed:
         if pipeline.motion is None:
             raise ConfigError("--smooth needs the rig's motion limits, and this rig has none", str(rig.path or session))
@@ -70,7 +86,7 @@ def build_player(session: Path, episode, speed: float, to: str, rig_path=None, s
     message = "" if effective >= speed else (f"playing at {effective:.2f}x: {speed:g}x would exceed a joint's speed, "
                                              "acceleration or jerk limit")
     clock = SessionClock()
-    actuators, runners, tap = {}, [], StateTap()
+    actuators, runners, tap, recording = {}, [], StateTap(), None
     if to != "preview":
         context = rig.device_context(clock)
         if to == "sim":
@@ -79,8 +95,10 @@ def build_player(session: Path, episode, speed: float, to: str, rig_path=None, s
         else:
             rig.require("arm", "hand")
             devices = {kind: rig.of_kind(kind)[0].cls(rig.of_kind(kind)[0].name, rig.of_kind(kind)[0].settings, context) for kind in ("arm", "hand")}
-        actuators = devices
-        runners = [DeviceRunner(dev, tap.sink, clock) for dev in devices.values()]
+        recording = ReplayRecording(out, rig, session, episode, clock) if out is not None else None
+        actuators = recording.actuators(devices) if recording else devices
+        sink = recording.sink(tap.sink) if recording else tap.sink
+        runners = [DeviceRunner(dev, sink, clock) for dev in devices.values()]
 
     def measured():
         arm = next((s for t, s in tap.latest.items() if t.startswith("/arm/")), None)
@@ -93,7 +111,9 @@ def build_player(session: Path, episode, speed: float, to: str, rig_path=None, s
 
     player = Player(playback, effective, actuators, pipeline.arm_guard, eff_guard, measured, rig.pipeline.engage_speed_frac,
                     motion=pipeline.motion, clock=clock)
-    return player, runners, tap, rig, message
+    if recording is not None:
+        recording.playing = lambda: player.state.mode == "playing"
+    return player, runners, tap, rig, message, recording
 
 
 def _start_view(port: int | None, session: Path, player: Player, console: Console):
@@ -115,8 +135,8 @@ def _start_view(port: int | None, session: Path, player: Player, console: Consol
 
 
 def play(session: Path, episode, speed: float, to: str, rig_path, engage_after, console: Console, view: str, show: bool,
-         smoothed: bool = False, foxglove: int | None = None) -> None:
-    player, runners, tap, rig, message = build_player(session, episode, speed, to, rig_path, smoothed)
+         smoothed: bool = False, foxglove: int | None = None, out: Path | None = None) -> None:
+    player, runners, tap, rig, message, recording = build_player(session, episode, speed, to, rig_path, smoothed, out)
     live_view = _start_view(foxglove, session, player, console)
     for r in runners:
         r.start()
@@ -163,7 +183,13 @@ def play(session: Path, episode, speed: float, to: str, rig_path, engage_after, 
             live_view[1].set()
             live_view[2].join(2.0)
             live_view[0].close()
+        if recording is not None:
+            recording.close()  # after the robot has its last command: a failed recording never stops it early
+            if not recording.error:
+                console.print(f"replay recorded in {out}", highlight=False)
     sent = sum(1 for phase, _, _ in player.state.sent if phase == "playing")
     console.print(f"played {len(p.t_ns)} steps at {player.speed:.2f}x to {to}; {sent} commands sent" + (f"; {message}" if message else ""))
     if player.state.message:  # the robot refused a command or went away: playback stopped there
         raise DeviceError(f"playback stopped: {player.state.message}")
+    if recording is not None:
+        recording.check()

@@ -19,7 +19,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from teleprev.errors import DeviceError, SessionError
+from teleprev.errors import ConfigError, DeviceError, SessionError
 from teleprev.messages import JointSample
 from teleprev.pipeline.derivatives import divided_differences, runs
 from teleprev.pipeline.guard import JointGuard
@@ -59,6 +59,25 @@ def _stream(reader: SessionReader, topic: str, lo: int, hi: int) -> tuple[dict[i
 def load_playback(path, episode: int | None = None) -> Playback:
     with SessionReader(path) as reader:
         return _playback(reader, path, episode)
+
+
+def load_dataset_playback(root, episode: int | None, limits: dict) -> Playback:
+    """One episode of a LeRobot dataset's `action` column (any dataset's) as commands at its frames'
+    timestamps, its joints matched to the rig's by name as `teleprev audit DATASET` matches them."""
+    from teleprev.export.actions import read_actions
+
+    data = read_actions(root, limits)
+    present = np.unique(data.episodes)
+    if episode is None:
+        raise ConfigError("a dataset is replayed one episode at a time: pass --episode N", str(root))
+    if episode not in present:
+        have = f"episodes {present.min()}..{present.max()}" if len(present) else "no episodes"
+        raise SessionError(f"no episode {episode} in this dataset ({have})", str(root))
+    t, q = data.episode(episode)
+    if len(t) < 2:
+        raise SessionError(f"episode {episode} has {len(t)} frame: nothing to play", str(root))
+    return Playback(t, q[:, data.arm_cols], q[:, data.hand_cols], tuple(limits["arm"]["names"]),
+                    tuple(limits["hand"]["names"]), "dataset actions")
 
 
 def _playback(reader: SessionReader, path, episode: int | None) -> Playback:
@@ -173,7 +192,7 @@ class _Generated:
 
     def step(self, dt: float, arm, arm_v, effector, effector_v, frac: float = 1.0) -> None:
         m = self.motion
-        self.arm = m.arm.track(self.arm, arm, arm_v, dt, frac)[0]
+        self.arm = m.arm.track_inside(self.arm, arm, arm_v, dt, frac)  # braking for the joint limits as live
         if m.hand is not None:
             self.effector, self.effector_v = m.hand_step(self.effector, self.effector_v, effector, effector_v, dt,
                                                          self.dt_before, frac, self.flags)
@@ -195,33 +214,39 @@ def smooth(p: Playback, motion, effector_guard: JointGuard, speed: float = 1.0, 
     g = _Generated(motion, effector_guard, p.arm[0], p.effector[0])
     t0 = int(p.t_ns[0])
     t, arm, eff = [t0], [g.arm.q], [g.effector]
-    played = 0.0
+    played_ns = 0
 
-    def step(dt, *targets):
-        nonlocal played
-        g.step(dt, *targets)
-        played += dt
-        t.append(t0 + int(round(played * speed * 1e9)))
+    def step(until_ns, *targets):
+        # Each step lasts a whole number of nanoseconds and is generated for exactly that: the stamps' divided
+        # differences then measure the generator's own motion, within its limits (not 1e-5 past them).
+        nonlocal played_ns
+        g.step((until_ns - played_ns) / 1e9, *targets)
+        played_ns = until_ns
+        t.append(t0 + int(round(played_ns * speed)))
         arm.append(g.arm.q)
         eff.append(g.effector)
 
     arm_sent, eff_sent = p.sent("arm"), p.sent("effector")
     for k in range(1, len(p.t_ns)):
-        span = (p.t_ns[k] - p.t_ns[k - 1]) / 1e9 / speed  # played seconds to this command
-        if span <= 0:
+        end_ns = int(round((int(p.t_ns[k]) - t0) / speed))  # played time of this command
+        span_ns = end_ns - played_ns
+        if span_ns <= 0:
             continue
+        span = span_ns / 1e9
         va = (p.arm[k] - p.arm[k - 1]) / span if arm_sent[k] and arm_sent[k - 1] else None
         ve = (p.effector[k] - p.effector[k - 1]) / span if eff_sent[k] and eff_sent[k - 1] else None
         n = max(1, int(np.ceil(span / max_step_s - 1e-9)))
+        start_ns = played_ns
         for i in range(1, n + 1):
             # where the recorded command stream (linear between commands) is at this sub-step
             f = i / n
-            step(span / n, p.arm[k - 1] + f * (p.arm[k] - p.arm[k - 1]), va,
+            step(start_ns + int(round(span_ns * f)), p.arm[k - 1] + f * (p.arm[k] - p.arm[k - 1]), va,
                  p.effector[k - 1] + f * (p.effector[k] - p.effector[k - 1]), ve)
+    settle_ns = int(round(max_step_s * 1e9))
     for _ in range(int(SETTLE_S / max_step_s)):  # then come to rest on the last command
         if g.at_rest_on(p.arm[-1], p.effector[-1]):
             break
-        step(max_step_s, p.arm[-1], None, p.effector[-1], None)
+        step(played_ns + settle_ns, p.arm[-1], None, p.effector[-1], None)
     return Playback(np.array(t, dtype=np.int64), np.array(arm), np.array(eff), p.arm_names, p.effector_names,
                     f"{p.source}, smoothed", len(t))
 
@@ -337,9 +362,10 @@ class Player:
         """The ramp through the pipeline's generator: from rest where the robot is to rest at the first
         command, at the engage fraction of the speed caps and within the acceleration and jerk limits."""
         g, t_ns = _Generated(self.motion, self.effector_guard, arm, eff), self._now_ns()
+        step_ns = int(round(self.period * 1e9))  # generated for the whole nanoseconds its stamps are apart
         while not self._stop.is_set():  # at least one command: the robot holds where it is told to
-            g.step(self.period, target_a, None, target_e, None, self.engage_speed_frac)
-            t_ns += int(self.period * 1e9)
+            g.step(step_ns / 1e9, target_a, None, target_e, None, self.engage_speed_frac)
+            t_ns += step_ns
             self._send(g.arm.q, g.effector, t_ns)
             time.sleep(self.period)
             if g.at_rest_on(target_a, target_e):

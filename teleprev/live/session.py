@@ -59,6 +59,14 @@ def default_session_path(task: str) -> Path:
     return Path("sessions") / f"{stamp}_{task or 'session'}.mcap"
 
 
+def rig_record(rig) -> dict[str, str]:
+    """The session's "rig" metadata record: the rig file's text (`load_recorded_rig` reads it back) and
+    what it names."""
+    return {"path": str(rig.path), "toml": rig.path.read_text() if rig.path else "", "name": rig.rig.name,
+            "robot": rig.rig.robot, "end_effector": rig.rig.end_effector,
+            "robot_urdf_sha256": load_robot(rig.rig.robot).urdf_sha256}
+
+
 class LiveSession:
     def __init__(self, options: RecordOptions):
         from teleprev.devices.runner import ActuatorPort, DeviceRunner
@@ -159,9 +167,7 @@ class LiveSession:
         rig, o = self.rig, self.options
         cal_path = rig.resolve(rig.rig.calibration) if rig.rig.calibration else None
         meta = {
-            "rig": {"path": str(rig.path), "toml": rig.path.read_text() if rig.path else "", "name": rig.rig.name,
-                    "robot": rig.rig.robot, "end_effector": rig.rig.end_effector,
-                    "robot_urdf_sha256": load_robot(rig.rig.robot).urdf_sha256},
+            "rig": rig_record(rig),
             "calibration": {"path": str(cal_path or ""), "toml": cal_path.read_text() if cal_path else ""},
             "session": {"operator": o.operator or rig.rig.operator, "task": self.task, "participant": o.participant or rig.rig.participant,
                         "condition": o.condition or rig.rig.condition, "end_effector": rig.rig.end_effector,

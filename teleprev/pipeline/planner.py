@@ -118,7 +118,6 @@ class CommandPlanner:
         self.engage_speed_frac = engage_speed_frac
         self.stale_ns = stale_ns
         self.state = PlannerState()
-        self._limits = tuple(x.tolist() for x in (self.arm.lower, self.arm.upper, self.arm.acceleration, self.arm.jerk))
 
     @classmethod
     def for_pipeline(cls, pipeline) -> "CommandPlanner":
@@ -227,7 +226,7 @@ class CommandPlanner:
             side.motion = self._brake(m, dt, flags)
             return False
         following, reached, _, held, close = out
-        if held or not self._stops_inside(following):
+        if held or not self.arm.stops_inside(following):
             # This sample would need more room than is left before a joint limit to brake: brake now,
             # which (by the same test at every tick before) stops inside the limits.
             side.motion = self._brake(m, dt, flags)
@@ -239,35 +238,10 @@ class CommandPlanner:
     def _brake(self, m: JointMotion, dt: float, flags: list[str]) -> JointMotion:
         """The hardest stop the limits allow, dt on; a joint whose stop would pass its limit is held at it as a
         last resort (never needed while every profile taken stops inside them: flagged "arm_limit_held")."""
-        out = self.arm.stop(m, dt)
-        inside = np.minimum(np.maximum(out.q, self.arm.lower), self.arm.upper)
-        held = inside != out.q
-        if not held.any():
-            return out
-        flags.append("arm_limit_held")
-        # Only the joints at a limit are held there: the others go on braking. Holding the whole arm at
-        # once took every other joint's braking velocity to zero in one tick (89 rad/s^2 on joint4, seen).
-        out = JointMotion(inside, np.where(held, 0.0, out.v), np.where(held, 0.0, out.a))
-        return JointMotion.rest(inside) if out.at_rest else out
-
-    def _stops_inside(self, m: JointMotion) -> bool:
-        """Whether braking as hard as the limits allow from m ends inside every joint limit. The exact stop
-        (ruckig) is computed only where a joint is closer to a limit than a bound on its braking distance:
-        its speed grown by what its acceleration adds while the jerk turns it round, held while it does,
-        then braked at the acceleration limit (twice that, and a millimetre radian, for margin)."""
-        lower, upper, acc, jerk = self._limits
-        for q, v, a, lo, hi, amax, jmax in zip(m.q.tolist(), m.v.tolist(), m.a.tolist(), lower, upper, acc, jerk):
-            up = v > 0 or (v == 0 and a > 0)
-            speed, push = (v, max(a, 0.0)) if up else (-v, max(-a, 0.0))
-            turn = (push + amax) / jmax
-            peak = speed + push * push / (2.0 * jmax)
-            reach = 2.0 * (peak * turn + peak * peak / (2.0 * amax)) + 1e-3
-            if (hi - q if up else q - lo) <= reach:
-                break  # (floats: a few microseconds where numpy's calls cost tens)
-        else:
-            return True
-        end = self.arm.stop_position(m)
-        return bool(((end >= self.arm.lower) & (end <= self.arm.upper)).all())
+        out, held = self.arm.brake(m, dt)
+        if held:
+            flags.append("arm_limit_held")
+        return out
 
     # ---- the hand --------------------------------------------------------------------------------
     def _hand(self, target: TargetUpdate | None, t_ns: int, dt: float, frac: float, flags: list[str]) -> bool:

@@ -19,7 +19,7 @@ def session(tmp_path_factory):
 
 
 def _play(session, speed, engage_delay=0.0):
-    player, runners, tap, rig, message = build_player(session, 0, speed, "sim")
+    player, runners, tap, rig, message, _ = build_player(session, 0, speed, "sim")
     sent_to_arm = []
     arm = player.actuators["arm"]
     original = arm.send

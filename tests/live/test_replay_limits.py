@@ -36,7 +36,7 @@ def _play(player, runners) -> list:
 
 def _play_to_sim_arm(smoothed: bool):
     """Play episode 0 of the fixture to the rig's robot (the sim arm, which faults like an xArm would)."""
-    player, runners, tap, rig, message = build_player(FIXTURE, 0, 1.0, "arm", SIM_RIG, smoothed=smoothed)
+    player, runners, tap, rig, message, _ = build_player(FIXTURE, 0, 1.0, "arm", SIM_RIG, smoothed=smoothed)
     return player, player.actuators["arm"], _play(player, runners)
 
 
@@ -78,7 +78,7 @@ def test_smoothed_the_sim_arm_follows_within_the_limits():
 
 
 def test_smoothed_at_half_speed_is_generated_for_the_played_time():
-    player, runners, tap, rig, message = build_player(FIXTURE, 1, 0.5, "arm", SIM_RIG, smoothed=True)
+    player, runners, tap, rig, message, _ = build_player(FIXTURE, 1, 0.5, "arm", SIM_RIG, smoothed=True)
     assert player.speed == 0.5
     p = player.p
     played_ns = np.diff(p.t_ns) / 0.5  # what the Player waits between commands at this speed
@@ -91,7 +91,7 @@ def test_smoothed_at_half_speed_is_generated_for_the_played_time():
 
 
 def test_a_fresh_recording_replays_to_the_sim_robot_without_a_fault(sim_session):
-    player, runners, tap, rig, message = build_player(sim_session, 0, 2.0, "sim")
+    player, runners, tap, rig, message, _ = build_player(sim_session, 0, 2.0, "sim")
     assert player.speed == 1.0  # recorded at the limits: 2x would break them
     hand_steps = int(player.p.sent("effector").sum())
     _play(player, runners)

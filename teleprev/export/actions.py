@@ -1,0 +1,94 @@
+"""A LeRobot dataset's `action` column, read from its parquet files without lerobot (the live path must
+not import it), with a rig's arm and end-effector joints found in it by name: what `teleprev audit
+DATASET` checks and `teleprev replay DATASET` plays.
+"""
+
+from __future__ import annotations
+
+import json
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from teleprev.errors import SessionError
+
+
+def is_dataset(path: Path) -> bool:
+    return (Path(path) / "meta" / "info.json").is_file()
+
+
+def _action_columns(names: list[str], joints: tuple[str, ...], prefix: str) -> list[int] | None:
+    """Where each joint sits among the action's names: "<prefix>.<joint>" (teleprev's exports), else
+    "<anything>.<joint>" or "<joint>" met exactly once; None if a joint is not found."""
+    out = []
+    for j in joints:
+        exact = [i for i, n in enumerate(names) if n == f"{prefix}.{j}"]
+        loose = [i for i, n in enumerate(names) if n == j or n.endswith("." + j)]
+        found = exact or (loose if len(loose) == 1 else [])
+        if not found:
+            return None
+        out.append(found[0])
+    return out
+
+
+@dataclass
+class DatasetActions:
+    """A LeRobot dataset's `action` column, with the rig's arm and end-effector joints found in it."""
+
+    episodes: np.ndarray  # per frame
+    stamps: np.ndarray  # per frame: its timestamp in ns (from its episode's start)
+    action: np.ndarray  # (frames, action values)
+    arm_cols: list[int]  # the rig's arm joints, in its order, among the action's values
+    hand_cols: list[int]
+    note: str = ""  # how the joints were matched, when not by name
+
+    def episode(self, index: int) -> tuple[np.ndarray, np.ndarray]:
+        """(stamps, actions) of one episode in time order."""
+        rows = np.flatnonzero(self.episodes == index)
+        rows = rows[np.argsort(self.stamps[rows], kind="stable")]
+        return self.stamps[rows], self.action[rows]
+
+
+def read_actions(root: str | Path, limits: dict) -> DatasetActions:
+    """The `action` column of a LeRobot dataset (teleprev's or anyone's) read from its parquet files
+    (without lerobot), its joints matched to the rig's `limits` by name ("arm.joint1" or "joint1"); when
+    no name matches and the action has exactly the rig's arm + end-effector joints, by position."""
+    import pyarrow.parquet as pq
+
+    root = Path(root)
+    where = str(root / "meta" / "info.json")
+    try:
+        info = json.loads((root / "meta" / "info.json").read_text())
+        feature = info["features"]["action"]
+    except (OSError, ValueError, KeyError) as e:
+        raise SessionError(f"not a LeRobot dataset with an 'action' feature ({type(e).__name__}: {e})", where) from None
+    names = feature.get("names")
+    if isinstance(names, dict):  # older datasets: {"motors": [...]}
+        names = next(iter(names.values()), None)
+    names = [str(n) for n in names] if names else [f"action.{i}" for i in range(int(feature["shape"][0]))]
+    arm_names, hand_names = limits["arm"]["names"], limits["hand"]["names"]
+    arm_cols = _action_columns(names, arm_names, "arm")
+    hand_cols = _action_columns(names, hand_names, "hand")
+    note = ""
+    if arm_cols is None or hand_cols is None:
+        if len(names) != len(arm_names) + len(hand_names):
+            raise SessionError(f"the action's {len(names)} names {names[:8]}{'...' if len(names) > 8 else ''} do not "
+                               f"name the rig's joints ({len(arm_names)} arm: {list(arm_names)}; {len(hand_names)} "
+                               f"end effector), and their number differs, so they cannot be matched by position", where)
+        arm_cols, hand_cols = list(range(len(arm_names))), list(range(len(arm_names), len(names)))
+        note = "joints matched by position (the action's names are not the rig's)"
+    files = sorted((root / "data").rglob("*.parquet"))
+    if not files:
+        raise SessionError("no data/*.parquet files", str(root))
+    table = {"episode_index": [], "timestamp": [], "action": []}
+    for f in files:
+        try:
+            part = pq.read_table(f, columns=list(table)).to_pydict()
+        except Exception as e:  # pyarrow raises many kinds for a damaged or foreign file
+            raise SessionError(f"cannot read the columns episode_index, timestamp, action ({e})", str(f)) from None
+        for k in table:
+            table[k].extend(part[k])
+    return DatasetActions(np.asarray(table["episode_index"], dtype=np.int64),
+                          np.round(np.asarray(table["timestamp"], dtype=float) * 1e9).astype(np.int64),
+                          np.asarray(table["action"], dtype=float), arm_cols, hand_cols, note)
