@@ -127,6 +127,7 @@ class SessionLoop:
         self._stopping = False
         self.fault = ""  # why the session stays in preview until the operator engages (a device failed)
         self._fault_told = False
+        self.taps: list[Callable[[Logged], Any]] = []  # each sample as logged, on this thread (e.g. a policy's observations)
 
     # ---- producers (any thread) ----------------------------------------------------------------
     def sink(self, sample: Sample, receive_ns: int) -> None:
@@ -240,6 +241,8 @@ class SessionLoop:
                               orientation=np.asarray(payload.orientation, float) + 0.0)
         msg = Logged(sample.topic, t, payload)
         self._log(msg)
+        for tap in self.taps:
+            tap(msg)
         counter = self.stats.streams.get(sample.topic)
         if counter is None:
             counter = self.stats.streams[sample.topic] = StreamCounter(first_ns=t)
