@@ -156,7 +156,9 @@ class PolicyRunner:
             t.start()
         return self
 
-    def stop(self, timeout: float = 10.0) -> None:
+    def stop(self, timeout: float = 2.0) -> None:
+        """No action is handed on from now; an inference still running after `timeout` (a stalled policy)
+        is left to end on its own (daemon) thread, so a session never waits on it to close its file."""
         self._stop.set()
         with self._lock:
             self._lock.notify_all()
