@@ -65,3 +65,14 @@ def test_a_matching_policy_passes_the_checks(tmp_path):
     plan = check_rollout(RolloutOptions(policy=saved_policy(tmp_path / "p"), out=tmp_path / "x.mcap"))
     assert plan.features.names == ("observation.state", "observation.images.cam_front") and plan.fps == 30
     assert plan.action_names[0] == "arm.joint1" and len(plan.action_names) == 22
+
+
+def test_the_checks_and_help_load_neither_torch_nor_lerobot(tmp_path):
+    from tests.export.test_lazy_lerobot import heavy_modules_after, run_cli
+
+    assert heavy_modules_after("import teleprev.live.rollout") == []
+    assert heavy_modules_after(run_cli("rollout", "--help")) == []
+    policy = saved_policy(tmp_path / "p")
+    code = ("from pathlib import Path\nfrom teleprev.live.rollout import RolloutOptions, check_rollout\n"
+            f"check_rollout(RolloutOptions(policy=Path({str(policy)!r}), out=Path({str(tmp_path / 'x.mcap')!r})))")
+    assert heavy_modules_after(code) == []
