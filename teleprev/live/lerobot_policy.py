@@ -74,7 +74,9 @@ class LeRobotPolicy:
         self.preprocessor = preprocessor
         self.postprocessor = postprocessor
         self.device = device
-        self.chunks = hasattr(policy, "predict_action_chunk")
+        # ACT plans a chunk from each observation alone (predict_action_chunk); other policies keep queues and
+        # histories of their own, which only their select_action feeds: one action a call, in their order
+        self.plans_ahead = card.type == "act"
 
     @classmethod
     def load(cls, path: Path) -> "LeRobotPolicy":
@@ -102,8 +104,8 @@ class LeRobotPolicy:
         self.policy.reset()
 
     def chunk(self, observation: dict[str, np.ndarray], task: str) -> np.ndarray:
-        """(n, action width) float64: the actions the policy plans from this observation, one per frame
-        from now (n = its n_action_steps where it plans chunks; 1 where it gives one action a call)."""
+        """(n, action width) float64: ACT's plan from this observation, one action per frame from now (its
+        n_action_steps); for other policies the next action of their own sequence (n = 1)."""
         import torch
         from lerobot.policies.utils import prepare_observation_for_inference
 
@@ -111,15 +113,10 @@ class LeRobotPolicy:
             batch = prepare_observation_for_inference(dict(observation), torch.device(self.device), task,
                                                       getattr(self.policy.config, "robot_type", None))
             batch = self.preprocessor(batch)
-            actions = None
-            if self.chunks:
-                try:
-                    actions = self.policy.predict_action_chunk(batch)  # (1, chunk, width)
-                    steps = getattr(self.policy.config, "n_action_steps", None)
-                    actions = actions[:, :steps] if steps else actions
-                except NotImplementedError:
-                    self.chunks = False
-            if actions is None:
+            if self.plans_ahead:
+                actions = self.policy.predict_action_chunk(batch)  # (1, chunk, width)
+                actions = actions[:, :self.policy.config.n_action_steps]
+            else:
                 actions = self.policy.select_action(batch)[:, None]  # (1, 1, width)
             actions = self.postprocessor(actions)
         return np.asarray(actions.detach().to("cpu", torch.float64).numpy()).reshape(-1, actions.shape[-1])

@@ -9,7 +9,8 @@
                      took frames (LEAD at least), the latest observation goes through the policy, and its
                      plan (an ACT chunk: n_action_steps actions, one per frame) replaces what was left,
                      less the frames its inference took (its last action is kept: a policy slower than
-                     its chunk still moves the robot, at its inference rate).
+                     its chunk still moves the robot, at its inference rate). A policy that keeps its own
+                     sequence (lerobot's select_action: Diffusion, pi0, ...) has its actions queued in turn.
                      Pacing: once per frame at the dataset's fps, the next action is handed on (to the
                      session loop, as a sample on /policy/action), or none if the queue ran dry.
 
@@ -42,6 +43,10 @@ LEAD = 2  # actions left, at least, when the next inference starts (frames of sl
 
 
 class Policy(Protocol):
+    # True: each call plans from this observation on (ACT's chunk), superseding what is queued; False: each
+    # call gives the next action(s) of the policy's own sequence (its select_action), queued after the rest
+    plans_ahead: bool
+
     def chunk(self, observation: dict[str, np.ndarray], task: str) -> np.ndarray: ...
 
     def reset(self) -> None: ...
@@ -206,9 +211,12 @@ class PolicyRunner:
                 self.stats.inference_s.append(took)
                 if self._reset:  # an episode started meanwhile: this plan was for the last one
                     continue
-                late = min(late, len(plan) - 1)
-                self.stats.dropped += late
-                self._queue = deque(plan[late:])
+                if getattr(self.policy, "plans_ahead", True):
+                    late = min(late, len(plan) - 1)
+                    self.stats.dropped += late
+                    self._queue = deque(plan[late:])
+                else:
+                    self._queue.extend(plan)
 
     def _lead(self) -> int:
         """Actions left when the next inference starts: as many frames as the last one took, and one."""

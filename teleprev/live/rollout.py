@@ -164,7 +164,8 @@ class Rollout:
         self.recording = LiveSession(RecordOptions(
             out=options.out, rig=options.rig, models=options.models, task=options.task,
             connect_timeout_s=options.connect_timeout_s, policy=record))
-        if self.recording.pipeline.action_names != plan.action_names:
+        if self.recording.pipeline.action_names != plan.action_names:  # check_rollout names them as the pipeline
+            self.recording.stop()
             raise ConfigError(f"the pipeline's joints {list(self.recording.pipeline.action_names)} differ from the "
                               f"rollout's {list(plan.action_names)}", str(options.rig or "rig"))
         self.latest = LatestSamples()

@@ -131,3 +131,14 @@ def test_when_actions_stop_the_commands_go_on_and_brake_to_rest(tmp_path):
     assert all("targets_stale" in ticks[c.stamp_ns]["flags"] for c in after)
     moving = [c for c in arm_cmds if engaged < c.stamp_ns < stopped]
     assert max(float(np.abs(c.velocities).max()) for c in moving) > 0.05  # it did move while actions came
+
+
+class SequencePolicy(CountingPolicy):
+    plans_ahead = False  # lerobot's select_action: the next action of the policy's own sequence each call
+
+
+def test_a_policy_keeping_its_own_sequence_has_every_action_handed_on_in_turn():
+    stats, handed = _run(SequencePolicy(size=1, think_s=0.0), fps=50.0, seconds=1.0)
+    values = [v // 1000 for _, v in handed]
+    assert len(values) >= 40 and values == list(range(len(values)))  # none skipped, none superseded
+    assert stats.dropped == 0
