@@ -4,8 +4,9 @@
                              policy type, its input and output features with their shapes, the fps of
                              the dataset it was trained on (when that dataset's folder is still there)
     LeRobotPolicy.load(path) the policy (lerobot.policies.factory.get_policy_class) and its saved pre- and
-                             post-processors (make_pre_post_processors): `chunk(observation)` gives the
-                             actions it plans from one observation, in the dataset's units
+                             post-processors (make_pre_post_processors), run once on a blank observation:
+                             `chunk(observation)` gives the actions it plans from one observation, in the
+                             dataset's units
 
 torch and lerobot are imported by `load` only (`teleprev rollout`), never by the live path itself.
 """
@@ -97,7 +98,17 @@ class LeRobotPolicy:
         pre, post = make_pre_post_processors(config, pretrained_path=str(path),
                                              preprocessor_overrides={"device_processor": override},
                                              postprocessor_overrides={"device_processor": override})
-        return cls(card, policy, pre, post, device)
+        loaded = cls(card, policy, pre, post, device)
+        loaded.warm_up()
+        return loaded
+
+    def warm_up(self) -> None:
+        """One inference on a blank observation, then a reset: torch's first call (allocations, kernel
+        choice) costs seconds, which the first episode's first plan must not wait for."""
+        blank = {name: np.zeros((shape[1], shape[2], shape[0]), np.uint8) if len(shape) == 3 else np.zeros(shape, np.float32)
+                 for name, shape in self.card.inputs.items()}
+        self.chunk(blank, "")
+        self.reset()
 
     def reset(self) -> None:
         """A new episode: the policy forgets what it kept of the last (its queues, its history)."""
