@@ -37,8 +37,9 @@ def test_record_export_train_rollout_audit_eval_export(tmp_path, sim_session, mo
 
     meta, actions, modes, commands, episodes = _read(session)
     assert meta["policy"]["type"] == "act" and meta["policy"]["fps"] == "30"
-    # each episode engaged for about 1.9 s: commands at 120 Hz, whatever the policy's rate
-    assert len(episodes) == EPISODES and len(actions) > 30 and len(commands) > 250
+    # each episode engaged for up to 1.9 s (once the policy's first plan is previewed): commands at 120 Hz,
+    # whatever the policy's rate (291 and 415 in two runs on a busy 2-core machine)
+    assert len(episodes) == EPISODES and len(actions) > 30 and len(commands) > 150
     names = actions[0][1].names
     assert names[:6] == tuple(f"arm.joint{k}" for k in range(1, 7)) and names[6:] == tuple(f"hand.{k}" for k in range(16))
     engages = [t for t, d in modes if d["mode"] == "execute"]
