@@ -16,6 +16,9 @@ What the pipeline computed and sent:
     /command/arm              JointSample   arm command actually sent (execute mode only), stamped with the
                                             instant the sender sent it; velocities: the command's velocity
     /command/hand             JointSample   end-effector command actually sent (execute mode only)
+    /policy/action            JointSample   a policy's raw action (teleprev rollout), arm and end-effector joints
+                                            by the dataset's names ("arm.joint1", "hand.0"): the input that
+                                            drives the pipeline in place of the glove and suit
     /command/tick             Event         teleprev.CommandTick: per tick of the paced sender (format 4),
                                             the last update it had adopted, its lateness and flags
     /tf                       TransformsSample   robot link frames (for Foxglove's URDF panel)
@@ -52,6 +55,7 @@ STEP_REPORT = "/pipeline/report"
 COMMAND_ARM = "/command/arm"
 COMMAND_HAND = "/command/hand"
 COMMAND_TICK = "/command/tick"
+POLICY_ACTION = "/policy/action"
 EPISODE = "/events/episode"
 MODE = "/events/mode"
 DEVICE_EVENT = "/events/device"

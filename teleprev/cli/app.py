@@ -19,6 +19,7 @@ from teleprev.cli import import_ as import_cli
 from teleprev.cli import record as record_cli
 from teleprev.cli import replay as replay_cli
 from teleprev.cli import robot
+from teleprev.cli import rollout as rollout_cli
 from teleprev.cli import session as session_cli
 from teleprev.cli import study as study_cli
 
@@ -37,6 +38,7 @@ MODELS = "Robot and models"
 
 app.command("record", rich_help_panel=COLLECT)(record_cli.record)
 app.command("calibrate", rich_help_panel=COLLECT)(calibrate_cli.calibrate)
+app.command("rollout", rich_help_panel=COLLECT)(rollout_cli.rollout)
 
 app.add_typer(devices_cli.app, name="devices", rich_help_panel=COLLECT)
 

@@ -188,7 +188,11 @@ def _rerun(reader: SessionReader, path: Path, models, rig_path, started: float) 
     # inputs; an output topic of another schema comes through as messages and is skipped, as before.
     tables = {k: JointTable() for k in RECORDED_JOINT_TOPICS
               if reader.schemas.get(k) == JOINT_STATES}
-    streamed = [inputs.hand, inputs.wrist, inputs.arm, inputs.effector, topics.MODE, topics.COMMAND_TICK,
+    if inputs.action and inputs.action not in reader.schemas:
+        raise SessionError(f"the session lacks the policy's actions ({inputs.action}) that drove its pipeline", str(path))
+    # a policy's rollout: its recorded actions are the input that steps the pipeline (PipelineDriver)
+    streamed = [inputs.hand, inputs.wrist, inputs.arm, inputs.effector, *([inputs.action] if inputs.action else []),
+                topics.MODE, topics.COMMAND_TICK,
                 topics.DEVICE_EVENT, *(k for k in RECORDED_JOINT_TOPICS if k not in tables)]
     # the actuators' measured states and resets: where a controller starts a stream (metrics' derivatives)
     histories = {topics.COMMAND_ARM: ActuatorHistory(), topics.COMMAND_HAND: ActuatorHistory()}

@@ -127,7 +127,8 @@ class SessionLoop:
         self._stopping = False
         self.fault = ""  # why the session stays in preview until the operator engages (a device failed)
         self._fault_told = False
-        self.held = ""  # why execute is refused for now (a reset between timed episodes), or ""
+        self.holds: dict[str, str] = {}  # why execute is refused for now, by who asked (a timed episodes' reset)
+        self.taps: list[Callable[[Logged], Any]] = []  # each sample as logged, on this thread (e.g. a policy's observations)
 
     # ---- producers (any thread) ----------------------------------------------------------------
     def sink(self, sample: Sample, receive_ns: int) -> None:
@@ -140,8 +141,9 @@ class SessionLoop:
     def control(self, action: str, **data) -> None:
         """For the operator (keys) and scripts: 'mode' (mode=), 'start' (task=), 'stop', 'discard',
         'outcome' (success=), 'operator' (event=, detail=), 'halt' (why=: back to preview, which brakes
-        the robot to rest, and execute is refused from then on), 'hold' (why=: the same until a 'hold'
-        with why="" lifts it; timed episodes' resets). 'start', 'stop' and 'discard' take at_ns=: the
+        the robot to rest, and execute is refused from then on), 'hold' (why=, source=: the same until a
+        'hold' from that source with why="" lifts it; execute is refused while any source holds: timed
+        episodes' resets, a policy that has not acted yet in its episode). 'start', 'stop' and 'discard' take at_ns=: the
         session-clock instant the episode event is stamped with (when a schedule or a key asked for it,
         however late the loop gets to it; default: when the loop does). Controls are never dropped."""
         self._queue.put((None, (action, data)))
@@ -245,6 +247,8 @@ class SessionLoop:
                               orientation=np.asarray(payload.orientation, float) + 0.0)
         msg = Logged(sample.topic, t, payload)
         self._log(msg)
+        for tap in self.taps:
+            tap(msg)
         counter = self.stats.streams.get(sample.topic)
         if counter is None:
             counter = self.stats.streams[sample.topic] = StreamCounter(first_ns=t)
@@ -368,8 +372,12 @@ class SessionLoop:
             self.halted = data["why"]
             action, data, message = "mode", {"mode": "preview", "reason": "halt"}, f"{self.halted}: robot stopped"
         elif action == "hold":
-            self.held = data.get("why", "")
-            action, data = ("mode", {"mode": "preview", "reason": data.get("reason", "hold")}) if self.held else ("", {})
+            source, why = data.get("source", "schedule"), data.get("why", "")
+            if why:
+                self.holds[source] = why
+            else:
+                self.holds.pop(source, None)
+            action, data = ("mode", {"mode": "preview", "reason": data.get("reason", "hold")}) if why else ("", {})
         if action == "mode":
             mode = data["mode"]
             t = self._stamp(now)
@@ -377,8 +385,8 @@ class SessionLoop:
                 return  # already in it (a retried engage accepted meanwhile): nothing to switch or record
             if self.halted and mode == "execute":
                 refused = self.halted
-            elif self.held and mode == "execute":
-                refused = self.held
+            elif self.holds and mode == "execute":
+                refused = "; ".join(self.holds.values())
             elif self.fault and mode == "execute" and data.get("reason") == "script":
                 refused = f"{self.fault} (an unattended session does not engage again after a fault)"
                 if not self._fault_told:  # why it stays in preview, once per fault

@@ -11,6 +11,7 @@
 
 from __future__ import annotations
 
+import dataclasses
 import datetime as _dt
 import json
 import time
@@ -52,6 +53,7 @@ class RecordOptions:
     connect_timeout_s: float = 5.0  # unattended: every device must have sent something by then
     foxglove: int | None = None  # a live Foxglove view on this port of 127.0.0.1 (0: any free port)
     episode_plan: EpisodeTimes | None = None  # timed episodes (run.run_timed): kept in the file's metadata
+    policy: dict[str, str] | None = None  # a policy drives the pipeline (teleprev rollout): its metadata record
 
 
 def default_session_path(task: str) -> Path:
@@ -85,7 +87,10 @@ class LiveSession:
         self.devices = {name: entry.cls(name, entry.settings, self.context) for name, entry in rig.devices.items()}
         first = {kind: rig.of_kind(kind)[0].name for kind in ("glove", "suit", "arm", "hand")}
         self.pipeline = build_pipeline(rig, options.models)
-        self.driver = PipelineDriver(self.pipeline, InputTopics.for_devices(first["glove"], first["suit"], first["arm"], first["hand"]))
+        inputs = InputTopics.for_devices(first["glove"], first["suit"], first["arm"], first["hand"])
+        if options.policy is not None:  # the policy's actions step the pipeline (Pipeline.joint_step)
+            inputs = dataclasses.replace(inputs, action=topics.POLICY_ACTION)
+        self.driver = PipelineDriver(self.pipeline, inputs)
         self.robot = load_robot(rig.rig.robot)
         out.parent.mkdir(parents=True, exist_ok=True)
         urdf = Path(self.robot.urdf_path)
@@ -185,6 +190,8 @@ class LiveSession:
         meta["pipeline"] = {"inputs": json.dumps(self.driver.topics.__dict__)}
         if o.episode_plan is not None:
             meta[PLAN_RECORD] = o.episode_plan.to_record(self.preview_lead_s)
+        if o.policy is not None:
+            meta["policy"] = dict(o.policy)
         # The post-condition questionnaire is answered after the file is closed: it goes in a sidecar
         # next to the session, which the session names here so that nothing recorded is rewritten.
         meta["study"] = {"survey_sidecar": Path(o.out).with_suffix(".survey.json").name}

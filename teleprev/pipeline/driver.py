@@ -1,7 +1,8 @@
 """Feeds a Pipeline from one ordered stream of logged samples, live or from a recording.
 
 It keeps the latest sample of each input stream, runs a step on every sample of the trigger stream (the
-glove: pipeline outputs at glove rate) and applies mode switches. Everything it decides depends only on
+glove: pipeline outputs at glove rate; with an `action` topic, a policy's actions: `Pipeline.joint_step`
+on each, the glove and suit only recorded) and applies mode switches. Everything it decides depends only on
 the samples and their log times, in log-time order, so replaying a session's raw streams and its mode
 switches through a driver built from the same rig and models reproduces the recorded commands.
 """
@@ -20,10 +21,11 @@ from teleprev import topics
 
 @dataclass(frozen=True)
 class InputTopics:
-    hand: str  # glove hand pose: also the trigger
+    hand: str  # glove hand pose: also the trigger (unless `action` is set)
     wrist: str
     arm: str
     effector: str
+    action: str = ""  # joint targets asked for directly (a policy's, topics.POLICY_ACTION): the trigger instead
 
     @classmethod
     def for_devices(cls, glove: str, suit: str, arm: str, hand: str) -> "InputTopics":
@@ -70,7 +72,7 @@ class PipelineDriver:
     def __init__(self, pipeline: Pipeline, inputs: InputTopics):
         self.pipeline = pipeline
         self.topics = inputs
-        self._input_topics = frozenset((inputs.hand, inputs.wrist, inputs.arm, inputs.effector))
+        self._input_topics = frozenset(t for t in (inputs.hand, inputs.wrist, inputs.arm, inputs.effector, inputs.action) if t)
         self.state = PipelineState()
         self.latest: dict[str, object] = {}
         self.last_result: StepResult | None = None
@@ -94,11 +96,13 @@ class PipelineDriver:
     def _inputs(self, t_ns: int, hand_input: HandInput | None = None) -> StepInputs:
         g = self.latest.get
         return StepInputs(t_ns, g(self.topics.hand), g(self.topics.wrist), g(self.topics.arm), g(self.topics.effector),
-                          hand_input)
+                          hand_input, g(self.topics.action) if self.topics.action else None)
 
     def prepare(self, messages: list[Logged]) -> list[HandInput | None]:
         """For a run of messages about to be fed: Pipeline.prepare_hands of each trigger sample, in one
         batch (None for the other messages), to pass to `feed` with its message."""
+        if self.topics.action:  # the glove steps nothing
+            return [None] * len(messages)
         hand = [i for i, m in enumerate(messages) if m.topic == self.topics.hand and isinstance(m.payload, JointSample)]
         out: list[HandInput | None] = [None] * len(messages)
         for i, prepared in zip(hand, self.pipeline.prepare_hands([messages[i].payload for i in hand])):
@@ -135,7 +139,11 @@ class PipelineDriver:
             mode = "estop" if data.get("reason") == "estop" or data.get("halt") else data.get("mode", "")
             self.request_mode(mode, msg.log_time_ns)
             return None
-        if topic == self.topics.arm and not self.pipeline.plans_commands and self.pipeline.motion is not None:
+        if self.topics.action:
+            if topic != self.topics.action:
+                return None
+            result = self.pipeline.joint_step(self.state, self._inputs(msg.log_time_ns))
+        elif topic == self.topics.arm and not self.pipeline.plans_commands and self.pipeline.motion is not None:
             # The trigger device may have gone quiet with the commands still moving: the arm's state
             # samples keep the clock going so that the commands brake to rest instead of freezing.
             result = self.pipeline.idle_step(self.state, self._inputs(msg.log_time_ns))

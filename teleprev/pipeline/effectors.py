@@ -61,6 +61,12 @@ class Effector(ABC):
         needs the angles only."""
         return None
 
+    def joint_target(self, q: np.ndarray, previous: np.ndarray | None) -> EffectorTarget:
+        """The target for joints asked for directly (a policy's action, not a hand pose): clipped into
+        the limits; `retargeted` is the clipped request, `target` what the guard steps towards."""
+        clipped = np.clip(np.asarray(q, dtype=float), self.guard.lower, self.guard.upper)
+        return EffectorTarget(clipped, clipped, "untouched")
+
 
 class LeapEffector(Effector):
     def __init__(self, spec: EndEffector, hand: RobotModel, corrector: Corrector, cfg: PipelineConfig, max_dt: float,
@@ -95,6 +101,13 @@ class LeapEffector(Effector):
         c = self.corrector.correct(prepared.q, previous, prepared)
         return EffectorTarget(prepared.q, c.q, c.action, tuple(c.colliding_links), float(c.deviation))
 
+    def joint_target(self, q: np.ndarray, previous: np.ndarray | None) -> EffectorTarget:
+        """Joints asked for directly go through the Corrector as retargeted ones do (it clips them into
+        the limits first): the target is never in self-collision."""
+        clipped = np.clip(np.asarray(q, dtype=float), self.guard.lower, self.guard.upper)
+        c = self.corrector.correct(clipped, previous)
+        return EffectorTarget(clipped, c.q, c.action, tuple(c.colliding_links), float(c.deviation))
+
 
 class GripperEffector(Effector):
     def __init__(self, spec: EndEffector, robot: RobotModel, cfg: PipelineConfig, max_dt: float):
@@ -125,3 +138,8 @@ class VacuumEffector(Effector):
         was_on = previous is not None and previous[0] > 0.5
         q = np.array([1.0 if self.map(float(flexion[self.joint]), was_on) else 0.0])
         return EffectorTarget(q, q, "untouched")
+
+    def joint_target(self, q: np.ndarray, previous: np.ndarray | None) -> EffectorTarget:
+        """A switch: on above one half."""
+        on = np.array([1.0 if float(np.asarray(q, dtype=float)[0]) > 0.5 else 0.0])
+        return EffectorTarget(on, on, "untouched")

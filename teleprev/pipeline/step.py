@@ -11,6 +11,10 @@ session format 4). In preview the planner commands nothing; an accepted switch t
 (`set_mode`, then `mode_update`) starts from the robot's measured joints. Inputs that are missing, stale,
 non-finite or implausible give no target for their side and are flagged; nothing computed from them is
 sent. Sessions of formats 1 to 3 made their commands in the step itself (teleprev/pipeline/older_formats.py).
+
+`Pipeline.joint_step` is the step for joint targets asked for directly (a policy's action, `teleprev
+rollout`): the arm's clipped into its joint limits, the end effector's through the Corrector, then the
+same TargetUpdate, so the same gate, planner and limits apply as to the operator's targets.
 """
 
 from __future__ import annotations
@@ -49,6 +53,7 @@ class StepInputs:
     arm: JointSample | None = None  # measured arm joints
     effector: JointSample | None = None  # measured end-effector joints
     hand_input: HandInput | None = None  # Pipeline.prepare_hands' answer for `hand`, when computed ahead
+    action: JointSample | None = None  # joint targets asked for directly (joint_step): Pipeline.action_names
 
 
 @dataclass(frozen=True)
@@ -105,6 +110,8 @@ class Pipeline:
         self.arm_guard = arm_guard
         self.effector = effector
         self.effector_names = effector.names
+        # joint_step's input: the arm's and the end effector's joints as a dataset's `action` names them
+        self.action_names = tuple(f"arm.{n}" for n in self.arm_names) + tuple(f"hand.{n}" for n in self.effector_names)
         self._stale_ns = int(cfg.stale_ms * 1e6)
         self._last_wrist: tuple = (None, "", None)  # (sample, flag, pose): a cache, the step stays pure
         table = effector.kernel_table()
@@ -316,13 +323,44 @@ class Pipeline:
         report["flags"] = flags
         return StepResult(new, retargeted, corrected, arm_target, arm_cmd, eff_cmd, report, update)
 
+    def joint_step(self, state: PipelineState, inputs: StepInputs) -> StepResult:
+        """A step on joint targets asked for directly (`inputs.action`, named as `action_names`) in place
+        of the glove and suit: the arm's clipped into its joint limits (flagged "arm_clipped"), the end
+        effector's through its `joint_target` (the Corrector, for a hand). Recorded as a glove step is:
+        `retargeted` is the end effector's request within its limits, `corrected` the Corrector's answer.
+        An action that is stale, lacks a joint or is not finite gives no target (that side brakes)."""
+        flags: list[str] = []
+        report: dict = {"step": state.step, "mode": state.mode, "corrector": "held", "colliding_links": [], "deviation_rad": 0.0}
+        q = None
+        if self._fresh(inputs.action, "policy", inputs.t_ns, flags):
+            q = self.measured(inputs.action, self.action_names)
+            if q is None:
+                flags.append("policy_invalid")
+        arm_target = retargeted = corrected = None
+        new = evolve(state, step=state.step + 1)
+        if q is not None:
+            n = len(self.arm_names)
+            arm_target = np.clip(q[:n], self.arm_guard.lower, self.arm_guard.upper)
+            if not np.array_equal(arm_target, q[:n]):
+                flags.append("arm_clipped")
+            t = self.effector.joint_target(q[n:], state.effector_q)
+            retargeted, corrected = t.retargeted, t.target
+            report.update(corrector=t.action, colliding_links=list(t.colliding_links), deviation_rad=t.deviation)
+            new = evolve(new, arm_q=arm_target, arm_q_before=state.arm_q, effector_q=corrected)
+        arm_ns = inputs.action.stamp_ns if arm_target is not None else 0
+        new, arm_cmd, eff_cmd, update = self._outputs(state, new, inputs, arm_target, corrected, flags, arm_ns)
+        report["flags"] = flags
+        return StepResult(new, retargeted, corrected, arm_target, arm_cmd, eff_cmd, report, update)
+
     def _outputs(self, state: PipelineState, new: PipelineState, inputs: StepInputs, arm_target, effector_target,
-                 flags: list[str]):
+                 flags: list[str], arm_ns: int | None = None):
         """(new state, arm command, effector command, update) for this step's fresh targets (None where the
-        input was unusable): no commands, the targets with their velocity estimates for the planner."""
+        input was unusable): no commands, the targets with their velocity estimates for the planner.
+        `arm_ns`: the stamp of the input the arm target solves, extrapolated from there (None: the wrist's)."""
         est = new.motion if new.motion is not None else EstimateState()
         arm_v = hand_v = None
-        arm_ns = inputs.wrist.stamp_ns if arm_target is not None else 0
+        if arm_ns is None:
+            arm_ns = inputs.wrist.stamp_ns if arm_target is not None else 0
         if arm_target is not None:
             arm_v, est = self._estimates.arm(est, arm_target, arm_ns)
         if effector_target is not None:

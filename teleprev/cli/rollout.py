@@ -1,0 +1,72 @@
+"""`teleprev rollout`: a policy trained with lerobot-train drives the robot, previewed, limited and recorded."""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Optional
+
+import typer
+
+
+def rollout(
+    policy: Path = typer.Option(..., "--policy", help="A policy saved by lerobot-train: its pretrained_model folder "
+                                "(e.g. outputs/train/act/checkpoints/last/pretrained_model)."),
+    config: Optional[Path] = typer.Option(None, "--config", help="Rig file (TOML). Default: the all-simulated rig."),
+    episodes: int = typer.Option(1, "--episodes", help="How many episodes to run."),
+    episode_time: float = typer.Option(10.0, "--episode-time", help="Seconds per episode (preview first, then execute)."),
+    engage_after: float = typer.Option(1.0, "--engage-after", help="Seconds of preview at the start of each episode "
+                                       "before the robot executes the policy's actions."),
+    reset_time: float = typer.Option(0.0, "--reset-time", help="Seconds between episodes, the robot in preview "
+                                     "(to reset the scene)."),
+    out: Optional[Path] = typer.Option(None, "--out", "-o", help="Session file to write (default: sessions/<time>_rollout.mcap)."),
+    recipe: Optional[str] = typer.Option(None, "--recipe", help="The export recipe the policy's dataset was made with "
+                                         "(a name in datasets/recipes/ or a file; default: default)."),
+    models: Optional[Path] = typer.Option(None, "--models", help="Folder with CPN/CCN weights (default: the rig's, else models/)."),
+    task: str = typer.Option("", "--task", "-t", help="Task id of the episodes (the policy reads its instruction)."),
+) -> None:
+    """Run a trained LeRobot policy on the rig: each episode previewed, then executed through the same
+    limits, Corrector and paced sender as the operator's targets; recorded as a session."""
+    from rich.console import Console
+    from rich.markup import escape
+
+    from teleprev.cli.signals import StopSignals
+    from teleprev.live.rollout import Rollout, RolloutOptions, check_rollout
+    from teleprev.live.run import print_summary
+    from teleprev.live.session import default_session_path
+
+    options = RolloutOptions(policy=policy, out=out or default_session_path("rollout"), rig=config, episodes=episodes,
+                             episode_time_s=episode_time, engage_after_s=engage_after, reset_time_s=reset_time,
+                             recipe=recipe, models=models, task=task)
+    plan = check_rollout(options)  # bad input: one line, exit 2, before anything opens
+    console = Console()
+    console.print(f"loading {plan.card.type} policy from {escape(str(policy))} ...", highlight=False)
+    from teleprev.live.lerobot_policy import LeRobotPolicy
+
+    loaded = LeRobotPolicy.load(policy)
+    with StopSignals() as signals:
+        run = Rollout(options, plan, loaded)
+        result = None
+        try:
+            result = run.run()
+        except KeyboardInterrupt:
+            pass
+    recording = run.recording
+    if recording.summary is not None:
+        print_summary(console, recording, recording.summary)
+    stats = run.runner.stats
+    console.print(f"policy: {stats.inferences} inferences ({stats.policy_hz():.1f} Hz while inferring), "
+                  f"{stats.handed} actions handed on at {plan.fps:g} fps, {stats.starved} frames without one",
+                  highlight=False)
+    if signals.received is not None:
+        raise typer.Exit(signals.exit_code)
+    errors = Console(stderr=True)
+    if result is not None and result.unconnected:
+        for line in result.unconnected:
+            errors.print(f"[bold red]error:[/] {escape(line)}", highlight=False, soft_wrap=True)
+        raise typer.Exit(1)
+    failure = stats.failure or recording.loop.failure
+    if failure:
+        errors.print(f"[bold red]error:[/] {escape(failure)} (the robot was braked to rest)", highlight=False, soft_wrap=True)
+        raise typer.Exit(1)
+    if recording.loop.stats.device_failures:
+        raise typer.Exit(1)
