@@ -155,12 +155,18 @@ def _rate(reader, topic: str) -> float:
     return _NS / float(np.median(d)) if len(d) else 0.0
 
 
-def _decode(data, topic: str, log_ns: int, where: str) -> np.ndarray:
+def rgb_image(data) -> np.ndarray | None:
+    """A camera sample's picture as the datasets hold it (H x W x 3, RGB), or None where it does not decode:
+    the same for an export and for a policy that observes the live camera (teleprev/live/policy.py)."""
     if isinstance(data, np.ndarray):  # a raw image a foreign reader already laid out as RGB
         return np.ascontiguousarray(data)
     import cv2
 
-    img = cv2.imdecode(np.frombuffer(data, np.uint8), cv2.IMREAD_COLOR_RGB)
+    return cv2.imdecode(np.frombuffer(data, np.uint8), cv2.IMREAD_COLOR_RGB)
+
+
+def _decode(data, topic: str, log_ns: int, where: str) -> np.ndarray:
+    img = rgb_image(data)
     if img is None:
         raise SessionError(f"the image on {topic} at log time {log_ns} does not decode", where)
     return img

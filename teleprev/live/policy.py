@@ -111,9 +111,9 @@ def observe(features: PolicyFeatures, latest: LatestSamples) -> dict[str, np.nda
 
 
 def decode_jpeg(sample: ImageSample) -> np.ndarray:
-    import cv2
+    from teleprev.export.session import rgb_image
 
-    image = cv2.imdecode(np.frombuffer(sample.data, np.uint8), cv2.IMREAD_COLOR_RGB)
+    image = rgb_image(sample.data)
     if image is None:
         raise ValueError(f"a camera image stamped {sample.stamp_ns} does not decode")
     return image
