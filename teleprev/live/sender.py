@@ -18,9 +18,9 @@ is permitted (root, CAP_SYS_NICE or an rtprio limit); `realtime` says whether it
 SCHED_FIFO does not help a thread that waits for the interpreter lock), a process without real-time
 priority up to 147 ms, this process with SCHED_FIFO at most 1.6 ms (p99 0.15 ms).
 
-Both directions are pipes of length-prefixed pickles between the two halves of one teleprev (never a file a
-user hands in). The session process reads the ticks back on a thread of its own (`outputs`), passes the
-commands to the actuators and records them. The sender dies with the session (PR_SET_PDEATHSIG), ignores
+Both directions are pipes of length-prefixed JSON messages of known types (teleprev/live/pipe_codec.py:
+nothing is unpickled). The session process reads the ticks back on a thread of its own (`outputs`), passes
+the commands to the actuators and records them. The sender dies with the session (PR_SET_PDEATHSIG), ignores
 the terminal's signals (the session stops it after braking), and a sender that dies is seen at once (its
 pipe closes): the session then halts.
 """
@@ -30,19 +30,17 @@ from __future__ import annotations
 import ctypes
 import gc
 import os
-import pickle
 import select
 import signal
-import struct
 import threading
 import time
 from dataclasses import dataclass
 
 from teleprev.clock import SessionClock
+from teleprev.live.pipe_codec import frame, types_by_name, unframe
 from teleprev.pipeline.planner import CommandPlanner, ModeUpdate, TargetUpdate, Tick
 
 DEFAULT_PRIORITY = 50  # SCHED_FIFO priority: above ordinary processes, below the kernel's own threads (99)
-_HEADER = struct.Struct("<I")
 _STOP = "stop"
 
 
@@ -60,6 +58,10 @@ class SenderStatus:
 
     realtime: bool
     detail: str
+
+
+_TO_SENDER = types_by_name(TargetUpdate, ModeUpdate)  # and _STOP, a string
+_FROM_SENDER = types_by_name(SentTick, Tick, SenderStatus)
 
 
 class CommandSender:
@@ -115,12 +117,12 @@ class CommandSender:
     def send(self, update: TargetUpdate | ModeUpdate | str) -> bool:
         """Pass an update on; never blocks (a full pipe, which a living sender never lets happen, drops it
         and counts it)."""
-        data = pickle.dumps(update, protocol=pickle.HIGHEST_PROTOCOL)
+        data = frame(update)
         with self._send_lock:
             if self._to_sender is None:
                 return False
             try:
-                os.write(self._to_sender, _HEADER.pack(len(data)) + data)
+                os.write(self._to_sender, data)
             except (BlockingIOError, BrokenPipeError):
                 self.dropped_updates += 1
                 return False
@@ -139,7 +141,7 @@ class CommandSender:
             os.close(self._from_sender)
             self._from_sender = None
             return None
-        out, self._buffer = _frames(self._buffer + chunk)
+        out, self._buffer = unframe(self._buffer + chunk, _FROM_SENDER)
         for item in out:
             if isinstance(item, SenderStatus):
                 self.status = item
@@ -163,18 +165,6 @@ class CommandSender:
             os.kill(self.pid, signal.SIGKILL)
             os.waitpid(self.pid, 0)
         self.pid = None
-
-
-def _frames(buffer: bytes) -> tuple[list, bytes]:
-    """The whole length-prefixed pickles at the start of `buffer`, and what is left of it."""
-    out = []
-    while len(buffer) >= _HEADER.size:
-        (size,) = _HEADER.unpack_from(buffer)
-        if len(buffer) < _HEADER.size + size:
-            break
-        out.append(pickle.loads(buffer[_HEADER.size:_HEADER.size + size]))
-        buffer = buffer[_HEADER.size + size:]
-    return out, buffer
 
 
 def _enlarge(fd: int) -> None:
@@ -249,7 +239,7 @@ class _Sender:
             if not chunk:
                 return False
             self.inbox += chunk
-        updates, self.inbox = _frames(self.inbox)
+        updates, self.inbox = unframe(self.inbox, _TO_SENDER)
         for update in updates:
             if update == _STOP:
                 return False
@@ -257,8 +247,7 @@ class _Sender:
         return True
 
     def _write(self, item) -> None:
-        data = pickle.dumps(item, protocol=pickle.HIGHEST_PROTOCOL)
-        self.outbox += _HEADER.pack(len(data)) + data
+        self.outbox += frame(item)
         self._flush()
 
     def _flush(self) -> None:
