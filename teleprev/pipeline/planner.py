@@ -145,7 +145,9 @@ class CommandPlanner:
             if not s.active:  # from rest at the measured state (braking: carry on from the commands)
                 s.arm = _Side(motion=JointMotion.rest(np.asarray(update.arm, dtype=float)))
                 s.hand = _Side(q=np.asarray(update.hand, dtype=float), v=np.zeros(len(update.hand)))
-                s.active, s.last_ns, s.dt_before = True, None, 0.0
+                # A controller (and the audit) takes a stream to have stood at its first command one cycle
+                # before it: the hand's cap spans that cycle and the second command's step.
+                s.active, s.last_ns, s.dt_before = True, None, RESUME_PERIOD_NS / 1e9
 
     def tick(self, t_ns: int) -> Tick | None:
         """The commands at t_ns, or None while the planner sends nothing."""
@@ -168,11 +170,6 @@ class CommandPlanner:
             s.hand.v = np.zeros_like(s.hand.v)
             dt, s.dt_before = RESUME_STEP_S, 0.0
             flags.append("commands_resumed")
-        elif s.dt_before == 0.0 and gap > RESUME_PERIOD_NS:
-            # The engage's first command was the stream's start: a controller (and the audit) takes the
-            # arm to have stood there one cycle before it. A second tick later than that cycle spans the
-            # cycle and its own step; capped over twice its own step, it would pass the hand's cap.
-            s.dt_before = RESUME_PERIOD_NS / 1e9
         executing = s.mode == "execute"
         if not executing:
             flags.append("stopping")
