@@ -48,8 +48,6 @@ def replay(
     if out is not None:
         from teleprev.live.replay_recording import check_out
 
-        if to == "preview":
-            raise ConfigError("--out records what the robot is sent: add --to sim or --to arm")
         check_out(out)
 
     waits_for_a_key = to == "sim" or (to == "arm" and rig is not None)  # (--to arm without --rig: refused below)

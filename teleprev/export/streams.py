@@ -64,6 +64,11 @@ class _Growing:
         return stamps, values, velocities
 
 
+def pose_values(p: PoseSample) -> np.ndarray:
+    """A pose as a dataset's vector holds it: position, then orientation (POSE_NAMES)."""
+    return np.concatenate([p.position, p.orientation])
+
+
 def probe_joint_names(reader, topic: str, schema: str) -> tuple[str, ...]:
     """The joint names of a stream, from its first message (a pose: x y z qx qy qz qw)."""
     if schema == POSE:
@@ -100,7 +105,7 @@ def read_episode(reader, joint_topics: dict[str, tuple[str, ...]], camera_topics
             else:
                 joints[t].add(p.stamp_ns, _reorder(p, names, index[t], t, msg.log_time_ns, where))
         elif type(p) is PoseSample:
-            joints[t].add(p.stamp_ns, np.concatenate([p.position, p.orientation]))
+            joints[t].add(p.stamp_ns, pose_values(p))
         else:
             raise SessionError(f"{t} at log time {msg.log_time_ns}: unexpected {type(p).__name__} message", where)
     out_j = {}

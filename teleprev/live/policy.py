@@ -36,6 +36,7 @@ import numpy as np
 from teleprev import topics
 from teleprev.errors import ConfigError
 from teleprev.export.recipe import IMAGE, JOINTS, POSE, Recipe, ResolvedFeature, resolve
+from teleprev.export.streams import pose_values
 from teleprev.messages import ImageSample, JointSample, Logged, PoseSample
 
 SCHEMAS = {"joints": JOINTS, "pose": POSE, "image": IMAGE}  # a StreamSpec's payload -> its recorded schema
@@ -103,7 +104,7 @@ def observe(features: PolicyFeatures, latest: LatestSamples) -> dict[str, np.nda
         parts = []
         for s in samples:
             if isinstance(s, PoseSample):
-                parts.append(np.concatenate([s.position, s.orientation]))
+                parts.append(pose_values(s))
             elif isinstance(s, JointSample):
                 parts.append(np.asarray(s.positions, dtype=float))
         out[f.name] = np.concatenate(parts).astype(np.float32)

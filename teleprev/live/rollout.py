@@ -28,6 +28,7 @@ from teleprev.live.run import run_timed
 from teleprev.live.schedule import EpisodeTimes
 from teleprev.live.session import LiveSession, RecordOptions
 from teleprev.messages import JointSample, Sample
+from teleprev.pipeline.step import action_names as joint_action_names
 from teleprev.rig import Rig, load_rig
 from teleprev.robot.model import load_robot
 
@@ -98,7 +99,7 @@ def check_rollout(options: RolloutOptions) -> RolloutPlan:
     streams, rates, inputs = _rig_streams(rig)
     features = PolicyFeatures.for_streams(recipe, streams, inputs)
     arm, effector = _joint_names(rig)
-    action_names = tuple(f"arm.{n}" for n in arm) + tuple(f"hand.{n}" for n in effector)
+    action_names = joint_action_names(arm, effector)
     where = f"{card.path} config.json"
     widths = {topics.device_topic("arm", inputs["arm"].split("/")[2], "state"): len(arm),
               topics.device_topic("hand", inputs["effector"].split("/")[2], "state"): len(effector)}

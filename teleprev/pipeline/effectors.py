@@ -104,7 +104,7 @@ class LeapEffector(Effector):
     def joint_target(self, q: np.ndarray, previous: np.ndarray | None) -> EffectorTarget:
         """Joints asked for directly go through the Corrector as retargeted ones do (it clips them into
         the limits first): the target is never in self-collision."""
-        clipped = np.clip(np.asarray(q, dtype=float), self.guard.lower, self.guard.upper)
+        clipped = super().joint_target(q, previous).retargeted
         c = self.corrector.correct(clipped, previous)
         return EffectorTarget(clipped, c.q, c.action, tuple(c.colliding_links), float(c.deviation))
 

@@ -111,7 +111,7 @@ class Pipeline:
         self.effector = effector
         self.effector_names = effector.names
         # joint_step's input: the arm's and the end effector's joints as a dataset's `action` names them
-        self.action_names = tuple(f"arm.{n}" for n in self.arm_names) + tuple(f"hand.{n}" for n in self.effector_names)
+        self.action_names = action_names(self.arm_names, self.effector_names)
         self._stale_ns = int(cfg.stale_ms * 1e6)
         self._last_wrist: tuple = (None, "", None)  # (sample, flag, pose): a cache, the step stays pure
         table = effector.kernel_table()
@@ -276,7 +276,7 @@ class Pipeline:
     # ---- step ----------------------------------------------------------------------------------
     def step(self, state: PipelineState, inputs: StepInputs) -> StepResult:
         flags: list[str] = []
-        report: dict = {"step": state.step, "mode": state.mode, "corrector": "held", "colliding_links": [], "deviation_rad": 0.0}
+        report = _new_report(state)
 
         hand = self._hand(inputs, flags)
         angles = None if hand is None else (hand.flexion, hand.abduction)
@@ -330,7 +330,7 @@ class Pipeline:
         `retargeted` is the end effector's request within its limits, `corrected` the Corrector's answer.
         An action that is stale, lacks a joint or is not finite gives no target (that side brakes)."""
         flags: list[str] = []
-        report: dict = {"step": state.step, "mode": state.mode, "corrector": "held", "colliding_links": [], "deviation_rad": 0.0}
+        report = _new_report(state)
         q = None
         if self._fresh(inputs.action, "policy", inputs.t_ns, flags):
             q = self.measured(inputs.action, self.action_names)
@@ -371,3 +371,14 @@ class Pipeline:
     def idle_step(self, state: PipelineState, inputs: StepInputs) -> StepResult | None:
         """Format 4 has none: the planner's own ticks brake commands whose targets stopped coming."""
         return None
+
+
+def action_names(arm: tuple[str, ...], effector: tuple[str, ...]) -> tuple[str, ...]:
+    """The joints of joint_step's input (a dataset's `action`), as the export names them: "arm.<joint>",
+    then "hand.<joint>"."""
+    return tuple(f"arm.{n}" for n in arm) + tuple(f"hand.{n}" for n in effector)
+
+
+def _new_report(state: PipelineState) -> dict:
+    """A step's report before anything is known of its inputs."""
+    return {"step": state.step, "mode": state.mode, "corrector": "held", "colliding_links": [], "deviation_rad": 0.0}
