@@ -6,9 +6,6 @@ states the robot reports, one episode around the played steps, and the rig in th
 
 from __future__ import annotations
 
-import queue
-import threading
-import time
 from pathlib import Path
 
 from teleprev import __version__, topics
@@ -17,8 +14,6 @@ from teleprev.messages import Event, JointSample, Logged
 
 _COMMAND_TOPICS = {"arm": topics.COMMAND_ARM, "hand": topics.COMMAND_HAND}
 TASK = "replay"
-FLUSH_S = 1.0  # a crash loses at most about this much of the recording
-_END = object()
 
 
 def check_out(out: Path) -> None:
@@ -31,48 +26,30 @@ def check_out(out: Path) -> None:
 
 
 class ReplayRecording:
-    """Messages are queued by the threads that send and receive them and written by a thread of the
-    recording's own, flushed at least once a second: a slow disk never delays a command."""
+    """The session's own Recorder (teleprev/session/recorder.py) writes it: messages are queued by the
+    threads that send and receive them and written by the recorder's thread, flushed twice a second, so a
+    slow or full disk never delays or stops a command."""
 
     def __init__(self, out: Path, rig, source: Path, episode: int | None, clock):
         from teleprev.live.session import rig_record
-        from teleprev.session.writer import McapSessionWriter
+        from teleprev.session.recorder import Recorder
 
         self.clock = clock
         meta = {"rig": rig_record(rig),
                 "session": {"task": TASK, "operator": "", "end_effector": rig.rig.end_effector, "software_version": __version__},
                 "replay": {"source": str(source), "episode": "" if episode is None else str(episode)}}
-        self.writer = McapSessionWriter(out, meta)
+        self.recorder = Recorder(out, meta).start()
         self.started = False
-        self.error = ""  # why the recording stopped early ("" while it has not)
         self.playing = lambda: True  # whether the player is past its engage ramp (build_player sets it)
-        self._queue: queue.SimpleQueue = queue.SimpleQueue()
-        self._thread = threading.Thread(target=self._drain, name="replay-recording", daemon=True)
-        self._thread.start()
+
+    @property
+    def error(self) -> str:
+        """Why the recording stopped early ("" while it has not)."""
+        failure = self.recorder.failure
+        return describe_os_error(failure) if failure is not None else ""
 
     def _write(self, topic: str, log_ns: int, payload) -> None:
-        self._queue.put(Logged(topic, log_ns, payload))
-
-    def _drain(self) -> None:
-        flushed = time.monotonic()
-        while True:
-            try:
-                msg = self._queue.get(timeout=FLUSH_S)
-            except queue.Empty:
-                msg = None
-            if msg is _END:
-                return
-            if self.error:
-                continue  # stopped: the queue is still emptied
-            try:
-                if msg is not None:
-                    self.writer.write(msg)
-                if time.monotonic() - flushed >= FLUSH_S:
-                    self.writer.flush()
-                    flushed = time.monotonic()
-            except OSError as exc:  # a full disk stops the recording, never the commands to the robot
-                self.error = describe_os_error(exc)
-                self.writer.abort()
+        self.recorder.log(Logged(topic, log_ns, payload))  # refused quietly once the recording has failed
 
     def _episode(self, event: str) -> None:
         now = self.clock.now_ns()
@@ -100,21 +77,16 @@ class ReplayRecording:
         """Write what is queued and close the file (`error` says if the recording had to stop early)."""
         if self.started:
             self._episode("stop")
-        self._queue.put(_END)
-        self._thread.join()
-        if self.error:
-            return
         try:
-            self.writer.close()
-        except OSError as exc:
-            self.error = describe_os_error(exc)
-            self.writer.abort()
+            self.recorder.close()
+        except SessionError:
+            pass  # the failure is kept by the recorder: `error` and `check` say it
 
     def check(self) -> None:
         """Raise SessionError if the recording had to stop early."""
         if self.error:
             raise SessionError(f"the replay's recording stopped early: {self.error} (what was flushed before is kept)",
-                               str(self.writer.path))
+                               str(self.recorder.path))
 
 
 class _Recorded:
