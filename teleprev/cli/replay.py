@@ -41,7 +41,9 @@ def replay(
 
     if not session.exists():
         raise ConfigError("no such session file or dataset folder", str(session))
-    if session.is_dir() and not (session / "meta" / "info.json").is_file():
+    from teleprev.export.actions import is_dataset
+
+    if session.is_dir() and not is_dataset(session):
         raise ConfigError("a folder that is not a LeRobot dataset (no meta/info.json)", str(session))
     if session.is_dir() and foxglove is not None:
         raise ConfigError("--foxglove plays a session's recorded topics, and a dataset has none", str(session))
