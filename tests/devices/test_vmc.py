@@ -275,7 +275,7 @@ def test_out_of_range_and_non_unit_packets_are_counted_and_skipped_and_the_recei
         counters = wait_counter(glove, "out_of_range", 2)  # the last packet's; they are read in order
         assert counters["out_of_range"] == 2 and counters["non_unit_rotations"] == 2
         assert glove.read(0.05) == []  # nothing of those four reached the device
-        assert glove._receiver._thread.is_alive() and not glove._receiver.failure
+        assert glove._receiver._thread.is_alive() and not glove._receiver.fanout.failure
         sender.sendto(bundle(good, msg("/VMC/Ext/T", 2.0, types="d")).dgram, ("127.0.0.1", port))
         samples = read_until(glove, 1)
         assert len(samples) == 1 and np.isfinite(samples[0].payload.positions).all()
@@ -382,20 +382,20 @@ def test_frames_missing_from_the_sender_time_are_counted_as_sequence_gaps(contex
 
 
 def test_frames_the_device_did_not_read_in_time_are_counted_as_queue_overflow(context):
-    from teleprev_devices.vmc import receiver as vmc_receiver
+    from teleprev_devices.fanout import QUEUE
 
     port = free_port()
     glove = VmcGlove("g", VmcSettings(port=port), context)
     glove.connect()
     sender = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
     try:
-        for k in range(vmc_receiver._QUEUE + 10):  # nobody reads meanwhile
+        for k in range(QUEUE + 10):  # nobody reads meanwhile
             sender.sendto(bundle(bone("RightIndexProximal", (0.03, 0, 0))).dgram, ("127.0.0.1", port))
             if k % 50 == 0:
                 time.sleep(0.02)  # (kept under the socket's own buffer)
         time.sleep(0.2)
         assert glove.counters()["lost_queue_overflow"] == 10
-        assert len(glove.read(0.05)) == vmc_receiver._QUEUE
+        assert len(glove.read(0.05)) == QUEUE
     finally:
         sender.close()
         glove.disconnect()
@@ -417,7 +417,7 @@ def test_a_thousand_fuzzed_datagrams_never_stop_the_receiver_nor_reach_the_glove
                 got.extend(glove.read(0.005))
         time.sleep(0.2)
         got.extend(glove.read(0.05))
-        assert glove._receiver._thread.is_alive() and not glove._receiver.failure
+        assert glove._receiver._thread.is_alive() and not glove._receiver.fanout.failure
         values = np.array([s.payload.positions for s in got])
         assert len(values) >= 75 and np.isfinite(values).all()
         counters = glove.counters()

@@ -75,13 +75,13 @@ class _VmcDevice(Device[V]):
     def connect(self) -> None:
         s = self.settings
         self._receiver = acquire(self.context.shared, s.host, s.port, self.context.clock, s.allow)
-        self._sub = self._receiver.subscribe()
+        self._sub = self._receiver.fanout.subscribe()
         self._last_frame_ns = self.context.clock.now_ns()
 
     def disconnect(self) -> None:
         receiver, self._receiver = self._receiver, None
         if receiver is not None:
-            receiver.unsubscribe(self._sub)
+            receiver.fanout.unsubscribe(self._sub)
             release(self.context.shared, receiver)
 
     def endpoint(self) -> str:
@@ -97,7 +97,7 @@ class _VmcDevice(Device[V]):
         receiver = self._receiver
         if receiver is None:
             raise DeviceError("not connected", f"device {self.name!r}")
-        frames = receiver.wait(self._sub, timeout_s)
+        frames = receiver.fanout.wait(self._sub, timeout_s)
         out: list[Sample] = []
         for frame in frames:
             out.extend(self.convert(frame))

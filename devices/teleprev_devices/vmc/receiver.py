@@ -29,6 +29,7 @@ import numpy as np
 import pythonosc
 from pythonosc.osc_packet import OscPacket
 
+from teleprev_devices.fanout import Fanout, acquire as acquire_shared, release as release_shared
 from teleprev_devices.vmc.unity import KNOWN_BONES
 from teleprev.devices import ClockSync, DeviceError, SessionClock
 
@@ -39,7 +40,6 @@ SO_RXQ_OVFL = getattr(socket, "SO_RXQ_OVFL", 40 if sys.platform.startswith("linu
 _ANCILLARY = socket.CMSG_SPACE(4)
 _PERIOD_WINDOW = 32  # sender-time steps the sender's frame period is the median of
 _PERIOD_MIN_STEPS = 8  # steps seen before gaps in the sender time are counted as lost frames
-_QUEUE = 256  # frames kept per subscriber that is not reading fast enough
 _RESYNC_NS = 1_000_000_000  # sender time going back this much: the sender restarted, start ClockSync over
 MAX_SENDER_TIME_S = 1e10  # |/VMC/Ext/T| beyond this (317 years) is no clock
 MAX_POSITION_M = 1000.0  # a bone or root further than this from the origin is no motion capture
@@ -89,13 +89,6 @@ class Counters:
                 "lost_socket_overruns": self.lost_socket_overruns, "lost_sequence_gaps": self.lost_sequence_gaps}
 
 
-class _Subscriber:
-    def __init__(self):
-        self.frames: deque[Frame] = deque(maxlen=_QUEUE)
-        self.ready = threading.Condition()
-        self.overflow = 0  # frames pushed out of the queue before the device read them
-
-
 class VmcReceiver:
     def __init__(self, host: str, port: int, clock: SessionClock, allow: tuple[str, ...] = (),
                  receive_buffer_kb: int = 1024):
@@ -107,8 +100,7 @@ class VmcReceiver:
         self._allowed = tuple(ipaddress.IPv4Network(a, strict=False) for a in allow)
         self.counters = Counters()
         self.where = f"VMC receiver {self.host}:{self.port}"
-        self._subs: list[_Subscriber] = []
-        self._lock = threading.Lock()
+        self.fanout: Fanout[Frame] = Fanout(self.where)
         self._bones: dict[str, BonePose] = {}
         self._sync = ClockSync()
         self._outliers_before = 0  # clock outliers of the ClockSyncs replaced after a sender restart
@@ -116,7 +108,6 @@ class VmcReceiver:
         self._steps: deque[int] = deque(maxlen=_PERIOD_WINDOW)  # recent positive sender-time steps
         self._outliers_between = 0  # frames with a rejected sender time since the last accepted one
         self._stop = threading.Event()
-        self.failure = ""  # set when the socket broke; subscribers then raise
         try:
             self._sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
             self._sock.bind((self.host, self.port))
@@ -136,29 +127,6 @@ class VmcReceiver:
         self._thread = threading.Thread(target=self._run, name=f"vmc-{self.port}", daemon=True)
         self._thread.start()
 
-    # ---- subscribers -----------------------------------------------------------------------------
-    def subscribe(self) -> _Subscriber:
-        sub = _Subscriber()
-        with self._lock:
-            self._subs.append(sub)
-        return sub
-
-    def unsubscribe(self, sub: _Subscriber) -> int:
-        with self._lock:
-            if sub in self._subs:
-                self._subs.remove(sub)
-            return len(self._subs)
-
-    def wait(self, sub: _Subscriber, timeout_s: float) -> list[Frame]:
-        with sub.ready:
-            if not sub.frames and not self.failure:
-                sub.ready.wait(timeout_s)
-            frames = list(sub.frames)
-            sub.frames.clear()
-        if self.failure and not frames:
-            raise DeviceError(self.failure, self.where)
-        return frames
-
     def close(self) -> None:
         self._stop.set()
         self._thread.join(1.0)
@@ -174,7 +142,7 @@ class VmcReceiver:
                     continue
                 except OSError as exc:
                     if not self._stop.is_set():
-                        self._fail(f"socket error: {exc}")
+                        self.fanout.fail(f"socket error: {exc}")
                     return
                 for level, kind, value in ancillary:
                     if level == socket.SOL_SOCKET and kind == SO_RXQ_OVFL and len(value) >= 4:
@@ -189,28 +157,10 @@ class VmcReceiver:
                     self.counters.failed_packets += 1
                     continue
                 if frame is not None:
-                    self._publish(frame)
+                    self.fanout.publish(frame)
         except BaseException as exc:  # a bug here: the devices must hear of it (they raise, the runner reopens)
-            self._fail(f"receiver thread ended: {type(exc).__name__}: {exc}")
+            self.fanout.fail(f"receiver thread ended: {type(exc).__name__}: {exc}")
             raise
-
-    def _fail(self, message: str) -> None:
-        self.failure = message
-        with self._lock:
-            subs = list(self._subs)
-        for sub in subs:
-            with sub.ready:
-                sub.ready.notify_all()
-
-    def _publish(self, frame: Frame) -> None:
-        with self._lock:
-            subs = list(self._subs)
-        for sub in subs:
-            with sub.ready:
-                if len(sub.frames) == sub.frames.maxlen:
-                    sub.overflow += 1  # the oldest frame is pushed out unread
-                sub.frames.append(frame)
-                sub.ready.notify_all()
 
     def parse(self, data: bytes, receive_ns: int) -> Frame | None:
         """Apply one datagram; a Frame if it carried any bone (None for garbage or other messages)."""
@@ -327,36 +277,17 @@ class _OscWarnings(logging.Filter):
 _OSC_WARNINGS = _OscWarnings()
 logging.getLogger().addFilter(_OSC_WARNINGS)
 
-_SHARED_LOCK = threading.Lock()
-
-
 def acquire(shared: dict, host: str, port: int, clock: SessionClock, allow: tuple[str, ...] = ()) -> VmcReceiver:
     """The receiver for (host, port), opened by the first plugin that asks (kept in context.shared)."""
-    with _SHARED_LOCK:
-        key = ("vmc", host, port)
-        entry = shared.get(key)
-        if entry is not None and entry[0].failure:  # its socket broke: open a fresh one
-            entry[0].close()
-            entry = None
-        if entry is not None and entry[0].allow != tuple(allow):
-            raise DeviceError(f"the devices on UDP {host}:{port} share one socket but allow different senders "
-                              f"({list(entry[0].allow)} and {list(allow)}); give them the same allow list",
-                              entry[0].where)
-        if entry is None:
-            entry = shared[key] = [VmcReceiver(host, port, clock, allow), 0]
-        entry[1] += 1
-        return entry[0]
+    def conflict(receiver: VmcReceiver) -> str:
+        if receiver.allow == tuple(allow):
+            return ""
+        return (f"the devices on UDP {host}:{port} share one socket but allow different senders "
+                f"({list(receiver.allow)} and {list(allow)}); give them the same allow list")
+
+    return acquire_shared(shared, ("vmc", host, port), lambda: VmcReceiver(host, port, clock, allow), conflict)
 
 
 def release(shared: dict, receiver: VmcReceiver) -> None:
     """Give a receiver back; the last plugin to do so closes the socket."""
-    with _SHARED_LOCK:
-        key = ("vmc", receiver.host, receiver.port)
-        entry = shared.get(key)
-        if entry is None or entry[0] is not receiver:  # a failed receiver already replaced
-            receiver.close()
-            return
-        entry[1] -= 1
-        if entry[1] <= 0:
-            del shared[key]
-            receiver.close()
+    release_shared(shared, ("vmc", receiver.host, receiver.port), receiver)
