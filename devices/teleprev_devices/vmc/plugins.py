@@ -20,9 +20,10 @@ from typing import TypeVar
 import numpy as np
 
 from teleprev.devices import (
-    Device, DeviceContext, DeviceError, JointSample, PoseSample, Sample, StreamSpec, smplx, transforms,
+    DeviceContext, JointSample, PoseSample, Sample, StreamSpec, smplx, transforms,
 )
 from teleprev_devices.vmc import unity
+from teleprev_devices.fanout import FanoutDevice, ListenSettings
 from teleprev_devices.vmc.receiver import Frame, VmcReceiver, acquire, release
 
 BODY_POSE_NAMES: tuple[str, ...] = tuple(f"{j}.{c}" for j in smplx.BODY_JOINTS for c in "xyz")
@@ -32,29 +33,17 @@ _FINGERS = frozenset(unity.RIGHT_HAND_BONES)
 
 
 @dataclass
-class VmcSettings:
-    host: str = "127.0.0.1"  # the address to listen on; "0.0.0.0" accepts senders on other machines
+class VmcSettings(ListenSettings):
     port: int = 39539  # VMC's usual receiving port
-    rate_hz: float = 60.0  # the sender's frame rate (for the rate display and gap detection)
-    timeout_s: float = 0.0  # > 0: no frame for this long is a fault (the runner reopens the socket); 0: only a gap
     allow: tuple[str, ...] = ()  # senders accepted (addresses or networks, e.g. "192.168.1.7", "10.0.0.0/24"); empty: any
 
     def __post_init__(self):
-        try:
-            ipaddress.IPv4Address(self.host)
-        except ValueError:
-            raise ValueError(f"host must be an IPv4 address to listen on (e.g. 127.0.0.1), got {self.host!r}") from None
+        super().__post_init__()
         for a in self.allow:
             try:
                 ipaddress.IPv4Network(a, strict=False)
             except ValueError:
                 raise ValueError(f"allow: {a!r} is not an IPv4 address or network (e.g. 192.168.1.7 or 10.0.0.0/24)") from None
-        if not 0 <= self.port <= 65535:
-            raise ValueError(f"port must be 0..65535, got {self.port}")
-        if not 0 < self.rate_hz <= 1000:
-            raise ValueError(f"rate_hz must be in (0, 1000], got {self.rate_hz}")
-        if self.timeout_s < 0:
-            raise ValueError(f"timeout_s must be >= 0, got {self.timeout_s}")
 
 
 @dataclass
@@ -65,56 +54,21 @@ class VmcSuitSettings(VmcSettings):
 V = TypeVar("V", bound=VmcSettings)
 
 
-class _VmcDevice(Device[V]):
-    def __init__(self, name: str, settings: V, context: DeviceContext):
-        super().__init__(name, settings, context)
-        self._receiver: VmcReceiver | None = None
-        self._sub = None
-        self._last_frame_ns = 0
-
-    def connect(self) -> None:
+class _VmcDevice(FanoutDevice[V]):
+    def open_receiver(self) -> VmcReceiver:
         s = self.settings
-        self._receiver = acquire(self.context.shared, s.host, s.port, self.context.clock, s.allow)
-        self._sub = self._receiver.fanout.subscribe()
-        self._last_frame_ns = self.context.clock.now_ns()
+        return acquire(self.context.shared, s.host, s.port, self.context.clock, s.allow)
 
-    def disconnect(self) -> None:
-        receiver, self._receiver = self._receiver, None
-        if receiver is not None:
-            receiver.fanout.unsubscribe(self._sub)
-            release(self.context.shared, receiver)
+    def close_receiver(self, receiver: VmcReceiver) -> None:
+        release(self.context.shared, receiver)
 
     def endpoint(self) -> str:
         return f"UDP {self.settings.host}:{self.settings.port}"
 
-    def counters(self) -> dict[str, int]:
-        receiver, sub = self._receiver, self._sub
-        if receiver is None or sub is None:
-            return {}
-        return {**receiver.counters.errors(), "lost_queue_overflow": sub.overflow}
-
-    def read(self, timeout_s: float) -> list[Sample]:
-        receiver = self._receiver
-        if receiver is None:
-            raise DeviceError("not connected", f"device {self.name!r}")
-        frames = receiver.fanout.wait(self._sub, timeout_s)
-        out: list[Sample] = []
-        for frame in frames:
-            out.extend(self.convert(frame))
-        self._check_timeout(bool(frames))
-        return out
-
-    def _check_timeout(self, got: bool) -> None:
-        limit = self.settings.timeout_s
-        if limit <= 0:
-            return
-        now = self.context.clock.now_ns()
-        if got:
-            self._last_frame_ns = now
-        elif now - self._last_frame_ns > limit * 1e9:
-            s = self.settings
-            raise DeviceError(f"no VMC frames on UDP {s.host}:{s.port} for {limit:g} s "
-                              "(is the sender running and sending to this address?)", f"device {self.name!r}")
+    def silence(self, seconds: float) -> str:
+        s = self.settings
+        return (f"no VMC frames on UDP {s.host}:{s.port} for {seconds:g} s "
+                "(is the sender running and sending to this address?)")
 
     @abstractmethod
     def convert(self, frame: Frame) -> list[Sample]:
