@@ -62,8 +62,8 @@ DEVICE_EVENT = "/events/device"
 OPERATOR = "/events/operator"
 
 KIND_TOPICS = {
-    "glove": ("hand",),
-    "suit": ("wrist", "body"),
+    "glove": ("hand", "xr_left", "xr_right"),  # xr_*: an XR page's raw hand joints (webxr.glove)
+    "suit": ("wrist", "body", "head"),  # head: the XR headset (webxr.suit)
     "camera": ("image",),
     "arm": ("state",),
     "hand": ("state",),

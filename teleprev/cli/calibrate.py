@@ -7,6 +7,8 @@ from typing import Optional
 
 import typer
 
+from teleprev.cli.record import WEBXR_HOST_HELP
+
 STEPS = (
     ("open", "Open your hand flat, fingers together, and hold it still."),
     ("fist", "Make a firm fist, thumb over the fingers, and hold it."),
@@ -20,6 +22,7 @@ def calibrate(
     seconds: float = typer.Option(1.5, "--seconds", help="How long each pose is averaged."),
     hold: Optional[float] = typer.Option(None, "--hold", help="Unattended: wait this long for each pose instead of asking for Enter."),
     operator: str = typer.Option("", "--operator", help="Operator name, stored in the file."),
+    webxr_host: str = typer.Option("", "--webxr-host", help=WEBXR_HOST_HELP),
 ) -> None:
     """Guided calibration: open hand, fist and neutral wrist, averaged from the live glove and suit."""
     import time
@@ -30,34 +33,38 @@ def calibrate(
     from teleprev.devices.runner import DeviceRunner
     from teleprev.errors import DeviceError
     from teleprev.human.smplx import hand_pose_from_values
-    from teleprev.messages import JointSample, PoseSample
     from teleprev.retarget.calibration_fit import calibrate as compute
     from teleprev.retarget.calibration import write_calibration
     from teleprev.rig import load_rig
+    from teleprev.cli.pages import announce_pages
     from teleprev.clock import SessionClock
 
     console = Console()
     _check_before_the_first_pose(out, hold, seconds)
     r = load_rig(rig)
+    if webxr_host:
+        r = r.with_device_settings("webxr", "--webxr-host", host=webxr_host)
     r.require("glove", "suit")
     clock = SessionClock()
     context = r.device_context(clock)
     glove, suit = r.of_kind("glove")[0], r.of_kind("suit")[0]
     devices = [e.cls(e.name, e.settings, context) for e in (glove, suit)]
+    hand_topic, wrist_topic = devices[0].topic("hand"), devices[1].topic("wrist")
     samples: dict[str, list] = {"hand": [], "wrist": []}
     collecting = [False]
 
     def sink(sample, receive_ns: int) -> None:
         if not collecting[0]:
             return
-        if isinstance(sample.payload, JointSample) and sample.topic.startswith("/glove/"):
+        if sample.topic == hand_topic:
             samples["hand"].append(hand_pose_from_values(sample.payload.names, sample.payload.positions))
-        elif isinstance(sample.payload, PoseSample) and sample.topic.startswith("/suit/"):
+        elif sample.topic == wrist_topic:  # (a suit may stream more poses: an XR headset's head)
             samples["wrist"].append(sample.payload.matrix()[:3, :3])
 
     runners = [DeviceRunner(d, sink, clock) for d in devices]
     for runner in runners:
         runner.start()
+    announce_pages(console, devices)
     held: dict[str, dict[str, list]] = {}
     try:
         for pose, instruction in STEPS:

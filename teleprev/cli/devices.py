@@ -7,6 +7,7 @@ from typing import Optional
 
 import typer
 
+from teleprev.cli.record import WEBXR_HOST_HELP
 from teleprev.cli.tables import print_table
 
 app = typer.Typer(help="Device plugins: list what is installed, check a rig's devices, emulate hardware.",
@@ -44,6 +45,7 @@ def list_plugins() -> None:
 def check(
     rig: Optional[Path] = typer.Argument(None, help="Rig file (TOML); default: the all-sim rig."),
     seconds: float = typer.Option(3.0, "--seconds", "-s", min=0.1, help="How long to read from every device."),
+    webxr_host: str = typer.Option("", "--webxr-host", help=WEBXR_HOST_HELP),
 ) -> None:
     """Open every device of a rig, read for a few seconds, and print rates, latency and errors ("lost":
     samples and events the reader could not hand on)."""
@@ -58,9 +60,12 @@ def check(
     from teleprev.devices import DeviceRunner
     from teleprev.errors import TeleprevError
     from teleprev.rig import default_rig_path, load_rig
+    from teleprev.cli.pages import announce_pages
 
     console = Console()
     loaded = load_rig(rig or default_rig_path())
+    if webxr_host:
+        loaded = loaded.with_device_settings("webxr", "--webxr-host", host=webxr_host)
     clock = SessionClock()
     context = loaded.device_context(clock)
     events: list[dict] = []
@@ -80,6 +85,7 @@ def check(
     for r in runners.values():
         r.start()
     try:
+        announce_pages(console, [r.device for r in runners.values()])
         time.sleep(seconds)
     finally:
         stats = {name: r.stats() for name, r in runners.items()}

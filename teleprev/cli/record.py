@@ -7,6 +7,8 @@ from typing import Literal, Optional
 
 import typer
 
+WEBXR_HOST_HELP = ("Where the XR page (webxr.* devices) listens, over the rig's host: 0.0.0.0 opens it to the "
+                   "network, and its URL then carries a pairing token.")
 TASKS_HELP = "Task label of the episodes (the sim operator performs it): pick_place, hang, pour, box_rotation, cup_stack."
 View = Literal["front", "side", "top"]  # the robot views of the terminal preview
 
@@ -44,6 +46,7 @@ def record(
     practice: bool = typer.Option(False, "--practice", help="Mark the session as practice; press r when ready."),
     connect_timeout: float = typer.Option(
         5.0, "--connect-timeout", help="Unattended or headless: fail unless every device has sent something within this many seconds."),
+    webxr_host: str = typer.Option("", "--webxr-host", help=WEBXR_HOST_HELP),
     foxglove: Optional[int] = typer.Option(None, "--foxglove", metavar="[PORT]", help="Also show the session live in "
                                            "Foxglove: a WebSocket server on 127.0.0.1:PORT (default 8765) with the "
                                            "file's topics.", show_default=False),
@@ -54,6 +57,7 @@ def record(
 
     from teleprev.cli.signals import StopSignals
     from teleprev.live.session import RecordOptions, LiveSession, default_session_path
+    from teleprev.cli.pages import announce_pages
     from teleprev.live.cues import Cues
     from teleprev.live.run import run_interactive, run_script, run_timed, print_summary
     from teleprev import topics
@@ -64,7 +68,7 @@ def record(
     options = RecordOptions(
         out=out or default_session_path(task), rig=rig, models=models, task=task, task_text=task_text,
         operator=operator, participant=participant, condition=condition, practice=practice,
-        connect_timeout_s=connect_timeout, foxglove=foxglove, episode_plan=plan,
+        connect_timeout_s=connect_timeout, foxglove=foxglove, episode_plan=plan, webxr_host=webxr_host,
     )
     unconnected: list[str] = []
     with StopSignals() as signals:
@@ -78,6 +82,7 @@ def record(
                           "before each end, so it stays in preview", highlight=False)
         try:
             recording.start()
+            announce_pages(console, recording.devices.values())
             if duration is not None or plan is not None or not preview:  # nobody watches the device table, or
                 unconnected = recording.wait_connected()  # the clock runs: a dead rig must fail
             if not unconnected and plan is not None:

@@ -16,7 +16,7 @@ from typing import TYPE_CHECKING, Any
 
 from teleprev import transforms
 from teleprev.clock import ClockSync, SessionClock
-from teleprev.devices.contract import KINDS, Actuator, Device, DeviceContext, NoSettings, StreamSpec
+from teleprev.devices.contract import KINDS, Actuator, Device, DeviceContext, NoSettings, OperatorLink, StreamSpec
 from teleprev.devices.pacing import wait_until_due
 from teleprev.devices.polled import DeviceFault, JointLimits, PolledActuator, PolledSettings
 from teleprev.devices.registry import GROUP, available, load_plugin
@@ -55,7 +55,7 @@ def __getattr__(name: str) -> Any:
 
 __all__ = [
     # the contract
-    "KINDS", "Actuator", "Device", "DeviceContext", "NoSettings", "StreamSpec", "wait_until_due",
+    "KINDS", "Actuator", "Device", "DeviceContext", "NoSettings", "OperatorLink", "StreamSpec", "wait_until_due",
     "DeviceFault", "JointLimits", "PolledActuator", "PolledSettings", "FAULT_TOLERANCE", "ServoStreamRule", "ServoViolation",
     # running and finding plugins
     "ActuatorPort", "DeviceRunner", "RunnerStats", "Sink", "default_gap_s", "GROUP", "available", "load_plugin",

@@ -44,6 +44,17 @@ class StreamSpec:
 
 
 @dataclass
+class OperatorLink:
+    """The recording behind a device that carries the operator's controls (an XR page): `act(action)` carries
+    out an operator action (live.operator_actions names them) and says why not ("" when done, "unknown" for
+    no such action); `status()` is what the operator is shown. The recording sets both once it runs; outside
+    one (devices check, calibrate) they stay None."""
+
+    act: Callable[[str], str] | None = None
+    status: Callable[[], dict] | None = None
+
+
+@dataclass
 class DeviceContext:
     """What a device gets from the rig besides its own settings."""
 
@@ -54,6 +65,7 @@ class DeviceContext:
     end_effector: str = "leap_hand"
     # Called with the task label whenever an episode starts (a simulated operator switches task on it).
     task_listeners: list[Callable[[str], None]] = field(default_factory=list)
+    operator: OperatorLink = field(default_factory=OperatorLink)
 
     @property
     def effector(self) -> EndEffector:
@@ -144,6 +156,11 @@ class Device(ABC, Generic[S]):
         """Where connect() reaches the hardware, for messages: e.g. "UDP 127.0.0.1:39539", "xArm
         192.168.1.222", "serial /dev/ttyUSB0"; "" for a device without one (a simulation)."""
         return ""
+
+    def operator_urls(self) -> list[str]:
+        """Addresses the operator opens to use the device (an XR page), known once connected; [] for most.
+        `teleprev record` and `devices check` print them, with a QR code."""
+        return []
 
     def counters(self) -> dict[str, int]:
         """Running totals of input the device skipped (e.g. {"malformed_packets": 3}) and, named "lost_...",

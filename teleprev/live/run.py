@@ -23,6 +23,7 @@ from teleprev.preview.keys import KeyReader
 from teleprev.preview.robot_view import RobotView
 from teleprev.robot.model import load_robot
 from teleprev.live.cues import Cues
+from teleprev.live.operator_actions import handle_key
 from teleprev.live.schedule import EpisodeTimes, Period, Schedule
 from teleprev.live.session import LiveSession
 from teleprev.session.summary import PREVIEW_ONLY, device_lost
@@ -75,32 +76,6 @@ def make_dashboard(recording: LiveSession, view: str) -> Dashboard:
     )
 
 
-def handle_key(recording: LiveSession, key: str, quit_flag: list) -> None:
-    loop = recording.loop
-    if key == " ":
-        loop.control("mode", mode="preview" if loop.snapshot.mode == "execute" else "execute")
-    elif key == "x":  # e-stop: teleprev sends nothing more at once; the controller stops the robot itself
-        loop.control("mode", mode="estop", reason="estop")
-    elif key == "s":
-        loop.control("start", task=recording.task)
-    elif key == "n":
-        loop.control("mode", mode="preview")
-        loop.control("start", task=recording.task)
-    elif key == "d":
-        loop.control("discard")
-    elif key == "a":  # the running (or last) episode discarded, and recorded again from now
-        loop.control("mode", mode="preview")
-        loop.control("discard")
-        loop.control("start", task=recording.task)
-    elif key in ("y", "f"):
-        loop.control("outcome", success=key == "y")
-    elif key == "r":
-        loop.control("operator", event="ready")
-    elif key in ("q", "\x1b"):
-        loop.control("mode", mode="preview")
-        quit_flag.append(True)
-
-
 def _frame(dashboard: Dashboard, recording: LiveSession, console: Console, countdown=None):
     size = console.size
     snap = recording.loop.snapshot
@@ -112,7 +87,8 @@ def run_interactive(recording: LiveSession, console: Console, view: str, fps: fl
     stats = PreviewStats()
     quit_flag: list = []
     dashboard = make_dashboard(recording, view) if show else None
-    with KeyReader(lambda k: handle_key(recording, k, quit_flag)):
+    press = lambda k: handle_key(recording, k, quit_flag)  # noqa: E731
+    with KeyReader(press), recording.pressing(press):
         if dashboard is None:
             while not quit_flag and not recording.failure:  # nobody watches a screen: end at once
                 time.sleep(0.1)
@@ -304,7 +280,7 @@ class TimedRun:
 
     def key(self, t_ns: int, key: str) -> None:
         period = self.period
-        if key == "n" or (key == "s" and period.kind == "reset"):
+        if key in ("n", "e") or (key == "s" and period.kind == "reset"):
             self.end(t_ns)
         elif key in ("d", "a"):
             if key == "a":
@@ -385,7 +361,7 @@ def run_timed(recording: LiveSession, plan: EpisodeTimes, console: Console | Non
     pacer = PreviewPacer(fps, recording.loop.backlog)
     run = TimedRun(recording, plan, cues, keys)
     next_frame = 0.0
-    with KeyReader(keys.press):
+    with KeyReader(keys.press), recording.pressing(keys.press):
         if live:
             live.start()
         try:

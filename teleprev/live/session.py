@@ -11,6 +11,7 @@
 
 from __future__ import annotations
 
+import contextlib
 import dataclasses
 import datetime as _dt
 import json
@@ -30,6 +31,7 @@ from teleprev import topics
 from teleprev.clock import SessionClock
 from teleprev.live.frames import sensor_frames
 from teleprev.live.loop import SessionLoop
+from teleprev.live.operator_actions import ACTION_KEYS, handle_key, operator_status
 from teleprev.live.schedule import PLAN_RECORD, EpisodeTimes
 from teleprev.messages import Logged, RobotDescription
 
@@ -54,6 +56,7 @@ class RecordOptions:
     foxglove: int | None = None  # a live Foxglove view on this port of 127.0.0.1 (0: any free port)
     episode_plan: EpisodeTimes | None = None  # timed episodes (run.run_timed): kept in the file's metadata
     policy: dict[str, str] | None = None  # a policy drives the pipeline (teleprev rollout): its metadata record
+    webxr_host: str = ""  # the XR page's address to listen on, over the rig's (record --webxr-host)
 
 
 def default_session_path(task: str) -> Path:
@@ -76,6 +79,8 @@ class LiveSession:
 
         self.options = options
         self.rig: Rig = load_rig(options.rig)
+        if options.webxr_host:
+            self.rig = self.rig.with_device_settings("webxr", "--webxr-host", host=options.webxr_host)
         rig = self.rig
         rig.require("glove", "suit", "arm", "hand")
         self.task = options.task or rig.rig.task
@@ -119,6 +124,10 @@ class LiveSession:
         self.loop.actuators = {kind: ActuatorPort(self.devices[first[kind]], self.runners[first[kind]]) for kind in ("arm", "hand")}
         self.sender = CommandSender(CommandPlanner.for_pipeline(self.pipeline), self.clock, rig.pipeline.command_rate_hz)
         self.summary = None
+        self._press = self._press_unattended
+        # A device carrying the operator's controls (the XR page) acts on this recording and shows its status.
+        self.context.operator.act = self.act
+        self.context.operator.status = lambda: operator_status(self.loop.snapshot)
 
     @property
     def preview_lead_s(self) -> float:
@@ -126,6 +135,27 @@ class LiveSession:
         the commands' braking bound, plus two of the sender's ticks and PREVIEW_SLACK_S for the switch to
         reach it."""
         return self.pipeline.motion.stop_time_bound() + 2.0 / self.rig.pipeline.command_rate_hz + PREVIEW_SLACK_S
+
+    def act(self, action: str) -> str:
+        """An operator action by name (operator_actions.ACTION_KEYS), from a control other than the keyboard:
+        it presses the action's key on whatever reads the keys now. "" when pressed, "unknown" for no such action."""
+        key = ACTION_KEYS.get(action)
+        if key is None:
+            return "unknown"
+        self._press(key)
+        return ""
+
+    @contextlib.contextmanager
+    def pressing(self, press):
+        """While the block runs, `act` presses keys with `press` (an interactive run's or a timed run's)."""
+        self._press = press
+        try:
+            yield
+        finally:
+            self._press = self._press_unattended
+
+    def _press_unattended(self, key: str) -> None:
+        handle_key(self, key, [])
 
     def _recording_failed(self, exc: OSError) -> None:
         """On the recorder's writer thread, the moment a write fails (the recorder has noted it, so

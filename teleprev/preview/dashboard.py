@@ -23,7 +23,8 @@ if TYPE_CHECKING:  # the preview renders what the live session hands it; it neve
     from teleprev.live.device_rows import DeviceRow
     from teleprev.live.loop import LoopSnapshot
 
-KEYS = (("space", "preview/execute"), ("x", "e-stop"), ("s", "start episode"), ("n", "next episode"),
+KEYS = (("space", "preview/execute"), ("x", "e-stop"), ("s/e", "start/end episode"),
+        ("n", "next episode"),
         ("d", "discard"), ("a", "discard, again"), ("y/f", "success/failure"), ("r", "ready"), ("q", "quit"))
 PREVIEW_STYLE = "bold black on yellow"
 EXECUTE_STYLE = "bold white on red"

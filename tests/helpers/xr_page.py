@@ -1,0 +1,54 @@
+"""A stand-in for the XR page in tests of the server's edges (tokens, garbage, takeovers): a real WebSocket
+over real TLS on loopback, sending what page/xr.js sends (wire.pack). The page itself is tested in a real
+browser (tests/webxr/test_browser.py)."""
+
+from __future__ import annotations
+
+import json
+import ssl
+import time
+
+import numpy as np
+from websockets.sync.client import connect
+
+from teleprev_devices.webxr import wire
+
+
+def insecure() -> ssl.SSLContext:
+    """TLS that accepts teleprev's self-signed certificate, as a browser does once the operator accepts it."""
+    context = ssl.create_default_context()
+    context.check_hostname = False
+    context.verify_mode = ssl.CERT_NONE
+    return context
+
+
+def open_hand() -> np.ndarray:
+    """(25, 8) joints of a right hand at rest: every joint's frame the identity, 8 mm radius."""
+    joints = np.zeros((25, 8))
+    joints[:, 6] = 1.0
+    joints[:, 7] = 0.008
+    joints[:, 2] = -0.4 - 0.01 * np.arange(25)
+    return joints
+
+
+class PageClient:
+    def __init__(self, port: int, token: str = ""):
+        query = f"?token={token}" if token else ""
+        self._connecting = connect(f"wss://127.0.0.1:{port}/ws{query}", ssl=insecure(), open_timeout=5)
+        self.ws = self._connecting.__enter__()
+        self.seq = 0
+
+    def frame(self, right=None, left=None, head=(0.0, 1.6, 0.0, 0.0, 0.0, 0.0, 1.0), seq=None) -> None:
+        now_ms = time.time() * 1000.0
+        self.ws.send(wire.pack(self.seq if seq is None else seq, now_ms, now_ms, head=head, left=left, right=right))
+        self.seq = (self.seq if seq is None else seq) + 1
+
+    def action(self, action: str) -> dict:
+        self.ws.send(json.dumps({"type": "action", "action": action}))
+        while True:
+            message = json.loads(self.ws.recv(timeout=5))
+            if message["type"] == "ack":
+                return message
+
+    def close(self) -> None:
+        self._connecting.__exit__(None, None, None)
