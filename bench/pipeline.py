@@ -149,14 +149,34 @@ def dex_retargeting(seconds: float) -> dict:
     return {"dexretargeting_ms_p50": common.percentile(times, 50) * 1e3, "dexretargeting_ms_p99": common.percentile(times, 99) * 1e3}
 
 
+def at_loop_priority(fn, *args):
+    """(fn(*args), its thread's priority): run on a thread at the session loop's priority
+    (teleprev/live/thread_priority.py), as the live steps run; the busy processes stay at the default."""
+    import threading
+
+    from teleprev.live.thread_priority import LOOP_NICE, raise_this_thread
+
+    out = {}
+
+    def run():
+        out["priority"] = raise_this_thread() or f"nice {LOOP_NICE}"
+        out["value"] = fn(*args)
+
+    thread = threading.Thread(target=run, name="steps")
+    thread.start()
+    thread.join()
+    return out["value"], out["priority"]
+
+
 def main() -> None:
     p = common.parser(__doc__)
     p.add_argument("--busy", type=int, default=0, help="busy processes beside the step timing")
     args = p.parse_args()
     seconds = 8.0 if args.quick else 30.0
     with common.Load(args.busy):
-        figures = step_timing(seconds)
+        figures, priority = at_loop_priority(step_timing, seconds)
     figures["busy_processes"] = args.busy
+    figures["step_thread"] = priority
     figures.update(preview_rate(4.0 if args.quick else 12.0))
     figures.update(dex_retargeting(10.0 if args.quick else 30.0))
     targets = {

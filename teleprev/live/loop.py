@@ -39,6 +39,7 @@ from teleprev.pipeline.planner import ModeUpdate
 from teleprev import topics
 from teleprev.clock import SessionClock
 from teleprev.live.episodes import EpisodeTracker
+from teleprev.live.thread_priority import LOOP_NICE, raise_this_thread
 
 _STOP = object()
 
@@ -127,6 +128,7 @@ class SessionLoop:
         self._stopping = False
         self.fault = ""  # why the session stays in preview until the operator engages (a device failed)
         self._fault_told = False
+        self.priority = ""  # the loop thread's nice value once it runs, or why it could not be raised
         self.holds: dict[str, str] = {}  # why execute is refused for now, by who asked (a timed episodes' reset)
         self.taps: list[Callable[[Logged], Any]] = []  # each sample as logged, on this thread (e.g. a policy's observations)
 
@@ -197,6 +199,7 @@ class SessionLoop:
                 self._queue.put((received, item))
 
     def _run(self) -> None:
+        self.priority = raise_this_thread() or f"nice {LOOP_NICE}"
         while True:
             receive_ns, item = self._queue.get()
             if item is _STOP:

@@ -252,7 +252,8 @@ class LiveSession:
         status = self.sender.status
         extra = {"loop": {"dropped": json.dumps(dict(stats.dropped)), "commands_sent": json.dumps(dict(stats.commands_sent)),
                           "command_errors": json.dumps(dict(stats.command_errors)),
-                          "device_failures": json.dumps(dict(stats.device_failures)), "failure": self.loop.failure},
+                          "device_failures": json.dumps(dict(stats.device_failures)), "failure": self.loop.failure,
+                          "priority": self.loop.priority},
                  "sender": {"rate_hz": f"{1e9 / self.sender.period_ns:g}", "ticks": str(stats.ticks),
                             "realtime": "true" if status and status.realtime else "false",
                             "detail": status.detail if status else "", "dropped_updates": str(self.sender.dropped_updates)},

@@ -1,0 +1,30 @@
+"""The session loop's thread runs at nice -10 where the machine lets it (root here, as in CI), so that busy
+processes beside a session delay its steps less; the session says which it got."""
+
+import os
+import time
+from pathlib import Path
+
+from teleprev.live.session import LiveSession, RecordOptions
+from teleprev.live.thread_priority import LOOP_NICE
+from teleprev.session.reader import SessionReader
+
+
+def _nice(tid: int) -> int:
+    stat = Path(f"/proc/self/task/{tid}/stat").read_text()
+    return int(stat.rsplit(")", 1)[1].split()[16])  # field 19 of proc(5), counted after the command name
+
+
+def test_the_loop_thread_takes_its_nice_value_and_the_session_records_it(tmp_path):
+    assert os.geteuid() == 0, "this test checks the raised priority, which needs root (CI runs as root)"
+    rec = LiveSession(RecordOptions(out=tmp_path / "s.mcap"))
+    rec.start()
+    try:
+        while not rec.loop.priority:
+            time.sleep(0.01)
+        assert _nice(rec.loop._thread.native_id) == LOOP_NICE
+        assert _nice(rec.runners["glove"]._thread.native_id) == 0  # only the loop's thread
+    finally:
+        rec.stop()
+    with SessionReader(tmp_path / "s.mcap") as reader:
+        assert reader.metadata["loop"]["priority"] == f"nice {LOOP_NICE}"
