@@ -17,3 +17,4 @@ class DeviceRow:
     lost: int  # samples the device's runner could not hand to the loop (the sink raised)
     errors: int
     lost_input: int = 0  # input lost before the device read it (socket overruns, sequence gaps, its queue)
+    hint: str = ""  # what the operator has to do for it to stream (e.g. open the XR page's URL), or ""

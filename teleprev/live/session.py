@@ -294,8 +294,10 @@ class LiveSession:
         rows = []
         for name, runner in self.runners.items():
             s = runner.stats()
+            urls = self.devices[name].operator_urls() if s.last_receive_ns is None else []
+            hint = f"XR page: {urls[0]}" if urls else ""
             rows.append(DeviceRow(name, self.devices[name].kind, s.state, s.rate_hz, s.nominal_hz, s.latency_ms,
-                                  self._loop_dropped(name), s.sink_errors, s.errors, s.lost_input))
+                                  self._loop_dropped(name), s.sink_errors, s.errors, s.lost_input, hint))
         return rows
 
     def _loop_dropped(self, name: str) -> int:

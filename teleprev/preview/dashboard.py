@@ -76,7 +76,7 @@ def key_lines(width: int) -> Text:
     return text
 
 
-def episode_line(snap: LoopSnapshot, now_ns: int) -> Text:
+def episode_line(snap: LoopSnapshot, now_ns: int, hints: tuple[str, ...] = ()) -> Text:
     session_s = (now_ns - snap.session_started_ns) / 1e9
     if snap.episode_active:
         ep = f"episode {snap.episode}  [{snap.task}]  {(now_ns - snap.episode_started_ns) / 1e9:6.1f} s"
@@ -89,6 +89,8 @@ def episode_line(snap: LoopSnapshot, now_ns: int) -> Text:
         line.append(f"    dropped {snap.dropped}", style="bold red")
     if snap.message:
         line.append(f"\n{snap.message}", style="yellow")
+    for hint in hints:  # a device waiting for the operator (the XR page's URL until the page streams)
+        line.append(f"\n{hint}", style="bold cyan")
     return line
 
 
@@ -163,7 +165,7 @@ class Dashboard:
                camera=None, countdown: tuple[str, float] | None = None) -> RenderableType:
         """The screen for a terminal of width x height; `camera` is the latest frame (an ImageSample) of the
         camera to show, or None; `countdown`: timed episodes' current period and its seconds left, or None."""
-        episode = episode_line(snap, now_ns)
+        episode = episode_line(snap, now_ns, tuple(dict.fromkeys(r.hint for r in devices if r.hint)))
         keys = key_lines(width)
         table = device_table(devices)
         fixed = 1 + len(episode.plain.splitlines()) + len(keys.plain.splitlines()) + len(devices) + 1

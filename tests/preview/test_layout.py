@@ -4,6 +4,7 @@ to be read, and nothing runs past the terminal; in a smaller one the status stay
 from __future__ import annotations
 
 import io
+from dataclasses import replace
 from types import SimpleNamespace
 
 import cv2
@@ -109,3 +110,14 @@ def test_the_camera_picture_keeps_its_colours_and_aspect():
     pic = picture(rgb, 20, 10)
     assert pic.top.shape[:2] == (7, 20)  # 4:3 in 20 columns: 15 pixel rows, two to a cell
     assert (pic.top[:, :9] == (248, 0, 0)).all() and (pic.bottom[:, 11:] == (0, 248, 0)).all()
+
+
+def test_the_xr_pages_url_shows_until_the_page_streams_and_the_screen_still_fits(dashboard):
+    url = "https://192.168.1.7:8443/?token=Zq3vR8xWb2LkP0mN4tYs1A"
+    waiting = [replace(d, state="connecting", hint=f"XR page: {url}") if d.kind in ("glove", "suit") else d for d in DEVICES]
+    console = Console(file=io.StringIO(), width=80, height=24, record=True, color_system="truecolor")
+    console.print(dashboard.render(snapshot(16), waiting, 80, 24, 0, camera=camera_frame()))
+    lines = console.export_text().rstrip("\n").splitlines()
+    assert len(lines) <= 24 and max(len(line) for line in lines) <= 80
+    assert sum(f"XR page: {url}" in line for line in lines) == 1  # once for the glove and the suit it serves
+    assert not any("XR page" in line for line in screen(dashboard, 80, 24, camera_frame()))

@@ -98,3 +98,23 @@ def test_the_page_engages_records_what_it_sent_and_a_lost_hand_holds_the_robot(t
     assert np.ptp(np.array(moving[-40:]), axis=0).max() > 1e-3  # the arm followed the swaying wrist
     held = np.array([q for t, q in arm if hidden_at + 0.7e9 < t < shown_at])
     assert len(held) > 20 and np.ptp(held, axis=0).max() < 1e-9  # braked, then held where it stopped
+
+
+def test_the_preview_shows_the_pages_url_until_the_page_streams(tmp_path):
+    rec = LiveSession(RecordOptions(out=tmp_path / "s.mcap", rig=webxr_rig(tmp_path)))
+    rec.start()
+    try:
+        deadline = time.monotonic() + 10
+        while not rec.devices["glove"].operator_urls() and time.monotonic() < deadline:
+            time.sleep(0.05)
+        url = rec.devices["glove"].operator_urls()[0]
+        hints = {r.name: r.hint for r in rec.device_rows()}
+        assert hints["glove"] == hints["suit"] == f"XR page: {url}" and not hints["arm"]
+        page = PageClient(int(url.split(":")[2].strip("/")))
+        while any(r.hint for r in rec.device_rows()) and time.monotonic() < deadline:
+            page.frame(right=open_hand())
+            time.sleep(0.02)
+        assert not any(r.hint for r in rec.device_rows())
+        page.close()
+    finally:
+        rec.stop()
