@@ -124,12 +124,13 @@ async function enterXR(mode) {
   if (!(await navigator.xr.isSessionSupported(mode))) { setNote(`${mode} is not supported here`); return; }
   const canvas = document.getElementById("gl");
   const gl = canvas.getContext("webgl", { xrCompatible: true, alpha: true });
-  const session = await navigator.xr.requestSession(mode, {
-    requiredFeatures: ["local-floor"], optionalFeatures: ["hand-tracking"] });
+  const session = await navigator.xr.requestSession(mode, { optionalFeatures: ["local-floor", "hand-tracking"] });
   state.session = session;
   state.gl = gl;
   session.updateRenderState({ baseLayer: new XRWebGLLayer(session, gl) });
-  state.refSpace = await session.requestReferenceSpace("local-floor");
+  // The floor frame where the headset has one; "local" (origin at the head's start) otherwise: teleprev
+  // follows the wrist's motion, and its yaw comes from calibration, so either frame drives the robot alike.
+  state.refSpace = await session.requestReferenceSpace("local-floor").catch(() => session.requestReferenceSpace("local"));
   state.panel = makePanel(gl);
   session.addEventListener("select", ev => { if (!ev.inputSource.hand) act("toggle_mode"); });
   session.addEventListener("squeeze", ev => { if (!ev.inputSource.hand) act(episodeAction()); });
