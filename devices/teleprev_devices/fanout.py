@@ -42,6 +42,8 @@ class ListenSettings:
             raise ValueError(f"rate_hz must be in (0, 1000], got {self.rate_hz}")
         if self.timeout_s < 0:
             raise ValueError(f"timeout_s must be >= 0, got {self.timeout_s}")
+
+
 QUEUE = 256  # items kept per subscriber that is not reading fast enough
 
 

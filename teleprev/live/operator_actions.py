@@ -5,6 +5,7 @@ alike. And the status such a control shows the operator."""
 
 from __future__ import annotations
 
+
 def handle_key(recording, key: str, quit_flag: list) -> None:
     """What a key does to a recording (a LiveSession); q and Esc also append to `quit_flag`."""
     loop = recording.loop

@@ -31,7 +31,6 @@ class Credentials:
     cert: Path
     key: Path
     token: str
-    made: bool  # made now (the browser will ask to accept it)
 
 
 def ensure(folder: Path, addresses: list[str]) -> Credentials:
@@ -40,13 +39,11 @@ def ensure(folder: Path, addresses: list[str]) -> Credentials:
     folder.mkdir(parents=True, exist_ok=True)
     cert, key, token_file = folder / CERT, folder / KEY, folder / TOKEN
     wanted = {"127.0.0.1", *addresses}
-    made = False
     if not (cert.exists() and key.exists() and _covers(cert, wanted)):
         _make(cert, key, sorted(wanted))
-        made = True
     if not token_file.exists() or not token_file.read_text().strip():
         _write_private(token_file, secrets.token_urlsafe(16).encode())
-    return Credentials(cert, key, token_file.read_text().strip(), made)
+    return Credentials(cert, key, token_file.read_text().strip())
 
 
 def _covers(cert: Path, addresses: set[str]) -> bool:

@@ -8,7 +8,8 @@ time: a newer connection takes over and the older one is closed, so a reloaded t
 frames with its predecessor's.
 
 Frame times come from the page's clock and are mapped onto the session clock by ClockSync, as the VMC
-receiver does: outliers are counted (`clock_outliers`) and mapped with the current offset. Nothing a
+receiver does: outliers are counted (`clock_outliers`) and mapped with the current offset. Each connection
+has its own ClockSync (a reloaded page has a new clock origin). Nothing a
 page sends can stop the server: malformed messages, non-finite values, and unknown actions are counted
 and skipped. Off this machine (host other than 127.0.0.1) every request must carry the pairing token
 (`?token=`), and those that do not are refused and counted (`refused_connections`).
@@ -37,7 +38,6 @@ PAGE_FILES = {"/": ("index.html", "text/html; charset=utf-8"), "/index.html": ("
 SOCKET_PATH = "/ws"
 STATUS_PERIOD_S = 0.25
 LOOPBACK = "127.0.0.1"
-_RESYNC_NS = 1_000_000_000  # the page's clock going back this much: a new page, start ClockSync over
 
 
 @dataclass(frozen=True, slots=True)
@@ -70,7 +70,6 @@ class _Page:
     connection: object
     sync: ClockSync = field(default_factory=ClockSync)
     last_seq: int | None = None
-    last_device_ns: int | None = None
     agent: str = ""
     session: str = ""  # the XR session the page runs ("immersive-ar", "immersive-vr", or "" before one)
 
@@ -89,7 +88,6 @@ class XrServer:
             raise DeviceError(f"cannot keep the page's certificate in {cert_dir} ({exc.strerror or exc}); "
                               "set cert_dir to a folder you can write", self.where) from None
         self._page: _Page | None = None
-        self._pages = {}  # connection -> _Page, every open one
         self._loop: asyncio.AbstractEventLoop | None = None
         self._stopped: asyncio.Event | None = None
         started = threading.Event()
@@ -109,9 +107,6 @@ class XrServer:
         """The page's address(es): one per address the server is reached at, with the token when needed."""
         query = f"?token={self.credentials.token}" if self.token_required else ""
         return [f"https://{a}:{self.port}/{query}" for a in self._addresses]
-
-    def page_connected(self) -> bool:
-        return self._page is not None
 
     def close(self) -> None:
         loop, stopped = self._loop, self._stopped
@@ -179,7 +174,6 @@ class XrServer:
 
         page = _Page(connection)
         old, self._page = self._page, page
-        self._pages[connection] = page
         self.counters.connections += 1
         if old is not None:
             await old.connection.close(4000, "another page took over")
@@ -199,7 +193,6 @@ class XrServer:
         except Exception:  # the connection broke: the page reconnects
             pass
         finally:
-            self._pages.pop(connection, None)
             if self._page is page:
                 self._page = None
 
@@ -217,13 +210,8 @@ class XrServer:
         if page.last_seq is not None and xr.seq > page.last_seq + 1:
             c.lost_sequence_gaps += xr.seq - page.last_seq - 1
         page.last_seq = xr.seq
-        device_ns = int(round(xr.time_ms * 1e6))
-        if page.last_device_ns is not None and device_ns < page.last_device_ns - _RESYNC_NS:
-            c.clock_outliers += page.sync.rejected
-            page.sync = ClockSync()
-        page.last_device_ns = device_ns
         before = page.sync.rejected
-        stamp = page.sync.observe(device_ns, receive_ns)
+        stamp = page.sync.observe(int(round(xr.time_ms * 1e6)), receive_ns)
         c.clock_outliers += page.sync.rejected - before
         c.frames += 1
         self.fanout.publish(Frame(receive_ns, stamp, xr))
