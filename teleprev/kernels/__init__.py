@@ -8,6 +8,7 @@
     motion      the hand's acceleration cap and the arm generator's arithmetic around ruckig
     glove       a glove sample's decoding, checks, finger angles and retargeting
     mlp         CPN / CCN inference and the Corrector's CCN step
+    correction  the Corrector's answer for one configuration: the check, the CCN step, its checks
 
 Kernels take arrays and numbers only; the classes that use them build their tables (the NamedTuples
 beside the kernels), and pass a table's fields in its order (`kernel(q, *table)`): a NamedTuple argument
@@ -85,7 +86,7 @@ def warm() -> None:
     stepping every sim rig's pipeline afterwards compiles or loads nothing more."""
     import numpy as np
 
-    from teleprev.kernels import collision, fk, glove, ik, mlp, motion, swept
+    from teleprev.kernels import collision, correction, fk, glove, ik, mlp, motion, swept
 
     f64, i64 = np.float64, np.int64
     # FK: a root and two revolute joints about z, 0.1 m apart
@@ -156,4 +157,7 @@ def warm() -> None:
     mlp.slots(rows, *cpn)
     mlp.predicts_free(rows, *cpn, 2.0)
     mlp.propose(rows, *ccn, limits)
-    mlp.propose_shorten(rows, *mlp.CcnStep(*ccn, limits, *cpn, 2.0, 4))
+    step = mlp.CcnStep(*ccn, limits, *cpn, 2.0, 4)
+    mlp.propose_shorten(rows, *step)
+    correction.correct_one(q, q, *table, *boxes, *margins, *step, np.zeros(2, dtype=np.bool_), np.empty(1, dtype=i64),
+                           np.empty(2))

@@ -97,10 +97,10 @@ class CompiledNets:
         self.cpn = CompiledCPN(cpn)
         self.ccn = CompiledCCN(ccn)
         self.steps = 2 ** shorten_levels
-        self._step = mlp_kernels.CcnStep(*self.ccn.mlp.net, self.ccn.f, *self.cpn.mlp.net, self.cpn.bound, self.steps)
+        self.step = mlp_kernels.CcnStep(*self.ccn.mlp.net, self.ccn.f, *self.cpn.mlp.net, self.cpn.bound, self.steps)
 
     def propose_shorten(self, q0: np.ndarray):
         """For colliding configurations q0 (N, n) within the limits: (proposals, shortened, hi), see kernels."""
         if q0.dtype != np.float64 or q0.ndim != 2 or not q0.flags.c_contiguous:  # the Corrector passes such rows
             q0 = _rows(q0)
-        return mlp_kernels.propose_shorten(q0, *self._step)
+        return mlp_kernels.propose_shorten(q0, *self.step)

@@ -31,6 +31,7 @@ from pathlib import Path
 import numpy as np
 
 from teleprev.errors import ModelError
+from teleprev.kernels import correction as correction_kernels
 from teleprev.noncollision.mlp import CCN, CPN, file_sha256, load_model
 from teleprev.noncollision.projection import ProjectionSettings, descend
 from teleprev.robot.collision import SelfCollisionChecker
@@ -128,6 +129,11 @@ class Corrector:
         self._nets = CompiledNets(self.cpn, self.ccn, self.settings.shorten_levels)
         self._cpn = self._nets.cpn
         self._nets.propose_shorten(self.neutral[None])
+        tables = getattr(self.checker, "kernel_tables", None)  # FCL's checker has none
+        # correct_one's tables after the configuration (None: the checker has no compiled check)
+        self._one = None if tables is None else (*tables[0], *tables[1], *tables[2], *self._nets.step)
+        if self._one is not None:
+            self._prepare_one(self.neutral, self.neutral)
         self._cpn.predicts_free(self.neutral[None])
 
     @classmethod
@@ -163,8 +169,27 @@ class Corrector:
                              f"{np.array2string(q_in, precision=3)}")
         q0 = self.model.clip(q_in)
         if len(q0) == 1:
-            return [Prepared(q_in[0], q0[0], self.checker.check(q0[0]))]
+            return [self._prepare_one(q_in[0], q0[0])]
         return self._prepare_batch(q_in, q0, self.checker.pair_matrix(q0))
+
+    def _prepare_one(self, q_in: np.ndarray, q0: np.ndarray) -> Prepared:
+        """prepare's one configuration (the live step's case), with its answer where no FCL and no previous
+        output is needed: the exact check, the CCN step and the exact checks of its proposals in one kernel
+        call (teleprev/kernels/correction.py), the same checks in the same order as `correct`."""
+        if self._one is None:
+            return Prepared(q_in, q0, self.checker.check(q0))
+        labels = np.zeros(len(self.checker.link_names), dtype=bool)
+        index = np.empty(len(self.checker.link_pairs), dtype=np.int64)
+        out = np.empty_like(q0)
+        answer, count, deviation = correction_kernels.correct_one(q_in, q0, *self._one, labels, index, out)
+        if answer == correction_kernels.ONE_UNDECIDED:
+            return Prepared(q_in, q0, self.checker.check(q0))
+        if answer == correction_kernels.ONE_UNTOUCHED:
+            return Prepared(q_in, q0, CollisionReport(labels, ()), None, Correction(out, "untouched", (), deviation))
+        names = self.checker.link_pairs
+        report = CollisionReport(labels, tuple([names[i] for i in index[:count].tolist()]))
+        links = tuple(report.colliding_links(self.checker.link_names))
+        return Prepared(q_in, q0, report, None, Correction(out, "ccn", links, deviation))
 
     def _prepare_batch(self, q_in: np.ndarray, q0: np.ndarray, pairs: np.ndarray) -> list[Prepared]:
         """prepare's batch (the kernels answer a row as alone): every answer that needs no

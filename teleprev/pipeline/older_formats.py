@@ -135,6 +135,7 @@ class NumpyCorrector(Corrector):
     def _load_networks(self) -> None:
         self._nets = None
         self._cpn = self.cpn
+        self._one = None  # the single configuration's check alone, as these formats ran it
 
     def _propose(self, q0: np.ndarray) -> tuple[np.ndarray, np.ndarray | None]:
         proposal = self.ccn(q0)

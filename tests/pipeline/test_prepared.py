@@ -119,3 +119,30 @@ def test_a_driver_fed_prepared_samples_computes_the_same_session(pipeline, rng):
                 assert np.array_equal(x.positions, y.positions)
             else:
                 assert x.data == y.data
+
+
+def test_one_input_answered_in_one_kernel_call_as_step_by_step(pipeline, rng):
+    """The live step's single input (the check, the CCN step and its checks in one call,
+    teleprev/kernels/correction.py) gets the answer `correct` computes from the exact check alone: the
+    same action, links, bits and deviation, free inputs, shortened and full proposals alike."""
+    from teleprev.noncollision.corrector import Prepared
+
+    corrector = pipeline.effector.corrector
+    q = corrector.model.sample_uniform(400, rng)
+    q[::7] *= 1.3  # some beyond the limits: clipped first
+    answered, actions = 0, set()
+    for x in q:
+        fused = corrector.prepare(x[None])[0]
+        q0 = corrector.model.clip(x)
+        stepwise = corrector.correct(x, None, Prepared(x, q0, corrector.checker.check(q0)))
+        got = corrector.correct(x, None, fused)
+        answered += fused.answer is not None
+        actions.add(got.action)
+        report = corrector.checker.check(q0)
+        assert fused.report.pairs == report.pairs and np.array_equal(fused.report.labels, report.labels)
+        assert got.action == stepwise.action and got.colliding_links == stepwise.colliding_links
+        assert np.array_equal(got.q, stepwise.q) and got.deviation == stepwise.deviation
+    if corrector._one is not None:  # the compiled formats: most inputs answered by the one call
+        assert answered > 100 and {"untouched", "ccn", "fallback"} <= actions
+    else:
+        assert answered == 0
