@@ -208,6 +208,31 @@ def arm_sample(base, base_v, sample, goal, lower, upper, tol, rest_velocity, res
     return out, held, close, at_rest
 
 
+@njit(cache=True)
+def far_from_limits(q, v, a, lower, upper, acceleration, jerk):
+    """Whether every joint is further from its limits than a bound on how far the hardest stop takes it
+    (ArmGenerator.stops_inside: then that stop ends inside the limits, no ruckig needed). Towards the limit
+    it heads for: its speed grown by what its acceleration adds while the jerk turns it round, held while
+    it does, then braked at the acceleration limit. Back the other way, where its acceleration opposes its
+    motion: the speed it reaches backwards while the jerk takes that acceleration away (a^2 / 2j - |v|),
+    then the same. Each twice, and a millimetre radian, for margin."""
+    for i in range(q.shape[0]):
+        up = v[i] > 0 or (v[i] == 0 and a[i] > 0)
+        speed = v[i] if up else -v[i]
+        push = a[i] if up else -a[i]
+        turn = (abs(a[i]) + acceleration[i]) / jerk[i]
+        peak = speed + max(push, 0.0) ** 2 / (2.0 * jerk[i])
+        ahead = upper[i] - q[i] if up else q[i] - lower[i]
+        if ahead <= 2.0 * (peak * turn + peak * peak / (2.0 * acceleration[i])) + 1e-3:
+            return False
+        back = push * push / (2.0 * jerk[i]) - speed if push < 0 else 0.0
+        if back > 0:
+            behind = q[i] - lower[i] if up else upper[i] - q[i]
+            if behind <= 2.0 * (back * turn + back * back / (2.0 * acceleration[i])) + 1e-3:
+                return False
+    return True
+
+
 # Each kernel's parameters, a table standing for its fields in order (tests/kernels/test_tables.py).
 SIGNATURES = {
     "hand_command": ("q", "v", "tracking", "target", "mode", "before", "before_v", "keep", "dt", "dt_before",

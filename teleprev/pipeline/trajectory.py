@@ -21,7 +21,7 @@ from functools import cached_property
 import numpy as np
 
 from teleprev.kernels.motion import (ESTIMATE_GIVEN, ESTIMATE_NONE, ArmLimits, HandLimits, arm_plan, arm_sample,
-                                     hand_command)
+                                     far_from_limits, hand_command)
 
 REST_VELOCITY = 1e-6  # rad/s: below this (and no acceleration) a joint is at rest
 REST_ACCELERATION = 1e-5
@@ -82,7 +82,6 @@ class ArmGenerator:
         self._inp.synchronization = Synchronization.No
         self._zero = [0.0] * n
         self._limits = ArmLimits(self.velocity, self.lower, self.upper, self.acceleration)
-        self._room = tuple(x.tolist() for x in (self.lower, self.upper, self.acceleration, self.jerk))
         # load the kernels from numba's cache now, not in a live loop's first steps
         self.follow(JointMotion.rest(self.lower), self.plan(JointMotion.rest(self.lower), self.upper, 0.01), 0.01)
 
@@ -153,19 +152,10 @@ class ArmGenerator:
 
     def stops_inside(self, m: JointMotion) -> bool:
         """Whether braking as hard as the limits allow from m ends inside every joint limit. The exact stop
-        (ruckig) is computed only where a joint is closer to a limit than a bound on its braking distance:
-        its speed grown by what its acceleration adds while the jerk turns it round, held while it does,
-        then braked at the acceleration limit (twice that, and a millimetre radian, for margin)."""
-        lower, upper, acc, jerk = self._room
-        for q, v, a, lo, hi, amax, jmax in zip(m.q.tolist(), m.v.tolist(), m.a.tolist(), lower, upper, acc, jerk):
-            up = v > 0 or (v == 0 and a > 0)
-            speed, push = (v, max(a, 0.0)) if up else (-v, max(-a, 0.0))
-            turn = (push + amax) / jmax
-            peak = speed + push * push / (2.0 * jmax)
-            reach = 2.0 * (peak * turn + peak * peak / (2.0 * amax)) + 1e-3
-            if (hi - q if up else q - lo) <= reach:
-                break  # (floats: a few microseconds where numpy's calls cost tens)
-        else:
+        (ruckig) is computed only where a joint is closer to a limit than a bound on its braking distance
+        (kernels.far_from_limits)."""
+        q, v, a = _vector(m.q), _vector(m.v), _vector(m.a)
+        if far_from_limits(q, v, a, self.lower, self.upper, self.acceleration, self.jerk):
             return True
         end = self.stop_position(m)
         return bool(((end >= self.lower) & (end <= self.upper)).all())

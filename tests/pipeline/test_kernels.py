@@ -239,3 +239,26 @@ def test_the_arm_plan_with_motions_estimate_equals_feedforward_then_track(genera
         assert close == (float(np.abs(motion.q - goal).max()) < 0.02)
         held_seen += held
     assert held_seen > 10
+
+
+def test_stops_inside_answers_as_the_exact_stop(generator, rng):
+    """The braking-distance bound (kernels.far_from_limits) only skips ruckig's exact stop where that stop
+    ends inside the limits: stops_inside answers as the exact stop does, near the limits and far from them."""
+    from teleprev.kernels.motion import far_from_limits
+
+    g, n = generator, len(generator.lower)
+    skipped = exact_outside = 0
+    for k in range(3000):
+        q = rng.uniform(g.lower, g.upper)
+        if k % 2:
+            side = rng.integers(0, 2, n).astype(bool)
+            q = np.where(side, g.upper - rng.uniform(0, 0.3, n), g.lower + rng.uniform(0, 0.3, n))
+        m = JointMotion(q, rng.uniform(-1.0, 1.0, n) * g.velocity, rng.uniform(-1.0, 1.0, n) * g.acceleration)
+        end = g.stop_position(m)
+        exact = bool(((end >= g.lower) & (end <= g.upper)).all())
+        assert g.stops_inside(m) == exact
+        far = far_from_limits(m.q, m.v, m.a, g.lower, g.upper, g.acceleration, g.jerk)
+        assert exact or not far
+        skipped += far
+        exact_outside += not exact
+    assert skipped > 300 and exact_outside > 300
