@@ -8,10 +8,12 @@ shipped ones). Every step's outputs are kept next to what the session recorded f
 
 from __future__ import annotations
 
+import gc
 import itertools
 import json
 import time
 from collections.abc import Sequence
+from contextlib import contextmanager
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -164,8 +166,20 @@ def _table(values: Sequence[np.ndarray | None], width: int) -> np.ndarray:
 def rerun_session(path: str | Path, models: str | Path | None = None, rig_path: str | Path | None = None) -> Rerun:
     path = Path(path)
     started = time.perf_counter()
-    with SessionReader(path) as reader:
+    with SessionReader(path) as reader, _long_lived_unscanned():
         return _rerun(reader, path, models, rig_path, started)
+
+
+@contextmanager
+def _long_lived_unscanned():
+    """The objects alive before a re-run (modules, compiled kernels, built pipelines) left out of the
+    garbage collector's scans while it runs: a full collection over them took 55-60 ms of a 30 s session's
+    0.6 s re-run. What the re-run makes is collected as usual."""
+    gc.freeze()
+    try:
+        yield
+    finally:
+        gc.unfreeze()
 
 
 def _rerun(reader: SessionReader, path: Path, models, rig_path, started: float) -> Rerun:

@@ -76,3 +76,24 @@ def test_an_older_format_reruns_with_its_own_arithmetic_bit_for_bit(fixture, ver
     assert "ccn" in set(r.corrector)  # the CCN's arithmetic is part of what must reproduce
     assert r.models_match, f"the shipped models are not the ones {fixture.name} was recorded with"
     assert session["bit_identical"]
+
+
+def test_a_rerun_keeps_the_long_lived_objects_out_of_the_collectors_scans(monkeypatch):
+    """While a session re-runs, what was alive before it is frozen out of the garbage collector's scans
+    (a full collection over it cost about a tenth of a re-run), and handed back afterwards."""
+    import gc
+
+    from teleprev.evaluation import reproduce
+
+    seen = []
+    rerun = reproduce._rerun
+
+    def spy(*args):
+        seen.append(gc.get_freeze_count())
+        return rerun(*args)
+
+    monkeypatch.setattr(reproduce, "_rerun", spy)
+    before = gc.get_freeze_count()
+    reproduce.rerun_session(FIXTURE_V3)
+    assert seen and seen[0] > before + 1000
+    assert gc.get_freeze_count() == before
