@@ -9,11 +9,12 @@ switches through a driver built from the same rig and models reproduces the reco
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field, replace
+from dataclasses import dataclass, field
 
 import numpy as np
 
 from teleprev.messages import Event, JointSample, Logged, PoseSample
+from teleprev.pipeline.frozen import evolve
 from teleprev.pipeline.planner import ModeUpdate, TargetUpdate
 from teleprev.pipeline.step import HandInput, Pipeline, PipelineState, StepInputs, StepResult
 from teleprev import topics
@@ -87,7 +88,7 @@ class PipelineDriver:
 
     def _queue(self, update) -> None:
         self._seq += 1
-        self._updates.append(replace(update, seq=self._seq))
+        self._updates.append(evolve(update, seq=self._seq))
 
     @property
     def mode(self) -> str:
