@@ -107,6 +107,16 @@ def _estimate(mode, target, before, before_v, gap, keep):
 
 
 @njit(cache=True)
+def velocity_estimate(target, mode, before, before_v, gap, keep):
+    """The target's velocity estimate (`mode`: ESTIMATE_ZERO, _RAW or _BLEND, over the gap in seconds),
+    every joint: TargetEstimates' arithmetic, the same as the commands' estimates above."""
+    out = np.empty(target.shape[0])
+    for i in range(target.shape[0]):
+        out[i] = _estimate(mode, target[i], before[i], before_v[i], gap, keep)
+    return out
+
+
+@njit(cache=True)
 def hand_command(q, v, tracking, target, mode, before, before_v, keep, dt, dt_before, speed_frac, lower, upper,
                  velocity, acceleration, brake_fraction):
     """Motion's hand step before the swept check, in one call: `tracking`, the target's velocity estimate
@@ -235,6 +245,7 @@ def far_from_limits(q, v, a, lower, upper, acceleration, jerk):
 
 # Each kernel's parameters, a table standing for its fields in order (tests/kernels/test_tables.py).
 SIGNATURES = {
+    "velocity_estimate": ("target", "mode", "before", "before_v", "gap", "keep"),
     "hand_command": ("q", "v", "tracking", "target", "mode", "before", "before_v", "keep", "dt", "dt_before",
                      "speed_frac", HandLimits),
     "arm_plan": ("q", "v", "target", "mode", "before", "before_v", "gap", "keep", "ahead", "dt", "speed_frac",

@@ -37,11 +37,12 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from teleprev.kernels.motion import ESTIMATE_GIVEN, ESTIMATE_HELD, ESTIMATE_NONE
+from teleprev.kernels.motion import (ESTIMATE_BLEND, ESTIMATE_GIVEN, ESTIMATE_HELD, ESTIMATE_NONE, ESTIMATE_RAW,
+                                     ESTIMATE_ZERO, velocity_estimate)
 from teleprev.pipeline.derivatives import RESUME_GAP_NS, RESUME_PERIOD_NS
 from teleprev.pipeline.frozen import evolve
 from teleprev.pipeline.motion import ENGAGED_TOL, EXTRAPOLATE_MAX_NS, FEEDFORWARD_MAX_GAP_NS, RESUME_STEP_S, Motion
-from teleprev.pipeline.trajectory import PLAN_GOAL, JointMotion
+from teleprev.pipeline.trajectory import PLAN_GOAL, JointMotion, float_vector
 
 
 @dataclass(frozen=True)
@@ -272,6 +273,7 @@ class TargetEstimates:
     def __init__(self, feedforward: bool, tau_ns: float):
         self.feedforward = feedforward
         self.tau_ns = tau_ns
+        _blend(None, None, np.zeros(1), 0, tau_ns)  # load the kernel from numba's cache now, not in a live step
 
     def arm(self, est: EstimateState, target: np.ndarray, stamp: int) -> tuple[np.ndarray | None, EstimateState]:
         """(velocity estimate, new state) for an arm target solving the wrist sample stamped `stamp`."""
@@ -301,12 +303,12 @@ class EstimateState:
 
 def _blend(before_q, before_v, q, gap_ns: int, tau_ns: float) -> np.ndarray:
     """(q - before) / gap, blended with the estimate before by exp(-gap / tau); zero without a usable
-    target before (none, or further back than FEEDFORWARD_MAX_GAP_NS)."""
+    target before (none, or further back than FEEDFORWARD_MAX_GAP_NS). In one kernel call
+    (kernels.motion.velocity_estimate)."""
+    q = float_vector(q)
     if before_q is None or not 0 < gap_ns <= FEEDFORWARD_MAX_GAP_NS:
-        return np.zeros_like(q)
-    raw = (q - before_q) / (gap_ns / 1e9)
+        return velocity_estimate(q, ESTIMATE_ZERO, q, q, 1.0, 0.0)
     if before_v is None:
-        return raw
-    keep = math.exp(-gap_ns / tau_ns)
-    return keep * before_v + (1.0 - keep) * raw
-
+        return velocity_estimate(q, ESTIMATE_RAW, float_vector(before_q), q, gap_ns / 1e9, 0.0)
+    return velocity_estimate(q, ESTIMATE_BLEND, float_vector(before_q), float_vector(before_v), gap_ns / 1e9,
+                             math.exp(-gap_ns / tau_ns))

@@ -63,11 +63,11 @@ class ArmGenerator:
                  jerk: np.ndarray):
         from ruckig import ControlInterface, InputParameter, Ruckig, Synchronization, Trajectory
 
-        self.lower = _vector(lower)  # the kernels' argument type: contiguous float64
-        self.upper = _vector(upper)
-        self.velocity = _vector(velocity)
-        self.acceleration = _vector(acceleration)
-        self.jerk = _vector(jerk)
+        self.lower = float_vector(lower)  # the kernels' argument type: contiguous float64
+        self.upper = float_vector(upper)
+        self.velocity = float_vector(velocity)
+        self.acceleration = float_vector(acceleration)
+        self.jerk = float_vector(jerk)
         n = len(self.lower)
         self._otg = Ruckig(n)
         self._inp = InputParameter(n)
@@ -95,9 +95,10 @@ class ArmGenerator:
         the joint could not stop before. A moving target is planned in its own frame (where it stands still,
         and the velocity limits shift by its velocity), so the profile meets it rather than the point where
         it was: `target` is where the target is dt from now, and it was at target - velocity * dt when s was."""
-        target = _vector(target)
-        return arm_plan(_vector(s.q), _vector(s.v), target, estimate, target if before is None else _vector(before),
-                        target if before_v is None else _vector(before_v), float(gap), float(keep), float(ahead),
+        target = float_vector(target)
+        return arm_plan(float_vector(s.q), float_vector(s.v), target, estimate,
+                        target if before is None else float_vector(before),
+                        target if before_v is None else float_vector(before_v), float(gap), float(keep), float(ahead),
                         float(dt), float(speed_frac), *self._limits)
 
     def follow(self, s: JointMotion, plan: np.ndarray, dt: float, tol: float = 0.0) -> tuple | None:
@@ -154,7 +155,7 @@ class ArmGenerator:
         """Whether braking as hard as the limits allow from m ends inside every joint limit. The exact stop
         (ruckig) is computed only where a joint is closer to a limit than a bound on its braking distance
         (kernels.far_from_limits)."""
-        q, v, a = _vector(m.q), _vector(m.v), _vector(m.a)
+        q, v, a = float_vector(m.q), float_vector(m.v), float_vector(m.a)
         if far_from_limits(q, v, a, self.lower, self.upper, self.acceleration, self.jerk):
             return True
         end = self.stop_position(m)
@@ -208,10 +209,10 @@ class HandLimiter:
     """
 
     def __init__(self, lower: np.ndarray, upper: np.ndarray, velocity: np.ndarray, acceleration: np.ndarray):
-        self.lower = _vector(lower)
-        self.upper = _vector(upper)
-        self.velocity = _vector(velocity)
-        self.acceleration = _vector(acceleration)
+        self.lower = float_vector(lower)
+        self.upper = float_vector(upper)
+        self.velocity = float_vector(velocity)
+        self.acceleration = float_vector(acceleration)
         self._limits = HandLimits(self.lower, self.upper, self.velocity, self.acceleration, BRAKE_FRACTION)
         q = self.lower  # load the kernel from numba's cache now, not in a live loop's first steps
         self.command(q, q, q, ESTIMATE_NONE, None, None, 0.0, 0.01, 0.01)
@@ -251,12 +252,14 @@ class HandLimiter:
         its estimate (kernels.ESTIMATE_*, over the gap dt; ESTIMATE_NONE: no target velocity), or (no target)
         stop, in one kernel call (kernels.hand_command). Returns (rows: command, its velocity, the estimate;
         whether the command is q)."""
-        q = _vector(q)
+        q = float_vector(q)
         tracking = target is not None
-        return hand_command(q, _vector(v), tracking, _vector(target) if tracking else q, estimate,
-                            q if before is None else _vector(before), q if before_v is None else _vector(before_v),
+        return hand_command(q, float_vector(v), tracking, float_vector(target) if tracking else q, estimate,
+                            q if before is None else float_vector(before),
+                            q if before_v is None else float_vector(before_v),
                             float(keep), float(dt), float(dt_before), float(speed_frac), *self._limits)
 
 
-def _vector(x) -> np.ndarray:
+def float_vector(x) -> np.ndarray:
+    """x as the kernels take it: a contiguous float64 array (x itself when it is one)."""
     return np.ascontiguousarray(x, dtype=np.float64)

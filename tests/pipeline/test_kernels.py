@@ -262,3 +262,32 @@ def test_stops_inside_answers_as_the_exact_stop(generator, rng):
         skipped += far
         exact_outside += not exact
     assert skipped > 300 and exact_outside > 300
+
+
+def test_the_targets_velocity_estimate_is_numpys_bits(rng):
+    """TargetEstimates (format 4's feed-forward, one kernel call) gives what its numpy arithmetic gave:
+    zero without a usable target before, the raw difference quotient without an estimate before, else the
+    blend; recorded sessions re-run on these bits."""
+    import math
+
+    from teleprev.pipeline.motion import FEEDFORWARD_MAX_GAP_NS, FEEDFORWARD_TAU_NS
+    from teleprev.pipeline.planner import EstimateState, TargetEstimates
+
+    estimates = TargetEstimates(True, FEEDFORWARD_TAU_NS)
+    kinds = set()
+    for k in range(3000):
+        n = (6, 16)[k % 2]
+        before, before_v, target = rng.normal(0, 1, n), rng.normal(0, 2, n), rng.normal(0, 1, n)
+        gap = int(rng.choice([0, 1, 8_333_333, 16_666_667, FEEDFORWARD_MAX_GAP_NS, FEEDFORWARD_MAX_GAP_NS + 1]))
+        est = EstimateState(hand_ns=1_000_000_000 - gap, hand_q=None if k % 7 == 0 else before,
+                            hand_v=None if k % 3 == 0 else before_v)
+        got, _ = estimates.hand(est, target, 1_000_000_000)
+        if est.hand_q is None or not 0 < gap <= FEEDFORWARD_MAX_GAP_NS:
+            want, kind = np.zeros(n), "zero"
+        elif est.hand_v is None:
+            want, kind = (target - before) / (gap / 1e9), "raw"
+        else:
+            want, kind = numpy_estimate(target, before, before_v, gap / 1e9, math.exp(-gap / FEEDFORWARD_TAU_NS)), "blend"
+        assert _bits_equal(got, want), kind
+        kinds.add(kind)
+    assert kinds == {"zero", "raw", "blend"}
