@@ -181,6 +181,7 @@ class Corrector:
         labels = np.zeros(len(self.checker.link_names), dtype=bool)
         index = np.empty(len(self.checker.link_pairs), dtype=np.int64)
         out = np.empty_like(q0)
+        q_in, q0 = np.ascontiguousarray(q_in), np.ascontiguousarray(q0)  # the kernel's types: no compile in a step
         answer, count, deviation = correction_kernels.correct_one(q_in, q0, *self._one, labels, index, out)
         if answer == correction_kernels.ONE_UNDECIDED:
             return Prepared(q_in, q0, self.checker.check(q0))

@@ -144,5 +144,13 @@ def test_one_input_answered_in_one_kernel_call_as_step_by_step(pipeline, rng):
         assert np.array_equal(got.q, stepwise.q) and got.deviation == stepwise.deviation
     if corrector._one is not None:  # the compiled formats: most inputs answered by the one call
         assert answered > 100 and {"untouched", "ccn", "fallback"} <= actions
+        # a strided row is answered alike, by the kernel already loaded (no compile inside a live step)
+        from teleprev.kernels.correction import correct_one
+
+        loaded = len(correct_one.signatures)
+        strided = np.zeros((1, 2 * q.shape[1]))
+        strided[:, ::2] = q[:1]
+        got = corrector.correct(q[0], None, corrector.prepare(strided[:, ::2])[0])
+        assert np.array_equal(got.q, corrector.correct(q[0]).q) and len(correct_one.signatures) == loaded
     else:
         assert answered == 0
