@@ -17,10 +17,8 @@ The default rig (rigs/sim.toml) is all simulated devices.
 
 from __future__ import annotations
 
-import dataclasses
-
 import math
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any
 
@@ -131,16 +129,16 @@ class Rig:
         """This rig with `changes` made to the settings of every device of a plugin family: a command-line
         `option` (e.g. record --webxr-host, family "webxr") over the rig file. A ConfigError naming the option
         when no device is of the family or the settings refuse the value."""
-        devices = dict(self.devices)
-        for name, d in self.devices.items():
-            if d.plugin.split(".")[0] == plugin_family:
-                try:
-                    devices[name] = dataclasses.replace(d, settings=dataclasses.replace(d.settings, **changes))
-                except (ValueError, TypeError) as exc:
-                    raise ConfigError(f"{option}: {exc}") from None
-        if devices == self.devices:
+        family = {name: d for name, d in self.devices.items() if d.plugin.split(".")[0] == plugin_family}
+        if not family:
             raise ConfigError(f"{option}: the rig has no {plugin_family}.* device", str(self.path or "rig"))
-        return dataclasses.replace(self, devices=devices)
+        devices = dict(self.devices)
+        for name, d in family.items():
+            try:
+                devices[name] = replace(d, settings=replace(d.settings, **changes))
+            except (ValueError, TypeError) as exc:
+                raise ConfigError(f"{option}: {exc}") from None
+        return replace(self, devices=devices)
 
     def device_context(self, clock: SessionClock) -> DeviceContext:
         """What every device of this rig is opened with: the clock, the rig's folder, robot and end effector."""
