@@ -31,7 +31,7 @@ from teleprev import topics  # noqa: E402
 from teleprev.session.reader import SessionReader  # noqa: E402
 from teleprev_devices.webxr import hands  # noqa: E402
 from tests.helpers.xr_browser import Quest3Browser, recorded_motion  # noqa: E402
-from tests.webxr.test_browser import free_port_tcp  # noqa: E402
+from tests.helpers.ports import free_tcp_port  # noqa: E402
 from tests.webxr.test_session import webxr_rig  # noqa: E402
 
 
@@ -41,7 +41,7 @@ def main() -> None:
     motion = recorded_motion(frames)
     with tempfile.TemporaryDirectory() as tmp:
         tmp = Path(tmp)
-        port = free_port_tcp()
+        port = free_tcp_port()
         session = tmp / "s.mcap"
         # teleprev in a process of its own, as an operator runs it; the browser is another program.
         record = subprocess.Popen(

@@ -16,14 +16,9 @@ from typer.testing import CliRunner
 from teleprev.cli.app import app
 from teleprev.errors import ConfigError
 from teleprev.rig import load_rig
+from tests.helpers.ports import free_port
 
 runner = CliRunner()
-
-
-def free_port() -> int:
-    with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as s:
-        s.bind(("127.0.0.1", 0))
-        return s.getsockname()[1]
 
 
 def test_list_shows_every_plugin_with_kind_module_and_missing_extras():

@@ -15,14 +15,9 @@ from pythonosc.osc_bundle_builder import IMMEDIATELY, OscBundleBuilder
 from pythonosc.osc_message_builder import OscMessageBuilder
 
 from teleprev.transforms import quat_from_axis_angle
+from tests.helpers.ports import free_port  # noqa: F401  (the VMC tests' UDP ports)
 
 FINGERS = ("Index", "Middle", "Ring", "Little", "Thumb")
-
-
-def free_port() -> int:
-    with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as s:
-        s.bind(("127.0.0.1", 0))
-        return s.getsockname()[1]
 
 
 def msg(address: str, *args, types: str | None = None):

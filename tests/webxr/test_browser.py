@@ -15,6 +15,7 @@ from teleprev.live.session import LiveSession, RecordOptions
 from teleprev.session.reader import SessionReader
 from teleprev_devices.webxr import hands
 from tests.helpers.cli import teleprev
+from tests.helpers.ports import free_tcp_port
 from tests.helpers.xr_browser import Quest3Browser, recorded_motion
 from tests.helpers.xr_hands import RADIUS_M, local_rotations, matrices, xr_hand
 from tests.webxr.test_session import webxr_rig
@@ -102,7 +103,7 @@ def test_a_quest3_streams_a_recorded_hand_that_teleprev_records_joint_for_joint(
 
 
 def test_devices_check_finds_the_page_left_open_across_a_restart(tmp_path):
-    port = free_port_tcp()
+    port = free_tcp_port()
     rig = webxr_rig(tmp_path, port=port)
     rec = LiveSession(RecordOptions(out=tmp_path / "s.mcap", rig=rig))
     rec.start()
@@ -128,14 +129,6 @@ def left_hand(pinch_middle: bool) -> dict:
     if pinch_middle:
         joints[tip["thumb-tip"], :3] = joints[tip["middle-finger-tip"], :3] + [0.0, 0.0, -0.005]
     return {"joints": matrices(joints).tolist(), "radii": [RADIUS_M] * 25}
-
-
-def free_port_tcp() -> int:
-    import socket
-
-    with socket.socket() as s:
-        s.bind(("127.0.0.1", 0))
-        return s.getsockname()[1]
 
 
 def _played_frames(motion: list[dict], right: np.ndarray) -> list[int]:

@@ -14,12 +14,12 @@ from teleprev_devices.webxr import hands
 from tests.helpers.cli import teleprev
 from tests.helpers.xr_hands import local_rotations, xr_hand
 from tests.helpers.xr_page import PageClient
-from tests.webxr.test_browser import free_port_tcp
+from tests.helpers.ports import free_tcp_port
 from tests.webxr.test_session import webxr_rig
 
 
 def test_calibrate_learns_the_yaw_between_the_headsets_forward_and_the_robots(tmp_path):
-    port = free_port_tcp()
+    port = free_tcp_port()
     rig = webxr_rig(tmp_path, port=port)
     yaw = np.radians(30.0)  # the operator's "forward" is 30 degrees left of the headset's
     frame = hands.A.T @ rpy_to_matrix(0.0, 0.0, np.pi + yaw)  # fingers (the hand frame's -x) along it
