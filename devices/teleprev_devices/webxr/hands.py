@@ -75,7 +75,7 @@ def hand_pose(joints: np.ndarray) -> np.ndarray:
     hand's (25, 8) joint values."""
     g = bone_frames(np.asarray(joints, dtype=float))
     local = _PARENT_FRAMES @ np.swapaxes(g[_PARENT], -1, -2) @ g[_CHILD] @ np.swapaxes(_FRAMES, -1, -2)
-    return transforms.quat_to_axis_angle(np.array([transforms.matrix_to_quat(r) for r in local])).reshape(45)
+    return np.concatenate([transforms.matrix_to_axis_angle(r) for r in local])
 
 
 def wrist_in_suit(joints: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
