@@ -1,7 +1,7 @@
 """Corpus figures: export and eval of 8 sessions with 2 workers against 1, and what Ray costs.
 
     python bench/corpus.py [--json] [--quick] [--no-ray] [--only eval|export] [--eval-s S] [--export-s S] [--runs N]
-                           [--encoder-threads 0,1]
+                           [--encoder-threads 0,1] [--busy N]
 
 Every timing is a whole `teleprev` command in a fresh process (`python -m teleprev.cli.app ...`), as a
 user runs it: interpreter start, imports (lerobot's for export), workers' start, the sessions, and for
@@ -33,6 +33,7 @@ Figures:
                                     each worker's video encoder capped at T threads (0: the encoder's own
                                     choice, one per core), the recipe's [video] threads
 The machine's cores are shared: cpu_count and the load average before the runs say how busy it was.
+--busy N adds N busy processes of the bench's own beside every timed command (not the sessions' making).
 
 Each command also pays costs that do not shrink with workers: the interpreter and imports (lerobot's
 import alone is about 4 s, torch and torchvision inside it; eval's modules and its compiled kernels
@@ -133,6 +134,7 @@ def main() -> None:
     p.add_argument("--eval-s", type=float, default=None, help="length of each eval session in seconds (default 20)")
     p.add_argument("--export-s", type=float, default=None, help="length of each export session in seconds (default 30)")
     p.add_argument("--runs", type=int, default=None, help="runs of each command, best kept (default 2)")
+    p.add_argument("--busy", type=int, default=0, help="busy processes beside the timed commands")
     p.add_argument("--encoder-threads", default="", help="export again with the encoder capped at each of these "
                    "thread counts (comma-separated; 0: the encoder's own choice)")
     args = p.parse_args()
@@ -153,6 +155,7 @@ def main() -> None:
                                      str(tmp / f"ds{n}"), "-j", str(n), "--json"]}
 
         walls: dict[str, float] = {}
+        load = common.Load(args.busy).__enter__()  # left once the timed commands are done
         for _ in range(runs):  # alternating, best of each: the cores are shared with others
             for n in (1, 2):
                 for command in commands:
@@ -173,6 +176,7 @@ def main() -> None:
                     best = min(best, timed([*argv["export"](n), "--recipe", str(recipe)]))
                     shutil.rmtree(tmp / f"ds{n}", ignore_errors=True)
                 figures[f"export_sessions_per_min_workers{n}_threads{threads}"] = SESSIONS * 60.0 / best
+        load.__exit__(None, None, None)
         for command in commands:
             figures[f"corpus_speedup_2_workers_{command}"] = walls[f"{command}_wall_s_workers1"] / walls[f"{command}_wall_s_workers2"]
         figures["corpus_speedup_2_workers"] = min(figures[f"corpus_speedup_2_workers_{c}"] for c in commands)
@@ -185,6 +189,7 @@ def main() -> None:
             if "eval" in commands:
                 figures["eval_ray_wall_s"] = timed(["eval", str(tmp / "eval"), "--ray", "-j", "2"])
     figures["load_avg_1min_after"] = round(os.getloadavg()[0], 2)
+    figures["busy_processes"] = args.busy
     figures = {k: round(v, 3) if isinstance(v, float) else v for k, v in figures.items()}
     targets = {"corpus_speedup_2_workers": ">= 1.7 (8 sessions, 2 workers vs 1)", "ray_overhead_s": "reported"}
     common.report("bench/corpus.py: a corpus of 8 sessions, 1 and 2 workers, and Ray", figures, targets, args.json)
