@@ -48,7 +48,7 @@ class SentFrames:
 
 
 class Quest3Browser:
-    def __init__(self, url: str, log: bool = True):
+    def __init__(self, url: str):
         from playwright.sync_api import sync_playwright
 
         executable = chromium_path()
@@ -61,7 +61,7 @@ class Quest3Browser:
             self.page.add_init_script(path=str(QUEST3))
             self.errors: list[str] = []
             self.page.on("pageerror", lambda e: self.errors.append(str(e)))
-            self.page.goto(url + ("&" if "?" in url else "?") + "log=1" if log else url)
+            self.page.goto(url + ("&" if "?" in url else "?") + "log=1")  # the page keeps what it sent (sent())
         except BaseException:
             self.close()
             raise
