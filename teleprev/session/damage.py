@@ -4,7 +4,6 @@ the CRC of the whole data section (message indexes and metadata included)."""
 from __future__ import annotations
 
 import struct
-import zlib
 
 from teleprev.session import records as mr
 from teleprev.session.chunk_file import ChunkFile
@@ -23,7 +22,7 @@ def data_section_intact(chunks: ChunkFile, file_bytes: int) -> bool | None:
         return None
     view = memoryview(chunks.mm)[:end_at]
     try:
-        return zlib.crc32(view) == crc
+        return mr.crc32(view) == crc
     finally:
         view.release()
         chunks.release_pages()
