@@ -2,7 +2,8 @@
 and ROS 2 std_msgs/String in CDR for the robot description (the schema Foxglove's URDF layer reads).
 
 Encoding uses the foxglove-sdk message classes. Decoding reads the schema stored in the file (protobuf
-FileDescriptorSet or JSON schema), with a fast path for foxglove.JointStates, the bulk of a session:
+FileDescriptorSet or JSON schema); foxglove.JointStates and PoseInFrame, the streams eval reads, have
+wire-format parsers of their own instead, and a fast path, JointStates being the bulk of a session:
 a channel's messages share one byte layout apart from the timestamp and the float64 values, so once a
 layout is seen, a message is checked against it and its doubles are gathered with numpy (a few µs for
 45 joints instead of ~30 µs through the protobuf runtime). Anything that does not match the layout
@@ -19,6 +20,7 @@ from __future__ import annotations
 
 import json
 import math
+import struct
 from dataclasses import dataclass
 from itertools import repeat
 from typing import Callable
@@ -181,9 +183,9 @@ def decoder_for(schema_name: str, schema_encoding: str, schema_data: bytes, mess
         raise ValueError(f"unsupported message encoding {message_encoding!r} / schema encoding {schema_encoding!r}")
     if schema_name == JOINT_STATES:
         return JointStatesDecoder()
-    cls = _protobuf_class(schema_name, schema_data)
     if schema_name == POSE_IN_FRAME:
-        return PoseInFrameDecoder(_pose_decoder(cls))
+        return PoseInFrameDecoder(_parse_pose_in_frame)
+    cls = _protobuf_class(schema_name, schema_data)
     if schema_name == COMPRESSED_IMAGE:
         return _image_decoder(cls)
     if schema_name == FRAME_TRANSFORMS:
@@ -235,13 +237,64 @@ def _stamp(ts) -> int:
     return ts.seconds * _NS + ts.nanos
 
 
-def _pose_decoder(cls) -> Decoder:
-    def decode(data: bytes) -> PoseSample:
-        m = cls.FromString(data)
-        p, q = m.pose.position, m.pose.orientation
-        return PoseSample(_stamp(m.timestamp), m.frame_id, np.array((p.x, p.y, p.z)), np.array((q.x, q.y, q.z, q.w)))
+def _parse_pose_in_frame(data: bytes) -> PoseSample:
+    """foxglove.PoseInFrame's full wire-format parse, as the protobuf runtime reads it: absent fields
+    zero, the last of a repeated value kept, a repeated pose merged into the one before. Our own parser
+    rather than the runtime's, because importing the runtime costs ~40 ms, a tenth of a short eval."""
+    stamp, frame_id = 0, ""
+    values = [0.0] * 7  # position x y z, orientation x y z w
+    n = len(data)
+    pos = 0
+    while pos < n:
+        tag, pos = _varint(data, pos)
+        field, wire = tag >> 3, tag & 7
+        if wire != 2 or field not in (1, 2, 3):
+            pos = _skip(data, pos, wire)
+            continue
+        length, pos = _varint(data, pos)
+        end = pos + length
+        if end > n:
+            raise ValueError("a field runs past the message")
+        if field == 1:
+            stamp = _parse_timestamp(data, pos, end)
+        elif field == 2:
+            frame_id = data[pos:end].decode("utf-8")
+        else:
+            _parse_pose(data, pos, end, values)
+        pos = end
+    if pos != n:
+        raise ValueError("a field runs past the message")
+    return PoseSample(stamp, frame_id, np.array(values[:3]), np.array(values[3:]))
 
-    return decode
+
+def _parse_pose(data: bytes, pos: int, end: int, values: list[float]) -> None:
+    """foxglove.Pose's fields into values: position (field 1, Vector3 x y z) at 0-2, orientation
+    (field 2, Quaternion x y z w) at 3-6."""
+    while pos < end:
+        tag, pos = _varint(data, pos)
+        field, wire = tag >> 3, tag & 7
+        if wire != 2 or field not in (1, 2):
+            pos = _skip(data, pos, wire)
+            continue
+        length, pos = _varint(data, pos)
+        stop = pos + length
+        if stop > end:
+            raise ValueError("a field runs past the pose")
+        base, count = (0, 3) if field == 1 else (3, 4)
+        while pos < stop:
+            tag, pos = _varint(data, pos)
+            f, w = tag >> 3, tag & 7
+            if w == 1 and 1 <= f <= count:
+                if pos + 8 > stop:
+                    raise ValueError("a double runs past its message")
+                values[base + f - 1] = _DOUBLE.unpack_from(data, pos)[0]
+                pos += 8
+            else:
+                pos = _skip(data, pos, w)
+        if pos != stop:
+            raise ValueError("a field runs past its message")
+    if pos != end:
+        raise ValueError("a field runs past the pose")
 
 
 # The end of a PoseInFrame whose seven doubles are all present: pose (field 3) { position (1) { x y z },
@@ -266,7 +319,7 @@ class _PoseLayout:
     @classmethod
     def learn(cls, data: bytes, sample: PoseSample) -> _PoseLayout | None:
         """The layout of `data` if it has the plain one (leading timestamp, frame id, all seven doubles)
-        and reading it through the layout gives `sample` (what the protobuf runtime decoded) exactly."""
+        and reading it through the layout gives `sample` (what the full parse decoded) exactly."""
         tail = len(data) - _POSE_TAIL_BYTES
         if tail < 0:
             return None
@@ -300,13 +353,13 @@ class _PoseLayout:
 
 
 class PoseInFrameDecoder:
-    """Decodes foxglove.PoseInFrame into PoseSample through the protobuf runtime; `batch()` reads the
+    """Decodes foxglove.PoseInFrame into PoseSample (`decode`: the full parse); `batch()` reads the
     messages of a known layout (see _PoseLayout) as rows of one array, with the same result."""
 
     _MAX_LAYOUTS = 8
     # Learning is tried a bounded number of times: a stream whose messages never have the plain layout
     # (a double exactly 0.0 is left out by the encoder, so the fixed tail never matches) would otherwise
-    # try it again on every message, on top of the protobuf decode.
+    # try it again on every message, on top of the full parse.
     _TRIES_PER_LENGTH = 2  # failed learns of one message length before that length is no longer tried
     _MAX_FAILED_LEARNS = 16  # failed learns in all
 
@@ -450,6 +503,7 @@ def _parse_timestamp(buf: bytes, pos: int, end: int) -> int:
 
 
 _F64 = np.dtype("<f8")
+_DOUBLE = struct.Struct("<d")
 _U8 = np.dtype(np.uint8)
 
 

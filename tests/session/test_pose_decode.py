@@ -3,19 +3,31 @@ what the protobuf runtime gives, message by message, whatever the layouts in the
 
 from __future__ import annotations
 
+from pathlib import Path
+
 import foxglove.messages as fm
 import numpy as np
 
 from teleprev.messages import PoseSample
-from teleprev.session.codec import (_POSE_TAIL_BYTES, POSE_IN_FRAME, PoseInFrameDecoder, _pose_decoder, _PoseLayout,
-                                   _protobuf_class, encode)
+from teleprev.session.codec import (_POSE_TAIL_BYTES, POSE_IN_FRAME, PoseInFrameDecoder, _parse_pose_in_frame,
+                                   _PoseLayout, _protobuf_class, decoder_for, encode)
 
 T0 = 1_700_000_000_123_456_789
+FIXTURE = Path(__file__).resolve().parents[1] / "fixtures" / "sim_v3.mcap"
 FILLER = np.frombuffer(b"\x3f" * 8, "<f8")[0]
 
 
 def protobuf_decoder():
-    return _pose_decoder(_protobuf_class(POSE_IN_FRAME, fm.PoseInFrame.get_schema().data))
+    """The protobuf runtime's decode, built from the schema as a file stores it: the reference."""
+    cls = _protobuf_class(POSE_IN_FRAME, fm.PoseInFrame.get_schema().data)
+
+    def decode(data: bytes) -> PoseSample:
+        m = cls.FromString(data)
+        p, q = m.pose.position, m.pose.orientation
+        stamp = m.timestamp.seconds * 10**9 + m.timestamp.nanos
+        return PoseSample(stamp, m.frame_id, np.array((p.x, p.y, p.z)), np.array((q.x, q.y, q.z, q.w)))
+
+    return decode
 
 
 def same(a: PoseSample, b: PoseSample) -> bool:
@@ -112,3 +124,97 @@ def test_messages_that_cannot_be_learned_are_not_learned_again_and_again(monkeyp
     # a learnable message afterwards still gets its layout
     d(encode(PoseSample(T0, "world", np.ones(3), np.ones(4))))
     assert len(d._layouts) == 1
+
+
+def _field(number: int, payload: bytes) -> bytes:
+    """A length-delimited protobuf field (numbers and lengths under 128 here)."""
+    return bytes((number << 3 | 2, len(payload))) + payload
+
+
+def _double(number: int, value: float) -> bytes:
+    return bytes((number << 3 | 1,)) + np.float64(value).tobytes()
+
+
+def _varint_field(number: int, value: int) -> bytes:
+    out = bytearray((number << 3,))
+    value &= (1 << 64) - 1
+    while value >= 0x80:
+        out.append(value & 0x7F | 0x80)
+        value >>= 7
+    out.append(value)
+    return bytes(out)
+
+
+def _random_message(rng) -> bytes:
+    """PoseInFrame bytes as any writer may lay them out: fields in any order, some left out, some
+    repeated (a pose merged into the one before), unknown fields of each wire type between them."""
+    def unknown() -> bytes:
+        return [_varint_field(9, int(rng.integers(0, 1 << 40))), _double(10, rng.standard_normal()),
+                _field(11, b"xyz"), bytes((12 << 3 | 5,)) + b"\x01\x02\x03\x04"][int(rng.integers(4))]
+
+    def some(parts: list[bytes]) -> bytes:
+        kept = [p for p in parts if rng.random() < 0.8]
+        if rng.random() < 0.3:
+            kept.insert(int(rng.integers(len(kept) + 1)), unknown())
+        order = rng.permutation(len(kept))
+        return b"".join(kept[i] for i in order)
+
+    def pose() -> bytes:
+        position = some([_double(i + 1, rng.standard_normal()) for i in range(3)])
+        orientation = some([_double(i + 1, rng.standard_normal()) for i in range(4)])
+        return _field(3, some([_field(1, position), _field(2, orientation)]))
+
+    stamp = _field(1, some([_varint_field(1, int(rng.integers(-5, 2_000_000_000))),
+                            _varint_field(2, int(rng.integers(-5, 10**9)))]))
+    parts = [stamp, _field(2, ["world", "", "wrist_l", "ü"][int(rng.integers(4))].encode()), pose()]
+    if rng.random() < 0.3:
+        parts.append(pose())
+    if rng.random() < 0.2:
+        parts.append(_field(2, b"again"))
+    return some(parts)
+
+
+def test_the_full_parse_reads_what_the_protobuf_runtime_reads(rng):
+    reference = protobuf_decoder()
+    for _ in range(3000):
+        data = _random_message(rng)
+        assert same(_parse_pose_in_frame(data), reference(data)), data.hex()
+
+
+def test_the_full_parse_refuses_what_the_protobuf_runtime_refuses(rng):
+    from google.protobuf.message import DecodeError
+
+    reference = protobuf_decoder()
+    for _ in range(300):
+        data = _random_message(rng)
+        for cut in range(len(data)):
+            try:
+                expected = reference(data[:cut])
+            except DecodeError:
+                expected = None
+            try:
+                got = _parse_pose_in_frame(data[:cut])
+            except (ValueError, IndexError):  # what the reader reports as a message that does not decode
+                got = None
+            assert (got is None) == (expected is None), (data.hex(), cut)
+            assert got is None or same(got, expected)
+
+
+def test_reading_poses_does_not_load_the_protobuf_runtime(tmp_path):
+    """The runtime's import takes ~40 ms, a tenth of a short session's eval: eval's streams do without."""
+    import subprocess
+    import sys
+
+    code = ("import sys\nfrom teleprev.session.reader import SessionReader\n"
+            f"with SessionReader({str(FIXTURE)!r}) as r:\n"
+            "    poses = [m for m in r.messages(topics=[t for t, s in r.schemas.items() if s == 'foxglove.PoseInFrame'])]\n"
+            "assert poses, 'no poses'\n"
+            "print(len(poses), 'google.protobuf' in sys.modules)\n")
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True).stdout.split()
+    assert int(out[0]) > 100 and out[1] == "False"
+
+
+def test_decoder_for_reads_poses_with_the_full_parse():
+    decoder = decoder_for(POSE_IN_FRAME, "protobuf", fm.PoseInFrame.get_schema().data, "protobuf")
+    sample = PoseSample(T0, "world", np.array([0.5, -0.25, 0.0]), np.array([0.0, 0.0, 0.6, 0.8]))
+    assert same(decoder(encode(sample)), protobuf_decoder()(encode(sample)))
