@@ -26,6 +26,11 @@ class ActuatorHistory:
         self.state_ns.append(int(stamp_ns))
         self.state_q.append(np.asarray(positions, dtype=float))
 
+    def add_states(self, stamps_ns: list[int], positions: np.ndarray) -> None:
+        """add_state of each stamp and row of positions, in order."""
+        self.state_ns.extend(int(t) for t in stamps_ns)
+        self.state_q.extend(positions)
+
     def rests(self, k: int, start_ns: int, last: np.ndarray | None, previous_end_ns: int | None = None):
         """stream_peaks's `rests`: the measured state at a run's start where the controller starts there
         (the first run; a run after a reconnect), else None (from rest on the last command)."""

@@ -212,6 +212,7 @@ def _rerun(reader: SessionReader, path: Path, models, rig_path, started: float) 
     histories = {topics.COMMAND_ARM: ActuatorHistory(), topics.COMMAND_HAND: ActuatorHistory()}
     measured = {inputs.arm: (histories[topics.COMMAND_ARM], arm_names),
                 inputs.effector: (histories[topics.COMMAND_HAND], eff_names)}
+    states: dict[str, list[JointSample]] = {topic: [] for topic in measured}  # into the histories at the end
     devices = {inputs.arm.split("/")[2]: histories[topics.COMMAND_ARM],
                inputs.effector.split("/")[2]: histories[topics.COMMAND_HAND]}
     planned = pipeline.plans_commands
@@ -235,11 +236,8 @@ def _rerun(reader: SessionReader, path: Path, models, rig_path, started: float) 
                 if data.get("event") == "connected" and data.get("device") in devices:
                     devices[data["device"]].connects_ns.append(msg.log_time_ns)
                 continue
-            if msg.topic in measured and isinstance(msg.payload, JointSample):
-                history, names = measured[msg.topic]
-                q = pipeline.measured(msg.payload, names)
-                if q is not None:
-                    history.add_state(msg.payload.stamp_ns, q)
+            if msg.topic in states and isinstance(msg.payload, JointSample):
+                states[msg.topic].append(msg.payload)
             n_inputs += 1
             t0 = time.perf_counter_ns()
             result = driver.advance(msg, hand_input)
@@ -247,6 +245,9 @@ def _rerun(reader: SessionReader, path: Path, models, rig_path, started: float) 
                 updates += driver.take_updates()
             if result is not None:
                 steps.add(msg.log_time_ns, result, time.perf_counter_ns() - t0)
+    for topic, samples in states.items():
+        history, names = measured[topic]
+        history.add_states(*pipeline.measured_rows(samples, names))
     for k, table in tables.items():
         recorded_by_stamp[k] = dict(zip(table.stamp_ns, table.positions))
     t = np.array(steps.t_ns, dtype=np.int64)

@@ -218,6 +218,20 @@ class Pipeline:
                 return None
         return q if np.isfinite(q).all() else None
 
+    def measured_rows(self, samples: list[JointSample], names: tuple[str, ...]) -> tuple[list[int], np.ndarray]:
+        """measured() of many samples at once: the stamps and the values (rows) of those it gives values
+        for, in order (eval's measured states: 5,700 in a 30 s session)."""
+        if samples and all(s.names == names for s in samples):
+            try:
+                block = np.array([s.positions for s in samples], dtype=float)
+            except ValueError:  # ragged rows
+                block = None
+            if block is not None and block.shape == (len(samples), len(names)):
+                keep = np.isfinite(block).all(axis=1).nonzero()[0]
+                return [samples[i].stamp_ns for i in keep.tolist()], block[keep]
+        kept = [(s.stamp_ns, q) for s in samples if (q := self.measured(s, names)) is not None]
+        return [t for t, _ in kept], np.array([q for _, q in kept], dtype=float).reshape(len(kept), len(names))
+
     # ---- mode ----------------------------------------------------------------------------------
     def set_mode(self, state: PipelineState, mode: str, inputs: StepInputs) -> tuple[PipelineState, str]:
         """Switch preview/execute (or "estop"); returns the new state and "" or why the switch was refused.

@@ -129,3 +129,24 @@ def test_vacuum_switches_with_hysteresis_in_the_pipeline():
         state = r.state
         on.append(r.corrected[0])
     assert on == [0, 0, 1, 1, 1, 0, 0, 1]
+
+
+def test_measured_rows_are_measured_one_by_one(gripper_pipeline, rng):
+    """Eval's measured states at once: the samples measured() gives values for, in order, the same values
+    (names in another order, a joint missing, NaN and inf rows among them)."""
+    from teleprev.messages import JointSample
+
+    p = gripper_pipeline
+    names = p.arm_names
+    plain = [JointSample(1000 + k, names, rng.standard_normal(len(names))) for k in range(50)]
+    for k in (3, 17):
+        plain[k].positions[k % len(names)] = (np.nan, np.inf)[k % 2]
+    shuffled = tuple(reversed(names))
+    odd = [JointSample(2000, shuffled, rng.standard_normal(len(names))), JointSample(2001, names[:-1], np.zeros(len(names) - 1))]
+    for samples in (plain, plain[:1], [], plain[:20] + odd + plain[20:]):
+        stamps, rows = p.measured_rows(samples, names)
+        expected = [(s.stamp_ns, q) for s in samples if (q := p.measured(s, names)) is not None]
+        assert stamps == [t for t, _ in expected]
+        assert rows.shape == (len(expected), len(names))
+        assert rows.tobytes() == b"".join(q.tobytes() for _, q in expected)
+    assert len(p.measured_rows(plain, names)[0]) == 48
