@@ -8,13 +8,18 @@ switches through the pipeline, camera frames never decoded. eval_realtime_x = re
 second of wall time (building the pipeline, file reading, the pipeline, the metrics, one process);
 eval_cpu_realtime_x the same per second of the process's CPU time, which on a shared machine is the fairer
 one-core figure; eval_warm_realtime_x the median of three more evals of the same file in the same process,
-whose pipeline is built already, as for the sessions of a corpus after the first of a rig.
+whose pipeline is built already, as for the sessions of a corpus after the first of a rig;
+eval_process_realtime_x the same session through `teleprev eval` in a fresh process, as a user runs it:
+the interpreter's start, the imports, numba's own start and loading the kernels from its cache included
+(the figures above run where a recording has done all that already).
 bit_identical is this fresh session's and every older format's fixture's (tests/fixtures/sim_v1..v3.mcap,
 each re-run with its own format's arithmetic): bit_identical_format<N> each, bit_identical all of them.
 """
 
 from __future__ import annotations
 
+import json
+import subprocess
 import sys
 import tempfile
 import time
@@ -60,6 +65,13 @@ def main() -> None:
             again = evaluate([path])
             warm.append(time.perf_counter() - t1)
         assert again.report["sessions"][0]["bit_identical"] == result.report["sessions"][0]["bit_identical"]
+        cli, cli_report = Path(sys.executable).with_name("teleprev"), Path(tmp) / "cli.json"
+        if not cli.exists():
+            sys.exit(f"bench/replay.py: no {cli}: run it with the project's environment (.venv/bin/python)")
+        t2 = time.perf_counter()
+        subprocess.run([str(cli), "eval", str(path), "--out", str(cli_report)], check=True, capture_output=True)
+        process_wall = time.perf_counter() - t2
+        assert json.loads(cli_report.read_text())["sessions"][0]["bit_identical"]
     o = result.report["overall"]
     from teleprev.topics import FORMAT_VERSION
 
@@ -74,6 +86,7 @@ def main() -> None:
         "recorded_s": o["duration_s"],
         "eval_wall_s": wall,
         "eval_warm_realtime_x": o["duration_s"] / common.percentile(warm, 50),  # pipeline already built
+        "eval_process_realtime_x": o["duration_s"] / process_wall,  # `teleprev eval` in a fresh process
         "eval_cpu_realtime_x": o["duration_s"] / cpu,  # per second of this process's CPU time: the one-core
         # figure when other processes share the core (wall time then counts their turns too)
         "steps": o["steps"],
