@@ -263,58 +263,49 @@ def _parse_pose_in_frame(data: bytes) -> PoseSample:
     rather than the runtime's, because importing the runtime costs ~40 ms, a tenth of a short eval."""
     stamp, frame_id = 0, ""
     values = [0.0] * 7  # position x y z, orientation x y z w
-    n = len(data)
-    pos = 0
-    while pos < n:
-        tag, pos = _varint(data, pos)
-        field, wire = tag >> 3, tag & 7
-        if wire != 2 or field not in (1, 2, 3):
-            pos = _skip(data, pos, wire)
-            continue
-        length, pos = _varint(data, pos)
-        end = pos + length
-        if end > n:
-            raise ValueError("a field runs past the message")
+    for field, start, stop in _length_fields(data, 0, len(data), (1, 2, 3)):
         if field == 1:
-            stamp = _parse_timestamp(data, pos, end)
+            stamp = _parse_timestamp(data, start, stop)
         elif field == 2:
-            frame_id = data[pos:end].decode("utf-8")
-        else:
-            _parse_pose(data, pos, end, values)
-        pos = end
-    if pos != n:
-        raise ValueError("a field runs past the message")
+            frame_id = data[start:stop].decode("utf-8")
+        else:  # the pose: position (Vector3 x y z) at 0-2, orientation (Quaternion x y z w) at 3-6
+            for part, p0, p1 in _length_fields(data, start, stop, (1, 2)):
+                _parse_doubles(data, p0, p1, values, *((0, 3) if part == 1 else (3, 4)))
     return PoseSample(stamp, frame_id, np.array(values[:3]), np.array(values[3:]))
 
 
-def _parse_pose(data: bytes, pos: int, end: int, values: list[float]) -> None:
-    """foxglove.Pose's fields into values: position (field 1, Vector3 x y z) at 0-2, orientation
-    (field 2, Quaternion x y z w) at 3-6."""
+def _length_fields(data: bytes, pos: int, end: int, wanted: tuple[int, ...]):
+    """(field, start, stop) of each length-delimited field numbered in `wanted` in data[pos:end], in
+    order; other fields are skipped. ValueError where a field runs past `end`."""
     while pos < end:
         tag, pos = _varint(data, pos)
         field, wire = tag >> 3, tag & 7
-        if wire != 2 or field not in (1, 2):
+        if wire != 2 or field not in wanted:
             pos = _skip(data, pos, wire)
             continue
         length, pos = _varint(data, pos)
-        stop = pos + length
-        if stop > end:
-            raise ValueError("a field runs past the pose")
-        base, count = (0, 3) if field == 1 else (3, 4)
-        while pos < stop:
-            tag, pos = _varint(data, pos)
-            f, w = tag >> 3, tag & 7
-            if w == 1 and 1 <= f <= count:
-                if pos + 8 > stop:
-                    raise ValueError("a double runs past its message")
-                values[base + f - 1] = _DOUBLE.unpack_from(data, pos)[0]
-                pos += 8
-            else:
-                pos = _skip(data, pos, w)
-        if pos != stop:
+        if pos + length > end:
             raise ValueError("a field runs past its message")
+        yield field, pos, pos + length
+        pos += length
     if pos != end:
-        raise ValueError("a field runs past the pose")
+        raise ValueError("a field runs past its message")
+
+
+def _parse_doubles(data: bytes, pos: int, end: int, values: list[float], base: int, count: int) -> None:
+    """A message of doubles numbered 1..count (Vector3, Quaternion) into values[base:base + count]."""
+    while pos < end:
+        tag, pos = _varint(data, pos)
+        field, wire = tag >> 3, tag & 7
+        if wire == 1 and 1 <= field <= count:
+            if pos + 8 > end:
+                raise ValueError("a double runs past its message")
+            values[base + field - 1] = _DOUBLE.unpack_from(data, pos)[0]
+            pos += 8
+        else:
+            pos = _skip(data, pos, wire)
+    if pos != end:
+        raise ValueError("a field runs past its message")
 
 
 # The end of a PoseInFrame whose seven doubles are all present: pose (field 3) { position (1) { x y z },
