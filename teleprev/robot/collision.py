@@ -109,16 +109,14 @@ class FclSelfCollisionChecker:
             for b in self.link_names[i + 1:]
             if frozenset((a, b)) not in excluded
         )
-        pair_index = {frozenset(p): k for k, p in enumerate(self.link_pairs)}
-        si, sj, lp = [], [], []
-        for i in range(len(shape_link)):
-            for j in range(i + 1, len(shape_link)):
-                key = frozenset((self.link_names[shape_link[i]], self.link_names[shape_link[j]]))
-                if shape_link[i] != shape_link[j] and key in pair_index:
-                    si.append(i)
-                    sj.append(j)
-                    lp.append(pair_index[key])
-        self._si, self._sj, self._lp = np.array(si, dtype=int), np.array(sj, dtype=int), np.array(lp, dtype=int)
+        pair_of = np.full((len(self.link_names),) * 2, -1)  # link positions -> checked pair (-1: not checked)
+        for k, (a, b) in enumerate(self.link_pairs):
+            pair_of[link_pos[a], link_pos[b]] = pair_of[link_pos[b], link_pos[a]] = k
+        si, sj = np.triu_indices(len(shape_link), 1)  # every shape pair i < j, in order
+        links = np.asarray(shape_link, dtype=np.int64)
+        lp = pair_of[links[si], links[sj]]
+        under = lp >= 0  # (a link is never paired with itself)
+        self._si, self._sj, self._lp = si[under], sj[under], lp[under]
         self._flat_pair = self._si * len(shape_link) + self._sj  # into the (S, S) distance matrix
         rad = np.array(radius)
         self._reach2 = (rad[self._si] + rad[self._sj]) ** 2

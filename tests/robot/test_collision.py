@@ -97,3 +97,19 @@ def test_exclusion_file_for_another_urdf_version_is_refused(hand, tmp_path):
     exclusions_path(copy).write_text(exclusions_path(hand.urdf_path).read_text())
     with pytest.raises(UrdfError, match="different version"):
         SelfCollisionChecker(load_robot(copy))
+
+
+def test_shape_pairs_are_every_pair_of_shapes_on_checked_link_pairs():
+    """The shape pairs under the checked link pairs: every shape i < j in order, on two different links
+    that form a checked pair, with that pair's index."""
+    from teleprev.robot.model import load_robot
+
+    checker = SelfCollisionChecker(load_robot("leap_hand_right"))
+    names = checker.link_names
+    link_of = checker._shape_link.tolist()
+    index = {frozenset(p): k for k, p in enumerate(checker.link_pairs)}
+    expected = [(i, j, index[frozenset((names[link_of[i]], names[link_of[j]]))])
+                for i in range(len(link_of)) for j in range(i + 1, len(link_of))
+                if link_of[i] != link_of[j] and frozenset((names[link_of[i]], names[link_of[j]])) in index]
+    assert len(expected) > 10
+    assert list(zip(checker._si.tolist(), checker._sj.tolist(), checker._lp.tolist())) == expected
