@@ -154,12 +154,12 @@ def at_loop_priority(fn, *args):
     (teleprev/live/thread_priority.py), as the live steps run; the busy processes stay at the default."""
     import threading
 
-    from teleprev.live.thread_priority import LOOP_NICE, raise_this_thread
+    from teleprev.live.thread_priority import raise_this_thread
 
     out = {}
 
     def run():
-        out["priority"] = raise_this_thread() or f"nice {LOOP_NICE}"
+        out["priority"] = raise_this_thread()
         out["value"] = fn(*args)
 
     thread = threading.Thread(target=run, name="steps")

@@ -39,7 +39,7 @@ from teleprev.pipeline.planner import ModeUpdate
 from teleprev import topics
 from teleprev.clock import SessionClock
 from teleprev.live.episodes import EpisodeTracker
-from teleprev.live.thread_priority import LOOP_NICE, raise_this_thread
+from teleprev.live.thread_priority import raise_this_thread
 
 _STOP = object()
 
@@ -199,7 +199,7 @@ class SessionLoop:
                 self._queue.put((received, item))
 
     def _run(self) -> None:
-        self.priority = raise_this_thread() or f"nice {LOOP_NICE}"
+        self.priority = raise_this_thread()
         while True:
             receive_ns, item = self._queue.get()
             if item is _STOP:

@@ -13,11 +13,12 @@ LOOP_NICE = -10
 
 
 def raise_this_thread(nice: int = LOOP_NICE) -> str:
-    """Give the calling thread `nice` (Linux sets it per thread). "" when done, else why not: without root,
-    CAP_SYS_NICE or an RLIMIT_NICE that allows it, the thread stays at its nice value."""
+    """Give the calling thread `nice` (Linux sets it per thread). Its priority as the session records it:
+    "nice -10" when done, else why not: without root, CAP_SYS_NICE or an RLIMIT_NICE that allows it, the
+    thread stays at its nice value."""
     try:
         os.setpriority(os.PRIO_PROCESS, threading.get_native_id(), nice)
-        return ""
+        return f"nice {nice}"
     except (OSError, AttributeError) as exc:
         why = exc.strerror if isinstance(exc, OSError) and exc.strerror else str(exc)
         return (f"the session loop stays at nice {os.getpriority(os.PRIO_PROCESS, 0)} ({why}): run as root, or grant "
