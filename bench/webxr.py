@@ -32,7 +32,7 @@ from teleprev.session.reader import SessionReader  # noqa: E402
 from teleprev_devices.webxr import hands  # noqa: E402
 from tests.helpers.xr_browser import Quest3Browser, recorded_motion  # noqa: E402
 from tests.helpers.ports import free_tcp_port  # noqa: E402
-from tests.webxr.test_session import webxr_rig  # noqa: E402
+from tests.helpers.xr_page import webxr_rig  # noqa: E402
 
 
 def main() -> None:
@@ -89,8 +89,7 @@ def _page_url(record: subprocess.Popen) -> str:
 
 
 def measure(path: Path, sent, numbered: int) -> dict:
-    reader = SessionReader(path)
-    try:
+    with SessionReader(path) as reader:
         right = np.array([m.payload.positions for m in reader.messages(["/glove/glove/xr_right"])]).reshape(-1, 25, 8)
         left = np.array([m.payload.positions for m in reader.messages(["/glove/glove/xr_left"])]).reshape(-1, 25, 8)
         wrists = np.array([m.payload.position for m in reader.messages(["/suit/suit/wrist"])])
@@ -99,8 +98,6 @@ def measure(path: Path, sent, numbered: int) -> dict:
         gloves = [m.log_time_ns for m in reader.messages(["/glove/glove/hand"])]
         modes = [(m.log_time_ns, m.payload.data["mode"]) for m in reader.messages([topics.MODE])]
         commands = reader.log_times(topics.COMMAND_ARM)
-    finally:
-        reader.close()
     page_right = sent.values[:, 207:].astype(float).reshape(-1, 25, 8)
     page_left = sent.values[:, 7:207].astype(float).reshape(-1, 25, 8)
     n = min(len(right), len(page_right))

@@ -1,6 +1,6 @@
 """A stand-in for the XR page in tests of the server's edges (tokens, garbage, takeovers): a real WebSocket
 over real TLS on loopback, sending what page/xr.js sends (wire.pack). The page itself is tested in a real
-browser (tests/webxr/test_browser.py)."""
+browser (tests/webxr/test_browser.py). And the rig that serves the page, for those tests and bench/webxr.py."""
 
 from __future__ import annotations
 
@@ -11,6 +11,7 @@ import time
 import numpy as np
 from websockets.sync.client import connect
 
+from teleprev.paths import data_dir
 from teleprev_devices.webxr import wire
 
 
@@ -52,3 +53,12 @@ class PageClient:
 
     def close(self) -> None:
         self._connecting.__exit__(None, None, None)
+
+
+def webxr_rig(tmp_path, port: int = 0):
+    """The shipped webxr_sim rig on `port` (0: any free one), its certificate kept in tmp_path."""
+    text = (data_dir("rigs") / "webxr_sim.toml").read_text().replace("port = 8443", f"port = {port}")
+    text = text.replace('rate_hz = 72.0', f'rate_hz = 72.0\ncert_dir = "{tmp_path / "cert"}"')
+    path = tmp_path / "webxr.toml"
+    path.write_text(text)
+    return path

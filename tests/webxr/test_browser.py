@@ -18,7 +18,7 @@ from tests.helpers.cli import teleprev
 from tests.helpers.ports import free_tcp_port
 from tests.helpers.xr_browser import Quest3Browser, recorded_motion
 from tests.helpers.xr_hands import RADIUS_M, local_rotations, matrices, xr_hand
-from tests.webxr.test_session import webxr_rig
+from tests.helpers.xr_page import webxr_rig
 
 FRAMES = 180  # 3 s at the headless browser's 60 frames a second
 

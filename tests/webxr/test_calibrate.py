@@ -15,7 +15,7 @@ from tests.helpers.cli import teleprev
 from tests.helpers.xr_hands import local_rotations, xr_hand
 from tests.helpers.xr_page import PageClient
 from tests.helpers.ports import free_tcp_port
-from tests.webxr.test_session import webxr_rig
+from tests.helpers.xr_page import webxr_rig
 
 
 def test_calibrate_learns_the_yaw_between_the_headsets_forward_and_the_robots(tmp_path):

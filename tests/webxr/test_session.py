@@ -11,19 +11,9 @@ import numpy as np
 
 from teleprev import topics
 from teleprev.live.session import LiveSession, RecordOptions
-from teleprev.paths import data_dir
 from teleprev.session.reader import SessionReader
 from tests.helpers.sessions import wait_opened
-from tests.helpers.xr_page import PageClient, open_hand
-
-
-def webxr_rig(tmp_path, port: int = 0):
-    """The shipped webxr_sim rig on `port` (0: any free one), its certificate kept in tmp_path."""
-    text = (data_dir("rigs") / "webxr_sim.toml").read_text().replace("port = 8443", f"port = {port}")
-    text = text.replace('rate_hz = 72.0', f'rate_hz = 72.0\ncert_dir = "{tmp_path / "cert"}"')
-    path = tmp_path / "webxr.toml"
-    path.write_text(text)
-    return path
+from tests.helpers.xr_page import PageClient, open_hand, webxr_rig
 
 
 class Player(threading.Thread):
