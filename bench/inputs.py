@@ -46,7 +46,8 @@ from teleprev.live.session import LiveSession, RecordOptions  # noqa: E402
 from teleprev.messages import JointSample, PoseSample  # noqa: E402
 from teleprev.session.reader import SessionReader  # noqa: E402
 from teleprev.session.summary import device_lost, summarize  # noqa: E402
-from tests.helpers.vmc import VmcSender, free_port, fuzz_datagram, rig_text  # noqa: E402
+from tests.helpers.ports import free_port  # noqa: E402
+from tests.helpers.vmc import VmcSender, fuzz_datagram, rig_text  # noqa: E402
 
 GLOVE = "/glove/glove/hand"
 VMC_DEVICES = ("glove", "suit")

@@ -336,7 +336,8 @@ def main() -> None:
     p.add_argument("--busy", type=int, default=8, help="busy processes beside the sessions")
     p.add_argument("--keep", type=Path, default=None, help="keep the sessions in this folder")
     args = p.parse_args()
-    from tests.helpers.vmc import HumanLikeSender, WristTwister, free_port
+    from tests.helpers.ports import free_port
+    from tests.helpers.vmc import HumanLikeSender, WristTwister
 
     seconds = 8.0 if args.quick else args.seconds
     folder = args.keep or Path(tempfile.mkdtemp(prefix="realtime-"))

@@ -15,7 +15,8 @@ from teleprev_devices.vmc import VmcGlove, VmcSuit
 from teleprev_devices.vmc.plugins import BODY_POSE_NAMES, VmcSettings, VmcSuitSettings
 from teleprev.human.smplx import JOINT_INDEX, angles_from_hand_pose, hand_pose_from_values
 from teleprev.transforms import axis_angle_to_matrix, matrix_to_quat, quat_to_matrix
-from tests.helpers.vmc import arm_frame, arm_messages, bone, bundle, free_port, msg, unity_quat
+from tests.helpers.ports import free_port
+from tests.helpers.vmc import arm_frame, arm_messages, bone, bundle, msg, unity_quat
 from teleprev import topics
 from teleprev.clock import SessionClock
 

@@ -15,7 +15,6 @@ from pythonosc.osc_bundle_builder import IMMEDIATELY, OscBundleBuilder
 from pythonosc.osc_message_builder import OscMessageBuilder
 
 from teleprev.transforms import quat_from_axis_angle
-from tests.helpers.ports import free_port  # noqa: F401  (the VMC tests' UDP ports)
 
 FINGERS = ("Index", "Middle", "Ring", "Little", "Thumb")
 

@@ -16,7 +16,8 @@ from teleprev.emulators.dynamixel_bus import DynamixelBus
 from teleprev.emulators.mjpeg_stream import MjpegServer
 from teleprev.emulators.xarm_controller import XArmController
 from teleprev.session.reader import SessionReader
-from tests.helpers.vmc import VmcSender, arm_messages, bundle, finger_messages, free_port
+from tests.helpers.ports import free_port
+from tests.helpers.vmc import VmcSender, arm_messages, bundle, finger_messages
 
 CLI = [sys.executable, "-m", "teleprev.cli.app"]
 ENV = {**os.environ, "COLUMNS": "200"}

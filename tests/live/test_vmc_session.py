@@ -13,7 +13,8 @@ from teleprev.session.reader import SessionReader
 from teleprev.session.summary import device_lost, summarize
 from tests.helpers.cli import teleprev
 from tests.helpers.sessions import wait_opened
-from tests.helpers.vmc import VmcSender, bone, bundle, finger_messages, free_port, msg, rig_text
+from tests.helpers.ports import free_port
+from tests.helpers.vmc import VmcSender, bone, bundle, finger_messages, msg, rig_text
 
 GLOVE, SUIT = "/glove/glove/hand", "/suit/suit/wrist"
 
