@@ -38,7 +38,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from teleprev.kernels.motion import (ESTIMATE_BLEND, ESTIMATE_GIVEN, ESTIMATE_HELD, ESTIMATE_NONE, ESTIMATE_RAW,
-                                     ESTIMATE_ZERO, velocity_estimate)
+                                     velocity_estimate)
 from teleprev.pipeline.derivatives import RESUME_GAP_NS, RESUME_PERIOD_NS
 from teleprev.pipeline.frozen import evolve
 from teleprev.pipeline.motion import ENGAGED_TOL, EXTRAPOLATE_MAX_NS, FEEDFORWARD_MAX_GAP_NS, RESUME_STEP_S, Motion
@@ -273,7 +273,7 @@ class TargetEstimates:
     def __init__(self, feedforward: bool, tau_ns: float):
         self.feedforward = feedforward
         self.tau_ns = tau_ns
-        _blend(None, None, np.zeros(1), 0, tau_ns)  # load the kernel from numba's cache now, not in a live step
+        _blend(np.zeros(1), None, np.zeros(1), 1, tau_ns)  # load the kernel from numba's cache now, not in a live step
 
     def arm(self, est: EstimateState, target: np.ndarray, stamp: int) -> tuple[np.ndarray | None, EstimateState]:
         """(velocity estimate, new state) for an arm target solving the wrist sample stamped `stamp`."""
@@ -303,11 +303,11 @@ class EstimateState:
 
 def _blend(before_q, before_v, q, gap_ns: int, tau_ns: float) -> np.ndarray:
     """(q - before) / gap, blended with the estimate before by exp(-gap / tau); zero without a usable
-    target before (none, or further back than FEEDFORWARD_MAX_GAP_NS). In one kernel call
-    (kernels.motion.velocity_estimate)."""
+    target before (none, or further back than FEEDFORWARD_MAX_GAP_NS). The quotient and the blend in one
+    kernel call (kernels.motion.velocity_estimate)."""
     q = float_vector(q)
     if before_q is None or not 0 < gap_ns <= FEEDFORWARD_MAX_GAP_NS:
-        return velocity_estimate(q, ESTIMATE_ZERO, q, q, 1.0, 0.0)
+        return np.zeros_like(q)
     if before_v is None:
         return velocity_estimate(q, ESTIMATE_RAW, float_vector(before_q), q, gap_ns / 1e9, 0.0)
     return velocity_estimate(q, ESTIMATE_BLEND, float_vector(before_q), float_vector(before_v), gap_ns / 1e9,
