@@ -189,7 +189,7 @@ def parse_attachment(buf, pos: int, end: int) -> AttachmentRecord:
     data = c.raw(c.u64())
     covered = c.pos  # the CRC covers every field before it
     crc = c.u32()
-    if crc and crc32(bytes(buf[pos:covered])) != crc:
+    if crc and crc32(buf[pos:covered]) != crc:
         raise McapFormatError("attachment CRC mismatch")
     return AttachmentRecord(log_time, create_time, name, media_type, data)
 

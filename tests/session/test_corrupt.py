@@ -157,3 +157,29 @@ def test_a_metadata_length_past_the_end_of_the_file_is_named_not_allocated(sessi
             reader.metadata
     run = teleprev("eval", path)
     assert run.returncode == 1 and not has_traceback(run.stdout + run.stderr) and "MemoryError" not in run.stdout
+
+
+def test_an_attachments_crc_is_checked_from_any_buffer():
+    """An attachment record reads back from the bytes, a memoryview or a bytearray of the file (recover
+    hands it a mapped file's), and one flipped bit in it is a CRC error."""
+    import io
+    import struct
+
+    from mcap.writer import Writer
+
+    from teleprev.session import records as mr
+
+    out = io.BytesIO()
+    writer = Writer(out)
+    writer.start()
+    writer.add_attachment(1, 2, "notes.txt", "text/plain", b"calibrated " * 50)
+    writer.finish()
+    data = out.getvalue()
+    pos = data.index(bytes([mr.ATTACHMENT]), len(mr.MAGIC))
+    end = pos + 9 + struct.unpack_from("<Q", data, pos + 1)[0]
+    for buf in (data, memoryview(data), bytearray(data)):
+        assert mr.parse_attachment(buf, pos + 9, end).data == b"calibrated " * 50
+    damaged = bytearray(data)
+    damaged[end - 30] ^= 1
+    with pytest.raises(mr.McapFormatError, match="attachment CRC mismatch"):
+        mr.parse_attachment(bytes(damaged), pos + 9, end)
