@@ -13,8 +13,8 @@ from __future__ import annotations
 import ipaddress
 import threading
 from abc import abstractmethod
-from dataclasses import dataclass
 from collections import deque
+from dataclasses import dataclass
 from typing import Callable, Generic, Protocol, TypeVar
 
 from teleprev.devices import Device, DeviceContext, DeviceError, Sample

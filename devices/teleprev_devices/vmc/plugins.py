@@ -13,7 +13,6 @@ counted as disallowed_senders and dropped), and plugins sharing a port must list
 from __future__ import annotations
 
 import ipaddress
-from abc import abstractmethod
 from dataclasses import dataclass
 from typing import TypeVar
 
@@ -69,10 +68,6 @@ class _VmcDevice(FanoutDevice[V]):
         s = self.settings
         return (f"no VMC frames on UDP {s.host}:{s.port} for {seconds:g} s "
                 "(is the sender running and sending to this address?)")
-
-    @abstractmethod
-    def convert(self, frame: Frame) -> list[Sample]:
-        """The samples one frame of the sender gives this device."""
 
 
 class VmcSuit(_VmcDevice[VmcSuitSettings], kind="suit"):

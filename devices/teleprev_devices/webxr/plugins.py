@@ -16,7 +16,6 @@ page's connection.
 
 from __future__ import annotations
 
-from abc import abstractmethod
 from dataclasses import dataclass
 from pathlib import Path
 from typing import TypeVar
@@ -62,10 +61,6 @@ class _WebXrDevice(FanoutDevice[V]):
 
     def silence(self, seconds: float) -> str:
         return f"no XR frames for {seconds:g} s (is the page open in the headset, in an XR session?)"
-
-    @abstractmethod
-    def convert(self, frame: Frame) -> list[Sample]:
-        """The samples one XR frame gives this device."""
 
 
 class WebXrGlove(_WebXrDevice[WebXrSettings], kind="glove"):
