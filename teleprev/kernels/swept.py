@@ -189,10 +189,12 @@ def swept_command(q0, q1, v1, acceleration, lower, upper, q0_clear, q1_clear, re
     """A hand command's two checks in one call: the segment q0 -> q1, then q1 -> where braking at
     `acceleration` from q1 at v1 ends within [lower, upper] (Motion._stop_point's arithmetic).
 
-    Returns (answer, cache, clear). answer SWEPT_FREE / SWEPT_COLLIDES: decided without FCL; any other:
-    the caller runs the two checks one by one. q0_clear / q1_clear: their clearance as the caller's cache
-    knows it (-1: not known). cache, clear: the last clearance check, as SweptCheck.clear's cache would
+    Returns (answer, cache, clear, q1_clear). answer SWEPT_FREE / SWEPT_COLLIDES: decided without FCL; any
+    other: the caller runs the two checks one by one. q0_clear / q1_clear: their clearance as the caller's
+    cache knows it (-1: not known). cache, clear: the last clearance check, as SweptCheck.clear's cache would
     hold it after the two checks: 0 none, 1 q0, 2 q1, 3 the end point left in `point`; clear its answer.
+    q1_clear on the way out: q1's clearance where it is known now (the first segment's end point is q1 bit
+    for bit), else -1; the next command's segment starts at q1.
     """
     world = np.empty((link_int.shape[0], 4, 4))
     hits = np.zeros(pairs.shape[0], dtype=np.bool_)
@@ -209,7 +211,7 @@ def swept_command(q0, q1, v1, acceleration, lower, upper, q0_clear, q1_clear, re
                                 shape_link, shape_local, shape_size, links, spheres, pairs, loose, tight, world,
                                 hits, labels, index, point)
     if answer > SWEPT_FREE:
-        return answer, 0, 0
+        return answer, 0, 0, -1
     if end >= 0:
         cache, clear = 3, end
         same = True  # the cache holds the end point, which is q1 only if equal bit for bit
@@ -221,17 +223,17 @@ def swept_command(q0, q1, v1, acceleration, lower, upper, q0_clear, q1_clear, re
         cache, clear = 1, c0
         q1_clear = -1  # the cache holds q0, which differs from q1
     if answer == SWEPT_COLLIDES:
-        return answer, cache, clear
+        return answer, cache, clear, q1_clear
     answer, k, c1, end = _swept(q1, stop, q1_clear, 1, reach, spacing, start_step, link_int, link_num, link_terms,
                                 shape_link, shape_local, shape_size, links, spheres, pairs, loose, tight, world,
                                 hits, labels, index, point)
     if answer > SWEPT_FREE:
-        return answer, 0, 0
+        return answer, 0, 0, -1
     if end >= 0:
         cache, clear = 3, end
     elif k >= 0 and spacing > 0:
         cache, clear = 2, c1
-    return answer, cache, clear
+    return answer, cache, clear, c1 if spacing > 0 else -1
 
 
 # Each kernel's parameters, a table standing for its fields in order (tests/kernels/test_tables.py).

@@ -94,13 +94,16 @@ class SweptCheck:
                       if self.clearance > 0 else checker)
         self.reach = reach_table(model, checker.link_names)
         self._clear_cache: tuple[bytes, bool] = (b"", False)  # the last end point checked (pure: a cache)
+        # The last command's end point, whose clearance its check found: the next command starts there, and
+        # the check of its way to the stop point has taken _clear_cache by then (command_free).
+        self._command_end: tuple[bytes, bool] = (b"", False)
         self._kernel_args = self._compiled_tables()
         if self._kernel_args is not None:  # load the kernels from numba's cache now, not in a live loop's first steps
             q = model.neutral()
             self._segment_free_compiled(q, q + 1e-3)
             self._last_free_compiled(q, q + 1e-3, 1)
             self.command_free(q, q + 1e-3, q, q + 1.0, q - 1.0, q + 1.0)
-            self._clear_cache = (b"", False)
+            self._clear_cache = self._command_end = (b"", False)
 
     def _compiled_tables(self) -> tuple | None:
         """The swept kernels' arguments after their own (teleprev/kernels/swept.py: SweptTable, FkTable,
@@ -217,15 +220,17 @@ class SweptCheck:
         q0 = np.ascontiguousarray(q0, dtype=np.float64)
         q1 = np.ascontiguousarray(q1, dtype=np.float64)
         key0, key1 = q0.tobytes(), q1.tobytes()
-        cached = self._clear_cache
-        answer, cache, clear = swept_kernels.swept_command(
+        cached, end = self._clear_cache, self._command_end
+        q0_clear = int(cached[1]) if cached[0] == key0 else int(end[1]) if end[0] == key0 else -1
+        answer, cache, clear, q1_clear = swept_kernels.swept_command(
             q0, q1, np.ascontiguousarray(v1, dtype=np.float64), acceleration, lower, upper,
-            int(cached[1]) if cached[0] == key0 else -1, int(cached[1]) if cached[0] == key1 else -1,
-            *self._kernel_args)
+            q0_clear, int(cached[1]) if cached[0] == key1 else -1, *self._kernel_args)
         if answer != swept_kernels.SWEPT_FREE and answer != swept_kernels.SWEPT_COLLIDES:
             return None
         if cache:
             self._clear_cache = ((key0, key1, self._point.tobytes())[cache - 1], bool(clear))
+        if q1_clear >= 0:
+            self._command_end = (key1, bool(q1_clear))
         return answer == swept_kernels.SWEPT_FREE
 
     def _last_free_compiled(self, q0, q1, steps: int) -> float | None:

@@ -184,3 +184,40 @@ def test_compiled_command_check_is_both_segment_checks(pair):
             assert got == expected
             assert numpy_swept._clear_cache == compiled_swept._clear_cache
     assert decided > 1000
+
+
+def test_a_chain_of_commands_checks_each_start_once(pair, monkeypatch):
+    """Consecutive commands (each starting where the last one ended, as the planner sends them) answer as
+    the two numpy segment checks do, and the kernel is told each start's clearance, found by the check
+    of the command before (without that, every command checked its start again: a fifth of the points)."""
+    from teleprev.kernels import swept as swept_kernels
+    from teleprev.pipeline.trajectory import HandLimiter
+
+    numpy_swept, compiled_swept = pair
+    hand = numpy_swept.model
+    limiter = HandLimiter(hand.lower, hand.upper, hand.velocity_limit, np.full(len(hand.lower), 40.0))
+    told, kernel = [], swept_kernels.swept_command
+
+    def swept_command(q0, q1, v1, acceleration, lower, upper, q0_clear, *rest):
+        told.append(q0_clear)
+        return kernel(q0, q1, v1, acceleration, lower, upper, q0_clear, *rest)
+
+    monkeypatch.setattr(swept_kernels, "swept_command", swept_command)
+    rng = np.random.default_rng(6)
+    compiled_swept._clear_cache = compiled_swept._command_end = (b"", False)
+    q, decided = hand.neutral(), 0
+    for _ in range(400):
+        step = rng.normal(0, 0.004, q.shape)
+        q1 = np.clip(q + step, hand.lower, hand.upper)
+        v1 = step / 0.01
+        stop = np.minimum(np.maximum(q1 + v1 * np.abs(v1) / (2.0 * limiter.acceleration), limiter.lower), limiter.upper)
+        numpy_swept._clear_cache = (b"", False)
+        expected = numpy_swept.segment_free(q, q1) and numpy_swept.segment_free(q1, stop)
+        got = compiled_swept.command_free(q, q1, v1, limiter.acceleration, limiter.lower, limiter.upper)
+        if got is not None:
+            decided += 1
+            assert got == expected
+        q = q1 if expected else q
+    assert decided > 390
+    known = sum(c >= 0 for c in told[1:])
+    assert known > 0.95 * (len(told) - 1), known
