@@ -59,7 +59,7 @@ def check_dataset(root: Path, repo: str, frames_min: int, names_last: str) -> st
     import numpy as np
     from lerobot.datasets.lerobot_dataset import LeRobotDataset
 
-    from teleprev.export.foreign.samples import ARM, T0_NS
+    from teleprev.export.foreign.samples import ARM
     from teleprev.export.synthetic import arm_q
 
     ds = LeRobotDataset(repo, root=root, video_backend="pyav")

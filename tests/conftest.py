@@ -63,10 +63,10 @@ def sim_session(tmp_path_factory):
 def sim_dataset(sim_session, tmp_path_factory):
     """sim_session exported with the default recipe as the LeRobot dataset lab/sim (its root), shared by the
     tests that read one (and never change it)."""
-    from tests.helpers.cli import teleprev
+    from tests.helpers import cli
 
     root = tmp_path_factory.mktemp("sim_dataset") / "sim"
-    ran = teleprev("export", sim_session, "--repo-id", "lab/sim", "--root", root)
+    ran = cli.teleprev("export", sim_session, "--repo-id", "lab/sim", "--root", root)
     assert ran.returncode == 0, ran.stderr + ran.stdout
     return root
 

@@ -164,9 +164,9 @@ class BlockingStreamingEncoder(StreamingVideoEncoder):
         while True:
             if not thread.is_alive():
                 try:
-                    status, message = self._result_queues[video_key].get_nowait()
+                    _, message = self._result_queues[video_key].get_nowait()
                 except queue.Empty:
-                    status, message = "error", "stopped"
+                    message = "stopped"
                 raise RuntimeError(f"the video encoder for {video_key} failed: {message}")
             try:
                 self._frame_queues[video_key].put(frame, timeout=0.5)

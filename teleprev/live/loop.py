@@ -32,7 +32,7 @@ from typing import Any, Callable
 
 import numpy as np
 
-from teleprev.devices.contract import Actuator, Device
+from teleprev.devices.contract import Actuator
 from teleprev.messages import Event, ImageSample, JointSample, Logged, PoseSample, Sample
 from teleprev.pipeline.driver import PipelineDriver
 from teleprev.pipeline.planner import ModeUpdate

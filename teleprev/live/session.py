@@ -16,7 +16,7 @@ import dataclasses
 import datetime as _dt
 import json
 import time
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from pathlib import Path
 
 from teleprev import __version__, numeric_platform

@@ -45,7 +45,7 @@ class GridResult:
 
     def markdown(self) -> str:
         lines = [
-            f"| alpha | beta | beta/alpha | valid (exact) | mean joint deviation (rad) | |",
+            "| alpha | beta | beta/alpha | valid (exact) | mean joint deviation (rad) | |",
             "|---:|---:|---:|---:|---:|---|",
         ]
         for p in self.points:

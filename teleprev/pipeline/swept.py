@@ -30,7 +30,7 @@ import math
 
 import numpy as np
 
-from teleprev.kernels import collision as collision_kernels, swept as swept_kernels
+from teleprev.kernels import swept as swept_kernels
 from teleprev.robot.collision import FclSelfCollisionChecker, SelfCollisionChecker
 from teleprev.robot.model import RobotModel
 from teleprev.robot.urdf import Shape

@@ -87,7 +87,6 @@ class RobotModel:
         # local(q) = origin + sin(a) * k1 + (1 - cos(a)) * k2 + d * slide, with a (revolute) or d (prismatic)
         # the joint's value, so all local transforms of a configuration are one vectorised expression.
         n = len(order)
-        n_act = len(self.joints)
         self._origin = np.tile(np.eye(4), (n, 1, 1))
         k1 = np.zeros((n, 4, 4))
         k2 = np.zeros((n, 4, 4))

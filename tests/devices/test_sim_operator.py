@@ -5,7 +5,6 @@ import pytest
 
 from teleprev_devices.sim.operator import SimOperator
 from teleprev_devices.sim.tasks import TASKS
-from teleprev.human.smplx import angles_from_hand_pose, hand_pose_from_angles
 from teleprev.retarget.hand import LeapRetargeter
 
 RATE = 120.0

@@ -156,7 +156,6 @@ def test_a_session_loads_back_with_its_episodes_features_tasks_values_and_images
         last = i + 1 == len(ds) or int(rows["episode_index"][i + 1]) != e
         if not last:  # evenly spaced: the next camera frame, none skipped or repeated
             assert numbers[i + 1] == numbers[i] + 1
-        t_next = stamp + 1e9 / FPS if last else src.frames[numbers[i + 1]][0]
         worst_psnr = min(worst_psnr, psnr(images[i], source_rgb))
         arm, arm_age = src.latest(ARM, stamp)
         hand, hand_age = src.latest(HAND, stamp)

@@ -16,7 +16,7 @@ from teleprev.export.recipe import load_recipe
 from teleprev.live.lerobot_policy import PolicyCard
 from teleprev.live.policy import PolicyFeatures, PolicyRunner
 from teleprev.live.rollout import Rollout, RolloutOptions, RolloutPlan, _joint_names, _rig_streams
-from teleprev.messages import Event, JointSample
+from teleprev.messages import Event
 from teleprev.rig import load_rig
 from teleprev.session.reader import SessionReader
 from tests.helpers.sessions import RIGS

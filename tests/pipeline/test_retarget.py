@@ -29,7 +29,7 @@ def test_angles_round_trip_through_axis_angle(rng):
 
 def test_closed_form_pose_equals_the_rotations_it_stands_for(rng):
     from teleprev.human.smplx import JOINT_FRAMES
-    from teleprev.transforms import axis_angle_to_matrix, matrix_to_axis_angle, rpy_to_matrix
+    from teleprev.transforms import axis_angle_to_matrix, rpy_to_matrix
 
     flexion, abduction = rng.uniform(-3.0, 3.0, (20, 15)), rng.uniform(-3.0, 3.0, (20, 15))
     pose = hand_pose_from_angles(flexion, abduction)

@@ -9,13 +9,10 @@ import csv
 import pytest
 
 from teleprev.errors import ConfigError
-from teleprev.messages import Event, Logged
-from teleprev import topics
-from teleprev.session.writer import McapSessionWriter
 from teleprev.study import survey
 from teleprev.study.facts import session_facts
 from teleprev.study.stats import ColumnMap, Summary, group, preview_column, table_iii
-from tests.helpers.study_sessions import S, scripted
+from tests.helpers.study_sessions import scripted
 from tests.helpers.cli import teleprev
 
 def study_sessions(d):
