@@ -183,12 +183,13 @@ class Corrector:
         out = np.empty_like(q0)
         q_in, q0 = np.ascontiguousarray(q_in), np.ascontiguousarray(q0)  # the kernel's types: no compile in a step
         answer, count, deviation = correction_kernels.correct_one(q_in, q0, *self._one, labels, index, out)
-        if answer == correction_kernels.ONE_UNDECIDED:
+        report = self.checker.report_of(count, labels, index)  # the exact check's, as checker.check gives it
+        if report is None:  # q0 within the margin of touching: FCL decides
             return Prepared(q_in, q0, self.checker.check(q0))
+        if answer == correction_kernels.ONE_UNDECIDED:  # a proposal for FCL, or both collide: `correct` decides
+            return Prepared(q_in, q0, report)
         if answer == correction_kernels.ONE_UNTOUCHED:
-            return Prepared(q_in, q0, CollisionReport(labels, ()), None, Correction(out, "untouched", (), deviation))
-        names = self.checker.link_pairs
-        report = CollisionReport(labels, tuple([names[i] for i in index[:count].tolist()]))
+            return Prepared(q_in, q0, report, None, Correction(out, "untouched", (), deviation))
         links = tuple(report.colliding_links(self.checker.link_names))
         return Prepared(q_in, q0, report, None, Correction(out, "ccn", links, deviation))
 

@@ -246,12 +246,17 @@ class SelfCollisionChecker(FclSelfCollisionChecker):
         labels = np.zeros(self._n_labels, dtype=bool)
         index = np.empty(len(self.link_pairs), dtype=np.int64)
         n = collision_kernels.check_margins(np.ascontiguousarray(q, dtype=np.float64), *self._args, False, labels, index)
-        if n == 0:
-            return CollisionReport(labels, ())
-        if n > 0:
-            names = self.link_pairs
-            return CollisionReport(labels, tuple([names[i] for i in index[:n].tolist()]))
-        return super().check(q)  # a pair within the margin of touching
+        report = self.report_of(n, labels, index)
+        return report if report is not None else super().check(q)
+
+    def report_of(self, n: int, labels: np.ndarray, index: np.ndarray) -> CollisionReport | None:
+        """The report of a compiled check's answer (collision_kernels.check_margins without first_only): n
+        colliding pairs, their indices in index[:n], their links in labels; None where a pair is within
+        the margin of touching (n < 0): then FCL decides."""
+        if n < 0:
+            return None
+        names = self.link_pairs
+        return CollisionReport(labels, tuple([names[i] for i in index[:n].tolist()]))
 
     def collides(self, q: np.ndarray) -> bool:
         if self._args is None:
