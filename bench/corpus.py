@@ -127,6 +127,41 @@ def ray_overhead() -> dict:
     return {"ray_overhead_s": t2 - t0, "ray_start_s": t1 - t0, "ray_schedule_s": t2 - t1, "ray_shutdown_s": t3 - t2}
 
 
+def best_walls(argv: dict, commands: list[str], runs: int, tmp: Path, figures: dict) -> dict[str, float]:
+    """Each command with 1 and 2 workers, `runs` times, alternating (the cores are shared with others): the
+    best wall time of each, "<command>_wall_s_workers<n>"; the cores the best 1-worker run kept busy go
+    into figures as "<command>_cores_busy_workers1"."""
+    walls: dict[str, float] = {}
+    for _ in range(runs):
+        for n in (1, 2):
+            for command in commands:
+                key = f"{command}_wall_s_workers{n}"
+                took = timed(argv[command](n))
+                if took < walls.get(key, float("inf")):
+                    walls[key] = took
+                    if n == 1:  # (a fork server's workers are not the command's children: not counted)
+                        figures[key.replace("wall_s", "cores_busy")] = BUSY[-1]
+                shutil.rmtree(tmp / f"ds{n}", ignore_errors=True)
+    return walls
+
+
+def encoder_thread_figures(export_argv, thread_counts: list[int], runs: int, tmp: Path) -> dict[str, float]:
+    """Sessions per minute of the export with each worker's video encoder capped at each thread count, with 1
+    and 2 workers (best of `runs`)."""
+    figures = {}
+    for threads in thread_counts:
+        recipe = tmp / f"threads{threads}.toml"
+        recipe.write_text((ROOT / "datasets" / "recipes" / "default.toml").read_text().replace(
+            "[video]\n", f"[video]\nthreads = {threads}\n", 1))
+        for n in (1, 2):
+            best = float("inf")
+            for _ in range(runs):
+                best = min(best, timed([*export_argv(n), "--recipe", str(recipe)]))
+                shutil.rmtree(tmp / f"ds{n}", ignore_errors=True)
+            figures[f"export_sessions_per_min_workers{n}_threads{threads}"] = SESSIONS * 60.0 / best
+    return figures
+
+
 def main() -> None:
     p = common.parser(__doc__)
     p.add_argument("--no-ray", action="store_true", help="leave out the Ray figures (without the ray extra)")
@@ -154,29 +189,10 @@ def main() -> None:
                 "export": lambda n: ["export", str(tmp / "export"), "--repo-id", "bench/corpus", "--root",
                                      str(tmp / f"ds{n}"), "-j", str(n), "--json"]}
 
-        walls: dict[str, float] = {}
-        load = common.Load(args.busy).__enter__()  # left once the timed commands are done
-        for _ in range(runs):  # alternating, best of each: the cores are shared with others
-            for n in (1, 2):
-                for command in commands:
-                    key = f"{command}_wall_s_workers{n}"
-                    took = timed(argv[command](n))
-                    if took < walls.get(key, float("inf")):
-                        walls[key] = took
-                        if n == 1:  # (a fork server's workers are not the command's children: not counted)
-                            figures[key.replace("wall_s", "cores_busy")] = BUSY[-1]
-                    shutil.rmtree(tmp / f"ds{n}", ignore_errors=True)
-        for threads in [int(t) for t in args.encoder_threads.split(",") if t.strip()] if "export" in commands else []:
-            recipe = tmp / f"threads{threads}.toml"
-            recipe.write_text((ROOT / "datasets" / "recipes" / "default.toml").read_text().replace(
-                "[video]\n", f"[video]\nthreads = {threads}\n", 1))
-            for n in (1, 2):
-                best = float("inf")
-                for _ in range(runs):
-                    best = min(best, timed([*argv["export"](n), "--recipe", str(recipe)]))
-                    shutil.rmtree(tmp / f"ds{n}", ignore_errors=True)
-                figures[f"export_sessions_per_min_workers{n}_threads{threads}"] = SESSIONS * 60.0 / best
-        load.__exit__(None, None, None)
+        thread_counts = [int(t) for t in args.encoder_threads.split(",") if t.strip()] if "export" in commands else []
+        with common.Load(args.busy):  # beside the timed commands only
+            walls = best_walls(argv, commands, runs, tmp, figures)
+            figures.update(encoder_thread_figures(argv["export"], thread_counts, runs, tmp))
         for command in commands:
             figures[f"corpus_speedup_2_workers_{command}"] = walls[f"{command}_wall_s_workers1"] / walls[f"{command}_wall_s_workers2"]
         figures["corpus_speedup_2_workers"] = min(figures[f"corpus_speedup_2_workers_{c}"] for c in commands)
