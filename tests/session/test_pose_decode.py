@@ -10,7 +10,7 @@ import numpy as np
 
 from teleprev.messages import PoseSample
 from teleprev.session.codec import (_POSE_TAIL_BYTES, POSE_IN_FRAME, PoseInFrameDecoder, _parse_pose_in_frame,
-                                   _PoseLayout, _protobuf_class, decoder_for, encode)
+                                   _PoseLayout, _protobuf_class, _stamp, decoder_for, encode)
 
 T0 = 1_700_000_000_123_456_789
 FIXTURE = Path(__file__).resolve().parents[1] / "fixtures" / "sim_v3.mcap"
@@ -24,8 +24,7 @@ def protobuf_decoder():
     def decode(data: bytes) -> PoseSample:
         m = cls.FromString(data)
         p, q = m.pose.position, m.pose.orientation
-        stamp = m.timestamp.seconds * 10**9 + m.timestamp.nanos
-        return PoseSample(stamp, m.frame_id, np.array((p.x, p.y, p.z)), np.array((q.x, q.y, q.z, q.w)))
+        return PoseSample(_stamp(m.timestamp), m.frame_id, np.array((p.x, p.y, p.z)), np.array((q.x, q.y, q.z, q.w)))
 
     return decode
 
@@ -216,5 +215,6 @@ def test_reading_poses_does_not_load_the_protobuf_runtime(tmp_path):
 
 def test_decoder_for_reads_poses_with_the_full_parse():
     decoder = decoder_for(POSE_IN_FRAME, "protobuf", fm.PoseInFrame.get_schema().data, "protobuf")
+    assert decoder._decode is _parse_pose_in_frame  # not the runtime's, which reads the same
     sample = PoseSample(T0, "world", np.array([0.5, -0.25, 0.0]), np.array([0.0, 0.0, 0.6, 0.8]))
     assert same(decoder(encode(sample)), protobuf_decoder()(encode(sample)))
