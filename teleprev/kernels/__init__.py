@@ -140,8 +140,7 @@ def warm() -> None:
                            *motion.ArmLimits(x + 1.0, x - 1.0, x + 1.0, x + 1.0))
     motion.arm_sample(plan[4], plan[5], np.zeros((3, 2)), plan[6], x - 1.0, x + 1.0, 0.02, 1e-6, 1e-5)
     motion.far_from_limits(x, x, x, x - 1.0, x + 1.0, x + 1.0, x + 1.0)
-    for mode in (motion.ESTIMATE_ZERO, motion.ESTIMATE_RAW, motion.ESTIMATE_BLEND):
-        motion.velocity_estimate(x, mode, x, x, 0.01, 0.5)
+    motion.velocity_estimate(x, motion.ESTIMATE_BLEND, x, x, 0.01, 0.5)
 
     retarget = np.zeros((5, 2))
     retarget[glove.UPPER] = 1.0
