@@ -14,7 +14,7 @@ import numpy as np
 
 from teleprev.devices import DeviceContext, DeviceRunner, SessionClock, smplx
 
-README = Path(__file__).resolve().parents[2] / "README.md"
+README = Path(__file__).resolve().parents[2] / "docs" / "writing-a-plugin.md"
 
 
 def section_blocks(heading: str) -> list[tuple[str, str]]:
