@@ -1,4 +1,4 @@
-"""The import graph follows the layer order written in the README ("How the code is laid out").
+"""The import graph follows the layer order written in docs/architecture.md ("How the code is laid out").
 
 A module may import modules of its own layer or of lower ones, never of a higher one; imports inside
 functions count (they are dependencies too), imports under `if TYPE_CHECKING:` do not. That device
@@ -86,7 +86,7 @@ def files(folder: str) -> list[Path]:
 
 def test_every_teleprev_module_has_a_layer():
     missing = [module_name(p) for p in files("teleprev") if module_name(p) not in TOP and unit(module_name(p)) is None]
-    assert not missing, f"modules outside the layer table (add them to LAYERS and the README): {missing}"
+    assert not missing, f"modules outside the layer table (add them to LAYERS and docs/architecture.md): {missing}"
 
 
 def test_no_import_goes_up_a_layer():

@@ -2,8 +2,8 @@
 
     from teleprev.devices import Device, DeviceContext, StreamSpec, JointSample, DeviceError
 
-A plugin (devices/teleprev_devices, or a third party's) imports nothing else of teleprev. See the
-README's "Writing a device plugin" for a complete plugin, its entry point and its test.
+A plugin (devices/teleprev_devices, or a third party's) imports nothing else of teleprev. See
+docs/writing-a-plugin.md for a complete plugin, its entry point and its test.
 
 The robot model, its geometry and the session reader are imported on first use, so that
 `import teleprev.devices` stays light.

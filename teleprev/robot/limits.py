@@ -21,7 +21,7 @@ joint's inertia, dominated by the rotor's reflected through the gear (288^2), wh
 publish: a coreless motor of this class has a mechanical time constant of 5 to 10 ms, that is an output
 inertia of tau_m x 0.93 N.m / 8.48 rad/s = 0.55 to 1.1 g.m^2, and so 165 to 330 rad/s^2 (Lite) or 260 to
 520 rad/s^2 (Full). 200 rad/s^2 lies inside the Lite hand's range. What the cap costs in lag
-(bench/realtime.py, hand_lag_ms_p50, and the README) is small beside the swept check's braking near the
+(bench/realtime.py, hand_lag_ms_p50, and docs/motion-limits.md) is small beside the swept check's braking near the
 clearance margin: on 20 s sim sessions /command/hand followed the retargeted fingers with a median lag of
 67, 62 and 117 ms at 100, 200 and 400 rad/s^2.
 """

@@ -1,4 +1,4 @@
-"""The README's "Writing a device plugin" runs as written: its glove plugin streams through DeviceRunner,
+"""docs/writing-a-plugin.md runs as written: its glove plugin streams through DeviceRunner,
 its entry point names that plugin, and its own test passes."""
 
 from __future__ import annotations
@@ -14,34 +14,26 @@ import numpy as np
 
 from teleprev.devices import DeviceContext, DeviceRunner, SessionClock, smplx
 
-README = Path(__file__).resolve().parents[2] / "docs" / "writing-a-plugin.md"
+PAGE = Path(__file__).resolve().parents[2] / "docs" / "writing-a-plugin.md"
 
 
-def section_blocks(heading: str) -> list[tuple[str, str]]:
-    """(language, code) of the fenced blocks under a README heading, in order."""
-    lines = README.read_text().splitlines(keepends=True)
-    start = lines.index(heading + "\n") + 1
-    body, fenced = [], False
-    for line in lines[start:]:
-        fenced ^= line.startswith("```")
-        if line.startswith("#") and not fenced:  # the next heading (a "#" inside a block is code)
-            break
-        body.append(line)
-    return re.findall(r"```(\w+)\n(.*?)```", "".join(body), flags=re.S)
+def page_blocks() -> list[tuple[str, str]]:
+    """(language, code) of the page's fenced blocks, in order."""
+    return re.findall(r"```(\w+)\n(.*?)```", PAGE.read_text(), flags=re.S)
 
 
 def load_plugin_module(monkeypatch) -> types.ModuleType:
-    """The README's plugin block, executed as the module `my_glove` it says it is."""
-    lang, code = section_blocks("### Writing a device plugin")[0]
+    """The page's plugin block, executed as the module `my_glove` it says it is."""
+    lang, code = page_blocks()[0]
     assert lang == "python" and code.startswith("# my_glove.py")
     assert len(code.strip().splitlines()) <= 40  # an example to read, not a library
     module = types.ModuleType("my_glove")
     monkeypatch.setitem(sys.modules, "my_glove", module)
-    exec(compile(code, f"{README}:my_glove.py", "exec"), module.__dict__)
+    exec(compile(code, f"{PAGE}:my_glove.py", "exec"), module.__dict__)
     return module
 
 
-def test_the_readme_glove_streams_hand_poses_through_the_runner(monkeypatch):
+def test_the_documented_glove_streams_hand_poses_through_the_runner(monkeypatch):
     my_glove = load_plugin_module(monkeypatch)
     clock, got = SessionClock(), []
     glove = my_glove.WaveGlove("right", my_glove.WaveSettings(rate_hz=50.0), DeviceContext(clock))
@@ -56,9 +48,9 @@ def test_the_readme_glove_streams_hand_poses_through_the_runner(monkeypatch):
     assert runner.stats().errors == 0 and runner.stats().sink_errors == 0
 
 
-def test_the_readme_entry_point_rig_and_test_fit_the_plugin(monkeypatch):
+def test_the_documented_entry_point_rig_and_test_fit_the_plugin(monkeypatch):
     my_glove = load_plugin_module(monkeypatch)
-    blocks = section_blocks("### Writing a device plugin")
+    blocks = page_blocks()
     tomls = [tomllib.loads(code) for lang, code in blocks if lang == "toml"]
     (name, target), = tomls[0]["project"]["entry-points"]["teleprev.devices"].items()
     module, cls = target.split(":")
@@ -70,7 +62,7 @@ def test_the_readme_entry_point_rig_and_test_fit_the_plugin(monkeypatch):
     lang, test_code = blocks[-1]
     assert lang == "python" and "DeviceRunner" in test_code
     namespace: dict = {}
-    exec(compile(test_code, f"{README}:test", "exec"), namespace)
+    exec(compile(test_code, f"{PAGE}:test", "exec"), namespace)
     tests = [f for n, f in namespace.items() if n.startswith("test_")]
     assert tests
     for test in tests:

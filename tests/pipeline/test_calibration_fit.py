@@ -56,7 +56,7 @@ def test_bad_calibration_files_are_named(tmp_path):
 
 
 def test_calibrate_command_on_the_sim_rig_writes_a_usable_file(tmp_path):
-    """The guided command, unattended: the simulated operator holds each pose when asked. The README's
+    """The guided command, unattended: the simulated operator holds each pose when asked. docs/recording.md's
     `--out calib/ada.toml` names a folder that does not exist yet: it is made."""
     from tests.helpers.cli import teleprev
 
