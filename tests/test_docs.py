@@ -1,8 +1,8 @@
-"""The README and docs/ cannot drift from the code: every relative link (and its #anchor) leads somewhere;
-every `teleprev ...` line in a shell code block is a command the CLI has, with options it has, values it
-accepts and the arguments it needs; a command named in a sentence exists with the options it is given; and
-a source file named in inline code exists. The commands come from the CLI itself (typer's click command
-tree, read as teleprev's entry point reads its arguments), not from a list kept here."""
+"""The README, docs/ and the model cards cannot drift from the code: every relative link (and its #anchor)
+leads somewhere; every `teleprev ...` line in a shell code block is a command the CLI has, with options it
+has, values it accepts and the arguments it needs; a command named in a sentence exists with the options it
+is given; and a source file named in inline code exists. The commands come from the CLI itself (typer's
+click command tree, read as teleprev's entry point reads its arguments), not from a list kept here."""
 
 from __future__ import annotations
 
@@ -17,7 +17,9 @@ import typer
 from teleprev.cli.app import app, foxglove_port_default, ray_address_default
 
 ROOT = Path(__file__).resolve().parents[1]
-PAGES = [ROOT / "README.md", *sorted((ROOT / "docs").glob("*.md"))]
+DOCS = sorted((ROOT / "docs").glob("*.md"))
+MODEL_CARDS = sorted((ROOT / "models").glob("*.md"))  # written by training; their commands retrain the models
+PAGES = [ROOT / "README.md", *DOCS, *MODEL_CARDS]
 SHELL_LANGUAGES = {"bash", "sh", "shell", "console"}
 HELP = {"--help", "-h"}
 # where the repository's sources and shipped data live (what teleprev writes, sessions/ or datasets/out/, is not)
@@ -151,7 +153,7 @@ def command_problem(line: str, whole: bool = True) -> str | None:
 
 
 def documented_commands() -> list[tuple[str, str]]:
-    """(where, line) of every `teleprev` line in a shell block of the README and docs/."""
+    """(where, line) of every `teleprev` line in a shell block of the pages."""
     out = []
     for page in PAGES:
         for block in fenced_blocks(page.read_text()):
@@ -205,7 +207,7 @@ def test_the_readme_is_a_front_door():
     assert len(readme.splitlines()) <= 220
     assert "bash scripts/demo.sh" in readme and "bash scripts/test.sh" in readme
     linked = {(ROOT / link.target.partition("#")[0]).resolve() for link in links(readme)}
-    assert not [page for page in PAGES[1:] if page not in linked], "a docs/ page the README does not lead to"
+    assert not [page for page in DOCS if page not in linked], "a docs/ page the README does not lead to"
 
 
 # The checkers themselves: each must catch what it is there to catch.
