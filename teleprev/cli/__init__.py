@@ -1,1 +1,37 @@
-"""The `teleprev` command line: one small module per command group, registered in app.py."""
+"""The `teleprev` command line: one small module per command group, registered in app.py.
+
+A Ctrl-C while the command's modules are still being imported (the first second of every command, longer on
+a busy machine) stops it with one line and exit status 130, as one during the command does (app.main), not a
+traceback through the import machinery: this package is imported before any of them.
+"""
+
+import os
+import sys
+
+INTERRUPTED = "interrupted"  # what a command stopped by Ctrl-C says on stderr
+INTERRUPTED_EXIT = 130  # 128 + SIGINT, as a shell reports it
+
+
+def interrupted_exit():
+    """Say one line and exit 130, from anywhere (inside an import too: nothing is left to clean up there)."""
+    for stream in (sys.stdout, sys.stderr):
+        try:
+            stream.flush()
+        except (OSError, ValueError):
+            pass
+    try:
+        sys.stderr.write(f"{INTERRUPTED}\n")
+        sys.stderr.flush()
+    except (OSError, ValueError):
+        pass
+    os._exit(INTERRUPTED_EXIT)
+
+
+def _quiet_interrupt(kind, value, tb, previous=sys.excepthook):
+    if issubclass(kind, KeyboardInterrupt):
+        interrupted_exit()
+    previous(kind, value, tb)
+
+
+if sys.excepthook is sys.__excepthook__:  # not in a host that has its own (an IDE, a test runner's)
+    sys.excepthook = _quiet_interrupt

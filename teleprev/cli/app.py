@@ -11,6 +11,7 @@ import sys
 import typer
 
 from teleprev import __version__
+from teleprev.cli import INTERRUPTED, INTERRUPTED_EXIT
 from teleprev.cli import calibrate as calibrate_cli
 from teleprev.cli import collision
 from teleprev.cli import devices as devices_cli
@@ -151,7 +152,8 @@ def main() -> None:
     except typer.Abort:  # end of input at a prompt
         sys.exit(1)
     except KeyboardInterrupt:
-        sys.exit(130)
+        Console(stderr=True).print(INTERRUPTED, highlight=False)
+        sys.exit(INTERRUPTED_EXIT)
     sys.exit(code if isinstance(code, int) else 0)
 
 

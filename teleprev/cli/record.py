@@ -72,7 +72,8 @@ def record(
     )
     unconnected: list[str] = []
     with StopSignals() as signals:
-        recording = LiveSession(options)
+        with signals.deferred():  # the session file opened whole (a signal now is raised in the try below)
+            recording = LiveSession(options)
         if recording.view is not None:
             console.print(f"Foxglove: open connection {recording.view.url}", highlight=False)
         if plan is not None and plan.engage_after_s is not None and \
@@ -81,10 +82,14 @@ def record(
                           f"{plan.engage_after_s:g} s: the robot is back in preview {recording.preview_lead_s:.2f} s "
                           "before each end, so it stays in preview", highlight=False)
         try:
-            recording.start()
+            signals.check()
+            with signals.deferred():
+                recording.start()
+            signals.check()  # also a Ctrl-C whose KeyboardInterrupt start-up lost: it must not go on to engage
             announce_pages(console, recording.devices.values())
             if duration is not None or plan is not None or not preview:  # nobody watches the device table, or
                 unconnected = recording.wait_connected()  # the clock runs: a dead rig must fail
+            signals.check()
             if not unconnected and plan is not None:
                 run_timed(recording, plan, console if preview else None, view, fps,
                           cues=Cues.for_terminal(console.file) if cues else Cues(None, None))

@@ -44,12 +44,16 @@ def rollout(
 
     loaded = LeRobotPolicy.load(policy)
     with StopSignals() as signals:
-        run = Rollout(options, plan, loaded)
+        with signals.deferred():  # the session file opened whole (a signal now is raised in the try below)
+            run = Rollout(options, plan, loaded)
         result = None
         try:
+            signals.check()
             result = run.run()
         except KeyboardInterrupt:
-            pass
+            if run.recording.summary is None:  # stopped before the run began: its file is finalized here
+                with signals.finishing():
+                    run.recording.stop()
     recording = run.recording
     if recording.summary is not None:
         print_summary(console, recording, recording.summary)
