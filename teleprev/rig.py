@@ -89,6 +89,7 @@ class Rig:
     raw: dict = field(default_factory=dict)  # the file's content, recorded as session metadata
     frames: dict[str, SensorFrame] = field(default_factory=dict)  # [frames.<name>]: sensors in the robot's tree
     tasks: dict[str, str] = field(default_factory=dict)  # [tasks]: task id -> the instruction in words
+    text: str | None = None  # the TOML, for a rig read from text (a session's recorded rig has no file)
 
     def check_task(self, task: str, where: str) -> None:
         """Refuse a task label that a device of this rig has to act out and does not know (a simulated
@@ -178,7 +179,7 @@ def load_rig_text(text: str, where: str, path: Path | None = None) -> Rig:
         raise ConfigError(f"not valid TOML ({exc})", where) from None
     if isinstance(data.get("pipeline"), dict):
         data["pipeline"].pop("trigger", None)
-    return parse_rig(data, path, where)
+    return replace(parse_rig(data, path, where), text=text)
 
 
 def load_recorded_rig(metadata: dict, session: Path) -> Rig | None:

@@ -53,7 +53,22 @@ class PolicyCard:
             kind = str(config["type"])
         except (ValueError, KeyError, TypeError) as exc:
             raise ConfigError(f"config.json is not a LeRobot policy config ({type(exc).__name__}: {exc})", where) from None
+        check_weights(path / "model.safetensors")
         return cls(path, kind, inputs, outputs, _dataset_fps(path))
+
+
+def check_weights(path: Path) -> None:
+    """Refuse (ConfigError) weights that cannot be read: a truncated file, a damaged header, no tensors.
+    safetensors checks the header and every tensor's place in the file on opening (no torch, no data read)."""
+    from safetensors import safe_open
+
+    try:
+        with safe_open(str(path), framework="numpy") as f:
+            names = list(f.keys())
+    except Exception as exc:  # safetensors' own error types (SafetensorError), and OSError
+        raise ConfigError(f"the policy's weights cannot be read (truncated or damaged?): {exc}", str(path)) from None
+    if not names:
+        raise ConfigError("the policy's weights file holds no tensors", str(path))
 
 
 def _dataset_fps(path: Path) -> int:
@@ -91,7 +106,12 @@ class LeRobotPolicy:
         config.device = device
         if hasattr(config, "pretrained_backbone_weights"):  # the trained weights replace them: download nothing
             config.pretrained_backbone_weights = None
-        policy = get_policy_class(config.type).from_pretrained(str(path), config=config)
+        try:
+            policy = get_policy_class(config.type).from_pretrained(str(path), config=config)
+        except Exception as exc:  # tensors missing or shaped unlike the config: torch's and safetensors' own errors
+            raise ConfigError(f"the policy's weights do not load into its {config.type} model: "
+                              f"{str(exc).splitlines()[0] if str(exc) else type(exc).__name__}",
+                              str(path / "model.safetensors")) from None
         policy.to(device)
         policy.eval()
         override = {"device": device}

@@ -67,7 +67,8 @@ def default_session_path(task: str) -> Path:
 def rig_record(rig) -> dict[str, str]:
     """The session's "rig" metadata record: the rig file's text (`load_recorded_rig` reads it back) and
     what it names."""
-    return {"path": str(rig.path), "toml": rig.path.read_text() if rig.path else "", "name": rig.rig.name,
+    toml = rig.text if rig.text is not None else rig.path.read_text() if rig.path else ""
+    return {"path": str(rig.path), "toml": toml, "name": rig.rig.name,
             "robot": rig.rig.robot, "end_effector": rig.rig.end_effector,
             "robot_urdf_sha256": load_robot(rig.rig.robot).urdf_sha256}
 

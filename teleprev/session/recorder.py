@@ -178,9 +178,14 @@ class Recorder:
                                f"run `teleprev recover {self.path}`", str(self.path))
         with self._lock:
             streams = {t: replace(s) for t, s in self._stats.items()}
+        try:
+            size = self.path.stat().st_size
+        except FileNotFoundError:  # the writes went to a file someone unlinked: nothing is left to recover
+            raise SessionError("the session file, or its folder, was deleted while recording; the recording "
+                               "is lost", str(self.path)) from None
         self._summary = RecordingSummary(
             self.path, streams, time.monotonic() - self._t_start, self._cpu_s, self._max_depth,
-            self.path.stat().st_size, [f"{t}: {m}" for t, m in self._errors.items()],
+            size, [f"{t}: {m}" for t, m in self._errors.items()],
         )
         return self._summary
 

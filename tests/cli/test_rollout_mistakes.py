@@ -7,7 +7,9 @@ from __future__ import annotations
 import json
 from pathlib import Path
 
+import numpy as np
 import pytest
+from safetensors.numpy import save_file
 
 from tests.cli.test_mistakes import nothing_made, one_line
 from tests.helpers.cli import teleprev
@@ -25,9 +27,30 @@ def saved_policy(folder: Path, inputs: dict | None = None, action=ACTION, files=
               "input_features": {k: {"type": kinds.get(k, "VISUAL"), "shape": list(v)} for k, v in inputs.items()},
               "output_features": {"action": {"type": "ACTION", "shape": list(action)}}}
     (folder / "config.json").write_text(json.dumps(config))
-    for name in (*files, "policy_preprocessor.json", "policy_postprocessor.json"):
+    for name in ("policy_preprocessor.json", "policy_postprocessor.json"):
         (folder / name).write_text("{}")
+    if "model.safetensors" in files:
+        save_file({"model.layer.weight": np.zeros((64, 64), np.float32)}, str(folder / "model.safetensors"))
     return folder
+
+
+def truncated(policy: Path) -> None:
+    weights = policy / "model.safetensors"
+    weights.write_bytes(weights.read_bytes()[:-100])
+
+
+def header_flipped(policy: Path) -> None:
+    weights = policy / "model.safetensors"
+    data = bytearray(weights.read_bytes())
+    data[12] ^= 0xFF  # inside the JSON header
+    weights.write_bytes(bytes(data))
+
+
+def header_length_flipped(policy: Path) -> None:
+    weights = policy / "model.safetensors"
+    data = bytearray(weights.read_bytes())
+    data[3] ^= 0x01  # the header's length: far past the file's end
+    weights.write_bytes(bytes(data))
 
 
 CASES = {
@@ -41,6 +64,9 @@ CASES = {
                "the policy observes observation.images.wrist, which recipe"),
     "action": (dict(action=(7,)), [], "the policy's action is [7]; this rig's is 22 joints"),
     "gripper rig": ({}, ["--config", RIGS / "sim_gripper.toml"], "observation.state has shape [22], this rig gives [7]"),
+    "truncated weights": (dict(damage=truncated), [], "the policy's weights cannot be read"),
+    "header byte": (dict(damage=header_flipped), [], "the policy's weights cannot be read"),
+    "header length": (dict(damage=header_length_flipped), [], "the policy's weights cannot be read"),
     "episodes": ({}, ["--episodes", "0"], "--episodes must be 1 or more, got 0"),
     "episode time": ({}, ["--episode-time", "-2"], "--episode-time must be a positive number of seconds, got -2"),
     "engage": ({}, ["--episode-time", "3", "--engage-after", "3"], "--engage-after must be 0 or more seconds and less than"),
@@ -52,7 +78,11 @@ def test_refused_in_one_line_before_anything_opens(tmp_path_factory, case):
     made, args, said = CASES[case]
     policy = tmp_path_factory.mktemp("policy") / "pretrained_model"
     if made is not None:
+        made = dict(made)
+        damage = made.pop("damage", None)
         saved_policy(policy, **made)
+        if damage is not None:
+            damage(policy)
     cwd = tmp_path_factory.mktemp("cwd")
     run = teleprev("rollout", "--policy", policy, *args, cwd=cwd)
     assert run.returncode == 2 and said in one_line(run), run.stderr
