@@ -42,6 +42,7 @@ class StreamAudit:
     topic: str
     commands: int = 0
     position_outside: int = 0
+    not_finite: int = 0  # commands holding a NaN or infinite position (their differences measure nothing)
     speed_max: float = 0.0
     speed_limit: float = 0.0
     accel_max: float = 0.0
@@ -63,6 +64,8 @@ class StreamAudit:
     @property
     def violations(self) -> list[str]:
         out = [f"{k} {v:.3f} x the limit" for k, v in self.ratios.items() if v > 1.0 + TOLERANCE + self.rounding.get(k, 0.0)]
+        if self.not_finite:
+            out.append(f"{self.not_finite} commands not finite (NaN or inf)")
         if self.position_outside:
             out.append(f"{self.position_outside} commands outside the joint limits")
         if self.colliding:
@@ -98,6 +101,10 @@ def _measure(audit: StreamAudit, t_ns: np.ndarray, q: np.ndarray, lower: np.ndar
              from_rest: bool, rests) -> None:
     audit.commands = len(t_ns)
     audit.position_outside = int(((q < lower - 1e-9) | (q > upper + 1e-9)).any(axis=1).sum())
+    finite = np.isfinite(q).all(axis=1)
+    audit.not_finite = int((~finite).sum())
+    if audit.not_finite:  # the peaks are measured between the finite commands; those are violations of their own
+        t_ns, q, rests = t_ns[finite], q[finite], None
     audit.speed_max, audit.accel_max, audit.jerk_max = stream_peaks(t_ns, q, from_rest, rests=rests).worst()
 
 
@@ -231,6 +238,7 @@ def merge(total: StreamAudit, part: StreamAudit) -> None:
     """Fold one episode's audit into the stream's total (maxima and counts)."""
     total.commands += part.commands
     total.position_outside += part.position_outside
+    total.not_finite += part.not_finite
     total.speed_max, total.speed_limit = max(total.speed_max, part.speed_max), part.speed_limit
     total.accel_max, total.accel_limit = max(total.accel_max, part.accel_max), part.accel_limit
     total.jerk_max, total.jerk_limit = max(total.jerk_max, part.jerk_max), part.jerk_limit
@@ -261,6 +269,8 @@ def print_report(report: AuditReport, console) -> None:
                 style = "red" if r > 1 + TOLERANCE else "green"
                 table.add_row(name, f"{measured:.4g}", f"{limit:.4g}", f"[{style}]{r:.3f}[/]")
         table.add_row("outside joint limits", str(s.position_outside), "0", "")
+        if s.not_finite:
+            table.add_row("not finite (NaN, inf)", f"[red]{s.not_finite}[/]", "0", "")
         if s.colliding is not None:
             table.add_row("in self-collision", str(s.colliding), "0", "")
             table.add_row("segments through a self-collision", str(s.swept_colliding), "0", "")

@@ -87,8 +87,28 @@ def read_actions(root: str | Path, limits: dict) -> DatasetActions:
             part = pq.read_table(f, columns=list(table)).to_pydict()
         except Exception as e:  # pyarrow raises many kinds for a damaged or foreign file
             raise SessionError(f"cannot read the columns episode_index, timestamp, action ({e})", str(f)) from None
+        _check_finite(part, names, f)
         for k in table:
             table[k].extend(part[k])
     return DatasetActions(np.asarray(table["episode_index"], dtype=np.int64),
                           np.round(np.asarray(table["timestamp"], dtype=float) * 1e9).astype(np.int64),
                           np.asarray(table["action"], dtype=float), arm_cols, hand_cols, note)
+
+
+def _check_finite(part: dict, names: list[str], where: Path) -> None:
+    """Refuse a NaN or infinite action or timestamp (a player's jerk-limited generator and the audit's
+    differences cannot measure one), naming the first: its row, episode, time and joint."""
+    action = np.asarray(part["action"], dtype=float)
+    stamps = np.asarray(part["timestamp"], dtype=float)
+    bad_stamp = np.flatnonzero(~np.isfinite(stamps))
+    bad_action = np.argwhere(~np.isfinite(action)) if action.ndim == 2 else np.zeros((0, 2), int)
+    if not len(bad_stamp) and not len(bad_action):
+        return
+    row = min(bad_stamp[0] if len(bad_stamp) else len(stamps), bad_action[0][0] if len(bad_action) else len(stamps))
+    episode = part["episode_index"][row]
+    if len(bad_stamp) and bad_stamp[0] == row:
+        raise SessionError(f"timestamp is {stamps[row]} in row {row} (episode {episode}): not a time", str(where))
+    col = int(bad_action[0][1])
+    name = names[col] if col < len(names) else f"action[{col}]"
+    raise SessionError(f"action {name!r} is {action[row, col]} in row {row} (episode {episode}, timestamp "
+                       f"{stamps[row]:g} s): only finite joint positions can be replayed or audited", str(where))
