@@ -55,6 +55,7 @@ def record(
     from rich.console import Console
     from rich.markup import escape
 
+    from teleprev.cli.outputs import check_output
     from teleprev.cli.signals import StopSignals
     from teleprev.live.session import RecordOptions, LiveSession, default_session_path
     from teleprev.cli.pages import announce_pages
@@ -63,10 +64,12 @@ def record(
     from teleprev import topics
 
     plan = check_options(rig, task, duration, engage_after, connect_timeout, episodes, episode_time, reset_time, marks)
+    out = out or default_session_path(task)
+    check_output(out, "--out", overwrite=False, make_parents=True)
     console = Console()
     preview = preview and console.is_terminal  # a redrawn screen in a log file is noise: headless there
     options = RecordOptions(
-        out=out or default_session_path(task), rig=rig, models=models, task=task, task_text=task_text,
+        out=out, rig=rig, models=models, task=task, task_text=task_text,
         operator=operator, participant=participant, condition=condition, practice=practice,
         connect_timeout_s=connect_timeout, foxglove=foxglove, episode_plan=plan, webxr_host=webxr_host,
     )

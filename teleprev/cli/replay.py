@@ -34,6 +34,7 @@ def replay(
     A real robot (--to arm) gets only commands that pass `teleprev audit`, or ones played --smooth."""
     from rich.console import Console
 
+    from teleprev.cli.outputs import check_output
     from teleprev.live.playback import play
 
     from teleprev.errors import ConfigError
@@ -47,10 +48,7 @@ def replay(
         raise ConfigError("a folder that is not a LeRobot dataset (no meta/info.json)", str(session))
     if session.is_dir() and foxglove is not None:
         raise ConfigError("--foxglove plays a session's recorded topics, and a dataset has none", str(session))
-    if out is not None:
-        from teleprev.live.replay_recording import check_out
-
-        check_out(out)
+    check_output(out, "--out", overwrite=False)
 
     waits_for_a_key = to == "sim" or (to == "arm" and rig is not None)  # (--to arm without --rig: refused below)
     if waits_for_a_key and engage_after is None and not KeyReader(print).is_terminal:
@@ -91,9 +89,14 @@ def eval_(
     Exits 1 on a regression or a session that could not be evaluated."""
     from rich.console import Console
 
+    from teleprev.cli.outputs import check_input, check_output
     from teleprev.corpus.sessions import resolve_sessions
     from teleprev.evaluation.report import load_tolerances, print_report, read_report, write_report
 
+    check_output(out, "--out")
+    check_output(plots, "--plots", "folder", make_parents=True)
+    check_input(baseline, "--baseline", "report")
+    check_input(tolerances, "--tolerances", "tolerances file")
     paths = resolve_sessions(sessions)
     console = Console()
     executor = None
@@ -140,8 +143,10 @@ def audit(
     any violation."""
     from rich.console import Console
 
+    from teleprev.cli.outputs import check_output
     from teleprev.evaluation.audit import audit_path, print_report, write_json
 
+    check_output(json_out, "--json")
     console = Console()
     reports = [audit_path(s, config) for s in sessions]
     for r in reports:

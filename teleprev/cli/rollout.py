@@ -29,6 +29,7 @@ def rollout(
     from rich.console import Console
     from rich.markup import escape
 
+    from teleprev.cli.outputs import check_output
     from teleprev.cli.signals import StopSignals
     from teleprev.live.rollout import Rollout, RolloutOptions, check_rollout
     from teleprev.live.run import print_summary
@@ -37,6 +38,7 @@ def rollout(
     options = RolloutOptions(policy=policy, out=out or default_session_path("rollout"), rig=config, episodes=episodes,
                              episode_time_s=episode_time, engage_after_s=engage_after, reset_time_s=reset_time,
                              recipe=recipe, models=models, task=task)
+    check_output(options.out, "--out", overwrite=False, make_parents=True)
     plan = check_rollout(options)  # bad input: one line, exit 2, before anything opens
     console = Console()
     console.print(f"loading {plan.card.type} policy from {escape(str(policy))} ...", highlight=False)

@@ -17,11 +17,13 @@ def survey(
     from rich.console import Console
     from rich.markup import escape
 
+    from teleprev.cli.outputs import check_output
     from teleprev.study import survey as sv
 
     console = Console(highlight=False)
     target = sv.target(session)
     sv.check_free(target, replace)  # before the participant answers anything
+    check_output(target.sidecar, "the survey beside the session")
     if answers is not None:
         given = sv.parse_answers(answers)
     else:
@@ -54,10 +56,12 @@ def study(
     from rich.markup import escape
 
     from teleprev.errors import ConfigError
+    from teleprev.cli.outputs import check_output
     from teleprev.study.facts import session_facts
     from teleprev.study.stats import ColumnMap, group, pooled_conditions, table_iii
     from teleprev.study.tables import group_labels, print_tables, write_csv, write_table_iii_markdown
 
+    check_output(out, "--out", "folder", make_parents=True)
     console = Console(highlight=False)
     columns = ColumnMap(tuple(with_preview), tuple(without_preview))
     paths = list(dict.fromkeys(p.resolve() for p in sessions))  # a session named twice counts once

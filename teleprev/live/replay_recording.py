@@ -9,20 +9,11 @@ from __future__ import annotations
 from pathlib import Path
 
 from teleprev import __version__, topics
-from teleprev.errors import ConfigError, SessionError, describe_os_error
+from teleprev.errors import SessionError, describe_os_error
 from teleprev.messages import Event, JointSample, Logged
 
 _COMMAND_TOPICS = {"arm": topics.COMMAND_ARM, "hand": topics.COMMAND_HAND}
 TASK = "replay"
-
-
-def check_out(out: Path) -> None:
-    """Refuse an --out that would overwrite something or cannot be created, before anything opens."""
-    out = Path(out)
-    if out.exists():
-        raise ConfigError("already exists; teleprev does not overwrite a recording", str(out))
-    if not out.parent.is_dir():
-        raise ConfigError("the folder to write the replay's session in does not exist", str(out.parent))
 
 
 class ReplayRecording:
