@@ -64,6 +64,7 @@ def record(
     from teleprev import topics
 
     plan = check_options(rig, task, duration, engage_after, connect_timeout, episodes, episode_time, reset_time, marks)
+    check_fps(fps)
     out = out or default_session_path(task)
     check_output(out, "--out", overwrite=False, make_parents=True)
     console = Console()
@@ -156,3 +157,14 @@ def check_options(rig: Optional[Path], task: str, duration: Optional[float], eng
     if task:
         load_rig(rig).check_task(task, "--task")
     return plan
+
+
+MAX_FPS = 120.0  # terminal preview redraws per second: more than a terminal shows
+
+
+def check_fps(fps: float) -> None:
+    """--fps (the terminal preview's redraws per second), refused before anything opens."""
+    from teleprev.errors import ConfigError
+
+    if not 0 < fps <= MAX_FPS:
+        raise ConfigError(f"--fps must be more than 0 and at most {MAX_FPS:g} redraws per second, got {fps:g}")
