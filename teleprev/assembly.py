@@ -5,7 +5,8 @@ Live recording builds the current format's pipeline; `teleprev eval` builds the 
 with, so that it re-runs bit for bit. This is the one place where a format chooses its arithmetic
 (`_arithmetic`): formats 1 and 2 the numpy classes of teleprev/pipeline/older_formats.py, format 1
 without motion limits; format 3 the compiled classes, commands made by each step; format 4 on the
-commands sampled by the paced sender from the step's targets (`build_planner`).
+commands sampled by the paced sender from the step's targets (`build_planner`); up to format 4 the glove
+read abduction first, from format 5 on flexion first.
 """
 
 from __future__ import annotations
@@ -30,7 +31,8 @@ from teleprev.robot.ik import ArmIK
 from teleprev.robot.collision import SelfCollisionChecker
 from teleprev.robot.limits import arm_limits, effector_limits
 from teleprev.robot.model import RobotModel, load_robot
-from teleprev.topics import COMPILED_FORMAT_VERSION, FORMAT_VERSION, MOTION_FORMAT_VERSION, PLANNED_FORMAT_VERSION
+from teleprev.topics import (COMPILED_FORMAT_VERSION, FLEXION_FIRST_FORMAT_VERSION, FORMAT_VERSION, MOTION_FORMAT_VERSION,
+                             PLANNED_FORMAT_VERSION)
 
 
 @dataclass(frozen=True)
@@ -47,9 +49,12 @@ class Arithmetic:
 
 def _arithmetic(session_format: int) -> Arithmetic:
     motion = session_format >= MOTION_FORMAT_VERSION
-    if session_format >= PLANNED_FORMAT_VERSION:
+    if session_format >= FLEXION_FIRST_FORMAT_VERSION:
         return Arithmetic(motion)
     from teleprev.pipeline import older_formats as old
+
+    if session_format >= PLANNED_FORMAT_VERSION:
+        return Arithmetic(motion, pipeline=old.AbductionFirstPipeline)
 
     if session_format >= COMPILED_FORMAT_VERSION:
         return Arithmetic(motion, pipeline=old.StepCommandsPipeline)

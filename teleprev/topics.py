@@ -34,7 +34,7 @@ Events:
 
 from __future__ import annotations
 
-FORMAT_VERSION = 4  # session layout version, written to the "teleprev" metadata record
+FORMAT_VERSION = 5  # session layout version, written to the "teleprev" metadata record
 # Format 2: commands go through the motion limits (teleprev/pipeline/motion.py); idle steps may command
 # between trigger samples; a ModeSwitch with reason "estop" stops commanding at once.
 MOTION_FORMAT_VERSION = 2
@@ -44,6 +44,9 @@ COMPILED_FORMAT_VERSION = 3
 # Format 4: the commands are sampled by the paced sender at the instant it sends them, from the pipeline
 # steps' targets (teleprev/pipeline/planner.py); /command/tick records which targets each tick had.
 PLANNED_FORMAT_VERSION = 4
+# Format 5: a glove's hand pose is read flexion first, as the direction of each bone (teleprev/human/smplx.py):
+# formats 1 to 4 read it abduction first, which a deep fist's sideways deviation or a twisted thumb upsets.
+FLEXION_FIRST_FORMAT_VERSION = 5
 
 TASKS_RECORD = "tasks"  # metadata record: task id -> the task as a natural-language instruction
 TF = "/tf"

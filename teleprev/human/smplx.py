@@ -5,12 +5,21 @@ as axis-angle vectors (SMPL-X's `right_hand_pose`, shape (15, 3)), recorded as a
 values named "<joint>.x", "<joint>.y", "<joint>.z".
 
 Convention (right hand, SMPL-X rest pose): the fingers point along -x, the palm faces -y and the thumb
-side is +z. Each joint has a joint frame B in which abduction is a rotation about y (positive towards the
-thumb) and flexion a rotation about z (positive curls towards the palm); the local rotation is
-    R = B @ Ry(abduction) @ Rz(flexion) @ B.T
-and angles_from_hand_pose inverts it (a twist about the bone, R = ... Rx(twist), is taken off first). For the four fingers B is the
-identity; the thumb's frame is the finger frame turned 60 degrees about y, so the thumb points out and
-forwards and curls across the palm.
+side is +z. Each joint has a joint frame B in which flexion is a rotation about z (positive curls towards
+the palm) and abduction a rotation about y (positive towards the thumb); the local rotation is
+    R = B @ Rz(flexion) @ Ry(abduction) @ Rx(twist) @ B.T
+flexion first, then abduction about the flexed segment's own y, then a twist about the bone. The bone
+(along -x in B) points where flexion and abduction put it, whatever the twist: flexion is the bone's turn
+in the plane of curling, abduction its angle out of that plane. So a deep fist's sideways deviation of a
+few degrees reads as a few degrees, and a thumb metacarpal turned about its own bone reads the same at
+every turn. angles_from_hand_pose reads the bone's direction. For the four fingers B is the identity; the
+thumb's frame is the finger frame turned 60 degrees about y, so the thumb points out and forwards and
+curls across the palm.
+
+Sessions of formats 1 to 4 read hands the other way round, R = B Ry(abduction) Rz(flexion) Rx(twist) B.T
+(abduction first, the twist nearest zero taken off): angles_from_hand_pose_abduction_first, kept as it was
+so that they re-run bit for bit. It is singular at 90 degrees of flexion (a small sideways deviation of a
+flexed finger reads as a large abduction) and flips a thumb turned more than 90 degrees about its bone.
 """
 
 from __future__ import annotations
@@ -51,18 +60,21 @@ _FRAME_SIN = np.array([np.sin(_THUMB_TILT) if j.startswith("thumb") else 0.0 for
 FRAME_TURN = np.stack([_FRAME_COS, _FRAME_SIN])  # (2, 15): the same, for the compiled preparation
 
 
-def hand_pose_from_angles(flexion: np.ndarray, abduction: np.ndarray) -> np.ndarray:
+def hand_pose_from_angles(flexion: np.ndarray, abduction: np.ndarray, abduction_first: bool = False) -> np.ndarray:
     """Axis-angle hand pose (..., 15, 3) from flexion and abduction angles (..., 15) in radians.
 
-    The rotation B Ry(abduction) Rz(flexion) B^T in closed form: the quaternion of Ry(a) Rz(f) is
-    (sin a/2 sin f/2, sin a/2 cos f/2, cos a/2 sin f/2, cos a/2 cos f/2), and conjugating by the joint
+    The rotation B Rz(flexion) Ry(abduction) B^T in closed form: the quaternion (x y z, w) of Rz(f) Ry(a)
+    is (-sin a/2 sin f/2, sin a/2 cos f/2, cos a/2 sin f/2, cos a/2 cos f/2), and conjugating by the joint
     frame turns its vector part by B. Taken the short way round (w >= 0). A glove streams this at 120 Hz.
+    `abduction_first`: B Ry(abduction) Rz(flexion) B^T instead (x = +sin a/2 sin f/2), the convention that
+    angles_from_hand_pose_abduction_first (formats 1 to 4) inverts.
     """
     flexion = np.asarray(flexion, dtype=float)
     abduction = np.asarray(abduction, dtype=float)
     sa, ca = np.sin(0.5 * abduction), np.cos(0.5 * abduction)
     sf, cf = np.sin(0.5 * flexion), np.cos(0.5 * flexion)
-    v = np.einsum("jik,...jk->...ji", JOINT_FRAMES, np.stack([sa * sf, sa * cf, ca * sf], axis=-1))
+    x = sa * sf if abduction_first else -(sa * sf)
+    v = np.einsum("jik,...jk->...ji", JOINT_FRAMES, np.stack([x, sa * cf, ca * sf], axis=-1))
     w = ca * cf
     sign = np.where(w < 0, -1.0, 1.0)
     v, w = v * sign[..., None], np.abs(w)
@@ -72,7 +84,40 @@ def hand_pose_from_angles(flexion: np.ndarray, abduction: np.ndarray) -> np.ndar
 
 
 def angles_from_hand_pose(pose: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """(flexion, abduction) angles (..., 15) from an axis-angle hand pose (..., 15, 3).
+    """(flexion, abduction) angles (..., 15) from an axis-angle hand pose (..., 15, 3): the direction of
+    each joint's bone.
+
+    In the joint frame, M = B.T R B = Rz(flexion) Ry(abduction) Rx(twist), and the bone (x) points along
+    M's first column (cos f cos a, sin f cos a, -sin a), which no twist moves: flexion = atan2(M10, M00)
+    (past 90 degrees too), abduction = atan2(-M20, hypot(M00, M10)). Singular only where the bone points
+    straight sideways (abduction 90 degrees), which no finger does. M's column from R's quaternion with
+    its vector part turned by B.T (a rotation about y), column by column because it runs on every step;
+    teleprev/kernels/glove.py computes the same in compiled code.
+    """
+    x, y, z, w = _joint_frame_quaternion(pose)
+    m00 = 1.0 - 2.0 * (y * y + z * z)
+    m10 = 2.0 * (x * y + z * w)
+    m20 = 2.0 * (x * z - y * w)
+    flexion = np.arctan2(m10, m00)
+    abduction = np.arctan2(-m20, np.sqrt(m00 * m00 + m10 * m10))
+    return flexion, abduction
+
+
+def _joint_frame_quaternion(pose: np.ndarray):
+    """(x, y, z, w), each (..., 15): the quaternion of each joint's rotation in its joint frame, B.T R B."""
+    v = np.asarray(pose, dtype=float)
+    vx, vy, vz = v[..., 0], v[..., 1], v[..., 2]
+    angle = np.sqrt(vx * vx + vy * vy + vz * vz)
+    half = 0.5 * angle
+    scale = np.where(angle > 1e-12, np.sin(half) / np.where(angle > 1e-12, angle, 1.0), 0.5)
+    w = np.cos(half)
+    x0, y, z0 = vx * scale, vy * scale, vz * scale
+    return _FRAME_COS * x0 - _FRAME_SIN * z0, y, _FRAME_SIN * x0 + _FRAME_COS * z0, w
+
+
+def angles_from_hand_pose_abduction_first(pose: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """(flexion, abduction) angles (..., 15) from an axis-angle hand pose (..., 15, 3), as sessions of
+    formats 1 to 4 read them (teleprev/pipeline/older_formats.py): abduction first. Kept unchanged.
 
     In the joint frame, M = B.T R B = Ry(abduction) Rz(flexion) Rx(twist): the bone (along x) points
     where abduction and flexion put it, and twist turns the segment about its own bone. IMU gloves report
@@ -83,15 +128,7 @@ def angles_from_hand_pose(pose: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     sessions reproduce bit for bit). Everything is computed from M's quaternion: R's quaternion with its
     vector part turned by B.T (a rotation about y), column by column because it runs on every step.
     """
-    v = np.asarray(pose, dtype=float)
-    vx, vy, vz = v[..., 0], v[..., 1], v[..., 2]
-    angle = np.sqrt(vx * vx + vy * vy + vz * vz)
-    half = 0.5 * angle
-    scale = np.where(angle > 1e-12, np.sin(half) / np.where(angle > 1e-12, angle, 1.0), 0.5)
-    w = np.cos(half)
-    x0, y, z0 = vx * scale, vy * scale, vz * scale
-    x = _FRAME_COS * x0 - _FRAME_SIN * z0
-    z = _FRAME_SIN * x0 + _FRAME_COS * z0
+    x, y, z, w = _joint_frame_quaternion(pose)
     w, x, y, z = _untwist(w, x, y, z)
     flexion = np.arctan2(2.0 * (x * y + z * w), 1.0 - 2.0 * (x * x + z * z))
     abduction = np.arctan2(2.0 * (x * z + y * w), 1.0 - 2.0 * (x * x + y * y))

@@ -6,8 +6,10 @@ Per row, in one pass and in this order (the order of the numpy path, Pipeline._p
     checks      every value finite (else INVALID), every joint's rotation <= MAX_JOINT_ROTATION (else
                 OUT_OF_RANGE)
     angles      angles_from_hand_pose (teleprev/human/smplx.py): the quaternion, turned into the joint
-                frame, the twist about the bone taken off where it is above TWIST_NOISE, then flexion and
-                abduction; OUT_OF_RANGE too where flexion or abduction is beyond the human bounds
+                frame, then the bone's direction as flexion and abduction (format 5 on); OUT_OF_RANGE too
+                where flexion or abduction is beyond the human bounds. Formats 3 and 4 read them abduction
+                first, the twist about the bone taken off where above TWIST_NOISE
+                (prepare_rows_abduction_first, angles_from_hand_pose_abduction_first)
     retarget    LeapRetargeter.from_angles: angle[source] * gain + offset, clipped to the joint limits
                 (skipped for an effector that needs only the angles: a table with no columns)
 
@@ -57,8 +59,8 @@ def _retarget_row(angles, table, out):
 
 
 @njit(cache=True, inline="always")
-def _prepare_row(values, frames, limits, table, angles, q):
-    """One glove sample: its flag, and where OK its angles [flexion(15), abduction(15)] and joints."""
+def _checks(values, limits):
+    """INVALID where a value is not finite, OUT_OF_RANGE where a joint's rotation is beyond the bound, else OK."""
     n = values.shape[0]
     for k in range(n):
         if not math.isfinite(values[k]):
@@ -67,7 +69,47 @@ def _prepare_row(values, frames, limits, table, angles, q):
         vx, vy, vz = values[3 * j], values[3 * j + 1], values[3 * j + 2]
         if vx * vx + vy * vy + vz * vz > limits[MAX_ROTATION_SQ]:
             return OUT_OF_RANGE
-    flag = OK
+    return OK
+
+
+@njit(cache=True, inline="always")
+def _prepare_row(values, frames, limits, table, angles, q):
+    """One glove sample: its flag, and where OK its angles [flexion(15), abduction(15)] and joints. The
+    angles are the bone's direction in the joint frame, flexion first (smplx.angles_from_hand_pose)."""
+    flag = _checks(values, limits)
+    if flag != OK:
+        return flag
+    for j in range(15):
+        vx, vy, vz = values[3 * j], values[3 * j + 1], values[3 * j + 2]
+        angle = math.sqrt(vx * vx + vy * vy + vz * vz)
+        half = 0.5 * angle
+        scale = math.sin(half) / angle if angle > 1e-12 else 0.5
+        w = math.cos(half)
+        x0, y, z0 = vx * scale, vy * scale, vz * scale
+        c, s = frames[0, j], frames[1, j]
+        x = c * x0 - s * z0
+        z = s * x0 + c * z0
+        m00 = 1.0 - 2.0 * (y * y + z * z)
+        m10 = 2.0 * (x * y + z * w)
+        m20 = 2.0 * (x * z - y * w)
+        flexion = math.atan2(m10, m00)
+        abduction = math.atan2(-m20, math.sqrt(m00 * m00 + m10 * m10))
+        angles[j] = flexion
+        angles[15 + j] = abduction
+        if flexion > limits[MAX_FLEXION] or flexion < limits[MIN_FLEXION] or abs(abduction) > limits[MAX_ABDUCTION]:
+            flag = OUT_OF_RANGE
+    if flag == OK:
+        _retarget_row(angles, table, q)
+    return flag
+
+
+@njit(cache=True, inline="always")
+def _prepare_row_abduction_first(values, frames, limits, table, angles, q):
+    """_prepare_row as sessions of formats 3 and 4 computed it (smplx.angles_from_hand_pose_abduction_first):
+    the twist about the bone taken off, then abduction first. Kept unchanged."""
+    flag = _checks(values, limits)
+    if flag != OK:
+        return flag
     for j in range(15):
         vx, vy, vz = values[3 * j], values[3 * j + 1], values[3 * j + 2]
         angle = math.sqrt(vx * vx + vy * vy + vz * vz)
@@ -116,5 +158,17 @@ def prepare_rows(values, frames, limits, table):
     return flags, angles, q
 
 
+@njit(cache=True)
+def prepare_rows_abduction_first(values, frames, limits, table):
+    """prepare_rows with the reading of sessions of formats 3 and 4 (_prepare_row_abduction_first)."""
+    rows = values.shape[0]
+    flags = np.empty(rows, dtype=np.int64)
+    angles = np.zeros((rows, 30))
+    q = np.zeros((rows, table.shape[1]))
+    for r in range(rows):
+        flags[r] = _prepare_row_abduction_first(values[r], frames, limits, table, angles[r], q[r])
+    return flags, angles, q
+
+
 # Each kernel's parameters, a table standing for its fields in order (tests/kernels/test_tables.py).
-SIGNATURES = {"prepare_rows": ("values", GloveTable)}
+SIGNATURES = {"prepare_rows": ("values", GloveTable), "prepare_rows_abduction_first": ("values", GloveTable)}

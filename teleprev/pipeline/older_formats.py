@@ -12,7 +12,9 @@ kernels:
     NumpyArmRetargeter   the wrist-to-TCP target in numpy                  (retarget/arm.py: ArmRetargeter)
     NumpySweptCheck      every segment by the numpy check                  (pipeline/swept.py: SweptCheck)
     NumpyCorrector       the numpy CPN and CCN                             (noncollision/corrector.py)
-    StepCommandsPipeline commands made by each step (formats 2 and 3)       (pipeline/step.py: Pipeline)
+    AbductionFirstPipeline  format 4: the glove read abduction first       (pipeline/step.py: Pipeline)
+                         (kernels/glove.py: prepare_rows_abduction_first)
+    StepCommandsPipeline commands made by each step (formats 2 and 3), the glove read abduction first
     NumpyPipeline        the glove preparation in numpy, and format 1's     (pipeline/step.py: Pipeline)
                          commands: speed caps alone, no motion limits
 
@@ -24,7 +26,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from teleprev.human.smplx import angles_from_hand_pose, hand_pose_from_values
+from teleprev.human.smplx import angles_from_hand_pose_abduction_first, hand_pose_from_values
+from teleprev.kernels import glove as glove_kernels
 from teleprev.messages import JointSample
 from teleprev.noncollision.corrector import Corrector, Prepared
 from teleprev.noncollision.mlp import SCORE_BAND
@@ -184,7 +187,14 @@ class NumpyCorrector(Corrector):
         return None if hi == steps else q0 + (hi / steps) * delta
 
 
-class StepCommandsPipeline(Pipeline):
+class AbductionFirstPipeline(Pipeline):
+    """Formats up to 4 read the glove abduction first, the twist about the bone taken off first (from
+    format 5 on: flexion first, teleprev/human/smplx.py)."""
+
+    read_gloves = staticmethod(glove_kernels.prepare_rows_abduction_first)
+
+
+class StepCommandsPipeline(AbductionFirstPipeline):
     """Formats 2 and 3: each step makes its commands (Motion.commands), at the glove's rate; the arm's state
     samples brake them between steps (idle steps) when the glove goes quiet."""
 
@@ -229,7 +239,7 @@ class NumpyPipeline(StepCommandsPipeline):
         rows = np.flatnonzero(valid & finite & in_range)
         if not len(rows):
             return out
-        flexion, abduction = angles_from_hand_pose(poses[rows])
+        flexion, abduction = angles_from_hand_pose_abduction_first(poses[rows])
         bent = ((flexion.max(axis=1) > MAX_FLEXION) | (flexion.min(axis=1) < MIN_FLEXION)
                 | (abs(abduction).max(axis=1) > MAX_ABDUCTION))
         ok = np.flatnonzero(~bent)
@@ -250,7 +260,7 @@ class NumpyPipeline(StepCommandsPipeline):
             return HandInput("glove_invalid")
         if np.einsum("ij,ij->i", pose, pose).max() > MAX_JOINT_ROTATION**2:
             return HandInput("glove_out_of_range")
-        flexion, abduction = angles_from_hand_pose(pose)
+        flexion, abduction = angles_from_hand_pose_abduction_first(pose)
         if flexion.max() > MAX_FLEXION or flexion.min() < MIN_FLEXION or abs(abduction).max() > MAX_ABDUCTION:
             return HandInput("glove_out_of_range")
         return HandInput("", flexion, abduction, self.effector.prepare(flexion[None], abduction[None])[0])

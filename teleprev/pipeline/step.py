@@ -100,6 +100,8 @@ class Pipeline:
     command planner, whose limits are `motion`'s. Older formats: teleprev/pipeline/older_formats.py."""
 
     plans_commands = True  # its commands come from the planner (format 4); False: from the step itself
+    # the compiled glove preparation: decode, checks, angles (read flexion first), retargeting
+    read_gloves = staticmethod(glove_kernels.prepare_rows)
 
     def __init__(self, cfg: PipelineConfig, arm: ArmRetargeter, arm_guard: JointGuard, effector: Effector,
                  motion: Motion | None):
@@ -119,7 +121,7 @@ class Pipeline:
         self._glove = glove_kernels.GloveTable(
             FRAME_TURN, np.array([MAX_JOINT_ROTATION**2, MIN_FLEXION, MAX_FLEXION, MAX_ABDUCTION, TWIST_NOISE]),
             table if table is not None else np.zeros((5, 0)))
-        glove_kernels.prepare_rows(np.zeros((1, 45)), *self._glove)  # load it from numba's cache now
+        self.read_gloves(np.zeros((1, 45)), *self._glove)  # load it from numba's cache now
         self._estimates = TargetEstimates(cfg.arm_feedforward, FEEDFORWARD_TAU_NS)
 
     def model_hashes(self) -> dict[str, str] | None:
@@ -160,7 +162,7 @@ class Pipeline:
                     rows[i] = hand_values(s.names, s.positions)
                 except KeyError:
                     rows[i] = np.nan  # missing components: glove_invalid, as a non-finite sample
-        codes, angles, joints = glove_kernels.prepare_rows(rows, *self._glove)
+        codes, angles, joints = self.read_gloves(rows, *self._glove)
         if n == 1:
             if codes[0]:
                 return [HandInput(glove_kernels.FLAG_NAMES[codes[0]])]

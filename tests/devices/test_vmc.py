@@ -49,7 +49,7 @@ def test_index_flexion_sent_over_osc_comes_out_as_the_same_flexion(context):
         abd = 0.2  # index abduction towards the thumb (+z in Unity, forward in T-pose)
         q_index = unity_quat([0, 1, 0], -abd)  # turning +x towards +z is about -y in Unity's math
         assert (quat_to_matrix(q_index) @ [1.0, 0, 0])[2] > 0
-        q_index_both = quat_to_matrix(q_index) @ quat_to_matrix(q)
+        q_index_both = quat_to_matrix(q) @ quat_to_matrix(q_index)  # curled, then sideways in the curled frame
         msgs = [bone("RightIndexProximal", (0.03, 0, 0), matrix_to_quat(q_index_both))]
         msgs += [bone(n, (0.03, 0, 0), unity_quat([0, 0, 1], -f)) for n, f in flex.items() if n != "RightIndexProximal"]
         client.send(bundle(*msgs))

@@ -1,15 +1,18 @@
 """The compiled glove preparation (teleprev/kernels/glove.py, sessions of format 3 on) against the
 numpy one it stands in for: the same flags on every input, good or broken, angles and joints within
-1e-12; and one sample prepared alone (the live step) has the same bits as in a batch (eval)."""
+1e-12, for the reading of formats 3 and 4 (abduction first, against formats 1 and 2's numpy pipeline) and
+for format 5's (flexion first, against smplx.angles_from_hand_pose); and one sample prepared alone (the
+live step) has the same bits as in a batch (eval)."""
 
 import numpy as np
 import pytest
 
-from teleprev.human.smplx import HAND_POSE_NAMES, TWIST_NOISE, hand_pose_from_angles, hand_pose_from_values, hand_values
+from teleprev.human.smplx import (HAND_POSE_NAMES, TWIST_NOISE, angles_from_hand_pose, hand_pose_from_angles,
+                                  hand_pose_from_values, hand_values)
 from teleprev.assembly import build_pipeline
 from teleprev.messages import JointSample
 from teleprev.kernels import glove as hand_kernels
-from teleprev.pipeline.step import MAX_ABDUCTION, MAX_FLEXION, MAX_JOINT_ROTATION, MIN_FLEXION
+from teleprev.pipeline.step import MAX_ABDUCTION, MAX_FLEXION, MAX_JOINT_ROTATION, MIN_FLEXION, HandInput
 from teleprev.rig import load_rig
 from tests.helpers.pipeline_inputs import twisted
 from tests.helpers.sessions import RIGS
@@ -19,9 +22,41 @@ SIM_RIGS = {"leap_hand": "sim.toml", "parallel_gripper": "sim_gripper.toml", "va
 
 @pytest.fixture(scope="module")
 def pipelines():
-    """{effector: (numpy pipeline, compiled pipeline)} for each end effector's sim rig."""
-    return {name: (build_pipeline(load_rig(RIGS / rig), session_format=2), build_pipeline(load_rig(RIGS / rig)))
+    """{effector: (numpy pipeline, compiled pipeline)} for each end effector's sim rig: the numpy one of
+    formats 1 and 2 and the compiled one of format 4, both reading abduction first."""
+    return {name: (build_pipeline(load_rig(RIGS / rig), session_format=2), build_pipeline(load_rig(RIGS / rig), session_format=4))
             for name, rig in SIM_RIGS.items()}
+
+
+@pytest.fixture(scope="module")
+def current():
+    """{effector: the current format's pipeline} (flexion first)."""
+    return {name: build_pipeline(load_rig(RIGS / rig)) for name, rig in SIM_RIGS.items()}
+
+
+class FlexionFirstInNumpy:
+    """The current format's preparation in numpy: the same checks, smplx.angles_from_hand_pose, the
+    effector's own preparation (the reference the compiled kernel must agree with)."""
+
+    def __init__(self, pipeline):
+        self.effector = pipeline.effector
+
+    def prepare_hands(self, samples):
+        return [self._one(s) for s in samples]
+
+    def _one(self, s) -> HandInput:
+        try:
+            pose = hand_pose_from_values(s.names, s.positions)
+        except KeyError:
+            return HandInput("glove_invalid")
+        if not np.isfinite(pose).all():
+            return HandInput("glove_invalid")
+        if np.einsum("ij,ij->i", pose, pose).max() > MAX_JOINT_ROTATION**2:
+            return HandInput("glove_out_of_range")
+        flexion, abduction = angles_from_hand_pose(pose)
+        if flexion.max() > MAX_FLEXION or flexion.min() < MIN_FLEXION or abs(abduction).max() > MAX_ABDUCTION:
+            return HandInput("glove_out_of_range")
+        return HandInput("", flexion, abduction, self.effector.prepare(flexion[None], abduction[None])[0])
 
 
 def _pose(rng, flexion=(-0.2, 1.8), abduction=(-0.4, 0.4)) -> np.ndarray:
@@ -76,9 +111,13 @@ def _bits(a: np.ndarray, b: np.ndarray) -> bool:
     return a.dtype == b.dtype and a.shape == b.shape and a.tobytes() == b.tobytes()
 
 
+@pytest.mark.parametrize("reading", ["abduction_first", "flexion_first"])
 @pytest.mark.parametrize("name", list(SIM_RIGS))
-def test_compiled_flags_and_values_agree_with_numpy(pipelines, name, rng):
-    numpy_p, compiled_p = pipelines[name]
+def test_compiled_flags_and_values_agree_with_numpy(pipelines, current, name, reading, rng):
+    if reading == "abduction_first":
+        numpy_p, compiled_p = pipelines[name]
+    else:
+        numpy_p, compiled_p = FlexionFirstInNumpy(current[name]), current[name]
     gloves = _gloves(rng)
     flags = set()
     for batched in (False, True):
@@ -103,9 +142,10 @@ def test_compiled_flags_and_values_agree_with_numpy(pipelines, name, rng):
     assert flags == {"", "glove_invalid", "glove_out_of_range"}
 
 
+@pytest.mark.parametrize("reading", ["abduction_first", "flexion_first"])
 @pytest.mark.parametrize("name", list(SIM_RIGS))
-def test_compiled_single_samples_equal_the_batch_bit_for_bit(pipelines, name, rng):
-    _, p = pipelines[name]
+def test_compiled_single_samples_equal_the_batch_bit_for_bit(pipelines, current, name, reading, rng):
+    p = pipelines[name][1] if reading == "abduction_first" else current[name]
     gloves = _gloves(rng)
     batch = p.prepare_hands(gloves)
     for g, b in zip(gloves, batch):

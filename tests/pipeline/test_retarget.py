@@ -32,15 +32,17 @@ def test_closed_form_pose_equals_the_rotations_it_stands_for(rng):
     from teleprev.transforms import axis_angle_to_matrix, rpy_to_matrix
 
     flexion, abduction = rng.uniform(-3.0, 3.0, (20, 15)), rng.uniform(-3.0, 3.0, (20, 15))
-    pose = hand_pose_from_angles(flexion, abduction)
-    for n in range(20):
-        for j in range(15):
-            b = JOINT_FRAMES[j]
-            expected = b @ rpy_to_matrix(0.0, abduction[n, j], 0.0) @ rpy_to_matrix(0.0, 0.0, flexion[n, j]) @ b.T
-            assert np.allclose(axis_angle_to_matrix(pose[n, j]), expected, atol=1e-12)
-            assert np.linalg.norm(pose[n, j]) <= np.pi + 1e-12
-    one = hand_pose_from_angles(flexion[0], abduction[0])
-    assert np.array_equal(one, pose[0])
+    for abduction_first in (False, True):  # flexion first (format 5 on), abduction first (formats 1 to 4)
+        pose = hand_pose_from_angles(flexion, abduction, abduction_first=abduction_first)
+        for n in range(20):
+            for j in range(15):
+                b = JOINT_FRAMES[j]
+                flex, abd = rpy_to_matrix(0.0, 0.0, flexion[n, j]), rpy_to_matrix(0.0, abduction[n, j], 0.0)
+                expected = b @ (abd @ flex if abduction_first else flex @ abd) @ b.T
+                assert np.allclose(axis_angle_to_matrix(pose[n, j]), expected, atol=1e-12)
+                assert np.linalg.norm(pose[n, j]) <= np.pi + 1e-12
+        one = hand_pose_from_angles(flexion[0], abduction[0], abduction_first=abduction_first)
+        assert np.array_equal(one, pose[0])
 
 
 def test_open_hand_is_the_open_leap_hand(retarget):

@@ -15,8 +15,9 @@ The hand pose is each SMPL-X joint's local rotation: with G_j = R_j M^T a bone f
 B_j the SMPL-X joint frame (the thumb's is turned, see smplx.JOINT_FRAMES), joint j under parent p turns
 by B_p G_p^T G_j B_j^T. The parents are the bones before: the metacarpal for a finger's first joint, the
 wrist for the thumb's. A whole-hand or wrist rotation therefore cancels, and the twist of a bone about
-its own axis stays in the rotation, where the pipeline's swing-twist split (smplx.angles_from_hand_pose)
-takes it off before flexion and abduction are read: twist never reads as abduction.
+its own axis stays in the rotation, where the pipeline reads only the bone's direction
+(smplx.angles_from_hand_pose): twist never reads as abduction, and a thumb metacarpal turned about
+itself (IWER's pinch: about -105 degrees) reads as the same thumb.
 """
 
 from __future__ import annotations
