@@ -126,6 +126,21 @@ def record(
         raise typer.Exit(1)
     if recording.loop.stats.device_failures:
         raise typer.Exit(1)  # a device failed during the session: the summary above says which
+    unattended = duration is not None or plan is not None
+    missed = never_engaged(recording.loop, engage_after if unattended else None)
+    if missed:
+        Console(stderr=True).print(f"[bold red]error:[/] {escape(missed)}", highlight=False, soft_wrap=True)
+        raise typer.Exit(1)
+
+
+def never_engaged(loop, engage_after: float | None) -> str:
+    """One line saying why, when an unattended session (record or rollout) was asked to engage
+    `engage_after` s into its episodes and never did; "" when it engaged or was not asked to."""
+    if engage_after is None or loop.stats.engages:
+        return ""
+    last = loop.snapshot.message  # the loop's last word to the operator: a refused engage, as a rule
+    why = last.removeprefix("cannot switch to execute: ") or "no episode lasted until then"
+    return f"never engaged (--engage-after {engage_after:g} s): {why}; the session is recorded, all in preview"
 
 
 def check_options(rig: Optional[Path], task: str, duration: Optional[float], engage_after: Optional[float],

@@ -30,6 +30,7 @@ def rollout(
     from rich.markup import escape
 
     from teleprev.cli.outputs import check_output
+    from teleprev.cli.record import never_engaged
     from teleprev.cli.signals import StopSignals
     from teleprev.live.rollout import Rollout, RolloutOptions, check_rollout
     from teleprev.live.run import print_summary
@@ -75,4 +76,8 @@ def rollout(
         errors.print(f"[bold red]error:[/] {escape(failure)} (the robot was braked to rest)", highlight=False, soft_wrap=True)
         raise typer.Exit(1)
     if recording.loop.stats.device_failures:
+        raise typer.Exit(1)
+    missed = never_engaged(recording.loop, engage_after) if result is not None else ""
+    if missed:
+        errors.print(f"[bold red]error:[/] {escape(missed)}", highlight=False, soft_wrap=True)
         raise typer.Exit(1)

@@ -73,3 +73,19 @@ def wait_opened(rec: LiveSession, timeout_s: float = 10.0) -> None:
             closed = [n for n, r in rec.runners.items() if not r.connected]
             raise AssertionError(f"devices not opened within {timeout_s} s: {closed}")
         time.sleep(0.01)
+
+
+# A LEAP Hand spread into itself: index and middle fingers abducted towards each other (self-collision).
+COLLIDING_LEAP_HOME = [0.6, 0.0, 0.0, 0.0, -0.6] + [0.0] * 11
+
+
+def colliding_hand_rig(folder: Path) -> Path:
+    """The default sim rig with its hand starting in self-collision, written to `folder`: every engage is
+    refused (no valid command to start from), whatever the timing."""
+    text = (RIGS / "sim.toml").read_text()
+    start = text.index("[devices.hand]")
+    line = text.index("home = []", start)
+    end = text.index("\n", line)
+    path = folder / "colliding_hand.toml"
+    path.write_text(text[:line] + f"home = {COLLIDING_LEAP_HOME}" + text[end:])
+    return path

@@ -11,6 +11,7 @@ from teleprev.evaluation.reproduce import rerun_session
 from teleprev.session.reader import SessionReader
 from tests.helpers.cli import teleprev
 from tests.helpers.policies import train_tiny_act
+from tests.helpers.sessions import colliding_hand_rig
 
 EPISODES, EPISODE_S, ENGAGE_S = 2, 2.5, 0.6
 
@@ -34,6 +35,13 @@ def test_record_export_train_rollout_audit_eval_export(tmp_path, sim_session, mo
                    "--engage-after", ENGAGE_S, "--out", session)
     assert ran.returncode == 0, ran.stdout + ran.stderr
     assert "inferences" in ran.stdout and "actions handed on at 30 fps" in ran.stdout
+
+    # a rollout that never engages (its hand starts in self-collision: every engage refused) exits 1, saying why
+    refused = teleprev("rollout", "--policy", policy, "--config", colliding_hand_rig(tmp_path), "--episodes", 1,
+                       "--episode-time", 1.5, "--engage-after", 0.3, "--out", tmp_path / "refused.mcap")
+    assert refused.returncode == 1, refused.stdout + refused.stderr
+    said = " ".join(refused.stderr.split())
+    assert "never engaged (--engage-after 0.3 s)" in said and "self-collision" in said, said
 
     meta, actions, modes, commands, episodes = _read(session)
     assert meta["policy"]["type"] == "act" and meta["policy"]["fps"] == "30"
