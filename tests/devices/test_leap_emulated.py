@@ -5,7 +5,6 @@ injected fault stopping the hand's commands with one line naming the motor and w
 from __future__ import annotations
 
 import struct
-import sys
 import time
 
 import numpy as np
@@ -15,7 +14,7 @@ import dynamixel_sdk as sdk  # the real SDK: scripts/test.sh installs the leap e
 from teleprev.clock import SessionClock
 from teleprev.devices import DeviceContext, DeviceRunner
 from teleprev.emulators import dynamixel_wire as wire
-from teleprev.emulators.dynamixel_bus import REPLY_MARGIN_MS, DynamixelBus
+from teleprev.emulators.dynamixel_bus import DynamixelBus
 from teleprev.errors import DeviceError
 from teleprev_devices.leap import LeapHand, LeapSettings, SdkDynamixelBus, ticks_from_angles
 from tests.helpers.hardware import CommandStream, EventLog
@@ -23,21 +22,19 @@ from tests.helpers.hardware import CommandStream, EventLog
 
 @pytest.fixture(scope="module")
 def bus():
-    # The emulated bus shares this process's GIL with the SDK's busy-waiting reads; a real motor answers
-    # whatever the host does, so threads take turns often enough for it to answer inside the SDK's 34 ms.
-    interval = sys.getswitchinterval()
-    sys.setswitchinterval(0.0005)
     with DynamixelBus().start() as b:
         yield b
-    sys.setswitchinterval(interval)
+
+
+def settings(bus, **more) -> LeapSettings:
+    """leap.hand's settings as the emulator's rig keys give them: the port and where its latency timer is."""
+    return LeapSettings(port=bus.port, latency_timer_path=str(bus.latency_timer_path), **more)
 
 
 class Session:
     def __init__(self, bus):
         self.clock = SessionClock()
-        # the margin the emulator's rig keys give: the bus answers from a thread of this busy process
-        self.hand = LeapHand("hand", LeapSettings(port=bus.port, reply_margin_ms=REPLY_MARGIN_MS),
-                             DeviceContext(self.clock))
+        self.hand = LeapHand("hand", settings(bus), DeviceContext(self.clock))
         self.log = EventLog()
         self.runner = DeviceRunner(self.hand, self.log.sink, self.clock, reconnect_s=0.1).start()
         assert self.log.wait(lambda: self.log.count("connected") == 1), self.log.events
@@ -104,7 +101,7 @@ def test_the_control_table_through_the_sdk(bus):
     assert port.openPort() and port.setBaudRate(4_000_000)
     try:
         model, result, error = ph.ping(port, 7)
-        assert (model, result, error) == (wire.XC330_T288, sdk.COMM_SUCCESS, 0)
+        assert (model, result, error) == (wire.XC330_M288, sdk.COMM_SUCCESS, 0)
         assert ph.write1ByteTxRx(port, 7, 64, 1) == (sdk.COMM_SUCCESS, 0)  # torque on
         assert ph.write1ByteTxRx(port, 7, 11, 3) == (sdk.COMM_SUCCESS, wire.ACCESS_ERROR)  # EEPROM: refused
         assert ph.write4ByteTxRx(port, 7, 116, 2200) == (sdk.COMM_SUCCESS, 0)
@@ -127,26 +124,3 @@ def test_a_port_that_is_not_there(tmp_path):
         hand.connect()
 
 
-def _silent_read_s(bus, margin_ms: float) -> float:
-    """How long a sync read of a silent motor waits before the SDK gives up, with `margin_ms` added."""
-    link = SdkDynamixelBus(bus.port, reply_margin_ms=margin_ms)
-    link.open()
-    try:
-        t = time.monotonic()
-        with pytest.raises(DeviceError, match="motor 3 did not answer"):
-            link.sync_read([3], 132, 4)  # present position
-        return time.monotonic() - t
-    finally:
-        link.close()
-
-
-def test_a_reply_margin_waits_longer_for_a_silent_motor_and_still_faults(bus):
-    bus.inject("silent", motor=3)
-    try:
-        plain, margined = _silent_read_s(bus, 0.0), _silent_read_s(bus, 150.0)
-    finally:
-        bus.operator_clear()
-    assert plain < 0.15  # the SDK's own wait: about 34 ms
-    assert margined - plain > 0.12  # 150 ms more, give or take the host's scheduling
-    with pytest.raises(ValueError, match="reply_margin_ms"):
-        LeapSettings(port=bus.port, reply_margin_ms=-1)
