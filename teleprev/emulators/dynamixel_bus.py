@@ -254,13 +254,14 @@ class DynamixelBus:
             raise EmulatorError(f"cannot open a pseudo-terminal for the Dynamixel bus: {exc.strerror}") from None
         tty.setraw(slave)  # bytes pass unchanged: no echo, no line discipline
         link = Path(self.port)
-        if link.is_symlink():
-            link.unlink()
-        elif link.exists():
+        try:  # never over something that is there: a file, or a device node like /dev/ttyUSB0
+            link.symlink_to(os.ttyname(slave))
+        except OSError as exc:
             os.close(master)
             os.close(slave)
-            raise EmulatorError(f"{link} exists and is not a link this emulator made: pick a path that does not exist")
-        link.symlink_to(os.ttyname(slave))
+            why = "it already exists" if link.is_symlink() or link.exists() else exc.strerror
+            raise EmulatorError(f"cannot put the emulated bus at {link}: {why}; pick a path that does not exist "
+                                "(or leave out --port)") from None
         with self._lock:
             self._master, self._slave = master, slave
         self._stop.clear()
