@@ -12,13 +12,22 @@ emulator received per second; the xArm stream is paced at 125 Hz, the hand's at 
 (a command sent through the SDK to the state read back through it showing that command), hw_faults_run,
 hw_faults_silent (faults with no error event naming them within 3 s), hw_tracebacks (exceptions that
 escaped a thread, or reached the user as a Python exception instead of a sentence).
+
+From the emulators during the sessions (the bench's own command streams on threads, not a recorded session):
+emulator_faults (errors the emulated controller latched), wire_arrival_gap_ms_max, wire_targets_per_cycle_max
+and wire_speed/accel/jerk_ratio_max (the arm's targets as the controller received and judged them),
+leap_read_miss_frac and leap_faults (reads without a reply, and hand faults). emulator_conformance: the
+documented behaviours tests/devices/test_emulator_conformance.py checks through the real SDKs, counted as the
+tests that pass.
 """
 
 from __future__ import annotations
 
 import random
 import re
+import subprocess
 import sys
+from collections import Counter
 import threading
 import time
 from pathlib import Path
@@ -109,12 +118,36 @@ def run_faults(kinds, inject, clear, log, said, rng, out):
         log.wait(lambda: log.count("connected") > connects, 6.0)
 
 
+def wire_timing(box: XArmController) -> dict:
+    """The servo targets as the emulated controller received and judged them."""
+    taken = [a for a in box.arrivals if a.taken]
+    gaps = np.diff([a.received_ns for a in taken]) / 1e6 if len(taken) > 1 else np.array([float("nan")])
+    per_cycle = Counter(a.cycle for a in taken)
+    judged = list(box.judged)
+
+    def worst(ratios) -> float:
+        return round(max(ratios), 3) if judged else float("nan")
+
+    return {"wire_arrival_gap_ms_max": round(float(gaps.max()), 2), "wire_arrival_gap_ms_p99": round(percentile(gaps, 99), 2),
+            "wire_targets_per_cycle_max": max(per_cycle.values(), default=0),
+            "wire_speed_ratio_max": worst(j.speed_ratio for j in judged),
+            "wire_accel_ratio_max": worst(j.accel_ratio for j in judged),
+            "wire_jerk_ratio_max": worst(j.jerk_ratio for j in judged)}
+
+
+def conformance() -> int:
+    """How many of the emulators' documented behaviours their conformance tests confirm (tests that pass)."""
+    root = Path(__file__).resolve().parents[1]
+    run = subprocess.run([sys.executable, "-m", "pytest", "-q", "-p", "no:cacheprovider",
+                          "tests/devices/test_emulator_conformance.py"], cwd=root, capture_output=True, text=True,
+                         timeout=600)
+    passed = re.search(r"(\d+) passed", run.stdout)
+    return int(passed.group(1)) if passed else 0
+
+
 def main() -> None:
     args = parser(__doc__.split("\n\n")[0]).parse_args()
     seconds = 5.0 if args.quick else 30.0
-    # The emulators share this process's GIL with the SDKs' threads; a real motor answers whatever the host
-    # does, so let threads take turns often enough that the bus emulator answers inside dynamixel-sdk's 34 ms.
-    sys.setswitchinterval(0.0005)
     escaped = []
     threading.excepthook = lambda a: escaped.append(a)
     clock = SessionClock()
@@ -122,7 +155,8 @@ def main() -> None:
     box = XArmController(host=None).start()
     bus = DynamixelBus().start()
     arm = XArm("arm", XArmSettings(host=box.host), DeviceContext(clock))
-    hand = LeapHand("hand", LeapSettings(port=bus.port), DeviceContext(clock))
+    hand = LeapHand("hand", LeapSettings(port=bus.port, latency_timer_path=str(bus.latency_timer_path)),
+                    DeviceContext(clock))
     arm_log, hand_log = Timed(), Timed()
     results = {}
 
@@ -145,6 +179,11 @@ def main() -> None:
                and len(box.commands) == arm_probe.sent and arm.counters()["refused_commands"] == 0)
     leap_ok = (hand_log.count("error") == 0 and hand_probe.failed == 0 and bus.corrupt_requests == 0
                and bus.goal_writes >= hand_probe.sent and hand.counters()["refused_commands"] == 0)
+    wire_figures = wire_timing(box)
+    emulator_faults = len(box.faults)
+    hand_reads = hand_log.states + hand.counters()["read_misses"]
+    leap_miss_frac = hand.counters()["read_misses"] / hand_reads if hand_reads else float("nan")
+    leap_faults = hand_log.count("error")
     trips = roundtrips_ms(arm_probe.sends, arm_log.seen, 1e-5) + roundtrips_ms(hand_probe.sends, hand_log.seen, 2e-3)
     session_s = time.monotonic() - t0
 
@@ -205,6 +244,11 @@ def main() -> None:
         "sdk_roundtrip_ms_median": round(percentile(trips, 50), 2) if trips else float("nan"),
         "session_s": round(session_s, 1),
         "camera_frames_per_s": round(frames_2s / 2.0, 1),
+        "emulator_faults": emulator_faults,
+        **wire_figures,
+        "leap_read_miss_frac": round(leap_miss_frac, 4),
+        "leap_faults": leap_faults,
+        "emulator_conformance": conformance(),
     }
     for name, log in (("xarm", arm_log), ("leap", hand_log)):
         for e in log.of("error")[:1]:
@@ -217,7 +261,8 @@ def main() -> None:
     report("The real SDKs against emulated hardware", figures, {
         "xarm_sdk_session_ok": "true", "leap_sdk_session_ok": "true", "camera_stream_ok": "true",
         "xarm_command_rate_hz": ">= 100", "leap_command_rate_hz": ">= 90", "sdk_roundtrip_ms_p99": "reported",
-        "hw_faults_run": ">= 30", "hw_faults_silent": "0", "hw_tracebacks": "0"}, as_json=args.json)
+        "hw_faults_run": ">= 30", "hw_faults_silent": "0", "hw_tracebacks": "0", "emulator_faults": "0",
+        "leap_read_miss_frac": "<= 0.001", "leap_faults": "0", "emulator_conformance": ">= 25"}, as_json=args.json)
 
 
 if __name__ == "__main__":

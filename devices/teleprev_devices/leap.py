@@ -13,6 +13,19 @@ current-based position control (operating mode 5) with kP / kD (x0.75 on the sid
 and 8) and a current limit, as the LEAP Hand's own driver sets them. The plugin talks to the bus
 through DynamixelBus, a five-call interface; SdkDynamixelBus is the real one.
 
+The bus's timing is the hardware's: a U2D2 (FTDI) adapter holds short replies for its latency timer (16 ms
+by default), so on connect the plugin sets it to 1 ms through sysfs
+(/sys/bus/usb-serial/devices/ttyUSBn/latency_timer) where it may, and says the exact command where it may
+not (`teleprev devices check` shows which); the motors' Return Delay Time is set to 0 (500 us each at
+power-on: 8 ms per 16-motor read). While waiting for a reply the SDK's read loop sleeps in select() on the
+port instead of spinning (dynamixel-sdk polls a non-blocking port until its packet timeout), so the rest
+of the process runs.
+
+One read that gets no (or a garbled) reply is a counted miss ("read_misses"), tried again at once; the
+hand faults when miss_limit reads in a row fail: a hand that stops answering stops its commands within
+miss_limit x the SDK's reply wait (2 x latency timer + 2 ms: 5 x 4 ms with the timer at 1 ms, 5 x 34 ms at
+16 ms), plus a poll period.
+
 A fault stops the hand's commands and says which motor and what: a Hardware Error Status bit
 (overload, overheating, input voltage: the motor turned its torque off; checked every
 hardware_check_every-th poll and before the torque comes on), a motor that does not answer, a corrupted
@@ -23,7 +36,10 @@ again. `teleprev devices emulate leap` runs an emulated bus to try a rig against
 from __future__ import annotations
 
 import math
+import os
+import select
 from dataclasses import dataclass
+from pathlib import Path
 from typing import Protocol, Sequence
 
 import numpy as np
@@ -38,6 +54,7 @@ except ImportError:  # Windows
     PORT_ERRORS = (OSError,)
 
 # Control table (protocol 2.0, XC330/XM430 series): address, size in bytes.
+RETURN_DELAY_TIME = (9, 1)
 OPERATING_MODE = (11, 1)
 TORQUE_ENABLE = (64, 1)
 POSITION_D_GAIN = (80, 2)
@@ -56,6 +73,8 @@ BAUDRATE = 4_000_000
 HARDWARE_ERRORS = {0x01: "input voltage error", 0x04: "overheating", 0x08: "motor encoder error",
                    0x10: "electrical shock", 0x20: "overload"}  # Hardware Error Status bits (e-Manual)
 ALERT = 0x80  # bit 7 of a status packet's error byte: the motor has a hardware error
+USB_SERIAL_SYSFS = Path("/sys/bus/usb-serial/devices")  # where Linux's ftdi_sio exposes each port's latency_timer
+LATENCY_TIMER_MS = 1  # the shortest the FTDI chip allows (AN232B-04: 1 to 255 ms)
 
 
 def ticks_from_angles(q: np.ndarray) -> np.ndarray:
@@ -89,26 +108,71 @@ class DynamixelBus(Protocol):
     def close(self) -> None: ...
 
 
+class PortGone(DeviceError):
+    """The serial port itself failed (the adapter unplugged): no reply is coming, however long one waits."""
+
+
+def latency_timer_path(port: str) -> Path:
+    """The sysfs attribute holding the latency timer of the USB-serial adapter behind `port` (a by-id link
+    resolves to its ttyUSBn)."""
+    return USB_SERIAL_SYSFS / Path(os.path.realpath(port)).name / "latency_timer"
+
+
+def set_latency_timer(path: Path) -> tuple[int | None, str]:
+    """Set the adapter's latency timer to LATENCY_TIMER_MS where allowed: (its value now, one line saying so)."""
+    try:
+        ms = int(path.read_text().split()[0])
+    except (OSError, ValueError, IndexError):
+        return None, (f"no latency timer at {path} (not an FTDI adapter on Linux): replies come as the adapter "
+                      "passes them on")
+    if ms > LATENCY_TIMER_MS:
+        try:
+            path.write_text(f"{LATENCY_TIMER_MS}\n")
+            ms = int(path.read_text().split()[0])
+        except (OSError, ValueError, IndexError):
+            pass
+    if ms > LATENCY_TIMER_MS:
+        return ms, (f"USB adapter latency timer {ms} ms: every reply waits up to {ms} ms more; set it to 1 with "
+                    f"`echo {LATENCY_TIMER_MS} | sudo tee {path}` (no permission to write it from here)")
+    return ms, f"USB adapter latency timer {ms} ms ({path})"
+
+
+def _sleep_until_bytes(port) -> None:
+    """Make the SDK's read loop sleep in select() until bytes arrive or its packet timeout ends, instead of
+    polling the non-blocking port in a busy loop (dynamixel_sdk rxPacket), which starves the process."""
+    ser, read = port.ser, port.readPort
+
+    def read_port(length):
+        if not ser.in_waiting:
+            remaining_s = (port.packet_timeout - port.getTimeSinceStart()) / 1000.0
+            if remaining_s > 0:
+                select.select([ser.fileno()], [], [], remaining_s)
+        return read(length)
+
+    port.readPort = read_port
+
+
 class SdkDynamixelBus:
     """DynamixelBus over dynamixel_sdk (PortHandler, PacketHandler 2.0, GroupSyncRead/Write)."""
 
-    def __init__(self, port: str, baudrate: int = BAUDRATE, sdk=None, reply_margin_ms: float = 0.0):
+    def __init__(self, port: str, baudrate: int = BAUDRATE, sdk=None, latency_timer: str = ""):
         self.port_name = port
         self.baudrate = baudrate
-        self.reply_margin_ms = reply_margin_ms
+        self.latency_timer = Path(latency_timer) if latency_timer else latency_timer_path(port)
+        self.latency_timer_ms: int | None = None
+        self.latency_note = ""
         self.where = f"Dynamixel bus {port}"
         self._sdk = sdk
         self.port = None
 
     def _gone(self, exc: Exception) -> DeviceError:
-        return DeviceError(f"the serial port stopped working (adapter unplugged?): {exc}", self.where)
+        return PortGone(f"the serial port stopped working (adapter unplugged?): {exc}", self.where)
 
     def open(self) -> None:
         sdk = self._sdk or LeapHand.import_sdk()
         self._sdk = sdk
+        self.latency_timer_ms, self.latency_note = set_latency_timer(self.latency_timer)
         self.port = sdk.PortHandler(self.port_name)
-        if self.reply_margin_ms:
-            _add_reply_margin(self.port, self.reply_margin_ms)
         self.packet = sdk.PacketHandler(2.0)
         try:
             opened = self.port.openPort() and self.port.setBaudRate(self.baudrate)
@@ -117,6 +181,7 @@ class SdkDynamixelBus:
             raise DeviceError(f"cannot open the serial port ({exc})", self.where) from None
         if not opened:
             raise DeviceError(f"cannot open the serial port at {self.baudrate} baud", self.where)
+        _sleep_until_bytes(self.port)
 
     def _no_answer(self, result: int, motor: int | None, what: str) -> DeviceError:
         who = f"motor {motor}" if motor is not None else "a motor"
@@ -181,19 +246,6 @@ class SdkDynamixelBus:
                 pass  # the adapter is already gone
 
 
-def _add_reply_margin(port, margin_ms: float) -> None:
-    """Wait `margin_ms` longer than the SDK does for each status packet (its own wait is about 34 ms for a
-    sync read): every timeout the SDK sets on this port, it sets with the margin added."""
-    for name in ("setPacketTimeout", "setPacketTimeoutMillis"):
-        set_timeout = getattr(port, name)
-
-        def with_margin(value, set_timeout=set_timeout):
-            set_timeout(value)
-            port.packet_timeout += margin_ms
-
-        setattr(port, name, with_margin)
-
-
 @dataclass
 class LeapSettings:
     port: str = "/dev/ttyUSB0"  # the U2D2's serial device (COM3 on Windows)
@@ -202,9 +254,9 @@ class LeapSettings:
     kd: int = 200
     current_limit_ma: int = 350  # Lite 350, Full 550 (XC330 goal current is in mA)
     hardware_check_every: int = 9  # polls between reads of the motors' Hardware Error Status (10 Hz at 90 Hz)
-    # Added to the SDK's wait for a reply. Leave it out for real hardware (a motor answers in microseconds);
-    # an emulated bus that shares the host's cores with the session may need it (`teleprev devices emulate leap`).
-    reply_margin_ms: float = 0.0
+    miss_limit: int = 5  # reads in a row without a (good) reply before the hand faults; fewer are counted misses
+    # The adapter's latency timer; default: found from `port` in /sys/bus/usb-serial/devices.
+    latency_timer_path: str = ""
 
     def __post_init__(self):
         if not self.port:
@@ -217,8 +269,8 @@ class LeapSettings:
             raise ValueError(f"current_limit_ma must be 1..1000, got {self.current_limit_ma}")
         if not 1 <= self.hardware_check_every <= 1000:
             raise ValueError(f"hardware_check_every must be 1..1000, got {self.hardware_check_every}")
-        if not 0 <= self.reply_margin_ms <= 1000:
-            raise ValueError(f"reply_margin_ms must be in [0, 1000], got {self.reply_margin_ms}")
+        if not 1 <= self.miss_limit <= 100:
+            raise ValueError(f"miss_limit must be 1..100, got {self.miss_limit}")
 
 
 class LeapHand(PolledActuator[LeapSettings], kind="hand", sdk_module="dynamixel_sdk", extra="leap"):
@@ -228,9 +280,9 @@ class LeapHand(PolledActuator[LeapSettings], kind="hand", sdk_module="dynamixel_
         robot = context.robot if _has_joint(context.robot, "0") else "leap_hand_right"  # the hand alone otherwise
         super().__init__(name, settings, context, robot, tuple(str(i) for i in MOTOR_IDS),
                          where=f"device {name!r} (LEAP Hand on {settings.port})")
-        self.bus: DynamixelBus = bus or SdkDynamixelBus(settings.port, reply_margin_ms=settings.reply_margin_ms)
+        self.bus: DynamixelBus = bus or SdkDynamixelBus(settings.port, latency_timer=settings.latency_timer_path)
         self._polls = 0
-        self._retried = 0
+        self._misses = 0
 
     def endpoint(self) -> str:
         return f"serial {self.settings.port}"
@@ -247,6 +299,9 @@ class LeapHand(PolledActuator[LeapSettings], kind="hand", sdk_module="dynamixel_
 
         self.bus.write(ids, *TORQUE_ENABLE, [0] * 16)  # the operating mode only changes with torque off
         self._check_hardware()
+        delays = self._sync_read(RETURN_DELAY_TIME)
+        if any(delays.values()):  # EEPROM: written once, not at every connect
+            self.bus.write(ids, *RETURN_DELAY_TIME, [0] * 16)
         self.bus.write(ids, *OPERATING_MODE, [CURRENT_BASED_POSITION] * 16)
         self.bus.write(ids, *POSITION_P_GAIN, gains(s.kp))
         self.bus.write(ids, *POSITION_I_GAIN, [0] * 16)
@@ -262,18 +317,26 @@ class LeapHand(PolledActuator[LeapSettings], kind="hand", sdk_module="dynamixel_
         self.bus.close()
 
     def counters(self) -> dict[str, int]:
-        return {**super().counters(), "retried_reads": self._retried}
+        return {**super().counters(), "read_misses": self._misses}
+
+    def notes(self) -> list[str]:
+        """What `teleprev devices check` prints about the hand's bus: its adapter's latency timer."""
+        note = getattr(self.bus, "latency_note", "")
+        return [note] if note else []
 
     def _sync_read(self, field: tuple[int, int]) -> dict[int, int]:
-        """A sync read, tried twice: one reply lost or late is the bus's ordinary noise, two in a row a fault."""
-        try:
-            return self.bus.sync_read(list(MOTOR_IDS), *field)
-        except DeviceError as first:
-            self._retried += 1
+        """A sync read, tried until it succeeds or miss_limit tries in a row have failed: a reply lost, late or
+        garbled is the bus's ordinary noise (a counted miss); miss_limit in a row is a hand that stopped."""
+        failures: list[DeviceError] = []
+        while len(failures) < self.settings.miss_limit:
             try:
                 return self.bus.sync_read(list(MOTOR_IDS), *field)
-            except DeviceError:
-                raise first from None  # what went wrong first (a second try on a dead port says less)
+            except PortGone:
+                raise
+            except DeviceError as exc:
+                failures.append(exc)
+                self._misses += 1
+        raise failures[0]  # what went wrong first (later tries on a dead bus say less)
 
     def _check_hardware(self) -> None:
         status = self._sync_read(HARDWARE_ERROR_STATUS)

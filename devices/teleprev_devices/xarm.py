@@ -4,14 +4,22 @@
     plugin = "xarm.arm"
     host = "192.168.1.185"     # the control box
     dof = 6
-    rate_hz = 100.0            # joint state polling (the controller is best polled at <= 100 Hz)
+    rate_hz = 100.0            # joint state samples, from the controller's 100 Hz report (port 30003)
 
-The plugin talks to the controller through XArmLink, a five-call interface; SdkXArmLink is the real
-one (xarm.wrapper.XArmAPI, imported when the device connects). Servo mode is motion_enable +
-set_mode(1) + set_state(0); commands are streamed with set_servo_angle_j in radians and the controller
-runs the latest one at once, so every command is checked here first: finite, inside the URDF's limits,
-at most max_step_rad from the previous target, and (on the commands' stamps) under the acceleration and
-jerk limits of a servo-mode stream (teleprev.devices.ServoStreamRule, the rule the sim arm faults by).
+The plugin talks to the controller through XArmLink, a small interface; SdkXArmLink is the real one
+(xarm.wrapper.XArmAPI, imported when the device connects). Servo mode is motion_enable + set_mode(1) +
+set_state(0); commands are streamed with set_servo_angle_j in radians and the controller runs the latest
+one at once, so every command is checked here first: finite, inside the joint limits, at most
+max_step_rad from the previous target, and (on the commands' stamps) under the acceleration and jerk
+limits of a servo-mode stream (teleprev.devices.ServoStreamRule, the rule the sim arm faults by).
+
+The joint limits are the URDF's intersected, on every connect, with the connected arm's own: the SDK's
+table for its series (an SN from XI1305 on has joint2 <= 2.0246 and joint3 <= 0.1745 rad;
+xarm/core/config/x_config.py), which the SDK enforces by refusing a target (code -8).
+
+Requests stay within UFactory's rates (at most 250 requests a second on port 502, state at <= 100 Hz):
+joint states come from the real-time report the controller pushes at 100 Hz on port 30003, not from
+requests; port 502 carries the commands and an error-code read every error_check_every-th sample.
 
 A fault stops the commands and is one line naming it: a controller error with its code and meaning
 (collision, joint limit, e-stop: cleared on the arm by the operator, never from here), a lost
@@ -21,13 +29,14 @@ connection, a report stream gone quiet for report_timeout_s, a reply slower than
 
 from __future__ import annotations
 
+import threading
 import time
 from dataclasses import dataclass
 from typing import Callable, Protocol
 
 import numpy as np
 
-from teleprev.devices import DeviceContext, DeviceError, DeviceFault, PolledActuator, ServoStreamRule
+from teleprev.devices import DeviceContext, DeviceError, DeviceFault, JointLimits, PolledActuator, ServoStreamRule
 
 # What the SDK's own return codes mean (xarm.x3.code.APIState), in words for the operator.
 SDK_CODES = {
@@ -50,35 +59,61 @@ class XArmLink(Protocol):
     """The controller as the plugin needs it. Every call raises DeviceError on failure."""
 
     def connect(self) -> None: ...
+    def joint_limits(self) -> list[tuple[float, float]] | None: ...  # the connected arm's own, radians
     def enable_servo_mode(self) -> None: ...
     def joint_angles(self) -> list[float]: ...  # radians, joint1.. (at least dof values)
     def servo_angle_j(self, angles: list[float]) -> None: ...  # radians, dof values
     def disconnect(self) -> None: ...
 
 
+def sdk_joint_limits(api) -> list[tuple[float, float]] | None:
+    """The joint limits the SDK enforces for the connected arm: its table row for the arm's series, chosen
+    as xarm/x3/xarm.py _is_out_of_joint_range chooses it (an SN from XI1305 up to 8500 uses the "_1305" row)."""
+    from xarm.core.config.x_config import XCONF
+
+    sn = api.sn or ""
+    series = int(sn[2:6]) if sn[2:6].isdigit() else 0
+    device_type = int(f"{api.axis}1305") if 1305 <= series < 8500 else api.device_type
+    return XCONF.Robot.JOINT_LIMITS.get(api.axis, {}).get(device_type)
+
+
+def intersect_limits(urdf: JointLimits, arm: list[tuple[float, float]] | None) -> JointLimits:
+    """The URDF's joint limits narrowed to the arm's own (None: the arm has no table, the URDF's stand)."""
+    if not arm:
+        return urdf
+    table = np.array(arm[:len(urdf.names)], dtype=float)
+    return JointLimits(urdf.names, np.maximum(urdf.lower, table[:, 0]), np.minimum(urdf.upper, table[:, 1]))
+
+
 class SdkXArmLink:
     """XArmLink over xarm.wrapper.XArmAPI (`api_factory`: a subclass of it, say).
 
-    The controller pushes a report (state, mode, error and warning codes) every 200 ms on port 30002,
-    which the SDK reads on its own thread; a report older than `report_timeout_s` is a fault, since the
-    controller's errors would then go unseen. Every request waits at most `reply_timeout_s` for its reply.
+    The controller pushes the real-time report (state, mode, joint angles, TCP pose) every 10 ms on port
+    30003, which the SDK reads on its own thread; joint angles come from it. A report older than
+    `report_timeout_s` is a fault, since the arm's state would then go unseen. The error code, which that
+    report does not carry, is read every `error_check_every`-th sample and after any refused command.
+    Every request waits at most `reply_timeout_s` for its reply.
     """
 
     def __init__(self, host: str, dof: int, api_factory: Callable | None = None, reply_timeout_s: float = 0.1,
-                 report_timeout_s: float = 1.0):
+                 report_timeout_s: float = 1.0, error_check_every: int = 10):
         self.host = host
         self.dof = dof
         self.where = f"xArm controller {host}"
         self.reply_timeout_s = reply_timeout_s
         self.report_timeout_s = report_timeout_s
+        self.error_check_every = error_check_every
         self._factory = api_factory
         self.api = None
         self._last_report = 0.0
-        self._reported_error = 0
+        self._reported: list[float] | None = None
+        self._first_report = threading.Event()
+        self._reads = 0
 
     def _on_report(self, report: dict) -> None:
+        self._reported = list(report["joints"])
         self._last_report = time.monotonic()
-        self._reported_error = int(report.get("error_code", 0) or 0)
+        self._first_report.set()
 
     def _controller_error(self, code: int) -> str:
         try:
@@ -112,7 +147,7 @@ class SdkXArmLink:
     def connect(self) -> None:
         factory = self._factory or XArm.import_sdk("xarm.wrapper").XArmAPI
         try:
-            self.api = factory(self.host, is_radian=True, do_not_open=True)
+            self.api = factory(self.host, is_radian=True, do_not_open=True, report_type="real")
             self.api.connect()
         except Exception as exc:
             self.api = None
@@ -125,8 +160,17 @@ class SdkXArmLink:
             self.disconnect()
             raise DeviceError(f"the controller drives a {axis}-joint arm but the rig says dof = {self.dof}", self.where)
         self._last_report = time.monotonic()  # the report stream has report_timeout_s to start
-        self.api.register_report_callback(self._on_report)
+        self._reported = None
+        self._first_report.clear()
+        self.api.register_report_callback(self._on_report, report_joints=True)
         self.api.set_timeout(self.reply_timeout_s)
+        if not self._first_report.wait(self.report_timeout_s):
+            self.disconnect()
+            raise DeviceError(f"the controller's report stream (port 30003) sent nothing in {self.report_timeout_s:g} s "
+                              "after connecting", self.where)
+
+    def joint_limits(self) -> list[tuple[float, float]] | None:
+        return sdk_joint_limits(self.api)
 
     def enable_servo_mode(self) -> None:
         # An error the controller latched (collision, limit, e-stop) is the operator's to clear, on purpose:
@@ -145,17 +189,19 @@ class SdkXArmLink:
             raise self._fail("", -1)
         silent = time.monotonic() - self._last_report
         if silent > self.report_timeout_s:
-            raise DeviceError(f"the controller's report stream (port 30002) sent nothing for {silent:.1f} s "
-                              f"(limit {self.report_timeout_s:g} s): its errors would go unseen", self.where)
-        if self._reported_error:
-            raise DeviceError(f"{self._controller_error(self._reported_error)}; the arm stopped (clear it on the "
-                              "arm once you know why, then reconnect)", self.where)
+            raise DeviceError(f"the controller's report stream (port 30003) sent nothing for {silent:.1f} s "
+                              f"(limit {self.report_timeout_s:g} s): the arm's state would go unseen", self.where)
+        self._reads += 1
+        if self._reads % self.error_check_every == 0:
+            status, (error, _warn) = self.api.get_err_warn_code()
+            self._check(status, "get_err_warn_code")
+            if error:
+                raise DeviceError(f"{self._controller_error(error)}; the arm stopped (clear it on the arm once "
+                                  "you know why, then reconnect)", self.where)
 
     def joint_angles(self) -> list[float]:
         self._healthy()
-        code, angles = self.api.get_servo_angle(is_radian=True)
-        self._check(code, "get_servo_angle")
-        return list(angles)[: self.dof]
+        return list(self._reported)[: self.dof]
 
     def servo_angle_j(self, angles: list[float]) -> None:
         if not self.api.connected:
@@ -176,8 +222,9 @@ class XArmSettings:
     max_step_rad: float = 0.2  # largest change of any joint from one command to the next
     max_acceleration: float = 10.0  # rad/s^2 and rad/s^3: a command stream past these (+10%, on the commands'
     max_jerk: float = 500.0  # stamps) stops the commands, as it would fault the sim arm
-    reply_timeout_s: float = 0.1  # a controller reply slower than this is a fault
-    report_timeout_s: float = 1.0  # the report stream (5 Hz) silent for this long is a fault
+    reply_timeout_s: float = 0.1  # a controller reply slower than this is a fault (it answers in a few ms)
+    report_timeout_s: float = 1.0  # the report stream (100 Hz) silent for this long is a fault
+    error_check_every: int = 10  # samples between reads of the error code (10 Hz at 100 Hz)
 
     def __post_init__(self):
         if not self.host:
@@ -185,7 +232,9 @@ class XArmSettings:
         if self.dof not in (6, 7):
             raise ValueError(f"dof must be 6 or 7, got {self.dof}")
         if not 0 < self.rate_hz <= 100:
-            raise ValueError(f"rate_hz must be in (0, 100] (the controller is best polled at <= 100 Hz), got {self.rate_hz}")
+            raise ValueError(f"rate_hz must be in (0, 100] (the controller reports at 100 Hz), got {self.rate_hz}")
+        if not 1 <= self.error_check_every <= 100:
+            raise ValueError(f"error_check_every must be 1..100, got {self.error_check_every}")
         if not 0 < self.max_step_rad <= 0.5:
             raise ValueError(f"max_step_rad must be in (0, 0.5], got {self.max_step_rad}")
         if not (self.max_acceleration > 0 and self.max_jerk > 0):
@@ -202,7 +251,9 @@ class XArm(PolledActuator[XArmSettings], kind="arm", sdk_module="xarm", extra="x
         super().__init__(name, settings, context, context.robot, tuple(f"joint{i}" for i in range(1, settings.dof + 1)),
                          where=f"device {name!r} (xArm {settings.host})")
         self.link: XArmLink = link or SdkXArmLink(settings.host, settings.dof, reply_timeout_s=settings.reply_timeout_s,
-                                                  report_timeout_s=settings.report_timeout_s)
+                                                  report_timeout_s=settings.report_timeout_s,
+                                                  error_check_every=settings.error_check_every)
+        self.urdf_limits = self.limits
         self.rule = ServoStreamRule(self.joint_names, settings.max_acceleration, settings.max_jerk, self.period_ns)
 
     def endpoint(self) -> str:
@@ -210,6 +261,7 @@ class XArm(PolledActuator[XArmSettings], kind="arm", sdk_module="xarm", extra="x
 
     def _open(self) -> None:
         self.link.connect()
+        self.limits = intersect_limits(self.urdf_limits, self.link.joint_limits())
 
     def _start(self) -> np.ndarray:
         self.link.enable_servo_mode()

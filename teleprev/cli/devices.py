@@ -89,6 +89,8 @@ def check(
         time.sleep(seconds)
     finally:
         stats = {name: r.stats() for name, r in runners.items()}
+        # what a device found out about its hardware's setup (e.g. a USB adapter's latency timer)
+        notes = [f"  {name}: {note}" for name, r in runners.items() for note in getattr(r.device, "notes", list)()]
         for r in runners.values():
             r.stop()
 
@@ -120,7 +122,7 @@ def check(
         if s.last_error or _skipped(s.skipped):
             said.append(f"  {name}: {s.last_error or _skipped(s.skipped)}")
     print_table(console, table)
-    for line in said:
+    for line in notes + said:
         console.print(line, highlight=False, markup=False, soft_wrap=True)
     for e in events:
         if e["event"] in ("error", "gap", "disconnected"):

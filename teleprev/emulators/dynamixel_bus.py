@@ -1,15 +1,27 @@
-"""An emulated Dynamixel Protocol 2.0 bus with the LEAP Hand's 16 motors, on a pseudo-terminal that pyserial
-and dynamixel-sdk open like a U2D2 USB adapter.
+"""An emulated Dynamixel Protocol 2.0 bus with the LEAP Hand's 16 XC330-M288-T motors behind a U2D2 (FTDI)
+USB adapter, on a pseudo-terminal that pyserial and dynamixel-sdk open like the adapter's /dev/ttyUSBn.
 
     with DynamixelBus().start() as bus:          # bus.port: a stable path, like /dev/serial/by-id/...
-        ...                                      # leap.hand with port = bus.port
+        ...                                      # leap.hand with the rig keys bus.rig_keys() gives
         bus.inject("overload", motor=5)          # motor 5 sets its Hardware Error Status, torque off
         bus.operator_clear()                     # power-cycled: errors gone, every motor answers
 
-The motors (IDs 0..15, X-series control table) answer PING, READ, WRITE, SYNC_READ, SYNC_WRITE and
-REBOOT as the e-Manual describes: EEPROM (addresses below 64) is written only with the torque off; a
-motor with a hardware error sets bit 7 of every status packet's error byte and keeps its torque off;
-with the torque on, a motor moves from where it is towards its goal position at its no-load speed.
+Everything here is the e-Manual's (Protocol 2.0; the XC330-M288-T control table, see dynamixel_wire) or the
+adapter's (FTDI AN232B-04), never what a plugin would like:
+- the motors answer PING, READ, WRITE, REBOOT, SYNC_READ, SYNC_WRITE, FAST_SYNC_READ, BULK_READ, BULK_WRITE and
+  FAST_BULK_READ; to the broadcast ID only PING and the group reads are answered ("Status Packet is not returned
+  for broadcast", Protocol 2.0 "Instruction Packet"), and Status Return Level 0 / 1 leaves out all but PING /
+  PING and reads;
+- writes are checked as the control table says: read-only items (Access Error), EEPROM with the torque on
+  (Access Error), outside an item's range (Data Range Error), past the limit another item sets, e.g. Goal
+  Current above Current Limit (Data Limit Error), part of a multi-byte item (Data Length Error);
+- power-on values per the control table, which a reboot brings back for the RAM area;
+- timing: a motor answers Return Delay Time (2 us per unit, 500 us at power-on) after the bus went quiet,
+  its bytes take 10 bits each at the baud rate, and the adapter hands bytes to the host in 62-byte USB
+  packets, a short one only when its latency timer runs out (16 ms by default, "reset every time data is
+  sent back to the PC": AN232B-04, "Small Amounts of Data and End of Buffer Conditions"). The timer is read
+  from `latency_timer_path`, the file the Linux ftdi_sio driver exposes in sysfs; writing 1 there makes it 1 ms;
+- a motor set to another baud rate than the port hears nothing it can decode, and says nothing.
 
 Injected faults (`inject(kind, motor)`): overload, overheating, input_voltage (Hardware Error Status
 bits), silent (the motor stops answering), bad_crc (every reply's CRC is wrong until cleared), unplug
@@ -19,10 +31,13 @@ puts it back at the same path).
 
 from __future__ import annotations
 
+import math
 import os
 import select
+import shutil
 import struct
 import tempfile
+import termios
 import threading
 import time
 import tty
@@ -36,26 +51,31 @@ FAULTS = ("overload", "overheating", "input_voltage", "silent", "bad_crc", "unpl
 HARDWARE_FAULTS = {"overload": wire.OVERLOAD, "overheating": wire.OVERHEATING, "input_voltage": wire.INPUT_VOLTAGE}
 MOTOR_IDS = tuple(range(16))
 OPEN_HAND = 2048  # ticks: the LEAP Hand's flat open hand
-REPLY_MARGIN_MS = 150.0  # the rig keys' reply_margin_ms: the emulator shares the host's cores with the session
-NO_LOAD_SPEED = 65 * 4096 / 60  # ticks/s: about 65 rev/min at the output
+LEAP_BAUD = 6  # Baud Rate (8) = 4 Mbps: how the LEAP Hand's motors are set up (its driver opens the port at 4 Mbps)
+NO_LOAD_SPEED = 81 * 4096 / 60  # ticks/s: 81 rev/min at 5.0 V (XC330-M288-T specifications)
+FTDI_PACKET = 62  # user bytes in one 64-byte USB packet (AN232B-04: 2 status bytes and 62 user bytes)
+FTDI_DEFAULT_LATENCY_MS = 16  # AN232B-04: "The default value of the timer is set to 16 milliseconds"
+POSITION_RANGE = 1_048_575  # Goal Position in modes other than position control (e-Manual, Goal Position)
+READS = (wire.READ, wire.SYNC_READ, wire.FAST_SYNC_READ, wire.BULK_READ, wire.FAST_BULK_READ)
 
 
 class Motor:
-    def __init__(self, dxl_id: int, position: int = OPEN_HAND):
-        self.id = dxl_id
+    """One XC330-M288-T: its control table and where its horn is."""
+
+    def __init__(self, dxl_id: int, position: int = OPEN_HAND, baud: int = LEAP_BAUD):
         self.table = bytearray(wire.TABLE_SIZE)
-        self.set(wire.MODEL_NUMBER, wire.XC330_T288)
-        self.set(wire.FIRMWARE_VERSION, 52)
-        self.set(wire.ID, dxl_id)
-        self.set(wire.OPERATING_MODE, 3)
-        self.set(wire.CURRENT_LIMIT, 910)
-        self.set(wire.PRESENT_INPUT_VOLTAGE, 50)
-        self.set(wire.PRESENT_TEMPERATURE, 32)
-        self.set(wire.PRESENT_POSITION, position)
-        self.set(wire.GOAL_POSITION, position)
+        for f in wire.FIELDS:
+            self._store(f, f.initial)
+        self.set(wire.ID, dxl_id)  # ID and baud rate: EEPROM, as the LEAP Hand's motors are configured
+        self.set(wire.BAUD_RATE, baud)
         self.position = float(position)
         self.silent = False
         self._moved = time.monotonic()
+        self.reboot()
+
+    @property
+    def id(self) -> int:
+        return self.get(wire.ID)
 
     def get(self, field: tuple[int, int]) -> int:
         address, size = field
@@ -65,17 +85,34 @@ class Motor:
         address, size = field
         self.table[address:address + size] = (int(value) & ((1 << 8 * size) - 1)).to_bytes(size, "little")
 
+    def _store(self, f: wire.Field, value: int) -> None:
+        self.set((f.address, f.size), value)
+
+    def _value(self, f: wire.Field) -> int:
+        return int.from_bytes(self.table[f.address:f.address + f.size], "little", signed=f.signed)
+
     @property
     def hardware_error(self) -> int:
         return self.get(wire.HARDWARE_ERROR_STATUS)
+
+    @property
+    def return_delay_s(self) -> float:
+        return self.get(wire.RETURN_DELAY_TIME) * 2e-6  # 2 [usec] per unit
+
+    def reboot(self) -> None:
+        """Power-on: the RAM area (64 and up) back to its initial values, EEPROM kept (e-Manual, Reboot)."""
+        for f in wire.FIELDS:
+            if f.address >= wire.EEPROM_END:
+                self._store(f, f.initial)
+        self.set(wire.GOAL_POSITION, round(self.position))
+        self.step(time.monotonic())
 
     def step(self, now: float) -> None:
         """Move towards the goal (torque on) at the no-load speed; update present position and velocity."""
         dt, self._moved = now - self._moved, now
         velocity = 0.0
         if self.get(wire.TORQUE_ENABLE):
-            goal = self.get(wire.GOAL_POSITION)
-            goal = goal - (1 << 32) if goal & 0x80000000 else goal
+            goal = self._value(wire.FIELD_AT[wire.GOAL_POSITION[0]])
             reach = NO_LOAD_SPEED * dt
             delta = max(-reach, min(reach, goal - self.position))
             self.position += delta
@@ -84,29 +121,112 @@ class Motor:
         self.set(wire.PRESENT_VELOCITY, round(velocity / 4096 * 60 / 0.229))  # 0.229 rev/min per unit
         self.set(wire.PRESENT_CURRENT, 12 if self.get(wire.TORQUE_ENABLE) else 0)  # mA
 
+    def _limit_error(self, f: wire.Field, value: int, pending: dict[int, int]) -> bool:
+        """Past the limit another item sets (the e-Manual's ranges written as "... Limit(38)")."""
+        if f.address in wire.LIMITED_BY:
+            limiter = wire.FIELD_AT[wire.LIMITED_BY[f.address]]
+            limit = pending.get(limiter.address, self._value(limiter))
+            return abs(value) > limit
+        if f.address == wire.GOAL_POSITION[0]:
+            if self.get(wire.OPERATING_MODE) == 3:  # position control: within the Min/Max Position Limits
+                return not self.get((52, 4)) <= value <= self.get((48, 4))
+            return abs(value) > POSITION_RANGE
+        return False
+
     def write(self, address: int, data: bytes) -> int:
-        """The status error for a write (0: done)."""
-        if address + len(data) > wire.TABLE_SIZE:
-            return wire.DATA_RANGE_ERROR
-        if address < wire.EEPROM_END and self.get(wire.TORQUE_ENABLE):
-            return wire.ACCESS_ERROR
-        if address == wire.TORQUE_ENABLE[0] and self.hardware_error:
-            data = b"\x00" + data[1:]  # no torque until the error is gone
-        if address <= wire.GOAL_POSITION[0] < address + len(data) and self.get(wire.TORQUE_ENABLE):
-            self.step(time.monotonic())
-        self.table[address:address + len(data)] = data
-        if address == wire.TORQUE_ENABLE[0]:
-            self._moved = time.monotonic()
+        """The status error for a write (0: done); nothing is written unless all of it is allowed."""
+        end = address + len(data)
+        if end > wire.TABLE_SIZE or not data:
+            return wire.DATA_LENGTH_ERROR
+        touched = [f for f in wire.FIELDS if f.address < end and address < f.address + f.size]
+        for f in touched:
+            if f.address < address or f.address + f.size > end:
+                return wire.DATA_LENGTH_ERROR  # part of a multi-byte item
+            if not f.writable or (f.address < wire.EEPROM_END and self.get(wire.TORQUE_ENABLE)):
+                return wire.ACCESS_ERROR
+        pending = {}
+        for f in touched:
+            raw = data[f.address - address:f.address - address + f.size]
+            pending[f.address] = int.from_bytes(raw, "little", signed=f.signed)
+        for f in touched:
+            value = pending[f.address]
+            if f.address == wire.GOAL_POSITION[0] or f.address in wire.LIMITED_BY:  # bounded by another item
+                if self._limit_error(f, value, pending):
+                    return wire.DATA_LIMIT_ERROR
+                continue
+            if not f.low <= value <= f.high or (f.address == wire.OPERATING_MODE[0] and value not in wire.OPERATING_MODES):
+                return wire.DATA_RANGE_ERROR
+            if self._limit_error(f, value, pending):
+                return wire.DATA_LIMIT_ERROR
+        now = time.monotonic()
+        if self.get(wire.TORQUE_ENABLE):
+            self.step(now)
+        for f in touched:
+            value = pending[f.address]
+            if f.address == wire.TORQUE_ENABLE[0] and self.hardware_error:
+                value = 0  # no torque while a hardware error is set (e-Manual, Hardware Error Status)
+            self._store(f, value)
+        if wire.TORQUE_ENABLE[0] in pending:
+            self._moved = now
         return 0
+
+    def read(self, address: int, size: int) -> tuple[int, bytes]:
+        if address + size > wire.TABLE_SIZE:
+            return wire.DATA_RANGE_ERROR, b""
+        self.step(time.monotonic())
+        return 0, bytes(self.table[address:address + size])
+
+    def answers(self, instruction: int) -> bool:
+        """Status Return Level (68): 0 answers PING only, 1 PING and reads, 2 everything."""
+        level = self.get(wire.STATUS_RETURN_LEVEL)
+        return instruction == wire.PING or level == 2 or (level == 1 and instruction in READS)
+
+
+class FtdiAdapter:
+    """When bytes the motors sent reach the host: 62-byte USB packets go at once, a short one when the latency
+    timer runs out; the timer restarts at every packet sent (AN232B-04), and the chip sends one at least every
+    latency period, so an idle adapter's timer runs in steps of that period."""
+
+    def __init__(self, latency_timer_path: Path):
+        self.path = latency_timer_path
+        self._last_sent = time.monotonic()
+
+    @property
+    def latency_s(self) -> float:
+        try:
+            ms = int(self.path.read_text().split()[0])
+        except (OSError, ValueError, IndexError):
+            ms = FTDI_DEFAULT_LATENCY_MS
+        return min(max(ms, 1), 255) / 1000  # the driver accepts 1..255 ms (AN232B-04, "Adjusting ... Latency")
+
+    def schedule(self, bytes_at: list[tuple[float, bytes]]) -> list[tuple[float, bytes]]:
+        """(time the host gets them, bytes) for bytes leaving the motors at the given times."""
+        latency = self.latency_s
+        out: list[tuple[float, bytes]] = []
+        buffer = b""
+        for t, chunk in bytes_at:
+            for b in range(len(chunk)):  # each byte lands at its own time; a full packet goes at once
+                buffer += chunk[b:b + 1]
+                if len(buffer) == FTDI_PACKET:
+                    out.append((t, buffer))
+                    self._last_sent, buffer = t, b""
+        if buffer:
+            end = bytes_at[-1][0]
+            periods = max(1, math.ceil((end - self._last_sent) / latency))
+            self._last_sent += periods * latency
+            out.append((self._last_sent, buffer))
+        return out
 
 
 class DynamixelBus:
-    def __init__(self, port: str | Path | None = None, positions: dict[int, int] | None = None):
-        self._dir = None
-        if port is None:
-            self._dir = tempfile.mkdtemp(prefix="teleprev-dxl-")
-            port = Path(self._dir) / "ttyLEAP"
-        self.port = str(port)
+    def __init__(self, port: str | Path | None = None, positions: dict[int, int] | None = None,
+                 latency_timer_ms: int = FTDI_DEFAULT_LATENCY_MS):
+        self._dir = tempfile.mkdtemp(prefix="teleprev-dxl-")
+        self.port = str(port) if port is not None else str(Path(self._dir) / "ttyLEAP")
+        # the adapter's sysfs attribute (/sys/bus/usb-serial/devices/ttyUSBn/latency_timer on a real one)
+        self.latency_timer_path = Path(self._dir) / "latency_timer"
+        self.latency_timer_path.write_text(f"{latency_timer_ms}\n")
+        self.adapter = FtdiAdapter(self.latency_timer_path)
         self.motors = {i: Motor(i, (positions or {}).get(i, OPEN_HAND)) for i in MOTOR_IDS}
         self._lock = threading.Lock()
         self._master = -1
@@ -116,6 +236,8 @@ class DynamixelBus:
         self.bad_crc = False
         self.requests: Counter[int] = Counter()
         self.goal_writes = 0  # sync writes of the goal position
+        self.goal_arrivals_ns: list[int] = []  # time.monotonic_ns() each goal-position sync write was read
+        self.unheard = 0  # requests sent at a baud rate no motor listens at
         self.corrupt_requests = 0
         self.injected: list[tuple[int, str, int]] = []
 
@@ -132,9 +254,14 @@ class DynamixelBus:
             raise EmulatorError(f"cannot open a pseudo-terminal for the Dynamixel bus: {exc.strerror}") from None
         tty.setraw(slave)  # bytes pass unchanged: no echo, no line discipline
         link = Path(self.port)
-        if link.is_symlink() or link.exists():
-            link.unlink()
-        link.symlink_to(os.ttyname(slave))
+        try:  # never over something that is there: a file, or a device node like /dev/ttyUSB0
+            link.symlink_to(os.ttyname(slave))
+        except OSError as exc:
+            os.close(master)
+            os.close(slave)
+            why = "it already exists" if link.is_symlink() or link.exists() else exc.strerror
+            raise EmulatorError(f"cannot put the emulated bus at {link}: {why}; pick a path that does not exist "
+                                "(or leave out --port)") from None
         with self._lock:
             self._master, self._slave = master, slave
         self._stop.clear()
@@ -160,11 +287,7 @@ class DynamixelBus:
 
     def stop(self) -> None:
         self.unplug()
-        if self._dir:
-            try:
-                os.rmdir(self._dir)
-            except OSError:
-                pass
+        shutil.rmtree(self._dir, ignore_errors=True)
 
     def __enter__(self) -> DynamixelBus:
         return self
@@ -173,9 +296,9 @@ class DynamixelBus:
         self.stop()
 
     def rig_keys(self, name: str = "hand") -> str:
-        # The bus answers from a thread on this host's cores: the margin keeps a busy host from reading as
-        # a silent motor (a real bus needs none).
-        return f'[devices.{name}]\nplugin = "leap.hand"\nport = "{self.port}"\nreply_margin_ms = {REPLY_MARGIN_MS:g}\n'
+        # A real adapter's latency timer is found from the port in sysfs; a pseudo-terminal has none there.
+        return (f'[devices.{name}]\nplugin = "leap.hand"\nport = "{self.port}"\n'
+                f'latency_timer_path = "{self.latency_timer_path}"\n')
 
     # ---- faults ---------------------------------------------------------------------------------------
     def inject(self, kind: str, motor: int = 0) -> None:
@@ -203,6 +326,7 @@ class DynamixelBus:
             for m in self.motors.values():
                 m.silent = False
                 m.set(wire.HARDWARE_ERROR_STATUS, 0)
+                m.reboot()
         if not self.plugged:
             self.plug()
 
@@ -214,9 +338,16 @@ class DynamixelBus:
             return {i: m.get(wire.PRESENT_POSITION) for i, m in self.motors.items()}
 
     # ---- the bus ---------------------------------------------------------------------------------------
+    def _port_baud(self, slave: int) -> int:
+        try:
+            speed = termios.tcgetattr(slave)[4]
+        except termios.error:
+            return 0
+        return next((b for b in wire.BAUD_RATES.values() if getattr(termios, f"B{b}", None) == speed), 0)
+
     def _serve(self, master: int) -> None:
-        # Real motors answer within microseconds whatever the host does, and dynamixel-sdk waits only 34 ms:
-        # where allowed (root), this thread answers before the host's other work (it mostly sleeps in select).
+        # Real motors answer whatever the host does: where allowed (root), this thread runs before the host's
+        # other work (it mostly sleeps in select).
         try:
             os.sched_setscheduler(threading.get_native_id(), os.SCHED_FIFO, os.sched_param(10))
         except (OSError, AttributeError):
@@ -230,61 +361,126 @@ class DynamixelBus:
                 data = os.read(master, 4096)
             except OSError:
                 return
-            out = b""
+            arrived = time.monotonic()
+            baud = self._port_baud(self._slave)
+            replies: list[tuple[Motor, bytes]] = []
             for dxl_id, instruction, params in reader.feed(data):
-                out += self._answer(dxl_id, instruction, params)
-            if out:
+                replies += self._answer(dxl_id, instruction, params, baud)
+            if not replies:
+                continue
+            # Each motor speaks after its return delay, once the one before it is done (half duplex).
+            t, bytes_at = arrived, []
+            for m, out in replies:
+                t += m.return_delay_s + len(out) * 10 / baud
+                bytes_at.append((t, out))
+            for due, chunk in self.adapter.schedule(bytes_at):
+                wait = due - time.monotonic()
+                if wait > 0:
+                    time.sleep(wait)
                 try:
-                    os.write(master, out)
+                    os.write(master, chunk)
                 except OSError:
                     return
 
-    def _reply(self, m: Motor, error: int, data: bytes = b"") -> bytes:
-        if m.silent:
-            return b""
+    def _status(self, m: Motor, error: int, data: bytes = b"") -> bytes:
         return wire.status(m.id, error | (wire.ALERT if m.hardware_error else 0), data, corrupt=self.bad_crc)
 
-    def _answer(self, dxl_id: int, instruction: int | None, params: bytes) -> bytes:
+    def _listening(self, baud: int) -> list[Motor]:
+        return [m for m in self.motors.values() if not m.silent and wire.BAUD_RATES.get(m.get(wire.BAUD_RATE)) == baud]
+
+    def _answer(self, dxl_id: int, instruction: int | None, params: bytes, baud: int) -> list[tuple[Motor, bytes]]:
+        """The status packets a request gets, in the order the motors send them."""
         with self._lock:
+            listening = {m.id: m for m in self._listening(baud)}
+            if not listening:
+                self.unheard += 1
+                return []
             if instruction is None:
                 self.corrupt_requests += 1
-                m = self.motors.get(dxl_id)
-                return self._reply(m, wire.CRC_ERROR) if m else b""
+                m = listening.get(dxl_id)
+                return [(m, self._status(m, wire.CRC_ERROR))] if m else []
             self.requests[instruction] += 1
-            now = time.monotonic()
-            if instruction == wire.SYNC_WRITE and len(params) >= 4:
-                address, size = struct.unpack("<HH", params[:4])
-                body = params[4:]
-                for k in range(0, len(body) - size + 1, size + 1):
-                    m = self.motors.get(body[k])
-                    if m is not None and not m.silent:
-                        m.write(address, body[k + 1:k + 1 + size])
-                if address == wire.GOAL_POSITION[0]:
-                    self.goal_writes += 1
-                return b""
-            if instruction == wire.SYNC_READ and len(params) >= 4:
-                address, size = struct.unpack("<HH", params[:4])
-                out = b""
-                for i in params[4:]:
-                    m = self.motors.get(i)
-                    if m is not None:
-                        m.step(now)
-                        out += self._reply(m, 0, bytes(m.table[address:address + size]))
-                return out
-            m = self.motors.get(dxl_id)
+            if dxl_id == wire.BROADCAST:
+                return self._broadcast(instruction, params, listening)
+            m = listening.get(dxl_id)
             if m is None:
-                return b""
-            if instruction == wire.PING:
-                return self._reply(m, 0, struct.pack("<HB", m.get(wire.MODEL_NUMBER), m.get(wire.FIRMWARE_VERSION)))
-            if instruction == wire.READ and len(params) >= 4:
-                address, size = struct.unpack("<HH", params[:4])
-                m.step(now)
-                return self._reply(m, 0, bytes(m.table[address:address + size]))
-            if instruction == wire.WRITE and len(params) >= 2:
-                address = struct.unpack("<H", params[:2])[0]
-                return self._reply(m, m.write(address, params[2:]))
-            if instruction == wire.REBOOT:
-                m.set(wire.HARDWARE_ERROR_STATUS, 0)
-                m.set(wire.TORQUE_ENABLE, 0)
-                return self._reply(m, 0)
-            return self._reply(m, wire.INSTRUCTION_ERROR)
+                return []
+            error, data = self._unicast(m, instruction, params)
+            if not m.answers(instruction):
+                return []
+            return [(m, self._status(m, error, data))]
+
+    def _unicast(self, m: Motor, instruction: int, params: bytes) -> tuple[int, bytes]:
+        if instruction == wire.PING:
+            return 0, struct.pack("<HB", m.get(wire.MODEL_NUMBER), m.get(wire.FIRMWARE_VERSION))
+        if instruction == wire.READ and len(params) >= 4:
+            address, size = struct.unpack("<HH", params[:4])
+            return m.read(address, size)
+        if instruction == wire.WRITE and len(params) >= 3:
+            return m.write(struct.unpack("<H", params[:2])[0], params[2:]), b""
+        if instruction == wire.REBOOT:
+            m.reboot()  # the status packet goes before the restart (e-Manual, Reboot)
+            return 0, b""
+        return wire.INSTRUCTION_ERROR, b""
+
+    def _broadcast(self, instruction: int, params: bytes, listening: dict[int, Motor]) -> list[tuple[Motor, bytes]]:
+        if instruction == wire.PING:  # every motor answers, in ID order
+            return [(m, self._status(m, *self._unicast(m, wire.PING, b""))) for _, m in sorted(listening.items())]
+        if instruction in (wire.WRITE, wire.REBOOT):  # every motor acts, none answers
+            for m in listening.values():
+                self._unicast(m, instruction, params)
+            return []
+        if instruction == wire.SYNC_WRITE and len(params) >= 4:
+            address, size = struct.unpack("<HH", params[:4])
+            body = params[4:]
+            for k in range(0, len(body) - size, size + 1):
+                m = listening.get(body[k])
+                if m is not None:
+                    m.write(address, body[k + 1:k + 1 + size])
+            if address == wire.GOAL_POSITION[0]:
+                self.goal_writes += 1
+                self.goal_arrivals_ns.append(time.monotonic_ns())
+            return []
+        if instruction == wire.BULK_WRITE:
+            for dxl_id, address, data in _bulk_items(params, with_data=True):
+                if dxl_id in listening:
+                    listening[dxl_id].write(address, data)
+            return []
+        if instruction in (wire.SYNC_READ, wire.FAST_SYNC_READ) and len(params) >= 4:
+            address, size = struct.unpack("<HH", params[:4])
+            asked = [(i, address, size) for i in params[4:]]
+        elif instruction in (wire.BULK_READ, wire.FAST_BULK_READ):
+            asked = [(i, a, n) for i, a, n in _bulk_items(params, with_data=False)]
+        else:
+            return []
+        fast = instruction in (wire.FAST_SYNC_READ, wire.FAST_BULK_READ)
+        answers = []
+        for i, address, size in asked:
+            m = listening.get(i)
+            if m is None or not m.answers(instruction):
+                if fast:
+                    break  # one packet the motors fill in turn: it ends where a motor does not speak
+                continue
+            answers.append((m, *m.read(address, size)))
+        if not fast:  # each motor its own status packet, in the order asked (e-Manual, Sync Read / Bulk Read)
+            return [(m, self._status(m, error, data)) for m, error, data in answers]
+        if not answers:
+            return []
+        parts = [(error | (wire.ALERT if m.hardware_error else 0), m.id, data) for m, error, data in answers]
+        packet = wire.fast_status(parts, corrupt=self.bad_crc)
+        if len(answers) < len(asked):
+            packet = packet[:-2]  # cut short: no last CRC
+        return [(answers[0][0], packet)]
+
+
+def _bulk_items(params: bytes, with_data: bool):
+    """(id, address, size) or (id, address, data) of a bulk read / write's parameters."""
+    k = 0
+    while k + 5 <= len(params):
+        dxl_id, address, size = params[k], *struct.unpack("<HH", params[k + 1:k + 5])
+        k += 5
+        if with_data:
+            yield dxl_id, address, params[k:k + size]
+            k += size
+        else:
+            yield dxl_id, address, size

@@ -43,6 +43,8 @@ def test_emulate_prints_rig_keys_that_devices_check_reads(tmp_path):
         out = check.stdout + check.stderr
         assert check.returncode == 0, out
         assert "all 2 devices streaming" in out
+        # leap.hand set the emulated adapter's latency timer to 1 ms, and check says so
+        assert "hand: USB adapter latency timer 1 ms (" in out, out
         rows = {ln.split()[0]: ln.split() for ln in out.splitlines() if ln.split()[:1] in (["arm"], ["hand"])}
         assert rows["arm"][1:4] == ["xarm.arm", "arm", "ok"] and rows["hand"][1:4] == ["leap.hand", "hand", "ok"]
     finally:
@@ -64,3 +66,14 @@ def test_an_address_that_is_taken_is_one_line():
     assert proc.returncode == 2
     assert proc.stdout.strip() == f"cannot listen on {host}:502: it is taken (another emulator, or a controller on " \
                                   "this machine); pick another loopback address, e.g. --host 127.0.0.2"
+
+
+def test_emulate_leap_refuses_a_path_that_exists(tmp_path):
+    taken = tmp_path / "notes.txt"
+    taken.write_text("keep me")
+    proc = subprocess.run([*CLI, "devices", "emulate", "leap", "--port", str(taken), "--seconds", "1"],
+                          capture_output=True, text=True, timeout=60, env={**os.environ, "COLUMNS": "300"})
+    assert proc.returncode == 2
+    assert proc.stdout.strip() == (f"cannot put the emulated bus at {taken}: it already exists; pick a path that "
+                                   "does not exist (or leave out --port)")
+    assert taken.read_text() == "keep me" and not taken.is_symlink()

@@ -29,6 +29,7 @@ class BusDouble:
         for i in range(16):
             self.regs[(i, 132)] = 2048 if ticks is None else ticks[i]
             self.regs[(i, 70)] = 0  # Hardware Error Status
+            self.regs[(i, 9)] = 250  # Return Delay Time at power-on
         self.log: list[tuple] = []
         self.unplugged = False
         self.is_open = False
@@ -81,6 +82,7 @@ def test_connect_configures_current_based_position_control():
     side = lambda g: tuple(round(0.75 * g) if i in (0, 4, 8) else g for i in range(16))  # noqa: E731
     assert writes == [
         (64, (0,) * 16),  # torque off before changing the mode
+        (9, (0,) * 16),  # no return delay: 8 ms less per 16-motor read
         (11, (5,) * 16),  # current-based position
         (84, side(600)),  # kP, x0.75 on side-to-side joints
         (82, (0,) * 16),
@@ -121,7 +123,7 @@ def test_commands_outside_the_limits_are_refused_and_never_written():
         h.send(JointSample(0, ("0",), np.array([np.inf])))
     with pytest.raises(DeviceError, match="unknown joints"):
         h.send(JointSample(0, ("16",), np.array([0.0])))
-    assert len(bus.log) == n and h.counters() == {"refused_commands": 3, "retried_reads": 0}
+    assert len(bus.log) == n and h.counters() == {"refused_commands": 3, "read_misses": 0}
 
 
 def test_reads_are_capped_near_90_hz():

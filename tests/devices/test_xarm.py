@@ -23,8 +23,9 @@ NAMES = tuple(f"joint{i}" for i in range(1, 7))
 class LinkDouble:
     """Records every call; `unplugged` makes every call fail as a lost connection would."""
 
-    def __init__(self, angles=HOME, extra=(0.0,)):
+    def __init__(self, angles=HOME, extra=(0.0,), table=None):
         self.calls: list[tuple] = []
+        self.table = table  # the arm's own joint limits, as the SDK's table gives them
         self.angles = list(angles) + list(extra)  # the SDK reports 7 values for a 6-joint arm
         self.unplugged = False
 
@@ -35,6 +36,9 @@ class LinkDouble:
 
     def connect(self):
         self._call("connect")
+
+    def joint_limits(self):
+        return self.table
 
     def enable_servo_mode(self):
         self._call("enable_servo_mode")
@@ -155,3 +159,18 @@ def test_missing_sdk_is_a_clear_error(monkeypatch):
     monkeypatch.setitem(sys.modules, "xarm.wrapper", None)
     with pytest.raises(DeviceError, match=r"uv sync --extra xarm"):
         SdkXArmLink("10.0.0.2", 6).connect()
+
+
+def test_the_arms_own_joint_limits_narrow_the_urdfs_before_any_command():
+    xi1305 = [(-6.28, 6.28), (-2.042035, 2.024581), (-3.822271, 0.174532), (-6.28, 6.28), (-1.692969, 3.14),
+              (-6.28, 6.28)]
+    link = LinkDouble(table=xi1305)
+    a = arm(link)
+    a.connect()
+    assert a.limits.upper[1] == pytest.approx(2.024581) and a.limits.upper[2] == pytest.approx(0.174532)
+    assert a.limits.lower[0] == pytest.approx(-3.11018)  # the URDF's, where it is the narrower
+    q = np.array(HOME)
+    q[2] = 0.18  # inside the URDF's 0.19198, past this arm's 0.174532
+    with pytest.raises(DeviceError, match=r"outside the joint limits: joint3=0.1800 not in \[-3.1102, 0.1745\]"):
+        a.send(cmd(q))
+    assert not [c for c in link.calls if c[0] == "servo_angle_j"]

@@ -12,7 +12,7 @@ import pytest
 from teleprev.clock import SessionClock
 from teleprev.devices import DeviceContext, DeviceError, DeviceRunner
 from teleprev.emulators import xarm_wire as wire
-from teleprev.emulators.xarm_controller import REPLY_TIMEOUT_S, XArmController
+from teleprev.emulators.xarm_controller import XArmController
 from teleprev.messages import JointSample
 from teleprev_devices.xarm import XArm, XArmSettings
 from tests.helpers.hardware import CommandStream, EventLog
@@ -30,7 +30,6 @@ class Session:
 
     def __init__(self, box, **settings):
         self.clock = SessionClock()
-        settings = {"reply_timeout_s": REPLY_TIMEOUT_S, **settings}  # as the emulator's rig keys give it
         self.arm = XArm("arm", XArmSettings(host=box.host, **settings), DeviceContext(self.clock))
         self.log = EventLog()
         self.runner = DeviceRunner(self.arm, self.log.sink, self.clock, reconnect_s=0.1).start()
@@ -58,8 +57,9 @@ def test_a_servo_session_through_the_sdk(box, session):
     assert session.log.states >= 80 and session.log.count("error") == 0
     assert box.faults == [] and not box.unknown  # nothing the controller refused or did not know
     assert (box.mode, box.enabled) == (wire.SERVO_MODE, True) and box.state == wire.MOVING
-    for register in (wire.MOTION_EN, wire.SET_MODE, wire.SET_STATE, wire.GET_JOINT_POS, wire.MOVE_SERVOJ):
+    for register in (wire.MOTION_EN, wire.SET_MODE, wire.SET_STATE, wire.GET_ERROR, wire.MOVE_SERVOJ):
         assert box.requests[register] > 0, register
+    assert box.requests[wire.GET_JOINT_POS] == 0  # joint states come from the 30003 report, not from requests
     # each target is taken at once, and the state read back is the controller's
     assert np.allclose(box.commands[-1].target, box.angles)
     assert np.allclose(session.log.last_state.positions, box.angles, atol=0.02)
@@ -70,8 +70,8 @@ def test_a_servo_session_through_the_sdk(box, session):
     ("joint_limit", "controller error 23: Joints Angle Exceed Limit"),
     ("estop", "controller error 1: The Emergency Stop Button on the xArm Controller is pushed in"),
     ("drop", "xArm controller"),  # a reply that never comes, or the connection seen closed: either says so
-    ("silent_report", "report stream (port 30002) sent nothing for 0.6 s"),
-    ("slow_replies", f"no reply within {REPLY_TIMEOUT_S:g} s (SDK code 3)"),
+    ("silent_report", "report stream (port 30003) sent nothing for 0.6 s"),
+    ("slow_replies", "no reply within 0.1 s (SDK code 3)"),
 ])
 def test_a_fault_is_one_line_an_error_event_and_the_commands_stop(box, session, fault, said):
     log = session.log
@@ -95,15 +95,15 @@ def test_a_fault_is_one_line_an_error_event_and_the_commands_stop(box, session, 
     assert box.requests[wire.CLEAN_ERR] == 0
 
 
-def sdk_servo(box) -> XArmAPI:
-    api = XArmAPI(box.host, is_radian=True)
+def sdk_servo(box, **options) -> XArmAPI:
+    api = XArmAPI(box.host, is_radian=True, **options)
     assert api.connected
     assert (api.motion_enable(True), api.set_mode(1), api.set_state(0)) == (0, 0, 0)
     return api
 
 
 def test_the_controller_faults_on_a_target_past_its_limits(box):
-    api = sdk_servo(box)
+    api = sdk_servo(box, check_joint_limit=False)  # the SDK's own check would refuse a target past the table (-8)
     try:
         q = list(box.angles)
         q[1] += 0.15  # 0.15 rad at once: at least 5 rad/s (over 30 ms at most), past joint2's 3.14 rad/s
@@ -113,7 +113,7 @@ def test_the_controller_faults_on_a_target_past_its_limits(box):
         box.operator_clear()
         assert (api.motion_enable(True), api.set_state(0)) == (0, 0)
         q = list(box.angles)
-        q[0] = 3.12  # past the URDF's 3.11 rad (the SDK's own check allows 2 pi)
+        q[2] = 0.25  # past joint3's 0.191986 rad in the SDK's table for this series
         assert api.set_servo_angle_j(q, is_radian=True) == 1
         assert api.get_err_warn_code() == (0, [wire.JOINT_LIMIT, 0])
         # xarm.arm connecting now says what stopped the arm, and leaves the error for the operator
