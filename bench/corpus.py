@@ -68,12 +68,12 @@ def record_eval_sessions(folder: Path, seconds: float) -> None:
         rec = LiveSession(RecordOptions(out=path))
         rec.start()
         try:
-            rec.loop.control("start", task="pick_place")
+            rec.loop.start_episode("pick_place")
             time.sleep(2.0)
-            rec.loop.control("mode", mode="execute", reason="bench")
+            rec.loop.engage("bench")
             time.sleep(seconds - 2.0)
-            rec.loop.control("mode", mode="preview", reason="bench")
-            rec.loop.control("stop")
+            rec.loop.to_preview("bench")
+            rec.loop.stop_episode()
         finally:
             rec.stop()
         recorded.append(path)

@@ -35,15 +35,15 @@ def _record(path: Path, seconds: float = 3.0, engage_after: float = 0.5) -> None
     rec = LiveSession(RecordOptions(out=path, rig=SIM_RIG, task="pick_place"))
     rec.start()
     try:
-        rec.loop.control("start", task="pick_place")
+        rec.loop.start_episode("pick_place")
         time.sleep(engage_after)
         end = time.monotonic() + seconds - engage_after
         while time.monotonic() < end:
             if rec.loop.stats.engages == 0:
-                rec.loop.control("mode", mode="execute", reason="bench")
+                rec.loop.engage("bench")
             time.sleep(min(0.25, max(0.0, end - time.monotonic())))
-        rec.loop.control("mode", mode="preview", reason="bench")
-        rec.loop.control("stop")
+        rec.loop.to_preview("bench")
+        rec.loop.stop_episode()
     finally:
         rec.stop()
 

@@ -110,7 +110,7 @@ def session_figures(folder: Path, seconds: float) -> dict:
     rec = LiveSession(RecordOptions(out=path, rig=default_rig_path(), task="pick_place"))
     rec.start()
     try:
-        rec.loop.control("start", task="pick_place")
+        rec.loop.start_episode("pick_place")
         time.sleep(seconds)
     finally:
         rec.stop()

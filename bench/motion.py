@@ -39,13 +39,13 @@ def record(out: Path, rig: Path | None, task: str, seconds: float) -> Path:
     rec = LiveSession(RecordOptions(out=out, rig=rig, task=task))
     rec.start()
     try:
-        rec.loop.control("start", task=task)
+        rec.loop.start_episode(task)
         time.sleep(2.0)
-        rec.loop.control("mode", mode="execute", reason="bench")
+        rec.loop.engage("bench")
         time.sleep(seconds - 4.0)
-        rec.loop.control("mode", mode="preview", reason="bench")
+        rec.loop.to_preview("bench")
         time.sleep(2.0)
-        rec.loop.control("stop")
+        rec.loop.stop_episode()
     finally:
         rec.stop()
     return out

@@ -287,7 +287,7 @@ def sync_error(tmp: Path, seconds: float) -> dict:
     path = tmp / "sync.mcap"
     rec = LiveSession(RecordOptions(out=path, rig=default_rig_path().parent / "sim_gripper.toml"))
     rec.start()
-    rec.loop.control("start", task="pick_place")
+    rec.loop.start_episode("pick_place")
     _time.sleep(seconds)
     rec.stop()
     truth = rec.context.shared["sim.truth"]

@@ -45,12 +45,12 @@ def main() -> None:
         rec.start()
         try:
             for _ in range(2):
-                rec.loop.control("start", task="pick_place")
+                rec.loop.start_episode("pick_place")
                 time.sleep(2.0)
-                rec.loop.control("mode", mode="execute", reason="bench")
+                rec.loop.engage("bench")
                 time.sleep(seconds / 2 - 2.0)
-                rec.loop.control("mode", mode="preview", reason="bench")
-                rec.loop.control("stop")
+                rec.loop.to_preview("bench")
+                rec.loop.stop_episode()
         finally:
             rec.stop()
         load = common.Load(args.busy).__enter__()  # left at the end of the fixtures' evals below

@@ -4,6 +4,8 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
+from teleprev.live.controls import DiscardEpisode, MarkOutcome, StartEpisode, StopEpisode
+
 
 @dataclass
 class EpisodeTracker:
@@ -11,6 +13,16 @@ class EpisodeTracker:
     active: bool = False
     task: str = ""
     started_ns: int = 0
+
+    def apply(self, control: StartEpisode | StopEpisode | DiscardEpisode | MarkOutcome, t_ns: int) -> list[dict]:
+        """The events of an episode control carried out at t_ns (a start without a task: the last one's)."""
+        if isinstance(control, StartEpisode):
+            return self.start(control.task or self.task or "", t_ns)
+        if isinstance(control, StopEpisode):
+            return self.stop(t_ns)
+        if isinstance(control, DiscardEpisode):
+            return self.discard(t_ns)
+        return self.outcome(control.success)
 
     def start(self, task: str, t_ns: int) -> list[dict]:
         """Events that start a new episode (stopping the running one first)."""

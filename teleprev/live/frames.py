@@ -8,9 +8,10 @@ from __future__ import annotations
 
 import numpy as np
 
-from teleprev.messages import Transform
+from teleprev.messages import JointSample, Transform, TransformsSample
 from teleprev.retarget.calibration import Calibration
 from teleprev.rig import Rig, SensorFrame
+from teleprev.robot.frames import FramePublisher
 from teleprev.robot.model import RobotModel
 from teleprev.transforms import matrix_to_quat, rpy_to_matrix
 from teleprev.errors import ConfigError
@@ -51,3 +52,29 @@ def optical_look_at(eye: np.ndarray, target: np.ndarray, where: str) -> np.ndarr
     right /= np.linalg.norm(right)
     down = np.cross(forward, right)
     return np.stack([right, down, forward], axis=1)
+
+
+class RobotFrames:
+    """The robot's /tf from its measured joints, for the session loop: one sample per arm state sample (at
+    most one per `period_ns`), stamped with its acquisition time so that the robot lines up with the
+    images; the end effector at its latest measured state."""
+
+    def __init__(self, publisher: FramePublisher, period_ns: int = 0):
+        self.publisher = publisher
+        self.period_ns = period_ns
+        self._last_ns = 0
+
+    def sample(self, driver, arm_state) -> TransformsSample | None:
+        """The frames for this arm state sample of a PipelineDriver's arm, or None (none due, or no state)."""
+        if arm_state.stamp_ns - self._last_ns < self.period_ns:
+            return None
+        pipeline, model = driver.pipeline, self.publisher.model
+        arm = pipeline.measured(arm_state, pipeline.arm_names) if isinstance(arm_state, JointSample) else None
+        if arm is None:
+            return None
+        self._last_ns = arm_state.stamp_ns
+        joints = dict(zip(pipeline.arm_names, arm))
+        eff = pipeline.measured(driver.latest.get(driver.topics.effector), pipeline.effector_names)
+        if eff is not None and pipeline.effector_names[0] in model.joint_index:
+            joints.update(zip(pipeline.effector_names, eff))
+        return self.publisher.sample(model.vector(joints), arm_state.stamp_ns)

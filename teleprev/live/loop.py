@@ -8,14 +8,16 @@ operator's controls (mode switches, episodes). Because the loop is the only plac
 decided, replaying a session's raw streams in log-time order meets the pipeline with exactly the inputs
 it met live.
 
-The commands do not wait for this loop: the sender samples them on its own clock, in its own process. A
-relay thread here takes each tick it reports, passes its commands to the arm and the end effector (the
-actuators' `send`), and queues the tick for the loop to record (/command/arm, /command/hand and
-/command/tick, stamped with the instant the sender sent them).
+The loop thread only orders and dispatches: the controls are typed messages (teleprev/live/controls.py)
+queued among the samples; whether execute may be engaged is the ExecuteGate's to say
+(teleprev/live/gate.py); the commands do not wait for this loop: the sender samples them on its own clock,
+in its own process, and the CommandRelay's thread (teleprev/live/relay.py) passes each tick's commands to
+the arm and the end effector at once, then queues the tick for the loop to record (/command/arm,
+/command/hand and /command/tick, stamped with the instant the sender sent them).
 
 After a device fails, nothing engages by itself: the session goes back to preview (an actuator that
 failed: nothing more is sent at once, its controller has stopped it; another device: the commands brake to
-rest), records why, and refuses an unattended engage until the operator engages with a key.
+rest), records why, and the gate refuses an unattended engage until the operator engages with a key.
 
 The terminal preview reads `snapshot`, which the loop replaces (never mutates) after every change.
 """
@@ -35,10 +37,13 @@ import numpy as np
 from teleprev.devices.contract import Actuator
 from teleprev.messages import Event, ImageSample, JointSample, Logged, PoseSample, Sample
 from teleprev.pipeline.driver import PipelineDriver
-from teleprev.pipeline.planner import ModeUpdate
 from teleprev import topics
 from teleprev.clock import SessionClock
+from teleprev.live.controls import (Control, DiscardEpisode, Engage, EStop, Halt, Hold, MarkOutcome, OperatorNote,
+                                    Release, StartEpisode, StopEpisode, ToPreview, UNATTENDED)
 from teleprev.live.episodes import EpisodeTracker
+from teleprev.live.gate import ExecuteGate, GateState
+from teleprev.live.relay import CommandRelay
 from teleprev.live.thread_priority import raise_this_thread
 
 _STOP = object()
@@ -87,6 +92,38 @@ class LoopStats:
     ticks: int = 0
     engages: int = 0  # accepted switches to execute
 
+    def count(self, topic: str, t_ns: int, payload) -> None:
+        """One sample of `topic` logged at t_ns."""
+        counter = self.streams.get(topic)
+        if counter is None:
+            counter = self.streams[topic] = StreamCounter(first_ns=t_ns)
+        counter.count += 1
+        counter.last_ns = t_ns
+        counter.latency_ns = t_ns - getattr(payload, "stamp_ns", t_ns)
+
+
+class LoopInbox:
+    """The one queue the session loop takes everything from, in arrival order: samples from the device
+    threads (never blocking: a full queue drops the sample and counts it), controls (never dropped), the
+    sender's ticks. Made before the loop, so that the device runners (whose ports the loop sends through)
+    can be given its `sink`."""
+
+    def __init__(self, size: int = 4096):
+        self.queue: queue.Queue = queue.Queue(maxsize=size)
+        self.dropped: Counter = Counter()  # samples there was no room for, per topic
+
+    def sink(self, sample: Sample, receive_ns: int) -> None:
+        try:
+            self.queue.put_nowait((receive_ns, sample))
+        except queue.Full:
+            self.dropped[sample.topic] += 1
+
+    def put(self, receive_ns: int | None, item) -> None:
+        self.queue.put((receive_ns, item))
+
+    def backlog(self) -> int:
+        return self.queue.qsize()
+
 
 class SessionLoop:
     def __init__(
@@ -94,119 +131,112 @@ class SessionLoop:
         clock: SessionClock,
         log: Callable[[Logged], Any],
         driver: PipelineDriver | None = None,
+        *,
+        inbox: LoopInbox | None = None,
         actuators: dict[str, Actuator] | None = None,
-        frames=None,
-        tf_period_ns: int = 0,
-        queue_size: int = 4096,
-        on_episode_start: Callable[[str], None] | None = None,
         sender=None,
+        frames=None,
+        on_episode_start: Callable[[str], None] | None = None,
     ):
-        """`log` receives every message to record (Recorder.log); `actuators` maps "arm" and "hand" to the
-        ActuatorPorts that pass commands on; `frames` (a FramePublisher) turns measured joints into /tf;
-        `sender` (a started CommandSender) makes the commands of a format 4 pipeline."""
+        """`log` receives every message to record (Recorder.log); `inbox` the queue the device runners were
+        given the `sink` of (default: a new one); `actuators` maps "arm" and "hand" to the ActuatorPorts
+        that pass commands on; `sender` (a CommandSender, started before this loop) makes the commands of a
+        format 4 pipeline; `frames` (teleprev/live/frames.py: RobotFrames) turns measured joints into /tf."""
         self.clock = clock
         self._log = log
         self.driver = driver
-        self.actuators = actuators or {}
+        self.inbox = inbox or LoopInbox()
+        self.sink = self.inbox.sink  # for device threads (any thread): never blocks
+        self.backlog = self.inbox.backlog  # samples and controls waiting (the loop is behind when this grows)
+        names = (driver.pipeline.arm_names, driver.pipeline.effector_names) if driver is not None else ((), ())
+        self.relay = CommandRelay(clock, actuators if actuators is not None else {}, sender, names,
+                                  on_tick=self.inbox.put, on_gone=lambda: self.halt("the command sender stopped"))
         self.frames = frames
-        self.tf_period_ns = tf_period_ns
         self.on_episode_start = on_episode_start
-        self.stats = LoopStats()
+        self.stats = LoopStats(dropped=self.inbox.dropped, commands_sent=self.relay.sent,
+                               command_errors=self.relay.errors)
         self.episodes = EpisodeTracker()
+        self.gate = ExecuteGate()
         self.snapshot = LoopSnapshot(session_started_ns=clock.now_ns())
         self._camera_topic: str | None = None
-        self._queue: queue.Queue = queue.Queue(maxsize=queue_size)
         self._last_ns = 0
-        self._last_tf_ns = 0
         self._thread: threading.Thread | None = None
-        self.halted = ""  # why the session may no longer execute (e.g. the recording failed)
         self.failure = ""  # why the loop no longer runs the pipeline (it raised), or ""
-        self.sender = sender
-        self.sender_active = False  # the sender is commanding (executing, or braking to rest)
-        self._mode_seq = 0  # the last mode switch passed to the sender
-        self._relay_thread: threading.Thread | None = None
-        self._stopping = False
-        self.fault = ""  # why the session stays in preview until the operator engages (a device failed)
-        self._fault_told = False
         self.priority = ""  # the loop thread's nice value once it runs, or why it could not be raised
-        self.holds: dict[str, str] = {}  # why execute is refused for now, by who asked (a timed episodes' reset)
         self.taps: list[Callable[[Logged], Any]] = []  # each sample as logged, on this thread (e.g. a policy's observations)
+        self._handlers: dict[type, Callable[[Any, int], str | None]] = {
+            Engage: self._engage, ToPreview: self._to_preview, EStop: self._estop, Halt: self._halt,
+            Hold: self._hold, Release: self._release, StartEpisode: self._episode, StopEpisode: self._episode,
+            DiscardEpisode: self._episode, MarkOutcome: self._episode, OperatorNote: self._note,
+        }
 
-    # ---- producers (any thread) ----------------------------------------------------------------
-    def sink(self, sample: Sample, receive_ns: int) -> None:
-        """For device threads: never blocks; a full queue drops the sample and counts it."""
-        try:
-            self._queue.put_nowait((receive_ns, sample))
-        except queue.Full:
-            self.stats.dropped[sample.topic] += 1
+    # ---- controls (any thread): queued for the loop thread, never dropped --------------------------
+    def send(self, control: Control) -> None:
+        self.inbox.put(None, control)
 
-    def control(self, action: str, **data) -> None:
-        """For the operator (keys) and scripts: 'mode' (mode=), 'start' (task=), 'stop', 'discard',
-        'outcome' (success=), 'operator' (event=, detail=), 'halt' (why=: back to preview, which brakes
-        the robot to rest, and execute is refused from then on), 'hold' (why=, source=: the same until a
-        'hold' from that source with why="" lifts it; execute is refused while any source holds: timed
-        episodes' resets, a policy that has not acted yet in its episode). 'start', 'stop' and 'discard' take at_ns=: the
-        session-clock instant the episode event is stamped with (when a schedule or a key asked for it,
-        however late the loop gets to it; default: when the loop does). Controls are never dropped."""
-        self._queue.put((None, (action, data)))
+    def engage(self, reason: str = "key", unattended: bool = False) -> None:
+        """To execute; `unattended` (a script's engage, recorded as "script") is refused after a device
+        fault until the operator engages."""
+        self.send(Engage(UNATTENDED if unattended else reason, unattended))
 
-    def backlog(self) -> int:
-        """Samples and controls waiting for the loop thread (it is behind when this grows)."""
-        return self._queue.qsize()
+    def to_preview(self, reason: str = "key") -> None:
+        self.send(ToPreview(reason))
+
+    def estop(self) -> None:
+        self.send(EStop())
+
+    def halt(self, why: str) -> None:
+        """Back to preview (the robot brakes to rest), and execute is refused from then on."""
+        self.send(Halt(why))
+
+    def hold(self, source: str, why: str, reason: str = "hold") -> None:
+        """Back to preview, and execute is refused until `source` releases its hold."""
+        if not why:
+            raise ValueError("a hold says why execute is refused (release(source) lifts it)")
+        self.send(Hold(source, why, reason))
+
+    def release(self, source: str) -> None:
+        self.send(Release(source))
+
+    def start_episode(self, task: str = "", at_ns: int | None = None) -> None:
+        self.send(StartEpisode(task, at_ns))
+
+    def stop_episode(self, at_ns: int | None = None) -> None:
+        self.send(StopEpisode(at_ns))
+
+    def discard_episode(self, at_ns: int | None = None) -> None:
+        self.send(DiscardEpisode(at_ns))
+
+    def mark_outcome(self, success: bool) -> None:
+        self.send(MarkOutcome(success))
+
+    def note(self, event: str, detail: str = "") -> None:
+        self.send(OperatorNote(event, detail))
 
     # ---- lifecycle -----------------------------------------------------------------------------
     def start(self) -> None:
         self._thread = threading.Thread(target=self._run, name="session-loop", daemon=True)
         self._thread.start()
-        if self.sender is not None:
-            self._relay_thread = threading.Thread(target=self._relay, name="command-relay", daemon=True)
-            self._relay_thread.start()
+        self.relay.start()
 
     def stop(self, timeout: float = 5.0) -> None:
         """Stop the sender, process everything queued so far (its last ticks too), then stop."""
-        self._stopping = True
-        if self.sender is not None:
-            self.sender.stop()
-            if self._relay_thread:
-                self._relay_thread.join(timeout)
-        self._queue.put((None, _STOP))
+        self.relay.stop(timeout)
+        self.inbox.put(None, _STOP)
         if self._thread:
             self._thread.join(timeout)
 
-    # ---- the relay thread ------------------------------------------------------------------------
-    def _relay(self) -> None:
-        """The sender's ticks: their commands to the actuators at once, then to the loop to record."""
-        from teleprev.live.sender import SentTick
-
-        while True:
-            items = self.sender.receive(0.2)
-            if items is None:  # the sender has gone
-                self.sender_active = False
-                if not self._stopping:
-                    self.control("halt", why="the command sender stopped")
-                return
-            for item in items:
-                if not isinstance(item, SentTick):
-                    continue
-                tick = item.tick
-                if tick.seq >= self._mode_seq:  # (a tick from before the last mode switch says nothing now)
-                    self.sender_active = tick.active
-                received = self.clock.now_ns()
-                for kind, names, q, v in (("arm", self._arm_names, tick.arm, tick.arm_v),
-                                          ("hand", self._effector_names, tick.hand, tick.hand_v)):
-                    if q is not None:
-                        self._send(kind, JointSample(tick.t_ns, names, q, v))
-                self._queue.put((received, item))
-
+    # ---- the loop thread -------------------------------------------------------------------------
     def _run(self) -> None:
         self.priority = raise_this_thread()
+        get = self.inbox.queue.get
         while True:
-            receive_ns, item = self._queue.get()
+            receive_ns, item = get()
             if item is _STOP:
                 return
             try:
                 if receive_ns is None:
-                    self._control(*item)
+                    self._apply(item)
                 elif isinstance(item, Sample):
                     self._sample(item, receive_ns)
                 else:
@@ -223,12 +253,11 @@ class SessionLoop:
         try:
             self._event(topics.OPERATOR, "teleprev.OperatorEvent",
                         {"event": "loop_failed", "detail": "".join(traceback.format_exception(exc))})
-            self._control("halt", {"why": self.failure})
+            self._apply(Halt(self.failure))
         except Exception:
-            if self.sender is not None:  # the halt itself failed: stop sending at once
-                self.sender.stop()
+            if self.relay.sender is not None:  # the halt itself failed: stop sending at once
+                self.relay.sender.stop()
 
-    # ---- the loop thread -------------------------------------------------------------------------
     def _stamp(self, receive_ns: int | None = None) -> int:
         t = self.clock.now_ns() if receive_ns is None else receive_ns
         self._last_ns = max(t, self._last_ns + 1)
@@ -252,12 +281,7 @@ class SessionLoop:
         self._log(msg)
         for tap in self.taps:
             tap(msg)
-        counter = self.stats.streams.get(sample.topic)
-        if counter is None:
-            counter = self.stats.streams[sample.topic] = StreamCounter(first_ns=t)
-        counter.count += 1
-        counter.last_ns = t
-        counter.latency_ns = t - getattr(payload, "stamp_ns", t)
+        self.stats.count(sample.topic, t, payload)
         if sample.topic == topics.DEVICE_EVENT and payload.data.get("event") == "error":
             self._device_failed(payload.data)
         if isinstance(payload, ImageSample) and self._camera_topic in (None, sample.topic):
@@ -267,8 +291,10 @@ class SessionLoop:
             return
         started = time.perf_counter_ns()
         out = self.driver.feed(msg)
-        if sample.topic == self.driver.topics.arm:
-            self._publish_frames(payload)
+        if self.frames is not None and sample.topic == self.driver.topics.arm:
+            tf = self.frames.sample(self.driver, payload)
+            if tf is not None:
+                self._log(Logged(topics.TF, self._stamp(), tf))
         if out.result is None:
             return
         if len(self.stats.step_ns) < 100_000:
@@ -276,8 +302,8 @@ class SessionLoop:
         self._pass_updates()
         for topic, payload in out.logged:
             self._log(Logged(topic, self._stamp(), payload))
-        self._send("arm", out.arm_command)
-        self._send("hand", out.effector_command)
+        self.relay.send("arm", out.arm_command)
+        self.relay.send("hand", out.effector_command)
         pipeline, latest = self.driver.pipeline, self.driver.latest
         self.snapshot = replace(
             self.snapshot, mode=self.driver.mode, step=out.result,
@@ -288,15 +314,8 @@ class SessionLoop:
 
     def _pass_updates(self) -> None:
         """The planner's updates the driver made (format 4), to the sender."""
-        if self.driver is not None and self.sender is not None:
-            for update in self.driver.take_updates():
-                if isinstance(update, ModeUpdate):
-                    self._mode_seq = update.seq
-                    if update.mode == "halt":
-                        self.sender_active = False  # the planner sends nothing more from its next tick
-                    elif update.mode == "execute":
-                        self.sender_active = True
-                self.sender.send(update)
+        if self.relay.sender is not None:
+            self.relay.pass_updates(self.driver.take_updates())
 
     def _tick(self, item, receive_ns: int) -> None:
         """Record one of the sender's ticks: its commands and which updates it had (CommandTick)."""
@@ -305,21 +324,14 @@ class SessionLoop:
         stats.ticks += 1
         if len(stats.late_ns) < 1_000_000:
             stats.late_ns.append(item.late_ns)
-        for topic, names, q, v in ((topics.COMMAND_ARM, self._arm_names, tick.arm, tick.arm_v),
-                                   (topics.COMMAND_HAND, self._effector_names, tick.hand, tick.hand_v)):
+        relay = self.relay
+        for topic, names, q, v in ((topics.COMMAND_ARM, relay.arm_names, tick.arm, tick.arm_v),
+                                   (topics.COMMAND_HAND, relay.effector_names, tick.hand, tick.hand_v)):
             if q is not None:
                 self._log(Logged(topic, self._stamp(receive_ns), JointSample(tick.t_ns, names, q, v)))
         data = {"seq": tick.seq, "late_ms": item.late_ns / 1e6, "flags": list(tick.flags), "active": tick.active}
         self._log(Logged(topics.COMMAND_TICK, self._stamp(), Event(tick.t_ns, "teleprev.CommandTick", data)))
         self.snapshot = replace(self.snapshot, commands_sent=sum(stats.commands_sent.values()))
-
-    @property
-    def _arm_names(self) -> tuple[str, ...]:
-        return self.driver.pipeline.arm_names
-
-    @property
-    def _effector_names(self) -> tuple[str, ...]:
-        return self.driver.pipeline.effector_names
 
     def _device_failed(self, data: dict) -> None:
         """A device failed: count it, tell the operator, go back to preview (a recorded mode switch, so a
@@ -329,108 +341,85 @@ class SessionLoop:
         name = str(data.get("device", ""))
         self.stats.device_failures[name] += 1
         message = f"device {name} failed: {data.get('message', '')}"
-        actuator = name in {getattr(p, "name", None) for p in self.actuators.values()}
-        self.fault, self._fault_told = message, False
-        if self.driver is not None and (self.driver.mode == "execute" or (actuator and self.sender_active)):
-            switch = {"mode": "preview", "reason": f"device {name} failed"}
-            if actuator:
-                switch["halt"] = True
-            self._control("mode", switch)
+        actuator = name in {getattr(p, "name", None) for p in self.relay.actuators.values()}
+        self.gate.device_failed(message)
+        if self.driver is not None and (self.driver.mode == "execute" or (actuator and self.relay.active)):
+            self._apply(ToPreview(f"device {name} failed", halt=actuator))
             message += ("; nothing more is sent to the robot" if actuator else "; the robot brakes to rest") + \
                 ", back in PREVIEW (press space to engage again)"
-        self.snapshot = replace(self.snapshot, message=message, fault=self.fault)
+        self.snapshot = replace(self.snapshot, message=message, fault=self.gate.fault)
 
-    def _send(self, kind: str, command: JointSample | None) -> None:
-        """Through an ActuatorPort: never raises; a device that is down or refuses is counted, not retried."""
-        if command is None:
+    # ---- controls, on the loop thread ------------------------------------------------------------
+    def _apply(self, control: Control) -> None:
+        """Carry out one control; each handler returns the operator's message ("": none new), or None
+        when nothing changed (the preview's snapshot then stays as it is)."""
+        message = self._handlers[type(control)](control, self.clock.now_ns())
+        if message is None:
             return
-        port = self.actuators.get(kind)
-        if port is None:
-            return
-        if port.send(command):
-            self.stats.commands_sent[kind] += 1
-        else:
-            self.stats.command_errors[kind] += 1
-
-    def _publish_frames(self, arm_state) -> None:
-        """/tf for every arm state sample (at most one per tf_period_ns), stamped with its acquisition time
-        so that the robot lines up with the images; the end effector at its latest measured state."""
-        if self.frames is None or arm_state.stamp_ns - self._last_tf_ns < self.tf_period_ns:
-            return
-        pipeline, model = self.driver.pipeline, self.frames.model
-        arm = pipeline.measured(arm_state, pipeline.arm_names) if isinstance(arm_state, JointSample) else None
-        if arm is None:
-            return
-        self._last_tf_ns = arm_state.stamp_ns
-        joints = dict(zip(pipeline.arm_names, arm))
-        eff = pipeline.measured(self.driver.latest.get(self.driver.topics.effector), pipeline.effector_names)
-        if eff is not None and pipeline.effector_names[0] in model.joint_index:
-            joints.update(zip(pipeline.effector_names, eff))
-        self._log(Logged(topics.TF, self._stamp(), self.frames.sample(model.vector(joints), arm_state.stamp_ns)))
-
-    def _control(self, action: str, data: dict) -> None:
-        now = self.clock.now_ns()
-        message = ""
-        if action == "halt":
-            self.halted = data["why"]
-            action, data, message = "mode", {"mode": "preview", "reason": "halt"}, f"{self.halted}: robot stopped"
-        elif action == "hold":
-            source, why = data.get("source", "schedule"), data.get("why", "")
-            if why:
-                self.holds[source] = why
-            else:
-                self.holds.pop(source, None)
-            action, data = ("mode", {"mode": "preview", "reason": data.get("reason", "hold")}) if why else ("", {})
-        if action == "mode":
-            mode = data["mode"]
-            t = self._stamp(now)
-            if self.driver is not None and mode == self.driver.mode and not data.get("halt") and not self.halted:
-                return  # already in it (a retried engage accepted meanwhile): nothing to switch or record
-            if self.halted and mode == "execute":
-                refused = self.halted
-            elif self.holds and mode == "execute":
-                refused = "; ".join(self.holds.values())
-            elif self.fault and mode == "execute" and data.get("reason") == "script":
-                refused = f"{self.fault} (an unattended session does not engage again after a fault)"
-                if not self._fault_told:  # why it stays in preview, once per fault
-                    self._fault_told = True
-                    self._event(topics.OPERATOR, "teleprev.OperatorEvent", {"event": "engage_refused", "detail": refused}, now)
-            else:
-                halt = bool(data.get("halt"))
-                refused = self.driver.request_mode("estop" if halt else mode, t) if self.driver else "no pipeline"
-            if refused:
-                message = f"cannot switch to {mode}: {refused}"
-            else:
-                # An e-stop is recorded as a switch to preview for the reason "estop" (a replay repeats it).
-                switch = {"mode": "preview", "reason": "estop"} if mode == "estop" else {"mode": mode, "reason": data.get("reason", "key")}
-                if data.get("halt"):
-                    switch["halt"] = True
-                self._log(Logged(topics.MODE, t, Event(t, "teleprev.ModeSwitch", switch)))
-                self._pass_updates()
-                if mode == "execute":
-                    self.stats.engages += 1
-                    self.fault = ""  # the operator engaged again
-        elif action in ("start", "stop", "discard", "outcome"):
-            tracker = self.episodes
-            at = data.get("at_ns")
-            at = now if at is None else int(at)
-            if action == "start":
-                task = data.get("task") or tracker.task or ""
-                events = tracker.start(task, at)
-                if self.on_episode_start:
-                    self.on_episode_start(task)
-            elif action == "stop":
-                events = tracker.stop(at)
-            elif action == "discard":
-                events = tracker.discard(at)
-            else:
-                events = tracker.outcome(bool(data.get("success", True)))
-            for e in events:
-                self._event(topics.EPISODE, "teleprev.EpisodeEvent", e, now, stamp_ns=at)
-        elif action == "operator":
-            self._event(topics.OPERATOR, "teleprev.OperatorEvent", {"event": data.get("event", ""), "detail": data.get("detail", "")}, now)
         self.snapshot = replace(
             self.snapshot, mode=self.driver.mode if self.driver else "preview", episode=self.episodes.index,
             episode_active=self.episodes.active, task=self.episodes.task, episode_started_ns=self.episodes.started_ns,
-            message=message or self.snapshot.message, fault=self.fault,
+            message=message or self.snapshot.message, fault=self.gate.fault,
         )
+
+    def _engage(self, c: Engage, now: int) -> str | None:
+        return self._switch("execute", c.reason, now, unattended=c.unattended)
+
+    def _to_preview(self, c: ToPreview, now: int) -> str | None:
+        return self._switch("preview", c.reason, now, halt=c.halt)
+
+    def _estop(self, c: EStop, now: int) -> str | None:
+        return self._switch("estop", "estop", now)
+
+    def _halt(self, c: Halt, now: int) -> str | None:
+        self.gate.halt(c.why)
+        refused = self._switch("preview", "halt", now)
+        return refused or f"{c.why}: robot stopped"
+
+    def _hold(self, c: Hold, now: int) -> str | None:
+        self.gate.hold(c.source, c.why)
+        return self._switch("preview", c.reason, now)
+
+    def _release(self, c: Release, now: int) -> str:
+        self.gate.release(c.source)
+        return ""
+
+    def _switch(self, mode: str, reason: str, now: int, halt: bool = False, unattended: bool = False) -> str | None:
+        """A mode switch through the gate and the pipeline, recorded (so that a replay makes it too) and
+        passed to the sender; returns why it was refused, "" when made, None when already in that mode."""
+        t = self._stamp(now)
+        halted = self.gate.state is GateState.HALTED
+        if self.driver is not None and mode == self.driver.mode and not halt and not halted:
+            return None  # already in it (a retried engage accepted meanwhile): nothing to switch or record
+        refusal = self.gate.refusal(unattended) if mode == "execute" else None
+        if refusal is not None:
+            if refusal.tell:  # why it stays in preview, once per fault
+                self._event(topics.OPERATOR, "teleprev.OperatorEvent", {"event": "engage_refused", "detail": refusal.why}, now)
+            refused = refusal.why
+        else:
+            refused = self.driver.request_mode("estop" if halt else mode, t) if self.driver else "no pipeline"
+        if refused:
+            return f"cannot switch to {mode}: {refused}"
+        # An e-stop is recorded as a switch to preview for the reason "estop" (a replay repeats it).
+        switch = {"mode": "preview", "reason": "estop"} if mode == "estop" else {"mode": mode, "reason": reason}
+        if halt:
+            switch["halt"] = True
+        self._log(Logged(topics.MODE, t, Event(t, "teleprev.ModeSwitch", switch)))
+        self._pass_updates()
+        if mode == "execute":
+            self.stats.engages += 1
+            self.gate.engaged()  # the operator engaged again
+        return ""
+
+    def _episode(self, c: StartEpisode | StopEpisode | DiscardEpisode | MarkOutcome, now: int) -> str:
+        at = now if getattr(c, "at_ns", None) is None else int(c.at_ns)
+        events = self.episodes.apply(c, at)
+        if isinstance(c, StartEpisode) and self.on_episode_start:
+            self.on_episode_start(self.episodes.task)
+        for e in events:
+            self._event(topics.EPISODE, "teleprev.EpisodeEvent", e, now, stamp_ns=at)
+        return ""
+
+    def _note(self, c: OperatorNote, now: int) -> str:
+        self._event(topics.OPERATOR, "teleprev.OperatorEvent", {"event": c.event, "detail": c.detail}, now)
+        return ""

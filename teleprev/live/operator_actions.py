@@ -10,28 +10,31 @@ def handle_key(recording, key: str, quit_flag: list) -> None:
     """What a key does to a recording (a LiveSession); q and Esc also append to `quit_flag`."""
     loop = recording.loop
     if key == " ":
-        loop.control("mode", mode="preview" if loop.snapshot.mode == "execute" else "execute")
+        if loop.snapshot.mode == "execute":
+            loop.to_preview()
+        else:
+            loop.engage()
     elif key == "x":  # e-stop: teleprev sends nothing more at once; the controller stops the robot itself
-        loop.control("mode", mode="estop", reason="estop")
+        loop.estop()
     elif key == "s":
-        loop.control("start", task=recording.task)
+        loop.start_episode(recording.task)
     elif key == "e":
-        loop.control("stop")
+        loop.stop_episode()
     elif key == "n":
-        loop.control("mode", mode="preview")
-        loop.control("start", task=recording.task)
+        loop.to_preview()
+        loop.start_episode(recording.task)
     elif key == "d":
-        loop.control("discard")
+        loop.discard_episode()
     elif key == "a":  # the running (or last) episode discarded, and recorded again from now
-        loop.control("mode", mode="preview")
-        loop.control("discard")
-        loop.control("start", task=recording.task)
+        loop.to_preview()
+        loop.discard_episode()
+        loop.start_episode(recording.task)
     elif key in ("y", "f"):
-        loop.control("outcome", success=key == "y")
+        loop.mark_outcome(key == "y")
     elif key == "r":
-        loop.control("operator", event="ready")
+        loop.note("ready")
     elif key in ("q", "\x1b"):
-        loop.control("mode", mode="preview")
+        loop.to_preview()
         quit_flag.append(True)
 
 

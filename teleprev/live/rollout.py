@@ -34,6 +34,7 @@ from teleprev.robot.model import load_robot
 
 DEFAULT_FPS = 30  # a recipe without fps and a rig without camera (as the export's)
 WAITING = "the policy has not acted yet in this episode"  # why an episode's engage waits
+POLICY = "policy"  # who holds execute back until then
 
 
 @dataclass
@@ -170,14 +171,13 @@ class Rollout:
         self.recording.loop.taps.append(self.latest)
         loop = self.recording.loop
         self.runner = PolicyRunner(policy, lambda: observe(plan.features, self.latest), self._deliver, plan.fps,
-                                   on_failure=lambda why: loop.control("halt", why=why),
-                                   on_acting=lambda: loop.control("hold", source="policy", why=""))
+                                   on_failure=loop.halt, on_acting=lambda: loop.release(POLICY))
         self.recording.context.task_listeners.append(self._new_episode)
 
     def _new_episode(self, task: str) -> None:
         """An episode starts: it executes only once the policy's own targets for it have been previewed (the
         targets of the episode before would otherwise pass for them), so execute waits for its first action."""
-        self.recording.loop.control("hold", source="policy", why=WAITING)
+        self.recording.loop.hold(POLICY, WAITING)
         self.runner.new_episode(self.recording.rig.task_text(task))
 
     def _deliver(self, action) -> None:

@@ -22,6 +22,7 @@ from teleprev.preview.dashboard import Dashboard
 from teleprev.preview.keys import KeyReader
 from teleprev.preview.robot_view import RobotView
 from teleprev.robot.model import load_robot
+from teleprev.live.controls import UNATTENDED, Control, Engage, StartEpisode, StopEpisode, ToPreview
 from teleprev.live.cues import Cues
 from teleprev.live.operator_actions import handle_key
 from teleprev.live.schedule import EpisodeTimes, Period, Schedule
@@ -121,7 +122,7 @@ class Engager:
 
     def open(self, now: float, until: float) -> None:
         self._before = self.loop.stats.engages
-        self.loop.control("mode", mode="execute", reason="script")
+        self.loop.engage(unattended=True)
         self.until, self._asked = until, now
 
     def close(self) -> None:
@@ -133,7 +134,7 @@ class Engager:
         if self.loop.stats.engages > self._before or now >= self.until:
             self.until = None  # engaged (this episode asks no more), or its window is over
         elif now - self._asked >= ENGAGE_RETRY_S:
-            self.loop.control("mode", mode="execute", reason="script")
+            self.loop.engage(unattended=True)
             self._asked = now
 
     def next_s(self) -> float | None:
@@ -154,28 +155,28 @@ def run_script(recording: LiveSession, duration: float, episodes: int, engage_af
     length = duration / max(episodes, 1)
     pacer = PreviewPacer(fps, loop.backlog)
     start = time.perf_counter()
-    plan = []  # (time offset, action, kwargs)
+    plan: list[tuple[float, Control]] = []  # (time offset, control)
     engager = Engager(loop)
     for k in range(max(episodes, 1)):
         t0 = k * length
-        plan.append((t0, "start", {"task": recording.task}))
+        plan.append((t0, StartEpisode(recording.task)))
         if engage_after is not None and engage_after < length:
-            plan.append((t0 + engage_after, "mode", {"mode": "execute", "reason": "script"}))
-        plan.append((t0 + length - 1e-3, "mode", {"mode": "preview", "reason": "script"}))
-        plan.append((t0 + length - 1e-3, "stop", {}))
+            plan.append((t0 + engage_after, Engage(UNATTENDED, unattended=True)))
+        plan.append((t0 + length - 1e-3, ToPreview(UNATTENDED)))
+        plan.append((t0 + length - 1e-3, StopEpisode()))
     if live:
         live.start()
     try:
         while True:
             elapsed = time.perf_counter() - start
             while plan and plan[0][0] <= elapsed:
-                _, action, kwargs = plan.pop(0)
-                if action == "mode" and kwargs["mode"] == "execute":
+                _, control = plan.pop(0)
+                if isinstance(control, Engage):
                     engager.open(elapsed, plan[0][0] if plan else elapsed)
                     continue
-                if action == "mode":
+                if isinstance(control, ToPreview):
                     engager.close()
-                loop.control(action, **kwargs)
+                loop.send(control)
             engager.poll(elapsed)
             if (elapsed >= duration and not plan) or recording.failure:
                 break
@@ -223,6 +224,7 @@ class TimedKeys:
 
 
 RESTING = "the robot rests between timed episodes (n: start the next one now)"  # why execute is refused
+SCHEDULE = "schedule"  # who holds execute back between timed episodes (and the reason the switch records)
 
 
 class TimedRun:
@@ -252,8 +254,8 @@ class TimedRun:
         if period.kind == "reset":
             self.cues.cue("reset")
             return
-        self.loop.control("hold", why="")
-        self.loop.control("start", task=self.recording.task, at_ns=period.start_ns)
+        self.loop.release(SCHEDULE)
+        self.loop.start_episode(self.recording.task, at_ns=period.start_ns)
         self.cues.cue(f"episode {period.number + 1}")
         after = self.plan.engage_after_s
         self.rest_ns = period.end_ns - self.lead_ns
@@ -264,7 +266,7 @@ class TimedRun:
         """Back to preview and refuse execute until the next episode (the robot brakes to rest)."""
         self.engager.close()
         self.engage_ns = self.rest_ns = None
-        self.loop.control("hold", why=RESTING, reason="schedule")
+        self.loop.hold(SCHEDULE, RESTING, reason=SCHEDULE)
 
     def end(self, at_ns: int | None = None, discard: bool = False) -> None:
         """End the current period at its planned end or early at at_ns; the next one begins."""
@@ -272,10 +274,13 @@ class TimedRun:
         at = period.end_ns if at_ns is None else at_ns
         if period.kind == "episode":
             self.rest()
-            self.loop.control("discard" if discard else "stop", at_ns=at)
+            if discard:
+                self.loop.discard_episode(at_ns=at)
+            else:
+                self.loop.stop_episode(at_ns=at)
             mark = None if discard else self.plan.mark(period.number)
             if mark is not None:
-                self.loop.control("outcome", success=mark)
+                self.loop.mark_outcome(mark)
         self.begin(self.schedule.advance(at_ns))
 
     def key(self, t_ns: int, key: str) -> None:
@@ -288,11 +293,11 @@ class TimedRun:
             if period.kind == "episode":
                 self.end(t_ns, discard=True)
             else:
-                self.loop.control("discard", at_ns=t_ns)  # the last episode (its reset goes on)
+                self.loop.discard_episode(at_ns=t_ns)  # the last episode (its reset goes on)
         elif key in ("q", "\x1b"):
             if period.kind == "episode":
                 self.rest()
-                self.loop.control("stop", at_ns=t_ns)
+                self.loop.stop_episode(at_ns=t_ns)
             self.quit = True
         elif key != "s":  # (s during an episode: it is running already)
             if key == "x":  # an e-stop: no episode engages by itself any more
@@ -383,7 +388,7 @@ def run_timed(recording: LiveSession, plan: EpisodeTimes, console: Console | Non
             if live:
                 live.stop()
             run.engager.close()
-            recording.loop.control("hold", why="")
+            recording.loop.release(SCHEDULE)
             cues.close()
     return stats
 

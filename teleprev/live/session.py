@@ -1,7 +1,7 @@
 """A recording in progress: the rig's devices, the pipeline, the session loop and the recorder, wired.
 
     with LiveSession(options) as rec:      # opens devices, starts threads
-        rec.loop.control("start", task="pour")
+        rec.loop.start_episode("pour")
         ...
     rec.summary                          # counts, drops, where the file is
 
@@ -29,8 +29,8 @@ from teleprev.robot.frames import FramePublisher
 from teleprev.robot.model import load_robot
 from teleprev import topics
 from teleprev.clock import SessionClock
-from teleprev.live.frames import sensor_frames
-from teleprev.live.loop import SessionLoop
+from teleprev.live.frames import RobotFrames, sensor_frames
+from teleprev.live.loop import LoopInbox, SessionLoop
 from teleprev.live.operator_actions import ACTION_KEYS, handle_key, operator_status
 from teleprev.live.schedule import PLAN_RECORD, EpisodeTimes
 from teleprev.messages import Logged, RobotDescription
@@ -116,14 +116,15 @@ class LiveSession:
         from teleprev.live.sender import CommandSender
         from teleprev.pipeline.planner import CommandPlanner
 
-        self.loop = SessionLoop(
-            self.clock, self._log, self.driver,
-            frames=FramePublisher(self.robot, sensor_frames(rig, self.robot, rig_calibration(rig))),
-            tf_period_ns=int(1e9 / rig.pipeline.tf_rate_hz) if rig.pipeline.tf_rate_hz > 0 else 0, queue_size=options.queue_size, on_episode_start=self._episode_started,
-        )
-        self.runners = {name: DeviceRunner(dev, self.loop.sink, self.clock) for name, dev in self.devices.items()}
-        self.loop.actuators = {kind: ActuatorPort(self.devices[first[kind]], self.runners[first[kind]]) for kind in ("arm", "hand")}
+        inbox = LoopInbox(options.queue_size)  # the device runners' sink, and the actuators' ports, before the loop
+        self.runners = {name: DeviceRunner(dev, inbox.sink, self.clock) for name, dev in self.devices.items()}
+        self.actuators = {kind: ActuatorPort(self.devices[first[kind]], self.runners[first[kind]]) for kind in ("arm", "hand")}
         self.sender = CommandSender(CommandPlanner.for_pipeline(self.pipeline), self.clock, rig.pipeline.command_rate_hz)
+        frames = FramePublisher(self.robot, sensor_frames(rig, self.robot, rig_calibration(rig)))
+        tf_period_ns = int(1e9 / rig.pipeline.tf_rate_hz) if rig.pipeline.tf_rate_hz > 0 else 0
+        self.loop = SessionLoop(self.clock, self._log, self.driver, inbox=inbox, actuators=self.actuators,
+                                sender=self.sender, frames=RobotFrames(frames, tf_period_ns),
+                                on_episode_start=self._episode_started)
         self.summary = None
         self._press = self._press_unattended
         # A device carrying the operator's controls (the XR page) acts on this recording and shows its status.
@@ -162,7 +163,7 @@ class LiveSession:
         """On the recorder's writer thread, the moment a write fails (the recorder has noted it, so
         `failure` says why): the robot brakes to rest and the preview says why; the session then ends
         with a non-zero exit."""
-        self.loop.control("halt", why=self.failure)
+        self.loop.halt(self.failure)
 
     @property
     def failure(self) -> str:
@@ -180,11 +181,11 @@ class LiveSession:
         start = time.monotonic()
         asked = False
         while time.monotonic() < start + timeout_s:
-            if self.driver.state.mode == "preview" and not self.loop.sender_active:
+            if self.driver.state.mode == "preview" and not self.loop.relay.active:
                 return True
             if not asked and self.driver.state.mode != "preview" and time.monotonic() > start + 0.25:
                 # no switch to preview was on its way (the caller's would have arrived by now): ask for one
-                self.loop.control("mode", mode="preview", reason="stop")
+                self.loop.to_preview("stop")
                 asked = True
             time.sleep(0.01)
         return False
@@ -230,7 +231,6 @@ class LiveSession:
 
     def start(self) -> "LiveSession":
         self.sender.start()  # forked first, before this session starts any thread
-        self.loop.sender = self.sender
         self.recorder.start()
         t = self.clock.now_ns()  # first in the file, so that Foxglove's URDF layer has the robot from the start
         self._log(Logged(topics.ROBOT_DESCRIPTION, t, RobotDescription(t, self.robot.urdf_path.read_text())))
@@ -238,7 +238,7 @@ class LiveSession:
         for runner in self.runners.values():
             runner.start()
         if self.options.practice:
-            self.loop.control("operator", event="practice_start")
+            self.loop.note("practice_start")
         return self
 
     def stop(self):
@@ -247,7 +247,7 @@ class LiveSession:
         self.settle()
         for runner in self.runners.values():
             runner.stop()
-        self.loop.control("stop")
+        self.loop.stop_episode()
         self.loop.stop()
         stats = self.loop.stats
         status = self.sender.status

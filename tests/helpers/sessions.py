@@ -18,20 +18,20 @@ def record_sim(out: Path, rig: str = "sim.toml", seconds: float = 3.0, episodes:
     rec.start()
     try:
         for _ in range(episodes):
-            rec.loop.control("start", task=task)
+            rec.loop.start_episode(task)
             if engage_after is not None:
                 time.sleep(engage_after)
                 end = time.monotonic() + seconds - engage_after
                 engaged = rec.loop.stats.engages
-                rec.loop.control("mode", mode="execute", reason="script")
+                rec.loop.engage(unattended=True)
                 while time.monotonic() < end:  # refused (e.g. nothing previewed yet under load): ask again
                     time.sleep(min(0.25, max(0.0, end - time.monotonic())))  # until engaged, as `record` does
                     if rec.loop.stats.engages == engaged and time.monotonic() < end:
-                        rec.loop.control("mode", mode="execute", reason="script")
+                        rec.loop.engage(unattended=True)
             else:
                 time.sleep(seconds)
-            rec.loop.control("mode", mode="preview", reason="test")
-            rec.loop.control("stop")
+            rec.loop.to_preview("test")
+            rec.loop.stop_episode()
     finally:
         rec.stop()
     return rec
@@ -59,8 +59,8 @@ class RecordingPort:
 
 def record_what_is_sent(rec: LiveSession) -> dict[str, RecordingPort]:
     """Put a RecordingPort between the session loop and each actuator."""
-    doubles = {k: RecordingPort(p) for k, p in rec.loop.actuators.items()}
-    rec.loop.actuators = doubles
+    doubles = {k: RecordingPort(p) for k, p in rec.actuators.items()}
+    rec.actuators.update(doubles)  # the very dict the loop sends through
     return doubles
 
 

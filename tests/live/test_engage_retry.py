@@ -8,16 +8,14 @@ from teleprev.live.session import LiveSession, RecordOptions
 def test_a_refused_engage_is_asked_again(tmp_path):
     rec = LiveSession(RecordOptions(out=tmp_path / "s.mcap"))
     asked = []
-    control = rec.loop.control
+    engage = rec.loop.engage
 
-    def refuse_the_first_two(action, **kwargs):  # as the pipeline refuses: the request has no effect
-        if action == "mode" and kwargs.get("mode") == "execute":
-            asked.append(kwargs)
-            if len(asked) <= 2:
-                return None
-        return control(action, **kwargs)
+    def refuse_the_first_two(reason="key", unattended=False):  # as the pipeline refuses: the request has no effect
+        asked.append(unattended)
+        if len(asked) > 2:
+            engage(reason, unattended)
 
-    rec.loop.control = refuse_the_first_two
+    rec.loop.engage = refuse_the_first_two
     rec.start()
     try:
         run_script(rec, duration=3.0, episodes=1, engage_after=0.5)
@@ -44,13 +42,13 @@ def test_an_engage_while_engaged_changes_nothing(tmp_path):
     rec = LiveSession(RecordOptions(out=path))
     rec.start()
     try:
-        rec.loop.control("start", task="pick_place")
+        rec.loop.start_episode("pick_place")
         time.sleep(1.0)
         for _ in range(4):  # the first engages; the others arrive while the arm moves
-            rec.loop.control("mode", mode="execute", reason="script")
+            rec.loop.engage(unattended=True)
             time.sleep(0.5)
-        rec.loop.control("mode", mode="preview", reason="test")
-        rec.loop.control("stop")
+        rec.loop.to_preview("test")
+        rec.loop.stop_episode()
     finally:
         rec.stop()
     assert rec.loop.stats.engages == 1

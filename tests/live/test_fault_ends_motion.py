@@ -8,6 +8,7 @@ import numpy as np
 
 from teleprev import topics
 from teleprev.evaluation.audit import audit_session
+from teleprev.live.gate import GateState
 from teleprev.live.run import run_script
 from teleprev.live.session import LiveSession, RecordOptions
 from teleprev.pipeline.planner import ModeUpdate
@@ -17,14 +18,14 @@ from teleprev.session.reader import SessionReader
 
 def record_mode_updates(rec: LiveSession) -> list[ModeUpdate]:
     """The mode updates the session loop passes to the command sender, in order."""
-    sent, send = [], rec.loop.sender.send
+    sent, send = [], rec.sender.send
 
     def keep(update):
         if isinstance(update, ModeUpdate):
             sent.append(update)
         return send(update)
 
-    rec.loop.sender.send = keep
+    rec.sender.send = keep
     return sent
 
 
@@ -42,10 +43,10 @@ def test_a_fault_mid_episode_ends_the_motion_until_the_operator_engages(tmp_path
     modes_sent = record_mode_updates(rec)
     try:
         run_script(rec, duration=6.0, episodes=2, engage_after=0.8)  # the second episode would engage at 3.8 s
-        assert rec.loop.stats.engages == 1 and rec.loop.fault
+        assert rec.loop.stats.engages == 1 and rec.loop.gate.state is GateState.FAULTED
         deadline = time.monotonic() + 3.0
         while rec.loop.stats.engages < 2 and time.monotonic() < deadline:
-            rec.loop.control("mode", mode="execute")  # the operator's key (again while the arm reconnects)
+            rec.loop.engage()  # the operator's key (again while the arm reconnects)
             time.sleep(0.25)
         time.sleep(1.0)
     finally:

@@ -100,11 +100,11 @@ def live(tmp_path_factory):
     try:
         watcher = threading.Thread(target=lambda: result.update(zip(("channels", "got"), asyncio.run(_watch(rec.view.port, 20.0, enough=_enough)))))
         watcher.start()
-        rec.loop.control("start", task="pick_place")
+        rec.loop.start_episode("pick_place")
         time.sleep(0.5)
-        rec.loop.control("mode", mode="execute", reason="test")
+        rec.loop.engage("test")
         watcher.join(30)
-        rec.loop.control("mode", mode="preview", reason="test")
+        rec.loop.to_preview("test")
     finally:
         rec.stop()
     assert "channels" in result, "the WebSocket client never got in (see the watcher thread's exception)"

@@ -14,9 +14,9 @@ def test_an_exception_in_the_loop_brakes_the_robot_and_keeps_recording(tmp_path)
     rec = LiveSession(RecordOptions(out=path))
     rec.start()
     try:
-        rec.loop.control("start", task="pick_place")
+        rec.loop.start_episode("pick_place")
         time.sleep(1.0)
-        rec.loop.control("mode", mode="execute", reason="script")
+        rec.loop.engage(unattended=True)
         time.sleep(1.0)
         assert rec.loop.stats.engages == 1
 
@@ -28,9 +28,9 @@ def test_an_exception_in_the_loop_brakes_the_robot_and_keeps_recording(tmp_path)
         while not rec.failure and time.monotonic() < deadline:
             time.sleep(0.02)
         failed_ns = rec.clock.now_ns()
-        rec.loop.control("mode", mode="execute", reason="key")  # the operator tries again: refused
+        rec.loop.engage()  # the operator tries again: refused
         time.sleep(1.0)
-        rec.loop.control("stop")
+        rec.loop.stop_episode()
     finally:
         rec.stop()
     assert rec.failure == "the session loop failed: FloatingPointError: a bug in the step"

@@ -71,10 +71,10 @@ def test_a_glove_that_dies_mid_session_stops_the_robot(tmp_path):
         wait_opened(rec)
         sender.start(rate_hz=60.0)
         assert rec.wait_connected(5.0) == []
-        rec.loop.control("start", task="pick_place")
+        rec.loop.start_episode("pick_place")
         deadline = time.monotonic() + 5.0
         while rec.loop.snapshot.mode != "execute" and time.monotonic() < deadline:  # refused until inputs are fresh
-            rec.loop.control("mode", mode="execute", reason="test")
+            rec.loop.engage("test")
             time.sleep(0.1)
         assert rec.loop.snapshot.mode == "execute", rec.loop.snapshot.message
         time.sleep(1.0)

@@ -39,12 +39,12 @@ def test_a_full_disk_stops_the_robot_and_the_preview_says_why(tmp_path):
     doubles = record_what_is_sent(rec)
     rec.start()
     try:
-        rec.loop.control("start", task="pick_place")
+        rec.loop.start_episode("pick_place")
         time.sleep(1.0)
         deadline = time.monotonic() + 10
         while rec.loop.snapshot.mode != "execute" and time.monotonic() < deadline:
             # refused while the sim hand happens to stand inside the clearance margin: ask again
-            rec.loop.control("mode", mode="execute")
+            rec.loop.engage()
             time.sleep(0.5)
         time.sleep(0.5)
         assert rec.loop.snapshot.mode == "execute", rec.loop.snapshot.message
@@ -62,7 +62,7 @@ def test_a_full_disk_stops_the_robot_and_the_preview_says_why(tmp_path):
         assert reached_s < 3 * rec.recorder.flush_interval_s + 1.0  # the next flush fails, the loop hears at once
         assert "no space left" in snap.message and "robot stopped" in snap.message
         time.sleep(1.5)  # braking to rest takes well under this
-        rec.loop.control("mode", mode="execute")  # the operator tries to go on: refused
+        rec.loop.engage()  # the operator tries to go on: refused
         time.sleep(0.3)
         assert rec.loop.snapshot.mode == "preview"
         assert "cannot switch to execute" in rec.loop.snapshot.message

@@ -141,15 +141,15 @@ def test_a_study_of_real_sim_recordings(tmp_path):
     common = dict(rig=RIGS / "sim.toml", task="pick_place", participant="p9", condition="w/ preview")
     practice = LiveSession(RecordOptions(out=tmp_path / "practice.mcap", practice=True, **common)).start()
     time.sleep(0.6)
-    practice.loop.control("operator", event="ready")
+    practice.loop.note("ready")
     practice.stop()
 
     rec = LiveSession(RecordOptions(out=tmp_path / "trial.mcap", **common)).start()
     for success in (True, False):
-        rec.loop.control("start", task="pick_place")
+        rec.loop.start_episode("pick_place")
         time.sleep(0.4)
-        rec.loop.control("stop")
-        rec.loop.control("outcome", success=success)
+        rec.loop.stop_episode()
+        rec.loop.mark_outcome(success)
     rec.stop()
 
     trial = session_facts(tmp_path / "trial.mcap")
