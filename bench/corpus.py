@@ -59,7 +59,7 @@ SESSIONS = 8
 
 
 def record_eval_sessions(folder: Path, seconds: float) -> None:
-    from teleprev.live.session import LiveSession, RecordOptions
+    from teleprev.live.record.session import LiveSession, RecordOptions
 
     folder.mkdir(parents=True)
     recorded = []

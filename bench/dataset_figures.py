@@ -30,7 +30,7 @@ SIM_RIG = ROOT / "rigs" / "sim.toml"
 
 def _record(path: Path, seconds: float = 3.0, engage_after: float = 0.5) -> None:
     """One pick_place episode on the default sim rig, engaged `engage_after` s in (asked again until it is)."""
-    from teleprev.live.session import LiveSession, RecordOptions
+    from teleprev.live.record.session import LiveSession, RecordOptions
 
     rec = LiveSession(RecordOptions(out=path, rig=SIM_RIG, task="pick_place"))
     rec.start()
@@ -54,7 +54,7 @@ def dataset_replay_ok(folder: Path) -> bool:
     from teleprev.evaluation.audit import audit_session
     from teleprev.export.recipe import load_recipe
     from teleprev.export.run import ExportOptions, export
-    from teleprev.live.playback import play
+    from teleprev.live.replay.playback import play
     from teleprev.session.reader import SessionReader
 
     session, root, out = folder / "sim.mcap", folder / "sim_dataset", folder / "replay.mcap"

@@ -32,10 +32,10 @@ PLAN = dict(episodes=4, episode_s=1.5, reset_s=1.0, engage_after_s=0.3)
 
 def measure(folder: Path, episodes: int = PLAN["episodes"]) -> dict:
     from teleprev import topics
-    from teleprev.live.cues import Cues
-    from teleprev.live.run import run_timed
-    from teleprev.live.schedule import EpisodeTimes
-    from teleprev.live.session import LiveSession, RecordOptions
+    from teleprev.live.record.cues import Cues
+    from teleprev.live.record.run import run_timed
+    from teleprev.live.record.schedule import EpisodeTimes
+    from teleprev.live.record.session import LiveSession, RecordOptions
     from teleprev.session.reader import SessionReader
 
     plan = EpisodeTimes(**{**PLAN, "episodes": episodes}).check()

@@ -41,7 +41,7 @@ sys.path.insert(0, str(ROOT))  # tests.helpers.vmc: the same sender the tests us
 
 import numpy as np  # noqa: E402
 
-from teleprev.live.session import LiveSession, RecordOptions  # noqa: E402
+from teleprev.live.record.session import LiveSession, RecordOptions  # noqa: E402
 from teleprev.messages import JointSample, PoseSample  # noqa: E402
 from teleprev.session.reader import SessionReader  # noqa: E402
 from teleprev.session.summary import device_lost, summarize  # noqa: E402

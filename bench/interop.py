@@ -101,7 +101,7 @@ def session_figures(folder: Path, seconds: float) -> dict:
     from mcap.reader import make_reader
     from rosbags.typesys import Stores, get_typestore
 
-    from teleprev.live.session import LiveSession, RecordOptions
+    from teleprev.live.record.session import LiveSession, RecordOptions
     from teleprev.rig import default_rig_path
     from teleprev.robot.model import load_robot
     from teleprev.session.reader import SessionReader

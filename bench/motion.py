@@ -34,7 +34,7 @@ ROOT = Path(__file__).resolve().parents[1]
 
 
 def record(out: Path, rig: Path | None, task: str, seconds: float) -> Path:
-    from teleprev.live.session import LiveSession, RecordOptions
+    from teleprev.live.record.session import LiveSession, RecordOptions
 
     rec = LiveSession(RecordOptions(out=out, rig=rig, task=task))
     rec.start()

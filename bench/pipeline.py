@@ -90,8 +90,8 @@ def preview_rate(seconds: float) -> dict:
     from rich.console import Console
 
     from teleprev.session.reader import SessionReader
-    from teleprev.live.session import RecordOptions, LiveSession
-    from teleprev.live.run import run_script
+    from teleprev.live.record.session import RecordOptions, LiveSession
+    from teleprev.live.record.run import run_script
 
     with tempfile.TemporaryDirectory() as tmp:
         out = Path(tmp) / "preview.mcap"
@@ -151,10 +151,10 @@ def dex_retargeting(seconds: float) -> dict:
 
 def at_loop_priority(fn, *args):
     """(fn(*args), its thread's priority): run on a thread at the session loop's priority
-    (teleprev/live/thread_priority.py), as the live steps run; the busy processes stay at the default."""
+    (teleprev/live/core/thread_priority.py), as the live steps run; the busy processes stay at the default."""
     import threading
 
-    from teleprev.live.thread_priority import raise_this_thread
+    from teleprev.live.core.thread_priority import raise_this_thread
 
     out = {}
 

@@ -281,7 +281,7 @@ def sync_error(tmp: Path, seconds: float) -> dict:
 
     from teleprev.rig import default_rig_path
     from teleprev.session.reader import SessionReader
-    from teleprev.live.session import RecordOptions, LiveSession
+    from teleprev.live.record.session import RecordOptions, LiveSession
     from teleprev.topics import parse_device_topic
 
     path = tmp / "sync.mcap"

@@ -37,7 +37,7 @@ def main() -> None:
     seconds = 10.0 if args.quick else 30.0
 
     from teleprev.evaluation.evaluate import evaluate
-    from teleprev.live.session import RecordOptions, LiveSession
+    from teleprev.live.record.session import RecordOptions, LiveSession
 
     with tempfile.TemporaryDirectory() as tmp:
         path = Path(tmp) / "bench.mcap"

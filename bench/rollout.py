@@ -4,7 +4,7 @@
 
 Records a short demo on the default sim rig, exports it, trains a tiny ACT with lerobot-train (2 steps,
 CPU, no pretrained backbone: tests/helpers/policies.py), then rolls it out for 2 episodes of about 4 s
-(engaged 0.5 s into each) through the real path (teleprev.live.rollout, as `teleprev rollout` runs it).
+(engaged 0.5 s into each) through the real path (teleprev.live.rollout.rollout, as `teleprev rollout` runs it).
 
     rollout_commands          commands sent to the arm (each tick also sends the hand's)
     rollout_audit_failures    violations `teleprev audit` finds in the rollout's commands (and hand states)
@@ -55,8 +55,8 @@ def other_figures(folder: Path) -> dict:
 def rollout(folder: Path, episodes: int, episode_s: float) -> dict:
     from teleprev import topics
     from teleprev.evaluation.audit import audit_session
-    from teleprev.live.lerobot_policy import LeRobotPolicy
-    from teleprev.live.rollout import Rollout, RolloutOptions, check_rollout
+    from teleprev.live.rollout.lerobot_policy import LeRobotPolicy
+    from teleprev.live.rollout.rollout import Rollout, RolloutOptions, check_rollout
     from teleprev.session.summary import summarize
     from tests.helpers.policies import train_tiny_act
     from tests.helpers.sessions import record_sim

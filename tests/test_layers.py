@@ -14,7 +14,8 @@ import pytest
 
 ROOT = Path(__file__).resolve().parents[1]
 
-# Lowest first. A package is placed whole, a ground-floor module alone.
+# Lowest first. A package is placed whole, a ground-floor module alone; a subpackage placed on its own
+# (live's rooms) belongs to its own entry, not to its parent's.
 LAYERS: list[tuple[str, ...]] = [
     ("teleprev.errors", "teleprev.paths", "teleprev.config", "teleprev.numeric_platform", "teleprev.transforms",
      "teleprev.clock", "teleprev.topics", "teleprev.messages", "teleprev.corpus", "teleprev.kernels"),
@@ -23,7 +24,9 @@ LAYERS: list[tuple[str, ...]] = [
     ("teleprev.pipeline",),
     ("teleprev.rig", "teleprev.assembly"),
     ("teleprev.preview", "teleprev.export", "teleprev.study"),
-    ("teleprev.live",),
+    ("teleprev.live", "teleprev.live.core", "teleprev.live.view"),
+    ("teleprev.live.record",),
+    ("teleprev.live.replay", "teleprev.live.rollout"),
     ("teleprev.evaluation",),
     ("teleprev.cli",),
 ]
@@ -31,12 +34,9 @@ TOP = ("teleprev",)  # teleprev/__init__.py: the version and the numeric platfor
 
 
 def unit(module: str) -> str | None:
-    """The layer entry a module belongs to (its package, or itself on the ground floor)."""
-    for layer in LAYERS:
-        for entry in layer:
-            if module == entry or module.startswith(entry + "."):
-                return entry
-    return None
+    """The layer entry a module belongs to (the most specific: its package, or itself on the ground floor)."""
+    found = [entry for layer in LAYERS for entry in layer if module == entry or module.startswith(entry + ".")]
+    return max(found, key=len, default=None)
 
 
 def level(entry: str) -> int:

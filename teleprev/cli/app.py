@@ -96,7 +96,7 @@ def foxglove_port_default(argv: list[str]) -> list[str]:
     out = []
     for k, arg in enumerate(argv):
         if arg == "--foxglove" and not (k + 1 < len(argv) and argv[k + 1].isdigit()):
-            out.append("--foxglove=8765")  # teleprev.live.foxglove_view.DEFAULT_PORT (not imported: --help stays fast)
+            out.append("--foxglove=8765")  # teleprev.live.view.foxglove_view.DEFAULT_PORT (not imported: --help stays fast)
             continue
         out.append(arg)
     return out

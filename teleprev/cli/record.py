@@ -57,10 +57,10 @@ def record(
 
     from teleprev.cli.outputs import check_output
     from teleprev.cli.signals import StopSignals
-    from teleprev.live.session import RecordOptions, LiveSession, default_session_path
+    from teleprev.live.record.session import RecordOptions, LiveSession, default_session_path
     from teleprev.cli.pages import announce_pages
-    from teleprev.live.cues import Cues
-    from teleprev.live.run import run_interactive, run_script, run_timed, print_summary
+    from teleprev.live.record.cues import Cues
+    from teleprev.live.record.run import run_interactive, run_script, run_timed, print_summary
     from teleprev import topics
 
     plan = check_options(rig, task, duration, engage_after, connect_timeout, episodes, episode_time, reset_time, marks)
@@ -149,7 +149,7 @@ def check_options(rig: Optional[Path], task: str, duration: Optional[float], eng
     """The values no device has to be opened to refuse: one line each (teleprev.errors.ConfigError).
     Returns the plan of timed episodes (--episode-time), or None."""
     from teleprev.errors import ConfigError
-    from teleprev.live.schedule import EpisodeTimes
+    from teleprev.live.record.schedule import EpisodeTimes
     from teleprev.rig import load_rig
 
     plan = None

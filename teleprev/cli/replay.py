@@ -35,7 +35,7 @@ def replay(
     from rich.console import Console
 
     from teleprev.cli.outputs import check_output
-    from teleprev.live.playback import play
+    from teleprev.live.replay.playback import play
 
     from teleprev.errors import ConfigError
     from teleprev.preview.keys import KeyReader

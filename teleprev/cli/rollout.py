@@ -32,9 +32,9 @@ def rollout(
     from teleprev.cli.outputs import check_output
     from teleprev.cli.record import never_engaged
     from teleprev.cli.signals import StopSignals
-    from teleprev.live.rollout import Rollout, RolloutOptions, check_rollout
-    from teleprev.live.run import print_summary
-    from teleprev.live.session import default_session_path
+    from teleprev.live.rollout.rollout import Rollout, RolloutOptions, check_rollout
+    from teleprev.live.record.run import print_summary
+    from teleprev.live.record.session import default_session_path
 
     options = RolloutOptions(policy=policy, out=out or default_session_path("rollout"), rig=config, episodes=episodes,
                              episode_time_s=episode_time, engage_after_s=engage_after, reset_time_s=reset_time,
@@ -43,7 +43,7 @@ def rollout(
     plan = check_rollout(options)  # bad input: one line, exit 2, before anything opens
     console = Console()
     console.print(f"loading {plan.card.type} policy from {escape(str(policy))} ...", highlight=False)
-    from teleprev.live.lerobot_policy import LeRobotPolicy
+    from teleprev.live.rollout.lerobot_policy import LeRobotPolicy
 
     loaded = LeRobotPolicy.load(policy)
     with StopSignals() as signals:

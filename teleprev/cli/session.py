@@ -32,7 +32,7 @@ def _plan_line(record: dict[str, str]) -> str:
     record does not read as a plan)."""
     from rich.markup import escape
 
-    from teleprev.live.schedule import EpisodeTimes
+    from teleprev.live.record.schedule import EpisodeTimes
 
     try:
         line = EpisodeTimes.from_record(record).describe()

@@ -46,7 +46,7 @@ class StreamSpec:
 @dataclass
 class OperatorLink:
     """The recording behind a device that carries the operator's controls (an XR page): `act(action)` carries
-    out an operator action (live.operator_actions names them) and says why not ("" when done, "unknown" for
+    out an operator action (live.record.operator_actions names them) and says why not ("" when done, "unknown" for
     no such action); `status()` is what the operator is shown. The recording sets both once it runs; outside
     one (devices check, calibrate) they stay None."""
 

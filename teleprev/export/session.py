@@ -157,7 +157,7 @@ def _rate(reader, topic: str) -> float:
 
 def rgb_image(data) -> np.ndarray | None:
     """A camera sample's picture as the datasets hold it (H x W x 3, RGB), or None where it does not decode:
-    the same for an export and for a policy that observes the live camera (teleprev/live/policy.py)."""
+    the same for an export and for a policy that observes the live camera (teleprev/live/rollout/policy.py)."""
     if isinstance(data, np.ndarray):  # a raw image a foreign reader already laid out as RGB
         return np.ascontiguousarray(data)
     import cv2

@@ -3,7 +3,7 @@
 From session format 4 on, a pipeline step makes no commands. It hands the planner its targets (a
 TargetUpdate: the arm's IK solution and the hand's corrected joints, each with the velocity the step
 estimated from the targets before it) and every accepted mode switch (a ModeUpdate). The planner runs on
-the sender's clock (teleprev/live/sender.py): at each tick it adopts the updates that have arrived, then
+the sender's clock (teleprev/live/core/sender.py): at each tick it adopts the updates that have arrived, then
 samples the motion at the tick's own instant. A late tick samples further along, so it is never followed
 by a catch-up burst, and nothing the session loop does (or fails to do in time) reaches the commands
 other than through their targets.

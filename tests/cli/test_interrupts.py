@@ -63,8 +63,8 @@ def test_ctrl_c_while_imports_run_is_one_line_and_130():
 
 
 @pytest.mark.parametrize("module, where", [
-    ("teleprev.live.session", "build_pipeline"),  # the kernels load while the session is made
-    ("teleprev.live.session", "LiveSession.wait_connected"),  # the devices start
+    ("teleprev.live.record.session", "build_pipeline"),  # the kernels load while the session is made
+    ("teleprev.live.record.session", "LiveSession.wait_connected"),  # the devices start
 ])
 def test_record_interrupted_in_start_up_stops_and_never_engages(tmp_path, module, where):
     out = tmp_path / "s.mcap"

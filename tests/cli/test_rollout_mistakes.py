@@ -90,7 +90,7 @@ def test_refused_in_one_line_before_anything_opens(tmp_path_factory, case):
 
 
 def test_a_matching_policy_passes_the_checks(tmp_path):
-    from teleprev.live.rollout import RolloutOptions, check_rollout
+    from teleprev.live.rollout.rollout import RolloutOptions, check_rollout
 
     plan = check_rollout(RolloutOptions(policy=saved_policy(tmp_path / "p"), out=tmp_path / "x.mcap"))
     assert plan.features.names == ("observation.state", "observation.images.cam_front") and plan.fps == 30
@@ -100,9 +100,9 @@ def test_a_matching_policy_passes_the_checks(tmp_path):
 def test_the_checks_and_help_load_neither_torch_nor_lerobot(tmp_path):
     from tests.export.test_lazy_lerobot import heavy_modules_after, run_cli
 
-    assert heavy_modules_after("import teleprev.live.rollout") == []
+    assert heavy_modules_after("import teleprev.live.rollout.rollout") == []
     assert heavy_modules_after(run_cli("rollout", "--help")) == []
     policy = saved_policy(tmp_path / "p")
-    code = ("from pathlib import Path\nfrom teleprev.live.rollout import RolloutOptions, check_rollout\n"
+    code = ("from pathlib import Path\nfrom teleprev.live.rollout.rollout import RolloutOptions, check_rollout\n"
             f"check_rollout(RolloutOptions(policy=Path({str(policy)!r}), out=Path({str(tmp_path / 'x.mcap')!r})))")
     assert heavy_modules_after(code) == []

@@ -262,7 +262,7 @@ def test_events_carry_the_device_event_schema():
 
 
 def test_a_device_dying_mid_session_leaves_a_gap_event_in_the_file_and_the_others_complete(tmp_path):
-    from teleprev.live.loop import SessionLoop
+    from teleprev.live.core.loop import SessionLoop
     from teleprev.session.reader import SessionReader
     from teleprev.session.recorder import Recorder
 

@@ -6,7 +6,7 @@ import time
 from pathlib import Path
 
 from teleprev.rig import default_rig_path
-from teleprev.live.session import RecordOptions, LiveSession
+from teleprev.live.record.session import RecordOptions, LiveSession
 
 RIGS = default_rig_path().parent
 

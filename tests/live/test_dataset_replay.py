@@ -9,7 +9,7 @@ from pathlib import Path
 
 import numpy as np
 
-from teleprev.live.player import Playback, smooth
+from teleprev.live.replay.player import Playback, smooth
 from teleprev.rig import load_rig
 from teleprev.assembly import build_pipeline
 from teleprev.session.reader import SessionReader

@@ -1,8 +1,8 @@
 """Unattended record: an engage the pipeline refuses (nothing previewed yet, the hand's measured state
 inside its clearance margin) is asked again until the episode ends, so the session still gets commands."""
 
-from teleprev.live.run import run_script
-from teleprev.live.session import LiveSession, RecordOptions
+from teleprev.live.record.run import run_script
+from teleprev.live.record.session import LiveSession, RecordOptions
 
 
 def test_a_refused_engage_is_asked_again(tmp_path):

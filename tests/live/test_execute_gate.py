@@ -9,8 +9,8 @@ import pytest
 
 from teleprev import topics
 from teleprev.clock import SessionClock
-from teleprev.live.gate import ExecuteGate, GateState
-from teleprev.live.loop import SessionLoop
+from teleprev.live.core.gate import ExecuteGate, GateState
+from teleprev.live.core.loop import SessionLoop
 from tests.helpers.wait import wait_until
 
 

@@ -8,9 +8,9 @@ import numpy as np
 
 from teleprev import topics
 from teleprev.evaluation.audit import audit_session
-from teleprev.live.gate import GateState
-from teleprev.live.run import run_script
-from teleprev.live.session import LiveSession, RecordOptions
+from teleprev.live.core.gate import GateState
+from teleprev.live.record.run import run_script
+from teleprev.live.record.session import LiveSession, RecordOptions
 from teleprev.pipeline.planner import ModeUpdate
 from teleprev.rig import default_rig_path
 from teleprev.session.reader import SessionReader

@@ -1,11 +1,11 @@
-"""The Foxglove layout in the repo (teleprev/live/foxglove_layout.json) is what the module builds, and every
+"""The Foxglove layout in the repo (teleprev/live/view/foxglove_layout.json) is what the module builds, and every
 topic it shows is one a recording has, with the schema its panel reads."""
 
 from __future__ import annotations
 
 import json
 
-from teleprev.live.foxglove_layout import FILE, layout
+from teleprev.live.view.foxglove_layout import FILE, layout
 from teleprev.session.reader import SessionReader
 
 

@@ -16,8 +16,8 @@ import pytest
 
 from teleprev.cli.app import foxglove_port_default
 from teleprev.errors import ConfigError
-from teleprev.live.foxglove_view import FoxgloveView
-from teleprev.live.session import LiveSession, RecordOptions
+from teleprev.live.view.foxglove_view import FoxgloveView
+from teleprev.live.record.session import LiveSession, RecordOptions
 from teleprev.rig import default_rig_path
 from teleprev.robot.model import load_robot
 from teleprev.session.codec import decoder_for

@@ -5,7 +5,7 @@ import time
 
 from teleprev import topics
 from teleprev.evaluation.audit import audit_session
-from teleprev.live.session import LiveSession, RecordOptions
+from teleprev.live.record.session import LiveSession, RecordOptions
 from teleprev.session.reader import SessionReader
 
 

@@ -5,8 +5,8 @@ import os
 import time
 from pathlib import Path
 
-from teleprev.live.session import LiveSession, RecordOptions
-from teleprev.live.thread_priority import LOOP_NICE
+from teleprev.live.record.session import LiveSession, RecordOptions
+from teleprev.live.core.thread_priority import LOOP_NICE
 from teleprev.session.reader import SessionReader
 
 

@@ -6,8 +6,8 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from teleprev.live.pipe_codec import frame, types_by_name, unframe
-from teleprev.live.sender import SenderStatus, SentTick
+from teleprev.live.core.pipe_codec import frame, types_by_name, unframe
+from teleprev.live.core.sender import SenderStatus, SentTick
 from teleprev.pipeline.planner import ModeUpdate, TargetUpdate, Tick
 
 

@@ -7,8 +7,8 @@ import numpy as np
 import pytest
 
 from tests.helpers.sessions import record_sim
-from teleprev.live.playback import build_player
-from teleprev.live.player import load_playback, safe_speed
+from teleprev.live.replay.playback import build_player
+from teleprev.live.replay.player import load_playback, safe_speed
 
 
 @pytest.fixture(scope="module")

@@ -13,9 +13,9 @@ import numpy as np
 
 from teleprev import topics
 from teleprev.export.recipe import load_recipe
-from teleprev.live.lerobot_policy import PolicyCard
-from teleprev.live.policy import PolicyFeatures, PolicyRunner
-from teleprev.live.rollout import Rollout, RolloutOptions, RolloutPlan, _joint_names, _rig_streams
+from teleprev.live.rollout.lerobot_policy import PolicyCard
+from teleprev.live.rollout.policy import PolicyFeatures, PolicyRunner
+from teleprev.live.rollout.rollout import Rollout, RolloutOptions, RolloutPlan, _joint_names, _rig_streams
 from teleprev.messages import Event
 from teleprev.rig import load_rig
 from teleprev.session.reader import SessionReader

@@ -15,7 +15,7 @@ from teleprev.session.reader import SessionReader
 
 
 def test_a_whole_session_in_preview_sends_no_motion_command(tmp_path):
-    from teleprev.live.session import RecordOptions, LiveSession
+    from teleprev.live.record.session import RecordOptions, LiveSession
     import time
 
     rec = LiveSession(RecordOptions(out=tmp_path / "p.mcap"))
@@ -89,8 +89,8 @@ def test_unattended_record_cli_writes_every_stream(tmp_path):
 
 
 def test_the_terminal_preview_shows_the_mode_and_the_robot(executed):
-    from teleprev.live.session import RecordOptions, LiveSession
-    from teleprev.live.run import make_dashboard
+    from teleprev.live.record.session import RecordOptions, LiveSession
+    from teleprev.live.record.run import make_dashboard
     import time
 
     rec = LiveSession(RecordOptions(out=executed.parent / "screen.mcap"))

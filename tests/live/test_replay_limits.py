@@ -10,8 +10,8 @@ import pytest
 
 from teleprev.errors import ConfigError
 from tests.helpers.cli import teleprev
-from teleprev.live import playback
-from teleprev.live.playback import build_player
+from teleprev.live.replay import playback
+from teleprev.live.replay.playback import build_player
 from teleprev.pipeline.derivatives import divided_differences
 
 FIXTURE = Path(__file__).parents[1] / "fixtures" / "sim_v1.mcap"  # format 1: speed caps only, fails the audit

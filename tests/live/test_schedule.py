@@ -11,8 +11,8 @@ import numpy as np
 import pytest
 
 from teleprev.errors import ConfigError
-from teleprev.live.cues import Cues
-from teleprev.live.schedule import EpisodeTimes, Schedule
+from teleprev.live.record.cues import Cues
+from teleprev.live.record.schedule import EpisodeTimes, Schedule
 from teleprev.pipeline.trajectory import ArmGenerator, HandLimiter, JointMotion
 
 

@@ -7,8 +7,8 @@ import os
 import threading
 
 from teleprev.clock import SessionClock
-from teleprev.live import sender as sender_module
-from teleprev.live.sender import CommandSender
+from teleprev.live.core import sender as sender_module
+from teleprev.live.core.sender import CommandSender
 
 
 class StillPlanner:

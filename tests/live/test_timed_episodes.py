@@ -14,10 +14,10 @@ import numpy as np
 from rich.console import Console
 
 from teleprev import topics
-from teleprev.live.cues import Cues
-from teleprev.live.run import RESTING, TimedKeys, run_timed
-from teleprev.live.schedule import EpisodeTimes
-from teleprev.live.session import LiveSession, RecordOptions
+from teleprev.live.record.cues import Cues
+from teleprev.live.record.run import RESTING, TimedKeys, run_timed
+from teleprev.live.record.schedule import EpisodeTimes
+from teleprev.live.record.session import LiveSession, RecordOptions
 from teleprev.session.reader import SessionReader
 from tests.helpers.cli import teleprev
 from tests.helpers.sessions import record_what_is_sent

@@ -8,7 +8,7 @@ import time
 import numpy as np
 
 from teleprev import topics
-from teleprev.live.session import LiveSession, RecordOptions
+from teleprev.live.record.session import LiveSession, RecordOptions
 from teleprev.session.reader import SessionReader
 from teleprev.session.summary import device_lost, summarize
 from tests.helpers.cli import teleprev

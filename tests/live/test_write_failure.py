@@ -33,7 +33,7 @@ def fill_after_flush(writer, timeout_s: float = 5.0) -> None:
 
 
 def test_a_full_disk_stops_the_robot_and_the_preview_says_why(tmp_path):
-    from teleprev.live.session import LiveSession, RecordOptions
+    from teleprev.live.record.session import LiveSession, RecordOptions
 
     rec = LiveSession(RecordOptions(out=tmp_path / "full.mcap"))
     doubles = record_what_is_sent(rec)

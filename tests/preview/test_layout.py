@@ -13,8 +13,8 @@ import pytest
 from rich.console import Console
 
 from teleprev.live.device_rows import DeviceRow
-from teleprev.live.loop import LoopSnapshot
-from teleprev.live.run import ROBOT_BOUNDS
+from teleprev.live.core.loop import LoopSnapshot
+from teleprev.live.record.run import ROBOT_BOUNDS
 from teleprev.messages import ImageSample
 from teleprev.preview.camera_view import picture
 from teleprev.preview.dashboard import KEYS, Dashboard

@@ -6,8 +6,8 @@ import time
 
 from rich.console import Console
 
-from teleprev.live.run import _frame, make_dashboard
-from teleprev.live.session import LiveSession, RecordOptions
+from teleprev.live.record.run import _frame, make_dashboard
+from teleprev.live.record.session import LiveSession, RecordOptions
 from teleprev.messages import ImageSample
 
 

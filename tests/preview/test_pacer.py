@@ -1,7 +1,7 @@
 """The preview gives up frame rate before the session loop falls behind: at most half the time
 drawing, and slower while the loop has a backlog, back to full rate once it has caught up."""
 
-from teleprev.live.run import PreviewPacer
+from teleprev.live.record.run import PreviewPacer
 
 
 def test_the_preview_slows_down_while_the_loop_is_behind_and_recovers():

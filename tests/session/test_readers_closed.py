@@ -85,14 +85,14 @@ def test_eval_closes_the_session(session):
 
 
 def test_replay_closes_the_session(session):
-    from teleprev.live.playback import build_player
+    from teleprev.live.replay.playback import build_player
 
     with nothing_left_open(session):
         build_player(session, 0, 1.0, "preview")
 
 
 def test_a_refused_episode_closes_the_session(session):
-    from teleprev.live.player import load_playback
+    from teleprev.live.replay.player import load_playback
 
     with nothing_left_open(session):
         with pytest.raises(SessionError, match="no episode 7"):

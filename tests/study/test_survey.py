@@ -12,7 +12,7 @@ from tests.helpers.study_sessions import scripted
 
 from teleprev.errors import ConfigError, SessionError
 from teleprev.messages import Event, Logged
-from teleprev.live.session import RecordOptions, LiveSession
+from teleprev.live.record.session import RecordOptions, LiveSession
 from teleprev.session.writer import McapSessionWriter
 from teleprev.study import survey
 from teleprev.study.facts import session_facts

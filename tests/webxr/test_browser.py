@@ -11,7 +11,7 @@ import numpy as np
 
 from teleprev import topics
 from teleprev.human.smplx import angles_from_hand_pose
-from teleprev.live.session import LiveSession, RecordOptions
+from teleprev.live.record.session import LiveSession, RecordOptions
 from teleprev.session.reader import SessionReader
 from teleprev_devices.webxr import hands
 from tests.helpers.cli import teleprev

@@ -10,7 +10,7 @@ import time
 import numpy as np
 
 from teleprev import topics
-from teleprev.live.session import LiveSession, RecordOptions
+from teleprev.live.record.session import LiveSession, RecordOptions
 from teleprev.session.reader import SessionReader
 from tests.helpers.sessions import wait_opened
 from tests.helpers.xr_page import PageClient, open_hand, webxr_rig

@@ -23,7 +23,7 @@ import numpy as np
 
 from teleprev import topics as T
 from teleprev.errors import ConfigError
-from teleprev.live.foxglove_front import SubprotocolFront
+from teleprev.live.view.foxglove_front import SubprotocolFront
 from teleprev.messages import Event, ImageSample, JointSample, Logged, PoseSample, RobotDescription, TransformsSample
 from teleprev.session.codec import encode, schema_for
 from teleprev.topics import ROBOT_DESCRIPTION

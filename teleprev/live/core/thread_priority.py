@@ -1,7 +1,7 @@
 """The session loop's priority: a nice value below the default, for the thread that orders the inputs and
 steps the pipeline, so that busy processes beside the session (cameras, encoders, a browser) delay its
 steps less. Busy processes at nice 0 on every core put 4.2 ms into the step's p99 at nice 0, and 0.29 ms at
-nice -10 (bench/pipeline.py --busy 2). The command sender has SCHED_FIFO of its own (live/sender.py);
+nice -10 (bench/pipeline.py --busy 2). The command sender has SCHED_FIFO of its own (live/core/sender.py);
 the loop is not given real-time priority, so that a bug spinning in it cannot freeze the machine."""
 
 from __future__ import annotations

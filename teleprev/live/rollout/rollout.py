@@ -4,7 +4,7 @@
                              against the rig's streams and the export recipe, the episode times
     Rollout(options, policy) the session (LiveSession, recorded like `record`'s) with the policy's
                              observations tapped from the session loop and its actions handed back to it
-                             on /policy/action (teleprev/live/policy.py), episodes timed by `run_timed`
+                             on /policy/action (teleprev/live/rollout/policy.py), episodes timed by `run_timed`
 
 Every episode starts in preview (the robot gets no motion command while the policy's targets show) and
 engages `engage_after_s` into it through the normal engage path; the episode ends back in preview, the
@@ -22,11 +22,11 @@ from teleprev import topics
 from teleprev.clock import SessionClock
 from teleprev.errors import ConfigError
 from teleprev.export.recipe import Recipe, load_recipe
-from teleprev.live.lerobot_policy import PolicyCard
-from teleprev.live.policy import LatestSamples, PolicyFeatures, PolicyRunner, observe
-from teleprev.live.run import run_timed
-from teleprev.live.schedule import EpisodeTimes
-from teleprev.live.session import LiveSession, RecordOptions
+from teleprev.live.rollout.lerobot_policy import PolicyCard
+from teleprev.live.rollout.policy import LatestSamples, PolicyFeatures, PolicyRunner, observe
+from teleprev.live.record.run import run_timed
+from teleprev.live.record.schedule import EpisodeTimes
+from teleprev.live.record.session import LiveSession, RecordOptions
 from teleprev.messages import JointSample, Sample
 from teleprev.pipeline.step import action_names as joint_action_names
 from teleprev.rig import Rig, load_rig
@@ -132,7 +132,7 @@ def check_rollout(options: RolloutOptions) -> RolloutPlan:
 
 
 def episode_plan(options: RolloutOptions) -> EpisodeTimes:
-    """The rollout's timed episodes (teleprev/live/schedule.py), as `record --episode-time` runs them: each
+    """The rollout's timed episodes (teleprev/live/record/schedule.py), as `record --episode-time` runs them: each
     starts in preview, engages engage_after_s into it, and is back in preview, at rest, by its end."""
     return EpisodeTimes(options.episodes, options.episode_time_s, options.reset_time_s, options.engage_after_s)
 

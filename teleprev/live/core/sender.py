@@ -18,7 +18,7 @@ is permitted (root, CAP_SYS_NICE or an rtprio limit); `realtime` says whether it
 SCHED_FIFO does not help a thread that waits for the interpreter lock), a process without real-time
 priority up to 147 ms, this process with SCHED_FIFO at most 1.6 ms (p99 0.15 ms).
 
-Both directions are pipes of length-prefixed JSON messages of known types (teleprev/live/pipe_codec.py:
+Both directions are pipes of length-prefixed JSON messages of known types (teleprev/live/core/pipe_codec.py:
 nothing is unpickled). The session process reads the ticks back on a thread of its own (`outputs`), passes
 the commands to the actuators and records them. The sender dies with the session (PR_SET_PDEATHSIG), ignores
 the terminal's signals (the session stops it after braking), and a sender that dies is seen at once (its
@@ -37,7 +37,7 @@ import time
 from dataclasses import dataclass
 
 from teleprev.clock import SessionClock
-from teleprev.live.pipe_codec import frame, types_by_name, unframe
+from teleprev.live.core.pipe_codec import frame, types_by_name, unframe
 from teleprev.pipeline.planner import CommandPlanner, ModeUpdate, TargetUpdate, Tick
 
 DEFAULT_PRIORITY = 50  # SCHED_FIFO priority: above ordinary processes, below the kernel's own threads (99)

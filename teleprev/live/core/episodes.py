@@ -4,7 +4,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
-from teleprev.live.controls import DiscardEpisode, MarkOutcome, StartEpisode, StopEpisode
+from teleprev.live.core.controls import DiscardEpisode, MarkOutcome, StartEpisode, StopEpisode
 
 
 @dataclass

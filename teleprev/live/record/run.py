@@ -22,11 +22,11 @@ from teleprev.preview.dashboard import Dashboard
 from teleprev.preview.keys import KeyReader
 from teleprev.preview.robot_view import RobotView
 from teleprev.robot.model import load_robot
-from teleprev.live.controls import UNATTENDED, Control, Engage, StartEpisode, StopEpisode, ToPreview
-from teleprev.live.cues import Cues
-from teleprev.live.operator_actions import handle_key
-from teleprev.live.schedule import EpisodeTimes, Period, Schedule
-from teleprev.live.session import LiveSession
+from teleprev.live.core.controls import UNATTENDED, Control, Engage, StartEpisode, StopEpisode, ToPreview
+from teleprev.live.record.cues import Cues
+from teleprev.live.record.operator_actions import handle_key
+from teleprev.live.record.schedule import EpisodeTimes, Period, Schedule
+from teleprev.live.record.session import LiveSession
 from teleprev.session.summary import PREVIEW_ONLY, device_lost
 
 # Fixed view bounds (metres) that hold an xArm's workspace, so the picture does not rescale.

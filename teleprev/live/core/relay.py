@@ -76,7 +76,7 @@ class CommandRelay:
             self.sender.send(update)
 
     def _relay(self) -> None:
-        from teleprev.live.sender import SentTick
+        from teleprev.live.core.sender import SentTick
 
         while True:
             items = self.sender.receive(0.2)

@@ -3,7 +3,7 @@ Foxglove imports with Layouts > Import from file): the robot in 3D from /robot_d
 camera's frame, the camera, the arm's state against its commands, the hand's retargeted target against the
 corrected one, and the mode and episode events.
 
-Built with foxglove-sdk's layout types; `python -m teleprev.live.foxglove_layout > foxglove_layout.json`
+Built with foxglove-sdk's layout types; `python -m teleprev.live.view.foxglove_layout > foxglove_layout.json`
 writes it again after a change here (tests/live/test_foxglove_layout.py checks that the two agree).
 """
 

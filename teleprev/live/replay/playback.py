@@ -17,13 +17,13 @@ from teleprev.assembly import build_pipeline, rig_calibration
 from teleprev.preview.keys import KeyReader
 from teleprev.preview.robot_view import Layer, RobotView
 from teleprev.export.actions import is_dataset
-from teleprev.live.player import ROUNDING, Player, load_dataset_playback, load_playback, safe_speed, smooth, validate
-from teleprev.live.replay_recording import ReplayRecording
+from teleprev.live.replay.player import ROUNDING, Player, load_dataset_playback, load_playback, safe_speed, smooth, validate
+from teleprev.live.replay.replay_recording import ReplayRecording
 from teleprev.rig import load_recorded_rig, load_rig
 from teleprev.robot.model import load_robot
 from teleprev.clock import SessionClock
 from teleprev.session.reader import SessionReader
-from teleprev.live.run import ROBOT_BOUNDS
+from teleprev.live.record.run import ROBOT_BOUNDS
 
 
 class StateTap:
@@ -48,8 +48,8 @@ def _recorded_rig(session: Path):
 def build_player(session: Path, episode, speed: float, to: str, rig_path=None, smoothed: bool = False, out=None):
     """The player and what it drives; returns (player, runners, tap, rig, message, recording). `session`: a
     session file or a LeRobot dataset folder (its `action` column); `smoothed`: play the sequence as the
-    pipeline's generator re-commands it (teleprev.live.player.smooth); `out`: record the replay there
-    (teleprev.live.replay_recording)."""
+    pipeline's generator re-commands it (teleprev.live.replay.player.smooth); `out`: record the replay there
+    (teleprev.live.replay.replay_recording)."""
     from teleprev.devices.registry import load_plugin
     from teleprev.devices.runner import DeviceRunner
 
@@ -121,7 +121,7 @@ def _start_view(port: int | None, session: Path, player: Player, console: Consol
     starts playing. Returns (view, stop event, thread) or None."""
     if port is None:
         return None
-    from teleprev.live.foxglove_view import FoxgloveView, file_channels, stream_session
+    from teleprev.live.view.foxglove_view import FoxgloveView, file_channels, stream_session
 
     view = FoxgloveView(port, file_channels(session))
     stop = threading.Event()

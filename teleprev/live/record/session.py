@@ -29,10 +29,10 @@ from teleprev.robot.frames import FramePublisher
 from teleprev.robot.model import load_robot
 from teleprev import topics
 from teleprev.clock import SessionClock
-from teleprev.live.frames import RobotFrames, sensor_frames
-from teleprev.live.loop import LoopInbox, SessionLoop
-from teleprev.live.operator_actions import ACTION_KEYS, handle_key, operator_status
-from teleprev.live.schedule import PLAN_RECORD, EpisodeTimes
+from teleprev.live.record.frames import RobotFrames, sensor_frames
+from teleprev.live.core.loop import LoopInbox, SessionLoop
+from teleprev.live.record.operator_actions import ACTION_KEYS, handle_key, operator_status
+from teleprev.live.record.schedule import PLAN_RECORD, EpisodeTimes
 from teleprev.messages import Logged, RobotDescription
 
 URDF_MEDIA_TYPE = "application/xml"  # the rig's URDF, attached to the session as <name>.urdf
@@ -102,7 +102,7 @@ class LiveSession:
         urdf = Path(self.robot.urdf_path)
         self.view = None
         if options.foxglove is not None:
-            from teleprev.live.foxglove_view import FoxgloveView, session_channels
+            from teleprev.live.view.foxglove_view import FoxgloveView, session_channels
 
             # every channel declared before the server starts: a client that connects at once sees them all
             self.view = FoxgloveView(options.foxglove, session_channels([s for dev in self.devices.values() for s in dev.streams()]))
@@ -113,7 +113,7 @@ class LiveSession:
             if self.view is not None:
                 self.view.close()
             raise
-        from teleprev.live.sender import CommandSender
+        from teleprev.live.core.sender import CommandSender
         from teleprev.pipeline.planner import CommandPlanner
 
         inbox = LoopInbox(options.queue_size)  # the device runners' sink, and the actuators' ports, before the loop

@@ -3,15 +3,15 @@
 Device reader threads (devices/runner.py) hand samples to a bounded queue; one loop thread takes them in
 arrival order, gives each a strictly increasing log time on the session clock (its host receive time),
 records it, feeds the pipeline driver, passes the step's targets and every accepted mode switch to the
-paced command sender (teleprev/live/sender.py), publishes the robot's frames on /tf, and carries out the
+paced command sender (teleprev/live/core/sender.py), publishes the robot's frames on /tf, and carries out the
 operator's controls (mode switches, episodes). Because the loop is the only place where order is
 decided, replaying a session's raw streams in log-time order meets the pipeline with exactly the inputs
 it met live.
 
-The loop thread only orders and dispatches: the controls are typed messages (teleprev/live/controls.py)
+The loop thread only orders and dispatches: the controls are typed messages (teleprev/live/core/controls.py)
 queued among the samples; whether execute may be engaged is the ExecuteGate's to say
-(teleprev/live/gate.py); the commands do not wait for this loop: the sender samples them on its own clock,
-in its own process, and the CommandRelay's thread (teleprev/live/relay.py) passes each tick's commands to
+(teleprev/live/core/gate.py); the commands do not wait for this loop: the sender samples them on its own clock,
+in its own process, and the CommandRelay's thread (teleprev/live/core/relay.py) passes each tick's commands to
 the arm and the end effector at once, then queues the tick for the loop to record (/command/arm,
 /command/hand and /command/tick, stamped with the instant the sender sent them).
 
@@ -39,12 +39,12 @@ from teleprev.messages import Event, ImageSample, JointSample, Logged, PoseSampl
 from teleprev.pipeline.driver import PipelineDriver
 from teleprev import topics
 from teleprev.clock import SessionClock
-from teleprev.live.controls import (Control, DiscardEpisode, Engage, EStop, Halt, Hold, MarkOutcome, OperatorNote,
+from teleprev.live.core.controls import (Control, DiscardEpisode, Engage, EStop, Halt, Hold, MarkOutcome, OperatorNote,
                                     Release, StartEpisode, StopEpisode, ToPreview, UNATTENDED)
-from teleprev.live.episodes import EpisodeTracker
-from teleprev.live.gate import ExecuteGate, GateState
-from teleprev.live.relay import CommandRelay
-from teleprev.live.thread_priority import raise_this_thread
+from teleprev.live.core.episodes import EpisodeTracker
+from teleprev.live.core.gate import ExecuteGate, GateState
+from teleprev.live.core.relay import CommandRelay
+from teleprev.live.core.thread_priority import raise_this_thread
 
 _STOP = object()
 
@@ -141,7 +141,7 @@ class SessionLoop:
         """`log` receives every message to record (Recorder.log); `inbox` the queue the device runners were
         given the `sink` of (default: a new one); `actuators` maps "arm" and "hand" to the ActuatorPorts
         that pass commands on; `sender` (a CommandSender, started before this loop) makes the commands of a
-        format 4 pipeline; `frames` (teleprev/live/frames.py: RobotFrames) turns measured joints into /tf."""
+        format 4 pipeline; `frames` (teleprev/live/record/frames.py: RobotFrames) turns measured joints into /tf."""
         self.clock = clock
         self._log = log
         self.driver = driver

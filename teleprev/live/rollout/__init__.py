@@ -1,0 +1,1 @@
+"""A trained policy driving a recording (`teleprev rollout`): its features, its runner, the LeRobot adapter."""
