@@ -20,7 +20,7 @@ from teleprev.preview.camera_view import CameraView
 from teleprev.preview.robot_view import Layer, RobotView
 
 if TYPE_CHECKING:  # the preview renders what the live session hands it; it never imports the live session
-    from teleprev.live.device_rows import DeviceRow
+    from teleprev.status import DeviceRow
     from teleprev.live.core.loop import LoopSnapshot
 
 KEYS = (("space", "preview/execute"), ("x", "e-stop"), ("s/e", "start/end episode"),

@@ -4,7 +4,7 @@ import io
 
 from rich.console import Console
 
-from teleprev.live.device_rows import DeviceRow
+from teleprev.status import DeviceRow
 from teleprev.preview.dashboard import device_table
 
 

@@ -23,7 +23,7 @@ from teleprev import __version__, numeric_platform
 from teleprev.errors import ConfigError
 from teleprev.assembly import build_pipeline, rig_calibration
 from teleprev.pipeline.driver import InputTopics, PipelineDriver
-from teleprev.live.device_rows import DeviceRow
+from teleprev.status import DeviceRow
 from teleprev.rig import Rig, load_rig
 from teleprev.robot.frames import FramePublisher
 from teleprev.robot.model import load_robot
