@@ -1,12 +1,42 @@
-"""One line of the terminal preview's device table: a device's runner stats and the loop's drops for it."""
+"""What a live session shows the operator: the session loop's snapshot and one line per device.
+
+The live session fills them (teleprev/live/core/loop.py replaces its snapshot after every change); the
+terminal preview (teleprev/preview/dashboard.py) and the XR page's status draw them. They sit below both,
+so that the preview never imports the live session.
+"""
 
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+
+
+@dataclass(frozen=True)
+class LoopSnapshot:
+    """What the terminal preview shows; replaced as a whole by the loop thread."""
+
+    mode: str = "preview"
+    episode: int = -1
+    episode_active: bool = False
+    task: str = ""
+    episode_started_ns: int = 0
+    session_started_ns: int = 0
+    step: Any = None  # the last StepResult (teleprev/pipeline/step.py)
+    measured_arm: np.ndarray | None = None
+    measured_effector: np.ndarray | None = None
+    message: str = ""  # the last refusal or warning, for the operator
+    commands_sent: int = 0
+    dropped: int = 0
+    fault: str = ""  # why the session stays in preview until the operator engages
+    camera: Any = None  # the latest ImageSample of the first camera heard from, for the preview
 
 
 @dataclass(frozen=True)
 class DeviceRow:
+    """One line of the terminal preview's device table: a device's runner stats and the loop's drops for it."""
+
     name: str
     kind: str
     state: str  # ok | gap | error | connecting

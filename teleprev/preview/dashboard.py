@@ -8,8 +8,6 @@ each only where it has room to be read (at 80x24: robot, hand and camera side by
 
 from __future__ import annotations
 
-from typing import TYPE_CHECKING
-
 import numpy as np
 from rich.console import Group, RenderableType
 from rich.panel import Panel
@@ -18,10 +16,8 @@ from rich.text import Text
 
 from teleprev.preview.camera_view import CameraView
 from teleprev.preview.robot_view import Layer, RobotView
+from teleprev.status import DeviceRow, LoopSnapshot  # what the live session hands the preview to draw
 
-if TYPE_CHECKING:  # the preview renders what the live session hands it; it never imports the live session
-    from teleprev.status import DeviceRow
-    from teleprev.live.core.loop import LoopSnapshot
 
 KEYS = (("space", "preview/execute"), ("x", "e-stop"), ("s/e", "start/end episode"),
         ("n", "next episode"),

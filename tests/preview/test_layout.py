@@ -12,8 +12,7 @@ import numpy as np
 import pytest
 from rich.console import Console
 
-from teleprev.status import DeviceRow
-from teleprev.live.core.loop import LoopSnapshot
+from teleprev.status import DeviceRow, LoopSnapshot
 from teleprev.live.record.run import ROBOT_BOUNDS
 from teleprev.messages import ImageSample
 from teleprev.preview.camera_view import picture

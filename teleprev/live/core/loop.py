@@ -39,6 +39,7 @@ from teleprev.messages import Event, ImageSample, JointSample, Logged, PoseSampl
 from teleprev.pipeline.driver import PipelineDriver
 from teleprev import topics
 from teleprev.clock import SessionClock
+from teleprev.status import LoopSnapshot
 from teleprev.live.core.controls import (Control, DiscardEpisode, Engage, EStop, Halt, Hold, MarkOutcome, OperatorNote,
                                     Release, StartEpisode, StopEpisode, ToPreview, UNATTENDED)
 from teleprev.live.core.episodes import EpisodeTracker
@@ -47,26 +48,6 @@ from teleprev.live.core.relay import CommandRelay
 from teleprev.live.core.thread_priority import raise_this_thread
 
 _STOP = object()
-
-
-@dataclass(frozen=True)
-class LoopSnapshot:
-    """What the terminal preview shows; replaced as a whole by the loop thread."""
-
-    mode: str = "preview"
-    episode: int = -1
-    episode_active: bool = False
-    task: str = ""
-    episode_started_ns: int = 0
-    session_started_ns: int = 0
-    step: Any = None  # the last StepResult
-    measured_arm: np.ndarray | None = None
-    measured_effector: np.ndarray | None = None
-    message: str = ""  # the last refusal or warning, for the operator
-    commands_sent: int = 0
-    dropped: int = 0
-    fault: str = ""  # why the session stays in preview until the operator engages
-    camera: Any = None  # the latest ImageSample of the first camera heard from, for the preview
 
 
 @dataclass
