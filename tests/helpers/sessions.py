@@ -7,6 +7,7 @@ from pathlib import Path
 
 from teleprev.rig import default_rig_path
 from teleprev.live.record.session import RecordOptions, LiveSession
+from tests.helpers.wait import wait_until
 
 RIGS = default_rig_path().parent
 
@@ -35,6 +36,21 @@ def record_sim(out: Path, rig: str = "sim.toml", seconds: float = 3.0, episodes:
     finally:
         rec.stop()
     return rec
+
+
+def engage_until_accepted(rec: LiveSession, timeout_s: float = 10.0, unattended: bool = False, every_s: float = 0.25) -> None:
+    """Ask to engage every `every_s` until the pipeline accepts (it refuses while nothing is previewed yet, or
+    while the sim hand stands inside its clearance margin); fails naming the last refusal after timeout_s."""
+    before = rec.loop.stats.engages
+
+    def engaged():
+        if rec.loop.stats.engages > before:
+            return True
+        rec.loop.engage(unattended=unattended)
+        return False
+
+    wait_until(engaged, timeout_s, what=f"an accepted engage (last message: {rec.loop.snapshot.message!r})",
+               poll_s=every_s)
 
 
 def record_corpus(folder: Path, names: str = "abc", seconds: float = 2.0) -> Path:

@@ -1,12 +1,12 @@
 """A bug in the pipeline (an exception in the session loop) while engaged: the robot brakes to rest within
 its limits, execute is refused from then on, the devices keep being recorded, and the session says why."""
 
-import time
-
 from teleprev import topics
 from teleprev.evaluation.audit import audit_session
 from teleprev.live.record.session import LiveSession, RecordOptions
 from teleprev.session.reader import SessionReader
+from tests.helpers.sessions import engage_until_accepted
+from tests.helpers.wait import wait_until
 
 
 def test_an_exception_in_the_loop_brakes_the_robot_and_keeps_recording(tmp_path):
@@ -15,21 +15,23 @@ def test_an_exception_in_the_loop_brakes_the_robot_and_keeps_recording(tmp_path)
     rec.start()
     try:
         rec.loop.start_episode("pick_place")
-        time.sleep(1.0)
-        rec.loop.engage(unattended=True)
-        time.sleep(1.0)
+        engage_until_accepted(rec, unattended=True)
+        wait_until(lambda: rec.loop.stats.commands_sent["arm"] > 60, 10.0, what="commands while engaged")
         assert rec.loop.stats.engages == 1
 
         def broken(msg, *args):
             raise FloatingPointError("a bug in the step")
 
         rec.loop.driver.feed = broken
-        deadline = time.monotonic() + 5
-        while not rec.failure and time.monotonic() < deadline:
-            time.sleep(0.02)
+        wait_until(lambda: rec.failure, 5.0, what="the loop's failure")
         failed_ns = rec.clock.now_ns()
+        glove = rec.loop.stats.streams["/glove/glove/hand"]
+        seen = glove.count
         rec.loop.engage()  # the operator tries again: refused
-        time.sleep(1.0)
+        wait_until(lambda: rec.loop.snapshot.message.startswith("cannot switch to execute"), 5.0,
+                   what="the operator's engage refused")
+        wait_until(lambda: not rec.loop.relay.active, 5.0, what="the commands braked to rest")
+        wait_until(lambda: glove.count > seen + 40, 10.0, what="the glove recorded after the failure")
         rec.loop.stop_episode()
     finally:
         rec.stop()

@@ -20,6 +20,7 @@ from teleprev.messages import Event
 from teleprev.rig import load_rig
 from teleprev.session.reader import SessionReader
 from tests.helpers.sessions import RIGS
+from tests.helpers.wait import wait_until
 
 
 class CountingPolicy:
@@ -38,21 +39,26 @@ class CountingPolicy:
         pass
 
 
-def _run(policy, fps: float, seconds: float):
+def _run(policy, fps: float, done, what: str, timeout_s: float = 10.0):
+    """Run a policy until `done(stats, handed)` holds (handed: (monotonic time, first value) of each action)."""
     handed: list[tuple[float, float]] = []
     runner = PolicyRunner(policy, lambda: {}, lambda a: handed.append((time.monotonic(), float(a[0]))), fps).start()
-    time.sleep(seconds)
-    runner.stop()
+    try:
+        wait_until(lambda: done(runner.stats, handed), timeout_s, what=what)
+    finally:
+        runner.stop()
     return runner.stats, handed
 
 
 def test_plans_are_queued_ahead_and_handed_on_one_per_frame():
-    stats, handed = _run(CountingPolicy(size=10, think_s=0.01), fps=50.0, seconds=1.5)
+    stats, handed = _run(CountingPolicy(size=10, think_s=0.01), 50.0, lambda st, h: len(h) >= 75 and st.inferences >= 5,
+                         "75 actions handed on (1.5 s at 50 fps)")
     values = [v for _, v in handed]
-    assert stats.failure == "" and stats.inferences >= 5 and stats.dropped == 0
+    assert stats.failure == ""
+    # none dropped but for an inference that took longer than a frame (a busy machine's)
+    assert stats.dropped == sum(min(int(took / 0.02), 9) for took in stats.inference_s), stats
     # the next plan arrives before the queue runs dry: after the first frame, every frame hands one on
     assert stats.starved <= 2, stats
-    assert len(handed) >= 0.9 * 1.5 * 50 - 2
     gaps = np.diff([t for t, _ in handed])
     assert 0.015 < float(np.median(gaps)) < 0.025 and gaps.max() < 0.1
     # within a plan the actions go on in order; a new plan replaces what was left (from its first action on)
@@ -61,12 +67,14 @@ def test_plans_are_queued_ahead_and_handed_on_one_per_frame():
 
 
 def test_actions_for_frames_that_passed_during_inference_are_dropped_but_the_last_kept():
-    stats, handed = _run(CountingPolicy(size=6, think_s=0.07), fps=50.0, seconds=1.2)
+    stats, handed = _run(CountingPolicy(size=6, think_s=0.07), 50.0, lambda st, h: st.inferences >= 8,
+                         "8 inferences of 70 ms")
     firsts = [v % 1000 for (_, v), (_, before) in zip(handed[1:], handed) if int(v) // 1000 != int(before) // 1000]
     assert firsts and min(firsts) >= 3  # 70 ms of inference at 50 fps: its first 3 frames had passed
     assert stats.dropped >= 3 * (stats.inferences - 1)
-    stats, handed = _run(CountingPolicy(size=3, think_s=0.15), fps=50.0, seconds=1.0)  # slower than its plan
-    assert handed and all(v % 1000 == 2 for _, v in handed)  # each plan's last action still moves the robot
+    stats, handed = _run(CountingPolicy(size=3, think_s=0.15), 50.0, lambda st, h: len(h) >= 4,  # slower than its plan
+                         "4 actions of a policy slower than its plan")
+    assert all(v % 1000 == 2 for _, v in handed)  # each plan's last action still moves the robot
 
 
 class HoldThenStall:
@@ -138,9 +146,9 @@ class SequencePolicy(CountingPolicy):
 
 
 def test_a_policy_keeping_its_own_sequence_has_every_action_handed_on_in_turn():
-    stats, handed = _run(SequencePolicy(size=1, think_s=0.0), fps=50.0, seconds=1.0)
+    stats, handed = _run(SequencePolicy(size=1, think_s=0.0), 50.0, lambda st, h: len(h) >= 40, "40 actions")
     values = [v // 1000 for _, v in handed]
-    assert len(values) >= 40 and values == list(range(len(values)))  # none skipped, none superseded
+    assert values == list(range(len(values)))  # none skipped, none superseded
     assert stats.dropped == 0
 
 
@@ -153,10 +161,11 @@ def test_each_episode_says_once_when_its_first_action_was_handed_on():
                           on_acting=lambda: events.append(("acting", 0.0)))
     runner.start()
     try:
-        time.sleep(0.6)
+        wait_until(lambda: len(events) >= 2, 5.0, what="the first plan handed on")
         runner.new_episode("")
         before = len(events)
-        time.sleep(0.7)
+        wait_until(lambda: [e for e in events[before:] if e[0] == "acting"], 5.0, what="the new episode acting")
+        wait_until(lambda: len(events) >= before + 3, 5.0, what="an action after it")
     finally:
         runner.stop()
     assert [e for e in events[:before] if e[0] == "acting"] == []  # the runner starts as if acting already
