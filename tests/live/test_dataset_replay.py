@@ -114,7 +114,7 @@ def test_bad_dataset_replays_are_one_line_before_anything_opens(sim_dataset, tmp
     assert not out.exists()
     out.write_bytes(b"")
     taken = teleprev(*base, "--episode", "0", "--config", SIM_RIG)
-    assert taken.returncode == 2 and "teleprev does not overwrite a recording" in taken.stderr
+    assert taken.returncode == 2 and "already exists; teleprev does not overwrite it" in taken.stderr
 
 
 def test_a_recording_that_fails_never_stops_the_replay_and_says_so(sim_dataset, tmp_path, monkeypatch):
