@@ -8,7 +8,8 @@ import sys
 import textwrap
 import time
 
-from tests.helpers.faults import ROOT, alive, workers_of
+from tests.helpers.faults import ROOT, survivors, workers_of
+from tests.helpers.wait import wait_until
 
 DRIVER = textwrap.dedent("""
     import sys, time
@@ -31,29 +32,24 @@ def test_workers_die_with_their_parent(tmp_path):
                             env={"PYTHONPATH": str(ROOT), "PATH": "/usr/bin:/bin"})
     try:
         assert proc.stdout.readline().strip() == "starting"
-        deadline = time.monotonic() + 60
-        workers: set[int] = set()
-        while time.monotonic() < deadline:  # the fork server and its two workers
-            workers = workers_of(proc.pid)
-            if len(workers) >= 3:
-                break
-            time.sleep(0.05)
-        assert len(workers) >= 3, workers
+
+        def started() -> set[int]:
+            found = workers_of(proc.pid)
+            return found if len(found) >= 3 else set()
+
+        workers = wait_until(started, 60, what="the fork server and its two workers", poll_s=0.05)
         time.sleep(0.5)  # inside their tasks
         proc.send_signal(signal.SIGKILL)
         proc.wait(timeout=10)
     finally:
         if proc.poll() is None:
             proc.kill()
-    deadline = time.monotonic() + 3  # the kernel ends them at once; left alone they would nap for 2 minutes
-    while any(alive(p) for p in workers) and time.monotonic() < deadline:
-        time.sleep(0.05)
-    survivors = [p for p in workers if alive(p)]
-    for p in survivors:  # do not leave them behind on a shared machine
+    left = survivors(workers)  # left alone they would nap for 2 minutes
+    for p in left:  # do not leave them behind on a shared machine
         try:
             import os
 
             os.kill(p, signal.SIGKILL)
         except ProcessLookupError:
             pass
-    assert not survivors, "a worker outlived its parent"
+    assert not left, "a worker outlived its parent"

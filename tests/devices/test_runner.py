@@ -14,6 +14,7 @@ from teleprev.errors import DeviceError
 from teleprev.messages import Event, JointSample, Sample
 from teleprev import topics
 from teleprev.clock import SessionClock
+from tests.helpers.wait import wait_until
 
 
 @dataclass
@@ -141,11 +142,11 @@ def test_a_device_that_dies_is_closed_reconnected_and_picked_up_again():
     time.sleep(0.2)
     a.unplugged.set()
     a.broken.set()
-    time.sleep(0.5)
-    assert runners[0].stats().state == "error" and not a.open
+    wait_until(lambda: runners[0].stats().state == "error" and not a.open, 5, what="a's error, closed")
+    time.sleep(0.3)  # reconnect attempts while unplugged
     a.broken.clear()
     a.unplugged.clear()
-    time.sleep(0.4)
+    wait_until(lambda: "recovered" in [e["event"] for e in sink.events("a")], 5, what="a recovered")
     for r in runners:
         r.stop()
 
@@ -238,9 +239,7 @@ def test_actuator_port_never_raises_and_counts_what_did_not_go_out():
     cmd = JointSample(0, ("joint1",), np.array([0.5]))
     assert port.send(cmd) is False and port.dropped_down == 1  # not connected yet
     runner.start()
-    deadline = time.monotonic() + 1.0
-    while not runner.connected and time.monotonic() < deadline:
-        time.sleep(0.01)
+    wait_until(lambda: runner.connected, 5, what="the runner connected")
     assert port.send(cmd) is True
     assert port.send(JointSample(0, ("joint1",), np.array([2.0]))) is False
     assert port.send(JointSample(0, ("joint1",), np.array([np.nan]))) is False

@@ -17,6 +17,7 @@ from teleprev.human.smplx import JOINT_INDEX, angles_from_hand_pose, hand_pose_f
 from teleprev.transforms import axis_angle_to_matrix, matrix_to_quat, quat_to_matrix
 from tests.helpers.ports import free_port
 from tests.helpers.vmc import arm_frame, arm_messages, bone, bundle, msg, unity_quat
+from tests.helpers.wait import wait_until
 from teleprev import topics
 from teleprev.clock import SessionClock
 
@@ -151,9 +152,7 @@ def test_garbage_is_counted_and_skipped_without_stopping_the_stream(context):
         pose = hand_pose_from_values(samples[0].payload.names, samples[0].payload.positions)
         assert np.isfinite(pose).all()
         assert angles_from_hand_pose(pose)[0][0] == pytest.approx(0.3)
-        deadline = time.monotonic() + 1.0
-        while glove.counters()["malformed_packets"] < 2 and time.monotonic() < deadline:
-            time.sleep(0.01)
+        wait_until(lambda: glove.counters()["malformed_packets"] >= 2, 5.0, what="two malformed packets counted")
         assert {k: v for k, v in glove.counters().items() if v} == {
             "malformed_packets": 2, "malformed_messages": 1, "unknown_bones": 2, "non_finite": 2}
         sender.sendto(bundle(good).dgram, ("127.0.0.1", port))
@@ -176,18 +175,19 @@ def test_suit_and_glove_share_one_port_and_the_runner_reports_skipped_garbage():
     client = SimpleUDPClient("127.0.0.1", port)
     raw = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
     try:
-        deadline = time.monotonic() + 2.0
-        while not all(r.connected for r in runners) and time.monotonic() < deadline:
-            time.sleep(0.01)
+        wait_until(lambda: all(r.connected for r in runners), 10.0, what="both runners connected")
         for k in range(30):
             fingers = bone("RightIndexProximal", (0.03, 0, 0), unity_quat([0, 0, 1], -0.01 * k))
             client.send(bundle(*arm_messages(), fingers))
             if k == 10:
                 raw.sendto(b"not osc", ("127.0.0.1", port))
             time.sleep(0.01)
-        time.sleep(1.2)  # the runner turns counters into events once a second
+        # the runner turns counters into events once a second
+        wait_until(lambda: {(s.payload.data["device"], s.payload.data["event"]) for s in list(got)
+                            if s.topic == topics.DEVICE_EVENT} >= {("s", "skipped"), ("g", "skipped")},
+                   10.0, what="both devices' skipped events")
         client.send(arm_frame())
-        time.sleep(0.1)
+        wait_until(lambda: sum(s.topic == "/suit/s/wrist" for s in list(got)) == 31, 5.0, what="the 31st wrist sample")
     finally:
         raw.close()
         for r in runners:
@@ -252,10 +252,9 @@ def test_settings_are_checked_when_the_rig_loads(tmp_path):
     assert entry.settings.host == "127.0.0.1" and entry.settings.body and entry.kind == "suit"
 
 
-def wait_counter(device, key, n, timeout=2.0):
-    deadline = time.monotonic() + timeout
-    while device.counters().get(key, 0) < n and time.monotonic() < deadline:
-        time.sleep(0.01)
+def wait_counter(device, key, n, timeout=5.0):
+    """The device's counters once `key` has counted `n` (the caller checks it stopped there)."""
+    wait_until(lambda: device.counters().get(key, 0) >= n, timeout, what=f"{key} >= {n}")
     return device.counters()
 
 
@@ -311,15 +310,13 @@ def test_a_clock_outlier_is_counted_and_recorded_as_an_event():
     runner = DeviceRunner(glove, lambda s, t: got.append(s), clock).start()
     sender = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
     try:
-        deadline = time.monotonic() + 2.0
-        while not runner.connected and time.monotonic() < deadline:
-            time.sleep(0.01)
+        wait_until(lambda: runner.connected, 10.0, what="the runner connected")
         for k in range(12):  # 10 ms apart in sender time; the eighth claims to be 5 s in the future
             t = 50.0 + 0.01 * k + (5.0 if k == 7 else 0.0)
             sender.sendto(bundle(bone("RightIndexProximal", (0.03, 0, 0)), msg("/VMC/Ext/T", t, types="d")).dgram,
                           ("127.0.0.1", port))
             time.sleep(0.01)
-        time.sleep(0.1)
+        wait_until(lambda: sum(s.topic == "/glove/g/hand" for s in list(got)) == 12, 5.0, what="12 hand samples")
     finally:
         runner.stop()
         sender.close()
@@ -394,8 +391,7 @@ def test_frames_the_device_did_not_read_in_time_are_counted_as_queue_overflow(co
             sender.sendto(bundle(bone("RightIndexProximal", (0.03, 0, 0))).dgram, ("127.0.0.1", port))
             if k % 50 == 0:
                 time.sleep(0.02)  # (kept under the socket's own buffer)
-        time.sleep(0.2)
-        assert glove.counters()["lost_queue_overflow"] == 10
+        assert wait_counter(glove, "lost_queue_overflow", 10)["lost_queue_overflow"] == 10
         assert len(glove.read(0.05)) == QUEUE
     finally:
         sender.close()

@@ -15,6 +15,7 @@ from teleprev_devices.xarm import SdkXArmLink, XArm, XArmSettings
 from teleprev.errors import ConfigError, DeviceError
 from teleprev.messages import JointSample
 from teleprev.clock import SessionClock
+from tests.helpers.wait import wait_until
 
 HOME = [0.0, -0.27, -0.11, 0.0, -0.85, -1.571]
 NAMES = tuple(f"joint{i}" for i in range(1, 7))
@@ -117,16 +118,13 @@ def test_a_lost_connection_is_a_device_error_and_the_runner_reconnects():
     clock = a.context.clock
     runner = DeviceRunner(a, lambda s, t: events.append(s), clock, reconnect_s=0.05)
     runner.start()
-    time.sleep(0.15)
+    wait_until(lambda: runner.connected, 5, what="the runner connected")
     link.unplugged = True
     with pytest.raises(DeviceError):
-        deadline = time.monotonic() + 1
-        while time.monotonic() < deadline:
-            a.send(cmd(HOME))
-            time.sleep(0.01)
-    time.sleep(0.2)
+        wait_until(lambda: a.send(cmd(HOME)), 5, what="the unplugged link's DeviceError")
+    time.sleep(0.2)  # reconnect attempts while unplugged
     link.unplugged = False
-    time.sleep(0.2)
+    wait_until(lambda: runner.stats().connects == 2, 5, what="the reconnect")
     runner.stop()
     kinds = [s.payload.data["event"] for s in events if s.topic == "/events/device"]
     assert kinds[:3] == ["connected", "error", "disconnected"] and "connected" in kinds[3:]

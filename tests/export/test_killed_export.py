@@ -9,7 +9,6 @@ import signal
 import subprocess
 import sys
 import textwrap
-import time
 from pathlib import Path
 
 import pytest
@@ -18,7 +17,8 @@ from teleprev.export.dataset import Staging
 from teleprev.export.swap import FAULT_ENV, clean_stale
 from teleprev.export.synthetic import EpisodeSpec, SyntheticSession, write_session
 from tests.helpers.cli import teleprev
-from tests.helpers.faults import ROOT, alive, has_traceback, start_cli, workers_of
+from tests.helpers.faults import ROOT, has_traceback, start_cli, survivors, workers_of
+from tests.helpers.wait import wait_until
 
 
 def tree(root: Path) -> dict[str, str]:
@@ -88,26 +88,21 @@ def test_workers_die_with_a_killed_export_and_the_next_export_cleans_up(sessions
     proc = start_cli(["export", *sessions, "--repo-id", "lab/killed", "--root", root, "-j", "2"])
     workers: set[int] = set()
     try:
-        deadline = time.monotonic() + 240
-        while time.monotonic() < deadline:  # until both workers are writing their parts
+
+        def both_writing() -> bool:
             parts = [p for s in tmp_path.glob(".killed.export-*") for p in s.glob("part-*")]
-            workers |= workers_of(proc.pid)
-            if len(parts) == 2:
-                break
-            assert proc.poll() is None, proc.communicate()
-            time.sleep(0.05)
-        else:
-            pytest.fail("the workers never started")
+            workers.update(workers_of(proc.pid))
+            assert len(parts) == 2 or proc.poll() is None, proc.communicate()
+            return len(parts) == 2
+
+        wait_until(both_writing, 240, what="both workers writing their parts", poll_s=0.05)
         workers |= workers_of(proc.pid)
         proc.send_signal(signal.SIGKILL)
         proc.wait(timeout=10)
     finally:
         if proc.poll() is None:
             proc.kill()
-    deadline = time.monotonic() + 3  # the kernel kills them at once; a worker left alone would go on for seconds
-    while any(alive(p) for p in workers) and time.monotonic() < deadline:
-        time.sleep(0.05)
-    assert workers and not [p for p in workers if alive(p)], "a worker outlived its parent"
+    assert workers and not survivors(workers), "a worker outlived its parent"  # one left alone would go on for seconds
     assert not root.exists() and len(list(tmp_path.glob(".killed.export-*"))) == 1
 
     run = teleprev("export", sessions[0], "--repo-id", "lab/killed", "--root", root)  # here: no second lerobot import
@@ -124,10 +119,13 @@ def test_sigterm_or_sighup_stop_an_append_and_leave_the_dataset_as_it_was(sessio
     for sig in (signal.SIGTERM, signal.SIGHUP):
         proc = start_cli(["export", sessions[1], "--repo-id", "lab/kept", "--root", root, "--append"])
         try:
-            deadline = time.monotonic() + 240
-            while not list(tmp_path.glob(".kept.export-*/dataset")) and time.monotonic() < deadline:
-                assert proc.poll() is None, proc.communicate()
-                time.sleep(0.02)
+
+            def copied() -> list[Path]:
+                found = list(tmp_path.glob(".kept.export-*/dataset"))
+                assert found or proc.poll() is None, proc.communicate()
+                return found
+
+            wait_until(copied, 240, what="the append's working copy", poll_s=0.02)
             proc.send_signal(sig)
             stdout, stderr = proc.communicate(timeout=120)
         finally:

@@ -12,9 +12,10 @@ import resource
 import signal
 import subprocess
 import sys
-import time
 from contextlib import contextmanager
 from pathlib import Path
+
+from tests.helpers.wait import WaitTimeout, wait_until
 
 ROOT = Path(__file__).resolve().parents[2]
 TELEPREV = [sys.executable, "-c", "from teleprev.cli.app import main; main()"]
@@ -67,13 +68,9 @@ def _env(extra: dict | None) -> dict:
     return env
 
 
-def wait_for_file(path: Path, min_bytes: int = 1, timeout: float = 60.0) -> bool:
-    deadline = time.monotonic() + timeout
-    while time.monotonic() < deadline:
-        if path.exists() and path.stat().st_size >= min_bytes:
-            return True
-        time.sleep(0.02)
-    return False
+def wait_for_file(path: Path, min_bytes: int = 1, timeout: float = 60.0) -> None:
+    wait_until(lambda: path.exists() and path.stat().st_size >= min_bytes, timeout,
+               what=f"{path} to hold {min_bytes} bytes", poll_s=0.02)
 
 
 def has_traceback(text: str) -> bool:
@@ -121,6 +118,15 @@ def alive(pid: int) -> bool:
     except OSError:
         return False
     return stat.rsplit(")", 1)[1].split()[0] != "Z"
+
+
+def survivors(pids: set[int], timeout_s: float = 3.0) -> list[int]:
+    """Those of `pids` still alive after up to timeout_s (the kernel ends a killed parent's workers at once)."""
+    try:
+        wait_until(lambda: not any(alive(p) for p in pids), timeout_s, poll_s=0.05)
+    except WaitTimeout:
+        pass
+    return [p for p in pids if alive(p)]
 
 
 def chunk_spans(path: Path) -> list[tuple[int, int, int, int]]:

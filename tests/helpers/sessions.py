@@ -3,11 +3,12 @@
 from __future__ import annotations
 
 import time
+from collections.abc import Callable
 from pathlib import Path
 
 from teleprev.rig import default_rig_path
 from teleprev.live.record.session import RecordOptions, LiveSession
-from tests.helpers.wait import wait_until
+from tests.helpers.wait import WaitTimeout, wait_until
 
 RIGS = default_rig_path().parent
 
@@ -38,19 +39,27 @@ def record_sim(out: Path, rig: str = "sim.toml", seconds: float = 3.0, episodes:
     return rec
 
 
-def engage_until_accepted(rec: LiveSession, timeout_s: float = 10.0, unattended: bool = False, every_s: float = 0.25) -> None:
+def engage_until_accepted(rec: LiveSession, timeout_s: float = 10.0, unattended: bool = False, every_s: float = 0.25,
+                          ask: Callable[[], object] | None = None) -> None:
     """Ask to engage every `every_s` until the pipeline accepts (it refuses while nothing is previewed yet, or
-    while the sim hand stands inside its clearance margin); fails naming the last refusal after timeout_s."""
+    while the sim hand stands inside its clearance margin); fails naming the last refusal after timeout_s.
+    `ask` sends one request instead of the loop's engage (the XR page's toggle, say): as a toggle, only
+    while the loop shows preview."""
     before = rec.loop.stats.engages
 
     def engaged():
         if rec.loop.stats.engages > before:
             return True
-        rec.loop.engage(unattended=unattended)
+        if ask is None:
+            rec.loop.engage(unattended=unattended)
+        elif rec.loop.snapshot.mode == "preview":
+            ask()
         return False
 
-    wait_until(engaged, timeout_s, what=f"an accepted engage (last message: {rec.loop.snapshot.message!r})",
-               poll_s=every_s)
+    try:
+        wait_until(engaged, timeout_s, what="an accepted engage", poll_s=every_s)
+    except WaitTimeout as e:
+        raise WaitTimeout(f"{e}; the last refusal: {rec.loop.snapshot.message!r}") from None
 
 
 def record_corpus(folder: Path, names: str = "abc", seconds: float = 2.0) -> Path:
@@ -83,12 +92,11 @@ def record_what_is_sent(rec: LiveSession) -> dict[str, RecordingPort]:
 def wait_opened(rec: LiveSession, timeout_s: float = 10.0) -> None:
     """Wait until every device runner of a started session has opened its device: a datagram sent to a
     VMC receiver before its socket is bound is lost where nothing can count it."""
-    deadline = time.monotonic() + timeout_s
-    while not all(r.connected for r in rec.runners.values()):
-        if time.monotonic() > deadline:
-            closed = [n for n, r in rec.runners.items() if not r.connected]
-            raise AssertionError(f"devices not opened within {timeout_s} s: {closed}")
-        time.sleep(0.01)
+    try:
+        wait_until(lambda: all(r.connected for r in rec.runners.values()), timeout_s, what="devices opened")
+    except WaitTimeout as e:
+        closed = [n for n, r in rec.runners.items() if not r.connected]
+        raise WaitTimeout(f"{e}; not opened: {closed}") from None
 
 
 # A LEAP Hand spread into itself: index and middle fingers abducted towards each other (self-collision).

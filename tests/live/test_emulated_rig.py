@@ -9,7 +9,6 @@ import json
 import os
 import subprocess
 import sys
-import time
 
 from teleprev import topics
 from teleprev.emulators.dynamixel_bus import DynamixelBus
@@ -18,6 +17,7 @@ from teleprev.emulators.xarm_controller import XArmController
 from teleprev.session.reader import SessionReader
 from tests.helpers.ports import free_port
 from tests.helpers.vmc import VmcSender, arm_messages, bundle, finger_messages
+from tests.helpers.wait import WaitTimeout, wait_until
 
 CLI = [sys.executable, "-m", "teleprev.cli.app"]
 ENV = {**os.environ, "COLUMNS": "200"}
@@ -29,13 +29,6 @@ class StillHand(VmcSender):
 
     def frame(self, k: int, rate_hz: float) -> bytes:
         return bundle(*arm_messages(t=100.0 + k / rate_hz), *finger_messages(0.6)).dgram
-
-
-def wait_for(done, timeout_s):
-    deadline = time.monotonic() + timeout_s
-    while time.monotonic() < deadline and not done():
-        time.sleep(0.05)
-    return done()
 
 
 def test_an_emulated_rig_records_exports_replays_to_the_arm_and_audits(tmp_path):
@@ -52,9 +45,11 @@ def test_an_emulated_rig_records_exports_replays_to_the_arm_and_audits(tmp_path)
         record = subprocess.Popen([*CLI, "record", str(rig), "--out", str(out), "--duration", "9", "--engage-after",
                                    "1", "--no-preview"], stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True,
                                   env=ENV)
-        if not wait_for(lambda: len(box.commands) > 150, 60):
+        try:
+            wait_until(lambda: len(box.commands) > 150, 60, what="150 arm commands", poll_s=0.05)
+        except WaitTimeout:
             record.kill()
-            raise AssertionError(f"the arm was commanded {len(box.commands)} times: {record.communicate()[0]}")
+            raise AssertionError(f"the arm was commanded {len(box.commands)} times: {record.communicate()[0]}") from None
         assert bus.goal_writes > 50
         box.inject("collision")  # mid-episode, in execute
         commanded = len(box.commands)

@@ -14,6 +14,7 @@ from teleprev.live.record.session import LiveSession, RecordOptions
 from teleprev.pipeline.planner import ModeUpdate
 from teleprev.rig import default_rig_path
 from teleprev.session.reader import SessionReader
+from tests.helpers.sessions import engage_until_accepted
 
 
 def record_mode_updates(rec: LiveSession) -> list[ModeUpdate]:
@@ -44,10 +45,7 @@ def test_a_fault_mid_episode_ends_the_motion_until_the_operator_engages(tmp_path
     try:
         run_script(rec, duration=6.0, episodes=2, engage_after=0.8)  # the second episode would engage at 3.8 s
         assert rec.loop.stats.engages == 1 and rec.loop.gate.state is GateState.FAULTED
-        deadline = time.monotonic() + 3.0
-        while rec.loop.stats.engages < 2 and time.monotonic() < deadline:
-            rec.loop.engage()  # the operator's key (again while the arm reconnects)
-            time.sleep(0.25)
+        engage_until_accepted(rec)  # the operator's key (again while the arm reconnects)
         time.sleep(1.0)
     finally:
         rec.stop()

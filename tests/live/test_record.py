@@ -7,7 +7,8 @@ import pytest
 from rich.console import Console
 
 from tests.helpers.cli import teleprev
-from tests.helpers.sessions import record_sim, record_what_is_sent
+from tests.helpers.sessions import engage_until_accepted, record_sim, record_what_is_sent
+from tests.helpers.wait import wait_until
 from teleprev.robot.collision import SelfCollisionChecker
 from teleprev.robot.model import load_robot
 from teleprev import topics
@@ -102,8 +103,8 @@ def test_the_terminal_preview_shows_the_mode_and_the_robot(executed):
         dash = make_dashboard(rec, "side")
         console.print(dash.render(rec.loop.snapshot, rec.device_rows(), 140, 44, rec.clock.now_ns()))
         preview_text = console.export_text()
-        rec.loop.engage()
-        time.sleep(0.5)
+        engage_until_accepted(rec)
+        wait_until(lambda: rec.loop.snapshot.mode == "execute", what="EXECUTE in the snapshot")
         console = Console(file=io.StringIO(), width=140, height=44, record=True)
         console.print(dash.render(rec.loop.snapshot, rec.device_rows(), 140, 44, rec.clock.now_ns()))
         execute_text = console.export_text()

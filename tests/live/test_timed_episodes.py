@@ -21,6 +21,7 @@ from teleprev.live.record.session import LiveSession, RecordOptions
 from teleprev.session.reader import SessionReader
 from tests.helpers.cli import teleprev
 from tests.helpers.sessions import record_what_is_sent
+from tests.helpers.wait import wait_until
 from tests.live.test_schedule import fake_speech
 
 
@@ -80,13 +81,6 @@ def test_a_timed_plan_runs_to_its_times(tmp_path, monkeypatch):
     assert line.split() == "episode plan 3 x 1.5 s, resets 1 s, engage after 0.2 s, marks yf-".split()
 
 
-def wait_for(condition, timeout_s: float = 10.0) -> None:
-    deadline = time.monotonic() + timeout_s
-    while not condition():
-        assert time.monotonic() < deadline, "timed out"
-        time.sleep(0.01)
-
-
 def test_keys_during_timed_episodes(tmp_path):
     """n ends the current period (episode -> reset, reset -> next episode), space in a reset is refused in
     one line, a discards the running episode and records it again, d in a reset discards the last one;
@@ -99,19 +93,19 @@ def test_keys_during_timed_episodes(tmp_path):
     snap = lambda: rec.loop.snapshot  # noqa: E731
 
     def operator():
-        wait_for(lambda: snap().episode == 0 and snap().episode_active)
+        wait_until(lambda: snap().episode == 0 and snap().episode_active, what="episode 0 running")
         time.sleep(0.3)
         pressed["n1"] = keys.press("n")  # episode 0 ends now
-        wait_for(lambda: not snap().episode_active)
+        wait_until(lambda: not snap().episode_active, what="the reset")
         pressed["space"] = keys.press(" ")
-        wait_for(lambda: "cannot switch to execute" in snap().message)
+        wait_until(lambda: "cannot switch to execute" in snap().message, what="the refusal")
         refusal.append(snap().message)
         pressed["n2"] = keys.press("n")  # the reset ends now: episode 1 starts
-        wait_for(lambda: snap().episode == 1 and snap().episode_active)
+        wait_until(lambda: snap().episode == 1 and snap().episode_active, what="episode 1 running")
         time.sleep(0.3)
         pressed["a"] = keys.press("a")  # episode 1 discarded, recorded again after the reset
-        wait_for(lambda: snap().episode == 2 and snap().episode_active)
-        wait_for(lambda: not snap().episode_active)  # its natural end: the reset
+        wait_until(lambda: snap().episode == 2 and snap().episode_active, what="episode 2 running")
+        wait_until(lambda: not snap().episode_active, what="the reset")  # its natural end: the reset
         pressed["d"] = keys.press("d")  # discards episode 2
 
     rec.start()

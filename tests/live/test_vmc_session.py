@@ -8,13 +8,15 @@ import time
 import numpy as np
 
 from teleprev import topics
+from teleprev.devices.runner import lost_input
 from teleprev.live.record.session import LiveSession, RecordOptions
 from teleprev.session.reader import SessionReader
 from teleprev.session.summary import device_lost, summarize
 from tests.helpers.cli import teleprev
-from tests.helpers.sessions import wait_opened
+from tests.helpers.sessions import engage_until_accepted, wait_opened
 from tests.helpers.ports import free_port
 from tests.helpers.vmc import VmcSender, bone, bundle, finger_messages, msg, rig_text
+from tests.helpers.wait import wait_until
 
 GLOVE, SUIT = "/glove/glove/hand", "/suit/suit/wrist"
 
@@ -41,7 +43,12 @@ def test_bad_bundles_are_counted_and_skipped_and_the_glove_and_suit_keep_recordi
         sender.inject(bundle(*finger_messages(0.5), msg("/VMC/Ext/T", 1e4, types="d")).dgram)  # a clock outlier
         time.sleep(1.5)
         sender.stop()
-        time.sleep(0.3)
+
+        def all_received() -> bool:
+            glove, suit = rec.runners["glove"].stats(), rec.runners["suit"].stats()
+            return glove.topics.get(GLOVE) == sender.sent + 1 and suit.topics.get(SUIT) == sender.sent
+
+        wait_until(all_received, what="every frame sent received")
     finally:
         summary = rec.stop()
     path = tmp_path / "s.mcap"
@@ -72,16 +79,10 @@ def test_a_glove_that_dies_mid_session_stops_the_robot(tmp_path):
         sender.start(rate_hz=60.0)
         assert rec.wait_connected(5.0) == []
         rec.loop.start_episode("pick_place")
-        deadline = time.monotonic() + 5.0
-        while rec.loop.snapshot.mode != "execute" and time.monotonic() < deadline:  # refused until inputs are fresh
-            rec.loop.engage("test")
-            time.sleep(0.1)
-        assert rec.loop.snapshot.mode == "execute", rec.loop.snapshot.message
+        engage_until_accepted(rec)  # refused until inputs are fresh
         time.sleep(1.0)
         sender.stop()  # the glove (and suit) go quiet; 0.3 s later the glove fails
-        deadline = time.monotonic() + 3.0
-        while not rec.loop.stats.device_failures and time.monotonic() < deadline:
-            time.sleep(0.02)
+        wait_until(lambda: rec.loop.stats.device_failures, 5.0, what="the glove's failure")
         shown = rec.loop.snapshot  # what the preview shows
         time.sleep(0.5)
     finally:
@@ -156,16 +157,18 @@ def test_a_flood_loses_frames_and_every_lost_one_is_counted_per_device(tmp_path)
             time.sleep(0.005)
         for d in frames[40:-1]:
             sender.send(d)
-        deadline = time.monotonic() + 10.0
-        while rec.runners["glove"].stats().state != "gap" and time.monotonic() < deadline:
-            time.sleep(0.05)  # the backlog drains, then the glove goes quiet
+        # the backlog drains, then the glove goes quiet
+        wait_until(lambda: rec.runners["glove"].stats().state == "gap", what="the glove's gap", poll_s=0.05)
         marker_ns = rec.clock.now_ns()
         sender.send(frames[-1])  # the next datagram read carries the kernel's count of what it dropped
-        deadline = time.monotonic() + 10.0
-        while (rec.runners["glove"].stats().last_receive_ns or 0) < marker_ns and time.monotonic() < deadline:
-            time.sleep(0.05)
-        time.sleep(1.1)  # the runner reads the device's counters once a second
-        rows = {r.name: r for r in rec.device_rows()}
+        wait_until(lambda: (rec.runners["glove"].stats().last_receive_ns or 0) >= marker_ns, what="the last datagram",
+                   poll_s=0.05)
+
+        def table():  # the runner reads the device's counters once a second
+            shown = {r.name: r for r in rec.device_rows()}
+            return shown if shown["glove"].lost_input == lost_input(rec.devices["glove"].counters()) else None
+
+        rows = wait_until(table, what="the device table's count of what was lost", poll_s=0.05)
     finally:
         rec.stop()
         sender.stop()

@@ -13,7 +13,8 @@ import pytest
 from teleprev.errors import SessionError
 from teleprev.session.recover import recover
 from tests.helpers.faults import has_traceback, run_cli, small_disk
-from tests.helpers.sessions import record_what_is_sent
+from tests.helpers.sessions import engage_until_accepted, record_what_is_sent
+from tests.helpers.wait import wait_until
 
 
 def fill_after_flush(writer, timeout_s: float = 5.0) -> None:
@@ -41,11 +42,7 @@ def test_a_full_disk_stops_the_robot_and_the_preview_says_why(tmp_path):
     try:
         rec.loop.start_episode("pick_place")
         time.sleep(1.0)
-        deadline = time.monotonic() + 10
-        while rec.loop.snapshot.mode != "execute" and time.monotonic() < deadline:
-            # refused while the sim hand happens to stand inside the clearance margin: ask again
-            rec.loop.engage()
-            time.sleep(0.5)
+        engage_until_accepted(rec)
         time.sleep(0.5)
         assert rec.loop.snapshot.mode == "execute", rec.loop.snapshot.message
         # From here every write the recorder makes fails with ENOSPC, as on a disk that just filled up. The
@@ -53,19 +50,15 @@ def test_a_full_disk_stops_the_robot_and_the_preview_says_why(tmp_path):
         # EINVAL (a character device cannot sync), which no full disk gives.
         fill_after_flush(rec.recorder._writer)
         failed_at = time.monotonic()
-        deadline = failed_at + 10
-        while rec.loop.snapshot.mode != "preview" and time.monotonic() < deadline:
-            time.sleep(0.01)
+        wait_until(lambda: rec.loop.snapshot.mode == "preview", 10, what="preview (the write failure reaching the loop)")
         reached_s = time.monotonic() - failed_at
         snap = rec.loop.snapshot
-        assert snap.mode == "preview", "the write failure never reached the session loop"
         assert reached_s < 3 * rec.recorder.flush_interval_s + 1.0  # the next flush fails, the loop hears at once
         assert "no space left" in snap.message and "robot stopped" in snap.message
         time.sleep(1.5)  # braking to rest takes well under this
         rec.loop.engage()  # the operator tries to go on: refused
-        time.sleep(0.3)
+        wait_until(lambda: "cannot switch to execute" in rec.loop.snapshot.message, what="the refusal")
         assert rec.loop.snapshot.mode == "preview"
-        assert "cannot switch to execute" in rec.loop.snapshot.message
     finally:
         with pytest.raises(SessionError, match="no space left.*teleprev recover"):
             rec.stop()

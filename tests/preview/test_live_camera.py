@@ -2,24 +2,21 @@
 frame in its snapshot, and the preview passes it to the dashboard."""
 
 import io
-import time
 
 from rich.console import Console
 
 from teleprev.live.record.run import _frame, make_dashboard
 from teleprev.live.record.session import LiveSession, RecordOptions
 from teleprev.messages import ImageSample
+from tests.helpers.wait import wait_until
 
 
 def test_a_live_sessions_screen_shows_its_camera(tmp_path):
     rec = LiveSession(RecordOptions(out=tmp_path / "s.mcap"))
     rec.start()
     try:
-        deadline = time.monotonic() + 20
-        while rec.loop.snapshot.camera is None and time.monotonic() < deadline:
-            time.sleep(0.05)
-        camera = rec.loop.snapshot.camera
-        assert isinstance(camera, ImageSample), "no camera frame reached the preview's snapshot"
+        camera = wait_until(lambda: rec.loop.snapshot.camera, 20, what="a camera frame in the preview's snapshot")
+        assert isinstance(camera, ImageSample)
         console = Console(file=io.StringIO(), width=80, height=24, color_system="truecolor", force_terminal=True)
         console.print(_frame(make_dashboard(rec, "side"), rec, console))
         lines = console.file.getvalue().splitlines()

@@ -13,6 +13,7 @@ from teleprev.errors import SessionError
 from teleprev.messages import Event, JointSample, Logged
 from teleprev.session.reader import SessionReader
 from teleprev.session.recorder import RECORDER_RECORD, Recorder
+from tests.helpers.wait import wait_until
 
 NAMES = ("a", "b")
 
@@ -113,7 +114,8 @@ def test_flushes_while_recording(tmp_path):
     rec = Recorder(path, {}, flush_interval_s=0.1).start()
     for k in range(50):
         rec.log(joint("/x", k, k))
-    time.sleep(0.4)
+    wait_until(lambda: rec.stats()["/x"].written == 50, what="50 messages written")
+    time.sleep(0.3)  # what is under test: three flush intervals later, they are in the file
     snapshot = tmp_path / "snap.mcap"
     snapshot.write_bytes(path.read_bytes())
     rec.log(joint("/x", 50, 50))
@@ -144,18 +146,17 @@ def test_io_failure_stops_cleanly_and_keeps_what_was_flushed(tmp_path):
     rec = Recorder(path, {}, flush_interval_s=0.05).start()
     for k in range(20):
         rec.log(joint("/x", k, k))
-    deadline = time.monotonic() + 5
-    while rec.stats()["/x"].written < 20 and time.monotonic() < deadline:
-        time.sleep(0.01)
+    wait_until(lambda: rec.stats()["/x"].written == 20, what="20 messages written")
     time.sleep(0.2)  # at least one flush after the last write
     read_only = os.open(os.devnull, os.O_RDONLY)
     os.dup2(read_only, rec._writer._file.fileno())  # the writer's descriptor now refuses writes
     os.close(read_only)
-    deadline = time.monotonic() + 5
-    while rec.failure is None and time.monotonic() < deadline:
+
+    def failed():
         rec.log(joint("/x", 100, 100))
-        time.sleep(0.01)
-    assert isinstance(rec.failure, OSError)
+        return rec.failure
+
+    assert isinstance(wait_until(failed, 5, what="the writer's failure"), OSError)
     assert not rec.log(joint("/x", 101, 101))
     with pytest.raises(SessionError, match="teleprev recover"):
         rec.close()

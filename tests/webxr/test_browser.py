@@ -18,19 +18,14 @@ from tests.helpers.cli import teleprev
 from tests.helpers.ports import free_tcp_port
 from tests.helpers.xr_browser import Quest3Browser, recorded_motion
 from tests.helpers.xr_hands import RADIUS_M, local_rotations, matrices, xr_hand
+from tests.helpers.wait import wait_until
 from tests.helpers.xr_page import webxr_rig
 
 FRAMES = 180  # 3 s at the headless browser's 60 frames a second
 
 
 def _url(rec: LiveSession) -> str:
-    deadline = time.monotonic() + 10
-    while time.monotonic() < deadline:
-        urls = rec.devices["glove"].operator_urls()
-        if urls:
-            return urls[0]
-        time.sleep(0.05)
-    raise AssertionError("the XR page was not served within 10 s")
+    return wait_until(rec.devices["glove"].operator_urls, what="the XR page served")[0]
 
 
 def test_a_quest3_streams_a_recorded_hand_that_teleprev_records_joint_for_joint(tmp_path):

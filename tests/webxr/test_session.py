@@ -12,7 +12,8 @@ import numpy as np
 from teleprev import topics
 from teleprev.live.record.session import LiveSession, RecordOptions
 from teleprev.session.reader import SessionReader
-from tests.helpers.sessions import wait_opened
+from tests.helpers.sessions import engage_until_accepted, wait_opened
+from tests.helpers.wait import wait_until
 from tests.helpers.xr_page import PageClient, open_hand, webxr_rig
 
 
@@ -43,20 +44,19 @@ def test_the_page_engages_records_what_it_sent_and_a_lost_hand_holds_the_robot(t
     rec.start()
     page = player = None
     try:
-        urls = []
-        deadline = time.monotonic() + 10
-        while not urls and time.monotonic() < deadline:
-            urls = rec.devices["glove"].operator_urls()
-            time.sleep(0.05)
+        urls = wait_until(rec.devices["glove"].operator_urls, what="the page's URL")
         page = PageClient(int(urls[0].split(":")[2].strip("/")))
         player = Player(page)
         player.start()
         wait_opened(rec)
         time.sleep(0.5)
         assert page.action("start")["refused"] == ""
-        assert page.action("toggle_mode")["refused"] == ""
-        time.sleep(1.5)
-        assert rec.loop.snapshot.mode == "execute"
+
+        def toggle():
+            assert page.action("toggle_mode")["refused"] == ""
+
+        engage_until_accepted(rec, ask=toggle)  # the page's toggle, again where the loop refused it
+        time.sleep(1.5)  # the arm follows the swaying wrist
         hidden_at = rec.clock.now_ns()
         player.hidden.set()
         time.sleep(1.2)
@@ -65,8 +65,7 @@ def test_the_page_engages_records_what_it_sent_and_a_lost_hand_holds_the_robot(t
         time.sleep(0.5)
         assert page.action("stop")["refused"] == ""
         assert page.action("toggle_mode")["refused"] == ""
-        time.sleep(0.3)
-        assert rec.loop.snapshot.mode == "preview"
+        wait_until(lambda: rec.loop.snapshot.mode == "preview", what="preview")
     finally:
         if player is not None:
             player.stop.set()
@@ -94,17 +93,20 @@ def test_the_preview_shows_the_pages_url_until_the_page_streams(tmp_path):
     rec = LiveSession(RecordOptions(out=tmp_path / "s.mcap", rig=webxr_rig(tmp_path)))
     rec.start()
     try:
-        deadline = time.monotonic() + 10
-        while not rec.devices["glove"].operator_urls() and time.monotonic() < deadline:
-            time.sleep(0.05)
-        url = rec.devices["glove"].operator_urls()[0]
-        hints = {r.name: r.hint for r in rec.device_rows()}
-        assert hints["glove"] == hints["suit"] == f"XR page: {url}" and not hints["arm"]
+        url = wait_until(rec.devices["glove"].operator_urls, what="the page's URL")[0]
+
+        def hints_show_the_url():  # each device's row, once that device serves the page
+            hints = {r.name: r.hint for r in rec.device_rows()}
+            return hints if hints["glove"] == hints["suit"] == f"XR page: {url}" else None
+
+        assert not wait_until(hints_show_the_url, what="the page's URL in the glove's and suit's rows")["arm"]
         page = PageClient(int(url.split(":")[2].strip("/")))
-        while any(r.hint for r in rec.device_rows()) and time.monotonic() < deadline:
+
+        def streamed():  # the page streams until the hints are gone
             page.frame(right=open_hand())
-            time.sleep(0.02)
-        assert not any(r.hint for r in rec.device_rows())
+            return not any(r.hint for r in rec.device_rows())
+
+        wait_until(streamed, what="the hints gone", poll_s=0.02)
         page.close()
     finally:
         rec.stop()
