@@ -15,5 +15,4 @@ if ! command -v chromium >/dev/null 2>&1 && ! command -v chromium-browser >/dev/
   DEBIAN_FRONTEND=noninteractive $SUDO apt-get install -y -qq chromium >/dev/null
 fi
 npm ci --prefix tests/webxr/browser --no-audit --no-fund --silent
-export TELEPREV_REQUIRE_RAY=1
 exec .venv/bin/python -m pytest -q "$@"

@@ -43,9 +43,7 @@ def test_the_old_session_still_evaluates():
     commanded = ~np.isnan(r.rerun["/command/hand"]).any(axis=1)
     assert commanded.sum() > 300
     # with the models it was recorded with, it must reproduce bit for bit
-    if not r.models_match:
-        pytest.skip(f"bit identity not checked: the shipped models are not the ones {FIXTURE.name} was "
-                    f"recorded with (models_match={r.models_match})")
+    assert r.models_match, f"the shipped models are not the ones {FIXTURE.name} was recorded with"
     assert session["bit_identical"]
 
 
