@@ -8,16 +8,14 @@ and the last value it saw, so a flaky wait reads as the timeout it is.
 from __future__ import annotations
 
 import time
-from typing import Callable, TypeVar
-
-T = TypeVar("T")
+from collections.abc import Callable
 
 
 class WaitTimeout(AssertionError):
     """The condition did not hold within the time given."""
 
 
-def wait_until(condition: Callable[[], T], timeout_s: float = 10.0, *, what: str = "", poll_s: float = 0.01) -> T:
+def wait_until[T](condition: Callable[[], T], timeout_s: float = 10.0, *, what: str = "", poll_s: float = 0.01) -> T:
     """Poll `condition` until it returns something truthy and return that; fail after `timeout_s`."""
     deadline = time.monotonic() + timeout_s
     while True:
