@@ -21,7 +21,7 @@ ROOT = Path(__file__).resolve().parents[1]
 LAYERS: list[tuple[str, ...]] = [
     ("teleprev.errors", "teleprev.paths", "teleprev.config", "teleprev.numeric_platform", "teleprev.transforms",
      "teleprev.clock", "teleprev.topics", "teleprev.messages", "teleprev.status", "teleprev.corpus", "teleprev.kernels"),
-    ("teleprev.robot", "teleprev.human", "teleprev.session"),
+    ("teleprev.robot", "teleprev.human", "teleprev.session", "teleprev.world"),
     ("teleprev.devices", "teleprev.retarget", "teleprev.noncollision", "teleprev.emulators"),
     ("teleprev.pipeline",),
     ("teleprev.rig", "teleprev.assembly"),

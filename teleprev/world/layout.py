@@ -1,0 +1,162 @@
+"""What stands on the table for each task, as rigid bodies with mass and friction, drawn from a seed.
+
+The positions are the kinematic sim rig's (devices/teleprev_devices/sim/tasks.py): metres from the
+operator's resting wrist in the task frame, mapped into the robot base frame through `anchor` (the TCP at
+the arm's home pose), with the same nominal places and jitter. The robot base stands on the table top
+(z = 0). Cups and the bowl are hollow (a floor and a ring of tapered wall plates) so that cups nest and
+hold the pour's contents; the spoon has a loop at the end of its handle that goes over the peg.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field, replace
+from typing import Literal
+
+import numpy as np
+
+TASKS = ("pick_place", "hang", "pour", "box_rotation", "cup_stack")
+# The TCP of the LEAP Hand rig at the sim arm's home pose, in the robot base frame (the sim world's anchor).
+DEFAULT_ANCHOR = (0.405, 0.0, 0.30)
+
+# Colours (RGBA 0..1), the sim camera's BGR colours turned around.
+_CUP_RGBA = ((0.78, 0.24, 0.16, 1.0), (0.16, 0.47, 0.78, 1.0), (0.24, 0.67, 0.24, 1.0))
+
+Kind = Literal["cup", "box", "sphere", "spoon"]
+
+
+@dataclass(frozen=True)
+class Shape:
+    """A rigid object's geometry and material.
+
+    cup: size = (bottom radius, top radius, height, wall thickness) (a bowl is a wide, low cup)
+    box: size = (x, y, z)
+    sphere: size = (radius,)
+    spoon: size = (length, width, thickness); a loop at its +x end, `LOOP_HOLE` square, goes over a peg
+    """
+
+    kind: Kind
+    size: tuple[float, ...]
+    mass: float  # kg
+    friction: float  # sliding friction coefficient (MuJoCo's first friction value)
+    rgba: tuple[float, float, float, float] = (0.6, 0.6, 0.6, 1.0)
+
+
+@dataclass(frozen=True)
+class Placed:
+    """An object of the scene: a free rigid body (it moves under the fingers) or a fixed one (the peg)."""
+
+    name: str
+    shape: Shape
+    position: tuple[float, float, float]  # of the body frame (the base centre for a cup), robot base frame
+    yaw: float = 0.0
+    fixed: bool = False
+    collides: bool = True  # False: a marker only (pick_place's target), drawn but never touched
+
+
+@dataclass(frozen=True)
+class Layout:
+    """One episode's scene: the task, the seed it was drawn from and every object's starting pose."""
+
+    task: str
+    seed: int
+    anchor: tuple[float, float, float]
+    objects: tuple[Placed, ...] = field(default_factory=tuple)
+
+    def object(self, name: str) -> Placed:
+        for o in self.objects:
+            if o.name == name:
+                return o
+        raise KeyError(f"no object {name!r} in the {self.task} layout (has {', '.join(o.name for o in self.objects)})")
+
+    @property
+    def free(self) -> tuple[Placed, ...]:
+        return tuple(o for o in self.objects if not o.fixed)
+
+
+LOOP_HOLE = 0.022  # the spoon loop's inner square (m): a 12 mm peg goes through it with room to spare
+LOOP_BAR = 0.006  # the loop's bar width
+
+CUP = Shape("cup", (0.032, 0.042, 0.10, 0.004), 0.05, 0.9)
+BOWL = Shape("cup", (0.055, 0.075, 0.06, 0.005), 0.25, 0.9, (0.78, 0.55, 0.27, 1.0))
+BALL = Shape("sphere", (0.008,), 0.003, 0.6, (0.9, 0.8, 0.2, 1.0))
+SPOON = Shape("spoon", (0.16, 0.035, 0.008), 0.04, 0.8, (0.78, 0.75, 0.75, 1.0))
+BOX = Shape("box", (0.10, 0.14, 0.08), 0.30, 0.6, (0.7, 0.55, 0.24, 1.0))
+PEG_STAND = Shape("box", (0.03, 0.03, 0.26), 1.0, 0.8, (0.55, 0.35, 0.16, 1.0))
+PEG = Shape("box", (0.07, 0.012, 0.012), 0.05, 0.8, (0.55, 0.35, 0.16, 1.0))
+TARGET = Shape("box", (0.10, 0.10, 0.002), 0.01, 0.5, (0.3, 0.8, 0.3, 0.6))
+POUR_BALLS = 10
+PEG_HEIGHT = 0.22  # the peg's axis above the table top
+
+
+def _coloured(shape: Shape, i: int) -> Shape:
+    return replace(shape, rgba=_CUP_RGBA[i])
+
+
+def _jitter(rng: np.random.Generator, scale: float = 0.02) -> np.ndarray:
+    return rng.normal(0.0, scale / 2, 2).clip(-scale, scale)
+
+
+class _Placer:
+    def __init__(self, anchor: tuple[float, float, float], rng: np.random.Generator):
+        self.anchor = np.asarray(anchor, dtype=float)
+        self.rng = rng
+
+    def xy(self, x: float, y: float, jitter: float = 0.02) -> np.ndarray:
+        """A task-frame spot (from the resting wrist) with the sim's jitter, in the robot base frame."""
+        return self.anchor[:2] + np.array([x, y]) + _jitter(self.rng, jitter)
+
+
+def _at(xy: np.ndarray, z: float) -> tuple[float, float, float]:
+    return (float(xy[0]), float(xy[1]), float(z))
+
+
+def _pick_place(p: _Placer) -> tuple[Placed, ...]:
+    cup, target = p.xy(0.10, -0.10), p.xy(0.12, 0.14)
+    return (Placed("cup", _coloured(CUP, 0), _at(cup, 0.0)),
+            Placed("target", TARGET, _at(target, 0.001), fixed=True, collides=False))
+
+
+def _hang(p: _Placer) -> tuple[Placed, ...]:
+    spoon, peg = p.xy(0.10, -0.12), p.xy(0.17, 0.12, 0.01)
+    return (
+        Placed("spoon", SPOON, _at(spoon, SPOON.size[2] / 2), 0.15),
+        Placed("peg_stand", PEG_STAND, (float(peg[0] + 0.03), float(peg[1]), PEG_STAND.size[2] / 2), fixed=True),
+        Placed("peg", PEG, (float(peg[0] - 0.005), float(peg[1]), PEG_HEIGHT), fixed=True),
+    )
+
+
+def _pour(p: _Placer) -> tuple[Placed, ...]:
+    cup, bowl = p.xy(0.08, -0.12), p.xy(0.15, 0.10)
+    objects = [Placed("cup", _coloured(CUP, 1), _at(cup, 0.0)), Placed("bowl", BOWL, _at(bowl, 0.0))]
+    # The contents: balls in two rings and a column inside the cup, clear of each other and of its walls.
+    r, floor = BALL.size[0], CUP.size[3]
+    spots = [(0.0, 0.0)] + [(0.017 * np.cos(a), 0.017 * np.sin(a)) for a in np.linspace(0, 2 * np.pi, 6, endpoint=False)]
+    for i in range(POUR_BALLS):
+        dx, dy = spots[i % len(spots)]
+        z = floor + r + 0.001 + (2 * r + 0.002) * (i // len(spots))
+        objects.append(Placed(f"ball{i + 1}", BALL, (float(cup[0] + dx), float(cup[1] + dy), float(z))))
+    return tuple(objects)
+
+
+def _box_rotation(p: _Placer) -> tuple[Placed, ...]:
+    box = p.xy(0.15, 0.0)
+    return (Placed("box", BOX, _at(box, BOX.size[2] / 2), float(p.rng.uniform(-0.2, 0.2))),)
+
+
+def _cup_stack(p: _Placer) -> tuple[Placed, ...]:
+    spots = [p.xy(0.08, -0.16), p.xy(0.15, -0.02), p.xy(0.10, 0.15)]
+    return tuple(Placed(f"cup{i + 1}", _coloured(CUP, i), _at(xy, 0.0))
+                 for i, xy in enumerate(spots))
+
+
+_LAYOUTS = {"pick_place": _pick_place, "hang": _hang, "pour": _pour, "box_rotation": _box_rotation,
+            "cup_stack": _cup_stack}
+
+
+def task_layout(task: str, seed: int, anchor: tuple[float, float, float] = DEFAULT_ANCHOR) -> Layout:
+    """The scene of `task` drawn from `seed` (the same seed gives the same layout)."""
+    if task not in _LAYOUTS:
+        raise ValueError(f"unknown task {task!r} (expected {', '.join(TASKS)})")
+    rng = np.random.default_rng(seed)
+    anchor = tuple(float(v) for v in anchor)
+    return Layout(task, int(seed), anchor, _LAYOUTS[task](_Placer(anchor, rng)))
