@@ -1,0 +1,95 @@
+"""The physics world's speed (issue 39): stepping against the clock, and rendering with the world stepping.
+
+    python bench/physics.py [--json] [--quick]
+
+physics_realtime_x   simulated seconds per wall second, the slowest task: the xArm6 + LEAP Hand moving
+                     (every joint on a smooth target) with the task's objects, stepped at 500 Hz alone on
+                     one core; physics_realtime_x[task] per task
+render_fps           640x480 colour frames per wall second from the front camera, the world stepping
+                     1/30 s between frames, on the same core (Mesa's llvmpipe held to one thread)
+"""
+
+from __future__ import annotations
+
+import os
+import sys
+import time
+from pathlib import Path
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+import common  # noqa: E402  (sets one-thread environment before numpy loads)
+
+# One core for the GL rasteriser too, and headless EGL; both are read when GL first loads.
+os.environ.setdefault("LP_NUM_THREADS", "1")
+os.environ.setdefault("MUJOCO_GL", "egl")
+
+import numpy as np  # noqa: E402
+
+FRAME_S = 1 / 30
+
+
+def _pin_to_one_core() -> int:
+    core = max(os.sched_getaffinity(0))
+    os.sched_setaffinity(0, {core})
+    return core
+
+
+def _moving_targets(world, home: dict[str, float], t: float) -> dict[str, float]:
+    """Every joint swinging slowly about its start (arm +-0.15 rad, fingers 0.2..0.9 rad)."""
+    arm = {n: home[n] + 0.15 * np.sin(0.8 * t + i) for i, n in enumerate(world.compiled.arm_joints)}
+    hand = {n: 0.55 + 0.35 * np.sin(1.3 * t + i) for i, n in enumerate(world.compiled.effector_joints)}
+    return arm | hand
+
+
+def realtime_x(task: str, sim_s: float) -> float:
+    from teleprev.world.layout import task_layout
+    from teleprev.world.world import PhysicsWorld
+
+    world = PhysicsWorld("leap_hand", task_layout(task, 0))
+    home = world.joint_positions()
+    command_ns = 10_000_000  # a new target every 10 ms, as the command sender's ticks would bring them
+    steps = int(sim_s * 1e9 // command_ns)
+    start = time.perf_counter()
+    for k in range(steps):
+        world.set_targets(_moving_targets(world, home, k * command_ns / 1e9))
+        world.advance_to((k + 1) * command_ns)
+    return sim_s / (time.perf_counter() - start)
+
+
+def render_fps(frames: int) -> float:
+    from teleprev.world.camera import WorldCamera
+    from teleprev.world.layout import task_layout
+    from teleprev.world.world import PhysicsWorld
+
+    world = PhysicsWorld("leap_hand", task_layout("pour", 0))
+    home = world.joint_positions()
+    with WorldCamera(world, "front", 640, 480) as camera:
+        camera.render()  # the GL context and its buffers, outside the timing
+        start = time.perf_counter()
+        for k in range(frames):
+            world.set_targets(_moving_targets(world, home, k * FRAME_S))
+            world.advance_to(int((k + 1) * FRAME_S * 1e9))
+            camera.render()
+        return frames / (time.perf_counter() - start)
+
+
+def main() -> None:
+    args = common.parser(__doc__).parse_args()
+    from teleprev.world.layout import TASKS
+
+    core = _pin_to_one_core()
+    steal_before = common.steal_ms()
+    per_task = {task: realtime_x(task, 1.0 if args.quick else 5.0) for task in TASKS}
+    fps = render_fps(15 if args.quick else 90)
+    steal_after = common.steal_ms()
+    figures = {"physics_realtime_x": min(per_task.values()), "render_fps": fps}
+    figures |= {f"physics_realtime_x[{task}]": x for task, x in per_task.items()}
+    figures["core"] = core
+    figures["steal_ms"] = (steal_after - steal_before) if steal_before is not None and steal_after is not None else None
+    targets = {"physics_realtime_x": ">= 5", "render_fps": ">= 15"}
+    common.report("bench/physics.py: the MuJoCo world on one core (xArm6 + LEAP Hand, 500 Hz)", figures, targets,
+                  args.json)
+
+
+if __name__ == "__main__":
+    main()
