@@ -28,7 +28,8 @@ an estimate that settles a finger step in about 0.1 s like the real hand).
 
 Parallel-jaw gripper ("gripper", the jaw opening in metres). The URDF's jaws mimic the driver (MuJoCo
 turns <mimic> into joint equalities), so the drive pushes each jaw with its own force: limited to 30 N
-(an estimate of a light gripper's grip force), stiff enough to reach the target within a millimetre.
+(an estimate of a light gripper's grip force), stiff enough to reach the target within a millimetre, and
+no faster than the URDF's 0.15 m/s (viscous loss of 200 N s/m: 30 N at that speed).
 
 Vacuum ("vacuum", 0 off / 1 on). MuJoCo's adhesion actuator on the suction cup: 42 N when on, the pull of
 a 30 mm cup at 60 kPa below atmosphere (60e3 Pa * pi * 0.015^2 m^2).
@@ -76,5 +77,6 @@ LEAP = dynamixel_drive(LEAP_P_GAIN, LEAP_D_GAIN, LEAP_CURRENT_LIMIT_MA)
 LEAP_SIDE = dynamixel_drive(int(LEAP_P_GAIN * 0.75), int(LEAP_D_GAIN * 0.75), LEAP_CURRENT_LIMIT_MA)
 LEAP_SIDE_JOINTS = ("0", "4", "8")
 
-GRIPPER = Drive(kp=3000.0, kd=30.0, force_limit=30.0, armature=0.05)
+# The motor and its gearing hold the jaws to the URDF's 0.15 m/s: 30 N / 0.15 m/s of viscous loss.
+GRIPPER = Drive(kp=3000.0, kd=30.0, force_limit=30.0, armature=0.05, damping=200.0)
 VACUUM_FORCE_N = 60e3 * math.pi * 0.015**2

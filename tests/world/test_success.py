@@ -39,9 +39,10 @@ def _hang_spoon(world: PhysicsWorld) -> None:
 
 def _balls_into_bowl(world: PhysicsWorld) -> None:
     bowl = world.layout.object("bowl").position
-    for i in range(POUR_BALLS):
-        a, r = 2 * math.pi * i / 7, (0.0 if i % 7 == 0 else 0.03)
-        world.place_object(f"ball{i + 1}", (bowl[0] + r * math.cos(a), bowl[1] + r * math.sin(a), 0.02 + 0.02 * (i // 7)))
+    # One layer on the bowl's floor: a ring of 7 and 3 inside it (a ball balanced on another rolls off later).
+    spots = [(0.03, 2 * math.pi * i / 7) for i in range(7)] + [(0.012, 2 * math.pi * i / 3) for i in range(3)]
+    for i, (r, a) in enumerate(spots[:POUR_BALLS]):
+        world.place_object(f"ball{i + 1}", (bowl[0] + r * math.cos(a), bowl[1] + r * math.sin(a), 0.015))
 
 
 def _turn_box(world: PhysicsWorld) -> None:

@@ -108,7 +108,9 @@ def test_the_gripper_jaws_follow_the_opening():
     world = PhysicsWorld("parallel_gripper", task_layout("pick_place", 0))
     assert world.joint_positions(["gripper"])["gripper"] == pytest.approx(0.085, abs=1e-4)
     world.set_targets({"gripper": 0.02})
-    run(world, 0.4)
+    run(world, 0.3)
+    assert world.joint_positions(["gripper"])["gripper"] > 0.035  # no faster than 0.15 m/s
+    run(world, 0.5)
     assert world.joint_positions(["gripper"])["gripper"] == pytest.approx(0.02, abs=1e-3)
     left = world.data.qpos[world.model.jnt_qposadr[world.model.joint("jaw_left_joint").id]]
     assert left == pytest.approx(0.01, abs=1e-3)  # the URDF's mimic: half the opening each
@@ -150,7 +152,8 @@ def test_objects_rest_on_the_table_and_fall_when_dropped():
     box = world.layout.object("box")
     run(world, 0.3)
     assert world.state().objects["box"].position == pytest.approx(box.position, abs=2e-3)
-    world.place_object("box", (box.position[0], box.position[1], 0.3))
+    world.place_object("box", (box.position[0], box.position[1], 0.15))  # below the hand
+    assert not world.state().objects["box"].touching_robot
     run(world, 0.5)
     assert world.state().objects["box"].position[2] == pytest.approx(0.04, abs=3e-3)
 
@@ -173,3 +176,35 @@ def test_the_vacuum_holds_what_its_cup_touches_only_while_on(suction):
         assert gap < 0.06 and world.state().objects["box"].touching_robot
     else:
         assert gap > 0.15 and world.joint_positions(["vacuum"]) == {"vacuum": 0.0}
+
+
+def test_the_gripper_holds_a_cup_it_closed_on_while_the_arm_moves():
+    world = PhysicsWorld("parallel_gripper", task_layout("pick_place", 0))
+    base = world.data.body("gripper_base")
+    rotation, origin = base.xmat.reshape(3, 3).copy(), base.xpos.copy()
+    cup_axes = np.stack([rotation[:, 1], rotation[:, 2], rotation[:, 0]], axis=1)  # lying across the jaws
+    quat = np.zeros(4)
+    mujoco.mju_mat2Quat(quat, cup_axes.flatten())
+    world.set_targets({"gripper": 0.0})
+    for _ in range(40):  # handed over: held between the jaws until they have closed on it
+        world.place_object("cup", origin + rotation @ [0.0, 0.0, 0.13] - cup_axes[:, 2] * 0.05, quat)
+        world.step(5)
+    run(world, 0.3)
+    # The jaws stop on the cup's sides (7.4 cm across there), squeezing it.
+    jaws = sum(world.data.qpos[world.model.jnt_qposadr[world.model.joint(j).id]]
+               for j in ("jaw_left_joint", "jaw_right_joint"))
+    assert jaws == pytest.approx(0.074, abs=0.003)
+
+    def cup_in_gripper() -> np.ndarray:
+        b = world.data.body("gripper_base")
+        return b.xmat.reshape(3, 3).T @ (np.asarray(world.state().objects["cup"].position) - b.xpos)
+
+    held, start = cup_in_gripper(), np.asarray(world.state().objects["cup"].position)
+    q0 = world.joint_positions(["joint2", "joint3"])
+    for k in range(100):  # a smooth 1 s move, as the pipeline's jerk-limited commands are
+        a = 0.5 - 0.5 * np.cos(np.pi * (k + 1) / 100)
+        world.set_targets({"joint2": q0["joint2"] - 0.25 * a, "joint3": q0["joint3"] - 0.2 * a})
+        world.step(5)
+    run(world, 0.3)
+    assert np.linalg.norm(np.asarray(world.state().objects["cup"].position) - start) > 0.15  # carried along
+    assert np.linalg.norm(cup_in_gripper() - held) < 0.005 and world.state().objects["cup"].touching_robot
