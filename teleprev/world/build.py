@@ -100,7 +100,8 @@ def _cup_parts(shape: Shape) -> list[tuple]:
         # The walls stand on the floor (z from t to h): only the floor touches what the cup stands on.
         r_centre = r_mid + (r_top - r_bottom) * t / (2 * h)
         pos = (r_centre * math.cos(a), r_centre * math.sin(a), (h + t) / 2)
-        parts.append((f"wall{i}", mujoco.mjtGeom.mjGEOM_BOX, (t / 2, half_width, (h - t) / 2 / math.cos(tilt)), pos, quat))
+        half_length = (h - t) / 2 / math.cos(tilt)
+        parts.append((f"wall{i}", mujoco.mjtGeom.mjGEOM_BOX, (t / 2, half_width, half_length), pos, quat))
     return parts
 
 

@@ -8,6 +8,7 @@ camera's axis, as a depth camera reports it.
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import Self
 
 import mujoco
 import numpy as np
@@ -36,7 +37,7 @@ class WorldCamera:
 
     def render(self, depth: bool = False) -> Frame:
         """The picture now (the world's lock is held only while the scene is copied out)."""
-        with self.world._lock:
+        with self.world.lock:
             self._renderer.update_scene(self.world.data, self.camera, self._option)
             t = self.world.time_ns
         rgb = self._renderer.render().copy()
@@ -53,7 +54,7 @@ class WorldCamera:
     def close(self) -> None:
         self._renderer.close()
 
-    def __enter__(self) -> "WorldCamera":
+    def __enter__(self) -> Self:
         return self
 
     def __exit__(self, *exc) -> None:

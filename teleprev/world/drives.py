@@ -8,7 +8,8 @@ xArm6 (joint1..joint6). The controller's servo mode runs the latest joint target
 and compensates gravity from its own dynamic model (xarm-python-sdk: set_servo_angle_j). We model it as
 PD with a closed-loop bandwidth of about 25 Hz on the reflected inertia of a harmonic-drive joint
 (armature 0.1 kg m^2, an estimate: a ~1e-5 kg m^2 rotor behind a 1:100 reduction), damping ratio 0.7
-(it lags a 1 rad/s ramp by about 9 mrad; the real controller's bandwidth is not published), torque-limited at the URDF's effort (50 N m, xarm_ros2's description), with gravity compensated on the
+(it lags a 1 rad/s ramp by about 9 mrad; the real controller's bandwidth is not published),
+torque-limited at the URDF's effort (50 N m, xarm_ros2's description), with gravity compensated on the
 arm links and the end effector's mount (the controller's payload setting).
 
 LEAP Hand (joints "0".."15"). Dynamixel XC330-M288-T servos in current-based position control with the

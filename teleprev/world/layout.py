@@ -72,6 +72,27 @@ class Layout:
     def free(self) -> tuple[Placed, ...]:
         return tuple(o for o in self.objects if not o.fixed)
 
+    def to_record(self) -> dict:
+        """A JSON-ready dict: the task, the seed, the anchor and every object's starting pose."""
+        return {"task": self.task, "seed": self.seed, "anchor": list(self.anchor),
+                "objects": {o.name: {"position": list(o.position), "yaw": o.yaw} for o in self.objects}}
+
+
+def layout_from_record(record: dict) -> Layout:
+    """The layout a record describes: the task's objects drawn from its seed, at the recorded poses (so a
+    recording plays back in the scene it was made in even if the drawing changes later)."""
+    try:
+        drawn = task_layout(record["task"], int(record["seed"]), tuple(record["anchor"]))
+        poses = record["objects"]
+        if set(poses) != {o.name for o in drawn.objects}:
+            raise ValueError(f"objects {sorted(poses)} are not the {drawn.task} task's "
+                             f"({', '.join(o.name for o in drawn.objects)})")
+        objects = tuple(replace(o, position=tuple(float(v) for v in poses[o.name]["position"]),
+                                yaw=float(poses[o.name]["yaw"])) for o in drawn.objects)
+    except (KeyError, TypeError) as exc:
+        raise ValueError(f"a world layout record needs task, seed, anchor and objects' poses: {exc!r}") from None
+    return replace(drawn, objects=objects)
+
 
 LOOP_HOLE = 0.022  # the spoon loop's inner square (m): a 12 mm peg goes through it with room to spare
 LOOP_BAR = 0.006  # the loop's bar width
@@ -130,7 +151,8 @@ def _pour(p: _Placer) -> tuple[Placed, ...]:
     objects = [Placed("cup", _coloured(CUP, 1), _at(cup, 0.0)), Placed("bowl", BOWL, _at(bowl, 0.0))]
     # The contents: balls in two rings and a column inside the cup, clear of each other and of its walls.
     r, floor = BALL.size[0], CUP.size[3]
-    spots = [(0.0, 0.0)] + [(0.017 * np.cos(a), 0.017 * np.sin(a)) for a in np.linspace(0, 2 * np.pi, 6, endpoint=False)]
+    ring = np.linspace(0, 2 * np.pi, 6, endpoint=False)
+    spots = [(0.0, 0.0)] + [(0.017 * np.cos(a), 0.017 * np.sin(a)) for a in ring]
     for i in range(POUR_BALLS):
         dx, dy = spots[i % len(spots)]
         z = floor + r + 0.001 + (2 * r + 0.002) * (i // len(spots))

@@ -16,8 +16,9 @@ centre (needs <= 4), tilted 1 deg (needs <= 10), on the table; let go and at res
 from __future__ import annotations
 
 import math
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
-from typing import Callable, Sequence
+from itertools import pairwise
 
 import numpy as np
 
@@ -70,8 +71,9 @@ def _pick_place(layout: Layout, s: WorldState) -> Goal:
     cup, target = s.objects["cup"], layout.object("target").position
     d, tilt, base = _xy_distance(cup.position, target), _tilt_deg(cup), cup.position[2]
     on_table = base <= ON_TABLE
-    reason = (f"cup {d * 100:.1f} cm from the target's centre (needs <= {PLACE_RADIUS * 100:.0f}), tilted {tilt:.0f} deg "
-              f"(needs <= {UPRIGHT_DEG:.0f}), " + ("on the table" if on_table else f"its base {base * 100:.1f} cm up"))
+    reason = (f"cup {d * 100:.1f} cm from the target's centre (needs <= {PLACE_RADIUS * 100:.0f}), "
+              f"tilted {tilt:.0f} deg (needs <= {UPRIGHT_DEG:.0f}), "
+              + ("on the table" if on_table else f"its base {base * 100:.1f} cm up"))
     return Goal(d <= PLACE_RADIUS and tilt <= UPRIGHT_DEG and on_table, reason)
 
 
@@ -127,7 +129,7 @@ def _cup_stack(layout: Layout, s: WorldState) -> Goal:
     bottom = cups[0]
     if bottom.position[2] > ON_TABLE or _tilt_deg(bottom) > UPRIGHT_DEG:
         return Goal(False, f"the lowest cup ({bottom.name}) is not standing on the table")
-    for below, above in zip(cups, cups[1:]):
+    for below, above in pairwise(cups):
         offset = _xy_distance(above.position, below.position)
         rise = above.position[2] - below.position[2]
         if offset > STACK_OFFSET or not STACK_RISE[0] <= rise <= STACK_RISE[1] or _tilt_deg(above) > UPRIGHT_DEG:

@@ -14,8 +14,8 @@ the layout is drawn.
 from __future__ import annotations
 
 import threading
+from collections.abc import Iterable, Mapping
 from dataclasses import dataclass
-from typing import Iterable, Mapping
 
 import mujoco
 import numpy as np
@@ -76,11 +76,11 @@ class PhysicsWorld:
             raise ValueError(f"rate_hz must be 500..10000 (the world steps at 500 Hz or more), got {rate_hz:g}")
         self.effector = end_effector(effector)
         self.layout = layout
-        self.step_ns = int(round(1e9 / rate_hz))
+        self.step_ns = round(1e9 / rate_hz)
         self.compiled: Compiled = compile_world(self.effector, layout, self.step_ns / 1e9)
         self.model = self.compiled.model
         self.data = mujoco.MjData(self.model)
-        self._lock = threading.RLock()
+        self.lock = threading.RLock()  # held by every method; a renderer copying the scene out holds it too
         m = self.model
         self.joint_names = self.compiled.arm_joints + self.compiled.effector_joints
         self._actuator = {n: m.actuator(n).id for n in self.joint_names}
@@ -112,7 +112,7 @@ class PhysicsWorld:
     def place_robot(self, positions: Mapping[str, float]) -> None:
         """Put joints at these positions at rest, with the drives holding them there (a reset, not a motion)."""
         self._check_names(positions)
-        with self._lock:
+        with self.lock:
             for name, value in positions.items():
                 if name in self._qpos:
                     self.data.qpos[self._qpos[name]] = value
@@ -141,32 +141,32 @@ class PhysicsWorld:
         values = np.asarray(list(targets.values()), dtype=float)
         if not np.all(np.isfinite(values)):
             raise ValueError(f"joint targets must be finite, got {dict(targets)}")
-        with self._lock:
+        with self.lock:
             self._set_ctrl(targets)
 
     def targets(self, names: Iterable[str] | None = None) -> dict[str, float]:
         names = self.joint_names if names is None else tuple(names)
         self._check_names(names)
-        with self._lock:
+        with self.lock:
             return {n: float(self.data.ctrl[self._actuator[n]]) for n in names}
 
     def joint_positions(self, names: Iterable[str] | None = None) -> dict[str, float]:
         """Measured positions by name (rad, m; "vacuum": the suction command, 0 or 1)."""
         names = self.joint_names if names is None else tuple(names)
         self._check_names(names)
-        with self._lock:
+        with self.lock:
             return {n: float(self.data.qpos[self._qpos[n]]) if n in self._qpos
                     else float(self.data.ctrl[self._actuator[n]]) for n in names}
 
     def joint_velocities(self, names: Iterable[str] | None = None) -> dict[str, float]:
         names = self.joint_names if names is None else tuple(names)
         self._check_names(names)
-        with self._lock:
+        with self.lock:
             return {n: float(self.data.qvel[self._dof[n]]) if n in self._dof else 0.0 for n in names}
 
     def tcp(self) -> np.ndarray:
         """The TCP's 4x4 pose in the robot base frame."""
-        with self._lock:
+        with self.lock:
             site = self.data.site("tcp")
             pose = np.eye(4)
             pose[:3, :3], pose[:3, 3] = site.xmat.reshape(3, 3), site.xpos
@@ -174,14 +174,14 @@ class PhysicsWorld:
 
     # ---- time ----------------------------------------------------------------------------------
     def step(self, n: int = 1) -> None:
-        with self._lock:
+        with self.lock:
             for _ in range(n):
                 mujoco.mj_step(self.model, self.data)
             self.time_ns += n * self.step_ns
 
     def advance_to(self, t_ns: int) -> int:
         """Step up to session time t_ns (the whole steps that fit); returns how many were taken."""
-        with self._lock:
+        with self.lock:
             n = max(0, (int(t_ns) - self.time_ns) // self.step_ns)
             self.step(n)
             return n
@@ -191,7 +191,7 @@ class PhysicsWorld:
         """Put a free object at a pose, at rest (a test's teleport, a recorded layout's restore)."""
         if name not in self._objects:
             raise KeyError(f"no free object {name!r} (the world has {', '.join(self._objects)})")
-        with self._lock:
+        with self.lock:
             a, d = self._object_qpos[name], self._object_dof[name]
             self.data.qpos[a:a + 3] = position
             q = np.asarray(quaternion, dtype=float)
@@ -209,13 +209,13 @@ class PhysicsWorld:
         return touching
 
     def state(self) -> WorldState:
-        with self._lock:
+        with self.lock:
             touching = self._touching_robot()
             objects = {}
             for name, body in self._objects.items():
                 a, d = self._object_qpos[name], self._object_dof[name]
                 qpos, qvel = self.data.qpos, self.data.qvel
-                objects[name] = ObjectState(name, tuple(map(float, qpos[a:a + 3])), tuple(map(float, qpos[a + 3:a + 7])),
-                                            tuple(map(float, qvel[d:d + 3])), tuple(map(float, qvel[d + 3:d + 6])),
-                                            body in touching)
+                objects[name] = ObjectState(
+                    name, tuple(map(float, qpos[a:a + 3])), tuple(map(float, qpos[a + 3:a + 7])),
+                    tuple(map(float, qvel[d:d + 3])), tuple(map(float, qvel[d + 3:d + 6])), body in touching)
             return WorldState(self.time_ns, objects)

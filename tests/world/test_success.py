@@ -120,6 +120,7 @@ def test_a_cup_knocked_over_on_the_target_fails():
     layout = task_layout("pick_place", 3)
     world = PhysicsWorld("leap_hand", layout)
     t = layout.object("target").position
-    world.place_object("cup", (t[0], t[1], 0.05), (math.cos(math.pi / 4), math.sin(math.pi / 4), 0.0, 0.0))  # on its side
+    on_its_side = (math.cos(math.pi / 4), math.sin(math.pi / 4), 0.0, 0.0)
+    world.place_object("cup", (t[0], t[1], 0.05), on_its_side)
     outcome = success.judge(layout, run(world, 1.5))
     assert not outcome.success and re.search(r"tilted [89]\d deg", outcome.reason)

@@ -12,7 +12,7 @@ import pytest
 
 from teleprev.robot.effectors import EFFECTORS
 from teleprev.world import drives
-from teleprev.world.layout import DEFAULT_ANCHOR, TASKS, task_layout
+from teleprev.world.layout import DEFAULT_ANCHOR, TASKS, layout_from_record, task_layout
 from teleprev.world.world import ARM_HOME, PhysicsWorld
 from tests.world.helpers import run
 
@@ -208,3 +208,18 @@ def test_the_gripper_holds_a_cup_it_closed_on_while_the_arm_moves():
     run(world, 0.3)
     assert np.linalg.norm(np.asarray(world.state().objects["cup"].position) - start) > 0.15  # carried along
     assert np.linalg.norm(cup_in_gripper() - held) < 0.005 and world.state().objects["cup"].touching_robot
+
+
+def test_a_layout_record_restores_the_recorded_scene():
+    layout = task_layout("cup_stack", 11)
+    record = json.loads(json.dumps(layout.to_record()))
+    assert record["task"] == "cup_stack" and record["seed"] == 11
+    assert layout_from_record(record) == layout
+    record["objects"]["cup2"]["position"][0] += 0.05  # where the recording says it stood wins
+    moved = layout_from_record(record).object("cup2").position[0]
+    assert moved == pytest.approx(layout.object("cup2").position[0] + 0.05)
+    del record["objects"]["cup3"]
+    with pytest.raises(ValueError, match="not the cup_stack task's"):
+        layout_from_record(record)
+    with pytest.raises(ValueError, match="needs task, seed"):
+        layout_from_record({"task": "pour"})
