@@ -65,10 +65,6 @@ def step_timing(seconds: float) -> dict:
             task_times.append(time.perf_counter() - t0)
             state = result.state
             actions.append(result.report["corrector"])
-            if result.arm_command is not None:
-                arm = result.arm_command
-            if result.effector_command is not None:
-                hand = result.effector_command
         times += task_times
         per_task[task] = common.percentile(task_times, 50) * 1e3
     actions = np.array(actions)

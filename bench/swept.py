@@ -38,13 +38,13 @@ def recorded_calls() -> tuple[list[list[tuple]], list[tuple], float]:
     """The swept calls of every hand step of the fixture sessions (per step a list of (method, args)),
     those steps' Motion.hand_step calls (motion, args), and the rig's clearance."""
     from teleprev.evaluation.reproduce import rerun_session
-    from teleprev.pipeline.motion import Motion
+    from teleprev.pipeline.older_formats import StepMotion
     from teleprev.pipeline.swept import SweptCheck
 
     steps: list[list[tuple]] = []
     hand_steps: list[tuple] = []
     clearance = 0.0
-    seg, last, hand_command = SweptCheck.segment_free, SweptCheck.last_free_on_segment, Motion._hand_command
+    seg, last, hand_command = SweptCheck.segment_free, SweptCheck.last_free_on_segment, StepMotion._hand_command
 
     def seg_rec(self, q0, q1):
         steps[-1].append(("segment_free", (np.array(q0), np.array(q1))))
@@ -65,12 +65,12 @@ def recorded_calls() -> tuple[list[list[tuple]], list[tuple], float]:
         hand_steps.append((self, (*args[:3], copy.deepcopy(estimates.get("hand_target_v")), *args[4:])))
         return out
 
-    SweptCheck.segment_free, SweptCheck.last_free_on_segment, Motion._hand_command = seg_rec, last_rec, step_rec
+    SweptCheck.segment_free, SweptCheck.last_free_on_segment, StepMotion._hand_command = seg_rec, last_rec, step_rec
     try:
         for name in FIXTURES:
             rerun_session(ROOT / "tests" / "fixtures" / name)
     finally:
-        SweptCheck.segment_free, SweptCheck.last_free_on_segment, Motion._hand_command = seg, last, hand_command
+        SweptCheck.segment_free, SweptCheck.last_free_on_segment, StepMotion._hand_command = seg, last, hand_command
     keep = [k for k, s in enumerate(steps) if s]
     return [steps[k] for k in keep], [hand_steps[k] for k in keep], clearance
 

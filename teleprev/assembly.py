@@ -2,64 +2,44 @@
 arithmetic of a session format.
 
 Live recording builds the current format's pipeline; `teleprev eval` builds the one a session was recorded
-with, so that it re-runs bit for bit. This is the one place where a format chooses its arithmetic
-(`_arithmetic`): formats 1 and 2 the numpy classes of teleprev/pipeline/older_formats.py, format 1
-without motion limits; format 3 the compiled classes, commands made by each step; format 4 on the
-commands sampled by the paced sender from the step's targets (`build_planner`); up to format 4 the glove
-read abduction first, from format 5 on flexion first.
+with, so that it re-runs bit for bit: an older format's classes come from
+teleprev/pipeline/older_formats (`_arithmetic`), each a subclass of the current one.
 """
 
 from __future__ import annotations
 
-from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
 
 from teleprev.errors import ConfigError
+from teleprev.pipeline.arithmetic import Arithmetic
 from teleprev.pipeline.config import PipelineConfig
+from teleprev.pipeline.driver import InputTopics, PipelineDriver
 from teleprev.pipeline.effectors import Effector, GripperEffector, LeapEffector, VacuumEffector
 from teleprev.pipeline.guard import JointGuard
 from teleprev.pipeline.motion import Motion
 from teleprev.pipeline.step import Pipeline
 from teleprev.pipeline.swept import SweptCheck
 from teleprev.pipeline.trajectory import ArmGenerator, HandLimiter
-from teleprev.retarget.arm import ArmRetargeter
 from teleprev.retarget.calibration import Calibration, load_calibration
 from teleprev.rig import Rig
 from teleprev.robot.ik import ArmIK
 from teleprev.robot.collision import SelfCollisionChecker
 from teleprev.robot.limits import arm_limits, effector_limits
 from teleprev.robot.model import RobotModel, load_robot
-from teleprev.topics import (COMPILED_FORMAT_VERSION, FLEXION_FIRST_FORMAT_VERSION, FORMAT_VERSION, MOTION_FORMAT_VERSION,
-                             PLANNED_FORMAT_VERSION)
+from teleprev.topics import FORMAT_VERSION
 
-
-@dataclass(frozen=True)
-class Arithmetic:
-    """The classes whose arithmetic a session format was computed with."""
-
-    motion: bool  # acceleration and jerk limits on the commands (format 2 on)
-    arm_ik: type = ArmIK
-    arm_retargeter: type = ArmRetargeter
-    swept_check: type = SweptCheck
-    corrector: type | None = None  # None: teleprev.noncollision.corrector.Corrector (loaded with the rigs that have one)
-    pipeline: type = Pipeline
+_CURRENT = Arithmetic()
 
 
 def _arithmetic(session_format: int) -> Arithmetic:
-    motion = session_format >= MOTION_FORMAT_VERSION
-    if session_format >= FLEXION_FIRST_FORMAT_VERSION:
-        return Arithmetic(motion)
-    from teleprev.pipeline import older_formats as old
+    if session_format >= FORMAT_VERSION:
+        return _CURRENT
+    from teleprev.pipeline import older_formats
 
-    if session_format >= PLANNED_FORMAT_VERSION:
-        return Arithmetic(motion, pipeline=old.AbductionFirstPipeline)
+    return older_formats.arithmetic(session_format)
 
-    if session_format >= COMPILED_FORMAT_VERSION:
-        return Arithmetic(motion, pipeline=old.StepCommandsPipeline)
-    return Arithmetic(motion, old.NumpyArmIK, old.NumpyArmRetargeter, old.NumpySweptCheck, old.NumpyCorrector,
-                      old.NumpyPipeline)
 
 def rig_calibration(rig: Rig) -> Calibration:
     return load_calibration(rig.resolve(rig.rig.calibration) if rig.rig.calibration else None)
@@ -102,7 +82,6 @@ def hand_clearance_m(rig: Rig) -> float:
 def build_motion(rig: Rig, ik: ArmIK, arm_speed: np.ndarray, effector, swept: SweptCheck | None = None) -> Motion:
     """The arm's jerk-limited generator and the hand's acceleration cap and swept check, from the robot
     table (teleprev/robot/limits.py) and the rig's [pipeline] keys."""
-    cfg = rig.pipeline
     table = arm_limits(rig.rig.robot)
     n = len(arm_speed)
     accel = _limit(rig, "arm_acceleration", table.acceleration if table else None, "arm acceleration limit")
@@ -114,7 +93,7 @@ def build_motion(rig: Rig, ik: ArmIK, arm_speed: np.ndarray, effector, swept: Sw
         g = effector.guard
         hand_accel = _limit(rig, "hand_acceleration", row.acceleration if row else None, "hand acceleration limit")
         hand = HandLimiter(g.lower, g.upper, g.speed, np.full(len(g.lower), hand_accel))
-    return Motion(arm, hand, swept, feedforward=cfg.arm_feedforward, idle_after_ns=int(cfg.max_command_dt_ms * 1e6))
+    return Motion(arm, hand, swept)
 
 
 def build_pipeline(rig: Rig, models: str | Path | None = None, calibration: Calibration | None = None,
@@ -137,6 +116,11 @@ def build_pipeline(rig: Rig, models: str | Path | None = None, calibration: Cali
     effector, swept = build_effector(rig, robot, cfg, max_dt, calibration, models, how)
     return how.pipeline(cfg, arm, arm_guard, effector,
                         build_motion(rig, ik, arm_speed, effector, swept) if how.motion else None)
+
+
+def build_driver(pipeline: Pipeline, inputs: InputTopics, session_format: int = FORMAT_VERSION) -> PipelineDriver:
+    """The driver that feeds `pipeline` (built by build_pipeline for `session_format`) its samples."""
+    return _arithmetic(session_format).driver(pipeline, inputs)
 
 
 def build_effector(rig: Rig, robot: RobotModel, cfg: PipelineConfig, max_dt: float, calibration: Calibration,

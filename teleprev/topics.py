@@ -19,8 +19,8 @@ What the pipeline computed and sent:
     /policy/action            JointSample   a policy's raw action (teleprev rollout), arm and end-effector joints
                                             by the dataset's names ("arm.joint1", "hand.0"): the input that
                                             drives the pipeline in place of the glove and suit
-    /command/tick             Event         teleprev.CommandTick: per tick of the paced sender (format 4),
-                                            the last update it had adopted, its lateness and flags
+    /command/tick             Event         teleprev.CommandTick: per tick of the paced sender, the last
+                                            update it had adopted, its lateness and flags
     /tf                       TransformsSample   robot link frames (for Foxglove's URDF panel)
     /robot_description        RobotDescription   the rig's URDF (ROS 2 std_msgs/String), once at the start;
                                                  the file also carries it as an attachment <robot>.urdf
@@ -34,19 +34,9 @@ Events:
 
 from __future__ import annotations
 
-FORMAT_VERSION = 5  # session layout version, written to the "teleprev" metadata record
-# Format 2: commands go through the motion limits (teleprev/pipeline/motion.py); idle steps may command
-# between trigger samples; a ModeSwitch with reason "estop" stops commanding at once.
-MOTION_FORMAT_VERSION = 2
-# Format 3: the pipeline's arithmetic is the compiled hot path (IK, CPN/CCN, hand preparation, swept
-# check), whose last bits differ from the numpy code that recorded formats 1 and 2.
-COMPILED_FORMAT_VERSION = 3
-# Format 4: the commands are sampled by the paced sender at the instant it sends them, from the pipeline
-# steps' targets (teleprev/pipeline/planner.py); /command/tick records which targets each tick had.
-PLANNED_FORMAT_VERSION = 4
-# Format 5: a glove's hand pose is read flexion first, as the direction of each bone (teleprev/human/smplx.py):
-# formats 1 to 4 read it abduction first, which a deep fist's sideways deviation or a twisted thumb upsets.
-FLEXION_FIRST_FORMAT_VERSION = 5
+# Session layout version, written to the "teleprev" metadata record. Sessions of older versions re-run with
+# their own classes (teleprev/pipeline/older_formats), which say what changed at each version.
+FORMAT_VERSION = 5
 
 TASKS_RECORD = "tasks"  # metadata record: task id -> the task as a natural-language instruction
 TF = "/tf"

@@ -1,13 +1,13 @@
 """The commands of a re-run session beside the recorded ones, on their own stamps.
 
-Up to format 3 the commands were made at pipeline steps (stamped with the step's time); from format 4 on
-the paced sender samples them at its ticks (teleprev/pipeline/planner.py). A CommandTrack holds one
-command stream either way: the stamps of the recorded commands and of the re-run ones (the union), and
-both values at each (NaN where one side has none).
+The paced sender samples the commands at its ticks (teleprev/pipeline/planner.py); the pipelines of older
+session formats made them at their steps, stamped with the step's time (teleprev/pipeline/older_formats).
+A CommandTrack holds one command stream either way: the stamps of the recorded commands and of the re-run
+ones (the union), and both values at each (NaN where one side has none).
 
-A format 4 session is re-run by replaying its ticks: each recorded CommandTick names the last pipeline
-update its tick had adopted, so a planner that adopts the re-run's updates up to it, at each recorded
-tick's instant, samples the same commands bit for bit when the pipeline is the one that recorded them.
+A session's ticks are replayed: each recorded CommandTick names the last pipeline update its tick had
+adopted, so a planner that adopts the re-run's updates up to it, at each recorded tick's instant, samples
+the same commands bit for bit when the pipeline is the one that recorded them.
 """
 
 from __future__ import annotations

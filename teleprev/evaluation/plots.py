@@ -42,18 +42,21 @@ def plot_episodes(r: Rerun, out_dir: str | Path) -> list[Path]:
     groups = [list(range(k, min(k + GROUP, len(eff_names)))) for k in range(0, len(eff_names), GROUP)]
     unit = effector_unit(r.effector.name)
     for index, task, start, stop in spans:
-        rows = (r.t_ns >= start) & (r.t_ns < (stop if stop is not None else np.iinfo(np.int64).max))
+        end = stop if stop is not None else np.iinfo(np.int64).max
+        rows = (r.t_ns >= start) & (r.t_ns < end)
         if not rows.any():
             continue
         t = (r.t_ns[rows] - start) / 1e9
+        arm = r.commands[topics.COMMAND_ARM].select(start, end)  # on the commands' own stamps
+        t_arm = (arm.t_ns - start) / 1e9
         shaded = changed_spans(t, np.isin(r.corrector[rows], ("ccn", "fallback")))
         fig, axes = plt.subplots(2 + len(groups), 1, figsize=(11, 2.1 * (2 + len(groups)) + 0.6), sharex=True,
                                  squeeze=False, height_ratios=[3] + [3] * len(groups) + [1.4])
         axes = axes[:, 0]
         arm_ax, diff_ax = axes[0], axes[-1]
         for j, name in enumerate(r.arm_names):
-            arm_ax.plot(t, r.recorded[topics.COMMAND_ARM][rows][:, j], color="0.82", lw=3)
-            arm_ax.plot(t, r.rerun[topics.COMMAND_ARM][rows][:, j], lw=1.1, label=name)
+            arm_ax.plot(t_arm, arm.recorded[:, j], color="0.82", lw=3)
+            arm_ax.plot(t_arm, arm.rerun[:, j], lw=1.1, label=name)
         arm_ax.set_ylabel("arm command\n(rad)")
         arm_ax.legend(loc="upper right", fontsize=7, ncol=len(r.arm_names))
         for ax, group in zip(axes[1:-1], groups):
@@ -63,12 +66,12 @@ def plot_episodes(r: Rerun, out_dir: str | Path) -> list[Path]:
             ax.set_ylabel(f"end effector\n({unit})")
             ax.legend(loc="upper right", fontsize=7, ncol=len(group), title_fontsize=7,
                       title="solid: corrected, dashed: retargeted")
-        for topic, label in ((topics.COMMAND_ARM, "arm command"), (topics.CORRECTED, "corrected")):
-            gap = np.abs(r.rerun[topic][rows] - r.recorded[topic][rows])
+        corrected = (r.rerun[topics.CORRECTED][rows], r.recorded[topics.CORRECTED][rows])
+        for times, (a, b), label in ((t_arm, (arm.rerun, arm.recorded), "arm command"), (t, corrected, "corrected")):
+            gap = np.abs(a - b)
             worst = np.where(np.isnan(gap).all(axis=1), np.nan, np.nanmax(np.nan_to_num(gap, nan=0.0), axis=1))
-            diff_ax.plot(t, worst, lw=1.0, label=label)
-        same = all(np.array_equal(r.rerun[k][rows], r.recorded[k][rows], equal_nan=True)
-                   for k in (topics.COMMAND_ARM, topics.CORRECTED))
+            diff_ax.plot(times, worst, lw=1.0, label=label)
+        same = arm.same() and np.array_equal(*corrected, equal_nan=True)
         diff_ax.set_ylabel("|re-run −\nrecorded|")
         diff_ax.legend(loc="upper right", fontsize=7, ncol=2,
                        title="re-run = recording, bit for bit" if same else "re-run differs from the recording",

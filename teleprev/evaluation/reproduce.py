@@ -23,11 +23,11 @@ from threadpoolctl import threadpool_limits
 from teleprev import numeric_platform
 from teleprev.errors import SessionError
 from teleprev.messages import Event, JointSample
-from teleprev.assembly import build_pipeline, rig_calibration
+from teleprev.assembly import build_driver, build_pipeline, rig_calibration
 from teleprev.evaluation.command_tracks import CommandTrack, RecordedTick, replay_ticks, track
 from teleprev.evaluation.controller_resets import ActuatorHistory
 from teleprev.pipeline.planner import CommandPlanner
-from teleprev.pipeline.driver import RECORDED_JOINT_TOPICS, InputTopics, PipelineDriver, recorded_names, recorded_values
+from teleprev.pipeline.driver import InputTopics, PipelineDriver
 from teleprev.pipeline.step import Pipeline, StepResult
 from teleprev.retarget.calibration import load_calibration_text
 from teleprev.rig import load_recorded_rig, load_rig
@@ -37,6 +37,7 @@ from teleprev.session.codec import JOINT_STATES
 from teleprev.session.reader import Episode, JointTable, SessionReader
 
 PREPARE_BLOCK = 4096  # messages read ahead per batch of glove-sample preparation (bounds the memory)
+COMMAND_TOPICS = (topics.COMMAND_ARM, topics.COMMAND_HAND)
 
 
 @dataclass
@@ -53,7 +54,7 @@ class Rerun:
     arm_names: tuple[str, ...]
     effector_names: tuple[str, ...]
     effector: EndEffector  # the end effector re-run (its row of the table)
-    rerun: dict[str, np.ndarray]  # topic -> (steps, joints)
+    rerun: dict[str, np.ndarray]  # topic -> (steps, joints), for each stream the steps record
     recorded: dict[str, np.ndarray]
     episodes: list[Episode]
     metadata: dict[str, dict[str, str]]
@@ -122,13 +123,15 @@ def _prepared(driver: PipelineDriver, messages, block: int = PREPARE_BLOCK):
 class _Steps:
     """What the re-run produced, a list entry per step, gathered as the steps go."""
 
-    def __init__(self) -> None:
+    def __init__(self, driver: PipelineDriver) -> None:
         self.t_ns: list[int] = []
         self.mode: list[str] = []
         self.corrector: list[str] = []
         self.latency_ns: list[int] = []
         self.flags: list[list[str]] = []
-        self.values: list[tuple[np.ndarray | None, ...]] = []  # per step: recorded_values (RECORDED_JOINT_TOPICS' order)
+        self.topics = driver.recorded_topics
+        self.recorded_values = driver.recorded_values
+        self.values: list[tuple[np.ndarray | None, ...]] = []  # per step: recorded_values (in `topics`' order)
 
     def add(self, t_ns: int, result: StepResult, latency_ns: int) -> None:
         self.t_ns.append(t_ns)
@@ -137,12 +140,12 @@ class _Steps:
         self.mode.append(report["mode"])
         self.corrector.append(report["corrector"])
         self.flags.append(report["flags"])
-        self.values.append(recorded_values(result))  # what PipelineDriver.feed records for this step
+        self.values.append(self.recorded_values(result))  # what PipelineDriver.feed records for this step
 
     def rows(self) -> dict[str, tuple[np.ndarray | None, ...]]:
-        """Per stream of RECORDED_JOINT_TOPICS, its value at each step (None: nothing recorded)."""
-        columns = zip(*self.values) if self.values else ((),) * len(RECORDED_JOINT_TOPICS)
-        return dict(zip(RECORDED_JOINT_TOPICS, columns))
+        """Per stream the steps record, its value at each step (None: nothing recorded)."""
+        columns = zip(*self.values) if self.values else ((),) * len(self.topics)
+        return dict(zip(self.topics, columns))
 
 
 def _table(values: Sequence[np.ndarray | None], width: int) -> np.ndarray:
@@ -192,22 +195,24 @@ def _rerun(reader: SessionReader, path: Path, models, rig_path, started: float) 
     missing = [t for t in (inputs.hand, inputs.wrist, inputs.arm, inputs.effector) if t not in reader.schemas]
     if missing:
         raise SessionError(f"the session lacks the pipeline's input streams {missing}", str(path))
-    driver = PipelineDriver(pipeline, inputs)
+    driver = build_driver(pipeline, inputs, recorded_format(meta))
     arm_names, eff_names = pipeline.arm_names, pipeline.effector_names
-    widths = {k: len(names) for k, names in zip(RECORDED_JOINT_TOPICS, recorded_names(pipeline))}
+    stepped_topics = driver.recorded_topics
+    outputs = stepped_topics + tuple(k for k in COMMAND_TOPICS if k not in stepped_topics)
+    widths = dict(zip(stepped_topics, map(len, driver.recorded_names))) | {topics.COMMAND_ARM: len(arm_names),
+                                                                           topics.COMMAND_HAND: len(eff_names)}
 
-    steps = _Steps()
-    recorded_by_stamp: dict[str, dict[int, np.ndarray]] = {k: {} for k in RECORDED_JOINT_TOPICS}
+    steps = _Steps(driver)
+    recorded_by_stamp: dict[str, dict[int, np.ndarray]] = {k: {} for k in outputs}
     # The recorded outputs are read as tables (stamps and values, no messages) in the same pass as the
     # inputs; an output topic of another schema comes through as messages and is skipped, as before.
-    tables = {k: JointTable() for k in RECORDED_JOINT_TOPICS
-              if reader.schemas.get(k) == JOINT_STATES}
+    tables = {k: JointTable() for k in outputs if reader.schemas.get(k) == JOINT_STATES}
     if inputs.action and inputs.action not in reader.schemas:
         raise SessionError(f"the session lacks the policy's actions ({inputs.action}) that drove its pipeline", str(path))
     # a policy's rollout: its recorded actions are the input that steps the pipeline (PipelineDriver)
     streamed = [inputs.hand, inputs.wrist, inputs.arm, inputs.effector, *([inputs.action] if inputs.action else []),
                 topics.MODE, topics.COMMAND_TICK,
-                topics.DEVICE_EVENT, *(k for k in RECORDED_JOINT_TOPICS if k not in tables)]
+                topics.DEVICE_EVENT, *(k for k in outputs if k not in tables)]
     # the actuators' measured states and resets: where a controller starts a stream (metrics' derivatives)
     histories = {topics.COMMAND_ARM: ActuatorHistory(), topics.COMMAND_HAND: ActuatorHistory()}
     measured = {inputs.arm: (histories[topics.COMMAND_ARM], arm_names),
@@ -215,8 +220,7 @@ def _rerun(reader: SessionReader, path: Path, models, rig_path, started: float) 
     states: dict[str, list[JointSample]] = {topic: [] for topic in measured}  # into the histories at the end
     devices = {inputs.arm.split("/")[2]: histories[topics.COMMAND_ARM],
                inputs.effector.split("/")[2]: histories[topics.COMMAND_HAND]}
-    planned = pipeline.plans_commands
-    updates, ticks = [], []  # format 4: the planner's updates the re-run makes, and the recorded ticks
+    updates, ticks = [], []  # the planner's updates the re-run makes, and the recorded ticks
     n_inputs = 0
     # One BLAS thread: the batched CPN is a few hundred rows, where threads cost more than they give (on a
     # busy machine or with -j workers, many times more); single configurations never use them anyway.
@@ -241,8 +245,7 @@ def _rerun(reader: SessionReader, path: Path, models, rig_path, started: float) 
             n_inputs += 1
             t0 = time.perf_counter_ns()
             result = driver.advance(msg, hand_input)
-            if planned:
-                updates += driver.take_updates()
+            updates += driver.take_updates()
             if result is not None:
                 steps.add(msg.log_time_ns, result, time.perf_counter_ns() - t0)
     for topic, samples in states.items():
@@ -252,24 +255,22 @@ def _rerun(reader: SessionReader, path: Path, models, rig_path, started: float) 
         recorded_by_stamp[k] = dict(zip(table.stamp_ns, table.positions))
     t = np.array(steps.t_ns, dtype=np.int64)
     rows = steps.rows()
-    rerun = {k: _table(rows[k], widths[k]) for k in RECORDED_JOINT_TOPICS}
+    rerun = {k: _table(rows[k], widths[k]) for k in stepped_topics}
     t_keys = t.tolist()
-    recorded = {k: _table([recorded_by_stamp[k].get(s) for s in t_keys], widths[k]) for k in RECORDED_JOINT_TOPICS}
+    recorded = {k: _table([recorded_by_stamp[k].get(s) for s in t_keys], widths[k]) for k in stepped_topics}
     notes = []
     stepped = set(t_keys)
-    extra = {k: len(set(recorded_by_stamp[k]) - stepped) for k in RECORDED_JOINT_TOPICS
-             if not (planned and k in (topics.COMMAND_ARM, topics.COMMAND_HAND))}
+    extra = {k: len(set(recorded_by_stamp[k]) - stepped) for k in stepped_topics}
     if any(extra.values()):
         notes.append(f"recorded outputs at times the re-run never stepped: { {k: v for k, v in extra.items() if v} }")
-    commands = {}
-    if planned:
-        arm_rerun, hand_rerun = replay_ticks(CommandPlanner.for_pipeline(pipeline), updates, ticks)
-        sides = {topics.COMMAND_ARM: arm_rerun, topics.COMMAND_HAND: hand_rerun}
-    else:
-        sides = {k: {s: row for s, row in zip(t_keys, rows[k]) if row is not None}
-                 for k in (topics.COMMAND_ARM, topics.COMMAND_HAND)}
-    for k, rerun_side in sides.items():
-        commands[k] = track(rerun_side, recorded_by_stamp[k], widths[k])
+    # The commands: those the steps made themselves (pipelines that record them), and those the planner
+    # samples at the recorded ticks of the paced sender from the re-run's updates.
+    sides = {k: {s: row for s, row in zip(t_keys, rows[k]) if row is not None} if k in rows else {}
+             for k in COMMAND_TOPICS}
+    if ticks:
+        for k, sampled in zip(COMMAND_TOPICS, replay_ticks(CommandPlanner.for_pipeline(pipeline), updates, ticks)):
+            sides[k].update(sampled)
+    commands = {k: track(rerun_side, recorded_by_stamp[k], widths[k]) for k, rerun_side in sides.items()}
     recorded_platform = meta.get("session", {}).get("numeric_platform")
     if recorded_platform and recorded_platform != numeric_platform.describe():
         notes.append(f"recorded on numeric platform {recorded_platform!r}, re-run on {numeric_platform.describe()!r}: "

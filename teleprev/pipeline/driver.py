@@ -3,8 +3,10 @@
 It keeps the latest sample of each input stream, runs a step on every sample of the trigger stream (the
 glove: pipeline outputs at glove rate; with an `action` topic, a policy's actions: `Pipeline.joint_step`
 on each, the glove and suit only recorded) and applies mode switches. Everything it decides depends only on
-the samples and their log times, in log-time order, so replaying a session's raw streams and its mode
-switches through a driver built from the same rig and models reproduces the recorded commands.
+the samples and their log times, in log-time order. Each step's targets and each accepted mode switch
+become an update for the command planner (`take_updates`), so replaying a session's raw streams and its
+mode switches through a driver built from the same rig and models, and the updates through a planner at
+the recorded ticks, reproduces the recorded commands.
 """
 
 from __future__ import annotations
@@ -38,38 +40,18 @@ class InputTopics:
         )
 
 
-# The JointStates streams a step's results are recorded on, in the order they are recorded.
-RECORDED_JOINT_TOPICS = (topics.RETARGETED, topics.CORRECTED, topics.ARM_TARGET, topics.COMMAND_ARM,
-                         topics.COMMAND_HAND)
-
-
-def recorded_values(result: StepResult) -> tuple[np.ndarray | None, ...]:
-    """What one step records on each of RECORDED_JOINT_TOPICS, in that order (None: nothing): the one
-    place that says which result goes on which topic, for the live recorder (PipelineDriver.feed) and the
-    evaluation's re-run alike. The corrected hand is recorded only with a retargeted one. (A tuple, not a
-    dict: the evaluation calls it on every step.)"""
-    retargeted = result.retargeted
-    return (retargeted, None if retargeted is None else result.corrected, result.arm_target, result.arm_command,
-            result.effector_command)
-
-
-def recorded_names(pipeline: Pipeline) -> tuple[tuple[str, ...], ...]:
-    """The joint names of each of RECORDED_JOINT_TOPICS, in that order."""
-    arm, eff = pipeline.arm_names, pipeline.effector_names
-    return eff, eff, arm, arm, eff
-
-
 @dataclass
 class Outputs:
-    """What one fed sample produced: messages to record and commands to send."""
+    """What one fed sample produced: the messages to record (the commands are the sender's)."""
 
     logged: list[tuple[str, object]] = field(default_factory=list)  # (topic, payload) stamped at the trigger time
-    arm_command: JointSample | None = None
-    effector_command: JointSample | None = None
     result: StepResult | None = None
 
 
 class PipelineDriver:
+    # The JointStates streams a step's results are recorded on, in the order they are recorded.
+    recorded_topics: tuple[str, ...] = (topics.RETARGETED, topics.CORRECTED, topics.ARM_TARGET)
+
     def __init__(self, pipeline: Pipeline, inputs: InputTopics):
         self.pipeline = pipeline
         self.topics = inputs
@@ -77,12 +59,25 @@ class PipelineDriver:
         self.state = PipelineState()
         self.latest: dict[str, object] = {}
         self.last_result: StepResult | None = None
-        self._names = recorded_names(pipeline)
-        self._seq = 0  # the planner's updates, numbered in the order they are made (format 4)
+        self.recorded_names = self._recorded_names()
+        self._seq = 0  # the planner's updates, numbered in the order they are made
         self._updates: list[TargetUpdate | ModeUpdate] = []
 
+    def recorded_values(self, result: StepResult) -> tuple[np.ndarray | None, ...]:
+        """What one step records on each of `recorded_topics`, in that order (None: nothing): the one place
+        that says which result goes on which topic, for the live recorder (`feed`) and the evaluation's
+        re-run alike. The corrected hand is recorded only with a retargeted one. (A tuple, not a dict: the
+        evaluation calls it on every step.)"""
+        retargeted = result.retargeted
+        return retargeted, None if retargeted is None else result.corrected, result.arm_target
+
+    def _recorded_names(self) -> tuple[tuple[str, ...], ...]:
+        """The joint names of each of `recorded_topics`, in that order."""
+        arm, eff = self.pipeline.arm_names, self.pipeline.effector_names
+        return eff, eff, arm
+
     def take_updates(self) -> list[TargetUpdate | ModeUpdate]:
-        """The planner's updates made since the last call, in order (format 4; none for older formats)."""
+        """The planner's updates made since the last call, in order."""
         out, self._updates = self._updates, []
         return out
 
@@ -112,12 +107,12 @@ class PipelineDriver:
 
     def request_mode(self, mode: str, t_ns: int) -> str:
         """Switch preview/execute (or "estop") at log time t_ns; returns "" or why it was refused. An accepted
-        switch of a format 4 pipeline makes the planner's ModeUpdate; asking for the mode it is in already
-        changes nothing (an e-stop excepted)."""
+        switch makes the planner's ModeUpdate; asking for the mode it is in already changes nothing (an
+        e-stop excepted)."""
         inputs = self._inputs(t_ns)
         before = self.state.mode
         self.state, refused = self.pipeline.set_mode(self.state, mode, inputs)
-        if not refused and self.pipeline.plans_commands and (mode == "estop" or self.state.mode != before):
+        if not refused and (mode == "estop" or self.state.mode != before):
             self._queue(self.pipeline.mode_update(mode, inputs, 0))
         return refused
 
@@ -140,18 +135,7 @@ class PipelineDriver:
             mode = "estop" if data.get("reason") == "estop" or data.get("halt") else data.get("mode", "")
             self.request_mode(mode, msg.log_time_ns)
             return None
-        if self.topics.action:
-            if topic != self.topics.action:
-                return None
-            result = self.pipeline.joint_step(self.state, self._inputs(msg.log_time_ns))
-        elif topic == self.topics.arm and not self.pipeline.plans_commands and self.pipeline.motion is not None:
-            # The trigger device may have gone quiet with the commands still moving: the arm's state
-            # samples keep the clock going so that the commands brake to rest instead of freezing.
-            result = self.pipeline.idle_step(self.state, self._inputs(msg.log_time_ns))
-        elif topic == self.topics.hand:
-            result = self.pipeline.step(self.state, self._inputs(msg.log_time_ns, hand_input))
-        else:
-            return None
+        result = self._step(topic, msg.log_time_ns, hand_input)
         if result is not None:
             self.state = result.state
             self.last_result = result
@@ -159,17 +143,20 @@ class PipelineDriver:
                 self._queue(result.update)
         return result
 
+    def _step(self, topic: str, t_ns: int, hand_input: HandInput | None) -> StepResult | None:
+        """The step a sample of `topic` triggers (the glove's, or with an `action` topic the policy's), or
+        None."""
+        if self.topics.action:
+            return self.pipeline.joint_step(self.state, self._inputs(t_ns)) if topic == self.topics.action else None
+        if topic == self.topics.hand:
+            return self.pipeline.step(self.state, self._inputs(t_ns, hand_input))
+        return None
+
     def _outputs(self, result: StepResult, t: int) -> Outputs:
         out = Outputs(result=result)
-        for topic, names, value in zip(RECORDED_JOINT_TOPICS, self._names, recorded_values(result)):
-            if value is None:
-                continue
-            sample = JointSample(t, names, value)
-            out.logged.append((topic, sample))
-            if topic == topics.COMMAND_ARM:
-                out.arm_command = sample
-            elif topic == topics.COMMAND_HAND:
-                out.effector_command = sample
+        for topic, names, value in zip(self.recorded_topics, self.recorded_names, self.recorded_values(result)):
+            if value is not None:
+                out.logged.append((topic, JointSample(t, names, value)))
         out.logged.append((topics.STEP_REPORT, Event(t, "teleprev.StepReport", _json_ready(result.report))))
         return out
 

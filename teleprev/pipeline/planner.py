@@ -1,6 +1,6 @@
-"""Commands sampled at the instant they are sent: the arithmetic of the paced command sender (format 4).
+"""Commands sampled at the instant they are sent: the arithmetic of the paced command sender.
 
-From session format 4 on, a pipeline step makes no commands. It hands the planner its targets (a
+A pipeline step makes no commands. It hands the planner its targets (a
 TargetUpdate: the arm's IK solution and the hand's corrected joints, each with the velocity the step
 estimated from the targets before it) and every accepted mode switch (a ModeUpdate). The planner runs on
 the sender's clock (teleprev/live/core/sender.py): at each tick it adopts the updates that have arrived, then
@@ -26,8 +26,8 @@ other than through their targets.
 
 In execute every tick sends both sides, holding where there is nothing to move to, so a controller never
 sees a paused stream while engaged. The planner is deterministic: the same updates adopted at the same
-ticks give the same commands bit for bit, which is how `teleprev eval` re-runs a format 4 session (each
-tick's record names the last update it had adopted).
+ticks give the same commands bit for bit, which is how `teleprev eval` re-runs a session (each tick's
+record names the last update it had adopted).
 """
 
 from __future__ import annotations
@@ -122,7 +122,7 @@ class CommandPlanner:
 
     @classmethod
     def for_pipeline(cls, pipeline) -> "CommandPlanner":
-        """The planner of a format 4 pipeline: its Motion's limits, its end effector's guard, its config."""
+        """The planner of a pipeline: its Motion's limits, its end effector's guard, its config."""
         cfg = pipeline.cfg
         return cls(pipeline.motion, pipeline.effector.guard, cfg.engage_speed_frac, int(cfg.stale_ms * 1e6))
 
@@ -260,15 +260,15 @@ class CommandPlanner:
                 estimate, goal_v = ESTIMATE_GIVEN, target.hand_v
         elif self.state.mode == "execute":
             flags.append("hand_stopping")
-        side.q, side.v, _ = self.motion._hand_move(side.q, side.v, goal, estimate, None, goal_v, 0.0, dt,
-                                                   self.state.dt_before, frac, flags)
+        side.q, side.v, _ = self.motion.hand_move(side.q, side.v, goal, estimate, None, goal_v, 0.0, dt,
+                                                  self.state.dt_before, frac, flags)
         return goal is None or bool(np.abs(side.q - goal).max() < ENGAGED_TOL)
 
 
 class TargetEstimates:
     """The velocity of a step's targets, estimated from the targets before (smoothed: IK solutions jitter
     by its tolerance from sample to sample), for the planner's feed-forward. Kept in PipelineState (as
-    `motion`), so the step stays a pure function."""
+    `estimates`), so the step stays a pure function."""
 
     def __init__(self, feedforward: bool, tau_ns: float):
         self.feedforward = feedforward

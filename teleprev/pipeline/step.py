@@ -6,11 +6,11 @@
 `Pipeline.step(state, inputs)` is a pure function of its arguments: the same state and inputs give the
 same outputs bit for bit, which is what lets `teleprev eval` re-run recorded sessions exactly. Its targets
 (with their velocity, estimated from the targets before) go to the command planner as a TargetUpdate; the
-paced sender samples the commands from them at the instant it sends (teleprev/pipeline/planner.py,
-session format 4). In preview the planner commands nothing; an accepted switch to execute
-(`set_mode`, then `mode_update`) starts from the robot's measured joints. Inputs that are missing, stale,
-non-finite or implausible give no target for their side and are flagged; nothing computed from them is
-sent. Sessions of formats 1 to 3 made their commands in the step itself (teleprev/pipeline/older_formats.py).
+paced sender samples the commands from them at the instant it sends (teleprev/pipeline/planner.py).
+In preview the planner commands nothing; an accepted switch to execute (`set_mode`, then `mode_update`)
+starts from the robot's measured joints. Inputs that are missing, stale, non-finite or implausible give
+no target for their side and are flagged; nothing computed from them is sent. (Older session formats
+re-run with the classes of teleprev/pipeline/older_formats/.)
 
 `Pipeline.joint_step` is the step for joint targets asked for directly (a policy's action, `teleprev
 rollout`): the arm's clipped into its joint limits, the end effector's through the Corrector, then the
@@ -40,7 +40,6 @@ from teleprev.retarget.arm import Anchor, ArmRetargeter
 MAX_FLEXION, MIN_FLEXION, MAX_ABDUCTION = 2.7, -1.2, 1.3
 MAX_JOINT_ROTATION = 2.9  # rad: no finger joint turns this far (axis-angle beyond it wraps round)
 MAX_WRIST_DISTANCE = 3.0  # metres from the suit's origin
-ENGAGED_TOL = 1e-3  # rad: the engage ramp is over when every command is this close to its target
 
 
 @dataclass(frozen=True)
@@ -76,11 +75,7 @@ class PipelineState:
     arm_q_before: np.ndarray | None = None  # the one before: with arm_q, a constant-velocity IK warm start
     arm_solved_ns: int = -1  # stamp of the wrist sample arm_q solves, when it converged (else -1)
     effector_q: np.ndarray | None = None  # last effector target (collision-free for a hand)
-    arm_cmd: np.ndarray | None = None  # formats 1 to 3: the last commands sent (execute mode)
-    effector_cmd: np.ndarray | None = None
-    cmd_ns: int | None = None
-    engaging: bool = False
-    motion: Any = None  # formats 2 and 3: Motion's MotionState; format 4: the targets' EstimateState
+    estimates: EstimateState | None = None  # the targets' velocity estimates (TargetEstimates)
 
 
 @dataclass(frozen=True)
@@ -89,24 +84,21 @@ class StepResult:
     retargeted: np.ndarray | None = None
     corrected: np.ndarray | None = None
     arm_target: np.ndarray | None = None
-    arm_command: np.ndarray | None = None  # formats 1 to 3: the step's own commands
-    effector_command: np.ndarray | None = None
     report: dict = field(default_factory=dict)
-    update: TargetUpdate | None = None  # format 4: the targets for the command planner
+    update: TargetUpdate | None = None  # the targets for the command planner
 
 
 class Pipeline:
-    """The step of sessions of format 4: compiled glove preparation, arm IK and Corrector; targets for the
-    command planner, whose limits are `motion`'s. Older formats: teleprev/pipeline/older_formats.py."""
+    """The step: compiled glove preparation, arm IK and Corrector; targets for the command planner, whose
+    limits are `motion`'s."""
 
-    plans_commands = True  # its commands come from the planner (format 4); False: from the step itself
     # the compiled glove preparation: decode, checks, angles (read flexion first), retargeting
     read_gloves = staticmethod(glove_kernels.prepare_rows)
 
     def __init__(self, cfg: PipelineConfig, arm: ArmRetargeter, arm_guard: JointGuard, effector: Effector,
-                 motion: Motion | None):
+                 motion: Motion):
         self.cfg = cfg
-        self.motion = motion  # teleprev.pipeline.motion.Motion: the limits on acceleration and jerk
+        self.motion = motion  # the limits on acceleration and jerk the planner keeps
         self.arm = arm
         self.arm_names = arm.ik.joint_names
         self.arm_guard = arm_guard
@@ -241,8 +233,7 @@ class Pipeline:
         if mode == state.mode and mode != "estop":
             return state, ""
         if mode in ("preview", "estop"):
-            return evolve(state, mode="preview", anchor=None, arm_q=None, arm_q_before=None, arm_solved_ns=-1,
-                          engaging=False), ""
+            return evolve(state, mode="preview", anchor=None, arm_q=None, arm_q_before=None, arm_solved_ns=-1), ""
         if mode != "execute":
             return state, f"unknown mode {mode!r}"
         start = self.engage_start(state, inputs)
@@ -295,7 +286,6 @@ class Pipeline:
         report = _new_report(state)
 
         hand = self._hand(inputs, flags)
-        angles = None if hand is None else (hand.flexion, hand.abduction)
         retargeted = corrected = None
         effector_q = state.effector_q
         if hand is not None:
@@ -334,10 +324,10 @@ class Pipeline:
 
         new = evolve(state, step=state.step + 1, anchor=anchor, arm_q=arm_q, arm_q_before=arm_q_before,
                       arm_solved_ns=solved_ns, effector_q=effector_q)
-        arm_target, effector_target = arm_q if arm_fresh else None, effector_q if angles is not None else None
-        new, arm_cmd, eff_cmd, update = self._outputs(state, new, inputs, arm_target, effector_target, flags)
+        arm_target = arm_q if arm_fresh else None  # the effector's: `corrected` (None without a usable glove)
+        new, update = self._update(new, inputs, arm_target, corrected, inputs.wrist.stamp_ns if arm_fresh else 0)
         report["flags"] = flags
-        return StepResult(new, retargeted, corrected, arm_target, arm_cmd, eff_cmd, report, update)
+        return StepResult(new, retargeted, corrected, arm_target, report, update)
 
     def joint_step(self, state: PipelineState, inputs: StepInputs) -> StepResult:
         """A step on joint targets asked for directly (`inputs.action`, named as `action_names`) in place
@@ -364,29 +354,23 @@ class Pipeline:
             report.update(corrector=t.action, colliding_links=list(t.colliding_links), deviation_rad=t.deviation)
             new = evolve(new, arm_q=arm_target, arm_q_before=state.arm_q, effector_q=corrected)
         arm_ns = inputs.action.stamp_ns if arm_target is not None else 0
-        new, arm_cmd, eff_cmd, update = self._outputs(state, new, inputs, arm_target, corrected, flags, arm_ns)
+        new, update = self._update(new, inputs, arm_target, corrected, arm_ns)
         report["flags"] = flags
-        return StepResult(new, retargeted, corrected, arm_target, arm_cmd, eff_cmd, report, update)
+        return StepResult(new, retargeted, corrected, arm_target, report, update)
 
-    def _outputs(self, state: PipelineState, new: PipelineState, inputs: StepInputs, arm_target, effector_target,
-                 flags: list[str], arm_ns: int | None = None):
-        """(new state, arm command, effector command, update) for this step's fresh targets (None where the
-        input was unusable): no commands, the targets with their velocity estimates for the planner.
-        `arm_ns`: the stamp of the input the arm target solves, extrapolated from there (None: the wrist's)."""
-        est = new.motion if new.motion is not None else EstimateState()
+    def _update(self, new: PipelineState, inputs: StepInputs, arm_target, effector_target,
+                arm_ns: int) -> tuple[PipelineState, TargetUpdate | None]:
+        """(new state, update) for this step's fresh targets (None where the input was unusable): the
+        targets with their velocity estimates, for the planner. `arm_ns`: the stamp of the input the arm
+        target solves (the wrist sample's, the action's), extrapolated from there."""
+        est = new.estimates if new.estimates is not None else EstimateState()
         arm_v = hand_v = None
-        if arm_ns is None:
-            arm_ns = inputs.wrist.stamp_ns if arm_target is not None else 0
         if arm_target is not None:
             arm_v, est = self._estimates.arm(est, arm_target, arm_ns)
         if effector_target is not None:
             hand_v, est = self._estimates.hand(est, effector_target, inputs.t_ns)
         update = TargetUpdate(0, inputs.t_ns, arm_target, arm_v, arm_ns, effector_target, hand_v)
-        return evolve(new, motion=est), None, None, update
-
-    def idle_step(self, state: PipelineState, inputs: StepInputs) -> StepResult | None:
-        """Format 4 has none: the planner's own ticks brake commands whose targets stopped coming."""
-        return None
+        return evolve(new, estimates=est), update
 
 
 def action_names(arm: tuple[str, ...], effector: tuple[str, ...]) -> tuple[str, ...]:

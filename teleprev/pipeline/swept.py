@@ -16,10 +16,10 @@ each other. The end point itself keeps the full c.
 
 SweptCheck runs a segment in one numba kernel (teleprev/kernels/swept.py, swept_*) where the geometry is
 all boxes: the bound, the points, the checks in order, the end point's, and last_free_on_segment's
-bisection; otherwise, and for sessions of format 2 (teleprev/pipeline/older_formats.py), the numpy
-check. Per configuration it decides as SelfCollisionChecker does (the
-compiled box test with its margin turned either way) and hands the ones within the margin back to FCL
-here, so its answers are the numpy check's (tests/pipeline/test_swept.py); only the bound's last bit
+bisection; otherwise, and for the older sessions re-run with numpy's arithmetic
+(teleprev/pipeline/older_formats), the numpy check. Per configuration it decides as SelfCollisionChecker
+does (the compiled box test with its margin turned either way) and hands the ones within the margin back
+to FCL here, so its answers are the numpy check's (tests/pipeline/test_swept.py); only the bound's last bit
 may differ (a summation order), which can change the number of points only at an exact tie.
 """
 

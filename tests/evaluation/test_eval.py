@@ -25,7 +25,7 @@ def test_rerun_reproduces_the_recorded_commands_bit_for_bit(gripper_session):
     o = result.report["overall"]
     assert o["steps"] > 500 and len(session["episodes"]) == 2
     r = result.reruns[0]
-    arm = r.commands["/command/arm"]  # sampled by the paced sender at its ticks (format 4)
+    arm = r.commands["/command/arm"]  # sampled by the paced sender at its ticks
     commanded = ~np.isnan(arm.rerun).any(axis=1)
     assert commanded.sum() > 200  # there was something to reproduce
     assert np.array_equal(arm.rerun, arm.recorded)

@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from teleprev.pipeline.frozen import evolve
-from teleprev.pipeline.motion import MotionState
+from teleprev.pipeline.planner import EstimateState
 from teleprev.pipeline.step import PipelineState
 
 
@@ -20,5 +20,5 @@ def test_evolve_equals_replace_and_leaves_the_original():
 
 
 def test_evolve_refuses_a_name_that_is_not_a_field():
-    with pytest.raises(TypeError, match="stoping"):
-        evolve(MotionState(), stoping=True)
+    with pytest.raises(TypeError, match="arm_nss"):
+        evolve(EstimateState(), arm_nss=1)

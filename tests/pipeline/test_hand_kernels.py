@@ -1,4 +1,4 @@
-"""The compiled glove preparation (teleprev/kernels/glove.py, sessions of format 3 on) against the
+"""The compiled glove preparation (teleprev/kernels/glove.py) against the
 numpy one it stands in for: the same flags on every input, good or broken, angles and joints within
 1e-12, for the reading of formats 3 and 4 (abduction first, against formats 1 and 2's numpy pipeline) and
 for format 5's (flexion first, against smplx.angles_from_hand_pose); and one sample prepared alone (the

@@ -265,7 +265,7 @@ def test_stops_inside_answers_as_the_exact_stop(generator, rng):
 
 
 def test_the_targets_velocity_estimate_is_numpys_bits(rng):
-    """TargetEstimates (format 4's feed-forward, one kernel call) gives what its numpy arithmetic gave:
+    """TargetEstimates (the planner's feed-forward, one kernel call) gives what its numpy arithmetic gave:
     zero without a usable target before, the raw difference quotient without an estimate before, else the
     blend; recorded sessions re-run on these bits."""
     import math

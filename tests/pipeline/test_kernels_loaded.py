@@ -16,7 +16,7 @@ SCRIPT = PRELUDE + textwrap.dedent("""
     p = build_pipeline(load_rig(sys.argv[1]))
     before = loaded()
     state = run_steps(p)
-    assert state.motion is not None  # the motion limits (and, for a hand, the swept check) ran
+    assert state.estimates is not None  # the targets' velocity estimates ran
     print(sorted(loaded() - before))
 """)
 

@@ -12,7 +12,7 @@ from tests.helpers.pipeline_inputs import inputs
 from teleprev.errors import ConfigError
 from teleprev.assembly import build_pipeline
 from teleprev.pipeline.config import PipelineConfig
-from teleprev.pipeline.step import PipelineState
+from teleprev.pipeline.older_formats import StepCommandsState
 from teleprev.rig import Rig, RigSection, load_rig_text
 from teleprev.robot.limits import arm_limits, effector_limits
 
@@ -42,7 +42,7 @@ def derivatives(t_ns, q):
 
 def run(p, steps, engage_at=None, state=None, make=None, mode_at=None):
     make = make or (lambda k: inputs(k, p.arm_names, p.effector_names, [0.05]))
-    state = state or PipelineState()
+    state = state or StepCommandsState()
     out = []
     for k in range(steps):
         i = make(k)

@@ -1,4 +1,4 @@
-"""The command planner (format 4): commands sampled at each tick of the paced sender, from the pipeline's
+"""The command planner: commands sampled at each tick of the paced sender, from the pipeline's
 targets, within the motion limits whatever the ticks' timing; every way commands end; determinism."""
 
 import numpy as np

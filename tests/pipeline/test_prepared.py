@@ -7,19 +7,25 @@ import numpy as np
 import pytest
 
 from teleprev.human.smplx import HAND_POSE_NAMES, JOINT_FRAMES, hand_pose_from_angles
-from teleprev.assembly import build_pipeline
+from teleprev.assembly import build_driver, build_pipeline
 from teleprev.messages import JointSample, Logged
-from teleprev.pipeline.driver import InputTopics, PipelineDriver
+from teleprev.pipeline.driver import InputTopics
 from teleprev.rig import load_rig
+from teleprev.topics import FORMAT_VERSION
 from teleprev.transforms import axis_angle_to_matrix, matrix_to_axis_angle
 from tests.helpers.pipeline_inputs import ARM_HOME, RATE_HZ, wrist_sample
 
 
-@pytest.fixture(scope="module", params=[3, 2], ids=["compiled", "numpy"])
-def pipeline(request):
-    # the default rig: LEAP Hand, shipped CPN/CCN, motion limits; the compiled hot path (format 3) and the
-    # numpy arithmetic that formats 1 and 2 re-run with
-    return build_pipeline(load_rig(), session_format=request.param)
+@pytest.fixture(scope="module", params=[FORMAT_VERSION, 2], ids=["compiled", "numpy"])
+def session_format(request):
+    # the compiled hot path (the current format's) and the numpy arithmetic that formats 1 and 2 re-run with
+    return request.param
+
+
+@pytest.fixture(scope="module")
+def pipeline(session_format):
+    # the default rig: LEAP Hand, shipped CPN/CCN, motion limits
+    return build_pipeline(load_rig(), session_format=session_format)
 
 
 def _twisted(pose: np.ndarray, twist: float) -> np.ndarray:
@@ -87,7 +93,7 @@ def test_the_corrector_answers_a_batch_as_it_answers_each_input(pipeline, rng):
     assert answered > 100
 
 
-def test_a_driver_fed_prepared_samples_computes_the_same_session(pipeline, rng):
+def test_a_driver_fed_prepared_samples_computes_the_same_session(pipeline, session_format, rng):
     """A session's worth of messages, stepped with and without preparation ahead: every output the same."""
     topics = InputTopics.for_devices("glove", "suit", "arm", "hand")
     gloves = _gloves(240, rng)
@@ -101,7 +107,7 @@ def test_a_driver_fed_prepared_samples_computes_the_same_session(pipeline, rng):
         messages.append(Logged(topics.hand, t, replace(glove, stamp_ns=t)))
 
     def run(prepare: bool):
-        driver = PipelineDriver(pipeline, topics)
+        driver = build_driver(pipeline, topics, session_format)
         prepared = driver.prepare(messages) if prepare else [None] * len(messages)
         out = []
         for k, (msg, hand_input) in enumerate(zip(messages, prepared)):

@@ -11,7 +11,7 @@ import pytest
 from tests.helpers.pipeline_inputs import inputs
 from teleprev.assembly import build_pipeline
 from teleprev.pipeline.config import PipelineConfig
-from teleprev.pipeline.step import PipelineState
+from teleprev.pipeline.older_formats import StepCommandsState
 from teleprev.rig import Rig, RigSection
 
 
@@ -26,7 +26,7 @@ def gripper_pipeline():
 
 def _run(p, steps, engage_at=None, state=None, make=None):
     make = make or (lambda k: inputs(k, p.arm_names, p.effector_names, [0.05]))
-    state = state or PipelineState()
+    state = state or StepCommandsState()
     results = []
     for k in range(steps):
         i = make(k)
@@ -69,7 +69,7 @@ def test_execute_ramps_from_the_measured_pose_then_follows_within_speed_caps(gri
 
 def test_engage_is_refused_before_anything_was_previewed(gripper_pipeline):
     p = gripper_pipeline
-    state, refused = p.set_mode(PipelineState(), "execute", inputs(0, p.arm_names, p.effector_names, [0.05]))
+    state, refused = p.set_mode(StepCommandsState(), "execute", inputs(0, p.arm_names, p.effector_names, [0.05]))
     assert refused and state.mode == "preview"
 
 
@@ -123,7 +123,7 @@ def test_the_step_is_deterministic(gripper_pipeline):
 def test_vacuum_switches_with_hysteresis_in_the_pipeline():
     p = build_pipeline(_rig("vacuum", "xarm6_vacuum"), session_format=1)
     flex = [0.0, 0.5, 1.0, 0.8, 0.7, 0.5, 0.8, 1.0]
-    state, on = PipelineState(), []
+    state, on = StepCommandsState(), []
     for k, f in enumerate(flex):
         r = p.step(state, inputs(k, p.arm_names, p.effector_names, [0.0], flexion=np.full(15, f)))
         state = r.state

@@ -283,8 +283,6 @@ class SessionLoop:
         self._pass_updates()
         for topic, payload in out.logged:
             self._log(Logged(topic, self._stamp(), payload))
-        self.relay.send("arm", out.arm_command)
-        self.relay.send("hand", out.effector_command)
         pipeline, latest = self.driver.pipeline, self.driver.latest
         self.snapshot = replace(
             self.snapshot, mode=self.driver.mode, step=out.result,

@@ -1,7 +1,64 @@
-"""The arithmetic of older session formats, kept so that their sessions re-run bit for bit."""
+"""Older session formats: what computed their sessions, kept so that `teleprev eval` re-runs them bit for bit.
 
-from teleprev.pipeline.older_formats.numpy_arithmetic import (NumpyArmIK, NumpyArmRetargeter, NumpyCorrector,
-                                                             NumpyPipeline, NumpySweptCheck, StepCommandsPipeline)
+    format 1   commands made by each step under the speed caps alone; numpy arithmetic
+    format 2   commands made by each step under the motion limits (StepMotion); numpy arithmetic
+    format 3   as format 2, with the compiled kernels (the current arithmetic)
+    format 4   the paced sender samples the commands from the steps' targets (teleprev/pipeline/planner.py),
+               as now
+    (format 5, the current one: the glove read flexion first; formats 1 to 4 read it abduction first)
 
-__all__ = ["NumpyArmIK", "NumpyArmRetargeter", "NumpyCorrector", "NumpyPipeline", "NumpySweptCheck",
-           "StepCommandsPipeline"]
+    numpy_arithmetic   NumpyArmIK, NumpyArmRetargeter, NumpySweptCheck, NumpyCorrector (formats 1 and 2)
+    abduction_first    AbductionFirstPipeline: the compiled glove reading of formats 3 and 4
+    step_motion        StepMotion: the commands of a step under the motion limits, and idle steps
+    step_commands      StepCommandsPipeline (formats 2 and 3), NumpyPipeline (formats 1 and 2, numpy's
+                       glove reading): the current step's targets, then the step's own commands
+    step_driver        StepCommandsDriver: records the steps' commands, runs the idle steps
+
+`arithmetic(format)` is the one place where a format number chooses its classes (teleprev/assembly.py
+asks it for every format older than topics.FORMAT_VERSION). Each class subclasses the current one.
+"""
+
+from __future__ import annotations
+
+from teleprev.pipeline.arithmetic import Arithmetic
+from teleprev.pipeline.older_formats.abduction_first import AbductionFirstPipeline
+from teleprev.pipeline.older_formats.numpy_arithmetic import (
+    NumpyArmIK,
+    NumpyArmRetargeter,
+    NumpyCorrector,
+    NumpySweptCheck,
+)
+from teleprev.pipeline.older_formats.step_commands import (
+    NumpyPipeline,
+    StepCommandsPipeline,
+    StepCommandsResult,
+    StepCommandsState,
+)
+from teleprev.pipeline.older_formats.step_driver import StepCommandsDriver
+from teleprev.pipeline.older_formats.step_motion import MotionState, StepMotion
+
+# Format 2: commands go through the motion limits; idle steps may command between trigger samples; a
+# ModeSwitch with reason "estop" stops commanding at once.
+MOTION_FORMAT_VERSION = 2
+# Format 3: the pipeline's arithmetic is the compiled hot path (IK, CPN/CCN, hand preparation, swept
+# check), whose last bits differ from the numpy code that recorded formats 1 and 2.
+COMPILED_FORMAT_VERSION = 3
+# Format 4: the commands are sampled by the paced sender at the instant it sends them, from the pipeline
+# steps' targets (teleprev/pipeline/planner.py); /command/tick records which targets each tick had.
+PLANNED_FORMAT_VERSION = 4
+
+__all__ = ["MOTION_FORMAT_VERSION", "COMPILED_FORMAT_VERSION", "PLANNED_FORMAT_VERSION", "arithmetic",
+           "AbductionFirstPipeline", "MotionState", "NumpyArmIK",
+           "NumpyArmRetargeter", "NumpyCorrector", "NumpyPipeline", "NumpySweptCheck", "StepCommandsDriver",
+           "StepCommandsPipeline", "StepCommandsResult", "StepCommandsState", "StepMotion"]
+
+
+def arithmetic(session_format: int) -> Arithmetic:
+    """The classes sessions of an older `session_format` were computed with."""
+    if session_format >= PLANNED_FORMAT_VERSION:
+        return Arithmetic(pipeline=AbductionFirstPipeline)
+    motion = session_format >= MOTION_FORMAT_VERSION
+    if session_format >= COMPILED_FORMAT_VERSION:
+        return Arithmetic(motion, pipeline=StepCommandsPipeline, driver=StepCommandsDriver)
+    return Arithmetic(motion, NumpyArmIK, NumpyArmRetargeter, NumpySweptCheck, NumpyCorrector, NumpyPipeline,
+                      StepCommandsDriver)

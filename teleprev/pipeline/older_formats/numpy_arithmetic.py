@@ -1,9 +1,6 @@
-"""The arithmetic that computed sessions of formats 1 to 3, kept so that they re-run bit for bit.
+"""The numpy arithmetic that sessions of formats 1 and 2 were computed with.
 
-Up to format 3 a pipeline step made its commands itself, at the glove's rate (StepCommandsPipeline: the
-commands kept to the motion limits by Motion, formats 2 and 3); from format 4 on the paced sender samples
-them from the step's targets (teleprev/pipeline/planner.py). Up to format 2 the arithmetic was numpy's,
-whose last bits differ from the compiled kernels' of format 3 on (Cholesky against LU, libm's
+Its last bits differ from the compiled kernels' of format 3 on (Cholesky against LU, libm's
 sin/cos/atan2 against numpy's, float32 sums in a fixed order against OpenBLAS's), so `teleprev eval`
 re-runs those sessions with these classes, each the current one with the numpy arithmetic in place of the
 kernels:
@@ -12,28 +9,17 @@ kernels:
     NumpyArmRetargeter   the wrist-to-TCP target in numpy                  (retarget/arm.py: ArmRetargeter)
     NumpySweptCheck      every segment by the numpy check                  (pipeline/swept.py: SweptCheck)
     NumpyCorrector       the numpy CPN and CCN                             (noncollision/corrector.py)
-    AbductionFirstPipeline  format 4: the glove read abduction first       (pipeline/step.py: Pipeline)
-                         (kernels/glove.py: prepare_rows_abduction_first)
-    StepCommandsPipeline commands made by each step (formats 2 and 3), the glove read abduction first
-    NumpyPipeline        the glove preparation in numpy, and format 1's     (pipeline/step.py: Pipeline)
-                         commands: speed caps alone, no motion limits
 
-teleprev/assembly.py chooses them by the session's format; nothing else does. Their tests compare them
-with the compiled classes within the rounding each kernel documents.
+(The glove preparation in numpy: step_commands.NumpyPipeline.) Their tests compare them with the
+compiled classes within the rounding each kernel documents.
 """
 
 from __future__ import annotations
 
 import numpy as np
 
-from teleprev.human.smplx import angles_from_hand_pose_abduction_first, hand_pose_from_values
-from teleprev.kernels import glove as glove_kernels
-from teleprev.messages import JointSample
 from teleprev.noncollision.corrector import Corrector, Prepared
 from teleprev.noncollision.mlp import SCORE_BAND
-from teleprev.pipeline.frozen import evolve
-from teleprev.pipeline.step import (ENGAGED_TOL, MAX_ABDUCTION, MAX_FLEXION, MAX_JOINT_ROTATION, MIN_FLEXION, HandInput,
-                                    Pipeline, PipelineState, StepInputs, StepResult)
 from teleprev.pipeline.swept import SweptCheck
 from teleprev.retarget.arm import Anchor, ArmRetargeter
 from teleprev.robot.collision_report import CollisionReport
@@ -185,127 +171,3 @@ class NumpyCorrector(Corrector):
             else:
                 lo = mid
         return None if hi == steps else q0 + (hi / steps) * delta
-
-
-class AbductionFirstPipeline(Pipeline):
-    """Formats up to 4 read the glove abduction first, the twist about the bone taken off first (from
-    format 5 on: flexion first, teleprev/human/smplx.py)."""
-
-    read_gloves = staticmethod(glove_kernels.prepare_rows_abduction_first)
-
-
-class StepCommandsPipeline(AbductionFirstPipeline):
-    """Formats 2 and 3: each step makes its commands (Motion.commands), at the glove's rate; the arm's state
-    samples brake them between steps (idle steps) when the glove goes quiet."""
-
-    plans_commands = False
-
-    def set_mode(self, state: PipelineState, mode: str, inputs: StepInputs) -> tuple[PipelineState, str]:
-        return self.motion.set_mode(self, state, mode, inputs)
-
-    def _outputs(self, state: PipelineState, new: PipelineState, inputs: StepInputs, arm_target, effector_target,
-                 flags: list[str]):
-        new, arm_cmd, eff_cmd = self.motion.commands(self, state, new, inputs, arm_target, effector_target, flags)
-        return new, arm_cmd, eff_cmd, None
-
-    def idle_step(self, state: PipelineState, inputs: StepInputs) -> StepResult | None:
-        """Between trigger samples: a step that only brakes moving commands, when no step came for a while."""
-        if self.motion is None or not self.motion.idle_due(state, inputs.t_ns):
-            return None
-        new, arm_cmd, eff_cmd, report = self.motion.idle(self, state, inputs)
-        return StepResult(new, None, None, None, arm_cmd, eff_cmd, report)
-
-
-class NumpyPipeline(StepCommandsPipeline):
-    """The glove preparation in numpy (element-wise array arithmetic: a batch gives each row the bits it
-    gets alone); without a Motion (format 1), commands under the speed caps alone."""
-
-    def prepare_hands(self, samples: list[JointSample]) -> list[HandInput]:
-        n = len(samples)
-        if n == 1:
-            return [self._prepare_hand(samples[0])]
-        out = [HandInput() for _ in range(n)]
-        poses = np.zeros((n, 15, 3))
-        valid = np.ones(n, dtype=bool)
-        for i, s in enumerate(samples):
-            try:
-                poses[i] = hand_pose_from_values(s.names, s.positions)
-            except KeyError:
-                out[i], valid[i] = HandInput("glove_invalid"), False
-        finite = np.isfinite(poses).all(axis=(1, 2))
-        in_range = np.einsum("nij,nij->ni", poses, poses).max(axis=1) <= MAX_JOINT_ROTATION**2
-        for i in np.flatnonzero(valid & ~(finite & in_range)):
-            out[i] = HandInput("glove_invalid" if not finite[i] else "glove_out_of_range")
-        rows = np.flatnonzero(valid & finite & in_range)
-        if not len(rows):
-            return out
-        flexion, abduction = angles_from_hand_pose_abduction_first(poses[rows])
-        bent = ((flexion.max(axis=1) > MAX_FLEXION) | (flexion.min(axis=1) < MIN_FLEXION)
-                | (abs(abduction).max(axis=1) > MAX_ABDUCTION))
-        ok = np.flatnonzero(~bent)
-        prepared = self.effector.prepare(flexion[ok], abduction[ok])
-        for k in np.flatnonzero(bent):
-            out[rows[k]] = HandInput("glove_out_of_range")
-        for j, k in enumerate(ok):
-            out[rows[k]] = HandInput("", flexion[k], abduction[k], prepared[j])
-        return out
-
-    def _prepare_hand(self, s: JointSample) -> HandInput:
-        """prepare_hands for one sample, without the batch's bookkeeping (the live step's case)."""
-        try:
-            pose = hand_pose_from_values(s.names, s.positions)
-        except KeyError:
-            return HandInput("glove_invalid")
-        if not np.isfinite(pose).all():
-            return HandInput("glove_invalid")
-        if np.einsum("ij,ij->i", pose, pose).max() > MAX_JOINT_ROTATION**2:
-            return HandInput("glove_out_of_range")
-        flexion, abduction = angles_from_hand_pose_abduction_first(pose)
-        if flexion.max() > MAX_FLEXION or flexion.min() < MIN_FLEXION or abs(abduction).max() > MAX_ABDUCTION:
-            return HandInput("glove_out_of_range")
-        return HandInput("", flexion, abduction, self.effector.prepare(flexion[None], abduction[None])[0])
-
-    # ---- format 1: no motion limits ----------------------------------------------------------------
-    def set_mode(self, state: PipelineState, mode: str, inputs: StepInputs) -> tuple[PipelineState, str]:
-        if self.motion is not None:
-            return super().set_mode(state, mode, inputs)
-        if mode == state.mode:
-            return state, ""
-        if mode == "preview":
-            # Re-anchor at the next step: the preview starts again from where the robot is.
-            return evolve(state, mode="preview", anchor=None, arm_q=None, arm_q_before=None, arm_solved_ns=-1,
-                          arm_cmd=None, effector_cmd=None, engaging=False), ""
-        if mode != "execute":
-            return state, f"unknown mode {mode!r}"
-        start = self.engage_start(state, inputs)
-        if isinstance(start, str):
-            return state, start
-        arm_q, eff_q = start
-        refused = self.invalid_start(eff_q)
-        if refused:
-            return state, refused
-        return evolve(state, mode="execute", arm_cmd=arm_q, effector_cmd=eff_q, cmd_ns=inputs.t_ns, engaging=True), ""
-
-    def _outputs(self, state: PipelineState, new: PipelineState, inputs: StepInputs, arm_target, effector_target,
-                 flags: list[str]):
-        if self.motion is not None:
-            return super()._outputs(state, new, inputs, arm_target, effector_target, flags)
-        arm_cmd = eff_cmd = None
-        if state.mode == "execute":
-            arm_q, effector_q = new.arm_q, new.effector_q
-            dt = (inputs.t_ns - state.cmd_ns) / 1e9 if state.cmd_ns is not None else 0.0
-            frac = self.cfg.engage_speed_frac if state.engaging else 1.0
-            if arm_target is not None:
-                arm_cmd = self.arm_guard.step(state.arm_cmd, arm_q, dt, frac)
-            if effector_target is not None:
-                eff_cmd = self.effector.guard.step(state.effector_cmd, effector_q, dt, frac, target_valid=True)
-            if arm_cmd is not None or eff_cmd is not None:
-                a = arm_cmd if arm_cmd is not None else state.arm_cmd
-                e = eff_cmd if eff_cmd is not None else state.effector_cmd
-                engaging = state.engaging and not (
-                    np.max(np.abs(a - arm_q)) < ENGAGED_TOL and np.max(np.abs(e - effector_q)) < ENGAGED_TOL
-                )
-                new = evolve(new, arm_cmd=a, effector_cmd=e, cmd_ns=inputs.t_ns, engaging=engaging)
-            if state.engaging:
-                flags.append("engaging")
-        return new, arm_cmd, eff_cmd, None
