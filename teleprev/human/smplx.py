@@ -116,8 +116,8 @@ def _joint_frame_quaternion(pose: np.ndarray):
 
 
 def angles_from_hand_pose_abduction_first(pose: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """(flexion, abduction) angles (..., 15) from an axis-angle hand pose (..., 15, 3), as sessions of
-    formats 1 to 4 read them (teleprev/pipeline/older_formats.py): abduction first. Kept unchanged.
+    """(flexion, abduction) angles (..., 15) from an axis-angle hand pose (..., 15, 3), as older
+    session formats read them (teleprev/pipeline/older_formats): abduction first. Kept unchanged.
 
     In the joint frame, M = B.T R B = Ry(abduction) Rz(flexion) Rx(twist): the bone (along x) points
     where abduction and flexion put it, and twist turns the segment about its own bone. IMU gloves report

@@ -1,5 +1,5 @@
-"""Compiled CPN / CCN inference (teleprev.kernels.mlp) for Corrector(compiled=True), sessions of
-format 3 on. The numpy networks (mlp.py) stay for training, gradients (projection) and compiled=False.
+"""Compiled CPN / CCN inference (teleprev.kernels.mlp) for Corrector(compiled=True), the live
+pipeline's. The numpy networks (mlp.py) stay for training, gradients (projection) and compiled=False.
 
 The kernels' loop order is fixed and a row's arithmetic does not depend on its batch, so a batch
 answers bit for bit as single calls do (tests/noncollision/test_compiled_mlp.py); the answers agree with

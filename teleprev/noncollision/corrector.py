@@ -19,8 +19,8 @@ output (the full proposal would jump by the CCN's safety margin), and it lowers 
 Every answer has passed the exact checker (the anchor was checked when it became the anchor), so no
 path returns a colliding configuration. No torch: this runs in every pipeline step. The CPN / CCN
 inference runs in numba kernels (noncollision/compiled.py), the CCN step (proposal and bisection) in one
-call; sessions of formats 1 and 2 were corrected with the numpy networks
-(teleprev/pipeline/older_formats.py: NumpyCorrector).
+call; older sessions corrected with the numpy networks re-run with
+teleprev.pipeline.older_formats.NumpyCorrector.
 """
 
 from __future__ import annotations

@@ -25,7 +25,7 @@ class ArmIK:
     Each iteration takes a damped least-squares step on the 6-D pose error, caps the step size and
     clips to the joint limits, so every iterate (and the result) is within limits. The solver is one numba
     kernel (teleprev.kernels.ik.ik_solve: the 6x6 system by Cholesky; the same inputs always give the same
-    bits); sessions of formats 1 and 2 were solved by numpy (teleprev.pipeline.older_formats.NumpyArmIK).
+    bits); older sessions solved by numpy re-run with teleprev.pipeline.older_formats.NumpyArmIK.
     """
 
     def __init__(

@@ -61,7 +61,7 @@ class DeviceEventInfo:
 
 @dataclass
 class SenderSummary:
-    """The paced command sender's timing in a session (format 4): from its ticks (/command/tick)."""
+    """The paced command sender's timing in a session: from its ticks (/command/tick)."""
 
     ticks: int
     rate_hz: float | None
@@ -109,7 +109,7 @@ class SessionSummary:
     # Per device (the "devices" metadata record a live session writes when it closes): samples received,
     # the device's lost_/skipped counters, lost_input (their total), loop_dropped, sink_errors, failures.
     device_counts: dict[str, dict[str, int]] = field(default_factory=dict)
-    sender: SenderSummary | None = None  # format 4: the paced command sender's timing
+    sender: SenderSummary | None = None  # the paced command sender's timing (None: no /command/tick)
 
     @property
     def duration_s(self) -> float:
