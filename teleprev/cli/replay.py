@@ -66,7 +66,14 @@ def replay(
             console.print(f"[red]not replaying {session} to the robot: it fails the audit[/] ({reasons}). "
                           "Add --smooth to send it through the jerk-limited generator instead.")
             raise typer.Exit(1)
-    play(session, episode, speed, to, rig, engage_after, console, view, preview, smooth, foxglove, out)
+    from teleprev.cli.signals import StopSignals
+
+    with StopSignals() as signals:  # SIGTERM, SIGHUP as Ctrl-C: the robot stops, the recording is finalized
+        try:
+            play(session, episode, speed, to, rig, engage_after, console, view, preview, smooth, foxglove, out, signals)
+        except KeyboardInterrupt:
+            pass
+    signals.exit_if_stopped(console)  # (play said "replay recorded in OUT" once the recording was closed whole)
 
 
 def eval_(
