@@ -81,9 +81,11 @@ def build_player(session: Path, episode, speed: float, to: str, rig_path=None, s
         effective = safe_speed(playback, pipeline.arm_guard.speed, eff_guard.speed, speed, pipeline.motion)
         if to != "preview" and pipeline.motion is not None and effective < min(speed, 1.0) - ROUNDING:
             # Slower than recorded, the recorded commands' pauses stretch past what a servo arm rides through.
-            raise ConfigError(f"the recorded commands can be played to a robot at {effective:.2f}x at most (their "
-                              "acceleration or jerk), and slower than 1x a servo arm would stop between them: "
-                              "add --smooth to re-command them through the jerk-limited generator", str(session))
+            # The refusal alone: the speed that would pass is no option (it is slower than 1x).
+            what = "the dataset's actions" if dataset else "the recorded commands"
+            raise ConfigError(f"{what} exceed the robot's acceleration or jerk limit at {min(speed, 1.0):g}x, and "
+                              "slower than 1x a servo arm would stop between them: add --smooth to re-command "
+                              "them through the jerk-limited generator", str(session))
     message = "" if effective >= speed else (f"playing at {effective:.2f}x: {speed:g}x would exceed a joint's speed, "
                                              "acceleration or jerk limit")
     clock = SessionClock()
