@@ -29,7 +29,7 @@ from typing import Callable
 import numpy as np
 
 from teleprev.devices.contract import Actuator, Device
-from teleprev.errors import DeviceError
+from teleprev.errors import DeviceError, describe_exception
 from teleprev.messages import Event, JointSample, PoseSample, Sample
 from teleprev import topics
 from teleprev.clock import SessionClock
@@ -198,7 +198,7 @@ class DeviceRunner:
         self._emit("connected", now, f"{type(self.device).__name__} opened")
 
     def _fault(self, during: str, exc: Exception) -> None:
-        message = str(exc) if isinstance(exc, DeviceError) else f"{type(exc).__name__}: {exc}"
+        message = describe_exception(exc)
         now = self.clock.now_ns()
         with self._lock:
             repeated = not self.connected and message == self._last_error
@@ -222,7 +222,7 @@ class DeviceRunner:
             self.device.disconnect()
         except Exception as exc:  # closing a broken device may fail too; nothing more to do about it
             with self._lock:
-                self._last_error = f"disconnect failed: {exc}"
+                self._last_error = f"disconnect failed: {describe_exception(exc)}"
 
     def _deliver(self, samples: list[Sample], now: int) -> None:
         valid = [s for s in samples if sample_is_valid(s)]
@@ -368,7 +368,7 @@ class ActuatorPort:
             self.device.send(command)
         except Exception as exc:
             self.failed += 1
-            self.last_error = str(exc)
+            self.last_error = describe_exception(exc)
             return False
         self.sent += 1
         return True

@@ -28,7 +28,7 @@ from pathlib import Path
 
 import numpy as np
 
-from teleprev.devices import ClockSync, DeviceError, OperatorLink, SessionClock
+from teleprev.devices import ClockSync, DeviceError, OperatorLink, SessionClock, describe_exception
 from teleprev_devices.fanout import Fanout, acquire as acquire_shared, release as release_shared
 from teleprev_devices.webxr import certificate, wire
 
@@ -123,9 +123,9 @@ class XrServer:
             asyncio.run(self._serve(port, started, failure))
         except BaseException as exc:  # a bug here: the devices must hear of it (they raise, the runner reopens)
             if started.is_set():
-                self.fanout.fail(f"server thread ended: {type(exc).__name__}: {exc}")
+                self.fanout.fail(f"server thread ended: {describe_exception(exc)}")
             else:
-                failure.append(f"{type(exc).__name__}: {exc}")
+                failure.append(describe_exception(exc))
                 started.set()
 
     async def _serve(self, port: int, started: threading.Event, failure: list[str]) -> None:

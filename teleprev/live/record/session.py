@@ -287,7 +287,9 @@ class LiveSession:
         for name, s in silent.items():
             device, plugin = self.devices[name], self.rig.devices[name].plugin
             tried = f"tried {device.endpoint()}, " if device.endpoint() else ""
-            what = f"connect failed: {s.last_error}" if s.connects == 0 else "no packets"
+            what = ("no packets" if s.connects else f"connect failed: {s.last_error}" if s.last_error else
+                    f"still connecting: its connect() had not returned after {timeout_s:g} s (a busy machine? "
+                    "raise --connect-timeout)")
             problems.append(f"device {name!r} ({plugin}) sent nothing within {timeout_s:g} s: {tried}{what}")
         return problems
 
