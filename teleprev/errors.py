@@ -39,6 +39,12 @@ class DeviceError(TeleprevError):
     """A device could not be opened, stopped sending or sent something unusable."""
 
 
+class DeviceStartError(DeviceError):
+    """A device that cannot start, and trying again will not change that: the port it must listen on is
+    taken, the folder it must write cannot be written. Its runner stops trying, and a recording waiting
+    for its devices fails at once, naming it."""
+
+
 def describe_exception(exc: BaseException) -> str:
     """An error in words for a one-line message, never empty: a teleprev error's own text; any other as its
     type and text; one whose text is empty (TimeoutError(), a DeviceError with no message) as its type,

@@ -107,7 +107,8 @@ def record(
             with signals.finishing():  # a second signal must not cut the file's finalization short
                 summary = recording.stop()  # raises SessionError if the recording failed (exit 2)
     try:
-        print_summary(console, recording, summary)
+        if not recording.cannot_start:  # else nothing ran: the one line below says why
+            print_summary(console, recording, summary)
         if signals.received is not None:
             console.print(f"stopped by {signals.name}; {options.out} is complete", highlight=False)
     except OSError:  # the terminal went away with the SIGHUP; the file is complete all the same

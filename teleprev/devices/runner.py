@@ -29,7 +29,7 @@ from typing import Callable
 import numpy as np
 
 from teleprev.devices.contract import Actuator, Device
-from teleprev.errors import DeviceError, describe_exception
+from teleprev.errors import DeviceError, DeviceStartError, describe_exception
 from teleprev.messages import Event, JointSample, PoseSample, Sample
 from teleprev import topics
 from teleprev.clock import SessionClock
@@ -77,6 +77,7 @@ class RunnerStats:
     sink_errors: int  # samples and events the sink raised on (lost to the session)
     skipped: dict[str, int] = field(default_factory=dict)  # the device's own counters (malformed, NaN, ...)
     topics: dict[str, int] = field(default_factory=dict)  # samples per topic
+    start_failure: str = ""  # why the device cannot start at all ("": it could, or may yet)
 
     @property
     def lost_input(self) -> int:
@@ -125,6 +126,7 @@ class DeviceRunner:
         self._gaps = 0
         self._sink_errors = 0
         self._last_error = ""
+        self._start_failure = ""  # why the device cannot start (DeviceStartError): the runner has stopped
         self._last_receive: int | None = None
         self._per_topic: dict[str, int] = {}
         self._primary_times: deque[int] = deque()
@@ -184,6 +186,9 @@ class DeviceRunner:
     def _connect(self) -> None:
         try:
             self.device.connect()
+        except DeviceStartError as exc:
+            self._cannot_start(exc)
+            return
         except Exception as exc:
             self._fault("connect", exc)
             return
@@ -214,6 +219,17 @@ class DeviceRunner:
         while not self._stop.is_set() and time.monotonic() < deadline:
             self._check_gap(self.clock.now_ns())
             self._stop.wait(min(0.05, max(0.0, deadline - time.monotonic())))
+
+    def _cannot_start(self, exc: DeviceStartError) -> None:
+        """A device that cannot start (its port taken, its folder not writable): said once, and no retries,
+        which would only say it again every reconnect_s."""
+        message = describe_exception(exc)
+        with self._lock:
+            self._faults += 1
+            self._last_error = self._start_failure = message
+            self._state = "error"
+        self._emit("error", self.clock.now_ns(), f"cannot start: {message}")
+        self._stop.set()
 
     def _close(self) -> None:
         with self._lock:
@@ -332,6 +348,7 @@ class DeviceRunner:
                 sink_errors=self._sink_errors,
                 skipped=skipped,
                 topics=dict(self._per_topic),
+                start_failure=self._start_failure,
             )
 
 

@@ -31,7 +31,7 @@ from pythonosc.osc_packet import OscPacket
 
 from teleprev_devices.fanout import Fanout, acquire as acquire_shared, release as release_shared
 from teleprev_devices.vmc.unity import KNOWN_BONES
-from teleprev.devices import ClockSync, DeviceError, SessionClock, describe_exception
+from teleprev.devices import ClockSync, DeviceError, DeviceStartError, SessionClock, describe_exception
 
 _MAX_DATAGRAM = 65535
 # Linux reports the datagrams its receive buffer had no room for (a running total) with each datagram
@@ -112,8 +112,8 @@ class VmcReceiver:
             self._sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
             self._sock.bind((self.host, self.port))
         except OSError as exc:
-            raise DeviceError(f"cannot listen on UDP {self.host}:{self.port} ({exc.strerror or exc}); "
-                              "is another program using the port?", self.where) from None
+            raise DeviceStartError(f"cannot listen on UDP {self.host}:{self.port} ({exc.strerror or exc}); "
+                                   "is another program using the port?", self.where) from None
         try:
             self._sock.setsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF, receive_buffer_kb * 1024)
         except OSError:

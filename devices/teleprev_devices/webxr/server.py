@@ -28,7 +28,7 @@ from pathlib import Path
 
 import numpy as np
 
-from teleprev.devices import ClockSync, DeviceError, OperatorLink, SessionClock, describe_exception
+from teleprev.devices import ClockSync, DeviceError, DeviceStartError, OperatorLink, SessionClock, describe_exception
 from teleprev_devices.fanout import Fanout, acquire as acquire_shared, release as release_shared
 from teleprev_devices.webxr import certificate, wire
 
@@ -74,6 +74,9 @@ class _Page:
     session: str = ""  # the XR session the page runs ("immersive-ar", "immersive-vr", or "" before one)
 
 
+_CANNOT_LISTEN = "cannot listen on"  # a start failure: the port is taken, or not this program's to open
+
+
 class XrServer:
     def __init__(self, host: str, port: int, clock: SessionClock, cert_dir: Path, hooks: OperatorLink):
         self.host, self.clock, self.hooks = host, clock, hooks
@@ -85,8 +88,8 @@ class XrServer:
         try:
             self.credentials = certificate.ensure(cert_dir, self._addresses)
         except OSError as exc:
-            raise DeviceError(f"cannot keep the page's certificate in {cert_dir} ({exc.strerror or exc}); "
-                              "set cert_dir to a folder you can write", self.where) from None
+            raise DeviceStartError(f"cannot keep the page's certificate in {cert_dir} ({exc.strerror or exc}); "
+                                   "set cert_dir to a folder you can write", self.where) from None
         self._page: _Page | None = None
         self._loop: asyncio.AbstractEventLoop | None = None
         self._stopped: asyncio.Event | None = None
@@ -98,6 +101,8 @@ class XrServer:
         started.wait(10.0)  # (set when serving, or when it could not)
         if failure or not started.is_set():
             self._thread.join(1.0)
+            if failure and failure[0].startswith(_CANNOT_LISTEN):
+                raise DeviceStartError(failure[0], self.where)
             raise DeviceError(failure[0] if failure else "the server did not start within 10 s", self.where)
         self.where = f"WebXR server {host}:{self.port}"
         self.fanout.where = self.where
@@ -139,7 +144,7 @@ class XrServer:
             server = await serve(self._connection, self.host, port, ssl=context, process_request=self._request,
                                  max_size=64 * 1024, compression=None, ping_interval=5, ping_timeout=10)
         except OSError as exc:
-            failure.append(f"cannot listen on {self.host}:{port} ({exc.strerror or exc}); is another program using the port?")
+            failure.append(f"{_CANNOT_LISTEN} {self.host}:{port} ({exc.strerror or exc}); is another program using the port?")
             started.set()
             return
         async with server:
