@@ -55,6 +55,8 @@ class Counters:
     non_finite: int = 0  # a frame with NaN or infinity in a tracked part
     failed_messages: int = 0  # messages whose handling raised anything else (counted, skipped)
     refused_connections: int = 0  # requests without the pairing token
+    oversize_messages: int = 0  # connections closed (1009) for a message over MAX_MESSAGE bytes
+    taken_over_pages: int = 0  # connections closed (4000) because another page connected
     lost_sequence_gaps: int = 0  # frames missing from the page's sequence numbers
     clock_outliers: int = 0
     actions: int = 0
@@ -62,6 +64,7 @@ class Counters:
     def errors(self) -> dict[str, int]:
         return {"malformed_messages": self.malformed_messages, "non_finite": self.non_finite,
                 "failed_messages": self.failed_messages, "refused_connections": self.refused_connections,
+                "oversize_messages": self.oversize_messages, "taken_over_pages": self.taken_over_pages,
                 "lost_sequence_gaps": self.lost_sequence_gaps, "clock_outliers": self.clock_outliers}
 
 
@@ -74,6 +77,10 @@ class _Page:
     session: str = ""  # the XR session the page runs ("immersive-ar", "immersive-vr", or "" before one)
 
 
+# Every refusal of a page is counted, and so recorded as a device event (the runner's "skipped" events):
+# a request without the token, a message too big (the server closes with 1009), a page another replaced.
+MAX_MESSAGE = 64 * 1024  # bytes: a frame is about 2 KiB
+CLOSE_TOO_BIG, CLOSE_TAKEN_OVER = 1009, 4000
 _CANNOT_LISTEN = "cannot listen on"  # a start failure: the port is taken, or not this program's to open
 
 
@@ -142,7 +149,7 @@ class XrServer:
         self._stopped = asyncio.Event()
         try:
             server = await serve(self._connection, self.host, port, ssl=context, process_request=self._request,
-                                 max_size=64 * 1024, compression=None, ping_interval=5, ping_timeout=10)
+                                 max_size=MAX_MESSAGE, compression=None, ping_interval=5, ping_timeout=10)
         except OSError as exc:
             failure.append(f"{_CANNOT_LISTEN} {self.host}:{port} ({exc.strerror or exc}); is another program using the port?")
             started.set()
@@ -181,7 +188,8 @@ class XrServer:
         old, self._page = self._page, page
         self.counters.connections += 1
         if old is not None:
-            await old.connection.close(4000, "another page took over")
+            self.counters.taken_over_pages += 1
+            await old.connection.close(CLOSE_TAKEN_OVER, "another page took over")
         try:
             async for message in connection:
                 if self._page is not page:
@@ -195,6 +203,9 @@ class XrServer:
                     break
                 except Exception:  # whatever a message does, the next one is read
                     self.counters.failed_messages += 1
+        except ConnectionClosed as exc:  # the connection broke (the page reconnects), or was refused
+            if exc.sent is not None and exc.sent.code == CLOSE_TOO_BIG:
+                self.counters.oversize_messages += 1
         except Exception:  # the connection broke: the page reconnects
             pass
         finally:
