@@ -109,12 +109,9 @@ def record(
     try:
         if not recording.cannot_start:  # else nothing ran: the one line below says why
             print_summary(console, recording, summary)
-        if signals.received is not None:
-            console.print(f"stopped by {signals.name}; {options.out} is complete", highlight=False)
     except OSError:  # the terminal went away with the SIGHUP; the file is complete all the same
         pass
-    if signals.received is not None:
-        raise typer.Exit(signals.exit_code)
+    signals.exit_if_stopped(console, options.out)
     if unconnected:
         errors = Console(stderr=True)
         for line in unconnected:
