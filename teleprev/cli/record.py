@@ -47,9 +47,9 @@ def record(
     connect_timeout: float = typer.Option(
         5.0, "--connect-timeout", help="Unattended or headless: fail unless every device has sent something within this many seconds."),
     webxr_host: str = typer.Option("", "--webxr-host", help=WEBXR_HOST_HELP),
-    foxglove: Optional[int] = typer.Option(None, "--foxglove", metavar="[PORT]", min=0, max=65535, help="Also show the session live in "
-                                           "Foxglove: a WebSocket server on 127.0.0.1:PORT (default 8765) with the "
-                                           "file's topics.", show_default=False),
+    foxglove: Optional[int] = typer.Option(None, "--foxglove", metavar="[PORT]", min=0, max=65535,
+                                           help="Also show the session live in Foxglove: a WebSocket server on "
+                                           "127.0.0.1:PORT (default 8765) with the file's topics.", show_default=False),
 ) -> None:
     """Record a session: devices, pipeline, preview and execute, episodes, all into one MCAP file."""
     from rich.console import Console

@@ -22,9 +22,9 @@ def replay(
     view: View = typer.Option("side", "--view", help="Robot view."),
     preview: bool = typer.Option(True, "--preview/--no-preview", help="Show the terminal preview."),
     smooth: bool = typer.Option(False, "--smooth", help="Send the commands as the pipeline's jerk-limited generator re-commands them (needed with --to arm for a session that fails `teleprev audit`)."),
-    foxglove: Optional[int] = typer.Option(None, "--foxglove", metavar="[PORT]", min=0, max=65535, help="Also play the session's topics "
-                                           "live to Foxglove: a WebSocket server on 127.0.0.1:PORT (default 8765).",
-                                           show_default=False),
+    foxglove: Optional[int] = typer.Option(None, "--foxglove", metavar="[PORT]", min=0, max=65535,
+                                           help="Also play the session's topics live to Foxglove: a WebSocket server "
+                                           "on 127.0.0.1:PORT (default 8765).", show_default=False),
     out: Optional[Path] = typer.Option(None, "--out", "-o", help="Record the replay (what the robot was sent, and its "
                                        "states) as a session here.", show_default=False),
 ) -> None:
@@ -93,7 +93,8 @@ def eval_(
                                       help="Run the sessions on Ray: alone, start a local instance (with -j CPUs, default "
                                            "all); auto, HOST:PORT or ray://HOST:PORT: join that cluster. Needs `uv sync "
                                            "--extra ray`.", show_default=False),
-    rows: int = typer.Option(30, "--rows", min=1, help="Sessions shown in the table of a corpus (the worst; the report has all)."),
+    rows: int = typer.Option(30, "--rows", min=1,
+                             help="Sessions shown in the table of a corpus (the worst; the report has all)."),
 ) -> None:
     """Re-run the pipeline on recorded raw streams, measure it, and catch regressions.
 

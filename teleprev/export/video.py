@@ -17,7 +17,8 @@ CODEC_DEFAULTS = {"h264": ("ultrafast", 23, 1), "hevc": ("ultrafast", 28, 1), "a
 
 # The encoders' own ranges: x264 and x265 take a crf of 0..51, SVT-AV1 0..63; their presets by name.
 MAX_CRF = {"h264": 51, "hevc": 51, "av1": 63}
-X26X_PRESETS = ("ultrafast", "superfast", "veryfast", "faster", "fast", "medium", "slow", "slower", "veryslow", "placebo")
+X26X_PRESETS = ("ultrafast", "superfast", "veryfast", "faster", "fast", "medium", "slow", "slower", "veryslow",
+                "placebo")
 MAX_GOP = 1000  # frames between keyframes: past this a training sampler decodes for seconds to reach a frame
 ENCODERS = ("teleprev", "lerobot")
 

@@ -15,7 +15,7 @@ def test_the_refusal_alone(sim_dataset):
     ran = teleprev("replay", sim_dataset, "--episode", "0", "--to", "sim", "--config", SIM_RIG, "--engage-after", "0",
                    "--no-preview")
     assert ran.returncode == 2, ran.stdout + ran.stderr
-    assert ran.stderr.strip() == (f"error: {sim_dataset}: the dataset's actions exceed the robot's acceleration or jerk limit at 1x, and "
-                                  "slower than 1x a servo arm would stop between them: add --smooth to re-command "
-                                  "them through the jerk-limited generator")
+    assert ran.stderr.strip() == (f"error: {sim_dataset}: the dataset's actions exceed the robot's acceleration or "
+                                  "jerk limit at 1x, and slower than 1x a servo arm would stop between them: add "
+                                  "--smooth to re-command them through the jerk-limited generator")
     assert "at most" not in ran.stdout + ran.stderr

@@ -7,11 +7,8 @@ from __future__ import annotations
 
 import time
 
-import pytest
-
 from teleprev.errors import DeviceError, describe_exception
 from teleprev.messages import Event
-from teleprev import topics
 from tests.helpers.wait import wait_until
 
 

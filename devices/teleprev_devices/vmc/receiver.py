@@ -31,7 +31,7 @@ from pythonosc.osc_packet import OscPacket
 
 from teleprev_devices.fanout import Fanout, acquire as acquire_shared, release as release_shared
 from teleprev_devices.vmc.unity import KNOWN_BONES
-from teleprev.devices import ClockSync, DeviceError, DeviceStartError, SessionClock, describe_exception
+from teleprev.devices import ClockSync, DeviceStartError, SessionClock, describe_exception
 
 _MAX_DATAGRAM = 65535
 # Linux reports the datagrams its receive buffer had no room for (a running total) with each datagram

@@ -143,7 +143,8 @@ def play(session: Path, episode, speed: float, to: str, rig_path, engage_after, 
     built is raised once they are whole, and none cuts the robot's stop and the recording's close short."""
     signals = signals or _NoSignals()
     with signals.deferred():
-        player, runners, tap, rig, message, recording = build_player(session, episode, speed, to, rig_path, smoothed, out)
+        built = build_player(session, episode, speed, to, rig_path, smoothed, out)
+    player, runners, tap, rig, message, recording = built
     live_view, thread = None, threading.Thread(target=player.run, daemon=True)
     try:
         signals.check()
@@ -157,7 +158,8 @@ def play(session: Path, episode, speed: float, to: str, rig_path, engage_after, 
             _finish(player, thread, runners, live_view, recording, console, out)
     sent = sum(1 for phase, _, _ in player.state.sent if phase == "playing")
     p = player.p
-    console.print(f"played {len(p.t_ns)} steps at {player.speed:.2f}x to {to}; {sent} commands sent" + (f"; {message}" if message else ""))
+    console.print(f"played {len(p.t_ns)} steps at {player.speed:.2f}x to {to}; {sent} commands sent"
+                  + (f"; {message}" if message else ""))
     if player.state.message:  # the robot refused a command or went away: playback stopped there
         raise DeviceError(f"playback stopped: {player.state.message}")
     if recording is not None:
