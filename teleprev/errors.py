@@ -39,6 +39,29 @@ class DeviceError(TeleprevError):
     """A device could not be opened, stopped sending or sent something unusable."""
 
 
+class DeviceStartError(DeviceError):
+    """A device that cannot start, and trying again will not change that: the port it must listen on is
+    taken, the folder it must write cannot be written. Its runner stops trying, and a recording waiting
+    for its devices fails at once, naming it."""
+
+
+def describe_exception(exc: BaseException) -> str:
+    """An error in words for a one-line message, never empty: a teleprev error's own text; any other as its
+    type and text; one whose text is empty (TimeoutError(), a DeviceError with no message) as its type,
+    where it happened, and what it was raised from."""
+    if isinstance(exc, TeleprevError):
+        if exc.message:
+            return str(exc)
+        text = f"{type(exc).__name__}" + (f" in {exc.where}" if exc.where else "")
+    else:
+        said = str(exc)
+        if said:
+            return f"{type(exc).__name__}: {said}"
+        text = type(exc).__name__
+    cause = exc.__cause__ or (None if exc.__suppress_context__ else exc.__context__)
+    return f"{text} (from {describe_exception(cause)})" if cause is not None and cause is not exc else text
+
+
 def describe_os_error(exc: BaseException) -> str:
     """An I/O error in a few words: "no space left on this device" rather than "[Errno 28] No space ..."."""
     said = out_of_space(exc)

@@ -238,6 +238,7 @@ def parse_rig(data: dict, path: Path | None, where: str | None = None) -> Rig:
             raise ConfigError(f"plugin {table['plugin']!r} declares no valid kind", dwhere)
         settings = from_table(cls.Settings, settings_table, dwhere)
         devices[name] = DeviceEntry(name, table["plugin"], cls.kind, cls, settings)
+    _check_device_motion_limits(devices, rig, where)
     frames_table = data.get("frames", {})
     if not isinstance(frames_table, dict):
         raise ConfigError("expected [frames.<name>] tables", f"{where} [frames]")
@@ -287,3 +288,67 @@ def _check_motion_limits(rig: RigSection, pipeline: PipelineConfig, where: str) 
                               "teleprev/robot/limits.py); a rig may only tighten it", f"{where} [pipeline].{key}")
         if value > bound:
             raise ConfigError(f"{value:g} {unit} is more than any robot takes (at most {bound:g})", f"{where} [pipeline].{key}")
+
+
+# A device's own motion-limit settings (what its controller runs at, or faults past), by the names plugins
+# give them: each is checked against the robot's physical number, as [pipeline]'s are.
+DEVICE_MOTION_KEYS = {"max_velocity": "speed", "max_speed": "speed", "max_acceleration": "acceleration",
+                      "max_accel": "acceleration", "max_jerk": "jerk"}
+
+
+@dataclass(frozen=True)
+class _Bound:
+    value: float
+    unit: str
+    source: str  # where the number comes from
+    zero_means_default: bool = False  # 0 is allowed: "the robot's own"
+
+
+def _device_bound(kind: str, quantity: str, rig: RigSection) -> _Bound | None:
+    """The robot's physical limit for a device of `kind` (arm, hand); None where it has none (a switch)."""
+    effector = end_effector(rig.end_effector)
+    if kind == "hand" and effector.is_switch:
+        return None
+    if quantity == "speed":
+        model = load_robot(rig.robot)
+        joints = [n for n in model.joint_names if (n in effector.joints) == (kind == "hand")]
+        if not joints:
+            return None
+        unit = "m/s" if kind == "hand" and rig.end_effector == "parallel_gripper" else "rad/s"
+        return _Bound(float(model.velocity_limit[model.indices(joints)].min()), unit,
+                      f"the URDF's velocity limit of {rig.robot}", zero_means_default=True)
+    if kind == "arm":
+        row = arm_limits(rig.robot)
+        number = (row.acceleration if row else MAX_ARM_ACCELERATION) if quantity == "acceleration" else \
+            (row.jerk if row else MAX_ARM_JERK)
+        unit = "rad/s²" if quantity == "acceleration" else "rad/s³"
+    elif quantity == "acceleration":
+        row = effector_limits(rig.end_effector)
+        if row is not None and row.acceleration is None:
+            return None
+        number, unit = (row.acceleration if row else MAX_HAND_ACCELERATION), "rad/s² (m/s² for a gripper)"
+    else:
+        return None  # no hand has a jerk number
+    source = f"{rig.robot}'s limit, teleprev/robot/limits.py" if row is not None else "more than any robot takes"
+    return _Bound(number, unit, source)
+
+
+def _check_device_motion_limits(devices: dict[str, DeviceEntry], rig: RigSection, where: str) -> None:
+    """An arm's or hand's own speed, acceleration and jerk settings within the robot's physical numbers: a
+    looser one would let the device run, or stop faulting, past what the robot takes (max_jerk = 1e308)."""
+    for name, entry in devices.items():
+        if entry.kind not in ("arm", "hand"):
+            continue
+        for key, quantity in DEVICE_MOTION_KEYS.items():
+            value = getattr(entry.settings, key, None)
+            if isinstance(value, bool) or not isinstance(value, (int, float)):
+                continue
+            bound = _device_bound(entry.kind, quantity, rig)
+            if bound is None:
+                continue
+            low = 0 <= value if bound.zero_means_default else 0 < value
+            if not (low and value <= bound.value):
+                span = f"{'[0' if bound.zero_means_default else '(0'}, {bound.value:g}] {bound.unit}"
+                default = " (0: the URDF's)" if bound.zero_means_default else ""
+                raise ConfigError(f"{value:g} is outside the robot's range: {key} must be in {span}{default}, "
+                                  f"from {bound.source}", f"{where} [devices.{name}].{key}")

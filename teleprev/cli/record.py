@@ -47,9 +47,9 @@ def record(
     connect_timeout: float = typer.Option(
         5.0, "--connect-timeout", help="Unattended or headless: fail unless every device has sent something within this many seconds."),
     webxr_host: str = typer.Option("", "--webxr-host", help=WEBXR_HOST_HELP),
-    foxglove: Optional[int] = typer.Option(None, "--foxglove", metavar="[PORT]", help="Also show the session live in "
-                                           "Foxglove: a WebSocket server on 127.0.0.1:PORT (default 8765) with the "
-                                           "file's topics.", show_default=False),
+    foxglove: Optional[int] = typer.Option(None, "--foxglove", metavar="[PORT]", min=0, max=65535,
+                                           help="Also show the session live in Foxglove: a WebSocket server on "
+                                           "127.0.0.1:PORT (default 8765) with the file's topics.", show_default=False),
 ) -> None:
     """Record a session: devices, pipeline, preview and execute, episodes, all into one MCAP file."""
     from rich.console import Console
@@ -107,13 +107,11 @@ def record(
             with signals.finishing():  # a second signal must not cut the file's finalization short
                 summary = recording.stop()  # raises SessionError if the recording failed (exit 2)
     try:
-        print_summary(console, recording, summary)
-        if signals.received is not None:
-            console.print(f"stopped by {signals.name}; {options.out} is complete", highlight=False)
+        if not recording.cannot_start:  # else nothing ran: the one line below says why
+            print_summary(console, recording, summary)
     except OSError:  # the terminal went away with the SIGHUP; the file is complete all the same
         pass
-    if signals.received is not None:
-        raise typer.Exit(signals.exit_code)
+    signals.exit_if_stopped(console, options.out)
     if unconnected:
         errors = Console(stderr=True)
         for line in unconnected:

@@ -22,9 +22,9 @@ def replay(
     view: View = typer.Option("side", "--view", help="Robot view."),
     preview: bool = typer.Option(True, "--preview/--no-preview", help="Show the terminal preview."),
     smooth: bool = typer.Option(False, "--smooth", help="Send the commands as the pipeline's jerk-limited generator re-commands them (needed with --to arm for a session that fails `teleprev audit`)."),
-    foxglove: Optional[int] = typer.Option(None, "--foxglove", metavar="[PORT]", help="Also play the session's topics "
-                                           "live to Foxglove: a WebSocket server on 127.0.0.1:PORT (default 8765).",
-                                           show_default=False),
+    foxglove: Optional[int] = typer.Option(None, "--foxglove", metavar="[PORT]", min=0, max=65535,
+                                           help="Also play the session's topics live to Foxglove: a WebSocket server "
+                                           "on 127.0.0.1:PORT (default 8765).", show_default=False),
     out: Optional[Path] = typer.Option(None, "--out", "-o", help="Record the replay (what the robot was sent, and its "
                                        "states) as a session here.", show_default=False),
 ) -> None:
@@ -40,6 +40,10 @@ def replay(
     from teleprev.errors import ConfigError
     from teleprev.preview.keys import KeyReader
 
+    from teleprev.cli.values import check_finite, check_seconds
+
+    check_finite("--speed", speed, "a finite multiple of the recorded speed (at least 0.01)")
+    check_seconds("--engage-after", engage_after, zero_ok=True)
     if not session.exists():
         raise ConfigError("no such session file or dataset folder", str(session))
     from teleprev.export.actions import is_dataset
@@ -66,7 +70,14 @@ def replay(
             console.print(f"[red]not replaying {session} to the robot: it fails the audit[/] ({reasons}). "
                           "Add --smooth to send it through the jerk-limited generator instead.")
             raise typer.Exit(1)
-    play(session, episode, speed, to, rig, engage_after, console, view, preview, smooth, foxglove, out)
+    from teleprev.cli.signals import StopSignals
+
+    with StopSignals() as signals:  # SIGTERM, SIGHUP as Ctrl-C: the robot stops, the recording is finalized
+        try:
+            play(session, episode, speed, to, rig, engage_after, console, view, preview, smooth, foxglove, out, signals)
+        except KeyboardInterrupt:
+            pass
+    signals.exit_if_stopped(console)  # (play said "replay recorded in OUT" once the recording was closed whole)
 
 
 def eval_(
@@ -82,7 +93,8 @@ def eval_(
                                       help="Run the sessions on Ray: alone, start a local instance (with -j CPUs, default "
                                            "all); auto, HOST:PORT or ray://HOST:PORT: join that cluster. Needs `uv sync "
                                            "--extra ray`.", show_default=False),
-    rows: int = typer.Option(30, "--rows", help="Sessions shown in the table of a corpus (the worst; the report has all)."),
+    rows: int = typer.Option(30, "--rows", min=1,
+                             help="Sessions shown in the table of a corpus (the worst; the report has all)."),
 ) -> None:
     """Re-run the pipeline on recorded raw streams, measure it, and catch regressions.
 

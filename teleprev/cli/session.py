@@ -178,9 +178,12 @@ def recover(
     from rich.console import Console
     from rich.table import Table
 
+    from teleprev.session.reader import check_written_by_teleprev
     from teleprev.session.recover import recover as do_recover
 
     from teleprev.cli.signals import StopSignals
+
+    check_written_by_teleprev(session)
 
     with StopSignals() as signals:  # a signal removes the half-written output (the source is never touched)
         try:

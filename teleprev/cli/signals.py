@@ -88,6 +88,20 @@ class StopSignals:
     def name(self) -> str:
         return signal.Signals(self.received).name if self.received is not None else ""
 
+    def exit_if_stopped(self, console, finalized=None) -> None:
+        """After the command's clean-up: one line saying which signal stopped it (and that `finalized`, the
+        file it wrote, is complete), then exit 128 + the signal. Nothing when no signal came."""
+        if self.received is None:
+            return
+        import typer
+
+        try:
+            console.print(f"stopped by {self.name}" + (f"; {finalized} is complete" if finalized else ""),
+                          highlight=False, soft_wrap=True)
+        except OSError:  # the terminal went away with the SIGHUP; the file is complete all the same
+            pass
+        raise typer.Exit(self.exit_code)
+
     @property
     def exit_code(self) -> int:
         """128 + the signal's number, as a shell reports a command a signal stopped; 0 without one."""

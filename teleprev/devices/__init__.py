@@ -22,7 +22,8 @@ from teleprev.devices.polled import DeviceFault, JointLimits, PolledActuator, Po
 from teleprev.devices.registry import GROUP, available, load_plugin
 from teleprev.devices.servo_limits import FAULT_TOLERANCE, ServoStreamRule, ServoViolation
 from teleprev.devices.runner import ActuatorPort, DeviceRunner, RunnerStats, Sink, default_gap_s
-from teleprev.errors import ConfigError, DeviceError, SessionError, TeleprevError
+from teleprev.errors import (ConfigError, DeviceError, DeviceStartError, SessionError, TeleprevError,
+                             describe_exception)
 from teleprev.human import smplx
 from teleprev.messages import Event, ImageSample, JointSample, Logged, PoseSample, Sample
 from teleprev.robot.effectors import EFFECTORS, EndEffector, end_effector
@@ -63,7 +64,7 @@ __all__ = [
     "Event", "ImageSample", "JointSample", "Logged", "PoseSample", "Sample",
     "ClockSync", "SessionClock", "KIND_TOPICS", "device_topic", "parse_device_topic",
     # errors
-    "ConfigError", "DeviceError", "SessionError", "TeleprevError",
+    "ConfigError", "DeviceError", "DeviceStartError", "SessionError", "TeleprevError", "describe_exception",
     # what built-in plugins use: SMPL-X names, rotations, the robot, the end-effector table, recorded sessions
     "smplx", "transforms", "EFFECTORS", "EndEffector", "end_effector",
     "RobotModel", "load_robot", "robot_geometry", "SessionReader",

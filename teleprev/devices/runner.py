@@ -29,7 +29,7 @@ from typing import Callable
 import numpy as np
 
 from teleprev.devices.contract import Actuator, Device
-from teleprev.errors import DeviceError
+from teleprev.errors import DeviceError, DeviceStartError, describe_exception
 from teleprev.messages import Event, JointSample, PoseSample, Sample
 from teleprev import topics
 from teleprev.clock import SessionClock
@@ -77,6 +77,7 @@ class RunnerStats:
     sink_errors: int  # samples and events the sink raised on (lost to the session)
     skipped: dict[str, int] = field(default_factory=dict)  # the device's own counters (malformed, NaN, ...)
     topics: dict[str, int] = field(default_factory=dict)  # samples per topic
+    start_failure: str = ""  # why the device cannot start at all ("": it could, or may yet)
 
     @property
     def lost_input(self) -> int:
@@ -125,6 +126,7 @@ class DeviceRunner:
         self._gaps = 0
         self._sink_errors = 0
         self._last_error = ""
+        self._start_failure = ""  # why the device cannot start (DeviceStartError): the runner has stopped
         self._last_receive: int | None = None
         self._per_topic: dict[str, int] = {}
         self._primary_times: deque[int] = deque()
@@ -184,6 +186,9 @@ class DeviceRunner:
     def _connect(self) -> None:
         try:
             self.device.connect()
+        except DeviceStartError as exc:
+            self._cannot_start(exc)
+            return
         except Exception as exc:
             self._fault("connect", exc)
             return
@@ -198,7 +203,7 @@ class DeviceRunner:
         self._emit("connected", now, f"{type(self.device).__name__} opened")
 
     def _fault(self, during: str, exc: Exception) -> None:
-        message = str(exc) if isinstance(exc, DeviceError) else f"{type(exc).__name__}: {exc}"
+        message = describe_exception(exc)
         now = self.clock.now_ns()
         with self._lock:
             repeated = not self.connected and message == self._last_error
@@ -215,6 +220,17 @@ class DeviceRunner:
             self._check_gap(self.clock.now_ns())
             self._stop.wait(min(0.05, max(0.0, deadline - time.monotonic())))
 
+    def _cannot_start(self, exc: DeviceStartError) -> None:
+        """A device that cannot start (its port taken, its folder not writable): said once, and no retries,
+        which would only say it again every reconnect_s."""
+        message = describe_exception(exc)
+        with self._lock:
+            self._faults += 1
+            self._last_error = self._start_failure = message
+            self._state = "error"
+        self._emit("error", self.clock.now_ns(), f"cannot start: {message}")
+        self._stop.set()
+
     def _close(self) -> None:
         with self._lock:
             self.connected = False
@@ -222,7 +238,7 @@ class DeviceRunner:
             self.device.disconnect()
         except Exception as exc:  # closing a broken device may fail too; nothing more to do about it
             with self._lock:
-                self._last_error = f"disconnect failed: {exc}"
+                self._last_error = f"disconnect failed: {describe_exception(exc)}"
 
     def _deliver(self, samples: list[Sample], now: int) -> None:
         valid = [s for s in samples if sample_is_valid(s)]
@@ -332,6 +348,7 @@ class DeviceRunner:
                 sink_errors=self._sink_errors,
                 skipped=skipped,
                 topics=dict(self._per_topic),
+                start_failure=self._start_failure,
             )
 
 
@@ -368,7 +385,7 @@ class ActuatorPort:
             self.device.send(command)
         except Exception as exc:
             self.failed += 1
-            self.last_error = str(exc)
+            self.last_error = describe_exception(exc)
             return False
         self.sent += 1
         return True

@@ -76,6 +76,41 @@ def read_info(root: Path) -> dict:
         raise ConfigError(f"{INFO} is not valid JSON ({exc})", str(root)) from None
 
 
+EPISODES_META = Path("meta") / "episodes"
+
+
+def check_files(root: Path, info: dict) -> None:
+    """Refuse to append to a dataset a file of which is missing: every data and video file its episodes'
+    metadata names (info.json's data_path and video_path filled in), and the episodes' metadata itself.
+    Appending would otherwise write new episodes beside a hole that training fails on later."""
+    import pyarrow.parquet as pq
+
+    root = Path(root)
+    tables = sorted((root / EPISODES_META).rglob("*.parquet"))
+    if not tables and int(info.get("total_episodes", 0)):
+        raise ConfigError(f"the dataset's episode metadata ({EPISODES_META}/) is missing: it cannot be appended to",
+                          str(root))
+    videos = [k for k, f in info.get("features", {}).items() if f.get("dtype") == "video"]
+    wanted: dict[Path, None] = {}
+    for table in tables:
+        try:
+            columns = pq.read_table(table).to_pydict()
+        except Exception as exc:  # pyarrow's errors have no common base below Exception
+            raise ConfigError(f"{table.relative_to(root)} cannot be read ({exc})", str(root)) from None
+        templates = [("data", info.get("data_path"), {})] + [(f"videos/{k}", info.get("video_path"), {"video_key": k})
+                                                             for k in videos]
+        for prefix, template, fields in templates:
+            chunks, files = columns.get(f"{prefix}/chunk_index"), columns.get(f"{prefix}/file_index")
+            if not template or chunks is None or files is None:
+                continue
+            for chunk, file in zip(chunks, files):
+                wanted[Path(template.format(chunk_index=chunk, file_index=file, **fields))] = None
+    for rel in wanted:
+        if not (root / rel).is_file():
+            raise ConfigError(f"{rel} is missing (the dataset's episodes name it): appending to a damaged dataset "
+                              "is refused; restore the file, or export into a new --root", str(root))
+
+
 def check_compatible(info: dict, features: dict, fps: int, robot_type: str, video: VideoSettings, where: str) -> None:
     """Refuse to append sessions whose features, fps, robot or codec differ from the dataset's."""
     if info.get("fps") != fps:

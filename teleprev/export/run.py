@@ -66,6 +66,7 @@ def export(options: ExportOptions, report: Reporter = no_progress) -> ExportRepo
         if not target.exists():
             raise ConfigError("--append: there is no dataset here to append to", str(target))
         info = D.read_info(target)
+        D.check_files(target, info)
         fps = fps or int(info.get("fps", 0))
 
     parallel = options.open_reader is None and (options.ray is not None or (options.workers > 1 and len(options.sessions) > 1))

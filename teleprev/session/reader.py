@@ -29,9 +29,36 @@ from teleprev.session.joint_table import JointTable
 from teleprev.session.message_selection import ReadRequest
 from teleprev.session.ordered_messages import ordered_messages
 from teleprev.session.scan_index import index_by_scan
+from teleprev.session.writer import TELEPREV_RECORD
 from teleprev.topics import EPISODE
 
 _END = 1 << 64
+
+
+def check_written_by_teleprev(path: str | os.PathLike) -> None:
+    """Refuse (SessionError) a file whose header says another program wrote it, before reading the rest:
+    what `teleprev recover` checks, whose files have no summary to look for the "teleprev" record in. A
+    header too damaged to read passes (recovering such a file is what recover is for)."""
+    try:
+        with open(path, "rb") as f:
+            library = _writer_library(f) if f.read(len(mr.MAGIC)) == mr.MAGIC else ""
+    except OSError:
+        return  # the command's own open says what is wrong with the path
+    if library and not library.startswith("teleprev/"):  # teleprev.session.writer, recover
+        raise SessionError(f"not a teleprev session: an MCAP file written by {library}; `teleprev import` reads "
+                           "other tools' recordings", str(path))
+
+
+def _writer_library(f) -> str:
+    """The `library` of the file's header record (the program that wrote it), "" when it cannot be read."""
+    try:
+        body = mr.read_record(f, len(mr.MAGIC), mr.HEADER)
+        profile_len = int.from_bytes(body[:4], "little")
+        at = 4 + profile_len
+        library_len = int.from_bytes(body[at:at + 4], "little")
+        return bytes(body[at + 4:at + 4 + library_len]).decode("utf-8", "replace").strip()[:80]
+    except (mr.McapFormatError, OSError, ValueError):
+        return ""
 
 
 @dataclass(frozen=True, slots=True)
@@ -45,9 +72,11 @@ class TopicInfo:
 
 
 class SessionReader:
-    def __init__(self, path: str | os.PathLike, *, verify_crc: bool = True):
+    def __init__(self, path: str | os.PathLike, *, verify_crc: bool = True, any_mcap: bool = False):
         """Each chunk's CRC is checked as it is read (`verify_crc`), so that a damaged chunk is an error
-        naming its time range, never data passed on as if it were whole."""
+        naming its time range, never data passed on as if it were whole. An MCAP that another tool wrote
+        (no "teleprev" metadata record, which teleprev's writer puts in every file it opens) is refused,
+        unless `any_mcap` (`teleprev import` reads those)."""
         self.path = Path(path)
         self.verify_crc = verify_crc
         where = str(self.path)
@@ -69,6 +98,11 @@ class SessionReader:
                                    "to rewrite what it holds into a valid session", where) from None
             if summary is None or (not summary.chunks and summary.statistics and summary.statistics.message_count):
                 summary = index_by_scan(f, self.file_bytes, self.path)  # written without a summary, or without chunk indexes
+            if not any_mcap and not any(name == TELEPREV_RECORD for name, _, _ in summary.metadata):
+                library = _writer_library(f)
+                raise SessionError(f"not a teleprev session: an MCAP file written by {library or 'another tool'} "
+                                   f"(it has no {TELEPREV_RECORD!r} metadata record); `teleprev import` reads "
+                                   "other tools' recordings", where)
             chunks = sorted(summary.chunks, key=lambda c: (c.start_ns, c.offset))
             self._file = ChunkFile(f, self.path, min((c.start_ns for c in chunks), default=None),
                                    verify_crc=verify_crc)

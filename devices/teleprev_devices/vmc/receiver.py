@@ -31,7 +31,7 @@ from pythonosc.osc_packet import OscPacket
 
 from teleprev_devices.fanout import Fanout, acquire as acquire_shared, release as release_shared
 from teleprev_devices.vmc.unity import KNOWN_BONES
-from teleprev.devices import ClockSync, DeviceError, SessionClock
+from teleprev.devices import ClockSync, DeviceStartError, SessionClock, describe_exception
 
 _MAX_DATAGRAM = 65535
 # Linux reports the datagrams its receive buffer had no room for (a running total) with each datagram
@@ -112,8 +112,8 @@ class VmcReceiver:
             self._sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
             self._sock.bind((self.host, self.port))
         except OSError as exc:
-            raise DeviceError(f"cannot listen on UDP {self.host}:{self.port} ({exc.strerror or exc}); "
-                              "is another program using the port?", self.where) from None
+            raise DeviceStartError(f"cannot listen on UDP {self.host}:{self.port} ({exc.strerror or exc}); "
+                                   "is another program using the port?", self.where) from None
         try:
             self._sock.setsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF, receive_buffer_kb * 1024)
         except OSError:
@@ -142,7 +142,7 @@ class VmcReceiver:
                     continue
                 except OSError as exc:
                     if not self._stop.is_set():
-                        self.fanout.fail(f"socket error: {exc}")
+                        self.fanout.fail(f"socket error: {describe_exception(exc)}")
                     return
                 for level, kind, value in ancillary:
                     if level == socket.SOL_SOCKET and kind == SO_RXQ_OVFL and len(value) >= 4:
@@ -159,7 +159,7 @@ class VmcReceiver:
                 if frame is not None:
                     self.fanout.publish(frame)
         except BaseException as exc:  # a bug here: the devices must hear of it (they raise, the runner reopens)
-            self.fanout.fail(f"receiver thread ended: {type(exc).__name__}: {exc}")
+            self.fanout.fail(f"receiver thread ended: {describe_exception(exc)}")
             raise
 
     def parse(self, data: bytes, receive_ns: int) -> Frame | None:

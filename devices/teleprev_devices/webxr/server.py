@@ -28,7 +28,7 @@ from pathlib import Path
 
 import numpy as np
 
-from teleprev.devices import ClockSync, DeviceError, OperatorLink, SessionClock
+from teleprev.devices import ClockSync, DeviceError, DeviceStartError, OperatorLink, SessionClock, describe_exception
 from teleprev_devices.fanout import Fanout, acquire as acquire_shared, release as release_shared
 from teleprev_devices.webxr import certificate, wire
 
@@ -55,6 +55,8 @@ class Counters:
     non_finite: int = 0  # a frame with NaN or infinity in a tracked part
     failed_messages: int = 0  # messages whose handling raised anything else (counted, skipped)
     refused_connections: int = 0  # requests without the pairing token
+    oversize_messages: int = 0  # connections closed (1009) for a message over MAX_MESSAGE bytes
+    taken_over_pages: int = 0  # connections closed (4000) because another page connected
     lost_sequence_gaps: int = 0  # frames missing from the page's sequence numbers
     clock_outliers: int = 0
     actions: int = 0
@@ -62,6 +64,7 @@ class Counters:
     def errors(self) -> dict[str, int]:
         return {"malformed_messages": self.malformed_messages, "non_finite": self.non_finite,
                 "failed_messages": self.failed_messages, "refused_connections": self.refused_connections,
+                "oversize_messages": self.oversize_messages, "taken_over_pages": self.taken_over_pages,
                 "lost_sequence_gaps": self.lost_sequence_gaps, "clock_outliers": self.clock_outliers}
 
 
@@ -72,6 +75,13 @@ class _Page:
     last_seq: int | None = None
     agent: str = ""
     session: str = ""  # the XR session the page runs ("immersive-ar", "immersive-vr", or "" before one)
+
+
+# Every refusal of a page is counted, and so recorded as a device event (the runner's "skipped" events):
+# a request without the token, a message too big (the server closes with 1009), a page another replaced.
+MAX_MESSAGE = 64 * 1024  # bytes: a frame is about 2 KiB
+CLOSE_TOO_BIG, CLOSE_TAKEN_OVER = 1009, 4000
+_CANNOT_LISTEN = "cannot listen on"  # a start failure: the port is taken, or not this program's to open
 
 
 class XrServer:
@@ -85,8 +95,8 @@ class XrServer:
         try:
             self.credentials = certificate.ensure(cert_dir, self._addresses)
         except OSError as exc:
-            raise DeviceError(f"cannot keep the page's certificate in {cert_dir} ({exc.strerror or exc}); "
-                              "set cert_dir to a folder you can write", self.where) from None
+            raise DeviceStartError(f"cannot keep the page's certificate in {cert_dir} ({exc.strerror or exc}); "
+                                   "set cert_dir to a folder you can write", self.where) from None
         self._page: _Page | None = None
         self._loop: asyncio.AbstractEventLoop | None = None
         self._stopped: asyncio.Event | None = None
@@ -98,6 +108,8 @@ class XrServer:
         started.wait(10.0)  # (set when serving, or when it could not)
         if failure or not started.is_set():
             self._thread.join(1.0)
+            if failure and failure[0].startswith(_CANNOT_LISTEN):
+                raise DeviceStartError(failure[0], self.where)
             raise DeviceError(failure[0] if failure else "the server did not start within 10 s", self.where)
         self.where = f"WebXR server {host}:{self.port}"
         self.fanout.where = self.where
@@ -123,9 +135,9 @@ class XrServer:
             asyncio.run(self._serve(port, started, failure))
         except BaseException as exc:  # a bug here: the devices must hear of it (they raise, the runner reopens)
             if started.is_set():
-                self.fanout.fail(f"server thread ended: {type(exc).__name__}: {exc}")
+                self.fanout.fail(f"server thread ended: {describe_exception(exc)}")
             else:
-                failure.append(f"{type(exc).__name__}: {exc}")
+                failure.append(describe_exception(exc))
                 started.set()
 
     async def _serve(self, port: int, started: threading.Event, failure: list[str]) -> None:
@@ -137,9 +149,9 @@ class XrServer:
         self._stopped = asyncio.Event()
         try:
             server = await serve(self._connection, self.host, port, ssl=context, process_request=self._request,
-                                 max_size=64 * 1024, compression=None, ping_interval=5, ping_timeout=10)
+                                 max_size=MAX_MESSAGE, compression=None, ping_interval=5, ping_timeout=10)
         except OSError as exc:
-            failure.append(f"cannot listen on {self.host}:{port} ({exc.strerror or exc}); is another program using the port?")
+            failure.append(f"{_CANNOT_LISTEN} {self.host}:{port} ({exc.strerror or exc}); is another program using the port?")
             started.set()
             return
         async with server:
@@ -176,7 +188,8 @@ class XrServer:
         old, self._page = self._page, page
         self.counters.connections += 1
         if old is not None:
-            await old.connection.close(4000, "another page took over")
+            self.counters.taken_over_pages += 1
+            await old.connection.close(CLOSE_TAKEN_OVER, "another page took over")
         try:
             async for message in connection:
                 if self._page is not page:
@@ -190,6 +203,9 @@ class XrServer:
                     break
                 except Exception:  # whatever a message does, the next one is read
                     self.counters.failed_messages += 1
+        except ConnectionClosed as exc:  # the connection broke (the page reconnects), or was refused
+            if exc.sent is not None and exc.sent.code == CLOSE_TOO_BIG:
+                self.counters.oversize_messages += 1
         except Exception:  # the connection broke: the page reconnects
             pass
         finally:

@@ -20,7 +20,7 @@ from teleprev.session.reader import Episode, SessionReader
 
 class FoxgloveReader:
     def __init__(self, path: str | Path, recipe: ImportRecipe):
-        self._session = SessionReader(path)
+        self._session = SessionReader(path, any_mcap=True)
         self.path = self._session.path
         self.recipe = recipe
         ours = {"rig": {"robot": recipe.robot_type}, "session": {"task": recipe.section.task},

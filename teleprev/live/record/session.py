@@ -126,6 +126,7 @@ class LiveSession:
                                 sender=self.sender, frames=RobotFrames(frames, tf_period_ns),
                                 on_episode_start=self._episode_started)
         self.summary = None
+        self.cannot_start = False  # a device could not start at all (wait_connected said which, at once)
         self._press = self._press_unattended
         # A device carrying the operator's controls (the XR page) acts on this recording and shows its status.
         self.context.operator.act = self.act
@@ -282,14 +283,29 @@ class LiveSession:
             silent = {name: r.stats() for name, r in self.runners.items() if r.stats().last_receive_ns is None}
             if not silent or time.monotonic() >= deadline:
                 break
+            if any(s.start_failure for s in silent.values()):  # no wait makes it start: say it at once
+                return self._cannot_start(silent)
             time.sleep(0.02)
         problems = []
         for name, s in silent.items():
             device, plugin = self.devices[name], self.rig.devices[name].plugin
             tried = f"tried {device.endpoint()}, " if device.endpoint() else ""
-            what = f"connect failed: {s.last_error}" if s.connects == 0 else "no packets"
+            what = ("no packets" if s.connects else f"connect failed: {s.last_error}" if s.last_error else
+                    f"still connecting: its connect() had not returned after {timeout_s:g} s (a busy machine? "
+                    "raise --connect-timeout)")
             problems.append(f"device {name!r} ({plugin}) sent nothing within {timeout_s:g} s: {tried}{what}")
         return problems
+
+    def _cannot_start(self, stats: dict) -> list[str]:
+        """One line per reason devices cannot start (the devices sharing a receiver share its reason)."""
+        by_reason: dict[str, list[str]] = {}
+        for name, s in stats.items():
+            if s.start_failure:
+                by_reason.setdefault(s.start_failure, []).append(name)
+        self.cannot_start = True
+        return [f"{'devices' if len(names) > 1 else 'device'} {', '.join(repr(n) for n in names)} "
+                f"({', '.join(dict.fromkeys(self.rig.devices[n].plugin for n in names))}) cannot start: {reason}"
+                for reason, names in by_reason.items()]
 
     def device_rows(self) -> list[DeviceRow]:
         rows = []

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import contextlib
 import threading
 import time
 from pathlib import Path
@@ -80,9 +81,11 @@ def build_player(session: Path, episode, speed: float, to: str, rig_path=None, s
         effective = safe_speed(playback, pipeline.arm_guard.speed, eff_guard.speed, speed, pipeline.motion)
         if to != "preview" and pipeline.motion is not None and effective < min(speed, 1.0) - ROUNDING:
             # Slower than recorded, the recorded commands' pauses stretch past what a servo arm rides through.
-            raise ConfigError(f"the recorded commands can be played to a robot at {effective:.2f}x at most (their "
-                              "acceleration or jerk), and slower than 1x a servo arm would stop between them: "
-                              "add --smooth to re-command them through the jerk-limited generator", str(session))
+            # The refusal alone: the speed that would pass is no option (it is slower than 1x).
+            what = "the dataset's actions" if dataset else "the recorded commands"
+            raise ConfigError(f"{what} exceed the robot's acceleration or jerk limit at {min(speed, 1.0):g}x, and "
+                              "slower than 1x a servo arm would stop between them: add --smooth to re-command "
+                              "them through the jerk-limited generator", str(session))
     message = "" if effective >= speed else (f"playing at {effective:.2f}x: {speed:g}x would exceed a joint's speed, "
                                              "acceleration or jerk limit")
     clock = SessionClock()
@@ -135,17 +138,57 @@ def _start_view(port: int | None, session: Path, player: Player, console: Consol
 
 
 def play(session: Path, episode, speed: float, to: str, rig_path, engage_after, console: Console, view: str, show: bool,
-         smoothed: bool = False, foxglove: int | None = None, out: Path | None = None) -> None:
-    player, runners, tap, rig, message, recording = build_player(session, episode, speed, to, rig_path, smoothed, out)
-    live_view = _start_view(foxglove, session, player, console)
-    for r in runners:
-        r.start()
-    thread = threading.Thread(target=player.run, daemon=True)
-    thread.start()
+         smoothed: bool = False, foxglove: int | None = None, out: Path | None = None, signals=None) -> None:
+    """`signals` (teleprev.cli.signals.StopSignals): a stop signal while the player and its recording are
+    built is raised once they are whole, and none cuts the robot's stop and the recording's close short."""
+    signals = signals or _NoSignals()
+    with signals.deferred():
+        built = build_player(session, episode, speed, to, rig_path, smoothed, out)
+    player, runners, tap, rig, message, recording = built
+    live_view, thread = None, threading.Thread(target=player.run, daemon=True)
+    try:
+        signals.check()
+        live_view = _start_view(foxglove, session, player, console)
+        for r in runners:
+            r.start()
+        thread.start()
+        _show(session, player, thread, to, rig, engage_after, console, view, show, message)
+    finally:
+        with signals.finishing():
+            _finish(player, thread, runners, live_view, recording, console, out)
+    sent = sum(1 for phase, _, _ in player.state.sent if phase == "playing")
+    p = player.p
+    console.print(f"played {len(p.t_ns)} steps at {player.speed:.2f}x to {to}; {sent} commands sent"
+                  + (f"; {message}" if message else ""))
+    if player.state.message:  # the robot refused a command or went away: playback stopped there
+        raise DeviceError(f"playback stopped: {player.state.message}")
+    if recording is not None:
+        recording.check()
+
+
+class _NoSignals:
+    """play() without a command's stop signals (tests, scripts)."""
+
+    def deferred(self):
+        return contextlib.nullcontext()
+
+    def finishing(self):
+        return contextlib.nullcontext()
+
+    def check(self) -> None:
+        pass
+
+
+def _show(session: Path, player: Player, thread: threading.Thread, to: str, rig, engage_after, console: Console,
+          view: str, show: bool, message: str) -> None:
+    """Engage (at once for the screen, after `engage_after` or on space otherwise) and show the replay until
+    the player is done or stopped (q, Esc)."""
     if to == "preview":
         player.engage()  # nothing moves: play at once
     elif engage_after is not None:
-        threading.Timer(engage_after, player.engage).start()
+        timer = threading.Timer(engage_after, player.engage)
+        timer.daemon = True  # a replay stopped before it fires must not wait for it to exit
+        timer.start()
     robot = load_robot(rig.rig.robot)
     robot_view = RobotView(robot, view, ROBOT_BOUNDS.get(view))
     p = player.p
@@ -164,32 +207,29 @@ def play(session: Path, episode, speed: float, to: str, rig_path, engage_after, 
         picture = robot_view.render([Layer(robot.vector(joints), "cyan")], max(size.width - 2, 20), max(size.height - 5, 6))
         return Group(Text(banner[0], style=banner[1], justify="center"), info, Text(message, style="yellow"), picture)
 
-    try:
-        with KeyReader(lambda key: player.engage() if key == " " else player.stop() if key in ("q", "\x1b") else None):
-            if show:
-                with Live(console=console, auto_refresh=False) as live:
-                    while thread.is_alive():
-                        live.update(frame(), refresh=True)
-                        time.sleep(0.04)
+    with KeyReader(lambda key: player.engage() if key == " " else player.stop() if key in ("q", "\x1b") else None):
+        if show:
+            with Live(console=console, auto_refresh=False) as live:
+                while thread.is_alive():
                     live.update(frame(), refresh=True)
-            else:
-                thread.join()
-    finally:
-        player.stop()
+                    time.sleep(0.04)
+                live.update(frame(), refresh=True)
+        else:
+            thread.join()
+
+
+def _finish(player: Player, thread: threading.Thread, runners, live_view, recording, console: Console, out) -> None:
+    """Stop the player and the robot's devices, then close the recording."""
+    player.stop()
+    if thread.is_alive():
         thread.join(2.0)
-        for r in runners:
-            r.stop()
-        if live_view is not None:
-            live_view[1].set()
-            live_view[2].join(2.0)
-            live_view[0].close()
-        if recording is not None:
-            recording.close()  # after the robot has its last command: a failed recording never stops it early
-            if not recording.error:
-                console.print(f"replay recorded in {out}", highlight=False)
-    sent = sum(1 for phase, _, _ in player.state.sent if phase == "playing")
-    console.print(f"played {len(p.t_ns)} steps at {player.speed:.2f}x to {to}; {sent} commands sent" + (f"; {message}" if message else ""))
-    if player.state.message:  # the robot refused a command or went away: playback stopped there
-        raise DeviceError(f"playback stopped: {player.state.message}")
+    for r in runners:
+        r.stop()
+    if live_view is not None:
+        live_view[1].set()
+        live_view[2].join(2.0)
+        live_view[0].close()
     if recording is not None:
-        recording.check()
+        recording.close()  # after the robot has its last command: a failed recording never stops it early
+        if not recording.error:
+            console.print(f"replay recorded in {out}", highlight=False)
