@@ -15,19 +15,16 @@ What the box does, each from the SDK's source (xarm/) or UFactory's documents, n
   "deceleration stop" (XArmAPI.set_state), stop the arm: state 4.
 - joint limits: the SDK's table for the arm's series (xarm/core/config/x_config.py JOINT_LIMITS; an SN from
   XI1305 on is the "_1305" row, x3/xarm.py _is_out_of_joint_range): a target past them is error 23.
-- servo mode (mode 1): a servo cycle of `servo_period_s` runs only the latest target that arrived in it; each
-  target is judged against the one that ran before it, on the times the targets arrived (the box has no
-  other clock for them): a joint faster than its limit (pi rad/s, 10% margin) is error 24, the flange
-  faster than `max_tcp_speed_mm_s` is error 60 ("Linear speed exceeded limit in servo_j mode", x_code).
-  Acceleration and jerk have no controller error code; they are judged on the same arrivals and counted as
-  jolts (`judged`, `jolts`), the figures a real arm feels.
-- position mode (mode 0): set_servo_angle, set_position and reset (move_gohome: all joints to 0) move the arm
-  at the requested speed, in state 1 until done, then state 2 (what the SDK's wait=True polls for).
-- the TCP pose (get_position, the reports) is forward kinematics of our URDF (at the zero pose [207, 0, 112]
-  mm, as UFactory gives the xArm6's initial position); get_joint_states answers positions, velocities and
-  efforts; reports on 30001/30002 (5 Hz) and 30003 (100 Hz).
-Every servo target's arrival is stamped (`arrivals`), so a bench can compute arrival gaps, lateness and
-targets per servo cycle.
+- servo mode (mode 1): a servo cycle of `servo_period_s` runs only the latest target that arrived in it,
+  judged on arrival times: error 24 for a joint too fast, error 60 for the flange, jolts counted
+  (xarm_servo.ServoCycle, `box.servo`); every target's arrival is stamped (`arrivals`).
+- position mode (mode 0): set_servo_angle, set_position and reset move the arm at the requested speed
+  (xarm_moves.PositionMoves).
+- the TCP pose (get_position, the reports) is forward kinematics of our URDF (xarm_kinematics);
+  get_joint_states answers positions, velocities and efforts; reports on 30001/30002 (5 Hz) and 30003
+  (100 Hz) (xarm_reports.ReportStreams).
+This class is the box's state machine (states, mode, errors) and its port 502: it answers each register and
+hands motion to the parts above.
 
 Injected faults (`inject(kind)`): collision (error 31), joint_limit (error 23), estop (error 1, motors
 off until the button is released), drop (every TCP connection closed; reconnecting is allowed),
@@ -36,106 +33,40 @@ silent_report (the open report connections stop sending), slow_replies (each rep
 
 from __future__ import annotations
 
-import math
 import struct
 import threading
 import time
-from collections import Counter, deque
-from dataclasses import dataclass, field
+from collections import Counter
 
 import numpy as np
 
-from teleprev.devices.servo_limits import STREAM_GAP_NS
 from teleprev.emulators import xarm_wire as wire
 from teleprev.emulators.listening import Listener, free_loopback_host, listen
+from teleprev.emulators.xarm_kinematics import ArmKinematics, joint_table
+from teleprev.emulators.xarm_moves import PositionMoves
+from teleprev.emulators.xarm_reports import REPORT_PORTS, ReportStreams
+from teleprev.emulators.xarm_servo import MAX_TCP_SPEED_MM_S, SERVO_PERIOD_S, ServoCycle, ServoFault
 
 FAULTS = ("collision", "joint_limit", "estop", "drop", "silent_report", "slow_replies")
 HOME = (0.0, -0.27, -0.11, 0.0, -0.85, -1.571)  # the sim arm's home: palm forward, the TCP near (0.29, 0, 0.31) m
 FIRMWARE = "2.6.0"
-SERVO_PERIOD_S = 0.004  # the box's servo cycle: 250 Hz, UFactory's maximum command rate on port 502
-SPEED_TOLERANCE = 0.10
-MAX_TCP_SPEED_MM_S = 1000.0  # xArm6 / xArm7 maximum TCP speed, 1 m/s (UFactory specifications)
-MAX_ACCELERATION, MAX_JERK = 10.0, 500.0  # rad/s^2, rad/s^3: what jolts are counted against (no error code)
-IDLE_AFTER_S = 0.2  # a servo-mode arm with no new target for this long reports READY again
-TWO_PI = 2 * math.pi
-# xarm/core/config/x_config.py XCONF.Robot.JOINT_LIMITS: (axis, series from XI1305 on) -> per-joint (low, high)
-JOINT_TABLE = {
-    (6, False): ((-TWO_PI, TWO_PI), (-2.059488, 2.094395), (-3.92699, 0.191986), (-TWO_PI, TWO_PI),
-                 (-1.692969, math.pi), (-TWO_PI, TWO_PI)),
-    (6, True): ((-TWO_PI, TWO_PI), (-2.042035, 2.024581), (-3.822271, 0.174532), (-TWO_PI, TWO_PI),
-                (-1.692969, math.pi), (-TWO_PI, TWO_PI)),
-    (7, False): ((-TWO_PI, TWO_PI), (-2.059488, 2.094395), (-TWO_PI, TWO_PI), (-0.191986, 3.92699),
-                 (-TWO_PI, TWO_PI), (-1.692969, math.pi), (-TWO_PI, TWO_PI)),
-    (7, True): ((-TWO_PI, TWO_PI), (-2.042035, 2.024581), (-TWO_PI, TWO_PI), (-0.10472, 3.92699),
-                (-TWO_PI, TWO_PI), (-1.692969, math.pi), (-TWO_PI, TWO_PI)),
-}
-
-
-@dataclass(frozen=True)
-class ReceivedCommand:
-    received_ns: int  # time.monotonic_ns() when the controller read it
-    target: np.ndarray
-
-
-@dataclass(frozen=True)
-class Arrival:
-    """A servo target as it reached the box: when, in which servo cycle, and whether it was taken."""
-
-    received_ns: int
-    cycle: int
-    target: np.ndarray
-    taken: bool  # False: the arm was not ready, or it faulted on it
-
-
-@dataclass(frozen=True)
-class Judgement:
-    """How one target that ran compared with the one before it, on arrival times: each ratio is the value
-    over its limit (speed: the fastest joint over its speed limit)."""
-
-    received_ns: int
-    speed_ratio: float
-    accel_ratio: float
-    jerk_ratio: float
-    tcp_speed_mm_s: float
-
-
-@dataclass
-class Motion:
-    """A position-mode move: from `start` to `goal` in joint space over `duration_s`."""
-
-    start: np.ndarray
-    goal: np.ndarray
-    duration_s: float
-    began: float = field(default=0.0)
-
-
-def rpy_from_matrix(r: np.ndarray) -> tuple[float, float, float]:
-    """Roll, pitch, yaw of R = Rz(yaw) Ry(pitch) Rx(roll), the xArm's TCP orientation convention."""
-    pitch = math.atan2(-r[2, 0], math.hypot(r[0, 0], r[1, 0]))
-    return math.atan2(r[2, 1], r[2, 2]), pitch, math.atan2(r[1, 0], r[0, 0])
 
 
 class XArmController:
+    """The box: its states, mode and errors, and port 502's registers; motion is the servo cycle's
+    (`servo`) and the position moves' (`moves`), the reports are `reports`'."""
+
     def __init__(self, host: str | None = "127.0.0.1", dof: int = 6, home: tuple[float, ...] | None = None,
                  report_period_s: float = wire.REPORT_PERIOD_S, slow_reply_s: float = 0.5, series: int = 1303,
                  servo_period_s: float = SERVO_PERIOD_S, max_tcp_speed_mm_s: float = MAX_TCP_SPEED_MM_S):
-        from teleprev.robot.model import load_robot
-
         if dof not in (6, 7):
             raise ValueError(f"dof must be 6 or 7, got {dof}")
-        self.model = load_robot(f"xarm{dof}")
-        idx = self.model.indices(tuple(f"joint{i}" for i in range(1, dof + 1)))
-        table = np.array(JOINT_TABLE[dof, 1305 <= series < 8500])
-        self.lower, self.upper = table[:, 0], table[:, 1]
-        self.max_speed = self.model.velocity_limit[idx]  # 180 deg/s per joint (xArm specifications)
-        self._joint_index = idx
+        self.kinematics = ArmKinematics(dof)
+        self.lower, self.upper = joint_table(dof, series)
         self.requested_host = host
         self.host = host or ""
         self.dof = dof
-        self.report_period_s = report_period_s
         self.slow_reply_s = slow_reply_s
-        self.servo_period_ns = int(servo_period_s * 1e9)
-        self.max_tcp_speed_mm_s = max_tcp_speed_mm_s
         start = np.array((HOME + (0.0,))[:dof] if home is None else home, dtype=float)
         if start.shape != (dof,):
             raise ValueError(f"home needs {dof} values, got {len(start)}")
@@ -150,27 +81,34 @@ class XArmController:
         self.error = 0
         self.warning = 0
         self.estop_pressed = False
-        self._last_command_ns = 0
         self._slow_until = 0.0
-        self._silenced: set = set()
         self._report_counter = 0
-        self._ran: deque[tuple[int, int, np.ndarray]] = deque(maxlen=4)  # (arrival ns, cycle, target) that ran
-        self._motions: deque[Motion] = deque()  # position-mode moves, the first one running
-        self._ik = None
-        self.commands: deque[ReceivedCommand] = deque(maxlen=200_000)  # servo targets taken
-        self.arrivals: deque[Arrival] = deque(maxlen=200_000)  # every servo target that reached the box
-        self.judged: deque[Judgement] = deque(maxlen=200_000)
-        self.jolts = 0  # targets that ran past the acceleration or jerk limit
-        self.superseded = 0  # targets replaced by a later one in the same servo cycle, never run
+        self.servo = ServoCycle(self.kinematics, self.lower, self.upper, servo_period_s, max_tcp_speed_mm_s)
+        self.moves = PositionMoves(self.kinematics, self.lower, self.upper)
+        self.reports = ReportStreams(self.report_state, report_period_s)
         self.requests: Counter[int] = Counter()  # register -> requests served
         self.unknown: Counter[int] = Counter()  # registers the emulator does not implement
         self.faults: list[tuple[int, str, int]] = []  # (monotonic ns, what, error code) for every latched error
         self.injected: list[tuple[int, str]] = []
         self._listeners: list[Listener] = []
 
+    @property
+    def commands(self):
+        """The servo targets the arm ran (ServoCycle.commands)."""
+        return self.servo.commands
+
+    @property
+    def arrivals(self):
+        """Every servo target that reached the box (ServoCycle.arrivals)."""
+        return self.servo.arrivals
+
+    @property
+    def judged(self):
+        return self.servo.judged
+
     # ---- lifecycle ---------------------------------------------------------------------------------
     def start(self) -> XArmController:
-        ports = (wire.COMMAND_PORT, wire.REPORT_NORMAL_PORT, wire.REPORT_RICH_PORT, wire.REPORT_REAL_PORT)
+        ports = (wire.COMMAND_PORT, *REPORT_PORTS)
         self.host = self.requested_host or free_loopback_host(ports)
         why = " (the xArm SDK only talks to ports 502 and 30001-30003)"
         socks = []
@@ -182,8 +120,8 @@ class XArmController:
                 s.close()
             raise
         self._listeners = [Listener(socks[0], self._serve_commands, f"xarm-{self.host}-502").start()]
-        for sock, port in zip(socks[1:], ports[1:]):
-            self._listeners.append(Listener(sock, lambda c, port=port: self._serve_reports(c, port),
+        for sock, port in zip(socks[1:], REPORT_PORTS):
+            self._listeners.append(Listener(sock, lambda c, port=port: self.reports.serve(c, port),
                                             f"xarm-{self.host}-{port}").start())
         return self
 
@@ -220,13 +158,10 @@ class XArmController:
                 self.enabled = False
             self._latch(wire.ESTOP, "emergency stop pressed")
         elif kind == "drop":
-            self._listeners[0].drop_all()
-            for listener in self._listeners[1:]:
+            for listener in self._listeners:
                 listener.drop_all()
         elif kind == "silent_report":
-            with self._lock:
-                for listener in self._listeners[1:]:
-                    self._silenced.update(listener.connections)
+            self.reports.silence(self._listeners[1:])
         elif kind == "slow_replies":
             with self._lock:
                 self._slow_until = time.monotonic() + 1.0
@@ -248,7 +183,7 @@ class XArmController:
         self.error = code
         self.state = wire.STOPPED
         self.speeds[:] = 0.0
-        self._motions.clear()
+        self.moves.clear()
         self.faults.append((time.monotonic_ns(), what, code))
 
     # ---- port 502 ----------------------------------------------------------------------------------
@@ -262,12 +197,8 @@ class XArmController:
                 continue
             if not chunk:
                 return
-            buf += chunk
-            while len(buf) >= 6:
-                length = struct.unpack(">H", buf[4:6])[0]
-                if len(buf) < 6 + length:
-                    break
-                frame, buf = buf[:6 + length], buf[6 + length:]
+            frames, buf = wire.split_frames(buf + chunk)
+            for frame in frames:
                 out = self._handle(frame)
                 if out:
                     delay = self._reply_delay()
@@ -305,7 +236,7 @@ class XArmController:
         if register == wire.GET_ERROR:
             return bytes([self.error, self.warning]), False
         if register == wire.GET_CMDNUM:
-            return struct.pack(">H", len(self._motions)), False
+            return struct.pack(">H", len(self.moves)), False
         if register == wire.GET_JOINT_POS:
             if not data:
                 return wire.floats(self.angles, 7), False
@@ -314,10 +245,7 @@ class XArmController:
         if register == wire.GET_TCP_POSE:
             return wire.floats(self.pose(), 6), False
         if register == wire.GET_TCP_POSE_AA:
-            from teleprev.transforms import matrix_to_axis_angle
-
-            flange = self._flange(self.angles)
-            return wire.floats([*(flange[:3, 3] * 1000), *matrix_to_axis_angle(flange[:3, :3])], 6), False
+            return wire.floats(self.kinematics.pose_axis_angle(self.angles), 6), False
         if register == wire.MOTION_EN and len(data) >= 2:
             if self.estop_pressed:
                 return b"", True
@@ -328,8 +256,8 @@ class XArmController:
         if register == wire.SET_MODE and len(data) >= 1:
             self.mode = data[0]
             self.state = wire.CONFIG_CHANGED  # not ready until set_state(0)
-            self._motions.clear()
-            self._ran.clear()
+            self.moves.clear()
+            self.servo.reset()
             return b"", False
         if register == wire.SET_STATE and len(data) >= 1:
             return b"", self._set_state(data[0])
@@ -348,7 +276,10 @@ class XArmController:
             self._servo(np.array(struct.unpack("<10f", data[:40])[:self.dof], dtype=float), now)
             return b"", self.mode != wire.SERVO_MODE
         if register in (wire.MOVE_JOINT, wire.MOVE_HOME, wire.MOVE_LINE):
-            return b"", not self._move(register, data, now)
+            if not self._ready(wire.POSITION_MODE) or not self.moves.add(register, data, self.angles, now):
+                return b"", True
+            self.state = wire.MOVING
+            return b"", False
         self.unknown[register] += 1
         return b"", True
 
@@ -357,10 +288,10 @@ class XArmController:
         if wanted == 0:
             if self.error or not self.enabled:
                 return True
-            self.state = wire.MOVING if self._motions else wire.READY
+            self.state = wire.MOVING if self.moves else wire.READY
             return False
         if wanted in (wire.STOPPED, wire.DECELERATION_STOP):  # both end with the arm stopped, its queue emptied
-            self._motions.clear()
+            self.moves.clear()
             self.speeds[:] = 0.0
             self.state = wire.STOPPED
             return False
@@ -373,153 +304,34 @@ class XArmController:
         return (not self.error and self.enabled and self.mode == mode
                 and self.state in (wire.READY, wire.MOVING))
 
-    # ---- kinematics --------------------------------------------------------------------------------
-    def _flange(self, q: np.ndarray) -> np.ndarray:
-        full = self.model.neutral()
-        full[self._joint_index] = q
-        return self.model.fk(full).matrix("link_eef")
-
     def pose(self) -> list[float]:
         """The TCP pose as the box reports it: x, y, z in mm, roll, pitch, yaw in rad."""
-        flange = self._flange(self.angles)
-        return [*(flange[:3, 3] * 1000.0), *rpy_from_matrix(flange[:3, :3])]
+        return self.kinematics.pose(self.angles)
 
-    # ---- position mode -----------------------------------------------------------------------------
-    def _move(self, register: int, data: bytes, now: int) -> bool:
-        """Queue a position-mode move; False when the box refuses it."""
-        if not self._ready(wire.POSITION_MODE):
-            return False
-        start = self._motions[-1].goal if self._motions else self.angles
-        if register == wire.MOVE_HOME and len(data) >= 12:
-            speed = struct.unpack("<3f", data[:12])[0]
-            goal = np.zeros(self.dof)
-        elif register == wire.MOVE_JOINT and len(data) >= 40:
-            values = struct.unpack("<10f", data[:40])
-            goal, speed = np.array(values[:self.dof]), values[7]
-        elif register == wire.MOVE_LINE and len(data) >= 36:
-            values = struct.unpack("<9f", data[:36])
-            goal = self._solve(values[:6], start)
-            if goal is None:
-                return False
-            flange = self._flange(start)[:3, 3] * 1000.0
-            distance_mm = float(np.linalg.norm(np.array(values[:3]) - flange))
-            speed = 0.0 if values[6] <= 0 else values[6]
-            duration = distance_mm / speed if speed > 0 else 0.0
-            return self._queue(start, goal, duration, now)
-        else:
-            return False
-        if np.any(goal < self.lower - 1e-6) or np.any(goal > self.upper + 1e-6):
-            return False
-        duration = float(np.max(np.abs(goal - start))) / speed if speed > 0 else 0.0
-        return self._queue(start, goal, duration, now)
-
-    def _queue(self, start: np.ndarray, goal: np.ndarray, duration: float, now: int) -> bool:
-        self._motions.append(Motion(np.array(start, dtype=float), np.array(goal, dtype=float), max(duration, 0.0),
-                                    now / 1e9 if not self._motions else 0.0))
-        self.state = wire.MOVING
-        return True
-
-    def _solve(self, pose, q_start: np.ndarray) -> np.ndarray | None:
-        """Joints for a TCP pose (mm, rad), by our IK; None where it does not reach."""
-        from teleprev.robot.ik import ArmIK
-        from teleprev.transforms import make_transform, rpy_to_matrix
-
-        if self._ik is None:
-            self._ik = ArmIK(self.model, "link_eef")
-        target = make_transform(rpy_to_matrix(*pose[3:6]), np.array(pose[:3]) / 1000.0)
-        full = self.model.neutral()
-        full[self._joint_index] = q_start
-        result = self._ik.solve(target, full[:len(self._ik.joint_names)])
-        return np.asarray(result.q)[:self.dof] if result.converged else None
-
+    # ---- motion ------------------------------------------------------------------------------------
     def _advance(self, now_ns: int) -> None:
         """Bring the arm to `now`: position-mode moves along, a quiet servo stream back to READY."""
-        now = now_ns / 1e9
-        while self._motions:
-            m = self._motions[0]
-            if not m.began:
-                m.began = now
-            done = 1.0 if m.duration_s <= 0 else (now - m.began) / m.duration_s
-            if done < 1.0:
-                self.angles = m.start + (m.goal - m.start) * done
-                self.speeds = (m.goal - m.start) / m.duration_s
-                return
-            self.angles = m.goal.copy()
-            self._motions.popleft()
-            if self._motions:
-                self._motions[0].began = m.began + m.duration_s
-            else:
-                self.speeds[:] = 0.0
-                if self.state == wire.MOVING:
-                    self.state = wire.READY
-        if self.state == wire.MOVING and self.mode == wire.SERVO_MODE and now_ns - self._last_command_ns > IDLE_AFTER_S * 1e9:
+        where = self.moves.advance(now_ns)
+        if where is not None:
+            self.angles, self.speeds = where.angles, where.speeds
+            if where.done and self.state == wire.MOVING:
+                self.state = wire.READY
+        if self.state == wire.MOVING and self.mode == wire.SERVO_MODE and self.servo.quiet(now_ns):
             self.state = wire.READY
             self.speeds[:] = 0.0
 
-    # ---- servo mode --------------------------------------------------------------------------------
     def _servo(self, target: np.ndarray, now: int) -> None:
-        """Take a servo target for this servo cycle (a later one in the same cycle replaces it), judged on
-        arrival times against the target that ran before; one the arm must not follow faults it."""
-        cycle = now // self.servo_period_ns
+        """A servo target: run by the servo cycle when the arm is ready for it; one it must not follow
+        faults the arm."""
         if not self._ready(wire.SERVO_MODE):
-            self.arrivals.append(Arrival(now, cycle, target, False))
+            self.servo.refuse(target, now)
             return
-        outside = (target < self.lower - 1e-6) | (target > self.upper + 1e-6)
-        if outside.any():
-            j = int(np.argmax(outside))
-            self.arrivals.append(Arrival(now, cycle, target, False))
-            self._latch_locked(wire.JOINT_LIMIT, f"joint{j + 1} target {target[j]:.4f} outside "
-                                                 f"[{self.lower[j]:.4f}, {self.upper[j]:.4f}]")
+        ran = self.servo.run(target, now, self.angles)
+        if isinstance(ran, ServoFault):
+            self._latch_locked(ran.code, ran.what)
             return
-        if self._ran and self._ran[-1][1] == cycle:  # only the latest target of a cycle runs
-            self._ran.pop()
-            self.superseded += 1
-        if not self._ran or now - self._ran[-1][0] > STREAM_GAP_NS:  # a stream starts from the arm at rest
-            self._ran.clear()
-            self._ran.append((now - self.servo_period_ns, cycle - 1, self.angles.copy()))
-        while len(self._ran) < 3:  # at rest before the stream's first target
-            ns, k, q = self._ran[0]
-            self._ran.appendleft((ns - self.servo_period_ns, k - 1, q))
-        judged = self._judge(now, target)
-        self.arrivals.append(Arrival(now, cycle, target, True))
-        if judged is None:
-            return
-        self.commands.append(ReceivedCommand(now, target))
-        self.judged.append(judged)
-        last_ns, _, last = self._ran[-1]
-        self.speeds = (target - last) / max((now - last_ns) / 1e9, self.servo_period_ns / 1e9)
-        self._ran.append((now, cycle, target))
-        self.angles = target
+        self.angles, self.speeds = ran.target, ran.speeds
         self.state = wire.MOVING
-        self._last_command_ns = now
-
-    def _judge(self, now: int, target: np.ndarray) -> Judgement | None:
-        """The target against the three that ran before it (divided differences on arrival times); None when
-        it faults the arm (speed: error 24, flange speed: error 60)."""
-        t = [(ns - now) / 1e9 for ns, _, _ in list(self._ran)[-3:]] + [0.0]
-        q = [p for _, _, p in list(self._ran)[-3:]] + [target]
-        dt = max(-t[2], self.servo_period_ns / 1e9)  # a target runs for at least one servo cycle
-        speed = np.abs(q[3] - q[2]) / dt
-        ratio = speed / self.max_speed
-        if ratio.max() > 1.0 + SPEED_TOLERANCE:
-            j = int(np.argmax(ratio))
-            self._latch_locked(wire.SPEED_LIMIT, f"joint{j + 1} commanded at {speed[j]:.3g} rad/s "
-                                                 f"(limit {self.max_speed[j]:g})")
-            return None
-        tcp_speed = float(np.linalg.norm(self._flange(q[3])[:3, 3] - self._flange(q[2])[:3, 3])) * 1000.0 / dt
-        if tcp_speed > self.max_tcp_speed_mm_s * (1.0 + SPEED_TOLERANCE):
-            self._latch_locked(wire.SERVO_TCP_SPEED, f"linear speed {tcp_speed:.0f} mm/s "
-                                                     f"(limit {self.max_tcp_speed_mm_s:g} mm/s)")
-            return None
-        t[2] = -dt if t[2] > -dt else t[2]
-        f1 = [(q[i + 1] - q[i]) / max(t[i + 1] - t[i], 1e-6) for i in range(3)]
-        f2 = [(f1[i + 1] - f1[i]) / max(t[i + 2] - t[i], 1e-6) for i in range(2)]
-        f3 = (f2[1] - f2[0]) / max(t[3] - t[0], 1e-6)
-        accel = float(np.max(np.abs(2.0 * f2[1]))) / MAX_ACCELERATION
-        jerk = float(np.max(np.abs(6.0 * f3))) / MAX_JERK
-        if max(accel, jerk) > 1.0 + SPEED_TOLERANCE:
-            self.jolts += 1
-        return Judgement(now, float(ratio.max()), accel, jerk, tcp_speed)
 
     # ---- ports 30001-30003 -------------------------------------------------------------------------
     def report_state(self) -> wire.ReportState:
@@ -532,24 +344,3 @@ class XArmController:
                 pose=np.array(self.pose()), speeds=np.concatenate([self.speeds, np.zeros(pad)]),
                 motors_enabled=self.enabled, error=self.error, warning=self.warning, axis=self.dof,
                 robot_type=self.dof, version=f"v{FIRMWARE}", counter=self._report_counter)
-
-    def report(self, size: int = wire.RICH_REPORT_SIZE) -> bytes:
-        return wire.pack_report(self.report_state(), size)
-
-    def _serve_reports(self, conn, port: int) -> None:
-        listener = next(li for li in self._listeners if li.name.endswith(f"-{port}"))
-        period = wire.REAL_REPORT_PERIOD_S if port == wire.REPORT_REAL_PORT else self.report_period_s
-        next_t = time.monotonic()
-        while not listener.stopped:
-            with self._lock:
-                silent = conn in self._silenced
-            if not silent:
-                if port == wire.REPORT_REAL_PORT:
-                    conn.sendall(wire.pack_real_report(self.report_state()))
-                else:
-                    size = wire.NORMAL_REPORT_SIZE if port == wire.REPORT_NORMAL_PORT else wire.RICH_REPORT_SIZE
-                    conn.sendall(self.report(size))
-            next_t += period
-            time.sleep(max(0.0, next_t - time.monotonic()))
-            if conn.fileno() < 0:
-                return

@@ -80,6 +80,18 @@ def floats(values, n: int) -> bytes:
     return struct.pack(f"<{n}f", *(v + [0.0] * (n - len(v))))
 
 
+def split_frames(buf: bytes) -> tuple[list[bytes], bytes]:
+    """The whole frames at the start of `buf`, and the bytes after them (a frame still arriving)."""
+    frames = []
+    while len(buf) >= 6:
+        end = 6 + struct.unpack(">H", buf[4:6])[0]
+        if len(buf) < end:
+            break
+        frames.append(buf[:end])
+        buf = buf[end:]
+    return frames, buf
+
+
 def reply(transaction: int, protocol: int, register: int, state: int, data: bytes = b"") -> bytes:
     return HEADER.pack(transaction, protocol, len(data) + 2, register) + bytes([state]) + data
 

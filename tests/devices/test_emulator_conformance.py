@@ -264,11 +264,11 @@ def _servo(box, api):
 def test_xarm_only_the_latest_target_of_a_servo_cycle_runs(box, api):
     """Servo mode runs the latest target each cycle: a burst is one jump, judged as one (error 24)."""
     q = _servo(box, api)
-    before = box.superseded
+    before = box.servo.superseded
     for _ in range(8):  # 8 x 0.01 rad within a few ms: each alone is slow, together 0.08 rad in one cycle
         q[0] += 0.01
         api.set_servo_angle_j(list(q), is_radian=True)
-    assert box.superseded > before or box.error == xw.SPEED_LIMIT
+    assert box.servo.superseded > before or box.error == xw.SPEED_LIMIT
     assert api.get_err_warn_code()[1][0] == xw.SPEED_LIMIT
 
 
@@ -287,7 +287,7 @@ def test_xarm_flange_speed_over_the_limit_is_error_60(box, api):
     """x_code ControllerError 60: "Linear speed exceeded limit in servo_j mode"."""
     q = _servo(box, api)
     q[:] = [0.0, 0.8, -1.2, 0.0, 0.4, 0.0]  # the flange 0.52 m out
-    radius = float(np.hypot(*box._flange(q)[:2, 3]))
+    radius = float(np.hypot(*box.kinematics.flange(q)[:2, 3]))
     box.operator_clear()
     box.angles = q.copy()  # the arm stretched out (as an operator would have moved it)
     assert (api.set_mode(1), api.set_state(0)) == (0, 0)
@@ -325,4 +325,4 @@ def test_xarm_every_target_is_stamped_on_arrival(box, api):
     got = list(box.arrivals)[start:]
     assert len(got) == 10 and all(a.taken for a in got)
     stamps = [a.received_ns for a in got]
-    assert stamps == sorted(stamps) and all(a.cycle == a.received_ns // box.servo_period_ns for a in got)
+    assert stamps == sorted(stamps) and all(a.cycle == a.received_ns // box.servo.period_ns for a in got)
