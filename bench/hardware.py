@@ -105,10 +105,16 @@ def session(device, log, clock, rate_hz, seconds, **stream):
     return runner, probe
 
 
-def run_faults(kinds, inject, clear, log, said, rng, out):
-    """Each kind in turn at a random moment; a fault is silent unless an error event naming it arrives in 3 s."""
+def run_faults(kinds, inject, clear, log, said, rng, out, stream):
+    """Each kind in turn at a random moment, once the device is back and `stream` commands it again (a fault
+    injected into a device still down would go unseen, and say nothing of the plugin); a fault is silent
+    unless an error event naming it arrives in 3 s."""
     for kind in kinds:
         time.sleep(rng.uniform(0.2, 0.6))
+        sent = stream.sent
+        if not log.wait(lambda: stream.sent >= sent + 10, 6.0):
+            out.append((kind, False, f"not commanded before the fault ({stream.last_error})"))
+            continue
         errors, connects = log.count("error"), log.count("connected")
         inject(kind)
         named = log.wait(lambda: log.count("error") > errors, 3.0) and said[kind] in log.of("error")[errors]["message"]
@@ -214,9 +220,9 @@ def main() -> None:
     outcomes: list[tuple[str, bool, str]] = []
     fault_threads = [
         threading.Thread(target=run_faults, args=(xarm_kinds, box.inject, box.operator_clear, arm_log, XARM_SAID,
-                                                  random.Random(1), outcomes)),
+                                                  random.Random(1), outcomes, arm_stream)),
         threading.Thread(target=run_faults, args=(leap_kinds, lambda k: bus.inject(k, motor=5), bus.operator_clear,
-                                                  hand_log, LEAP_SAID, random.Random(2), outcomes)),
+                                                  hand_log, LEAP_SAID, random.Random(2), outcomes, hand_stream)),
     ]
     for t in fault_threads:
         t.start()

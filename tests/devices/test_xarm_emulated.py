@@ -16,6 +16,7 @@ from teleprev.emulators.xarm_controller import XArmController
 from teleprev.messages import JointSample
 from teleprev_devices.xarm import XArm, XArmSettings
 from tests.helpers.hardware import CommandStream, EventLog
+from tests.helpers.wait import wait_until
 from xarm.wrapper import XArmAPI  # the real SDK: scripts/test.sh installs the xarm extra (a missing one fails here)
 
 
@@ -160,3 +161,42 @@ def test_the_arm_the_rig_names_must_be_the_one_connected():
     arm = XArm("arm", XArmSettings(host=host), DeviceContext(SessionClock()))  # nothing listens there now
     with pytest.raises(DeviceError, match=f"xArm controller {host}: cannot connect"):
         arm.connect()
+
+
+class SlowStart(XArm):
+    """xarm.arm on a controller slow to make ready (0.3 s from connect to servo mode): a reconnect holds the
+    device's lock that long, while a command stream waits to start again."""
+
+    def _start(self):
+        q = super()._start()
+        time.sleep(0.3)
+        return q
+
+
+def test_a_stream_starts_again_where_the_arm_stands_after_a_reconnect(box):
+    """After a fault the arm may stand elsewhere (moved by hand); the command stream starts again from the
+    position the reconnect measured, not from its last command before the fault, which the servo rule
+    would refuse as a jump (and the next fault injected would land on an arm already down)."""
+    clock = SessionClock()
+    arm = SlowStart("arm", XArmSettings(host=box.host), DeviceContext(clock))
+    log = EventLog()
+    runner = DeviceRunner(arm, log.sink, clock, reconnect_s=0.1).start()
+    stream = CommandStream(arm, clock)
+    try:
+        wait_until(lambda: log.count("connected") == 1, 10.0, what="the arm connected")
+        stream.start()
+        wait_until(lambda: stream.sent > 20, 5.0, what="commands streaming")
+        box.inject("collision")
+        wait_until(lambda: log.count("error") == 1, 3.0, what="the collision reported")
+        with box._lock:
+            box.angles = box.angles + 0.02  # the operator moves the stopped arm a little
+        box.operator_clear()
+        wait_until(lambda: log.count("connected") == 2, 10.0, what="the arm reconnected")
+        sent = stream.sent
+        wait_until(lambda: stream.sent > sent + 30, 5.0, what="commands streaming again")
+        assert [e["message"] for e in log.of("error")][1:] == []
+        assert np.abs(box.commands[-1].target - box.angles).max() < 0.05
+    finally:
+        stream.stop()
+        runner.stop()
+        box.operator_clear()

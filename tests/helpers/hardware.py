@@ -10,7 +10,8 @@ from __future__ import annotations
 
 import threading
 import time
-from typing import Callable
+from collections.abc import Callable
+from contextlib import nullcontext
 
 import numpy as np
 
@@ -80,6 +81,17 @@ class CommandStream:
         self._stop.set()
         self._thread.join(5.0)
 
+    def _resume_point(self) -> np.ndarray | None:
+        """Where the stream (re)starts: the device's target, once it is connected with no fault; None before.
+        Read under the device's lock, so that a reconnect in progress (which holds it, and sets the target
+        to where the arm now stands) is waited for: a target read before it would be where the arm was
+        before the fault, a jump from where it is now that the servo rule refuses."""
+        with getattr(self.device, "_lock", None) or nullcontext():
+            if getattr(self.device, "_fault", None) is not None or not getattr(self.device, "_connected", True):
+                return None
+            target = getattr(self.device, "_target", None)
+            return None if target is None else np.array(target, dtype=float)
+
     def _run(self) -> None:
         # Each position is a function of its own stamp: a thread preempted between reading the clock and
         # sending would otherwise send a position that does not match its stamp, which the servo rule (it
@@ -96,12 +108,13 @@ class CommandStream:
             next_t += self.period_s
             if next_t < now:  # fell behind (a stall): start again from now instead of bursting
                 next_t = now + self.period_s
-            target = getattr(self.device, "_target", None)
-            if start is None and target is None:
-                continue
-            stamp = self.clock.now_ns()
             if start is None:
-                start, t0 = np.array(target, dtype=float), stamp
+                start, t0 = self._resume_point(), None
+                if start is None:
+                    continue
+            stamp = self.clock.now_ns()
+            if t0 is None:
+                t0 = stamp
             elif last_ns is not None and stamp - last_ns > STREAM_GAP_NS:
                 start, t0 = last, stamp  # the rule sees a new stream, at rest on the last command
             q = start.copy()
