@@ -16,7 +16,8 @@ through DynamixelBus, a five-call interface; SdkDynamixelBus is the real one.
 The bus's timing is the hardware's: a U2D2 (FTDI) adapter holds short replies for its latency timer (16 ms
 by default), so on connect the plugin sets it to 1 ms through sysfs
 (/sys/bus/usb-serial/devices/ttyUSBn/latency_timer) where it may, and says the exact command where it may
-not (`teleprev devices check` shows which); the motors' Return Delay Time is set to 0 (500 us each at
+not (`teleprev devices check` shows which); `set_latency_timer = false` leaves it as it is (a lab that
+keeps the adapter's setting, or measures the default). The motors' Return Delay Time is set to 0 (500 us each at
 power-on: 8 ms per 16-motor read). While waiting for a reply the SDK's read loop sleeps in select() on the
 port instead of spinning (dynamixel-sdk polls a non-blocking port until its packet timeout), so the rest
 of the process runs.
@@ -118,22 +119,24 @@ def latency_timer_path(port: str) -> Path:
     return USB_SERIAL_SYSFS / Path(os.path.realpath(port)).name / "latency_timer"
 
 
-def set_latency_timer(path: Path) -> tuple[int | None, str]:
-    """Set the adapter's latency timer to LATENCY_TIMER_MS where allowed: (its value now, one line saying so)."""
+def set_latency_timer(path: Path, write: bool = True) -> tuple[int | None, str]:
+    """Set the adapter's latency timer to LATENCY_TIMER_MS where allowed (only read it with write=False): (its
+    value now, one line saying so)."""
     try:
         ms = int(path.read_text().split()[0])
     except (OSError, ValueError, IndexError):
         return None, (f"no latency timer at {path} (not an FTDI adapter on Linux): replies come as the adapter "
                       "passes them on")
-    if ms > LATENCY_TIMER_MS:
+    if ms > LATENCY_TIMER_MS and write:
         try:
             path.write_text(f"{LATENCY_TIMER_MS}\n")
             ms = int(path.read_text().split()[0])
         except (OSError, ValueError, IndexError):
             pass
     if ms > LATENCY_TIMER_MS:
+        why = "no permission to write it from here" if write else "left as it is: set_latency_timer = false"
         return ms, (f"USB adapter latency timer {ms} ms: every reply waits up to {ms} ms more; set it to 1 with "
-                    f"`echo {LATENCY_TIMER_MS} | sudo tee {path}` (no permission to write it from here)")
+                    f"`echo {LATENCY_TIMER_MS} | sudo tee {path}` ({why})")
     return ms, f"USB adapter latency timer {ms} ms ({path})"
 
 
@@ -155,10 +158,12 @@ def _sleep_until_bytes(port) -> None:
 class SdkDynamixelBus:
     """DynamixelBus over dynamixel_sdk (PortHandler, PacketHandler 2.0, GroupSyncRead/Write)."""
 
-    def __init__(self, port: str, baudrate: int = BAUDRATE, sdk=None, latency_timer: str = ""):
+    def __init__(self, port: str, baudrate: int = BAUDRATE, sdk=None, latency_timer: str = "",
+                 set_timer: bool = True):
         self.port_name = port
         self.baudrate = baudrate
         self.latency_timer = Path(latency_timer) if latency_timer else latency_timer_path(port)
+        self.set_timer = set_timer
         self.latency_timer_ms: int | None = None
         self.latency_note = ""
         self.where = f"Dynamixel bus {port}"
@@ -171,7 +176,7 @@ class SdkDynamixelBus:
     def open(self) -> None:
         sdk = self._sdk or LeapHand.import_sdk()
         self._sdk = sdk
-        self.latency_timer_ms, self.latency_note = set_latency_timer(self.latency_timer)
+        self.latency_timer_ms, self.latency_note = set_latency_timer(self.latency_timer, self.set_timer)
         self.port = sdk.PortHandler(self.port_name)
         self.packet = sdk.PacketHandler(2.0)
         try:
@@ -257,6 +262,7 @@ class LeapSettings:
     miss_limit: int = 5  # reads in a row without a (good) reply before the hand faults; fewer are counted misses
     # The adapter's latency timer; default: found from `port` in /sys/bus/usb-serial/devices.
     latency_timer_path: str = ""
+    set_latency_timer: bool = True  # false: leave the timer as it is (reads then wait for it; see the docstring)
 
     def __post_init__(self):
         if not self.port:
@@ -280,7 +286,8 @@ class LeapHand(PolledActuator[LeapSettings], kind="hand", sdk_module="dynamixel_
         robot = context.robot if _has_joint(context.robot, "0") else "leap_hand_right"  # the hand alone otherwise
         super().__init__(name, settings, context, robot, tuple(str(i) for i in MOTOR_IDS),
                          where=f"device {name!r} (LEAP Hand on {settings.port})")
-        self.bus: DynamixelBus = bus or SdkDynamixelBus(settings.port, latency_timer=settings.latency_timer_path)
+        self.bus: DynamixelBus = bus or SdkDynamixelBus(settings.port, latency_timer=settings.latency_timer_path,
+                                                              set_timer=settings.set_latency_timer)
         self._polls = 0
         self._misses = 0
 

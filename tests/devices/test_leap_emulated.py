@@ -138,6 +138,28 @@ def test_the_plugin_sets_the_adapters_latency_timer_to_1_ms():
             link.close()
 
 
+def test_set_latency_timer_false_leaves_the_timer_as_it_is():
+    """A lab that keeps its adapter's setting (or a bench measuring the default): the plugin only reads the
+    timer, says what it costs, and the hand still works at its pace."""
+    with DynamixelBus(latency_timer_ms=16).start() as b:
+        hand = LeapHand("hand", settings(b, set_latency_timer=False), DeviceContext(SessionClock()))
+        hand.connect()
+        try:
+            assert b.latency_timer_path.read_text().strip() == "16"
+            assert hand.notes() == [f"USB adapter latency timer 16 ms: every reply waits up to 16 ms more; set it "
+                                    f"to 1 with `echo 1 | sudo tee {b.latency_timer_path}` (left as it is: "
+                                    "set_latency_timer = false)"]
+            assert len(hand.read(1.0)) == 1
+            took = []
+            for _ in range(5):
+                t = time.monotonic()
+                hand.bus.sync_read(list(range(16)), *leap.PRESENT_POSITION)
+                took.append(time.monotonic() - t)
+            assert np.median(took) > 0.010  # each 16-motor read waits out the timer (about 17 ms; 1.6 ms at 1)
+        finally:
+            hand.disconnect()
+
+
 def test_a_latency_timer_it_may_not_set_is_one_line_with_the_command(tmp_path, monkeypatch):
     timer = tmp_path / "ttyUSB0" / "latency_timer"
     timer.parent.mkdir()
