@@ -15,7 +15,10 @@ escaped a thread, or reached the user as a Python exception instead of a sentenc
 
 From the emulators during the sessions (the bench's own command streams on threads, not a recorded session):
 emulator_faults (errors the emulated controller latched), wire_arrival_gap_ms_max, wire_targets_per_cycle_max
-and wire_speed/accel/jerk_ratio_max (the arm's targets as the controller received and judged them).
+and wire_speed/accel/jerk_ratio_max (the arm's targets as the controller received and judged them),
+wire_arrival_late_ms_p99 / _max (each target's arrival at the controller against the instant its sender
+planned to send it: teleprev/emulators/wire_schedule.py; the bench's streams keep their schedule as
+CommandStream.planned, a paced sender would give its ticks' due times).
 
 The hand runs two sessions one after the other, the arm commanded beside each: first with the emulated adapter's
 latency timer left at its 16 ms default (set_latency_timer = false: a lab that may not set it), then set to
@@ -47,7 +50,9 @@ from teleprev.clock import SessionClock  # noqa: E402
 from teleprev.devices import DeviceContext, DeviceRunner  # noqa: E402
 from teleprev.emulators.dynamixel_bus import DynamixelBus  # noqa: E402
 from teleprev.emulators.mjpeg_stream import MjpegServer  # noqa: E402
+from teleprev.emulators.wire_schedule import PlannedSend, lateness_ns  # noqa: E402
 from teleprev.emulators.xarm_controller import XArmController  # noqa: E402
+from teleprev.emulators.xarm_servo import Arrival  # noqa: E402
 from teleprev_devices.leap import LeapHand, LeapSettings  # noqa: E402
 from teleprev_devices.opencv_camera import OpenCVCamera, OpenCVSettings  # noqa: E402
 from teleprev_devices.xarm import XArm, XArmSettings  # noqa: E402
@@ -168,17 +173,23 @@ def run_faults(kinds, inject, clear, log, said, rng, out, stream):
         log.wait(lambda: log.count("connected") > connects, 6.0)
 
 
-def wire_timing(box: XArmController) -> dict:
-    """The servo targets as the emulated controller received and judged them."""
-    taken = [a for a in box.arrivals if a.taken]
-    gaps = np.diff([a.received_ns for a in taken]) / 1e6 if len(taken) > 1 else np.array([float("nan")])
-    per_cycle = Counter(a.cycle for a in taken)
+def wire_timing(box: XArmController, streams: list[tuple[list[Arrival], list[PlannedSend]]]) -> dict:
+    """The servo targets as the emulated controller received and judged them; `streams`: each command stream's
+    arrivals at the box and its sender's schedule (gaps are taken within a stream, not across the pause
+    between two)."""
+    taken = [[a for a in arrivals if a.taken] for arrivals, _ in streams]
+    gaps = np.concatenate([np.diff([a.received_ns for a in t]) / 1e6 for t in taken if len(t) > 1] or [[np.nan]])
+    late = np.array([ns / 1e6 for arrivals, planned in streams for ns in lateness_ns(planned, arrivals)] or [np.nan])
+    per_cycle = Counter(a.cycle for t in taken for a in t)
     judged = list(box.judged)
 
     def worst(ratios) -> float:
         return round(max(ratios), 3) if judged else float("nan")
 
-    return {"wire_arrival_gap_ms_max": round(float(gaps.max()), 2), "wire_arrival_gap_ms_p99": round(percentile(gaps, 99), 2),
+    return {"wire_arrival_gap_ms_max": round(float(gaps.max()), 2),
+            "wire_arrival_gap_ms_p99": round(percentile(gaps, 99), 2),
+            "wire_arrival_late_ms_p99": round(percentile(late, 99), 2),
+            "wire_arrival_late_ms_max": round(float(late.max()), 2),
             "wire_targets_per_cycle_max": max(per_cycle.values(), default=0),
             "wire_speed_ratio_max": worst(j.speed_ratio for j in judged),
             "wire_accel_ratio_max": worst(j.accel_ratio for j in judged),
@@ -214,11 +225,14 @@ def main() -> None:
     # it, each on a hand of its own starting open; the arm is commanded beside each.
     hands: dict[int, HandSession] = {}
     arm_probes: list[Probe] = []
+    arm_arrivals: list[list[Arrival]] = []
     for ms in (16, 1):
         hand_session = HandSession(buses[ms], clock, set_timer=ms == 1)
+        first = len(box.arrivals)
         arm_probes.append(Probe(arm, clock, rate_hz=125.0).start())
         time.sleep(seconds)
         arm_probes[-1].stop()
+        arm_arrivals.append(list(box.arrivals)[first:])
         hands[ms] = hand_session.finish()
         if hands[ms].timer_ms != ms:
             print(f"the {ms} ms LEAP session found the latency timer at {hands[ms].timer_ms} ms", file=sys.stderr)
@@ -229,7 +243,7 @@ def main() -> None:
     xarm_rate = len(box.commands) / (2 * seconds)
     xarm_ok = (arm_log.count("error") == 0 and not any(p.failed for p in arm_probes) and box.faults == []
                and not box.unknown and len(box.commands) == arm_sent and arm.counters()["refused_commands"] == 0)
-    wire_figures = wire_timing(box)
+    wire_figures = wire_timing(box, [(a, p.planned) for a, p in zip(arm_arrivals, arm_probes)])
     emulator_faults = len(box.faults)
     trips = [t for p in arm_probes for t in roundtrips_ms(p.sends, arm_log.seen, 1e-5)]
     trips += roundtrips_ms(hand_probe.sends, hand_log.seen, 2e-3)
@@ -315,6 +329,8 @@ def main() -> None:
         "xarm_sdk_session_ok": "true", "leap_sdk_session_ok": "true", "camera_stream_ok": "true",
         "xarm_command_rate_hz": ">= 100", "leap_command_rate_hz": ">= 90", "sdk_roundtrip_ms_p99": "reported",
         "hw_faults_run": ">= 30", "hw_faults_silent": "0", "hw_tracebacks": "0", "emulator_faults": "0",
+        "wire_arrival_gap_ms_max": "<= 25", "wire_arrival_late_ms_p99": "<= 5", "wire_targets_per_cycle_max": "<= 1",
+        "wire_speed_ratio_max": "<= 1.05", "wire_accel_ratio_max": "<= 1.05", "wire_jerk_ratio_max": "<= 1.05",
         "leap_read_miss_frac": "<= 0.001", "leap_faults": "0", "leap_read_miss_frac_16ms": "<= 0.001",
         "leap_faults_16ms": "0", "leap_read_miss_frac_1ms": "<= 0.001", "leap_faults_1ms": "0",
         "emulator_conformance": ">= 25"}, as_json=args.json)

@@ -7,7 +7,7 @@ from __future__ import annotations
 
 import threading
 import time
-from typing import Callable
+from collections.abc import Callable
 
 from teleprev.emulators import xarm_wire as wire
 from teleprev.emulators.listening import Listener

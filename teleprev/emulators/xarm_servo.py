@@ -134,7 +134,7 @@ class ServoCycle:
             first = self._ran[0]
             self._ran.appendleft(_Point(first.received_ns - self.period_ns, first.cycle - 1, first.q))
         judged = self._judge(now_ns, target)
-        self.arrivals.append(Arrival(now_ns, cycle, target, True))
+        self.arrivals.append(Arrival(now_ns, cycle, target, not isinstance(judged, ServoFault)))
         if isinstance(judged, ServoFault):
             return judged
         self.commands.append(ReceivedCommand(now_ns, target))

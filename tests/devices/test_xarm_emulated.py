@@ -12,6 +12,7 @@ import pytest
 from teleprev.clock import SessionClock
 from teleprev.devices import DeviceContext, DeviceError, DeviceRunner
 from teleprev.emulators import xarm_wire as wire
+from teleprev.emulators.wire_schedule import PlannedSend, from_session_clock, lateness_ns
 from teleprev.emulators.xarm_controller import XArmController
 from teleprev.messages import JointSample
 from teleprev_devices.xarm import XArm, XArmSettings
@@ -200,3 +201,28 @@ def test_a_stream_starts_again_where_the_arm_stands_after_a_reconnect(box):
         stream.stop()
         runner.stop()
         box.operator_clear()
+
+
+def test_lateness_is_each_arrival_against_the_instant_its_sender_planned():
+    """wire_schedule: the box's arrival stamps paired with the sender's schedule (float32 on the wire), a
+    target that left 30 ms after it was due shows 30 ms late, one planned but never sent is left out."""
+    with XArmController(host=None).start() as b:
+        api = sdk_servo(b)
+        try:
+            q, start, planned = np.array(b.angles), len(b.arrivals), []
+            t0 = time.monotonic_ns() + 20_000_000
+            for k in range(10):
+                due = t0 + k * 10_000_000
+                time.sleep(max(0.0, (due - time.monotonic_ns()) / 1e9) + (0.03 if k == 5 else 0.0))
+                q[0] += 0.0003
+                assert api.set_servo_angle_j(list(q), is_radian=True) == 0
+                planned.append(PlannedSend(due, q.copy()))
+                if k == 7:
+                    planned.append(PlannedSend(due + 1, q + 0.1))  # refused before it left: never on the wire
+            late = lateness_ns(planned, list(b.arrivals)[start:])
+        finally:
+            api.disconnect()
+    assert len(late) == 10 and min(late) >= 0
+    assert late[5] >= 30_000_000  # it left 30 ms after it was due
+    clock = SessionClock()
+    assert from_session_clock(clock, clock.from_monotonic(123_456_789), q).due_ns == 123_456_789

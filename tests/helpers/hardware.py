@@ -18,6 +18,7 @@ import numpy as np
 from teleprev import topics
 from teleprev.errors import DeviceError
 from teleprev.devices.servo_limits import STREAM_GAP_NS
+from teleprev.emulators.wire_schedule import PlannedSend
 from teleprev.messages import JointSample
 from tests.helpers.wait import WaitTimeout, wait_until
 
@@ -58,7 +59,8 @@ class CommandStream:
     """Sends `device` a command every 1/rate_hz s from its own thread, stamped when it is sent: the joints
     start where the device is and move by amplitude * (1 - cos(w t)) (at rest at t = 0, so the stream
     keeps far inside the servo rule's acceleration and jerk limits). Counts sent and failed commands;
-    `latency_ms` holds, for each command, the time until the device's state showed it (when `log` given)."""
+    `planned` keeps, for each command sent, the instant it was due to leave (its schedule, on the monotonic
+    clock) and what it was, which an emulator's arrival times are measured against."""
 
     def __init__(self, device, clock, rate_hz: float = 100.0, amplitude: float = 0.05, period_s: float = 4.0,
                  joints: slice = slice(None)):
@@ -70,6 +72,7 @@ class CommandStream:
         self.failed = 0
         self.last_error = ""
         self.send_s: list[float] = []
+        self.planned: list[PlannedSend] = []
         self._stop = threading.Event()
         self._thread = threading.Thread(target=self._run, name="command-stream", daemon=True)
 
@@ -105,7 +108,7 @@ class CommandStream:
             if now < next_t:
                 time.sleep(next_t - now)
                 continue
-            next_t += self.period_s
+            due, next_t = next_t, next_t + self.period_s
             if next_t < now:  # fell behind (a stall): start again from now instead of bursting
                 next_t = now + self.period_s
             if start is None:
@@ -124,6 +127,7 @@ class CommandStream:
                 self.device.send(JointSample(stamp, names, q))
                 self.sent += 1
                 self.send_s.append(time.perf_counter() - t)
+                self.planned.append(PlannedSend(round(due * 1e9), q))
                 last, last_ns = q, stamp
             except DeviceError as exc:
                 self.failed += 1
