@@ -98,9 +98,10 @@ def main() -> None:
     ik_us = {False: [], True: []}
     ik_converged = {False: 0, True: 0}
     state = {False: (q_home, q_home), True: (q_home, q_home)}
+    retargeters = {False: numpy_arm, True: compiled_arm}  # keyed by: compiled?
     for k, wrist in enumerate(wrists):
-        for retargeter in ((numpy_arm, compiled_arm) if k % 2 else (compiled_arm, numpy_arm)):
-            c = retargeter.ik.compiled
+        for c in ((False, True) if k % 2 else (True, False)):
+            retargeter = retargeters[c]
             q, q_before = state[c]
             start = 2.0 * q - q_before
             t = time.perf_counter()

@@ -168,13 +168,13 @@ def main() -> None:
     p = common.parser(__doc__)
     p.add_argument("--busy", type=int, default=0, help="busy processes beside the step timing")
     args = p.parse_args()
-    seconds = 8.0 if args.quick else 30.0
+    seconds = 3.0 if args.quick else 30.0
     with common.Load(args.busy):
         figures, priority = at_loop_priority(step_timing, seconds)
     figures["busy_processes"] = args.busy
     figures["step_thread"] = priority
-    figures.update(preview_rate(4.0 if args.quick else 12.0))
-    figures.update(dex_retargeting(10.0 if args.quick else 30.0))
+    figures.update(preview_rate(2.0 if args.quick else 12.0))
+    figures.update(dex_retargeting(2.0 if args.quick else 30.0))
     targets = {
         "step_ms_p50": "<= 0.1", "step_ms_p99": "<= 0.5", "corrected_frac": "reported", "fallback_frac": "reported",
         "preview_fps": ">= 20 (pipeline at 120 Hz)", "dexretargeting_ms_p50": "for comparison",

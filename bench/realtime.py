@@ -2,7 +2,8 @@
 this 2-core machine (4 per core), the preview rendering into a pseudo-terminal at 80x24 and 120x45 and the
 sim camera at 30 fps; every session then measured as a controller would see it.
 
-Sessions (10; --quick: 3 shorter ones):
+Sessions (10; --quick: 3 of 4 s, the sim rig at 80x24, the fault and the wrist twist, beside 2 busy processes,
+and the mechanisms for 1 s each):
     default sim rig (the simulated operator at its tasks), preview in a pty, 80x24 and 120x45 in turn
     a human-like VMC glove and suit over UDP (tests/helpers/vmc.py: HumanLikeSender), preview at 80x24
     the sim rig with a controller fault mid-episode (sim.arm fault_after_s), two episodes
@@ -333,21 +334,23 @@ def mechanisms(seconds: float) -> dict:
 def main() -> None:
     p = common.parser(__doc__.splitlines()[0])
     p.add_argument("--seconds", type=float, default=20.0, help="each session's length")
-    p.add_argument("--busy", type=int, default=8, help="busy processes beside the sessions")
+    p.add_argument("--busy", type=int, default=None, help="busy processes beside the sessions (default 8, --quick 2)")
     p.add_argument("--keep", type=Path, default=None, help="keep the sessions in this folder")
     args = p.parse_args()
     from tests.helpers.ports import free_port
     from tests.helpers.vmc import HumanLikeSender, WristTwister
 
-    seconds = 8.0 if args.quick else args.seconds
+    seconds = 4.0 if args.quick else args.seconds
+    if args.busy is None:
+        args.busy = 2 if args.quick else 8
     folder = args.keep or Path(tempfile.mkdtemp(prefix="realtime-"))
     folder.mkdir(parents=True, exist_ok=True)
     sim = ROOT / "rigs" / "sim.toml"
     plan = [("sim", sim, (80, 24)), ("sim", sim, (120, 45))] * (1 if args.quick else 3)
     plan = plan[:1] if args.quick else plan
-    plan += [("vmc_human", None, (80, 24))] * (1 if args.quick else 2)
+    plan += [("vmc_human", None, (80, 24))] * (0 if args.quick else 2)
     plan += [("fault", fault_rig(folder, 0.4 * seconds), None)]
-    plan += [] if args.quick else [("limit", None, None)]
+    plan += [("limit", None, None)]
     results, recorded = [], []
     with common.Load(args.busy):
         for k, (kind, rig, size) in enumerate(plan):
@@ -374,7 +377,7 @@ def main() -> None:
                   f"gap {m['gap_ms']:.1f} ms, late p99 {m['late_ms_p99']:.2f} ms, accel x{m['accel_ratio']:.3f}, "
                   f"jerk x{m['jerk_ratio']:.3f}, reproduces {m['bit_identical']}, host steal {m['steal_ms']} ms",
                   file=sys.stderr, flush=True)
-        mech = mechanisms(5.0 if args.quick else 10.0)
+        mech = mechanisms(1.0 if args.quick else 10.0)
     export_ratio = export_audit([r for r, m in zip(recorded, results) if m["kind"] == "sim"][:2], folder)
     rs = [r for m in results for r in m["hand_r"]]
     lags = [lag for m in results for lag in m["hand_lag_ms"]]

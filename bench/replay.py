@@ -34,7 +34,7 @@ def main() -> None:
     p.add_argument("--rig", default=None, help="rig file to record with (default: the all-sim LEAP rig)")
     p.add_argument("--busy", type=int, default=0, help="busy processes beside the evals (not the recording)")
     args = p.parse_args()
-    seconds = 10.0 if args.quick else 30.0
+    seconds = 6.0 if args.quick else 30.0
 
     from teleprev.evaluation.evaluate import evaluate
     from teleprev.live.record.session import RecordOptions, LiveSession
