@@ -40,6 +40,28 @@ Each command also pays costs that do not shrink with workers: the interpreter an
 import alone is about 4 s, torch and torchvision inside it; eval's modules and its compiled kernels
 about 1 s), opening and checking every session, and export's merge. --eval-s and --export-s set the
 sessions' length (default 20 and 30 s) to see how the ratio grows as the sessions outweigh them.
+
+JSON keys:
+    cpu_count                        int
+    load_avg_1min_before             float
+    eval_cores_busy_workers1         float
+    export_cores_busy_workers1       float
+    corpus_speedup_2_workers_eval    float
+    corpus_speedup_2_workers_export  float
+    corpus_speedup_2_workers         float
+    eval_wall_s_workers1             float
+    export_wall_s_workers1           float
+    eval_wall_s_workers2             float
+    export_wall_s_workers2           float
+    eval_recorded_s                  float
+    export_recorded_s                float
+    ray_overhead_s                   float
+    ray_start_s                      float
+    ray_schedule_s                   float
+    ray_shutdown_s                   float
+    eval_ray_wall_s                  float
+    load_avg_1min_after              float
+    busy_processes                   int
 """
 
 from __future__ import annotations

@@ -19,6 +19,20 @@ and wire_speed/accel/jerk_ratio_max (the arm's targets as the controller receive
 leap_read_miss_frac and leap_faults (reads without a reply, and hand faults). emulator_conformance: the
 documented behaviours tests/devices/test_emulator_conformance.py checks through the real SDKs, counted as the
 tests that pass.
+
+JSON keys:
+    xarm_sdk_session_ok      bool
+    leap_sdk_session_ok      bool
+    camera_stream_ok         bool
+    xarm_command_rate_hz     float
+    leap_command_rate_hz     float
+    sdk_roundtrip_ms_p99     float
+    hw_faults_run            int
+    hw_faults_silent         int
+    hw_tracebacks            int
+    sdk_roundtrip_ms_median  float
+    session_s                float
+    camera_frames_per_s      float
 """
 
 from __future__ import annotations

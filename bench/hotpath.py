@@ -11,6 +11,40 @@ the cache (--quick: from the cache only), and whether `teleprev --help` stays fa
 checks, angles, retargeting, clip, and for the LEAP Hand the exact check) is timed with the numpy
 arithmetic (formats 1 and 2) and the compiled one (format 3, teleprev/kernels/glove.py), the two
 interleaved sample by sample: one sample as the live step prepares it, and a session's worth as eval does.
+
+JSON keys:
+    collision_check_us_p50                              float
+    collision_first_contact_us_p50                      float
+    collision_check_uniform_us_p50                      float
+    collision_first_contact_uniform_us_p50              float
+    compiled_batch_us_per_config                        float
+    pipeline_checker_us_p50                             float
+    pipeline_checker_uniform_us_p50                     float
+    fcl_collision_check_us_p50                          float
+    fcl_first_contact_us_p50                            float
+    numpy_vectorised_collision_us_p50                   float
+    numpy_vectorised_disagreements                      int
+    compiled_fk_us_p50                                  float
+    numpy_fk_us_p50                                     float
+    free_configs_timed                                  int
+    prepare_hand_us_p50_numpy                           float
+    prepare_hand_us_p50_compiled                        float
+    prepare_hand_speedup                                float
+    prepare_hands_batch_us_per_sample_numpy             float
+    prepare_hands_batch_us_per_sample_compiled          float
+    prepare_gripper_hand_us_p50_numpy                   float
+    prepare_gripper_hand_us_p50_compiled                float
+    prepare_gripper_hand_speedup                        float
+    prepare_gripper_hands_batch_us_per_sample_numpy     float
+    prepare_gripper_hands_batch_us_per_sample_compiled  float
+    compiled_vs_fcl_disagreements                       int
+    compiled_vs_fcl_margin_side                         int
+    compiled_vs_fcl_missed_contacts                     int
+    compiled_vs_fcl_label_disagreements                 int
+    compiled_vs_fcl_configs                             int
+    pipeline_checker_vs_fcl_disagreements               int
+    cached_import_and_first_call_s                      float
+    help_s                                              float
 """
 
 from __future__ import annotations

@@ -23,6 +23,14 @@ twist_abduction_err_max       200 random hand poses with every proximal bone twi
                               sent as OSC bundles, read back by vmc.glove: the largest abduction change, rad
 recovery_after_bad_packet_ms  a bad datagram, then at once a good frame: from sending the bad one until the
                               session loop feeds the good one to the pipeline (median; p95 in the table)
+
+JSON keys:
+    fuzz_packets                  int
+    receiver_deaths               int
+    nan_recorded                  int
+    flood_drops_reported_frac     float
+    twist_abduction_err_max       float
+    recovery_after_bad_packet_ms  float
 """
 
 from __future__ import annotations

@@ -15,6 +15,15 @@ Figures:
   tf_rate_hz            /tf messages per second in a 3 s sim recording (arm_state_rate_hz beside it)
   urdf_embedded         the recording carries the rig's URDF as an attachment and on /robot_description,
                         byte for byte (read with the mcap library and rosbags' CDR decoder)
+
+JSON keys:
+    import_realtime_x               float
+    import_realtime_x_with_startup  float
+    imported_s                      float
+    foreign_formats_ok              int
+    tf_rate_hz                      float
+    arm_state_rate_hz               float
+    urdf_embedded                   bool
 """
 
 from __future__ import annotations

@@ -1,6 +1,27 @@
 """Foundation figures: FK (fast path vs pytorch-kinematics, batched), arm IK, exact self-collision.
 
     python bench/kinematics.py [--json] [--quick]
+
+JSON keys:
+    fk_single_us_p50              float
+    fk_pk_single_us_p50           float
+    fk_speedup_x                  float
+    fk_batch_cfg_per_s            float
+    fk_pk_batch_cfg_per_s         float
+    ik_ms_p50                     float
+    ik_ms_p99                     float
+    ik_converged_frac             float
+    ik_us_p50                     float
+    ik_compiled_us_p50            float
+    ik_compiled_us_p99            float
+    ik_compiled_speedup_x         float
+    arm_solve_us_p50              float
+    arm_solve_compiled_us_p50     float
+    arm_solve_compiled_speedup_x  float
+    ik_compiled_converged_frac    float
+    collision_check_us_p50        float
+    collision_free_configs        int
+    labels_per_s                  float
 """
 
 from __future__ import annotations

@@ -18,6 +18,26 @@ command stream (divided differences on the command stamps; the sim hand's measur
                            and follow, or stop), timed while re-running a session
     stop_distance_rad_max  the longest controlled stop: joint travel from the last command before a
                            stop began (a switch to preview, a stale target) to rest
+
+JSON keys:
+    arm_accel_max_ratio      float
+    arm_jerk_max_ratio       float
+    hand_accel_max_ratio     float
+    hand_swept_colliding     int
+    hand_state_colliding     int
+    tracking_lag_ms_p50      float
+    trajectory_us_p50        float
+    stop_distance_rad_max    float
+    arm_speed_max_ratio      float
+    hand_speed_max_ratio     float
+    sessions                 int
+    arm_commands             int
+    hand_commands            int
+    controlled_stops         int
+    trajectory_us_p99        float
+    audits_passed            int
+    hand_commands_colliding  int
+    commands_outside_limits  int
 """
 
 from __future__ import annotations

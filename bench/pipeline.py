@@ -7,6 +7,20 @@ Step timing drives the pure pipeline step directly (no device threads), with the
 the shipped models: the operator's glove at 120 Hz and suit at 60 Hz, execution engaged after 1 s, the
 arm's measured joints following the previous command. preview_fps runs a real recording of the
 default sim rig with the terminal preview drawn into a 120 x 40 off-screen console.
+
+JSON keys:
+    step_ms_p50                 float
+    step_ms_p99                 float
+    steps                       int
+    corrected_frac              float
+    fallback_frac               float
+    ccn_frac                    float
+    busy_processes              int
+    step_thread                 str
+    preview_fps                 float
+    preview_render_ms_p50       float
+    pipeline_hz_during_preview  float
+    live_step_ms_p50            float
 """
 
 from __future__ import annotations

@@ -9,6 +9,10 @@ Corrector changing most steps) once, then times plot_episodes on each:
     plot_s_per_episode_p50   median over the episodes
 
 --quick: sim_v1.mcap only.
+
+JSON keys:
+    plot_s_per_session_max  float
+    plot_s_per_episode_p50  float
 """
 
 from __future__ import annotations

@@ -24,6 +24,36 @@ Figures (issue 23):
     hand_lag_ms_p50                  and the median lag, per joint of every session (execute only)
 and the mechanism measured under the same load (why the sender is a SCHED_FIFO process), thread vs
 process, with and without real-time priority: mechanism_<kind>_late_ms_p99 / _max, _gaps_over_25ms.
+
+JSON keys:
+    loaded_sessions                        int
+    arm_faults                             int
+    audit_failures                         int
+    command_gap_ms_max                     float
+    command_late_ms_p99                    float
+    command_late_ms_max                    float
+    reengaged_after_fault                  int
+    limit_approach_accel_ratio_max         float
+    export_action_audit_ratio_max          float
+    eval_audit_jerk_agree                  bool
+    bit_identical                          bool
+    resume_jumps                           int
+    hand_tracking_r_min                    float
+    hand_lag_ms_p50                        float
+    sender_realtime                        bool
+    busy_processes                         int
+    mechanism_thread_late_ms_p99           float
+    mechanism_thread_late_ms_max           float
+    mechanism_thread_gaps_over_25ms        int
+    mechanism_thread_fifo_late_ms_p99      float
+    mechanism_thread_fifo_late_ms_max      float
+    mechanism_thread_fifo_gaps_over_25ms   int
+    mechanism_process_late_ms_p99          float
+    mechanism_process_late_ms_max          float
+    mechanism_process_gaps_over_25ms       int
+    mechanism_process_fifo_late_ms_p99     float
+    mechanism_process_fifo_late_ms_max     float
+    mechanism_process_fifo_gaps_over_25ms  int
 """
 
 from __future__ import annotations

@@ -10,6 +10,35 @@ camera, encoded once with OpenCV and cycled: JPEG encoding is not the recorder's
 step report, arm and hand commands, /tf with the xArm6 + LEAP Hand links). One producer thread logs
 the merged schedule on the session clock, as the session loop does; the recorder encodes, compresses
 (zstd), writes and fsyncs on its own thread.
+
+JSON keys:
+    dropped                  int
+    recorder_cpu_frac        float
+    headroom_x               int
+    recover_lost_s           float
+    sync_err_ms_max          float
+    sync_unmatched           int
+    reference_msgs_per_s     float
+    reference_mb_per_s       float
+    reference_seconds        float
+    messages_written         int
+    jpeg_kb                  float
+    log_call_us              float
+    writer_alone_us_per_msg  float
+    writer_alone_cpu_frac    float
+    max_queue_depth          int
+    queue_size               int
+    headroom_queue_size      int
+    headroom_step_s          float
+    headroom_limited_by      str
+    recover_trials           int
+    recover_messages_min     int
+    reader_msgs_per_s        float
+    reader_realtime_x        float
+    reader_all_msgs_per_s    float
+    reader_all_realtime_x    float
+    load_avg_start           float
+    load_avg_end             float
 """
 
 from __future__ import annotations

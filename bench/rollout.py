@@ -15,6 +15,15 @@ CPU, no pretrained backbone: tests/helpers/policies.py), then rolls it out for 2
 It also prints the figures of bench/episode_figures.py (episode_timing_err_ms_max) and
 bench/dataset_figures.py (dataset_replay_ok, filtered_export_ok) where those modules exist; null where not.
 --quick: episodes of 2.5 s, and not those figures (their benches' own quick runs measure them).
+
+JSON keys:
+    rollout_commands        int
+    rollout_audit_failures  int
+    policy_hz               float
+    command_gap_ms_max      float
+    actions_handed          int
+    frames_without_action   int
+    train_s                 float
 """
 
 from __future__ import annotations

@@ -10,9 +10,11 @@ import importlib.util
 import json
 import math
 import os
+import signal
 import subprocess
 import sys
 import time
+from dataclasses import dataclass
 from pathlib import Path
 
 import pytest
@@ -21,9 +23,8 @@ ROOT = Path(__file__).resolve().parents[2]
 BENCH = ROOT / "bench"
 BENCHES = sorted(p for p in BENCH.glob("*.py") if p.name != "common.py")
 
-# Seconds a quick run may take here (2 shared cores); a bench not named gets DEFAULT_LIMIT_S. Well above
-# what they take (bench/README: the figures of the quick runs), so that only a hang or a bench that
-# stopped being quick trips it.
+# Seconds a quick run may take (2 shared cores); a bench not named gets DEFAULT_LIMIT_S. About three
+# times what each takes here, so that only a hang, or a bench that stopped being quick, trips it.
 DEFAULT_LIMIT_S = 90
 LIMIT_S = {}
 
@@ -84,28 +85,83 @@ def test_a_bad_declaration_is_refused():
             declared_keys(bad)
 
 
-def _params():
-    for bench in BENCHES:
-        limit = LIMIT_S.get(bench.stem, DEFAULT_LIMIT_S)
-        yield pytest.param(bench, limit, id=bench.stem, marks=pytest.mark.timeout(limit + 30))
+# Quick runs at once: a test starts the next bench's run before it waits for its own, so that one
+# bench's sleeps and start-up (recordings run in real time, commands start interpreters) overlap
+# another's work. Two, for the 2-core machine the suite is timed on.
+PARALLEL = 2
 
 
-@pytest.mark.parametrize(("bench", "limit_s"), _params())
-def test_quick_mode_prints_every_declared_figure(bench: Path, limit_s: int):
+@dataclass
+class QuickRun:
+    bench: Path
+    limit_s: float
+    folder: Path
+    proc: subprocess.Popen | None = None
+    started: float = 0.0
+
+    def start(self) -> None:
+        env = {**os.environ, "PYTHONPATH": os.pathsep.join([str(ROOT), str(ROOT / "devices"),
+                                                             os.environ.get("PYTHONPATH", "")])}
+        self.started = time.perf_counter()
+        with open(self.folder / "stdout", "w") as out, open(self.folder / "stderr", "w") as err:
+            self.proc = subprocess.Popen([sys.executable, str(self.bench), "--quick", "--json"], cwd=ROOT, env=env,
+                                         stdout=out, stderr=err, text=True, start_new_session=True)
+
+    def wait(self) -> tuple[int | None, str, str, float]:
+        """(exit code, None when it ran past its limit and was killed; stdout; stderr; seconds)."""
+        try:
+            code = self.proc.wait(timeout=max(0.0, self.started + self.limit_s - time.perf_counter()))
+        except subprocess.TimeoutExpired:
+            os.killpg(self.proc.pid, signal.SIGKILL)  # the bench and the commands it started
+            self.proc.wait()
+            code = None
+        took = time.perf_counter() - self.started
+        return code, (self.folder / "stdout").read_text(), (self.folder / "stderr").read_text(), took
+
+
+@pytest.fixture(scope="module")
+def quick_runs(request, tmp_path_factory):
+    """The quick runs of the benches this session runs, in the order their tests come, started
+    PARALLEL at a time; `take(bench)` waits for one."""
+    wanted = [item.callspec.params["bench"] for item in request.session.items
+              if item.originalname == "test_quick_mode_prints_every_declared_figure"]
+    runs = {b: QuickRun(b, LIMIT_S.get(b.stem, DEFAULT_LIMIT_S), tmp_path_factory.mktemp(b.stem)) for b in wanted}
+
+    def running() -> int:
+        return sum(r.proc is not None and r.proc.poll() is None for r in runs.values())
+
+    def take(bench: Path) -> QuickRun:
+        if runs[bench].proc is None:
+            runs[bench].start()
+        for b in wanted[wanted.index(bench) + 1:]:  # the next ones, while fewer than PARALLEL run
+            if running() >= PARALLEL:
+                break
+            if runs[b].proc is None:
+                runs[b].start()
+        return runs[bench]
+
+    yield take
+    for run in runs.values():
+        if run.proc is not None and run.proc.poll() is None:
+            os.killpg(run.proc.pid, signal.SIGKILL)
+            run.proc.wait()
+
+
+def _params() -> list:
+    return [pytest.param(b, id=b.stem, marks=pytest.mark.timeout(LIMIT_S.get(b.stem, DEFAULT_LIMIT_S) + 30))
+            for b in BENCHES]
+
+
+@pytest.mark.parametrize("bench", _params())
+def test_quick_mode_prints_every_declared_figure(bench: Path, quick_runs):
     keys = declared(bench)
-    env = {**os.environ, "PYTHONPATH": os.pathsep.join([str(ROOT), str(ROOT / "devices"),
-                                                         os.environ.get("PYTHONPATH", "")])}
-    t = time.perf_counter()
-    try:
-        run = subprocess.run([sys.executable, str(bench), "--quick", "--json"], cwd=ROOT, env=env,
-                             capture_output=True, text=True, timeout=limit_s)
-    except subprocess.TimeoutExpired as e:
-        raise AssertionError(f"{bench.name} --quick ran past {limit_s} s; its stderr's end:\n"
-                             f"{(e.stderr or b'')[-3000:]!r}") from None
-    print(f"{bench.name} --quick: {time.perf_counter() - t:.1f} s")
-    assert run.returncode == 0, f"{bench.name} --quick exited {run.returncode}:\n{run.stderr[-3000:]}"
-    lines = run.stdout.strip().splitlines()
-    assert lines, f"{bench.name} --quick printed nothing on stdout:\n{run.stderr[-3000:]}"
+    run = quick_runs(bench)
+    code, stdout, stderr, took = run.wait()
+    print(f"{bench.name} --quick: {took:.1f} s")
+    assert code is not None, f"{bench.name} --quick ran past {run.limit_s} s; its stderr's end:\n{stderr[-3000:]}"
+    assert code == 0, f"{bench.name} --quick exited {code}:\n{stderr[-3000:]}"
+    lines = stdout.strip().splitlines()
+    assert lines, f"{bench.name} --quick printed nothing on stdout:\n{stderr[-3000:]}"
 
     def refuse(constant):
         raise ValueError(f"not strict JSON: {constant}")
