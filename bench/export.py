@@ -28,6 +28,24 @@ Figures:
 
 --quick: a 6 s session at 320x240, exported four ways (ours, lerobot's encoder, AV1, two workers), two
 exports at a time; no backlog_realtime_x_workers1 and no memory figures (they need long sessions).
+
+JSON keys:
+    realtime_x                   float
+    realtime_x_with_startup      float
+    realtime_x_lerobot_encoder   float
+    realtime_x_av1               float
+    backlog_realtime_x_workers2  float
+    startup_s                    float
+    frames_per_s                 float
+    max_align_err_ms             float
+    image_err_ms                 float
+    held_frames                  int
+    psnr_db_min                  float
+    dataset_mb_per_min           float
+    psnr_db_min_av1              float
+    dataset_mb_per_min_av1       float
+    cores                        int
+    load_avg_at_start            float
 """
 
 from __future__ import annotations

@@ -26,6 +26,14 @@ Figures:
   tracebacks_shown  runs that printed a Python traceback
   datasets_lost     exports after which the old dataset was neither intact nor replaced by the whole new one
 The machine is shared with other work: times are not figures here, only what happened.
+--quick: every kind of fault once (one signal each), a 3 s clean recording, exports of 1-2 s sessions.
+
+JSON keys:
+    faults_run        int
+    data_lost_s_max   float
+    silent_failures   int
+    tracebacks_shown  int
+    datasets_lost     int
 """
 
 from __future__ import annotations
@@ -424,9 +432,10 @@ def main() -> None:
 
         from teleprev.export.synthetic import EpisodeSpec, SyntheticSession, write_session
 
-        s0 = write_session(work / "s0.mcap", SyntheticSession((EpisodeSpec("pour", 3.0),), seed=1))
-        s1 = write_session(work / "s1.mcap", SyntheticSession((EpisodeSpec("pour", 6.0),), seed=2))
-        s2 = write_session(work / "s2.mcap", SyntheticSession((EpisodeSpec("hang", 6.0),), seed=3))
+        short, long = (1.0, 2.0) if args.quick else (3.0, 6.0)
+        s0 = write_session(work / "s0.mcap", SyntheticSession((EpisodeSpec("pour", short),), seed=1))
+        s1 = write_session(work / "s1.mcap", SyntheticSession((EpisodeSpec("pour", long),), seed=2))
+        s2 = write_session(work / "s2.mcap", SyntheticSession((EpisodeSpec("hang", long),), seed=3))
         base = work / "base"
         run = run_cli(["export", s0, "--repo-id", "bench/faults", "--root", base], timeout=600)
         assert run.returncode == 0, run.stderr

@@ -301,13 +301,13 @@ def main() -> None:
     p.add_argument("--fuzz", type=int, default=100_000, help="fuzz datagrams to send (default 100000)")
     p.add_argument("--rate", type=float, default=2000.0, help="fuzz datagrams per second (default 2000)")
     args = p.parse_args()
-    n_fuzz = 5000 if args.quick else args.fuzz
+    n_fuzz = 2000 if args.quick else args.fuzz
     with tempfile.TemporaryDirectory() as tmp:
         folder = Path(tmp)
         f = fuzz(folder, n_fuzz, args.rate)
-        fl = flood(folder, 1000 if args.quick else 5000)
-        tw = twist(50 if args.quick else 200)
-        rc = recovery(folder, 100 if args.quick else 300)
+        fl = flood(folder, 500 if args.quick else 5000)
+        tw = twist(20 if args.quick else 200)
+        rc = recovery(folder, 30 if args.quick else 300)
     from rich.console import Console
 
     Console(stderr=args.json).print(
