@@ -73,6 +73,8 @@ import time
 from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[1]
+# this checkout first, then what the caller had on the path (its device plugins, say)
+PYTHONPATH = os.pathsep.join(p for p in (str(ROOT), os.environ.get("PYTHONPATH", "")) if p)
 sys.path.insert(0, str(ROOT))
 sys.path.insert(0, str(ROOT / "bench"))
 
@@ -102,9 +104,12 @@ def record(rig: Path, out: Path, seconds: float, episodes: int, engage_after: fl
     """`teleprev record` unattended; with `size` (columns, rows) its preview renders into a pty that big."""
     cmd = [*CLI, "record", str(rig), "--out", str(out), "--duration", str(seconds), "--episodes", str(episodes),
            "--engage-after", str(engage_after)]
-    env = {**os.environ, "PYTHONPATH": str(ROOT)}
+    env = {**os.environ, "PYTHONPATH": PYTHONPATH}
     if size is None:
-        return subprocess.run([*cmd, "--no-preview"], capture_output=True, env=env, timeout=seconds + 120).returncode
+        done = subprocess.run([*cmd, "--no-preview"], capture_output=True, text=True, env=env, timeout=seconds + 120)
+        if done.returncode != 0 and done.stderr.strip():  # (the fault session exits 1, saying nothing)
+            print(f"{out.name}: teleprev record exited {done.returncode}: {done.stderr.strip()[-2000:]}", file=sys.stderr)
+        return done.returncode
     master, slave = pty.openpty()
     fcntl.ioctl(slave, termios.TIOCSWINSZ, struct.pack("HHHH", size[1], size[0], 0, 0))
     stop = threading.Event()
@@ -263,7 +268,8 @@ def export_audit(sessions: list[Path], folder: Path) -> float:
 
     root = folder / "dataset"
     done = subprocess.run([*CLI, "export", *map(str, sessions), "--repo-id", "bench/realtime", "--root", str(root)],
-                          capture_output=True, text=True, env={**os.environ, "PYTHONPATH": str(ROOT)}, timeout=900)
+                          capture_output=True, text=True, timeout=900,
+                          env={**os.environ, "PYTHONPATH": PYTHONPATH, "HF_HUB_OFFLINE": "1"})
     if done.returncode != 0:
         print(done.stdout[-2000:], done.stderr[-2000:], file=sys.stderr)
         return float("nan")

@@ -18,10 +18,6 @@ each re-run with its own format's arithmetic): bit_identical_format<N> each, bit
 JSON keys:
     eval_realtime_x          float
     bit_identical            bool
-    bit_identical_format1    bool
-    bit_identical_format2    bool
-    bit_identical_format3    bool
-    bit_identical_format4    bool
     recorded_s               float
     eval_wall_s              float
     eval_warm_realtime_x     float
