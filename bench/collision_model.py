@@ -7,6 +7,59 @@ CPN / CCN inference against the numpy networks, in the same run (`*_numpy_us` / 
 Held-out data: uniform samples for the CPN (plus boundary samples, the `cpn_boundary_*` figures); invalid
 configurations from uniform sampling and from retargeted human hand trajectories for the CCN, the baseline
 and the Corrector. Trajectories run through the Corrector in order, each output passed back as `previous`.
+
+JSON keys:
+    cpn_auc_min_link             float
+    cpn_recall                   float
+    cpn_config_fnr               float
+    cpn_single_us_p50            float
+    cpn_batch_cfg_per_s          float
+    ccn_valid_frac               float
+    ccn_mean_dev_rad             float
+    baseline_valid_frac          float
+    baseline_mean_dev_rad        float
+    baseline_ms_p50              float
+    n_invalid                    int
+    corrector_colliding_outputs  int
+    corrector_ms_p50             float
+    corrector_ms_p99             float
+    corrector_ms_p99_uniform     float
+    corrector_ms_p99_trajectory  float
+    corrector_untouched_ms_p50   float
+    corrector_ccn_frac           float
+    corrector_fallback_frac      float
+    corrector_mean_dev_rad       float
+    corrector_max_step_rad       float
+    cpn_threshold                float
+    cpn_precision                float
+    cpn_config_fpr               float
+    cpn_boundary_auc_min_link    float
+    cpn_boundary_recall          float
+    cpn_boundary_precision       float
+    cpn_boundary_config_fnr      float
+    cpn_boundary_config_fpr      float
+    cpn_worst_link               str
+    ccn_n_invalid                int
+    ccn_valid_frac_uniform       float
+    ccn_mean_dev_rad_uniform     float
+    ccn_valid_frac_trajectory    float
+    ccn_mean_dev_rad_trajectory  float
+    ccn_us_p50                   float
+    baseline_n                   int
+    n_invalid_trajectory         int
+    cpn_numpy_us                 float
+    cpn_compiled_us              float
+    cpn_speedup                  float
+    ccn_numpy_us                 float
+    ccn_compiled_us              float
+    ccn_speedup                  float
+    ccn_step_numpy_us            float
+    ccn_step_compiled_us         float
+    ccn_step_speedup             float
+    correct_numpy_us             float
+    correct_compiled_us          float
+    correct_speedup              float
+    compiled_n                   int
 """
 
 from __future__ import annotations

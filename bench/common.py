@@ -2,6 +2,23 @@
 
 Each script prints a table of its figures and, with --json, one JSON object last whose keys are the
 figure names its issue gives. Medians and ratios come from one run, since these machines are noisy.
+
+Every bench/*.py but this one is a bench, and every bench has a quick mode (--quick: seconds, not
+minutes; fewer samples, shorter sessions, a token load) that the suite runs as `python bench/NAME.py
+--quick --json` (tests/bench/test_quick.py, which finds the benches on disk). Each declares the figures it
+always prints in its module docstring, in a section of its own, last:
+
+    JSON keys:
+        fk_single_us_p50        float
+        collision_free_configs  int
+        urdf_embedded           bool
+
+The section starts at a line that reads exactly "JSON keys:"; each line after it, up to a blank line or
+the docstring's end, is a key and its type (float, int, bool or str; a float key may hold a whole number,
+an int key may not hold a bool). The suite fails the bench unless its quick run exits 0 and its last JSON
+object holds every declared key with a value of that type, null for none of them and no NaN or infinity
+anywhere. Figures a run prints only with some option (or that are per-item, named by the item) stay out
+of the section; the prose above it says what each figure means.
 """
 
 from __future__ import annotations
@@ -14,6 +31,29 @@ import time
 # One thread for numpy's BLAS and torch: the figures are per core.
 for _var in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS"):
     os.environ.setdefault(_var, "1")
+
+
+KEY_TYPES = {"float": (int, float), "int": (int,), "bool": (bool,), "str": (str,)}
+
+
+def declared_keys(docstring: str) -> dict[str, str]:
+    """The keys of a bench docstring's "JSON keys:" section and their types' names (see the module
+    docstring); a line that is not `key type` with a known type is a ValueError naming it."""
+    lines = docstring.splitlines()
+    starts = [k for k, line in enumerate(lines) if line.strip() == "JSON keys:"]
+    if len(starts) != 1:
+        raise ValueError(f'{len(starts)} "JSON keys:" sections, expected one')
+    keys: dict[str, str] = {}
+    for line in lines[starts[0] + 1:]:
+        if not line.strip():
+            break
+        parts = line.split()
+        if len(parts) != 2 or parts[1] not in KEY_TYPES:
+            raise ValueError(f"JSON keys: {line.strip()!r} is not `key type` with a type of {sorted(KEY_TYPES)}")
+        keys[parts[0]] = parts[1]
+    if not keys:
+        raise ValueError('the "JSON keys:" section names no key')
+    return keys
 
 
 def parser(description: str) -> argparse.ArgumentParser:

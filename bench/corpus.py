@@ -12,7 +12,9 @@ export lerobot's aggregate_datasets merge of the parts.
            file from scratch, so the copies are 8 sessions' work; `teleprev eval DIR -j N`.
   export:  8 synthetic sessions of 30 s (teleprev/export/synthetic.py: one 640x480 camera at 30 fps like
            the sim camera's, arm, hand, glove and suit streams, commands), default recipe and video;
-           `teleprev export DIR -j N`. (--quick: 6 s sessions, 320x240.)
+           `teleprev export DIR -j N`.
+  --quick: 4 sessions, not 8: eval's of 3 s (one recording, copied), export's of 2 s at 160x120; no
+           eval_ray_wall_s (Ray's start and scheduling are still measured).
 
 Figures:
   corpus_speedup_2_workers          the smaller of the two below (the issue's target: >= 1.7)
@@ -39,6 +41,27 @@ Each command also pays costs that do not shrink with workers: the interpreter an
 import alone is about 4 s, torch and torchvision inside it; eval's modules and its compiled kernels
 about 1 s), opening and checking every session, and export's merge. --eval-s and --export-s set the
 sessions' length (default 20 and 30 s) to see how the ratio grows as the sessions outweigh them.
+
+JSON keys:
+    cpu_count                        int
+    load_avg_1min_before             float
+    eval_cores_busy_workers1         float
+    export_cores_busy_workers1       float
+    corpus_speedup_2_workers_eval    float
+    corpus_speedup_2_workers_export  float
+    corpus_speedup_2_workers         float
+    eval_wall_s_workers1             float
+    export_wall_s_workers1           float
+    eval_wall_s_workers2             float
+    export_wall_s_workers2           float
+    eval_recorded_s                  float
+    export_recorded_s                float
+    ray_overhead_s                   float
+    ray_start_s                      float
+    ray_schedule_s                   float
+    ray_shutdown_s                   float
+    load_avg_1min_after              float
+    busy_processes                   int
 """
 
 from __future__ import annotations
@@ -58,12 +81,12 @@ ROOT = Path(__file__).resolve().parent.parent
 SESSIONS = 8
 
 
-def record_eval_sessions(folder: Path, seconds: float) -> None:
+def record_eval_sessions(folder: Path, seconds: float, sessions: int, recordings: int = 2) -> None:
     from teleprev.live.record.session import LiveSession, RecordOptions
 
     folder.mkdir(parents=True)
     recorded = []
-    for k in range(2):
+    for k in range(recordings):
         path = folder.parent / f"recorded{k}.mcap"
         rec = LiveSession(RecordOptions(out=path))
         rec.start()
@@ -77,15 +100,15 @@ def record_eval_sessions(folder: Path, seconds: float) -> None:
         finally:
             rec.stop()
         recorded.append(path)
-    for i in range(SESSIONS):
-        shutil.copyfile(recorded[i % 2], folder / f"s{i}.mcap")
+    for i in range(sessions):
+        shutil.copyfile(recorded[i % recordings], folder / f"s{i}.mcap")
 
 
-def write_export_sessions(folder: Path, seconds: float, width: int, height: int) -> None:
+def write_export_sessions(folder: Path, seconds: float, width: int, height: int, sessions: int) -> None:
     from teleprev.export.synthetic import EpisodeSpec, SyntheticSession, write_session
 
     folder.mkdir(parents=True)
-    for i in range(SESSIONS):
+    for i in range(sessions):
         write_session(folder / f"s{i}.mcap", SyntheticSession(
             (EpisodeSpec("pick_place", seconds / 2), EpisodeSpec("pour", seconds / 2)), width=width, height=height,
             frame_bank=100, seed=i))
@@ -113,13 +136,13 @@ def noop(context, item, emit):
     return item
 
 
-def ray_overhead() -> dict:
+def ray_overhead(sessions: int) -> dict:
     from teleprev.corpus.executor import RayExecutor
 
     t0 = time.perf_counter()
     executor = RayExecutor("local", cpus=2)
     t1 = time.perf_counter()
-    outcomes = executor.map(noop, None, list(range(SESSIONS)))
+    outcomes = executor.map(noop, None, list(range(sessions)))
     t2 = time.perf_counter()
     executor.close()
     t3 = time.perf_counter()
@@ -145,7 +168,7 @@ def best_walls(argv: dict, commands: list[str], runs: int, tmp: Path, figures: d
     return walls
 
 
-def encoder_thread_figures(export_argv, thread_counts: list[int], runs: int, tmp: Path) -> dict[str, float]:
+def encoder_thread_figures(export_argv, thread_counts: list[int], runs: int, tmp: Path, sessions: int) -> dict[str, float]:
     """Sessions per minute of the export with each worker's video encoder capped at each thread count, with 1
     and 2 workers (best of `runs`)."""
     figures = {}
@@ -158,7 +181,7 @@ def encoder_thread_figures(export_argv, thread_counts: list[int], runs: int, tmp
             for _ in range(runs):
                 best = min(best, timed([*export_argv(n), "--recipe", str(recipe)]))
                 shutil.rmtree(tmp / f"ds{n}", ignore_errors=True)
-            figures[f"export_sessions_per_min_workers{n}_threads{threads}"] = SESSIONS * 60.0 / best
+            figures[f"export_sessions_per_min_workers{n}_threads{threads}"] = sessions * 60.0 / best
     return figures
 
 
@@ -173,7 +196,8 @@ def main() -> None:
     p.add_argument("--encoder-threads", default="", help="export again with the encoder capped at each of these "
                    "thread counts (comma-separated; 0: the encoder's own choice)")
     args = p.parse_args()
-    eval_s, export_s, size = (6.0, 6.0, (320, 240)) if args.quick else (20.0, 30.0, (640, 480))
+    eval_s, export_s, size = (3.0, 2.0, (160, 120)) if args.quick else (20.0, 30.0, (640, 480))
+    sessions = 4 if args.quick else SESSIONS
     eval_s, export_s = args.eval_s or eval_s, args.export_s or export_s
     runs = args.runs or (1 if args.quick else 2)
     commands = [c for c in ("eval", "export") if args.only in (None, c)]
@@ -181,10 +205,10 @@ def main() -> None:
     with tempfile.TemporaryDirectory() as tmp:
         tmp = Path(tmp)
         if "eval" in commands:
-            record_eval_sessions(tmp / "eval", eval_s)
+            record_eval_sessions(tmp / "eval", eval_s, sessions, 1 if args.quick else 2)
             timed(["eval", str(tmp / "eval" / "s0.mcap")])  # warm the file cache and numba's kernel cache
         if "export" in commands:
-            write_export_sessions(tmp / "export", export_s, *size)
+            write_export_sessions(tmp / "export", export_s, *size, sessions)
         argv = {"eval": lambda n: ["eval", str(tmp / "eval"), "-j", str(n)],
                 "export": lambda n: ["export", str(tmp / "export"), "--repo-id", "bench/corpus", "--root",
                                      str(tmp / f"ds{n}"), "-j", str(n), "--json"]}
@@ -192,17 +216,17 @@ def main() -> None:
         thread_counts = [int(t) for t in args.encoder_threads.split(",") if t.strip()] if "export" in commands else []
         with common.Load(args.busy):  # beside the timed commands only
             walls = best_walls(argv, commands, runs, tmp, figures)
-            figures.update(encoder_thread_figures(argv["export"], thread_counts, runs, tmp))
+            figures.update(encoder_thread_figures(argv["export"], thread_counts, runs, tmp, sessions))
         for command in commands:
             figures[f"corpus_speedup_2_workers_{command}"] = walls[f"{command}_wall_s_workers1"] / walls[f"{command}_wall_s_workers2"]
         figures["corpus_speedup_2_workers"] = min(figures[f"corpus_speedup_2_workers_{c}"] for c in commands)
         figures.update(walls)
         for command, seconds in (("eval", eval_s), ("export", export_s)):
             if command in commands:
-                figures[f"{command}_recorded_s"] = SESSIONS * seconds
+                figures[f"{command}_recorded_s"] = sessions * seconds
         if not args.no_ray:
-            figures.update(ray_overhead())
-            if "eval" in commands:
+            figures.update(ray_overhead(sessions))
+            if "eval" in commands and not args.quick:
                 figures["eval_ray_wall_s"] = timed(["eval", str(tmp / "eval"), "--ray", "-j", "2"])
     figures["load_avg_1min_after"] = round(os.getloadavg()[0], 2)
     figures["busy_processes"] = args.busy

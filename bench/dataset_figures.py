@@ -11,6 +11,10 @@ dataset, loaded back with lerobot, holds exactly the episodes marked y (by sourc
 each with next.success and next.done on its last frame only.
 
 `measure(folder)` gives both (bench/rollout.py calls it); everything is written under `folder`.
+
+JSON keys:
+    dataset_replay_ok   bool
+    filtered_export_ok  bool
 """
 
 from __future__ import annotations

@@ -16,6 +16,17 @@ rig, headless, through run_timed as `teleprev record --episodes 4 --episode-time
                                 episode's end minus preview_before_end_s): eats into the braking margin
     rest_before_end_ms_min      smallest time from the last arm command (at rest) to its episode's end
     reset_commands              commands stamped inside a reset (should be 0)
+
+JSON keys:
+    episode_timing_err_ms_max  float
+    episode_event_lag_ms_max   float
+    preview_lag_ms_max         float
+    rest_before_end_ms_min     float
+    preview_before_end_ms      float
+    engaged_episodes           int
+    episodes                   int
+    reset_commands             int
+    steal_ms                   float
 """
 
 from __future__ import annotations

@@ -25,6 +25,27 @@ Figures:
                         (LeRobot buffers an episode's frame values until save_episode, and so do we
                         its joint samples: memory follows the longest episode, not the session)
   rss_after_import_mb   the process after importing lerobot, before exporting
+
+--quick: a 6 s session at 320x240, exported four ways (ours, lerobot's encoder, AV1, two workers), two
+exports at a time; no backlog_realtime_x_workers1 and no memory figures (they need long sessions).
+
+JSON keys:
+    realtime_x                   float
+    realtime_x_with_startup      float
+    realtime_x_lerobot_encoder   float
+    realtime_x_av1               float
+    backlog_realtime_x_workers2  float
+    startup_s                    float
+    frames_per_s                 float
+    max_align_err_ms             float
+    image_err_ms                 float
+    held_frames                  int
+    psnr_db_min                  float
+    dataset_mb_per_min           float
+    psnr_db_min_av1              float
+    dataset_mb_per_min_av1       float
+    cores                        int
+    load_avg_at_start            float
 """
 
 from __future__ import annotations
@@ -45,9 +66,14 @@ ROOT = Path(__file__).resolve().parent.parent
 
 
 def make_sessions(folder: Path, quick: bool) -> dict[str, Path]:
-    from teleprev.export.synthetic import EpisodeSpec, SyntheticSession, write_session
+    from teleprev.export.synthetic import EpisodeSpec, SyntheticSession
 
-    speed_s, long_s = (20.0, 120.0) if quick else (60.0, 600.0)
+    if quick:
+        return {"speed": _write(folder, SyntheticSession((EpisodeSpec("pick_place", 3.0), EpisodeSpec("pour", 3.0)),
+                                                         width=320, height=240, seed=1)),
+                "short": _write(folder, SyntheticSession((EpisodeSpec("pick_place", 3.0),), width=320, height=240,
+                                                         seed=2), "short")}
+    speed_s, long_s = 60.0, 600.0
     specs = {
         "speed": SyntheticSession((EpisodeSpec("pick_place", speed_s / 2), EpisodeSpec("pour", speed_s / 2)),
                                   width=640, height=480, seed=1),
@@ -58,18 +84,22 @@ def make_sessions(folder: Path, quick: bool) -> dict[str, Path]:
                                  frame_bank=300, pause_s=0.2, seed=3),
         "long1": SyntheticSession((EpisodeSpec("pick_place", long_s),), width=640, height=480, frame_bank=300, seed=4),
     }
-    out = {}
-    for name, spec in specs.items():
-        path = folder / f"{name}-{int(sum(e.duration_s for e in spec.episodes))}s-{len(spec.episodes)}ep.mcap"
-        if not path.exists():
-            t = time.perf_counter()
-            tmp = path.with_suffix(".partial")
-            tmp.unlink(missing_ok=True)
-            write_session(tmp, spec)
-            tmp.rename(path)
-            print(f"wrote {path.name} in {time.perf_counter() - t:.0f} s", file=sys.stderr)
-        out[name] = path
-    return out
+    return {name: _write(folder, spec, name) for name, spec in specs.items()}
+
+
+def _write(folder: Path, spec, name: str = "speed") -> Path:
+    """The session `spec` in folder (kept from an earlier run with --keep)."""
+    from teleprev.export.synthetic import write_session
+
+    path = folder / f"{name}-{int(sum(e.duration_s for e in spec.episodes))}s-{len(spec.episodes)}ep-{spec.width}.mcap"
+    if not path.exists():
+        t = time.perf_counter()
+        tmp = path.with_suffix(".partial")
+        tmp.unlink(missing_ok=True)
+        write_session(tmp, spec)
+        tmp.rename(path)
+        print(f"wrote {path.name} in {time.perf_counter() - t:.0f} s", file=sys.stderr)
+    return path
 
 
 def min_psnr(session: Path, root: Path, samples: int = 60) -> float:
@@ -146,7 +176,7 @@ def run_child(session: Path | list[Path], out: Path, encoder: str = "teleprev", 
                            "1" if psnr else "", str(workers)],
                           capture_output=True, text=True, env=env, cwd=ROOT)
     if proc.returncode != 0:
-        raise SystemExit(f"export of {session.name} failed:\n{proc.stderr[-3000:]}")
+        raise SystemExit(f"export of {sessions[0].name} failed:\n{proc.stderr[-3000:]}")
     shutil.rmtree(root, ignore_errors=True)
     return json.loads(proc.stdout.strip().splitlines()[-1])
 
@@ -163,15 +193,26 @@ def main() -> None:
     try:
         sessions = make_sessions(folder, args.quick)
         load = os.getloadavg()[0]
-        speed = run_child(sessions["speed"], folder, psnr=True)
-        stock = run_child(sessions["speed"], folder, encoder="lerobot")
-        av1 = run_child(sessions["speed"], folder, codec="av1", psnr=True)
-        backlog = [sessions["speed"], sessions["short"]]
-        one = run_child(backlog, folder)
-        two = run_child(backlog, folder, workers=2)
-        short = run_child(sessions["short"], folder)
-        long = run_child(sessions["long"], folder)
-        long1 = run_child(sessions["long1"], folder)
+        if args.quick:  # every kind of export once, two at a time: a smoke run, not figures
+            from concurrent.futures import ThreadPoolExecutor
+
+            with ThreadPoolExecutor(2) as pool:
+                speed, stock, av1, two = pool.map(lambda kw: run_child(**kw), [
+                    dict(session=sessions["speed"], out=folder, psnr=True),
+                    dict(session=sessions["speed"], out=folder, encoder="lerobot"),
+                    dict(session=sessions["speed"], out=folder, codec="av1", psnr=True),
+                    dict(session=[sessions["speed"], sessions["short"]], out=folder, workers=2)])
+            one = short = long = long1 = None
+        else:
+            speed = run_child(sessions["speed"], folder, psnr=True)
+            stock = run_child(sessions["speed"], folder, encoder="lerobot")
+            av1 = run_child(sessions["speed"], folder, codec="av1", psnr=True)
+            backlog = [sessions["speed"], sessions["short"]]
+            one = run_child(backlog, folder)
+            two = run_child(backlog, folder, workers=2)
+            short = run_child(sessions["short"], folder)
+            long = run_child(sessions["long"], folder)
+            long1 = run_child(sessions["long1"], folder)
     finally:
         if args.keep is None:
             shutil.rmtree(folder, ignore_errors=True)
@@ -180,7 +221,6 @@ def main() -> None:
         "realtime_x_with_startup": round(speed["recorded_s"] / (speed["wall_s"] + speed["startup_s"]), 2),
         "realtime_x_lerobot_encoder": round(stock["realtime_x"], 2),
         "realtime_x_av1": round(av1["realtime_x"], 2),
-        "backlog_realtime_x_workers1": round(one["recorded_s"] / one["total_s"], 2),
         "backlog_realtime_x_workers2": round(two["recorded_s"] / two["total_s"], 2),
         "startup_s": round(speed["startup_s"], 2),
         "frames_per_s": round(speed["frames"] / speed["wall_s"], 1),
@@ -191,15 +231,19 @@ def main() -> None:
         "dataset_mb_per_min": round(speed["size_mb"] * 60 / speed["recorded_s"], 2),
         "psnr_db_min_av1": round(av1["psnr_db_min"], 1),
         "dataset_mb_per_min_av1": round(av1["size_mb"] * 60 / av1["recorded_s"], 2),
-        "peak_rss_mb": round(long["peak_rss_mb"], 1),
-        "peak_rss_mb_1min": round(short["peak_rss_mb"], 1),
-        "peak_rss_mb_10min_one_episode": round(long1["peak_rss_mb"], 1),
-        "rss_after_import_mb": round(long["rss_after_import_mb"], 1),
-        "long_session_s": round(long["recorded_s"], 1),
-        "realtime_x_long": round(long["realtime_x"], 2),
         "cores": os.cpu_count(),
         "load_avg_at_start": round(load, 2),
     }
+    if not args.quick:
+        figures |= {
+            "backlog_realtime_x_workers1": round(one["recorded_s"] / one["total_s"], 2),
+            "peak_rss_mb": round(long["peak_rss_mb"], 1),
+            "peak_rss_mb_1min": round(short["peak_rss_mb"], 1),
+            "peak_rss_mb_10min_one_episode": round(long1["peak_rss_mb"], 1),
+            "rss_after_import_mb": round(long["rss_after_import_mb"], 1),
+            "long_session_s": round(long["recorded_s"], 1),
+            "realtime_x_long": round(long["realtime_x"], 2),
+        }
     targets = {"realtime_x": ">= 10", "max_align_err_ms": f"<= {1000 / 30 / 2:.1f} (half a frame at 30 fps)",
                "psnr_db_min": ">= 30",
                "peak_rss_mb": "flat: ~ peak_rss_mb_1min"}

@@ -26,6 +26,14 @@ Figures:
   tracebacks_shown  runs that printed a Python traceback
   datasets_lost     exports after which the old dataset was neither intact nor replaced by the whole new one
 The machine is shared with other work: times are not figures here, only what happened.
+--quick: every kind of fault once (one signal each), a 3 s clean recording, exports of 1-2 s sessions.
+
+JSON keys:
+    faults_run        int
+    data_lost_s_max   float
+    silent_failures   int
+    tracebacks_shown  int
+    datasets_lost     int
 """
 
 from __future__ import annotations
@@ -385,7 +393,8 @@ def main() -> None:
     p.add_argument("--details", type=Path, help="write every fault's row to this JSON file")
     args = p.parse_args()
     rng = random.Random(args.seed)
-    n = dict(record_signal=2, full_disk=2, device=1, recover_signal=1, export_signal=1, export_disk=1, flip=6, cut=3) \
+    # --quick: every kind of fault once, each signal once (SIGKILL to record, SIGTERM to recover, SIGHUP to export)
+    n = dict(record_signal=1, full_disk=1, device=1, recover_signal=1, export_signal=1, export_disk=1, flip=2, cut=1) \
         if args.quick else dict(record_signal=8, full_disk=8, device=4, recover_signal=5, export_signal=3, export_disk=3,
                                 flip=100, cut=40)
     os.environ.setdefault("HF_HUB_OFFLINE", "1")
@@ -400,7 +409,8 @@ def main() -> None:
     with tempfile.TemporaryDirectory(prefix="teleprev-faults-") as tmp:
         work = Path(tmp)
         clean = work / "clean.mcap"
-        run = run_cli(["record", "--duration", "6", "--no-preview", "--engage-after", "0.5", "-o", clean], timeout=180)
+        run = run_cli(["record", "--duration", "3" if args.quick else "6", "--no-preview", "--engage-after", "0.5",
+                       "-o", clean], timeout=180)
         assert run.returncode == 0, run.stderr
         from tests.helpers.faults import chunk_spans
 
@@ -408,7 +418,7 @@ def main() -> None:
         clean_times = message_times(clean)
 
         for k in range(n["record_signal"]):
-            for sig in SIGNALS:
+            for sig in (signal.SIGKILL,) if args.quick else SIGNALS:
                 add(record_signal(work, len(rows), sig, rng.uniform(0.5, 3.5)))
         for k in range(n["full_disk"]):
             add(record_full_disk(work, k, rng.randrange(400_000, 2_500_000)))
@@ -417,14 +427,15 @@ def main() -> None:
         cut = work / "cut.mcap"
         cut.write_bytes(clean.read_bytes()[: int(clean.stat().st_size * 0.9)])
         for k in range(n["recover_signal"]):
-            for sig in SIGNALS:
+            for sig in (signal.SIGTERM,) if args.quick else SIGNALS:
                 add(recover_signal(work, len(rows), cut, sig, rng.uniform(0.05, 1.2)))
 
         from teleprev.export.synthetic import EpisodeSpec, SyntheticSession, write_session
 
-        s0 = write_session(work / "s0.mcap", SyntheticSession((EpisodeSpec("pour", 3.0),), seed=1))
-        s1 = write_session(work / "s1.mcap", SyntheticSession((EpisodeSpec("pour", 6.0),), seed=2))
-        s2 = write_session(work / "s2.mcap", SyntheticSession((EpisodeSpec("hang", 6.0),), seed=3))
+        short, long = (1.0, 2.0) if args.quick else (3.0, 6.0)
+        s0 = write_session(work / "s0.mcap", SyntheticSession((EpisodeSpec("pour", short),), seed=1))
+        s1 = write_session(work / "s1.mcap", SyntheticSession((EpisodeSpec("pour", long),), seed=2))
+        s2 = write_session(work / "s2.mcap", SyntheticSession((EpisodeSpec("hang", long),), seed=3))
         base = work / "base"
         run = run_cli(["export", s0, "--repo-id", "bench/faults", "--root", base], timeout=600)
         assert run.returncode == 0, run.stderr
@@ -436,7 +447,7 @@ def main() -> None:
         export_s = time.monotonic() - t0
         shutil.rmtree(timing_root)
         for k in range(n["export_signal"]):
-            for sig in SIGNALS:
+            for sig in (signal.SIGHUP,) if args.quick else SIGNALS:
                 workers = 2 if (len(rows) % 3 == 0) else 1
                 add(export_signal(work, len(rows), base, [s1, s2], sig, rng.uniform(0.3, export_s * 1.1), workers, 1, 2))
         for k in range(n["export_disk"]):

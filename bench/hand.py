@@ -19,6 +19,12 @@
     hand_stall_ms_max           the longest time a finger's command stays more than 0.2 rad (any of its
                                 joints) from a still target (within 0.02 rad of where it stopped) that is free
                                 of self-collision (the exact checker), over the same sessions
+
+JSON keys:
+    pose_rejected_frac          float
+    engage_missed_exit_nonzero  bool
+    hand_follow_r_min           float
+    hand_stall_ms_max           float
 """
 
 from __future__ import annotations

@@ -28,6 +28,30 @@ leap_sdk_session_ok holds for both; leap_command_rate_hz is the 1 ms session's (
 at 16 ms every read holds the bus about 17 ms, and the commands wait for it). emulator_conformance: the
 documented behaviours tests/devices/test_emulator_conformance.py checks through the real SDKs, counted as the
 tests that pass.
+
+JSON keys:
+    xarm_sdk_session_ok         bool
+    leap_sdk_session_ok         bool
+    camera_stream_ok            bool
+    xarm_command_rate_hz        float
+    leap_command_rate_hz        float
+    sdk_roundtrip_ms_p99        float
+    hw_faults_run               int
+    hw_faults_silent            int
+    hw_tracebacks               int
+    sdk_roundtrip_ms_median     float
+    session_s                   float
+    camera_frames_per_s         float
+    emulator_faults             int
+    wire_arrival_gap_ms_max     float
+    wire_arrival_gap_ms_p99     float
+    wire_targets_per_cycle_max  int
+    wire_speed_ratio_max        float
+    wire_accel_ratio_max        float
+    wire_jerk_ratio_max         float
+    leap_read_miss_frac         float
+    leap_faults                 int
+    emulator_conformance        int
 """
 
 from __future__ import annotations

@@ -7,10 +7,44 @@ Compares the compiled checker (numba kernels) with the fcl checker it replaced a
 vectorised-numpy version of the same separating-axis test, checks it against FCL on uniform random
 configurations, times the checker the pipeline runs (SelfCollisionChecker: compiled, FCL within the
 margin; its answers must equal FCL's exactly), and times what compiling costs: cold (empty kernel cache, in a fresh process), from
-the cache, and whether `teleprev --help` stays fast. The glove preparation (Pipeline.prepare_hands: decode,
+the cache (--quick: from the cache only), and whether `teleprev --help` stays fast. The glove preparation (Pipeline.prepare_hands: decode,
 checks, angles, retargeting, clip, and for the LEAP Hand the exact check) is timed with the numpy
 arithmetic (formats 1 and 2) and the compiled one (format 3, teleprev/kernels/glove.py), the two
 interleaved sample by sample: one sample as the live step prepares it, and a session's worth as eval does.
+
+JSON keys:
+    collision_check_us_p50                              float
+    collision_first_contact_us_p50                      float
+    collision_check_uniform_us_p50                      float
+    collision_first_contact_uniform_us_p50              float
+    compiled_batch_us_per_config                        float
+    pipeline_checker_us_p50                             float
+    pipeline_checker_uniform_us_p50                     float
+    fcl_collision_check_us_p50                          float
+    fcl_first_contact_us_p50                            float
+    numpy_vectorised_collision_us_p50                   float
+    numpy_vectorised_disagreements                      int
+    compiled_fk_us_p50                                  float
+    numpy_fk_us_p50                                     float
+    free_configs_timed                                  int
+    prepare_hand_us_p50_numpy                           float
+    prepare_hand_us_p50_compiled                        float
+    prepare_hand_speedup                                float
+    prepare_hands_batch_us_per_sample_numpy             float
+    prepare_hands_batch_us_per_sample_compiled          float
+    prepare_gripper_hand_us_p50_numpy                   float
+    prepare_gripper_hand_us_p50_compiled                float
+    prepare_gripper_hand_speedup                        float
+    prepare_gripper_hands_batch_us_per_sample_numpy     float
+    prepare_gripper_hands_batch_us_per_sample_compiled  float
+    compiled_vs_fcl_disagreements                       int
+    compiled_vs_fcl_margin_side                         int
+    compiled_vs_fcl_missed_contacts                     int
+    compiled_vs_fcl_label_disagreements                 int
+    compiled_vs_fcl_configs                             int
+    pipeline_checker_vs_fcl_disagreements               int
+    cached_import_and_first_call_s                      float
+    help_s                                              float
 """
 
 from __future__ import annotations
@@ -28,7 +62,6 @@ import common  # noqa: E402  (sets one-thread environment before numpy loads)
 import numpy as np  # noqa: E402
 
 ROOT = Path(__file__).resolve().parents[1]
-VENV_BIN = ROOT / ".venv" / "bin"
 
 # Run in a fresh interpreter: import the checker and answer one check, reporting the seconds taken.
 _FIRST_CALL = """
@@ -56,22 +89,23 @@ class NumpySat:
     def __init__(self, compiled):
         self.model = compiled.model
         self.margin = compiled.margin
-        links, shape_link = compiled._links, []
+        boxes = compiled.boxes  # teleprev.kernels.collision.BoxTable
+        links, shape_link = boxes.links, []
         for k, (_, start, stop) in enumerate(links):
             shape_link += [k] * (stop - start)
         pa, pb, lp = [], [], []
-        for p, (la, lb) in enumerate(compiled._pairs):
+        for p, (la, lb) in enumerate(boxes.pairs):
             for a in range(links[la, 1], links[la, 2]):
                 for b in range(links[lb, 1], links[lb, 2]):
                     pa.append(a), pb.append(b), lp.append(p)
         self.pa, self.pb, self.lp = np.array(pa), np.array(pb), np.array(lp)
-        self.n_pairs = len(compiled._pairs)
-        self.model_link = compiled._shape_link
-        local = np.zeros((len(compiled._shape_local), 4, 4))
-        local[:, :3], local[:, 3, 3] = compiled._shape_local, 1.0
+        self.n_pairs = len(boxes.pairs)
+        self.model_link = boxes.shape_link
+        local = np.zeros((len(boxes.shape_local), 4, 4))
+        local[:, :3], local[:, 3, 3] = boxes.shape_local, 1.0
         self.local = local
-        self.half = compiled._shape_size[:, :3]
-        self.reach2 = (compiled._shape_size[self.pa, 3] + compiled._shape_size[self.pb, 3] + self.margin) ** 2
+        self.half = boxes.shape_size[:, :3]
+        self.reach2 = (boxes.shape_size[self.pa, 3] + boxes.shape_size[self.pb, 3] + self.margin) ** 2
 
     def pairs(self, q: np.ndarray) -> np.ndarray:
         boxes = self.model.fk(q).world[self.model_link] @ self.local
@@ -106,23 +140,27 @@ def _subprocess_seconds(code: str, env: dict) -> list[float]:
     return [float(v) for v in out.stdout.split()]
 
 
-def compile_costs() -> dict:
-    """Cold and cached first-call cost in fresh processes, against a kernel cache of their own."""
-    with tempfile.TemporaryDirectory() as cache:
-        env = {**os.environ, "NUMBA_CACHE_DIR": cache}
-        cold_first, cold_warm = _subprocess_seconds(_FIRST_CALL, env)
-        cached_first, cached_warm = _subprocess_seconds(_FIRST_CALL, env)
+def compile_costs(quick: bool) -> dict:
+    """Cold and cached first-call cost in fresh processes, against a kernel cache of their own; with
+    `quick`, the cached cost only, from the project's cache (compiling every kernel takes minutes)."""
+    figures = {}
+    if quick:
+        cached_first, _ = _subprocess_seconds(_FIRST_CALL, dict(os.environ))
+    else:
+        with tempfile.TemporaryDirectory() as cache:
+            env = {**os.environ, "NUMBA_CACHE_DIR": cache}
+            cold_first, cold_warm = _subprocess_seconds(_FIRST_CALL, env)
+            cached_first, cached_warm = _subprocess_seconds(_FIRST_CALL, env)
+        figures |= {"first_compile_s": cold_first, "setup_warm_s": cold_first + cold_warm}
+    cli = Path(sys.executable).with_name("teleprev")  # the project's environment's command, as a user runs it
+    if not cli.exists():
+        sys.exit(f"bench/hotpath.py: no {cli}: run it with the project's environment (.venv/bin/python)")
     help_times = []
-    for _ in range(5):
+    for _ in range(2 if quick else 5):
         t = time.perf_counter()
-        subprocess.run([str(VENV_BIN / "teleprev"), "--help"], capture_output=True, check=True)
+        subprocess.run([str(cli), "--help"], capture_output=True, check=True)
         help_times.append(time.perf_counter() - t)
-    return {
-        "first_compile_s": cold_first,
-        "setup_warm_s": cold_first + cold_warm,
-        "cached_import_and_first_call_s": cached_first,
-        "help_s": float(np.median(help_times)),
-    }
+    return figures | {"cached_import_and_first_call_s": cached_first, "help_s": float(np.median(help_times))}
 
 
 def agreement(hand, fcl_checker, compiled, strict, pipeline_checker, n: int, rng) -> dict:
@@ -236,7 +274,7 @@ def main() -> None:
     }
     figures.update(prepare_hand_figures(quick, rng))
     figures.update(agreement(hand, fcl_checker, compiled, strict, pipeline_checker, 10_000 if quick else 100_000, rng))
-    figures.update(compile_costs())
+    figures.update(compile_costs(quick))
     targets = {
         "collision_check_us_p50": "<= 20 (collision-free configs: every pair examined)",
         "compiled_vs_fcl_disagreements": "0, or margin-side only",

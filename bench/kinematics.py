@@ -1,6 +1,27 @@
 """Foundation figures: FK (fast path vs pytorch-kinematics, batched), arm IK, exact self-collision.
 
     python bench/kinematics.py [--json] [--quick]
+
+JSON keys:
+    fk_single_us_p50              float
+    fk_pk_single_us_p50           float
+    fk_speedup_x                  float
+    fk_batch_cfg_per_s            float
+    fk_pk_batch_cfg_per_s         float
+    ik_ms_p50                     float
+    ik_ms_p99                     float
+    ik_converged_frac             float
+    ik_us_p50                     float
+    ik_compiled_us_p50            float
+    ik_compiled_us_p99            float
+    ik_compiled_speedup_x         float
+    arm_solve_us_p50              float
+    arm_solve_compiled_us_p50     float
+    arm_solve_compiled_speedup_x  float
+    ik_compiled_converged_frac    float
+    collision_check_us_p50        float
+    collision_free_configs        int
+    labels_per_s                  float
 """
 
 from __future__ import annotations
@@ -98,9 +119,10 @@ def main() -> None:
     ik_us = {False: [], True: []}
     ik_converged = {False: 0, True: 0}
     state = {False: (q_home, q_home), True: (q_home, q_home)}
+    retargeters = {False: numpy_arm, True: compiled_arm}  # keyed by: compiled?
     for k, wrist in enumerate(wrists):
-        for retargeter in ((numpy_arm, compiled_arm) if k % 2 else (compiled_arm, numpy_arm)):
-            c = retargeter.ik.compiled
+        for c in ((False, True) if k % 2 else (True, False)):
+            retargeter = retargeters[c]
             q, q_before = state[c]
             start = 2.0 * q - q_before
             t = time.perf_counter()

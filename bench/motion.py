@@ -5,17 +5,39 @@
 Records sim sessions of all five tasks through the real recording path (default LEAP rig: sim arm in
 servo mode, sim hand), each engaged after 2 s and switched back to preview 2 s before its end (so the
 controlled stop is in it), plus one session whose glove and suit are played back from recorded data
-(tests/fixtures/sim_v1.mcap through the replay.* plugins). Then `teleprev audit` measures every
+(tests/fixtures/sim_v1.mcap through the replay.* plugins); --quick: sessions of 6 s, of the first task and
+the played-back one. Then `teleprev audit` measures every
 command stream (divided differences on the command stamps; the sim hand's measured state too):
 
     arm_accel_max_ratio, arm_jerk_max_ratio, hand_accel_max_ratio   max over sessions, measured / limit
     hand_swept_colliding, hand_state_colliding                      command segments / state samples
-    tracking_lag_ms_p50    the shift that best lines the arm command up with the arm target, while
-                           executing past the engage ramp (median over sessions)
+    tracking_lag_ms_p50    how far the arm command lags the arm target: the shift that best lines them up,
+                           over the commands of steady ticks (not engaging or braking; the tick's flags on
+                           /command/tick), median over sessions
     trajectory_us_p50      the arm generator's cost per step (ruckig and the arithmetic around it: ArmGenerator.plan
                            and follow, or stop), timed while re-running a session
     stop_distance_rad_max  the longest controlled stop: joint travel from the last command before a
-                           stop began (preview, stale input, a quiet trigger) to rest
+                           stop began (a switch to preview, a stale target) to rest
+
+JSON keys:
+    arm_accel_max_ratio      float
+    arm_jerk_max_ratio       float
+    hand_accel_max_ratio     float
+    hand_swept_colliding     int
+    hand_state_colliding     int
+    tracking_lag_ms_p50      float
+    trajectory_us_p50        float
+    stop_distance_rad_max    float
+    arm_speed_max_ratio      float
+    hand_speed_max_ratio     float
+    sessions                 int
+    arm_commands             int
+    hand_commands            int
+    controlled_stops         int
+    trajectory_us_p99        float
+    audits_passed            int
+    hand_commands_colliding  int
+    commands_outside_limits  int
 """
 
 from __future__ import annotations
@@ -79,31 +101,49 @@ def stream(reader, topic):
     return np.array([m.stamp_ns for m in msgs], dtype=np.int64), np.array([m.positions for m in msgs])
 
 
+# the sender's reasons (teleprev/pipeline/planner.py) for commands that do not simply follow the target
+UNSTEADY = {"engaging", "stopping", "arm_stopping", "targets_stale", "commands_resumed", "arm_limit_braking",
+            "arm_limit_held", "halt"}
+STOPPING = {"stopping", "arm_stopping"}  # braking to rest: a switch to preview, or a target gone stale
+
+
+def command_flags(reader, stamps) -> list[set[str]]:
+    """The flags of the sender's tick (/command/tick, stamped as its commands) behind each command stamp."""
+    from teleprev import topics
+
+    flags = {m.payload.stamp_ns: set(m.payload.data.get("flags", [])) for m in reader.messages([topics.COMMAND_TICK])}
+    return [flags.get(t, {"no_tick"}) for t in stamps.tolist()]
+
+
 def tracking_lag_ms(path: Path) -> float | None:
-    """The time shift (ms) that best lines the arm commands up with the arm targets, past the engage ramp."""
+    """The time shift (ms) that best lines the arm commands up with the arm targets: the mean absolute joint
+    error between each command and the target interpolated that much earlier, least over shifts of -100
+    to 300 ms in 0.5 ms steps (negative: the command leads, as the sender's extrapolation of the target to
+    the tick's instant can make it), over the commands of steady ticks (following, not engaging or
+    braking). None where fewer than 50 commands are steady, or where the best shift is at either end of the
+    range (the lag is not in it)."""
     import numpy as np
 
     from teleprev import topics
     from teleprev.session.reader import SessionReader
 
     with SessionReader(path) as reader:
-        steady = {m.payload.stamp_ns for m in reader.messages([topics.STEP_REPORT])
-                  if m.payload.data.get("mode") == "execute" and not ({"engaging", "arm_stopping"} & set(m.payload.data.get("flags", [])))}
         tt, target = stream(reader, topics.ARM_TARGET)
         tc, command = stream(reader, topics.COMMAND_ARM)
-    keep = np.array([t in steady for t in tc.tolist()], dtype=bool)
-    if keep.sum() < 50 or len(tt) < 50:
+        flags = command_flags(reader, tc)
+    if len(tt) < 50:
+        return None
+    keep = np.array([not (f & UNSTEADY) for f in flags], dtype=bool) & (tc >= tt[0]) & (tc <= tt[-1])
+    if keep.sum() < 50:
         return None
     tc, command = tc[keep], command[keep]
-    t0 = tt[0]
-    target_s, command_s = (tt - t0) / 1e9, (tc - t0) / 1e9
-    best, best_err = 0.0, np.inf
-    for lag_ms in np.arange(0.0, 200.0, 0.5):
-        shifted = np.stack([np.interp(command_s - lag_ms / 1000, target_s, target[:, j]) for j in range(target.shape[1])], axis=1)
-        err = float(np.mean(np.abs(command - shifted)))
-        if err < best_err:
-            best, best_err = float(lag_ms), err
-    return best
+    target_s, command_s = (tt - tt[0]) / 1e9, (tc - tt[0]) / 1e9
+    lags_ms = np.arange(-100.0, 300.0, 0.5)
+    errors = [float(np.mean(np.abs(command - np.stack([np.interp(command_s - lag / 1000, target_s, target[:, j])
+                                                       for j in range(target.shape[1])], axis=1))))
+              for lag in lags_ms]
+    best = int(np.argmin(errors))
+    return None if best in (0, len(lags_ms) - 1) else float(lags_ms[best])
 
 
 def stop_distances(path: Path) -> list[float]:
@@ -114,9 +154,8 @@ def stop_distances(path: Path) -> list[float]:
     from teleprev.session.reader import SessionReader
 
     with SessionReader(path) as reader:
-        flags = {m.payload.stamp_ns: set(m.payload.data.get("flags", [])) for m in reader.messages([topics.STEP_REPORT])}
         tc, command = stream(reader, topics.COMMAND_ARM)
-    stopping = np.array([bool({"stopping", "arm_stopping", "idle_stop"} & flags.get(t, set())) for t in tc.tolist()])
+        stopping = np.array([bool(STOPPING & f) for f in command_flags(reader, tc)])
     out = []
     k = 0
     while k < len(tc):
@@ -165,13 +204,14 @@ def generator_cost_us(path: Path) -> list[float]:
 def main() -> None:
     p = common.parser(__doc__)
     args = p.parse_args()
-    seconds = 8.0 if args.quick else 14.0
+    seconds = 6.0 if args.quick else 14.0
+    tasks = TASKS[:1] if args.quick else TASKS
 
     from teleprev.evaluation.audit import audit_session
 
     with tempfile.TemporaryDirectory() as tmp:
         tmp = Path(tmp)
-        sessions = [record(tmp / f"{task}.mcap", None, task, seconds) for task in TASKS]
+        sessions = [record(tmp / f"{task}.mcap", None, task, seconds) for task in tasks]
         sessions.append(record(tmp / "replayed.mcap", replay_rig(tmp), "pick_place", seconds))
         audits = [audit_session(s) for s in sessions]
         lags = [lag for lag in (tracking_lag_ms(s) for s in sessions) if lag is not None]

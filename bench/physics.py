@@ -8,6 +8,13 @@ physics_realtime_x   simulated seconds per wall second, the slowest task: the xA
                      second of the process's CPU time (what a quiet core would give)
 render_fps           640x480 colour frames per wall second from the front camera, the world stepping
                      1/30 s between frames, on the same core (Mesa's llvmpipe held to one thread)
+
+JSON keys:
+    physics_realtime_x      float
+    render_fps              float
+    physics_realtime_x_cpu  float
+    core                    int
+    steal_ms                float
 """
 
 from __future__ import annotations

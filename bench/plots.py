@@ -1,12 +1,18 @@
 """`teleprev eval --plots` figures: how long the episode plots take per session.
 
-    python bench/plots.py [--json]
+    python bench/plots.py [--json] [--quick]
 
 Re-runs the fixture sessions (tests/fixtures/sim_v1.mcap and sim_v2.mcap: two episodes each, the
 Corrector changing most steps) once, then times plot_episodes on each:
 
     plot_s_per_session_max   the slowest session's plots (target: about 1 s)
     plot_s_per_episode_p50   median over the episodes
+
+--quick: sim_v1.mcap only.
+
+JSON keys:
+    plot_s_per_session_max  float
+    plot_s_per_episode_p50  float
 """
 
 from __future__ import annotations
@@ -28,7 +34,7 @@ def main() -> None:
     from teleprev.evaluation.plots import plot_episodes
     from teleprev.evaluation.reproduce import rerun_session
 
-    reruns = [rerun_session(path) for path in FIXTURES]
+    reruns = [rerun_session(path) for path in (FIXTURES[:1] if args.quick else FIXTURES)]
     plot_episodes(reruns[0], tempfile.mkdtemp())  # matplotlib's first figure (fonts, caches) is not a session's
     per_session, per_episode = {}, []
     with tempfile.TemporaryDirectory() as out:

@@ -14,6 +14,21 @@ the interpreter's start, the imports, numba's own start and loading the kernels 
 (the figures above run where a recording has done all that already).
 bit_identical is this fresh session's and every older format's fixture's (tests/fixtures/sim_v1..v3.mcap,
 each re-run with its own format's arithmetic): bit_identical_format<N> each, bit_identical all of them.
+
+JSON keys:
+    eval_realtime_x          float
+    bit_identical            bool
+    recorded_s               float
+    eval_wall_s              float
+    eval_warm_realtime_x     float
+    eval_process_realtime_x  float
+    eval_cpu_realtime_x      float
+    steps                    int
+    step_ms_p50              float
+    rerun_only_realtime_x    float
+    collision_after_frac     float
+    corrected_frac           float
+    busy_processes           int
 """
 
 from __future__ import annotations
@@ -34,7 +49,7 @@ def main() -> None:
     p.add_argument("--rig", default=None, help="rig file to record with (default: the all-sim LEAP rig)")
     p.add_argument("--busy", type=int, default=0, help="busy processes beside the evals (not the recording)")
     args = p.parse_args()
-    seconds = 10.0 if args.quick else 30.0
+    seconds = 6.0 if args.quick else 30.0
 
     from teleprev.evaluation.evaluate import evaluate
     from teleprev.live.record.session import RecordOptions, LiveSession

@@ -14,6 +14,16 @@ CPU, no pretrained backbone: tests/helpers/policies.py), then rolls it out for 2
 
 It also prints the figures of bench/episode_figures.py (episode_timing_err_ms_max) and
 bench/dataset_figures.py (dataset_replay_ok, filtered_export_ok) where those modules exist; null where not.
+--quick: episodes of 2.5 s, and not those figures (their benches' own quick runs measure them).
+
+JSON keys:
+    rollout_commands        int
+    rollout_audit_failures  int
+    policy_hz               float
+    command_gap_ms_max      float
+    actions_handed          int
+    frames_without_action   int
+    train_s                 float
 """
 
 from __future__ import annotations
@@ -96,7 +106,8 @@ def main() -> None:
     with tempfile.TemporaryDirectory(prefix="bench_rollout_") as tmp:
         folder = Path(tmp)
         figures = rollout(folder, 2, 2.5 if args.quick else 4.0)
-        figures.update(other_figures(folder))
+        if not args.quick:
+            figures.update(other_figures(folder))
     common.report("policy rollout on the sim rig (tiny ACT)", figures, TARGETS, args.json)
 
 

@@ -13,6 +13,22 @@ from inside the margin, zero-length and long ones.
     swept_step_us_p50 / _numpy   all swept calls of one hand step (median over steps)
     hand_step_us_p50 / _numpy    Motion.hand_step with either check (compiled: both segments of a
                                  command in one kernel call, SweptCheck.command_free)
+
+JSON keys:
+    swept_us_p50                               float
+    swept_us_p50_numpy                         float
+    swept_step_us_p50                          float
+    swept_step_us_p50_numpy                    float
+    hand_step_us_p50                           float
+    hand_step_us_p50_numpy                     float
+    swept_step_us_p99                          float
+    swept_step_us_p99_numpy                    float
+    swept_random_us_p50                        float
+    swept_random_us_p50_numpy                  float
+    swept_recorded_steps                       int
+    swept_recorded_calls                       int
+    swept_compiled_vs_numpy_disagreements      int
+    hand_step_compiled_vs_numpy_disagreements  int
 """
 
 from __future__ import annotations

@@ -4,7 +4,7 @@ glove and suit) into teleprev's XR page, while `teleprev record` (a process of i
 session on the simulated robot (rigs/webxr_sim.toml). The left hand's pinch engages the robot, as an operator's would.
 
     python bench/webxr.py --json             # about 45 s: 1100 XR frames (the headless browser runs at 60 Hz)
-    python bench/webxr.py --quick            # 300 frames
+    python bench/webxr.py --quick            # 120 frames
 
 Figures: real_browser (Chromium launched, the page in an immersive-ar session under IWER), xr_frames (frames
 the page sent), joint_err_mm_max (the recorded xr_left/xr_right joints against what the page sent, every
@@ -12,6 +12,18 @@ joint of every frame), wrist_err_mm_max (the recorded wrist, back in the XR spac
 frame_loss_frac (frames the page numbered that the file does not hold), browser_to_step_ms_p50 (from the
 page sending a frame to the pipeline step on it being done, both clocks this machine's), commands_sent
 (arm commands recorded while executing).
+
+JSON keys:
+    real_browser            bool
+    xr_frames               int
+    joint_err_mm_max        float
+    wrist_err_mm_max        float
+    frame_loss_frac         float
+    browser_to_step_ms_p50  float
+    commands_sent           int
+    recorded_frames         int
+    frames_numbered         int
+    browser_to_step_ms_p99  float
 """
 
 from __future__ import annotations
@@ -37,7 +49,7 @@ from tests.helpers.xr_page import webxr_rig  # noqa: E402
 
 def main() -> None:
     args = parser(__doc__.split("\n\n")[0]).parse_args()
-    frames = 300 if args.quick else 1100
+    frames = 120 if args.quick else 1100
     motion = recorded_motion(frames)
     with tempfile.TemporaryDirectory() as tmp:
         tmp = Path(tmp)
