@@ -161,10 +161,10 @@ def dex_retargeting(seconds: float) -> dict:
 
 def at_loop_priority(fn, *args):
     """(fn(*args), its thread's priority): run on a thread at the session loop's priority
-    (teleprev/live/core/thread_priority.py), as the live steps run; the busy processes stay at the default."""
+    (teleprev/thread_priority.py), as the live steps run; the busy processes stay at the default."""
     import threading
 
-    from teleprev.live.core.thread_priority import raise_this_thread
+    from teleprev.thread_priority import raise_this_thread
 
     out = {}
 

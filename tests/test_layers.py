@@ -20,7 +20,8 @@ ROOT = Path(__file__).resolve().parents[1]
 # (live's rooms) belongs to its own entry, not to its parent's.
 LAYERS: list[tuple[str, ...]] = [
     ("teleprev.errors", "teleprev.paths", "teleprev.config", "teleprev.numeric_platform", "teleprev.transforms",
-     "teleprev.clock", "teleprev.topics", "teleprev.messages", "teleprev.status", "teleprev.corpus", "teleprev.kernels"),
+     "teleprev.clock", "teleprev.topics", "teleprev.messages", "teleprev.status", "teleprev.corpus", "teleprev.kernels",
+     "teleprev.thread_priority"),
     ("teleprev.robot", "teleprev.human", "teleprev.session", "teleprev.world"),
     ("teleprev.devices", "teleprev.retarget", "teleprev.noncollision", "teleprev.emulators"),
     ("teleprev.pipeline",),

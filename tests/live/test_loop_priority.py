@@ -6,7 +6,7 @@ import time
 from pathlib import Path
 
 from teleprev.live.record.session import LiveSession, RecordOptions
-from teleprev.live.core.thread_priority import LOOP_NICE
+from teleprev.thread_priority import LOOP_NICE
 from teleprev.session.reader import SessionReader
 
 

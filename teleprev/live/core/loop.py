@@ -45,7 +45,7 @@ from teleprev.live.core.controls import (Control, DiscardEpisode, Engage, EStop,
 from teleprev.live.core.episodes import EpisodeTracker
 from teleprev.live.core.gate import ExecuteGate, GateState
 from teleprev.live.core.relay import CommandRelay
-from teleprev.live.core.thread_priority import raise_this_thread
+from teleprev.thread_priority import raise_this_thread
 
 _STOP = object()
 
