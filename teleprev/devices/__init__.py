@@ -22,6 +22,7 @@ from teleprev.devices.polled import DeviceFault, JointLimits, PolledActuator, Po
 from teleprev.devices.registry import GROUP, available, load_plugin
 from teleprev.devices.servo_limits import FAULT_TOLERANCE, ServoStreamRule, ServoViolation
 from teleprev.devices.runner import ActuatorPort, DeviceRunner, RunnerStats, Sink, default_gap_s
+from teleprev.thread_priority import raise_this_thread
 from teleprev.errors import (ConfigError, DeviceError, DeviceStartError, SessionError, TeleprevError,
                              describe_exception)
 from teleprev.human import smplx
@@ -60,6 +61,7 @@ __all__ = [
     "DeviceFault", "JointLimits", "PolledActuator", "PolledSettings", "FAULT_TOLERANCE", "ServoStreamRule", "ServoViolation",
     # running and finding plugins
     "ActuatorPort", "DeviceRunner", "RunnerStats", "Sink", "default_gap_s", "GROUP", "available", "load_plugin",
+    "raise_this_thread",  # a plugin's own receiving thread, at the session loop's priority
     # samples, time and topics
     "Event", "ImageSample", "JointSample", "Logged", "PoseSample", "Sample",
     "ClockSync", "SessionClock", "KIND_TOPICS", "device_topic", "parse_device_topic",

@@ -30,6 +30,7 @@ import numpy as np
 
 from teleprev.devices.contract import Actuator, Device
 from teleprev.errors import DeviceError, DeviceStartError, describe_exception
+from teleprev.thread_priority import raise_this_thread
 from teleprev.messages import Event, JointSample, PoseSample, Sample
 from teleprev import topics
 from teleprev.clock import SessionClock
@@ -118,6 +119,7 @@ class DeviceRunner:
         self._lock = threading.Lock()
         self._stop = threading.Event()
         self._thread: threading.Thread | None = None
+        self.priority = ""  # the reading thread's nice value once it runs, or why it could not be raised
         self.connected = False
         self._state = "connecting"
         self._received = 0
@@ -162,6 +164,8 @@ class DeviceRunner:
 
     # ---- the device thread -----------------------------------------------------------------------
     def _run(self) -> None:
+        # At the session loop's priority: a sample this thread has not handed on ages behind busy processes.
+        self.priority = raise_this_thread(thread=f"device {self.name}'s runner")
         try:
             while not self._stop.is_set():
                 if not self.connected:

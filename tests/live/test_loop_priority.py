@@ -1,5 +1,6 @@
 """The session loop's thread runs at nice -10 where the machine lets it (root here, as in CI), so that busy
-processes beside a session delay its steps less; the session says which it got."""
+processes beside a session delay its steps less; the session says which it got. The threads that read the
+inputs take the same (tests/devices/test_input_priority.py); the recorder's writer does not."""
 
 import os
 import time
@@ -23,7 +24,7 @@ def test_the_loop_thread_takes_its_nice_value_and_the_session_records_it(tmp_pat
         while not rec.loop.priority:
             time.sleep(0.01)
         assert _nice(rec.loop._thread.native_id) == LOOP_NICE
-        assert _nice(rec.runners["glove"]._thread.native_id) == 0  # only the loop's thread
+        assert _nice(rec.recorder._thread.native_id) == 0  # the loop's and the inputs' threads only
     finally:
         rec.stop()
     with SessionReader(tmp_path / "s.mcap") as reader:

@@ -31,7 +31,7 @@ from pythonosc.osc_packet import OscPacket
 
 from teleprev_devices.fanout import Fanout, acquire as acquire_shared, release as release_shared
 from teleprev_devices.vmc.unity import KNOWN_BONES
-from teleprev.devices import ClockSync, DeviceStartError, SessionClock, describe_exception
+from teleprev.devices import ClockSync, DeviceStartError, SessionClock, describe_exception, raise_this_thread
 
 _MAX_DATAGRAM = 65535
 # Linux reports the datagrams its receive buffer had no room for (a running total) with each datagram
@@ -124,6 +124,7 @@ class VmcReceiver:
             except OSError:
                 pass  # no overrun count here; sequence gaps still show what went missing
         self._sock.settimeout(0.1)
+        self.priority = ""  # the receiving thread's nice value once it runs, or why it could not be raised
         self._thread = threading.Thread(target=self._run, name=f"vmc-{self.port}", daemon=True)
         self._thread.start()
 
@@ -134,6 +135,8 @@ class VmcReceiver:
 
     # ---- the receiving thread --------------------------------------------------------------------
     def _run(self) -> None:
+        # At the session loop's priority: datagrams wait in the socket while this thread waits for a CPU.
+        self.priority = raise_this_thread(thread=self.where)
         try:
             while not self._stop.is_set():
                 try:

@@ -28,7 +28,8 @@ from pathlib import Path
 
 import numpy as np
 
-from teleprev.devices import ClockSync, DeviceError, DeviceStartError, OperatorLink, SessionClock, describe_exception
+from teleprev.devices import (ClockSync, DeviceError, DeviceStartError, OperatorLink, SessionClock, describe_exception,
+                              raise_this_thread)
 from teleprev_devices.fanout import Fanout, acquire as acquire_shared, release as release_shared
 from teleprev_devices.webxr import certificate, wire
 
@@ -103,6 +104,7 @@ class XrServer:
         started = threading.Event()
         failure: list[str] = []
         self.port = port
+        self.priority = ""  # the server thread's nice value once it runs, or why it could not be raised
         self._thread = threading.Thread(target=self._run, args=(port, started, failure), name=f"webxr-{port}", daemon=True)
         self._thread.start()
         started.wait(10.0)  # (set when serving, or when it could not)
@@ -131,6 +133,8 @@ class XrServer:
 
     # ---- the server thread -----------------------------------------------------------------------
     def _run(self, port: int, started: threading.Event, failure: list[str]) -> None:
+        # At the session loop's priority: the page's frames wait in the socket while this thread waits for a CPU.
+        self.priority = raise_this_thread(thread=self.where)
         try:
             asyncio.run(self._serve(port, started, failure))
         except BaseException as exc:  # a bug here: the devices must hear of it (they raise, the runner reopens)
