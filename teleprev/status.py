@@ -31,6 +31,16 @@ class LoopSnapshot:
     dropped: int = 0
     fault: str = ""  # why the session stays in preview until the operator engages
     camera: Any = None  # the latest ImageSample of the first camera heard from, for the preview
+    input_age_ms: float = 0.0  # how old the sample the last step took was then (session clock - its stamp)
+    stale_ms: float = 0.0  # the pipeline's stale limit: input older than this holds the last command (0: none)
+
+    @property
+    def input_old(self) -> bool:
+        """The last step's input was old: a third of the stale limit or more (a busy machine, a slow link)."""
+        return self.stale_ms > 0 and self.input_age_ms >= self.stale_ms * OLD_INPUT_FRAC
+
+
+OLD_INPUT_FRAC = 1 / 3  # of the stale limit: 50 ms at 150, the age issue 42 holds a glove's samples to
 
 
 @dataclass(frozen=True)

@@ -83,6 +83,11 @@ def episode_line(snap: LoopSnapshot, now_ns: int, hints: tuple[str, ...] = ()) -
     line = Text(f"{ep}    session {session_s:7.1f} s    commands sent {snap.commands_sent}")
     if snap.dropped:
         line.append(f"    dropped {snap.dropped}", style="bold red")
+    if snap.input_old:
+        stale = snap.input_age_ms > snap.stale_ms
+        line.append(f"\ninput {snap.input_age_ms:.0f} ms old when stepped "
+                    + ("(stale: the robot holds)" if stale else f"(the robot holds at {snap.stale_ms:.0f} ms)")
+                    + ": the machine is busy or the link slow", style="bold red" if stale else "yellow")
     if snap.message:
         line.append(f"\n{snap.message}", style="yellow")
     for hint in hints:  # a device waiting for the operator (the XR page's URL until the page streams)

@@ -138,7 +138,8 @@ class SessionLoop:
                                command_errors=self.relay.errors)
         self.episodes = EpisodeTracker()
         self.gate = ExecuteGate()
-        self.snapshot = LoopSnapshot(session_started_ns=clock.now_ns())
+        self.snapshot = LoopSnapshot(session_started_ns=clock.now_ns(),
+                                     stale_ms=driver.pipeline.cfg.stale_ms if driver is not None else 0.0)
         self._camera_topic: str | None = None
         self._last_ns = 0
         self._thread: threading.Thread | None = None
@@ -271,6 +272,7 @@ class SessionLoop:
         if self.driver is None or self.failure:
             return
         started = time.perf_counter_ns()
+        age_ns = self.clock.now_ns() - getattr(payload, "stamp_ns", t)  # when the step takes it
         out = self.driver.feed(msg)
         if self.frames is not None and sample.topic == self.driver.topics.arm:
             tf = self.frames.sample(self.driver, payload)
@@ -289,6 +291,7 @@ class SessionLoop:
             measured_arm=pipeline.measured(latest.get(self.driver.topics.arm), pipeline.arm_names),
             measured_effector=pipeline.measured(latest.get(self.driver.topics.effector), pipeline.effector_names),
             commands_sent=sum(self.stats.commands_sent.values()), dropped=sum(self.stats.dropped.values()),
+            input_age_ms=age_ns / 1e6,
         )
 
     def _pass_updates(self) -> None:
