@@ -29,6 +29,7 @@ from teleprev.human import smplx
 from teleprev.messages import Event, ImageSample, JointSample, Logged, PoseSample, Sample
 from teleprev.robot.effectors import EFFECTORS, EndEffector, end_effector
 from teleprev.topics import KIND_TOPICS, device_topic, parse_device_topic
+from teleprev.world import places as world_places
 
 if TYPE_CHECKING:
     from teleprev.robot import geometry as robot_geometry
@@ -68,6 +69,6 @@ __all__ = [
     # errors
     "ConfigError", "DeviceError", "DeviceStartError", "SessionError", "TeleprevError", "describe_exception",
     # what built-in plugins use: SMPL-X names, rotations, the robot, the end-effector table, recorded sessions
-    "smplx", "transforms", "EFFECTORS", "EndEffector", "end_effector",
+    "smplx", "transforms", "EFFECTORS", "EndEffector", "end_effector", "world_places",
     "RobotModel", "load_robot", "robot_geometry", "SessionReader",
 ]

@@ -1,8 +1,10 @@
 """What stands on the table for each task, as rigid bodies with mass and friction, drawn from a seed.
 
-The positions are the kinematic sim rig's (devices/teleprev_devices/sim/tasks.py): metres from the
-operator's resting wrist in the task frame, mapped into the robot base frame through `anchor` (the TCP at
-the arm's home pose), with the same nominal places and jitter. The robot base stands on the table top
+The positions are the sim rig's spots (teleprev/world/places.py, which the kinematic sim's task scripts
+read too): metres from the operator's resting wrist in the task frame, mapped into the robot base frame
+through `anchor` (the TCP at the arm's home pose), with the same jitter. A layout drawn for the simulated
+operator's episode takes the spots its script drew (`task_layout(..., spots=...)`), so the objects stand
+where the operator reaches. The robot base stands on the table top
 (z = 0). Cups and the bowl are hollow (a floor and a ring of tapered wall plates) so that cups nest and
 hold the pour's contents; the spoon has a loop at the end of its handle that goes over the peg.
 """
@@ -14,9 +16,7 @@ from typing import Literal
 
 import numpy as np
 
-TASKS = ("pick_place", "hang", "pour", "box_rotation", "cup_stack")
-# The TCP of the LEAP Hand rig at the sim arm's home pose, in the robot base frame (the sim world's anchor).
-DEFAULT_ANCHOR = (0.405, 0.0, 0.30)
+from teleprev.world.places import BOX_YAW, DEFAULT_ANCHOR, PEG_HEIGHT, SPOON_YAW, SPOTS, TASKS
 
 # Colours (RGBA 0..1), the sim camera's BGR colours turned around.
 _CUP_RGBA = ((0.78, 0.24, 0.16, 1.0), (0.16, 0.47, 0.78, 1.0), (0.24, 0.67, 0.24, 1.0))
@@ -106,7 +106,6 @@ PEG_STAND = Shape("box", (0.03, 0.03, 0.26), 1.0, 0.8, (0.55, 0.35, 0.16, 1.0))
 PEG = Shape("box", (0.07, 0.012, 0.012), 0.05, 0.8, (0.55, 0.35, 0.16, 1.0))
 TARGET = Shape("box", (0.10, 0.10, 0.002), 0.01, 0.5, (0.3, 0.8, 0.3, 0.6))
 POUR_BALLS = 10
-PEG_HEIGHT = 0.22  # the peg's axis above the table top
 
 
 def _coloured(shape: Shape, i: int) -> Shape:
@@ -118,13 +117,23 @@ def _jitter(rng: np.random.Generator, scale: float = 0.02) -> np.ndarray:
 
 
 class _Placer:
-    def __init__(self, anchor: tuple[float, float, float], rng: np.random.Generator):
+    def __init__(self, task: str, anchor: tuple[float, float, float], rng: np.random.Generator,
+                 given: dict[str, tuple[float, float, float]]):
+        self.task = task
         self.anchor = np.asarray(anchor, dtype=float)
         self.rng = rng
+        self.given = given
 
-    def xy(self, x: float, y: float, jitter: float = 0.02) -> np.ndarray:
-        """A task-frame spot (from the resting wrist) with the sim's jitter, in the robot base frame."""
-        return self.anchor[:2] + np.array([x, y]) + _jitter(self.rng, jitter)
+    def xy(self, name: str) -> np.ndarray:
+        """An object's spot (places.SPOTS) in the robot base frame: the given one, else drawn with its jitter."""
+        if name in self.given:
+            return self.anchor[:2] + np.asarray(self.given[name][:2], dtype=float)
+        s = SPOTS[self.task][name]
+        return self.anchor[:2] + np.array([s.x, s.y]) + _jitter(self.rng, s.jitter)
+
+    def yaw(self, name: str, drawn) -> float:
+        """The given spot's yaw, else `drawn()`."""
+        return float(self.given[name][2]) if name in self.given else float(drawn())
 
 
 def _at(xy: np.ndarray, z: float) -> tuple[float, float, float]:
@@ -132,22 +141,22 @@ def _at(xy: np.ndarray, z: float) -> tuple[float, float, float]:
 
 
 def _pick_place(p: _Placer) -> tuple[Placed, ...]:
-    cup, target = p.xy(0.10, -0.10), p.xy(0.12, 0.14)
+    cup, target = p.xy("cup"), p.xy("target")
     return (Placed("cup", _coloured(CUP, 0), _at(cup, 0.0)),
             Placed("target", TARGET, _at(target, 0.001), fixed=True, collides=False))
 
 
 def _hang(p: _Placer) -> tuple[Placed, ...]:
-    spoon, peg = p.xy(0.10, -0.12), p.xy(0.17, 0.12, 0.01)
+    spoon, peg = p.xy("spoon"), p.xy("peg")
     return (
-        Placed("spoon", SPOON, _at(spoon, SPOON.size[2] / 2), 0.15),
+        Placed("spoon", SPOON, _at(spoon, SPOON.size[2] / 2), p.yaw("spoon", lambda: SPOON_YAW)),
         Placed("peg_stand", PEG_STAND, (float(peg[0] + 0.03), float(peg[1]), PEG_STAND.size[2] / 2), fixed=True),
         Placed("peg", PEG, (float(peg[0] - 0.005), float(peg[1]), PEG_HEIGHT), fixed=True),
     )
 
 
 def _pour(p: _Placer) -> tuple[Placed, ...]:
-    cup, bowl = p.xy(0.08, -0.12), p.xy(0.15, 0.10)
+    cup, bowl = p.xy("cup"), p.xy("bowl")
     objects = [Placed("cup", _coloured(CUP, 1), _at(cup, 0.0)), Placed("bowl", BOWL, _at(bowl, 0.0))]
     # The contents: balls in two rings and a column inside the cup, clear of each other and of its walls.
     r, floor = BALL.size[0], CUP.size[3]
@@ -161,12 +170,12 @@ def _pour(p: _Placer) -> tuple[Placed, ...]:
 
 
 def _box_rotation(p: _Placer) -> tuple[Placed, ...]:
-    box = p.xy(0.15, 0.0)
-    return (Placed("box", BOX, _at(box, BOX.size[2] / 2), float(p.rng.uniform(-0.2, 0.2))),)
+    box = p.xy("box")
+    return (Placed("box", BOX, _at(box, BOX.size[2] / 2), p.yaw("box", lambda: p.rng.uniform(-BOX_YAW, BOX_YAW))),)
 
 
 def _cup_stack(p: _Placer) -> tuple[Placed, ...]:
-    spots = [p.xy(0.08, -0.16), p.xy(0.15, -0.02), p.xy(0.10, 0.15)]
+    spots = [p.xy(f"cup{i + 1}") for i in range(3)]
     return tuple(Placed(f"cup{i + 1}", _coloured(CUP, i), _at(xy, 0.0))
                  for i, xy in enumerate(spots))
 
@@ -175,10 +184,15 @@ _LAYOUTS = {"pick_place": _pick_place, "hang": _hang, "pour": _pour, "box_rotati
             "cup_stack": _cup_stack}
 
 
-def task_layout(task: str, seed: int, anchor: tuple[float, float, float] = DEFAULT_ANCHOR) -> Layout:
-    """The scene of `task` drawn from `seed` (the same seed gives the same layout)."""
+def task_layout(task: str, seed: int, anchor: tuple[float, float, float] = DEFAULT_ANCHOR,
+                spots: dict[str, tuple[float, float, float]] | None = None) -> Layout:
+    """The scene of `task` drawn from `seed` (the same seed gives the same layout). `spots` (name -> task-frame
+    x, y and yaw, as a sim operator's script drew them) replace the draws of the objects they name."""
     if task not in _LAYOUTS:
         raise ValueError(f"unknown task {task!r} (expected {', '.join(TASKS)})")
+    unknown = sorted(set(spots or {}) - set(SPOTS[task]))
+    if unknown:
+        raise ValueError(f"spots {unknown} are not the {task} task's ({', '.join(SPOTS[task])})")
     rng = np.random.default_rng(seed)
     anchor = tuple(float(v) for v in anchor)
-    return Layout(task, int(seed), anchor, _LAYOUTS[task](_Placer(anchor, rng)))
+    return Layout(task, int(seed), anchor, _LAYOUTS[task](_Placer(task, anchor, rng, dict(spots or {}))))

@@ -23,11 +23,9 @@ import numpy as np
 from teleprev.robot.effectors import end_effector
 from teleprev.world.build import Compiled, compile_world
 from teleprev.world.layout import Layout
+from teleprev.world.places import ARM_HOME
 
 DEFAULT_RATE_HZ = 500.0
-# The sim arm's default home (joint1..joint6): the palm forward at about (0.40, 0, 0.30) m, fingers 20
-# degrees down, the pose the layout's anchor is measured at.
-ARM_HOME = (0.0, -0.27, -0.11, 0.0, -0.85, -1.571)
 
 
 @dataclass(frozen=True)

@@ -15,17 +15,16 @@ import re
 
 import numpy as np
 
-from teleprev.devices import DeviceContext, DeviceError, JointSample, ServoStreamRule
+from teleprev.devices import DeviceContext, DeviceError, JointSample, ServoStreamRule, world_places
 from teleprev_devices.sim.actuator import ActuatorSettings, SimActuator
 from teleprev_devices.sim.device import timing
-from teleprev_devices.sim.world import DEFAULT_HOME
 
 _ARM_JOINT = re.compile(r"joint\d+$")
 
 
 @timing(rate_hz=100.0, latency_ms=1.0, jitter_ms=0.2, clock_offset_s=52.0, clock_drift_ppm=8.0)
 class ArmSettings(ActuatorSettings):
-    home: tuple[float, ...] = DEFAULT_HOME  # joint1..: palm forward at about (0.40, 0, 0.30) m
+    home: tuple[float, ...] = world_places.ARM_HOME  # joint1..: palm forward at about (0.40, 0, 0.30) m
     max_velocity: float = 0.0  # rad/s for every joint; 0: the URDF's velocity limits
     max_acceleration: float = 10.0  # rad/s^2: commands beyond this (+10%) fault the controller
     max_jerk: float = 500.0  # rad/s^3: likewise

@@ -14,10 +14,11 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from teleprev.devices import world_places
 from teleprev_devices.sim import grasps
 
-TABLE_Z = -0.30
-TASKS = ("pick_place", "hang", "pour", "box_rotation", "cup_stack")
+TABLE_Z = world_places.TABLE_Z
+TASKS = world_places.TASKS
 
 # Colours are BGR (OpenCV).
 CUP_COLOURS = ((40, 60, 200), (200, 120, 40), (60, 170, 60))
@@ -52,10 +53,22 @@ class Script:
     task: str
     phases: tuple[Phase, ...]
     objects: tuple[SceneObject, ...] = field(default_factory=tuple)
+    spots: dict[str, tuple[float, float, float]] = field(default_factory=dict)  # name -> x, y, yaw as drawn
 
 
 def _v(*xs: float) -> np.ndarray:
     return np.array(xs, dtype=float)
+
+
+def _spot(b: "_Builder", task: str, name: str) -> np.ndarray:
+    """An object's place (world_places.SPOTS) with this repetition's jitter."""
+    s = world_places.spot(task, name)
+    return _v(s.x, s.y, 0) + b.jitter(s.jitter)
+
+
+def _spots(**xy_yaw) -> dict[str, tuple[float, float, float]]:
+    """The spots a script drew, for the physics world's layout: name=(xy, yaw)."""
+    return {name: (float(xy[0]), float(xy[1]), float(yaw)) for name, (xy, yaw) in xy_yaw.items()}
 
 
 class _Builder:
@@ -109,20 +122,21 @@ def _place(b: _Builder, target: np.ndarray, place_z: float, yaw: float) -> None:
 
 def pick_place(rng: np.random.Generator, rest: np.ndarray) -> Script:
     b = _Builder(rng)
-    cup = _v(0.10, -0.10, 0) + b.jitter()
-    target = _v(0.12, 0.14, 0) + b.jitter()
+    cup = _spot(b, "pick_place", "cup")
+    target = _spot(b, "pick_place", "target")
     grasp_z = TABLE_Z + 0.05
     _pick(b, cup, grasp_z, rng.uniform(-0.25, 0.0), squeeze=rng.uniform(0.25, 0.45))
     _place(b, target, grasp_z, rng.uniform(0.0, 0.3))
     _rest(b, rest)
-    return Script("pick_place", tuple(b.phases), (_cup("cup", cup, CUP_COLOURS[0]),))
+    return Script("pick_place", tuple(b.phases), (_cup("cup", cup, CUP_COLOURS[0]),),
+                  _spots(cup=(cup, 0.0), target=(target, 0.0)))
 
 
 def hang(rng: np.random.Generator, rest: np.ndarray) -> Script:
     b = _Builder(rng)
-    spoon = _v(0.10, -0.12, 0) + b.jitter()
-    peg = _v(0.17, 0.12, 0) + b.jitter(0.01)
-    peg_z = TABLE_Z + 0.22
+    spoon = _spot(b, "hang", "spoon")
+    peg = _spot(b, "hang", "peg")
+    peg_z = TABLE_Z + world_places.PEG_HEIGHT
     down = _v(-1.2, 0.35, 0)  # palm turned down over the spoon, fingers pointing down a little more
     c = rng.uniform(0.5, 0.95)
     b.add("reach", 1.1, spoon + _v(-0.04, -0.01, TABLE_Z + 0.11), down, grasps.open_hand(0.2), hand_window=(0.3, 1.0))
@@ -137,17 +151,18 @@ def hang(rng: np.random.Generator, rest: np.ndarray) -> Script:
     b.add("retreat", 0.6, peg + _v(-0.13, -0.03, peg_z + 0.03), _v(0, 0, 0))
     _rest(b, rest)
     objects = (
-        SceneObject("spoon", "box", (0.16, 0.025, 0.012), (spoon[0], spoon[1], TABLE_Z + 0.006), 0.15, (190, 190, 200)),
+        SceneObject("spoon", "box", (0.16, 0.025, 0.012), (spoon[0], spoon[1], TABLE_Z + 0.006), world_places.SPOON_YAW,
+                    (190, 190, 200)),
         SceneObject("peg_stand", "box", (0.03, 0.03, 0.26), (peg[0] + 0.03, peg[1], TABLE_Z + 0.13), 0.0, (40, 90, 140), False),
         SceneObject("peg", "box", (0.07, 0.012, 0.012), (peg[0] - 0.005, peg[1], peg_z), 0.0, (40, 90, 140), False),
     )
-    return Script("hang", tuple(b.phases), objects)
+    return Script("hang", tuple(b.phases), objects, _spots(spoon=(spoon, world_places.SPOON_YAW), peg=(peg, 0.0)))
 
 
 def pour(rng: np.random.Generator, rest: np.ndarray) -> Script:
     b = _Builder(rng)
-    cup = _v(0.08, -0.12, 0) + b.jitter()
-    bowl = _v(0.15, 0.10, 0) + b.jitter()
+    cup = _spot(b, "pour", "cup")
+    bowl = _spot(b, "pour", "bowl")
     grasp_z = TABLE_Z + 0.05
     pour_z = TABLE_Z + rng.uniform(0.20, 0.25)
     tilt = -rng.uniform(1.5, 2.0)  # pronation tips the cup's mouth to the left, over the bowl
@@ -167,12 +182,12 @@ def pour(rng: np.random.Generator, rest: np.ndarray) -> Script:
         _cup("cup", cup, CUP_COLOURS[1]),
         SceneObject("bowl", "cylinder", (0.075, 0.06), (bowl[0], bowl[1], TABLE_Z + 0.03), 0.0, (70, 140, 200), False),
     )
-    return Script("pour", tuple(b.phases), objects)
+    return Script("pour", tuple(b.phases), objects, _spots(cup=(cup, 0.0), bowl=(bowl, 0.0)))
 
 
 def box_rotation(rng: np.random.Generator, rest: np.ndarray) -> Script:
     b = _Builder(rng)
-    box = _v(0.15, 0.0, 0) + b.jitter()
+    box = _spot(b, "box_rotation", "box")
     size = (0.10, 0.14, 0.08)
     top = TABLE_Z + size[2]
     down = _v(-1.4, 0.3, 0)  # palm down on the lid
@@ -191,20 +206,21 @@ def box_rotation(rng: np.random.Generator, rest: np.ndarray) -> Script:
     b.add("push", 0.9, box + _v(-0.09, -0.02, TABLE_Z + 0.05), hand=grasps.flat(min(1.0, press + 0.4)))
     b.add("retreat", 0.5, box + _v(-0.16, -0.04, TABLE_Z + 0.10), _v(0, 0, 0), grasps.rest(0.3))
     _rest(b, rest)
-    objects = (SceneObject("box", "box", size, (box[0], box[1], TABLE_Z + size[2] / 2), rng.uniform(-0.2, 0.2), (60, 140, 180)),)
-    return Script("box_rotation", tuple(b.phases), objects)
+    yaw = rng.uniform(-world_places.BOX_YAW, world_places.BOX_YAW)
+    objects = (SceneObject("box", "box", size, (box[0], box[1], TABLE_Z + size[2] / 2), yaw, (60, 140, 180)),)
+    return Script("box_rotation", tuple(b.phases), objects, _spots(box=(box, yaw)))
 
 
 def cup_stack(rng: np.random.Generator, rest: np.ndarray) -> Script:
     b = _Builder(rng)
-    cups = [_v(0.08, -0.16, 0) + b.jitter(), _v(0.15, -0.02, 0) + b.jitter(), _v(0.10, 0.15, 0) + b.jitter()]
+    cups = [_spot(b, "cup_stack", f"cup{i + 1}") for i in range(3)]
     grasp_z = TABLE_Z + 0.05
     for level, cup in enumerate(cups[:2], start=1):
         _pick(b, cup, grasp_z, rng.uniform(-0.25, 0.0), squeeze=rng.uniform(0.2, 0.4))
         _place(b, cups[2], grasp_z + 0.03 * level, rng.uniform(0.0, 0.25))
     _rest(b, rest)
     objects = tuple(_cup(f"cup{i + 1}", c, CUP_COLOURS[i]) for i, c in enumerate(cups))
-    return Script("cup_stack", tuple(b.phases), objects)
+    return Script("cup_stack", tuple(b.phases), objects, _spots(**{f"cup{i + 1}": (c, 0.0) for i, c in enumerate(cups)}))
 
 
 SCRIPTS = {"pick_place": pick_place, "hang": hang, "pour": pour, "box_rotation": box_rotation, "cup_stack": cup_stack}

@@ -18,11 +18,8 @@ import numpy as np
 
 from teleprev_devices.sim.shared import get_or_create
 from teleprev_devices.sim.tasks import TABLE_Z, SCRIPTS, SceneObject
-from teleprev.devices import EFFECTORS, RobotModel, load_robot, transforms
+from teleprev.devices import EFFECTORS, RobotModel, load_robot, transforms, world_places
 
-# SimArm's default home: the palm (TCP) forward at about (0.40, 0, 0.30) m, fingers 20 degrees down.
-DEFAULT_HOME = (0.0, -0.27, -0.11, 0.0, -0.85, -1.571)
-DEFAULT_ANCHOR = np.array([0.405, 0.0, 0.30])  # that TCP, in the robot base frame
 TABLE = SceneObject("table", "box", (1.2, 1.3, 0.04), (0.30, 0.0, -0.02), 0.0, (95, 120, 150), False)
 
 _GRASP_REACH = 0.09  # metres between the grasp point and an object's centre for a grasp to hold it
@@ -47,10 +44,10 @@ class SimWorld:
         self._shared = shared if shared is not None else {}
         self._lock = threading.Lock()
         # Until an arm reports, the robot stands at the sim arm's default home.
-        self._q = self.model.clip(self.model.vector({f"joint{i + 1}": v for i, v in enumerate(DEFAULT_HOME)
+        self._q = self.model.clip(self.model.vector({f"joint{i + 1}": v for i, v in enumerate(world_places.ARM_HOME)
                                                      if f"joint{i + 1}" in self.model.joint_index}, self.model.neutral()))
         self.vacuum_on = False
-        self.anchor = DEFAULT_ANCHOR.copy()
+        self.anchor = np.array(world_places.DEFAULT_ANCHOR)
         # The point that closes on objects (the end-effector table's grasp point); for the LEAP Hand also,
         # in _reach_points, the pinch between the thumb and index tips.
         effector = EFFECTORS.get(end_effector)
