@@ -20,11 +20,12 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass, field, replace
 from pathlib import Path
-from typing import Any
+from typing import Any, Literal
 
 from teleprev.clock import SessionClock
 from teleprev.config import from_table, read_toml
 from teleprev.devices.contract import KINDS, DeviceContext
+from teleprev.devices.physics import PhysicsAccess
 from teleprev.devices.registry import load_plugin
 from teleprev.errors import ConfigError
 from teleprev.paths import data_dir, inside
@@ -46,6 +47,21 @@ class RigSection:
     task: str = "pick_place"  # default task label of episodes
     participant: str = ""  # user-study metadata
     condition: str = ""
+
+
+@dataclass(frozen=True)
+class SimSection:
+    """[sim]: the world the sim devices live in. "kinematic": the arm and hand follow their commands
+    exactly and objects move only when a grasp carries them; "physics": a MuJoCo world (teleprev/world)
+    stepped at rate_hz on the session clock in a process of its own, which sim.arm and sim.hand measure
+    from and command into, sim.camera renders, and which marks each episode's outcome."""
+
+    world: Literal["kinematic", "physics"] = "kinematic"
+    rate_hz: float = 500.0  # physics steps per second of session time
+
+    def __post_init__(self):
+        if not 500.0 <= self.rate_hz <= 10000.0:
+            raise ValueError(f"rate_hz must be 500..10000 (the world steps at 500 Hz or more), got {self.rate_hz:g}")
 
 
 @dataclass(frozen=True)
@@ -90,6 +106,7 @@ class Rig:
     frames: dict[str, SensorFrame] = field(default_factory=dict)  # [frames.<name>]: sensors in the robot's tree
     tasks: dict[str, str] = field(default_factory=dict)  # [tasks]: task id -> the instruction in words
     text: str | None = None  # the TOML, for a rig read from text (a session's recorded rig has no file)
+    sim: SimSection = field(default_factory=SimSection)  # [sim]: the world the sim devices live in
 
     def check_task(self, task: str, where: str) -> None:
         """Refuse a task label that a device of this rig has to act out and does not know (a simulated
@@ -142,8 +159,12 @@ class Rig:
         return replace(self, devices=devices)
 
     def device_context(self, clock: SessionClock) -> DeviceContext:
-        """What every device of this rig is opened with: the clock, the rig's folder, robot and end effector."""
-        return DeviceContext(clock, self.dir, {}, self.rig.robot, self.rig.end_effector)
+        """What every device of this rig is opened with: the clock, the rig's folder, robot and end effector,
+        and the physics world when [sim] asks for one (started when a device first uses it)."""
+        physics = None
+        if self.sim.world == "physics":
+            physics = PhysicsAccess(clock, self.rig.end_effector, self.sim.rate_hz, self.rig.task)
+        return DeviceContext(clock, self.dir, {}, self.rig.robot, self.rig.end_effector, physics=physics)
 
     def resolve(self, relative: str) -> Path:
         """A path from the rig file, relative to the rig file's folder."""
@@ -211,11 +232,12 @@ def load_recorded_rig(metadata: dict, session: Path) -> Rig | None:
 
 def parse_rig(data: dict, path: Path | None, where: str | None = None) -> Rig:
     where = where or str(path)
-    unknown = sorted(set(data) - {"rig", "pipeline", "devices", "frames", "tasks"})
+    unknown = sorted(set(data) - {"rig", "pipeline", "devices", "frames", "tasks", "sim"})
     if unknown:
         raise ConfigError(f"unknown table [{unknown[0]}] (expected [rig], [pipeline], [devices.<name>], "
-                          "[frames.<name>] and [tasks])", where)
+                          "[frames.<name>], [tasks] and [sim])", where)
     rig = from_table(RigSection, data.get("rig", {}), f"{where} [rig]")
+    sim = from_table(SimSection, data.get("sim", {}), f"{where} [sim]")
     if isinstance(data.get("pipeline"), dict) and "trigger" in data["pipeline"]:
         raise ConfigError("unknown key 'trigger': it was removed (a pipeline step runs on every glove sample); "
                           "delete the line", f"{where} [pipeline]")
@@ -248,7 +270,7 @@ def parse_rig(data: dict, path: Path | None, where: str | None = None) -> Rig:
         if name != "suit" and (name not in devices or devices[name].kind != "camera"):
             raise ConfigError("names no camera of this rig (a [frames] table is a camera device's name, or suit)",
                               f"{where} [frames.{name}]")
-    out = Rig(path.resolve() if path else None, rig, pipeline, devices, data, frames, tasks)
+    out = Rig(path.resolve() if path else None, rig, pipeline, devices, data, frames, tasks, sim=sim)
     out.check_task(rig.task, f"{where} [rig].task")
     return out
 

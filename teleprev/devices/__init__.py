@@ -18,6 +18,7 @@ from teleprev import transforms
 from teleprev.clock import ClockSync, SessionClock
 from teleprev.devices.contract import KINDS, Actuator, Device, DeviceContext, NoSettings, OperatorLink, StreamSpec
 from teleprev.devices.pacing import wait_until_due
+from teleprev.devices.physics import WORLDS, LayoutRecord, PhysicsAccess
 from teleprev.devices.polled import DeviceFault, JointLimits, PolledActuator, PolledSettings
 from teleprev.devices.registry import GROUP, available, load_plugin
 from teleprev.devices.servo_limits import FAULT_TOLERANCE, ServoStreamRule, ServoViolation
@@ -70,5 +71,7 @@ __all__ = [
     "ConfigError", "DeviceError", "DeviceStartError", "SessionError", "TeleprevError", "describe_exception",
     # what built-in plugins use: SMPL-X names, rotations, the robot, the end-effector table, recorded sessions
     "smplx", "transforms", "EFFECTORS", "EndEffector", "end_effector", "world_places",
+    # the physics world of a [sim] world = "physics" rig (DeviceContext.physics)
+    "WORLDS", "LayoutRecord", "PhysicsAccess",
     "RobotModel", "load_robot", "robot_geometry", "SessionReader",
 ]

@@ -26,6 +26,7 @@ from types import ModuleType
 from typing import Any, Callable, ClassVar, Generic, TypeVar
 
 from teleprev.clock import SessionClock
+from teleprev.devices.physics import PhysicsAccess
 from teleprev.errors import DeviceError
 from teleprev.messages import JointSample, Sample
 from teleprev.robot.effectors import EndEffector, end_effector
@@ -66,6 +67,9 @@ class DeviceContext:
     # Called with the task label whenever an episode starts (a simulated operator switches task on it).
     task_listeners: list[Callable[[str], None]] = field(default_factory=list)
     operator: OperatorLink = field(default_factory=OperatorLink)
+    # The rig's physics world ([sim] world = "physics"), which sim devices measure from, command into and
+    # render; None: the kinematic sim world.
+    physics: PhysicsAccess | None = None
 
     @property
     def effector(self) -> EndEffector:

@@ -1,4 +1,10 @@
-"""What the sim arm and hand share: joints that follow position commands and report their state."""
+"""What the sim arm and hand share: joints that follow position commands and report their state.
+
+Kinematic (the default): the joints follow the latest command exactly, within their speed limits. On a
+physics rig (DeviceContext.physics) each command becomes the drives' targets in the physics world at once
+and the state is what the world measures: the world steps in its own process and the targets and state
+pass through shared memory, so `send` works the same from the session process or the paced sender's.
+"""
 
 from __future__ import annotations
 
@@ -32,6 +38,8 @@ class SimActuator(SimDevice[A], Actuator[A], stream="state", payload="joints"):
     def __init__(self, name: str, settings: A, context: DeviceContext):
         super().__init__(name, settings, context)
         self.world = shared_world(context)
+        self.physics = context.physics  # None: kinematic
+        self.link = None  # the physics world's joints, once connected
         self.max_acceleration: float = np.inf
         self._commands: deque[tuple[int, np.ndarray]] = deque(maxlen=1000)
         self._lock = threading.Lock()
@@ -68,6 +76,12 @@ class SimActuator(SimDevice[A], Actuator[A], stream="state", payload="joints"):
         self._stepped_ns: int | None = None
         with self._lock:
             self._commands.clear()
+        if self.physics is not None:
+            first = self.link is None
+            self.link = self.physics.link()
+            if first:  # the world's robot starts where this device's home is
+                self.physics.place_robot(dict(zip(self.joint_names, self.home)))
+            return
         self.world.set_joints(self.joint_names, self.state_positions())
 
     def send(self, command: JointSample) -> None:
@@ -83,8 +97,38 @@ class SimActuator(SimDevice[A], Actuator[A], stream="state", payload="joints"):
         with self._lock:
             target = (self._commands[-1][1] if self._commands else self.follower.target).copy()
             target[[self._index[n] for n in command.names]] = positions
-            # servo mode runs a command from the instant it was sent (its stamp), however late it arrived
-            self._commands.append((command.stamp_ns, target))
+            refused = self._refuse(command.stamp_ns, target)
+            if not refused:
+                # servo mode runs a command from the instant it was sent (its stamp), however late it arrived
+                self._commands.append((command.stamp_ns, target))
+                if self.link is not None:  # physics: the drives' targets from now on
+                    self.link.set_targets(dict(zip(self.joint_names, target.tolist())))
+        if refused:
+            self._refused(refused)
+
+    def _refuse(self, stamp_ns: int, target: np.ndarray) -> str:
+        """Why the controller refuses this target ("": it runs it). Called with the commands' lock held."""
+        return ""
+
+    def _refused(self, why: str) -> None:
+        """The controller refused a target (`_refuse`): what it does then."""
+
+    def measured(self) -> tuple[np.ndarray, np.ndarray]:
+        """The joints' positions and velocities now."""
+        if self.link is not None:
+            _, q, v = self.link.joint_state(self.joint_names)
+            return q, v
+        return self.follower.q, self.follower.v
+
+    def hold_here(self) -> None:
+        """Stop where the joints are (a controller fault): no target beyond the current positions."""
+        with self._lock:
+            self._commands.clear()
+        q, _ = self.measured()
+        self.follower.set_target(self.follower.q)
+        self.follower.v[:] = 0.0
+        if self.link is not None:
+            self.link.set_targets(dict(zip(self.joint_names, q.tolist())))
 
     def _advance(self, true_ns: int) -> None:
         """Integrate up to true_ns in steps of the state period, each with the latest command sent by then."""
@@ -108,6 +152,10 @@ class SimActuator(SimDevice[A], Actuator[A], stream="state", payload="joints"):
         return self.follower.v.copy()
 
     def _acquire(self, true_ns: int) -> JointSample:
+        if self.link is not None:
+            self.world.follow_operator(self.physics, true_ns)
+            q, v = self.measured()
+            return JointSample(0, self.joint_names, q, v)
         self._advance(true_ns)
         q = self.state_positions()
         self.world.set_joints(self.joint_names, q)

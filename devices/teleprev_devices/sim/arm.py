@@ -70,21 +70,21 @@ class SimArm(SimActuator[ArmSettings], kind="arm"):
     def _check(self, stamp_ns: int, target: np.ndarray) -> str:
         """"" or the fault this command raises (teleprev.devices.ServoStreamRule: acceleration and jerk by
         divided differences on the stamps)."""
-        broken = self._rule.check(stamp_ns, target, lambda: (self.follower.q, self.follower.v))
+        broken = self._rule.check(stamp_ns, target, self.measured)
         return f"controller fault: {broken.describe()}; the arm stopped" if broken else ""
 
     def send(self, command: JointSample) -> None:
         if self.fault:
             raise DeviceError(f"{self.fault} (reconnect to clear)", f"device {self.name!r}")
         super().send(command)
-        with self._lock:
-            target = self._commands[-1][1]
-            fault = self._check(command.stamp_ns, target) or self._injected(command.stamp_ns)
-            if fault:
-                self.fault = fault
-                self._commands.clear()
-                self.follower.set_target(self.follower.q)
-                self.follower.v[:] = 0.0
+
+    def _refuse(self, stamp_ns: int, target: np.ndarray) -> str:
+        # checked before the target reaches the joints (kinematic or physical): a faulting command never runs
+        return self._check(stamp_ns, target) or self._injected(stamp_ns)
+
+    def _refused(self, why: str) -> None:
+        self.fault = why
+        self.hold_here()
 
     def _injected(self, stamp_ns: int) -> str:
         """The fault `fault_after_s` asks for, when it is due (once per session)."""

@@ -1,4 +1,9 @@
-"""sim.camera: a synthetic view of the scene with the robot in it, JPEG-encoded like a webcam's."""
+"""sim.camera: a synthetic view of the scene with the robot in it, JPEG-encoded like a webcam's.
+
+On a physics rig (DeviceContext.physics) it renders the physics world (MuJoCo, from a copy of the world
+made in the camera's own thread, teleprev.world.host.WorldMirror) from the same viewpoints and field of
+view; `depth = true` also keeps each frame's depth image (metres, 0 where nothing is in range) as
+`last_depth`, for depth work that is not recorded yet."""
 
 from __future__ import annotations
 
@@ -8,7 +13,7 @@ import cv2
 
 from teleprev.devices import DeviceContext, DeviceError, ImageSample
 from teleprev_devices.sim.device import SimDevice, TimingSettings, timing
-from teleprev_devices.sim.render import VIEWS, SceneRenderer
+from teleprev_devices.sim.render import VIEWS, FrameFinish, SceneRenderer
 from teleprev_devices.sim.world import shared_world
 
 
@@ -22,6 +27,7 @@ class CameraSettings(TimingSettings):
     jpeg_quality: int = 85
     noise: float = 2.0  # pixel noise (standard deviation, 0..255 scale), so that frames differ
     label: bool = True  # print the device name and session time in a corner
+    depth: bool = False  # physics rig: render each frame's depth image too (kept as last_depth)
 
     def __post_init__(self):
         super().__post_init__()
@@ -45,14 +51,31 @@ class SimCamera(SimDevice[CameraSettings], kind="camera", stream="image", payloa
     def __init__(self, name: str, settings: CameraSettings, context: DeviceContext):
         super().__init__(name, settings, context)
         self.world = shared_world(context)
+        self.physics = context.physics
+        self.last_depth = None  # physics, depth = true: the latest frame's depth image (metres)
+        if self.physics is not None and settings.fov_deg != 60.0:
+            raise self.bad_setting("fov_deg", "the physics world's cameras have a 60 degree field of view; "
+                                              f"got {settings.fov_deg:g}")
 
     def _open(self) -> None:
         s = self.settings
+        if self.physics is not None:
+            self.mirror = self.physics.mirror()  # made and used on this device's reader thread (its GL context)
+            self.finish = FrameFinish(s.width, s.height, s.noise, s.seed)
+            return
         self.renderer = SceneRenderer(self.world.model, s.width, s.height, s.view, s.fov_deg, s.noise, s.seed)
 
-    def _acquire(self, true_ns: int) -> ImageSample:
+    def _render(self, true_ns: int):
+        if self.physics is not None:
+            s = self.settings
+            frame = self.mirror.render(s.view, s.width, s.height, s.depth)
+            self.last_depth = frame.depth
+            return self.finish(cv2.cvtColor(frame.rgb, cv2.COLOR_RGB2BGR), self._label(true_ns))
         q = self.world.joints()
-        img = self.renderer.render(q, self.world.scene(true_ns, q), self._label(true_ns))
+        return self.renderer.render(q, self.world.scene(true_ns, q), self._label(true_ns))
+
+    def _acquire(self, true_ns: int) -> ImageSample:
+        img = self._render(true_ns)
         ok, buf = cv2.imencode(".jpg", img, [cv2.IMWRITE_JPEG_QUALITY, self.settings.jpeg_quality])
         if not ok:
             raise DeviceError("JPEG encoding failed", f"device {self.name!r}")

@@ -1,4 +1,4 @@
-"""sim.hand: the rig's end effector, kinematic: a LEAP Hand ("0".."15"), a parallel-jaw gripper
+"""sim.hand: the rig's end effector, kinematic (or in the physics world, see actuator.py): a LEAP Hand ("0".."15"), a parallel-jaw gripper
 ("gripper", metres of opening) or a vacuum tool ("vacuum", 0 off / 1 on), following commands within
 its speed limits and reporting its state."""
 
@@ -52,11 +52,11 @@ class SimHand(SimActuator[HandSettings], kind="hand"):
         self.home = self.check_home(np.array(settings.home, dtype=float) if settings.home else default_home)
 
     def state_positions(self) -> np.ndarray:
-        if self.end_effector == "vacuum":
+        if self.end_effector == "vacuum" and self.link is None:
             return (self.follower.q >= 0.5).astype(float)
         return self.follower.q.copy()
 
     def state_velocities(self) -> np.ndarray:
-        if self.end_effector == "vacuum":
+        if self.end_effector == "vacuum" and self.link is None:
             return np.zeros(1)
         return self.follower.v.copy()

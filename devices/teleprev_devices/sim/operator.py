@@ -321,6 +321,10 @@ class SimOperator:
         ep = self._episode(t)
         return ep.index, ep.task
 
+    def spots(self, t: float) -> dict[str, tuple[float, float, float]]:
+        """Where the episode at t put its objects (task frame x, y and yaw), for the physics world's layout."""
+        return dict(self._episode(t).script.spots)
+
 
 def task_mode(task_setting: str) -> tuple[str, str]:
     """(initial task, mode) from a device's `task` setting: "" follows set_task, "cycle" goes through

@@ -87,6 +87,30 @@ def _perpendiculars(axes: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     return u, np.cross(axes, u)
 
 
+class FrameFinish:
+    """What every sim camera frame gets last: the label in a corner and pixel noise, so that frames differ."""
+
+    def __init__(self, width: int, height: int, noise: float, seed: int):
+        self.height = height
+        rng = np.random.default_rng(seed)
+        self._noise = []
+        if noise > 0:
+            for _ in range(4):
+                n = rng.normal(0.0, noise, (height, width, 3))
+                self._noise.append((np.clip(n, 0, 255).astype(np.uint8), np.clip(-n, 0, 255).astype(np.uint8)))
+        self._frame = 0
+
+    def __call__(self, img: np.ndarray, label: str = "") -> np.ndarray:
+        if label:
+            cv2.putText(img, label, (8, self.height - 10), cv2.FONT_HERSHEY_SIMPLEX, 0.45, (30, 30, 30), 1, cv2.LINE_AA)
+        if self._noise:
+            pos, neg = self._noise[self._frame % len(self._noise)]
+            cv2.add(img, pos, dst=img)
+            cv2.subtract(img, neg, dst=img)
+        self._frame += 1
+        return img
+
+
 class SceneRenderer:
     """Draws one robot (its visual primitives) and the scene objects from one viewpoint."""
 
@@ -108,13 +132,7 @@ class SceneRenderer:
                 colours.append(HAND_COLOUR)
         self._link_colour = np.array(colours, dtype=float)
         self._background = self._draw_background()
-        rng = np.random.default_rng(seed)
-        self._noise = []
-        if noise > 0:
-            for _ in range(4):
-                n = rng.normal(0.0, noise, (height, width, 3))
-                self._noise.append((np.clip(n, 0, 255).astype(np.uint8), np.clip(-n, 0, 255).astype(np.uint8)))
-        self._frame = 0
+        self.finish = FrameFinish(width, height, noise, seed)
 
     # ---- static ----------------------------------------------------------------------------------
     def _draw_background(self) -> np.ndarray:
@@ -235,14 +253,7 @@ class SceneRenderer:
             self._cylinder_items(items, ends, np.array([o.spec.size[0] for o in cylinders]),
                                  np.array([o.spec.colour for o in cylinders], dtype=float))
         self._paint(img, items)
-        if label:
-            cv2.putText(img, label, (8, self.height - 10), cv2.FONT_HERSHEY_SIMPLEX, 0.45, (30, 30, 30), 1, cv2.LINE_AA)
-        if self._noise:
-            pos, neg = self._noise[self._frame % len(self._noise)]
-            cv2.add(img, pos, dst=img)
-            cv2.subtract(img, neg, dst=img)
-        self._frame += 1
-        return img
+        return self.finish(img, label)
 
 
 def _perp_light(axis: np.ndarray) -> np.ndarray:

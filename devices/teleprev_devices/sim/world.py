@@ -7,6 +7,9 @@ the operator's resting wrist corresponds to (the TCP at the arm's home pose). Th
 the table top (z = 0). An object the end effector closes on moves with it until it lets go, then
 drops upright onto the table (or the cup below it), or hangs from the peg it was let go at, so the
 camera shows a grasp that worked.
+
+On a physics rig (DeviceContext.physics) the objects are the physics world's instead: `follow_operator`
+loads each new operator episode's scene into it, its objects where the episode's script put them.
 """
 
 from __future__ import annotations
@@ -58,6 +61,7 @@ class SimWorld:
             self._grasp_link = None
         self._episode: tuple | None = None
         self._objects: list[PlacedObject] = []
+        self._physics_episode: tuple | None = None
 
     # ---- robot state ---------------------------------------------------------------------------
     def set_joints(self, names: tuple[str, ...], values: np.ndarray) -> None:
@@ -168,6 +172,24 @@ class SimWorld:
             if np.linalg.norm(other.pose[:2, 3] - obj.pose[:2, 3]) < other.spec.size[0]:
                 floor = max(floor, other.pose[2, 3] + other.spec.size[1] / 2 - 0.07)
         obj.pose = yaw_pose(yaw, [obj.pose[0, 3], obj.pose[1, 3], floor + height / 2])
+
+
+    # ---- the physics world's scene ---------------------------------------------------------------
+    def follow_operator(self, physics, now_ns: int) -> None:
+        """Physics: when the operator has begun another episode, run its scene (once per episode, whichever
+        device notices first)."""
+        op = self._shared.get("sim.operator")
+        if op is None:
+            return
+        t = op.time_s(now_ns)
+        key = op.episode(t)
+        with self._lock:
+            if key == self._physics_episode:
+                return
+            self._physics_episode = key
+        index, task = key
+        physics.load_layout(task, op.seed, self.anchor, op.spots(t),
+                            reason=f"operator episode {index} (seed {op.seed}): {task}")
 
 
 def shared_world(context) -> SimWorld:

@@ -1,0 +1,110 @@
+"""The rig's physics world as the sim plugins reach it (DeviceContext.physics, set when the rig says
+`[sim] world = "physics"`).
+
+The world runs in a process of its own (teleprev/world/host.py), started on first use: importing this
+module imports no physics engine, so `teleprev --help` and kinematic rigs never load mujoco. Plugins ask:
+
+    physics.link()                 targets in, joint state out (teleprev.world.host.WorldLink), from the
+                                   session process or a process forked from it after the world started
+    physics.load_layout(task, ...) a new scene (an episode's objects where the operator's script put them)
+    physics.mirror()               a copy for reading the whole world in the caller's thread: cameras
+                                   (mirror.render(view, w, h, depth)) and object states (mirror.sync().state())
+
+Every scene the world runs is kept with the session time it began (`layouts`) and handed to the
+listeners (the recording stores each as an event, so a session can be played back in its scenes).
+"""
+
+from __future__ import annotations
+
+import threading
+from collections.abc import Callable, Mapping
+from dataclasses import dataclass, field
+from typing import Any
+
+from teleprev.clock import SessionClock
+
+WORLDS = ("kinematic", "physics")
+
+
+@dataclass(frozen=True)
+class LayoutRecord:
+    """A scene the world began running at `time_ns` (session clock): Layout.to_record(), why it was loaded."""
+
+    time_ns: int
+    layout: dict
+    reason: str
+
+
+@dataclass
+class PhysicsAccess:
+    clock: SessionClock
+    end_effector: str
+    rate_hz: float = 500.0
+    task: str = "pick_place"  # the scene the world starts with, until a device loads another
+    seed: int = 0
+    layouts: list[LayoutRecord] = field(default_factory=list)
+    listeners: list[Callable[[LayoutRecord], None]] = field(default_factory=list)
+
+    def __post_init__(self):
+        self._host = None
+        self._lock = threading.Lock()
+
+    @property
+    def started(self) -> bool:
+        return self._host is not None
+
+    def host(self):
+        """The world process's host, started on first use (teleprev.world.host.WorldHost)."""
+        with self._lock:
+            if self._host is None:
+                from teleprev.world.host import WorldHost
+                from teleprev.world.layout import task_layout
+
+                layout = task_layout(self.task, self.seed)
+                self._host = WorldHost(self.end_effector, layout, self.clock, self.rate_hz)
+                self._note(layout.to_record(), "start")
+            return self._host
+
+    def link(self):
+        return self.host().link
+
+    def mirror(self):
+        from teleprev.world.host import WorldMirror
+
+        return WorldMirror(self.link())
+
+    def load_layout(self, task: str, seed: int, anchor, spots: Mapping[str, tuple[float, float, float]] | None = None,
+                    robot: Mapping[str, float] | None = None, reason: str = "") -> dict:
+        """Run the scene of `task` from now on (its objects at `spots`, task frame, around `anchor`; drawn from
+        `seed` where not given), the robot where it stands or placed at `robot`; returns its layout record."""
+        from teleprev.world.layout import task_layout
+
+        layout = task_layout(task, seed, tuple(anchor), dict(spots or {}))
+        self.host().load_layout(layout, robot)
+        record = layout.to_record()
+        self._note(record, reason)
+        return record
+
+    def place_robot(self, positions: Mapping[str, float]) -> None:
+        """Put the robot's joints at rest at these positions, the running scene's objects back at their
+        starting poses (a device's home at its first connect; not a motion)."""
+        from teleprev.world.layout import layout_from_record
+
+        _, record = self.link().running()
+        self.host().load_layout(layout_from_record(record), positions)
+
+    def _note(self, record: dict, reason: str) -> None:
+        entry = LayoutRecord(self.clock.now_ns(), record, reason)
+        self.layouts.append(entry)
+        for listener in list(self.listeners):
+            listener(entry)
+
+    def outcome(self) -> Any:
+        """The world's latest judgement of its task (teleprev.world.host.WorldOutcome), None before the world
+        started or judged."""
+        return self._host.link.outcome() if self._host is not None else None
+
+    def close(self) -> None:
+        with self._lock:
+            if self._host is not None:
+                self._host.close()
