@@ -30,6 +30,8 @@ Events:
     /events/mode              teleprev.ModeSwitch
     /events/device            teleprev.DeviceEvent
     /events/operator          teleprev.OperatorEvent
+    /events/world             teleprev.WorldLayout   a physics rig's scene (objects' starting poses, seed), each
+                                                     time the world begins one
 """
 
 from __future__ import annotations
@@ -53,6 +55,7 @@ EPISODE = "/events/episode"
 MODE = "/events/mode"
 DEVICE_EVENT = "/events/device"
 OPERATOR = "/events/operator"
+WORLD = "/events/world"
 
 KIND_TOPICS = {
     "glove": ("hand", "xr_left", "xr_right"),  # xr_*: an XR page's raw hand joints (webxr.glove)
@@ -93,12 +96,16 @@ _NUM = {"type": "number"}
 EVENT_SCHEMAS: dict[str, dict] = {
     "teleprev.EpisodeEvent": _schema(
         "teleprev.EpisodeEvent",
-        "An episode starts, stops or is discarded; outcome is marked by the operator when known.",
+        "An episode starts, stops or is discarded; outcome is marked by the operator when known (source "
+        "'operator', the default) or, on a physics rig, judged from the world's state when the episode stops "
+        "(source 'physics', with the reason in words). The operator's mark wins.",
         {
             "event": {"type": "string", "enum": ["start", "stop", "discard", "outcome"]},
             "episode": _INT,
             "task": _STR,
             "outcome": {"type": ["string", "null"], "enum": ["success", "failure", None]},
+            "source": {"type": "string", "enum": ["operator", "physics"]},
+            "reason": _STR,
         },
         ["event", "episode"],
     ),
@@ -126,6 +133,13 @@ EVENT_SCHEMAS: dict[str, dict] = {
             "since_ns": _INT,
         },
         ["device", "event"],
+    ),
+    "teleprev.WorldLayout": _schema(
+        "teleprev.WorldLayout",
+        "The physics world began a scene: its task, the seed it was drawn from, the anchor and every object's "
+        "starting pose (teleprev/world/layout.py: layout_from_record restores it), and why.",
+        {"layout": {"type": "object"}, "reason": _STR},
+        ["layout"],
     ),
     "teleprev.OperatorEvent": _schema(
         "teleprev.OperatorEvent",

@@ -14,7 +14,9 @@ from teleprev.topics import EPISODE
 @dataclass(frozen=True, slots=True)
 class Episode:
     """An episode as its /events/episode messages describe it; times are the events' stamp_ns.
-    `stop_ns` is None when the session ended (or was cut short) before the episode was stopped."""
+    `stop_ns` is None when the session ended (or was cut short) before the episode was stopped.
+    `outcome` is the operator's mark where there is one, else the physics world's (`judged`, with its
+    `judged_reason`): what exports and statistics select by."""
 
     index: int
     task: str
@@ -22,6 +24,9 @@ class Episode:
     stop_ns: int | None
     discarded: bool
     outcome: str | None
+    marked: str | None = None  # the operator's own mark (y / f)
+    judged: str | None = None  # the physics world's, when the episode stopped
+    judged_reason: str = ""
 
     @property
     def duration_s(self) -> float | None:
@@ -45,7 +50,8 @@ def episodes_from(messages: Iterable[Logged], path: Path) -> list[Episode]:
             if ep is not None:
                 raise SessionError(f"{where}: episode {index} started twice", str(path))
             found[index] = {"index": index, "task": str(ev.data.get("task") or ""), "start_ns": ev.stamp_ns,
-                            "stop_ns": None, "discarded": False, "outcome": ev.data.get("outcome")}
+                            "stop_ns": None, "discarded": False, "outcome": None, "marked": ev.data.get("outcome"),
+                            "judged": None, "judged_reason": ""}
             continue
         if ep is None:
             raise SessionError(f"{where}: {kind!r} for episode {index}, which never started", str(path))
@@ -55,10 +61,14 @@ def episodes_from(messages: Iterable[Logged], path: Path) -> list[Episode]:
             ep["discarded"] = True
             if ep["stop_ns"] is None:
                 ep["stop_ns"] = ev.stamp_ns
+        elif kind == "outcome" and ev.data.get("source") == "physics":
+            ep["judged"], ep["judged_reason"] = ev.data.get("outcome"), str(ev.data.get("reason") or "")
         elif kind == "outcome":
-            ep["outcome"] = ev.data.get("outcome")
+            ep["marked"] = ev.data.get("outcome")
         else:
             raise SessionError(f"{where}: unknown episode event {kind!r}", str(path))
         if ev.data.get("task") and not ep["task"]:
             ep["task"] = str(ev.data["task"])
+    for ep in found.values():
+        ep["outcome"] = ep["marked"] or ep["judged"]
     return [Episode(**found[i]) for i in sorted(found)]

@@ -82,7 +82,18 @@ class DiscardEpisode:
 
 @dataclass(frozen=True)
 class MarkOutcome:
+    """The operator's mark of the running (or last) episode: y success, f failure."""
+
     success: bool
+
+
+@dataclass(frozen=True)
+class WorldLayout:
+    """The physics world began a scene at at_ns (teleprev.devices.LayoutRecord), recorded on /events/world."""
+
+    layout: dict
+    reason: str
+    at_ns: int
 
 
 @dataclass(frozen=True)
@@ -94,4 +105,4 @@ class OperatorNote:
 
 
 Control = (Engage | ToPreview | EStop | Halt | Hold | Release | StartEpisode | StopEpisode | DiscardEpisode
-           | MarkOutcome | OperatorNote)
+           | MarkOutcome | OperatorNote | WorldLayout)

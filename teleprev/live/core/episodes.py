@@ -44,9 +44,16 @@ class EpisodeTracker:
         return self.stop(t_ns) + [{"event": "discard", "episode": self.index, "task": self.task}]
 
     def outcome(self, success: bool) -> list[dict]:
+        """The operator's mark of the running (or last) episode."""
         if self.index < 0:
             return []
         return [{"event": "outcome", "episode": self.index, "task": self.task, "outcome": "success" if success else "failure"}]
+
+    @staticmethod
+    def judged(index: int, task: str, mark: str, reason: str) -> dict:
+        """The physics world's mark of episode `index` (judged when it stopped), beside the operator's."""
+        return {"event": "outcome", "episode": index, "task": task, "outcome": mark, "source": "physics",
+                "reason": reason}
 
     def elapsed_s(self, now_ns: int) -> float:
         return (now_ns - self.started_ns) / 1e9 if self.active else 0.0

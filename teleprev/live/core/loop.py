@@ -41,7 +41,7 @@ from teleprev import topics
 from teleprev.clock import SessionClock
 from teleprev.status import LoopSnapshot
 from teleprev.live.core.controls import (Control, DiscardEpisode, Engage, EStop, Halt, Hold, MarkOutcome, OperatorNote,
-                                    Release, StartEpisode, StopEpisode, ToPreview, UNATTENDED)
+                                    Release, StartEpisode, StopEpisode, ToPreview, UNATTENDED, WorldLayout)
 from teleprev.live.core.episodes import EpisodeTracker
 from teleprev.live.core.gate import ExecuteGate, GateState
 from teleprev.live.core.relay import CommandRelay
@@ -118,11 +118,14 @@ class SessionLoop:
         sender=None,
         frames=None,
         on_episode_start: Callable[[str], None] | None = None,
+        judge: Callable[[], tuple[str, str] | None] | None = None,
     ):
         """`log` receives every message to record (Recorder.log); `inbox` the queue the device runners were
         given the `sink` of (default: a new one); `actuators` maps "arm" and "hand" to the ActuatorPorts
         that pass commands on; `sender` (a CommandSender, started before this loop) makes the commands of a
-        format 4 pipeline; `frames` (teleprev/live/record/frames.py: RobotFrames) turns measured joints into /tf."""
+        format 4 pipeline; `frames` (teleprev/live/record/frames.py: RobotFrames) turns measured joints into /tf;
+        `judge` (a physics rig) gives the outcome of the task now, as (mark, reason), or None when it cannot say:
+        each episode that stops is marked with it, beside the operator's y/f."""
         self.clock = clock
         self._log = log
         self.driver = driver
@@ -134,6 +137,7 @@ class SessionLoop:
                                   on_tick=self.inbox.put, on_gone=lambda: self.halt("the command sender stopped"))
         self.frames = frames
         self.on_episode_start = on_episode_start
+        self.judge = judge
         self.stats = LoopStats(dropped=self.inbox.dropped, commands_sent=self.relay.sent,
                                command_errors=self.relay.errors)
         self.episodes = EpisodeTracker()
@@ -150,6 +154,7 @@ class SessionLoop:
             Engage: self._engage, ToPreview: self._to_preview, EStop: self._estop, Halt: self._halt,
             Hold: self._hold, Release: self._release, StartEpisode: self._episode, StopEpisode: self._episode,
             DiscardEpisode: self._episode, MarkOutcome: self._episode, OperatorNote: self._note,
+            WorldLayout: self._world_layout,
         }
 
     # ---- controls (any thread): queued for the loop thread, never dropped --------------------------
@@ -194,6 +199,9 @@ class SessionLoop:
 
     def note(self, event: str, detail: str = "") -> None:
         self.send(OperatorNote(event, detail))
+
+    def world_layout(self, layout: dict, reason: str, at_ns: int) -> None:
+        self.send(WorldLayout(layout, reason, at_ns))
 
     # ---- lifecycle -----------------------------------------------------------------------------
     def start(self) -> None:
@@ -395,12 +403,25 @@ class SessionLoop:
 
     def _episode(self, c: StartEpisode | StopEpisode | DiscardEpisode | MarkOutcome, now: int) -> str:
         at = now if getattr(c, "at_ns", None) is None else int(c.at_ns)
+        stopping = self.episodes.task
         events = self.episodes.apply(c, at)
+        message = ""
+        if self.judge is not None:
+            for stop in [e for e in events if e["event"] == "stop"]:
+                judged = self.judge()
+                if judged is not None:
+                    mark, reason = judged
+                    events.insert(events.index(stop) + 1, self.episodes.judged(stop["episode"], stopping, mark, reason))
+                    message = f"episode {stop['episode'] + 1} ({stopping}): {mark.upper()}, by the physics world: {reason}"
         if isinstance(c, StartEpisode) and self.on_episode_start:
             self.on_episode_start(self.episodes.task)
         for e in events:
             self._event(topics.EPISODE, "teleprev.EpisodeEvent", e, now, stamp_ns=at)
-        return ""
+        return message
+
+    def _world_layout(self, c: WorldLayout, now: int) -> None:
+        self._event(topics.WORLD, "teleprev.WorldLayout", {"layout": c.layout, "reason": c.reason}, now, stamp_ns=c.at_ns)
+        return None
 
     def _note(self, c: OperatorNote, now: int) -> str:
         self._event(topics.OPERATOR, "teleprev.OperatorEvent", {"event": c.event, "detail": c.detail}, now)

@@ -90,6 +90,10 @@ class LiveSession:
             raise ConfigError("a session with this name exists already; choose another --out", str(out))
         self.clock = SessionClock()
         self.context = rig.device_context(self.clock)
+        self.physics = self.context.physics
+        if self.physics is not None:
+            # Started before the sender forks, so that an actuator reaches the world from either process.
+            self.physics.host()
         self.devices = {name: entry.cls(name, entry.settings, self.context) for name, entry in rig.devices.items()}
         first = {kind: rig.of_kind(kind)[0].name for kind in ("glove", "suit", "arm", "hand")}
         self.pipeline = build_pipeline(rig, options.models)
@@ -124,7 +128,12 @@ class LiveSession:
         tf_period_ns = int(1e9 / rig.pipeline.tf_rate_hz) if rig.pipeline.tf_rate_hz > 0 else 0
         self.loop = SessionLoop(self.clock, self._log, self.driver, inbox=inbox, actuators=self.actuators,
                                 sender=self.sender, frames=RobotFrames(frames, tf_period_ns),
-                                on_episode_start=self._episode_started)
+                                on_episode_start=self._episode_started,
+                                judge=self._judge if self.physics is not None else None)
+        if self.physics is not None:  # every scene the world runs, recorded (those begun so far first)
+            for entry in self.physics.layouts:
+                self._world_layout(entry)
+            self.physics.listeners.append(self._world_layout)
         self.summary = None
         self.cannot_start = False  # a device could not start at all (wait_connected said which, at once)
         self._press = self._press_unattended
@@ -197,6 +206,14 @@ class LiveSession:
             self.view.log(msg)
         return self.recorder.log(msg)
 
+    def _world_layout(self, entry) -> None:
+        self.loop.world_layout(entry.layout, entry.reason, entry.time_ns)
+
+    def _judge(self) -> tuple[str, str] | None:
+        """The physics world's outcome of its task now, as the loop marks a stopping episode with it."""
+        outcome = self.physics.outcome()
+        return None if outcome is None else (outcome.mark, outcome.reason)
+
     def _episode_started(self, task: str) -> None:
         for listener in self.context.task_listeners:
             listener(task)
@@ -225,6 +242,8 @@ class LiveSession:
             meta[PLAN_RECORD] = o.episode_plan.to_record(self.preview_lead_s)
         if o.policy is not None:
             meta["policy"] = dict(o.policy)
+        if self.physics is not None:  # its scenes are events on /events/world
+            meta["world"] = {"world": rig.sim.world, "rate_hz": f"{rig.sim.rate_hz:g}", "end_effector": rig.rig.end_effector}
         # The post-condition questionnaire is answered after the file is closed: it goes in a sidecar
         # next to the session, which the session names here so that nothing recorded is rewritten.
         meta["study"] = {"survey_sidecar": Path(o.out).with_suffix(".survey.json").name}
@@ -260,11 +279,17 @@ class LiveSession:
                             "realtime": "true" if status and status.realtime else "false",
                             "detail": status.detail if status else "", "dropped_updates": str(self.sender.dropped_updates)},
                  "devices": {name: json.dumps(counts) for name, counts in self.device_counts().items()}}
+        if self.physics is not None:
+            stats = self.physics.link().stats()
+            extra["world_run"] = {"steps": str(stats.steps), "late_max_ms": f"{stats.late_max_ms:.3f}",
+                                  "late_batches": str(stats.late_batches)}
         try:
             self.summary = self.recorder.close(extra)
         finally:
             if self.view is not None:
                 self.view.close()
+            if self.physics is not None:
+                self.physics.close()
         return self.summary
 
     def __enter__(self) -> "LiveSession":
