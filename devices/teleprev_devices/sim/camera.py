@@ -65,6 +65,12 @@ class SimCamera(SimDevice[CameraSettings], kind="camera", stream="image", payloa
             return
         self.renderer = SceneRenderer(self.world.model, s.width, s.height, s.view, s.fov_deg, s.noise, s.seed)
 
+    def disconnect(self) -> None:
+        super().disconnect()
+        mirror = getattr(self, "mirror", None)
+        if mirror is not None:  # its GL contexts are this thread's (the runner disconnects on the reading thread)
+            mirror.close_renderers()
+
     def _render(self, true_ns: int):
         if self.physics is not None:
             s = self.settings
