@@ -30,8 +30,8 @@ import numpy as np
 
 from teleprev.clock import SessionClock
 from teleprev.world.layout import Layout
-from teleprev.world.shared import (ALIVE, GENERATION, LATE_BATCHES, LATE_MAX_NS, OUTCOME_SEQ, REQUESTED, SIZE, STEPS,
-                                   STOP, TIME_NS, SharedBlock)
+from teleprev.world.shared import (ALIVE, GENERATION, LATE_BATCHES, LATE_MAX_NS, OUTCOME_SEQ, REALTIME, REQUESTED, SIZE,
+                                   STEPS, STOP, TIME_NS, SharedBlock)
 from teleprev.world.world import DEFAULT_RATE_HZ
 
 START_TIMEOUT_S = 30.0  # a fresh interpreter importing numpy and mujoco on a loaded machine
@@ -44,6 +44,7 @@ class WorldStats:
     late_max_ms: float  # how far behind the session clock a batch of steps started, at most
     late_batches: int  # batches that started more than 10 ms behind
     alive: bool
+    realtime: bool  # the world process got SCHED_FIFO
 
 
 @dataclass(frozen=True)
@@ -136,7 +137,8 @@ class WorldLink:
 
     def stats(self) -> WorldStats:
         h = self.block.header
-        return WorldStats(int(h[STEPS]), int(h[TIME_NS]), int(h[LATE_MAX_NS]) / 1e6, int(h[LATE_BATCHES]), bool(h[ALIVE]))
+        return WorldStats(int(h[STEPS]), int(h[TIME_NS]), int(h[LATE_MAX_NS]) / 1e6, int(h[LATE_BATCHES]), bool(h[ALIVE]),
+                          bool(h[REALTIME]))
 
 
 class WorldHost:

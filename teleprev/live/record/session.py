@@ -282,7 +282,8 @@ class LiveSession:
         if self.physics is not None:
             stats = self.physics.link().stats()
             extra["world_run"] = {"steps": str(stats.steps), "late_max_ms": f"{stats.late_max_ms:.3f}",
-                                  "late_batches": str(stats.late_batches)}
+                                  "late_batches": str(stats.late_batches),
+                                  "realtime": "true" if stats.realtime else "false"}
         try:
             self.summary = self.recorder.close(extra)
         finally:
