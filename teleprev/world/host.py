@@ -30,8 +30,20 @@ import numpy as np
 
 from teleprev.clock import SessionClock
 from teleprev.world.layout import Layout
-from teleprev.world.shared import (ALIVE, GENERATION, LATE_BATCHES, LATE_MAX_NS, OUTCOME_SEQ, REALTIME, REQUESTED, SIZE,
-                                   STEPS, STOP, TIME_NS, SharedBlock)
+from teleprev.world.shared import (
+    ALIVE,
+    GENERATION,
+    LATE_BATCHES,
+    LATE_MAX_NS,
+    OUTCOME_SEQ,
+    REALTIME,
+    REQUESTED,
+    SIZE,
+    STEPS,
+    STOP,
+    TIME_NS,
+    SharedBlock,
+)
 from teleprev.world.world import DEFAULT_RATE_HZ
 
 START_TIMEOUT_S = 30.0  # a fresh interpreter importing numpy and mujoco on a loaded machine
@@ -137,8 +149,8 @@ class WorldLink:
 
     def stats(self) -> WorldStats:
         h = self.block.header
-        return WorldStats(int(h[STEPS]), int(h[TIME_NS]), int(h[LATE_MAX_NS]) / 1e6, int(h[LATE_BATCHES]), bool(h[ALIVE]),
-                          bool(h[REALTIME]))
+        return WorldStats(int(h[STEPS]), int(h[TIME_NS]), int(h[LATE_MAX_NS]) / 1e6, int(h[LATE_BATCHES]),
+                          bool(h[ALIVE]), bool(h[REALTIME]))
 
 
 class WorldHost:

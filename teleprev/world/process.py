@@ -26,8 +26,21 @@ from collections import deque
 
 import numpy as np
 
-from teleprev.world.shared import (ALIVE, GENERATION, LATE_BATCHES, LATE_MAX_NS, OUTCOME_SEQ, PID, REALTIME, REQUESTED,
-                                   SIZE, STEPS, STOP, TIME_NS, SharedBlock)
+from teleprev.world.shared import (
+    ALIVE,
+    GENERATION,
+    LATE_BATCHES,
+    LATE_MAX_NS,
+    OUTCOME_SEQ,
+    PID,
+    REALTIME,
+    REQUESTED,
+    SIZE,
+    STEPS,
+    STOP,
+    TIME_NS,
+    SharedBlock,
+)
 
 PERIOD_S = 0.002  # a batch of steps this often (one 500 Hz step per batch when on time)
 STATE_PERIOD_NS = 20_000_000  # object states kept for judging, 50 per second

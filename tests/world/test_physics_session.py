@@ -51,7 +51,8 @@ def test_the_session_records_every_scene_the_world_ran(recorded):
         record = scene["layout"]
         assert record["task"] == "pick_place" and isinstance(record["seed"], int)
         layout = layout_from_record(record)  # restores the scene: its objects at the recorded starting poses
-        assert {o.name: list(o.position) for o in layout.objects} == {n: o["position"] for n, o in record["objects"].items()}
+        poses = {n: o["position"] for n, o in record["objects"].items()}
+        assert {o.name: list(o.position) for o in layout.objects} == poses
     # the operator's scenes stand where its scripts reach: each cup within the spot's jitter of its place
     cup = SPOTS["pick_place"]["cup"]
     for scene in recorded.scenes[1:]:

@@ -1,6 +1,6 @@
-"""sim.hand: the rig's end effector, kinematic (or in the physics world, see actuator.py): a LEAP Hand ("0".."15"), a parallel-jaw gripper
-("gripper", metres of opening) or a vacuum tool ("vacuum", 0 off / 1 on), following commands within
-its speed limits and reporting its state."""
+"""sim.hand: the rig's end effector: a LEAP Hand ("0".."15"), a parallel-jaw gripper ("gripper", metres
+of opening) or a vacuum tool ("vacuum", 0 off / 1 on), following commands within its speed limits and
+reporting its state; kinematic, or in the physics world on a physics rig (see actuator.py)."""
 
 from __future__ import annotations
 

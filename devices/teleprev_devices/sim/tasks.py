@@ -60,7 +60,7 @@ def _v(*xs: float) -> np.ndarray:
     return np.array(xs, dtype=float)
 
 
-def _spot(b: "_Builder", task: str, name: str) -> np.ndarray:
+def _spot(b: _Builder, task: str, name: str) -> np.ndarray:
     """An object's place (world_places.SPOTS) with this repetition's jitter."""
     s = world_places.spot(task, name)
     return _v(s.x, s.y, 0) + b.jitter(s.jitter)
@@ -220,7 +220,8 @@ def cup_stack(rng: np.random.Generator, rest: np.ndarray) -> Script:
         _place(b, cups[2], grasp_z + 0.03 * level, rng.uniform(0.0, 0.25))
     _rest(b, rest)
     objects = tuple(_cup(f"cup{i + 1}", c, CUP_COLOURS[i]) for i, c in enumerate(cups))
-    return Script("cup_stack", tuple(b.phases), objects, _spots(**{f"cup{i + 1}": (c, 0.0) for i, c in enumerate(cups)}))
+    spots = _spots(**{f"cup{i + 1}": (c, 0.0) for i, c in enumerate(cups)})
+    return Script("cup_stack", tuple(b.phases), objects, spots)
 
 
 SCRIPTS = {"pick_place": pick_place, "hang": hang, "pour": pour, "box_rotation": box_rotation, "cup_stack": cup_stack}

@@ -412,7 +412,8 @@ class SessionLoop:
                 if judged is not None:
                     mark, reason = judged
                     events.insert(events.index(stop) + 1, self.episodes.judged(stop["episode"], stopping, mark, reason))
-                    message = f"episode {stop['episode'] + 1} ({stopping}): {mark.upper()}, by the physics world: {reason}"
+                    message = (f"episode {stop['episode'] + 1} ({stopping}): {mark.upper()}, by the physics world: "
+                               f"{reason}")
         if isinstance(c, StartEpisode) and self.on_episode_start:
             self.on_episode_start(self.episodes.task)
         for e in events:
@@ -420,7 +421,8 @@ class SessionLoop:
         return message
 
     def _world_layout(self, c: WorldLayout, now: int) -> None:
-        self._event(topics.WORLD, "teleprev.WorldLayout", {"layout": c.layout, "reason": c.reason}, now, stamp_ns=c.at_ns)
+        self._event(topics.WORLD, "teleprev.WorldLayout", {"layout": c.layout, "reason": c.reason}, now,
+                    stamp_ns=c.at_ns)
         return None
 
     def _note(self, c: OperatorNote, now: int) -> str:

@@ -243,7 +243,8 @@ class LiveSession:
         if o.policy is not None:
             meta["policy"] = dict(o.policy)
         if self.physics is not None:  # its scenes are events on /events/world
-            meta["world"] = {"world": rig.sim.world, "rate_hz": f"{rig.sim.rate_hz:g}", "end_effector": rig.rig.end_effector}
+            meta["world"] = {"world": rig.sim.world, "rate_hz": f"{rig.sim.rate_hz:g}",
+                             "end_effector": rig.rig.end_effector}
         # The post-condition questionnaire is answered after the file is closed: it goes in a sidecar
         # next to the session, which the session names here so that nothing recorded is rewritten.
         meta["study"] = {"survey_sidecar": Path(o.out).with_suffix(".survey.json").name}
