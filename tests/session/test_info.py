@@ -82,7 +82,7 @@ def test_summary_facts(recorded):
     assert s.start_ns == T0 and s.file_bytes == recorded.stat().st_size
     assert [(d.device, d.event) for d in s.device_events] == [("right", "gap"), ("right", "recovered")]
     assert s.episodes == [
-        Episode(0, "pour water", T0 + 1_000 * MS, T0 + 3_000 * MS, False, "success"),
+        Episode(0, "pour water", T0 + 1_000 * MS, T0 + 3_000 * MS, False, "success", marked="success"),
         Episode(1, "pour water", T0 + 5_000 * MS, T0 + 6_500 * MS, True, None),
         Episode(2, "stack", T0 + 8_000 * MS, None, False, None),
     ]
