@@ -28,23 +28,30 @@ PHYSICS_RIG = default_rig_path().parent / "sim_physics.toml"
 EPISODE_S = 2.5
 
 
-@pytest.fixture(scope="module")
-def recorded(tmp_path_factory):
-    d = tmp_path_factory.mktemp("physics")
-    path = d / "physics.mcap"
-    ran = teleprev("record", PHYSICS_RIG, "--out", path, "--episodes", "2", "--episode-time", EPISODE_S,
-                   "--reset-time", "0.5", "--engage-after", "0.3", "--marks", "y-", "--no-preview")
+def _record(path, marks: str) -> SimpleNamespace:
+    # One engaged episode per session: a second engage may start from where an object pushed the arm, which
+    # the sim arm's servo rule faults on (the report on branch physics2 says why; not this test's subject).
+    ran = teleprev("record", PHYSICS_RIG, "--out", path, "--episodes", "1", "--episode-time", EPISODE_S,
+                   "--engage-after", "0.3", "--marks", marks, "--no-preview")
     assert ran.returncode == 0, ran.stderr + ran.stdout
     with SessionReader(path) as reader:
         return SimpleNamespace(
-            path=path, dir=d, episodes=reader.episodes(), metadata=reader.metadata,
+            path=path, episodes=reader.episodes(), metadata=reader.metadata,
             events=[m.payload.data for m in reader.messages([topics.EPISODE])],
             scenes=[m.payload.data for m in reader.messages([topics.WORLD])])
 
 
+@pytest.fixture(scope="module")
+def recorded(tmp_path_factory):
+    """Two sessions of one episode each: the operator marks the first y, the second not."""
+    d = tmp_path_factory.mktemp("physics")
+    return SimpleNamespace(dir=d, marked=_record(d / "marked.mcap", "y"), unmarked=_record(d / "unmarked.mcap", "-"))
+
+
 def test_the_session_records_every_scene_the_world_ran(recorded):
+    recorded = recorded.marked
     assert recorded.metadata["world"] == {"world": "physics", "rate_hz": "500", "end_effector": "leap_hand"}
-    assert int(recorded.metadata["world_run"]["steps"]) > 500 * 2 * EPISODE_S * 0.9  # stepped at 500 Hz throughout
+    assert int(recorded.metadata["world_run"]["steps"]) > 500 * EPISODE_S * 0.9  # stepped at 500 Hz throughout
     reasons = [s["reason"] for s in recorded.scenes]
     assert reasons[0] == "start" and reasons[1].startswith("operator episode 0 (seed 0): pick_place"), reasons
     for scene in recorded.scenes:
@@ -62,24 +69,26 @@ def test_the_session_records_every_scene_the_world_ran(recorded):
 
 
 def test_each_episode_is_marked_by_the_world_and_the_operators_mark_wins(recorded):
-    judged = [e for e in recorded.events if e.get("source") == "physics"]
-    assert [(e["episode"], e["outcome"]) for e in judged] == [(0, "failure"), (1, "failure")]
-    assert all(e["reason"] for e in judged)
-    first, second = recorded.episodes
+    for session in (recorded.marked, recorded.unmarked):
+        judged = [e for e in session.events if e.get("source") == "physics"]
+        assert [(e["episode"], e["outcome"]) for e in judged] == [(0, "failure")] and judged[0]["reason"]
+        assert session.episodes[0].judged_reason == judged[0]["reason"]
+    first, second = recorded.marked.episodes[0], recorded.unmarked.episodes[0]
     assert (first.marked, first.judged, first.outcome) == ("success", "failure", "success")  # y wins, both kept
     assert (second.marked, second.judged, second.outcome) == (None, "failure", "failure")  # the world's mark alone
-    assert second.judged_reason == judged[1]["reason"]
 
 
 def test_export_only_selects_by_the_combined_mark(recorded):
     root = recorded.dir / "success"
-    ran = teleprev("export", recorded.path, "--repo-id", "t/physics", "--root", root, "--only", "success")
+    ran = teleprev("export", recorded.marked.path, recorded.unmarked.path, "--repo-id", "t/physics", "--root", root,
+                   "--only", "success")
     assert ran.returncode == 0, ran.stderr + ran.stdout
     assert "selected: recorded 2; --only success kept 1" in ran.stdout
     from lerobot.datasets.lerobot_dataset import LeRobotDataset
 
     meta = LeRobotDataset("t/physics", root=root, video_backend="pyav").meta.episodes
-    assert [(meta["source_episode"][i], meta["outcome"][i]) for i in range(len(meta))] == [(0, "success")]
+    kept = [(meta["source_session"][i], meta["source_episode"][i], meta["outcome"][i]) for i in range(len(meta))]
+    assert kept == [("marked.mcap", 0, "success")]
 
 
 def test_the_preview_shows_the_outcome_when_an_episode_ends(tmp_path):
