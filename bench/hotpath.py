@@ -9,7 +9,7 @@ configurations, times the checker the pipeline runs (SelfCollisionChecker: compi
 margin; its answers must equal FCL's exactly), and times what compiling costs: cold (empty kernel cache, in a fresh process), from
 the cache (--quick: from the cache only), and whether `teleprev --help` stays fast. The glove preparation (Pipeline.prepare_hands: decode,
 checks, angles, retargeting, clip, and for the LEAP Hand the exact check) is timed with the numpy
-arithmetic (formats 1 and 2) and the compiled one (format 3, teleprev/kernels/glove.py), the two
+arithmetic (the earliest sessions') and the compiled one (teleprev/kernels/glove.py), the two
 interleaved sample by sample: one sample as the live step prepares it, and a session's worth as eval does.
 
 JSON keys:

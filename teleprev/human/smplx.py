@@ -16,9 +16,9 @@ every turn. angles_from_hand_pose reads the bone's direction. For the four finge
 thumb's frame is the finger frame turned 60 degrees about y, so the thumb points out and forwards and
 curls across the palm.
 
-Sessions of formats 1 to 4 read hands the other way round, R = B Ry(abduction) Rz(flexion) Rx(twist) B.T
+Sessions recorded by earlier versions read hands the other way round, R = B Ry(abduction) Rz(flexion) Rx(twist) B.T
 (abduction first, the twist nearest zero taken off): angles_from_hand_pose_abduction_first, kept as it was
-so that they re-run bit for bit. It is singular at 90 degrees of flexion (a small sideways deviation of a
+so that they re-run bit for bit (teleprev/pipeline/older_formats/ picks it). It is singular at 90 degrees of flexion (a small sideways deviation of a
 flexed finger reads as a large abduction) and flips a thumb turned more than 90 degrees about its bone.
 """
 
@@ -67,7 +67,7 @@ def hand_pose_from_angles(flexion: np.ndarray, abduction: np.ndarray, abduction_
     is (-sin a/2 sin f/2, sin a/2 cos f/2, cos a/2 sin f/2, cos a/2 cos f/2), and conjugating by the joint
     frame turns its vector part by B. Taken the short way round (w >= 0). A glove streams this at 120 Hz.
     `abduction_first`: B Ry(abduction) Rz(flexion) B^T instead (x = +sin a/2 sin f/2), the convention that
-    angles_from_hand_pose_abduction_first (formats 1 to 4) inverts.
+    angles_from_hand_pose_abduction_first (older session formats) inverts.
     """
     flexion = np.asarray(flexion, dtype=float)
     abduction = np.asarray(abduction, dtype=float)
