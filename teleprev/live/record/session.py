@@ -124,7 +124,8 @@ class LiveSession:
         tf_period_ns = int(1e9 / rig.pipeline.tf_rate_hz) if rig.pipeline.tf_rate_hz > 0 else 0
         self.loop = SessionLoop(self.clock, self._log, self.driver, inbox=inbox, actuators=self.actuators,
                                 sender=self.sender, frames=RobotFrames(frames, tf_period_ns),
-                                on_episode_start=self._episode_started)
+                                on_episode_start=self._episode_started,
+                                input_loss_to_preview_s=rig.session.input_loss_to_preview_s)
         self.summary = None
         self.cannot_start = False  # a device could not start at all (wait_connected said which, at once)
         self._press = self._press_unattended
