@@ -203,8 +203,8 @@ class SessionLoop:
     def mark_outcome(self, success: bool) -> None:
         self.send(MarkOutcome(success))
 
-    def note(self, event: str, detail: str = "") -> None:
-        self.send(OperatorNote(event, detail))
+    def note(self, event: str, detail: str = "", show: bool = False) -> None:
+        self.send(OperatorNote(event, detail, show))
 
     # ---- lifecycle -----------------------------------------------------------------------------
     def start(self) -> None:
@@ -443,4 +443,4 @@ class SessionLoop:
 
     def _note(self, c: OperatorNote, now: int) -> str:
         self._event(topics.OPERATOR, "teleprev.OperatorEvent", {"event": c.event, "detail": c.detail}, now)
-        return ""
+        return c.detail if c.show else ""
