@@ -59,8 +59,9 @@ class SessionSection:
 
     def __post_init__(self):
         if not 0.2 <= self.input_loss_to_preview_s <= 10.0:
-            raise ValueError("input_loss_to_preview_s must be in [0.2, 10] seconds (longer than the pipeline's "
-                             f"stale limit, short enough that nobody has looked away), got {self.input_loss_to_preview_s!r}")
+            raise ValueError("input_loss_to_preview_s must be in [0.2, 10] seconds (longer than the pipeline's stale "
+                             "limit, short enough that nobody has looked away), got "
+                             f"{self.input_loss_to_preview_s!r}")
 
 
 @dataclass(frozen=True)

@@ -103,7 +103,7 @@ class PlannerState:
     mode: str = "preview"  # "preview" | "execute"
     active: bool = False  # commanding (executing, or braking after a switch to preview)
     engaging: bool = False
-    input_lost: bool = False  # a tick in execute had no target for a side: the next full one resumes at the engage fraction
+    input_lost: bool = False  # a tick in execute had no target for a side: the next full one resumes slowly
     last_ns: int | None = None  # the last tick that sent
     dt_before: float = 0.0  # the interval before it (the hand cap's span)
     arm: _Side = field(default_factory=_Side)

@@ -36,7 +36,8 @@ RECORDER_RECORD = "recorder"  # metadata record with the counters, written at cl
 DEFAULT_QUEUE_SIZE = 4096
 POLL_S = 0.02  # how often the idle writer looks at the queue
 YIELD_EVERY = 16  # messages the writer encodes before letting producers have the GIL
-LAG_BUDGET_S = 0.3  # the oldest queued message older than this: new camera frames are shed (twice: all but commands, events)
+# The oldest queued message older than this: new camera frames are shed (past twice this: all but commands, events).
+LAG_BUDGET_S = 0.3
 COMMAND_PREFIX = "/command/"
 
 

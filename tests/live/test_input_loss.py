@@ -26,7 +26,8 @@ class LossySender(VmcSender):
 
     def frame(self, k: int, rate_hz: float) -> bytes:
         if self.loss == "nan":
-            return bundle(*arm_messages(root_pos=(math.nan,) * 3, t=100.0 + k / rate_hz), *finger_messages(math.nan)).dgram
+            arm = arm_messages(root_pos=(math.nan,) * 3, t=100.0 + k / rate_hz)
+            return bundle(*arm, *finger_messages(math.nan)).dgram
         return super().frame(k, rate_hz)
 
     def send(self, datagram: bytes) -> None:
@@ -145,7 +146,8 @@ def test_a_frozen_record_process_goes_back_to_preview_and_sends_nothing_more(tmp
     reader = SessionReader(out)
     modes = [(m.log_time_ns, m.payload.data["mode"], m.payload.data["reason"]) for m in reader.messages([topics.MODE])]
     lost_at = next(t for t, mode, reason in modes if reason == "input_lost")
-    assert [m for _, m, _ in modes if m == "execute"] and not [t for t, m, _ in modes if m == "execute" and t > lost_at], modes
+    engages = [t for t, mode, _ in modes if mode == "execute"]
+    assert engages and not [t for t in engages if t > lost_at], modes
     lost = [e for e in operator_events(out) if e["event"] == "input_lost"]
     assert len(lost) == 1 and "did not run for" in lost[0]["detail"], lost
     after = [m.log_time_ns for m in reader.messages([topics.COMMAND_ARM]) if m.log_time_ns > lost_at + 1e9]

@@ -9,10 +9,10 @@ import time
 import numpy as np
 
 from teleprev import topics
+from teleprev.live.record.session import LiveSession, RecordOptions
 from teleprev.messages import Event, ImageSample, JointSample, Logged
 from teleprev.session.reader import SessionReader
 from teleprev.session.recorder import RECORDER_RECORD, Recorder
-from teleprev.live.record.session import LiveSession, RecordOptions
 from tests.helpers.sessions import RIGS, wait_opened
 from tests.helpers.wait import wait_until
 

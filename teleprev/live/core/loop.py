@@ -307,7 +307,8 @@ class SessionLoop:
             self.stats.step_ns.append(time.perf_counter_ns() - started)
         if self.input_watch is not None:
             update = out.result.update
-            usable = out.result.arm_target is not None if update is None else update.arm is not None and update.hand is not None
+            usable = out.result.arm_target is not None if update is None else \
+                update.arm is not None and update.hand is not None
             self._input_event(self.input_watch.stepped(t, usable, out.result.report.get("flags", [])))
         self._pass_updates()
         for topic, payload in out.logged:

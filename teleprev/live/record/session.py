@@ -176,7 +176,8 @@ class LiveSession:
             self.loop.note("recording_behind", f"the recording is {lag_s:.2f} s behind: camera frames (then all but "
                                                f"commands and events) are not recorded until it catches up", show=True)
         else:
-            self.loop.note("recording_caught_up", f"the recording caught up; not recorded meanwhile: {counts}", show=True)
+            self.loop.note("recording_caught_up", f"the recording caught up; not recorded meanwhile: {counts}",
+                           show=True)
 
     @property
     def failure(self) -> str:
