@@ -94,6 +94,17 @@ class Row:
         return not self.announced and (self.lost_s > LOST_EPS_S or self.dataset_ok is False)
 
 
+def started(path: Path, min_bytes: int, timeout: float) -> bool:
+    """Whether the recording reached min_bytes in time (wait_for_file raises when it did not)."""
+    from tests.helpers.wait import WaitTimeout
+
+    try:
+        wait_for_file(path, min_bytes, timeout=timeout)
+    except WaitTimeout:
+        return False
+    return True
+
+
 def one_line(run) -> bool:
     return run.returncode != 0 and len([x for x in run.stderr.splitlines() if x.strip()]) == 1
 
@@ -160,7 +171,7 @@ def record_signal(work: Path, k: int, sig: int, after_s: float) -> Row:
     out = work / f"rec_sig{k}.mcap"
     proc = start_cli(RECORD + ["-o", out])
     try:
-        if not wait_for_file(out, 150_000, timeout=120):
+        if not started(out, 150_000, timeout=120):
             proc.kill()
             return Row("record", f"{sig.name} (never started)", proc.wait(), traceback=True)
         time.sleep(after_s)
@@ -279,7 +290,7 @@ def input_loss(work: Path, k: int, loss: str, lost_s: float, load: str) -> Row:
     lossy = _LossySender(port).sender.start(rate_hz=60.0)
     proc = start_cli(["record", rig, "--duration", "6", "--no-preview", "--engage-after", "0.5", "-o", out])
     try:
-        if not wait_for_file(out, 100_000, timeout=120):
+        if not started(out, 100_000, timeout=120):
             proc.kill()
             return Row("input", f"{loss} {lost_s:.1f} s {load} (never started)", proc.wait(), traceback=True)
         time.sleep(2.5)
@@ -305,7 +316,7 @@ def frozen_record(work: Path, k: int, frozen_s: float, load: str) -> Row:
     out = work / f"frozen{k}.mcap"
     proc = start_cli(["record", "--duration", "6", "--no-preview", "--engage-after", "0.3", "-o", out])
     try:
-        if not wait_for_file(out, 150_000, timeout=120):
+        if not started(out, 150_000, timeout=120):
             proc.kill()
             return Row("freeze", f"SIGSTOP {frozen_s:.1f} s {load} (never started)", proc.wait(), traceback=True)
         time.sleep(1.5)
