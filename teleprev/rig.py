@@ -7,6 +7,9 @@
     [pipeline]                   # see teleprev/pipeline/config.py
     wrist_scale = 1.0
 
+    [session]                    # how a recording behaves, whatever the devices
+    input_loss_to_preview_s = 1.0
+
     [devices.glove]              # one table per device: a plugin and that plugin's settings
     plugin = "sim.glove"
 
@@ -65,6 +68,19 @@ class SimSection:
 
 
 @dataclass(frozen=True)
+class SessionSection:
+    # Input lost (missing, stale, invalid) or the process frozen for longer than this while executing: back to
+    # PREVIEW, and the operator engages again. A shorter loss resumes at the engage speed (live/core/input_watch.py).
+    input_loss_to_preview_s: float = 1.0
+
+    def __post_init__(self):
+        if not 0.2 <= self.input_loss_to_preview_s <= 10.0:
+            raise ValueError("input_loss_to_preview_s must be in [0.2, 10] seconds (longer than the pipeline's stale "
+                             "limit, short enough that nobody has looked away), got "
+                             f"{self.input_loss_to_preview_s!r}")
+
+
+@dataclass(frozen=True)
 class SensorFrame:
     """Where a sensor's frame sits in the robot's tree (its calibrated extrinsics): [frames.<name>], name a
     camera device (its images' frame) or "suit" (the suit's world frame, in which wrist poses are given)."""
@@ -107,6 +123,7 @@ class Rig:
     tasks: dict[str, str] = field(default_factory=dict)  # [tasks]: task id -> the instruction in words
     text: str | None = None  # the TOML, for a rig read from text (a session's recorded rig has no file)
     sim: SimSection = field(default_factory=SimSection)  # [sim]: the world the sim devices live in
+    session: SessionSection = field(default_factory=SessionSection)  # [session]
 
     def check_task(self, task: str, where: str) -> None:
         """Refuse a task label that a device of this rig has to act out and does not know (a simulated
@@ -232,11 +249,12 @@ def load_recorded_rig(metadata: dict, session: Path) -> Rig | None:
 
 def parse_rig(data: dict, path: Path | None, where: str | None = None) -> Rig:
     where = where or str(path)
-    unknown = sorted(set(data) - {"rig", "pipeline", "devices", "frames", "tasks", "sim"})
+    unknown = sorted(set(data) - {"rig", "session", "pipeline", "devices", "frames", "tasks", "sim"})
     if unknown:
-        raise ConfigError(f"unknown table [{unknown[0]}] (expected [rig], [pipeline], [devices.<name>], "
+        raise ConfigError(f"unknown table [{unknown[0]}] (expected [rig], [session], [pipeline], [devices.<name>], "
                           "[frames.<name>], [tasks] and [sim])", where)
     rig = from_table(RigSection, data.get("rig", {}), f"{where} [rig]")
+    session = from_table(SessionSection, data.get("session", {}), f"{where} [session]")
     sim = from_table(SimSection, data.get("sim", {}), f"{where} [sim]")
     if isinstance(data.get("pipeline"), dict) and "trigger" in data["pipeline"]:
         raise ConfigError("unknown key 'trigger': it was removed (a pipeline step runs on every glove sample); "
@@ -270,7 +288,8 @@ def parse_rig(data: dict, path: Path | None, where: str | None = None) -> Rig:
         if name != "suit" and (name not in devices or devices[name].kind != "camera"):
             raise ConfigError("names no camera of this rig (a [frames] table is a camera device's name, or suit)",
                               f"{where} [frames.{name}]")
-    out = Rig(path.resolve() if path else None, rig, pipeline, devices, data, frames, tasks, sim=sim)
+    out = Rig(path.resolve() if path else None, rig, pipeline, devices, data, frames, tasks, session=session,
+              sim=sim)
     out.check_task(rig.task, f"{where} [rig].task")
     return out
 

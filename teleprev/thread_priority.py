@@ -16,6 +16,9 @@ import os
 import threading
 
 LOOP_NICE = -10
+# The recorder's writer: above busy processes beside the session (what is in memory reaches the disk first, so
+# that a full disk loses at most a second), below the loop, whose steps the commands wait for.
+WRITER_NICE = -5
 
 
 def raise_this_thread(nice: int = LOOP_NICE, thread: str = "the session loop") -> str:

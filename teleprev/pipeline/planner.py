@@ -16,6 +16,9 @@ other than through their targets.
     hand   the acceleration cap towards the target (where the Corrector put it, met moving with it), each
            command segment checked for self-collision with the clearance (Motion's hand step, one tick long)
     stale  a target older than the pipeline's stale limit: that side brakes to rest, then holds
+    resume once both sides have targets again after a tick without (stale, missing or invalid input): at
+           the engage fraction of the speed caps until the commands meet the targets, as an engage does
+           (the session loop sends the session back to preview when the loss lasted too long)
     pause  ticks further apart than RESUME_GAP_NS (the sender starved): the arm stood at the last
            command meanwhile, so the next commands start from rest there, one short step in
     engage from the measured state at rest (ModeUpdate "execute"), at the engage fraction of the speed
@@ -100,6 +103,7 @@ class PlannerState:
     mode: str = "preview"  # "preview" | "execute"
     active: bool = False  # commanding (executing, or braking after a switch to preview)
     engaging: bool = False
+    input_lost: bool = False  # a tick in execute had no target for a side: the next full one resumes slowly
     last_ns: int | None = None  # the last tick that sent
     dt_before: float = 0.0  # the interval before it (the hand cap's span)
     arm: _Side = field(default_factory=_Side)
@@ -142,7 +146,7 @@ class CommandPlanner:
         elif update.mode == "execute":
             if s.mode == "execute":
                 return
-            s.mode, s.engaging = "execute", True
+            s.mode, s.engaging, s.input_lost = "execute", True, False
             if not s.active:  # from rest at the measured state (braking: carry on from the commands)
                 s.arm = _Side(motion=JointMotion.rest(np.asarray(update.arm, dtype=float)))
                 s.hand = _Side(q=np.asarray(update.hand, dtype=float), v=np.zeros(len(update.hand)))
@@ -174,11 +178,17 @@ class CommandPlanner:
         executing = s.mode == "execute"
         if not executing:
             flags.append("stopping")
-        frac = self.engage_speed_frac if s.engaging else 1.0
         target = s.target if executing else None
         if target is not None and t_ns - target.t_ns > self.stale_ns:
             flags.append("targets_stale")
             target = None
+        if executing:
+            if target is None or target.arm is None or target.hand is None:
+                s.input_lost = True
+            elif s.input_lost:  # the input is back: from the held commands, at the engage fraction
+                s.input_lost, s.engaging = False, True
+                flags.append("input_resumed")
+        frac = self.engage_speed_frac if s.engaging else 1.0
         arm_reached = self._arm(target, t_ns, dt, frac, flags)
         hand_reached = self._hand(target, t_ns, dt, frac, flags)
         s.dt_before = dt

@@ -3,44 +3,60 @@
 `log()` never blocks and never raises for a full queue: the message is dropped and counted, so a slow
 disk cannot stall a device or the pipeline. Encoding, compression and file I/O all happen on the writer
 thread, which ends a chunk and flushes it to the OS every `flush_interval_s`, so a crash or a kill loses
-at most that much. At close, a "recorder" metadata record keeps every stream's counters in the file.
+at most that much, plus what is still queued. At close, a "recorder" metadata record keeps every stream's
+counters in the file.
+
+What is queued is bounded in time, not only in count: a full disk loses what was not flushed, so a writer
+that falls behind (a busy machine) would stretch the loss past a second. Recording what is already in
+memory comes first: the writer thread runs at a raised priority (teleprev/thread_priority.py's WRITER_NICE),
+and while the oldest queued
+message is older than `lag_budget_s`, new work is shed, the least valuable first: camera frames, then
+(past twice the budget) every stream but the commands and the events. Shed messages are counted per
+stream (`shed`, also in `dropped`), and `on_behind(behind, lag_s, shed)` tells the session when the writer
+falls behind and when it has caught up, on the writer thread.
 """
 
 from __future__ import annotations
 
 import json
 import os
-import queue
 import threading
 import time
+from collections import deque
+from collections.abc import Callable
 from dataclasses import dataclass, field, replace
 from pathlib import Path
-from typing import Callable
 
 from teleprev.errors import SessionError, describe_os_error
-from teleprev.messages import Logged
+from teleprev.messages import Event, ImageSample, Logged
 from teleprev.session.writer import DEFAULT_CHUNK_SIZE, McapSessionWriter, check_metadata
+from teleprev.thread_priority import WRITER_NICE, raise_this_thread
 
 RECORDER_RECORD = "recorder"  # metadata record with the counters, written at close
 DEFAULT_QUEUE_SIZE = 4096
 POLL_S = 0.02  # how often the idle writer looks at the queue
 YIELD_EVERY = 16  # messages the writer encodes before letting producers have the GIL
+# The oldest queued message older than this: new camera frames are shed (past twice this: all but commands, events).
+LAG_BUDGET_S = 0.3
+COMMAND_PREFIX = "/command/"
 
 
 @dataclass(slots=True)
 class StreamStats:
-    """Per topic: messages handed to log(), written to the file, dropped because the queue was full,
-    rejected because they could not be encoded (errors), and encoded bytes written."""
+    """Per topic: messages handed to log(), written to the file, dropped (the queue was full, or shed),
+    shed because the writer was behind, rejected because they could not be encoded (errors), and encoded
+    bytes written."""
 
     received: int = 0
     written: int = 0
     dropped: int = 0
     bytes: int = 0
     errors: int = 0
+    shed: int = 0
 
     def as_json(self) -> str:
         return json.dumps({"received": self.received, "written": self.written, "dropped": self.dropped,
-                           "errors": self.errors, "bytes": self.bytes})
+                           "errors": self.errors, "bytes": self.bytes, "shed": self.shed})
 
 
 @dataclass
@@ -52,6 +68,11 @@ class RecordingSummary:
     max_queue_depth: int
     file_bytes: int
     errors: list[str] = field(default_factory=list)  # first rejection message per topic
+    max_lag_s: float = 0.0  # the oldest queued message's age, at its largest
+
+    @property
+    def shed(self) -> int:
+        return sum(s.shed for s in self.streams.values())
 
     @property
     def written(self) -> int:
@@ -77,9 +98,15 @@ class Recorder:
         fsync: bool = True,
         on_failure: Callable[[BaseException], None] | None = None,
         attachments: dict[str, tuple[str, bytes]] | None = None,
+        lag_budget_s: float | None = None,
+        on_behind: Callable[[bool, float, dict[str, int]], None] | None = None,
     ):
         """`on_failure(exc)` is called once, on the writer thread, the moment a write or flush fails (a full
-        disk, a dead drive): at most one flush interval after the data it could not write was logged."""
+        disk, a dead drive): at most one flush interval after the data it could not write was logged.
+        `lag_budget_s`: shed new work past this lag (None: never; a live session's is LAG_BUDGET_S, a replay
+        written faster than real time sheds nothing).
+        `on_behind(behind, lag_s, shed)`: the writer fell behind by more than `lag_budget_s` (True), or caught
+        up (False); `shed`: messages shed so far, per topic."""
         if queue_size < 1:
             raise ValueError("queue_size must be at least 1")
         if not 0 < flush_interval_s <= 1.0:
@@ -88,7 +115,12 @@ class Recorder:
         self.queue_size = queue_size
         self.flush_interval_s = flush_interval_s
         self._writer = McapSessionWriter(self.path, metadata, chunk_size=chunk_size, fsync=fsync, attachments=attachments)
-        self._queue: queue.SimpleQueue = queue.SimpleQueue()
+        self._queue: deque = deque()  # (monotonic ns when queued, message); the writer pops from the left
+        self.lag_budget_ns = int(lag_budget_s * 1e9) if lag_budget_s is not None else None
+        self._on_behind = on_behind
+        self._behind_state = 0  # 0: on time; 1: behind (log() sheds), not told yet; 2: behind, told
+        self._max_lag_ns = 0
+        self.priority = ""  # the writer thread's nice value once it runs, or why it could not be raised
         self._lock = threading.Lock()
         self._stats: dict[str, StreamStats] = {}
         self._errors: dict[str, str] = {}
@@ -111,14 +143,45 @@ class Recorder:
                 st = self._stats[msg.topic] = StreamStats()
             st.received += 1
             q = self._queue
-            depth = q.qsize()
+            depth = len(q)
             if depth >= self.queue_size or not self._accepting:
                 st.dropped += 1
                 return False
-            q.put(msg)
+            now = time.monotonic_ns()
+            lag_ns = now - q[0][0] if depth else 0
+            if lag_ns > self._max_lag_ns:
+                self._max_lag_ns = lag_ns
+            if self.lag_budget_ns is not None and self._sheds(msg, lag_ns):
+                st.dropped += 1
+                st.shed += 1
+                return False
+            q.append((now, msg))
             if depth >= self._max_depth:
                 self._max_depth = depth + 1
             return True
+
+    def _sheds(self, msg: Logged, lag_ns: int) -> bool:
+        """Whether a new message waits behind a queue this old for nothing: the least valuable go first."""
+        if lag_ns <= self.lag_budget_ns:
+            return False
+        if self._behind_state == 0:
+            self._behind_state = 1
+        if isinstance(msg.payload, ImageSample):
+            return True
+        return lag_ns > 2 * self.lag_budget_ns and not isinstance(msg.payload, Event) \
+            and not msg.topic.startswith(COMMAND_PREFIX)
+
+    @property
+    def lag_s(self) -> float:
+        """How long the oldest queued message has waited (0: nothing queued)."""
+        try:
+            return max(0, time.monotonic_ns() - self._queue[0][0]) / 1e9
+        except IndexError:
+            return 0.0
+
+    @property
+    def max_lag_s(self) -> float:
+        return self._max_lag_ns / 1e9
 
     def stats(self) -> dict[str, StreamStats]:
         """A snapshot of the per-topic counters."""
@@ -161,7 +224,7 @@ class Recorder:
             self._accepting = False
         if self._thread is None:
             self.start()
-        self._queue.put(_STOP)
+        self._queue.append((0, _STOP))
         self._thread.join()
         if self._failure is None:
             try:
@@ -185,7 +248,7 @@ class Recorder:
                                "is lost", str(self.path)) from None
         self._summary = RecordingSummary(
             self.path, streams, time.monotonic() - self._t_start, self._cpu_s, self._max_depth,
-            size, [f"{t}: {m}" for t, m in self._errors.items()],
+            size, [f"{t}: {m}" for t, m in self._errors.items()], self.max_lag_s,
         )
         return self._summary
 
@@ -204,6 +267,9 @@ class Recorder:
             "queue_size": str(self.queue_size),
             "flush_interval_s": str(self.flush_interval_s),
             "max_queue_depth": str(self._max_depth),
+            "lag_budget_s": f"{self.lag_budget_ns / 1e9:g}" if self.lag_budget_ns is not None else "none",
+            "max_lag_s": f"{self.max_lag_s:.3f}",
+            "writer_priority": self.priority,
             "writer_cpu_s": f"{self._cpu_s:.3f}",
             "wall_s": f"{time.monotonic() - self._t_start:.3f}",
         })
@@ -227,7 +293,8 @@ class Recorder:
         # The writer wakes every POLL_S and drains the queue, instead of waking for every message: a
         # thread wake-up per message costs more CPU than encoding it. Within a drain it lets go of the
         # GIL every YIELD_EVERY messages, so that producers calling log() are not held up for long.
-        writer, get, stats = self._writer, self._queue.get_nowait, self._stats
+        self.priority = raise_this_thread(WRITER_NICE, "the recorder's writer")
+        writer, pop, stats = self._writer, self._queue.popleft, self._stats
         interval = self.flush_interval_s
         next_flush = time.monotonic() + interval
         sleep, monotonic = time.sleep, time.monotonic
@@ -237,8 +304,8 @@ class Recorder:
                 n = 0
                 while True:
                     try:
-                        msg = get()
-                    except queue.Empty:
+                        _, msg = pop()
+                    except IndexError:
                         break
                     if msg is _STOP:
                         stop = True
@@ -260,6 +327,7 @@ class Recorder:
                         break  # a long backlog still gets flushed on time
                 if stop:
                     break
+                self._tell_lag()
                 now = monotonic()
                 if now >= next_flush:
                     writer.flush()
@@ -271,3 +339,23 @@ class Recorder:
             self._fail(exc)
         finally:
             self._cpu_s = time.thread_time()
+
+    def _tell_lag(self) -> None:
+        """After a drain: tell the session when the writer has fallen behind (log() has started shedding),
+        and when it has caught up (the queue younger than half the budget again)."""
+        if self._behind_state == 1:
+            self._behind_state = 2
+            self._behind(True)
+        elif self._behind_state == 2 and self.lag_s * 2e9 < self.lag_budget_ns:
+            self._behind_state = 0
+            self._behind(False)
+
+    def _behind(self, behind: bool) -> None:
+        if self._on_behind is None:
+            return
+        with self._lock:
+            shed = {t: s.shed for t, s in self._stats.items() if s.shed}
+        try:
+            self._on_behind(behind, self.max_lag_s if behind else self.lag_s, shed)
+        except Exception:  # a listener's own error must not stop the recording
+            pass

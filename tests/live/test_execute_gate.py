@@ -17,7 +17,7 @@ from tests.helpers.wait import wait_until
 def test_the_strongest_reason_wins_and_each_lifts_as_it_says():
     gate = ExecuteGate()
     assert gate.state is GateState.OPEN and gate.refusal(unattended=True) is None
-    gate.device_failed("device arm failed: boom")
+    gate.faulted("device arm failed: boom")
     assert gate.state is GateState.FAULTED and gate.fault == "device arm failed: boom"
     assert gate.refusal(unattended=False) is None  # the operator's key is let through
     gate.hold("schedule", "resting")
@@ -37,11 +37,11 @@ def test_the_strongest_reason_wins_and_each_lifts_as_it_says():
 
 def test_an_unattended_engage_after_a_fault_is_told_once_per_fault():
     gate = ExecuteGate()
-    gate.device_failed("device arm failed")
+    gate.faulted("device arm failed")
     told = [gate.refusal(unattended=True).tell for _ in range(3)]
     assert told == [True, False, False]
     assert "does not engage again after a fault" in gate.refusal(unattended=True).why
-    gate.device_failed("device arm failed again")
+    gate.faulted("device arm failed again")
     assert gate.refusal(unattended=True).tell
 
 

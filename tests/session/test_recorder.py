@@ -40,7 +40,7 @@ def test_counts_and_file_agree(tmp_path):
         assert reader.metadata["session"] == {"operator": "ann"}
     assert values == list(range(500))
     assert counters == {"received": 500, "written": 500, "dropped": 0, "errors": 0,
-                        "bytes": summary.streams["/glove/g/hand"].bytes}
+                        "bytes": summary.streams["/glove/g/hand"].bytes, "shed": 0}
 
 
 def test_full_queue_drops_and_counts_without_blocking(tmp_path):

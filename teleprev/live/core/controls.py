@@ -98,10 +98,11 @@ class WorldLayout:
 
 @dataclass(frozen=True)
 class OperatorNote:
-    """An operator event recorded as it is (e.g. "ready", "practice_start")."""
+    """An operator event recorded as it is (e.g. "ready", "practice_start"); `show`: the preview says `detail`."""
 
     event: str
     detail: str = ""
+    show: bool = False
 
 
 Control = (Engage | ToPreview | EStop | Halt | Hold | Release | StartEpisode | StopEpisode | DiscardEpisode

@@ -6,8 +6,8 @@ clearance margin); the gate refuses it for reasons of the session, each one a Ga
     HALTED    for good: the recording, the session loop, the command sender or a policy failed
     HELD      for now: someone holds execute back (a timed episodes' reset, a policy that has not acted
               yet in its episode) until they release it
-    FAULTED   a device failed: nothing engages by itself any more; the operator's engage (a key) is let
-              through and clears the fault
+    FAULTED   a device failed, or the operator's input was lost past the bound (live/core/input_watch.py):
+              nothing engages by itself any more; the operator's engage (a key) is let through and clears it
     OPEN      nothing of the session's stands in the way
 
 It is used on the session loop's thread only (SessionLoop carries out every control there).
@@ -51,7 +51,7 @@ class ExecuteGate:
 
     @property
     def fault(self) -> str:
-        """Why the session stays in preview until the operator engages (the device that failed), or ""."""
+        """Why the session stays in preview until the operator engages (a device failed, the input was lost), or ""."""
         return self._fault
 
     def halt(self, why: str) -> None:
@@ -63,7 +63,7 @@ class ExecuteGate:
     def release(self, source: str) -> None:
         self._holds.pop(source, None)
 
-    def device_failed(self, message: str) -> None:
+    def faulted(self, message: str) -> None:
         self._fault, self._fault_told = message, False
 
     def engaged(self) -> None:

@@ -15,6 +15,9 @@ in its own process, and the CommandRelay's thread (teleprev/live/core/relay.py) 
 the arm and the end effector at once, then queues the tick for the loop to record (/command/arm,
 /command/hand and /command/tick, stamped with the instant the sender sent them).
 
+Input lost while executing (missing, stale or invalid samples, a frozen process) holds the robot; past the
+rig's bound the session goes back to preview (teleprev/live/core/input_watch.py).
+
 After a device fails, nothing engages by itself: the session goes back to preview (an actuator that
 failed: nothing more is sent at once, its controller has stopped it; another device: the commands brake to
 rest), records why, and the gate refuses an unattended engage until the operator engages with a key.
@@ -44,10 +47,12 @@ from teleprev.live.core.controls import (Control, DiscardEpisode, Engage, EStop,
                                     Release, StartEpisode, StopEpisode, ToPreview, UNATTENDED, WorldLayout)
 from teleprev.live.core.episodes import EpisodeTracker
 from teleprev.live.core.gate import ExecuteGate, GateState
+from teleprev.live.core.input_watch import InputEvent, InputWatch
 from teleprev.live.core.relay import CommandRelay
 from teleprev.thread_priority import raise_this_thread
 
 _STOP = object()
+IDLE_CHECK_S = 0.1  # the loop wakes at least this often to see whether the input has been lost
 
 
 @dataclass
@@ -119,13 +124,16 @@ class SessionLoop:
         frames=None,
         on_episode_start: Callable[[str], None] | None = None,
         judge: Callable[[], tuple[str, str] | None] | None = None,
+        input_loss_to_preview_s: float = 1.0,
     ):
         """`log` receives every message to record (Recorder.log); `inbox` the queue the device runners were
         given the `sink` of (default: a new one); `actuators` maps "arm" and "hand" to the ActuatorPorts
-        that pass commands on; `sender` (a CommandSender, started before this loop) makes the commands of a
-        format 4 pipeline; `frames` (teleprev/live/record/frames.py: RobotFrames) turns measured joints into /tf;
+        that pass commands on; `sender` (a CommandSender, started before this loop) makes the commands from the
+        pipeline's updates; `frames` (teleprev/live/record/frames.py: RobotFrames) turns measured joints into /tf;
         `judge` (a physics rig) gives the outcome of the task now, as (mark, reason), or None when it cannot say:
-        each episode that stops is marked with it, beside the operator's y/f."""
+        each episode that stops is marked with it, beside the operator's y/f;
+        `input_loss_to_preview_s`: the rig's [session] bound on a loss of the operator's input while executing
+        (a policy's actions are not watched: no person looks away)."""
         self.clock = clock
         self._log = log
         self.driver = driver
@@ -142,6 +150,9 @@ class SessionLoop:
                                command_errors=self.relay.errors)
         self.episodes = EpisodeTracker()
         self.gate = ExecuteGate()
+        watched = driver is not None and not driver.topics.action
+        self.input_watch = InputWatch(int(input_loss_to_preview_s * 1e9), int(driver.pipeline.cfg.stale_ms * 1e6)) \
+            if watched else None
         self.snapshot = LoopSnapshot(session_started_ns=clock.now_ns(),
                                      stale_ms=driver.pipeline.cfg.stale_ms if driver is not None else 0.0)
         self._camera_topic: str | None = None
@@ -197,8 +208,8 @@ class SessionLoop:
     def mark_outcome(self, success: bool) -> None:
         self.send(MarkOutcome(success))
 
-    def note(self, event: str, detail: str = "") -> None:
-        self.send(OperatorNote(event, detail))
+    def note(self, event: str, detail: str = "", show: bool = False) -> None:
+        self.send(OperatorNote(event, detail, show))
 
     def world_layout(self, layout: dict, reason: str, at_ns: int) -> None:
         self.send(WorldLayout(layout, reason, at_ns))
@@ -220,11 +231,23 @@ class SessionLoop:
     def _run(self) -> None:
         self.priority = raise_this_thread()
         get = self.inbox.queue.get
+        woke, stalled_s = time.monotonic(), 0.0
         while True:
-            receive_ns, item = get()
+            try:
+                receive_ns, item = get(timeout=IDLE_CHECK_S)
+            except queue.Empty:
+                receive_ns, item = None, None
             if item is _STOP:
                 return
+            stalled_s = max(stalled_s, time.monotonic() - woke)  # longer than IDLE_CHECK_S: frozen
+            woke = time.monotonic()
             try:
+                if self.input_watch is not None and (item is None or isinstance(item, Sample)):
+                    now = self.clock.now_ns() if item is None else receive_ns
+                    self._input_event(self.input_watch.check(now, stalled_s))
+                    stalled_s = 0.0
+                if item is None:
+                    continue
                 if receive_ns is None:
                     self._apply(item)
                 elif isinstance(item, Sample):
@@ -290,6 +313,11 @@ class SessionLoop:
             return
         if len(self.stats.step_ns) < 100_000:
             self.stats.step_ns.append(time.perf_counter_ns() - started)
+        if self.input_watch is not None:
+            update = out.result.update
+            usable = out.result.arm_target is not None if update is None else \
+                update.arm is not None and update.hand is not None
+            self._input_event(self.input_watch.stepped(t, usable, out.result.report.get("flags", [])))
         self._pass_updates()
         for topic, payload in out.logged:
             self._log(Logged(topic, self._stamp(), payload))
@@ -332,12 +360,22 @@ class SessionLoop:
         self.stats.device_failures[name] += 1
         message = f"device {name} failed: {data.get('message', '')}"
         actuator = name in {getattr(p, "name", None) for p in self.relay.actuators.values()}
-        self.gate.device_failed(message)
+        self.gate.faulted(message)
         if self.driver is not None and (self.driver.mode == "execute" or (actuator and self.relay.active)):
             self._apply(ToPreview(f"device {name} failed", halt=actuator))
             message += ("; nothing more is sent to the robot" if actuator else "; the robot brakes to rest") + \
                 ", back in PREVIEW (press space to engage again)"
         self.snapshot = replace(self.snapshot, message=message, fault=self.gate.fault)
+
+    def _input_event(self, event: InputEvent | None) -> None:
+        """Record a transition of the operator's input; past the bound, back to preview until the operator engages."""
+        if event is None:
+            return
+        self._event(topics.OPERATOR, "teleprev.OperatorEvent", {"event": event.event, "detail": event.detail})
+        if event.to_preview:
+            self.gate.faulted(event.detail)
+            self._apply(ToPreview("input_lost"))
+        self.snapshot = replace(self.snapshot, message=event.detail, fault=self.gate.fault)
 
     # ---- controls, on the loop thread ------------------------------------------------------------
     def _apply(self, control: Control) -> None:
@@ -399,6 +437,8 @@ class SessionLoop:
         if mode == "execute":
             self.stats.engages += 1
             self.gate.engaged()  # the operator engaged again
+        if self.input_watch is not None:
+            self.input_watch.engaged(t) if mode == "execute" else self.input_watch.left_execute()
         return ""
 
     def _episode(self, c: StartEpisode | StopEpisode | DiscardEpisode | MarkOutcome, now: int) -> str:
@@ -427,4 +467,4 @@ class SessionLoop:
 
     def _note(self, c: OperatorNote, now: int) -> str:
         self._event(topics.OPERATOR, "teleprev.OperatorEvent", {"event": c.event, "detail": c.detail}, now)
-        return ""
+        return c.detail if c.show else ""

@@ -76,7 +76,7 @@ def rig_record(rig) -> dict[str, str]:
 class LiveSession:
     def __init__(self, options: RecordOptions):
         from teleprev.devices.runner import ActuatorPort, DeviceRunner
-        from teleprev.session.recorder import Recorder
+        from teleprev.session.recorder import LAG_BUDGET_S, Recorder
 
         self.options = options
         self.rig: Rig = load_rig(options.rig)
@@ -112,7 +112,8 @@ class LiveSession:
             self.view = FoxgloveView(options.foxglove, session_channels([s for dev in self.devices.values() for s in dev.streams()]))
         try:
             self.recorder = Recorder(out, self._metadata(), attachments={urdf.name: (URDF_MEDIA_TYPE, urdf.read_bytes())},
-                                     on_failure=self._recording_failed)
+                                     on_failure=self._recording_failed, lag_budget_s=LAG_BUDGET_S,
+                                     on_behind=self._recording_behind)
         except BaseException:
             if self.view is not None:
                 self.view.close()
@@ -129,7 +130,8 @@ class LiveSession:
         self.loop = SessionLoop(self.clock, self._log, self.driver, inbox=inbox, actuators=self.actuators,
                                 sender=self.sender, frames=RobotFrames(frames, tf_period_ns),
                                 on_episode_start=self._episode_started,
-                                judge=self._judge if self.physics is not None else None)
+                                judge=self._judge if self.physics is not None else None,
+                                input_loss_to_preview_s=rig.session.input_loss_to_preview_s)
         if self.physics is not None:  # every scene the world runs, recorded (those begun so far first)
             for entry in self.physics.layouts:
                 self._world_layout(entry)
@@ -174,6 +176,17 @@ class LiveSession:
         `failure` says why): the robot brakes to rest and the preview says why; the session then ends
         with a non-zero exit."""
         self.loop.halt(self.failure)
+
+    def _recording_behind(self, behind: bool, lag_s: float, shed: dict[str, int]) -> None:
+        """On the recorder's writer thread: it fell behind (new work is shed, the least valuable first, so that
+        what is in memory reaches the disk first), or caught up; recorded, and shown in the preview."""
+        counts = ", ".join(f"{n} {topic}" for topic, n in sorted(shed.items())) or "nothing yet"
+        if behind:
+            self.loop.note("recording_behind", f"the recording is {lag_s:.2f} s behind: camera frames (then all but "
+                                               f"commands and events) are not recorded until it catches up", show=True)
+        else:
+            self.loop.note("recording_caught_up", f"the recording caught up; not recorded meanwhile: {counts}",
+                           show=True)
 
     @property
     def failure(self) -> str:
