@@ -8,6 +8,8 @@ session loop assigns it. Values are float64, so a session read back gives bit-id
 Recorded as (see teleprev/session/topics.py):
     JointSample  -> foxglove.JointStates     PoseSample -> foxglove.PoseInFrame
     ImageSample  -> foxglove.CompressedImage TransformsSample -> foxglove.FrameTransforms
+    DepthSample  -> foxglove.RawImage 16UC1 (or CompressedImage 16-bit PNG), its scale in the channel's metadata
+    CameraInfo   -> foxglove.CameraCalibration
     Event        -> JSON with a titled schema (one schema per event type)
     RobotDescription -> std_msgs/msg/String (ROS 2 CDR)
 """
@@ -63,6 +65,38 @@ class ImageSample:
 
 
 @dataclass(frozen=True, slots=True)
+class DepthSample:
+    """A depth image: `depth` (H, W) uint16 in the camera's units, `scale_m` metres per unit (a D435's unit is
+    1 mm, a D405's 0.1 mm; 0 is "no depth"). `format` is how it is recorded: "raw" (foxglove.RawImage 16UC1,
+    compressed by the file's zstd chunks) or "png" (a 16-bit PNG in foxglove.CompressedImage)."""
+
+    stamp_ns: int
+    frame_id: str
+    depth: np.ndarray
+    scale_m: float
+    format: str = "raw"
+
+    def metres(self) -> np.ndarray:
+        """The depth in metres (float32; 0 where the camera saw nothing)."""
+        return self.depth.astype(np.float32) * np.float32(self.scale_m)
+
+
+@dataclass(frozen=True, slots=True)
+class CameraInfo:
+    """A pinhole camera's calibration for the images of `frame_id` (foxglove.CameraCalibration): `k` the 3x3
+    intrinsic matrix row-major, `d` the distortion coefficients of `distortion_model` ("plumb_bob": k1 k2 p1
+    p2 k3)."""
+
+    stamp_ns: int
+    frame_id: str
+    width: int
+    height: int
+    k: tuple[float, ...]
+    d: tuple[float, ...] = ()
+    distortion_model: str = "plumb_bob"
+
+
+@dataclass(frozen=True, slots=True)
 class Transform:
     parent: str
     child: str
@@ -96,7 +130,7 @@ class RobotDescription:
     urdf: str
 
 
-Payload = Union[JointSample, PoseSample, ImageSample, TransformsSample, Event, RobotDescription]
+Payload = Union[JointSample, PoseSample, ImageSample, DepthSample, CameraInfo, TransformsSample, Event, RobotDescription]
 
 
 @dataclass(frozen=True, slots=True)

@@ -5,6 +5,8 @@ Raw device streams are named after the device (its name in the rig):
     /suit/<device>/wrist      PoseSample    right wrist pose in the suit's world frame
     /suit/<device>/body       JointSample   SMPL-X body joints, axis-angle components (optional)
     /camera/<device>/image    ImageSample   JPEG
+    /camera/<device>/depth    DepthSample   16-bit depth (RawImage 16UC1 or 16-bit PNG), unit in the channel metadata
+    /camera/<device>/calibration CameraInfo  intrinsics of the depth image's frame (foxglove.CameraCalibration)
     /arm/<device>/state       JointSample   measured arm joints
     /hand/<device>/state      JointSample   measured end-effector joints (LEAP "0".."15", "gripper", "vacuum")
 
@@ -21,7 +23,9 @@ What the pipeline computed and sent:
                                             drives the pipeline in place of the glove and suit
     /command/tick             Event         teleprev.CommandTick: per tick of the paced sender, the last
                                             update it had adopted, its lateness and flags
-    /tf                       TransformsSample   robot link frames (for Foxglove's URDF panel)
+    /tf                       TransformsSample   robot link frames (for Foxglove's URDF panel); a depth camera
+                                                 adds its own frame (its mount in the rig) so that Foxglove's
+                                                 3D panel places its point cloud in the robot's scene
     /robot_description        RobotDescription   the rig's URDF (ROS 2 std_msgs/String), once at the start;
                                                  the file also carries it as an attachment <robot>.urdf
 
@@ -60,7 +64,7 @@ WORLD = "/events/world"
 KIND_TOPICS = {
     "glove": ("hand", "xr_left", "xr_right"),  # xr_*: an XR page's raw hand joints (webxr.glove)
     "suit": ("wrist", "body", "head"),  # head: the XR headset (webxr.suit)
-    "camera": ("image",),
+    "camera": ("image", "depth", "calibration"),
     "arm": ("state",),
     "hand": ("state",),
 }

@@ -27,7 +27,8 @@ from teleprev.thread_priority import raise_this_thread
 from teleprev.errors import (ConfigError, DeviceError, DeviceStartError, SessionError, TeleprevError,
                              describe_exception)
 from teleprev.human import smplx
-from teleprev.messages import Event, ImageSample, JointSample, Logged, PoseSample, Sample
+from teleprev.messages import (CameraInfo, DepthSample, Event, ImageSample, JointSample, Logged, PoseSample, Sample,
+                               Transform, TransformsSample)
 from teleprev.robot.effectors import EFFECTORS, EndEffector, end_effector
 from teleprev.topics import KIND_TOPICS, device_topic, parse_device_topic
 from teleprev.world import places as world_places
@@ -65,7 +66,8 @@ __all__ = [
     "ActuatorPort", "DeviceRunner", "RunnerStats", "Sink", "default_gap_s", "GROUP", "available", "load_plugin",
     "raise_this_thread",  # a plugin's own receiving thread, at the session loop's priority
     # samples, time and topics
-    "Event", "ImageSample", "JointSample", "Logged", "PoseSample", "Sample",
+    "Event", "ImageSample", "JointSample", "Logged", "PoseSample", "Sample", "DepthSample", "CameraInfo", "Transform",
+    "TransformsSample",
     "ClockSync", "SessionClock", "KIND_TOPICS", "device_topic", "parse_device_topic",
     # errors
     "ConfigError", "DeviceError", "DeviceStartError", "SessionError", "TeleprevError", "describe_exception",

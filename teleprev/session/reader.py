@@ -253,7 +253,7 @@ class SessionReader:
             try:
                 if schema is None:
                     raise ValueError("channel has no schema")
-                decoders[i] = decoder_for(schema.name, schema.encoding, schema.data, ch.message_encoding)
+                decoders[i] = decoder_for(schema.name, schema.encoding, schema.data, ch.message_encoding, ch.metadata)
             except ValueError as exc:
                 if strict:
                     raise SessionError(f"topic {ch.topic}: {exc}", str(self.path)) from None

@@ -16,7 +16,7 @@ from pathlib import Path
 from teleprev import __version__
 from teleprev.errors import SessionError
 from teleprev.messages import Event, Logged, Payload
-from teleprev.session.codec import encode, schema_for
+from teleprev.session.codec import channel_metadata, encode, schema_for
 from teleprev.topics import FORMAT_VERSION
 
 DEFAULT_CHUNK_SIZE = 4 * 1024 * 1024
@@ -28,6 +28,7 @@ class _Channel:
     id: int
     payload_type: type
     schema: str
+    metadata: dict[str, str]  # codec.channel_metadata of its first payload (a depth channel's unit)
     sequence: int = 0
 
 
@@ -99,8 +100,9 @@ class McapSessionWriter:
         schema_id = self._schemas.get(spec.name)
         if schema_id is None:
             schema_id = self._schemas[spec.name] = self._mcap.register_schema(spec.name, spec.encoding, spec.data)
-        cid = self._mcap.register_channel(topic, spec.message_encoding, schema_id)
-        ch = self._channels[topic] = _Channel(cid, type(payload), spec.name)
+        metadata = channel_metadata(payload)
+        cid = self._mcap.register_channel(topic, spec.message_encoding, schema_id, metadata)
+        ch = self._channels[topic] = _Channel(cid, type(payload), spec.name, metadata)
         return ch
 
     def write(self, msg: Logged) -> int:
@@ -113,6 +115,9 @@ class McapSessionWriter:
         elif type(payload) is not ch.payload_type or (type(payload) is Event and payload.schema != ch.schema):
             got = payload.schema if isinstance(payload, Event) else type(payload).__name__
             raise ValueError(f"topic {msg.topic} carries {ch.schema}; cannot also record {got} on it")
+        elif ch.metadata and (ch.metadata != channel_metadata(payload) or schema_for(payload).name != ch.schema):
+            raise ValueError(f"topic {msg.topic} carries {ch.schema} {ch.metadata}; cannot also record "
+                             f"{schema_for(payload).name} {channel_metadata(payload)} on it")
         log_time = msg.log_time_ns
         if type(log_time) is not int:
             log_time = int(log_time)
