@@ -130,7 +130,8 @@ class RobotDescription:
     urdf: str
 
 
-Payload = Union[JointSample, PoseSample, ImageSample, DepthSample, CameraInfo, TransformsSample, Event, RobotDescription]
+Payload = Union[JointSample, PoseSample, ImageSample, DepthSample, CameraInfo, TransformsSample, Event,
+                RobotDescription]
 
 
 @dataclass(frozen=True, slots=True)

@@ -31,8 +31,18 @@ from typing import Callable
 
 import numpy as np
 
-from teleprev.messages import (CameraInfo, DepthSample, Event, ImageSample, JointSample, Payload, PoseSample,
-                               RobotDescription, Transform, TransformsSample)
+from teleprev.messages import (
+    CameraInfo,
+    DepthSample,
+    Event,
+    ImageSample,
+    JointSample,
+    Payload,
+    PoseSample,
+    RobotDescription,
+    Transform,
+    TransformsSample,
+)
 from teleprev.session.protobuf_wire import _parse_joint_states, _parse_pose_in_frame, _timestamp_spans
 from teleprev.topics import EVENT_SCHEMAS
 
@@ -197,7 +207,8 @@ def encode(payload: Payload) -> bytes:
 def _encode_depth(fm, payload: DepthSample) -> bytes:
     depth = payload.depth
     if depth.dtype != np.uint16 or depth.ndim != 2:
-        raise ValueError(f"depth {payload.frame_id!r}: expected an (H, W) uint16 image, got {depth.dtype} {depth.shape}")
+        raise ValueError(f"depth {payload.frame_id!r}: expected an (H, W) uint16 image, got {depth.dtype} "
+                         f"{depth.shape}")
     if not (payload.scale_m > 0 and np.isfinite(payload.scale_m)):
         raise ValueError(f"depth {payload.frame_id!r}: scale_m must be > 0, got {payload.scale_m}")
     stamp = _timestamp(fm, payload.stamp_ns)
@@ -214,7 +225,8 @@ def _encode_depth(fm, payload: DepthSample) -> bytes:
         if not ok:
             raise ValueError(f"depth {payload.frame_id!r}: PNG encoding failed")
         return fm.CompressedImage(timestamp=stamp, frame_id=payload.frame_id, data=png.tobytes(), format="png").encode()
-    raise ValueError(f"depth {payload.frame_id!r}: format must be one of {', '.join(DEPTH_FORMATS)}, got {payload.format!r}")
+    raise ValueError(f"depth {payload.frame_id!r}: format must be one of {', '.join(DEPTH_FORMATS)}, got "
+                     f"{payload.format!r}")
 
 
 # --- decoding ------------------------------------------------------------------------------------
