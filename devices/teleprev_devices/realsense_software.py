@@ -10,8 +10,8 @@ camera does: its frames stop (`pause`), its hardware clock jumps (`jump_clock_ms
     ...  # a rig with [devices.wrist] plugin = "realsense.camera", serial = "000000000405"
     camera.stop()
 
-The scene is a tilted table at 0.3..0.9 m with a box sliding across it and 2 % holes (depth 0), colour a
-gradient; `depth_for(frame_number)` gives back the exact counts a frame was fed with, and `fed` the hardware
+The scene is a tilted table at 0.3..0.9 m with a box sliding across it, 2 % holes (depth 0) and 0.5 mm of
+sensor noise, colour a gradient; `depth_for(frame_number)` gives back the exact counts a frame was fed with, and `fed` the hardware
 time of each.
 """
 
@@ -32,6 +32,7 @@ MODELS = {
     "D435": {"scale": 0.001, "sensors": ("Stereo Module", "RGB Camera"), "colour_offset_m": 0.015},
 }
 _SCENE_FRAMES = 30  # distinct depth frames, cycled (a frame's counts are a function of its number)
+_NOISE_FIELDS = 31  # sensor noise added to them, cycled at another period so that no two frames repeat
 
 
 @dataclass
@@ -67,6 +68,9 @@ class SoftwareRealSense:
         extrinsics.translation = [spec["colour_offset_m"], 0.0, 0.0]
         self._depth_profile.register_extrinsics_to(self._colour_profile, extrinsics)
         self._scene = _scene(width, height, self.depth_scale)
+        rng = np.random.default_rng(435)  # a D405's noise near 0.5 m is about 0.5 mm RMS
+        sigma = 0.0005 / self.depth_scale
+        self._noise = [np.rint(rng.normal(0, sigma, (height, width))).astype(np.int32) for _ in range(_NOISE_FIELDS)]
         self._colour = _colour(width, height)
         self._clock_origin_ms = clock_origin_ms
         self._mono0 = time.monotonic()
@@ -101,7 +105,9 @@ class SoftwareRealSense:
     def depth_for(self, number: int) -> np.ndarray:
         """The counts frame `number` was fed with (H, W) uint16: the scene, and the number itself in the first
         two pixels of the top row (low, high 16 bits) so that a frame read back names itself."""
-        depth = self._scene[number % _SCENE_FRAMES].copy()
+        scene = self._scene[number % _SCENE_FRAMES]
+        noise = self._noise[(number + number // _SCENE_FRAMES) % _NOISE_FIELDS]  # repeats after 930 frames
+        depth = np.where(scene > 0, scene.astype(np.int32) + noise, 0).astype(np.uint16)
         depth[0, 0], depth[0, 1] = number & 0xFFFF, number >> 16
         return depth
 

@@ -22,6 +22,9 @@ lerobot.datasets.lerobot_dataset.LeRobotDataset
     TeleprevDataset overrides it.
 lerobot.datasets.video_utils.StreamingVideoEncoder (not in lerobot's documentation)
   - constructor keywords fps, rgb_encoder, depth_encoder, queue_maxsize, encoder_threads;
+  - start_episode(video_keys, temp_dir, depth_video_keys), which FastStreamingEncoder calls for the depth
+    keys alone: it starts lerobot's own encoder thread for each (quantisation, 12-bit lossless HEVC), ends an
+    active episode, clears _dropped_frames and sets _episode_active;
   - the methods lerobot's DatasetWriter calls: start_episode(video_keys=, temp_dir=, depth_video_keys=)
     on an episode's first frame, feed_frame(video_key, image), finish_episode() returning
     {video key: (mp4 path, stats or None)}, cancel_episode() and close();
@@ -185,12 +188,13 @@ class FastStreamingEncoder(BlockingStreamingEncoder):
     """The same queues, finish/cancel and results, with _EncoderThread doing the work."""
 
     def start_episode(self, video_keys, temp_dir, depth_video_keys=None):
-        if depth_video_keys:
-            raise ValueError("the teleprev encoder does not encode depth cameras; use encoder = \"lerobot\"")
-        if self._episode_active:
-            self.cancel_episode()
-        self._dropped_frames.clear()
+        # Depth maps go to lerobot's own encoder thread: its 12-bit log quantisation and lossless HEVC are
+        # the convention LeRobotDataset reads back (it also ends an active episode and clears the drops).
+        depth = [key for key in video_keys if key in (depth_video_keys or ())]
+        StreamingVideoEncoder.start_episode(self, depth, temp_dir, depth)
         for key in video_keys:
+            if key in depth:
+                continue
             frames: queue.Queue = queue.Queue(maxsize=self.queue_maxsize)
             results: queue.Queue = queue.Queue(maxsize=1)
             stop = threading.Event()
@@ -203,7 +207,6 @@ class FastStreamingEncoder(BlockingStreamingEncoder):
             self._threads[key] = thread
             self._stop_events[key] = stop
             self._video_paths[key] = path
-        self._episode_active = True
 
 
 class TeleprevDataset(LeRobotDataset):

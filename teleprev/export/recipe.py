@@ -22,6 +22,15 @@
     name = "observation.images.{camera}"          # one video feature per camera
     streams = ["camera:*"]
 
+    [[feature]]
+    name = "observation.images.{camera}_depth"    # LeRobot's name for a camera's depth map
+    streams = ["depth:*"]                         # or "depth:wrist": the cameras whose depth is exported
+
+A depth stream (a depth camera's /camera/<name>/depth, teleprev/topics.py) becomes a LeRobot depth-map video:
+shape (H, W, 1), info is_depth_map, in metres (the session's unit times its scale), quantised and encoded by
+lerobot's own depth encoder (12-bit log quantisation, lossless HEVC), so LeRobotDataset reads it back in
+metres to within the quantisation step.
+
 Streams are named by role, so one recipe fits any rig: the role is looked up among the session's topics
 (device names come from the topic layout, teleprev/session/topics.py). A role names the device when the
 rig has several of its kind ("arm_state:left"), otherwise the one device (or the one the pipeline used)
@@ -51,6 +60,8 @@ from teleprev.session.summary import PREVIEW_ONLY, is_preview_only
 from teleprev import topics as T
 
 JOINTS, POSE, IMAGE = "foxglove.JointStates", "foxglove.PoseInFrame", "foxglove.CompressedImage"
+DEPTH = "depth"  # a Source's schema for a depth stream (recorded as foxglove.RawImage, or a PNG CompressedImage)
+DEPTH_SCHEMAS = ("foxglove.RawImage", IMAGE)
 POSE_NAMES = ("x", "y", "z", "qx", "qy", "qz", "qw")  # a pose as 7 values: position, quaternion x y z w
 LEROBOT_RESERVED = ("timestamp", "frame_index", "episode_index", "index", "task_index", "task")
 
@@ -74,6 +85,7 @@ ROLES: dict[str, Role] = {
     "wrist": Role(POSE, "wrist", kind="suit", stream="wrist", pipeline_input="wrist"),
     "body": Role(JOINTS, "body", kind="suit", stream="body"),
     "camera": Role(IMAGE, "", kind="camera", stream="image"),
+    "depth": Role(DEPTH, "", kind="camera", stream="depth"),
     "arm_command": Role(JOINTS, "arm", topic=T.COMMAND_ARM),
     "effector_command": Role(JOINTS, "hand", topic=T.COMMAND_HAND),
     "arm_target": Role(JOINTS, "arm_target", topic=T.ARM_TARGET),
@@ -192,7 +204,17 @@ class ResolvedFeature:
 
     @property
     def is_image(self) -> bool:
+        """A colour camera's video."""
         return self.sources[0].schema == IMAGE
+
+    @property
+    def is_depth(self) -> bool:
+        """A depth camera's depth-map video."""
+        return self.sources[0].schema == DEPTH
+
+    @property
+    def is_video(self) -> bool:
+        return self.sources[0].schema in (IMAGE, DEPTH)
 
 
 def resolve(recipe: Recipe, session_topics: dict, metadata: dict[str, dict[str, str]], where: str) -> list[ResolvedFeature]:
@@ -215,7 +237,7 @@ def resolve(recipe: Recipe, session_topics: dict, metadata: dict[str, dict[str, 
         sources: list[Source] = []
         for entry in spec.streams:
             sources.extend(_sources(entry, schemas, devices, inputs, fwhere, what))
-        images = [s for s in sources if s.schema == IMAGE]
+        images = [s for s in sources if s.schema in (IMAGE, DEPTH)]
         if images and len(images) != len(sources):
             raise ConfigError(f"mixes camera and joint streams ({', '.join(spec.streams)}); give cameras their own feature",
                               f"{recipe.path} [[feature]] {spec.name!r}")
@@ -232,7 +254,7 @@ def resolve(recipe: Recipe, session_topics: dict, metadata: dict[str, dict[str, 
     dup = next((n for n in names if names.count(n) > 1), None)
     if dup:
         raise ConfigError(f"two features are named {dup!r}", recipe.path)
-    if not any(not f.is_image for f in out):
+    if not any(not f.is_video for f in out):
         raise ConfigError("the recipe gives no joint feature (a LeRobot dataset needs at least one)", recipe.path)
     return out
 
@@ -245,11 +267,13 @@ def _sources(entry: str, schemas: dict[str, str], devices: dict[str, list[str]],
         if topic not in schemas:
             has = ", ".join(sorted(schemas)) if schemas else "none"
             raise SessionError(f"no topic {topic} in this {what} (its topics: {has})", where)
+        parsed = T.parse_device_topic(topic)
+        prefix = parsed[1] if parsed else topic.strip("/").split("/")[-1]
+        if (parsed and parsed[0] == "camera" and parsed[2] == "depth") or schemas[topic] == DEPTH_SCHEMAS[0]:
+            return [_checked(entry, topic, schemas, DEPTH, prefix, where)]
         if schemas[topic] not in (JOINTS, POSE, IMAGE):
             raise SessionError(f"{topic} holds {schemas[topic]} messages, expected {JOINTS}, {POSE} or {IMAGE}"
                                f"{_import_hint(schemas[topic])}", where)
-        parsed = T.parse_device_topic(topic)
-        prefix = parsed[1] if parsed else topic.strip("/").split("/")[-1]
         return [Source(entry, topic, schemas[topic], prefix)]
     role = ROLES[role_name]
     if role.topic:
@@ -261,9 +285,10 @@ def _sources(entry: str, schemas: dict[str, str], devices: dict[str, list[str]],
         return [_checked(entry, role.topic, schemas, role.schema, role.prefix, where)]
     found = sorted(devices.get(f"{role.kind}/{role.stream}", []))
     if device == "*":
-        if role_name != "camera":
+        if role_name not in ("camera", "depth"):
             raise ConfigError(f"'{entry}': only cameras can be taken all at once", where)
-        return [_checked(f"camera:{d}", T.device_topic("camera", d, "image"), schemas, IMAGE, d, where) for d in found]
+        return [_checked(f"{role_name}:{d}", T.device_topic("camera", d, role.stream), schemas, role.schema, d, where)
+                for d in found]
     if device:
         if device not in found:
             raise SessionError(f"stream {entry!r}: no {role.kind} device {device!r} with a {role.stream} stream "
@@ -279,11 +304,16 @@ def _sources(entry: str, schemas: dict[str, str], devices: dict[str, list[str]],
             raise SessionError(f"stream {entry!r}: the session has {len(found)} {role.kind} devices "
                                f"({', '.join(found)}); name one, e.g. '{role_name}:{found[0]}'", where)
         found = [parsed[1]]
-    prefix = found[0] if role_name == "camera" else role.prefix
+    prefix = found[0] if role_name in ("camera", "depth") else role.prefix
     return [_checked(entry, T.device_topic(role.kind, found[0], role.stream), schemas, role.schema, prefix, where)]
 
 
 def _checked(entry: str, topic: str, schemas: dict[str, str], schema: str, prefix: str, where: str) -> Source:
+    if schema == DEPTH and schemas[topic] in DEPTH_SCHEMAS:
+        return Source(entry, topic, DEPTH, prefix)
+    if schema == DEPTH:
+        raise SessionError(f"stream {entry!r} ({topic}) holds {schemas[topic]} messages, expected a depth image "
+                           f"({' or '.join(DEPTH_SCHEMAS)}){_import_hint(schemas[topic])}", where)
     if schemas[topic] != schema:
         raise SessionError(f"stream {entry!r} ({topic}) holds {schemas[topic]} messages, expected {schema}"
                            f"{_import_hint(schemas[topic])}", where)

@@ -15,10 +15,11 @@ from typing import Callable
 import numpy as np
 
 from teleprev.errors import ConfigError, SessionError
-from teleprev.export.recipe import IMAGE, Recipe, ResolvedFeature, resolve
+from teleprev.export.recipe import DEPTH, IMAGE, Recipe, ResolvedFeature, resolve
 from teleprev.export.report import EpisodeReport, SessionReport
 from teleprev.export.streams import probe_joint_names, read_episode
 from teleprev.export.timeline import EpisodePlan, plan_episode
+from teleprev.messages import DepthSample, ImageSample
 from teleprev import topics
 from teleprev.robot.effectors import EFFECTORS
 from teleprev.topics import TASKS_RECORD
@@ -62,7 +63,7 @@ class SessionSource:
     reader: object = field(init=False)
     features: list[ResolvedFeature] = field(init=False)
     names: dict[str, tuple[str, ...]] = field(init=False)  # joint names per joint topic
-    image_shapes: dict[str, tuple[int, int, int]] = field(init=False)  # (h, w, 3) per camera topic
+    image_shapes: dict[str, tuple[int, int, int]] = field(init=False)  # (h, w, 3) per camera, (h, w, 1) per depth
     reference: str | None = field(init=False)  # the reference camera's topic
     camera_rate_hz: float = field(init=False)
 
@@ -84,11 +85,13 @@ class SessionSource:
         self.names, self.image_shapes = {}, {}
         for f in self.features:
             for s in f.sources:
-                if s.schema == IMAGE:
+                if s.schema in (IMAGE, DEPTH):
                     self.image_shapes[s.topic] = _first_image_shape(reader, s.topic)
                 elif s.topic not in self.names:
                     self.names[s.topic] = probe_joint_names(reader, s.topic, s.schema)
-        cameras = [f.sources[0] for f in self.features if f.is_image]
+        # the frame times follow a colour camera; a depth stream leads only where there is none
+        cameras = [f.sources[0] for f in self.features if f.is_image] + [f.sources[0] for f in self.features
+                                                                          if f.is_depth]
         wanted = self.recipe.export.reference_camera
         if wanted:
             match = [s for s in cameras if s.prefix == wanted]
@@ -117,12 +120,15 @@ class SessionSource:
         return fps
 
     def lerobot_features(self) -> dict:
-        """The LeRobot feature spec: float32 vectors whose names list the joints, and RGB videos."""
+        """The LeRobot feature spec: float32 vectors whose names list the joints, RGB videos, and depth maps
+        (one channel, flagged is_depth_map: lerobot's depth encoder writes them)."""
         out = {}
         for f in self.features:
-            if f.is_image:
+            if f.is_video:
                 h, w, c = self.image_shapes[f.sources[0].topic]
                 out[f.name] = {"dtype": "video", "shape": (h, w, c), "names": ["height", "width", "channels"]}
+                if f.is_depth:
+                    out[f.name]["info"] = {"is_depth_map": True}
             else:
                 names = [f"{s.prefix}.{j}" for s in f.sources for j in self.names[s.topic]]
                 out[f.name] = {"dtype": "float32", "shape": (len(names),), "names": names}
@@ -141,7 +147,7 @@ class SessionSource:
 
 def _first_image_shape(reader, topic: str) -> tuple[int, int, int]:
     for msg in reader.messages([topic]):
-        return _decode(msg.payload.data, topic, msg.log_time_ns, str(reader.path)).shape
+        return _decode(msg.payload, topic, msg.log_time_ns, str(reader.path)).shape
     raise SessionError(f"camera {topic} has no frames", str(reader.path))
 
 
@@ -165,8 +171,19 @@ def rgb_image(data) -> np.ndarray | None:
     return cv2.imdecode(np.frombuffer(data, np.uint8), cv2.IMREAD_COLOR_RGB)
 
 
-def _decode(data, topic: str, log_ns: int, where: str) -> np.ndarray:
-    img = rgb_image(data)
+def depth_image(sample: DepthSample) -> np.ndarray:
+    """A depth sample as the datasets hold it: (H, W, 1) float32 metres, 0 where the camera saw nothing
+    (lerobot's quantiser clips it to its depth_min)."""
+    return sample.metres()[:, :, None]
+
+
+def _decode(payload, topic: str, log_ns: int, where: str) -> np.ndarray:
+    """A camera message's image as the dataset gets it (RGB, or depth in metres)."""
+    if isinstance(payload, DepthSample):
+        return depth_image(payload)
+    if not isinstance(payload, ImageSample):
+        raise SessionError(f"{topic} at log time {log_ns}: expected an image, got {type(payload).__name__}", where)
+    img = rgb_image(payload.data)
     if img is None:
         raise SessionError(f"the image on {topic} at log time {log_ns} does not decode", where)
     return img
@@ -225,7 +242,7 @@ def _export_episode(source: SessionSource, dataset, settings: ExportSettings, ep
                 continue
             timing = _timing(f, s)
             key = _key(s.topic, timing)
-            stamps = cams[s.topic].stamps if s.schema == IMAGE else joints[s.topic].stamps
+            stamps = cams[s.topic].stamps if s.schema in (IMAGE, DEPTH) else joints[s.topic].stamps
             streams[key] = (stamps, timing)
             labels[key] = s.entry
     ref_key = None
@@ -261,7 +278,7 @@ def _timing(f: ResolvedFeature, s) -> bool | str:
     """How a feature's stream is looked up (see plan_episode): False (an observation), "trajectory" (an
     action: the commanded trajectory at the frame's time), True (the first command sent in the frame) or
     "next"."""
-    if s.schema == IMAGE or not f.is_action:
+    if s.schema in (IMAGE, DEPTH) or not f.is_action:
         return False
     return "next" if f.next_frame else True if f.sent else "trajectory"
 
@@ -336,7 +353,7 @@ def _write_pieces(source: SessionSource, dataset, plan: EpisodePlan, joints, cam
     matrices = {}
     align = []
     for f in source.features:
-        if f.is_image:
+        if f.is_video:
             continue
         cols = []
         for s in f.sources:
@@ -405,7 +422,7 @@ class _ImageStream:
         self.need: dict[str, np.ndarray] = {}  # topic -> message ordinal per frame
         errs = []
         for f in source.features:
-            if not f.is_image:
+            if not f.is_video:
                 continue
             topic = f.sources[0].topic
             key = ref_key if topic == source.reference else _key(topic, False)
@@ -433,7 +450,7 @@ class _ImageStream:
             seen[topic] += 1
             ordinal = seen[topic]
             if ordinal in uses[topic]:
-                data[topic][ordinal] = (msg.payload.data, msg.log_time_ns)
+                data[topic][ordinal] = (msg.payload, msg.log_time_ns)
             while nxt < n and all(self.need[t][nxt] in data[t] for t in self.need):
                 images = {}
                 for t, store in data.items():
@@ -451,8 +468,8 @@ class _ImageStream:
             if nxt == n:
                 return
 
-    def _image(self, topic: str, data: bytes, log_ns: int, where: str) -> np.ndarray:
-        img = _decode(data, topic, log_ns, where)
+    def _image(self, topic: str, payload, log_ns: int, where: str) -> np.ndarray:
+        img = _decode(payload, topic, log_ns, where)
         if img.shape != self.source.image_shapes[topic]:
             raise SessionError(f"the image on {topic} at log time {log_ns} is {img.shape[1]}x{img.shape[0]}, the "
                                f"camera's first frame was {self.source.image_shapes[topic][1]}x"

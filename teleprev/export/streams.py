@@ -12,7 +12,7 @@ import numpy as np
 
 from teleprev.errors import SessionError
 from teleprev.export.recipe import IMAGE, POSE, POSE_NAMES
-from teleprev.messages import ImageSample, JointSample, PoseSample
+from teleprev.messages import DepthSample, ImageSample, JointSample, PoseSample
 
 
 @dataclass
@@ -95,7 +95,7 @@ def read_episode(reader, joint_topics: dict[str, tuple[str, ...]], camera_topics
         p = msg.payload
         t = msg.topic
         if t in cams:
-            if not isinstance(p, ImageSample):
+            if not isinstance(p, (ImageSample, DepthSample)):
                 raise SessionError(f"{t} at log time {msg.log_time_ns}: expected an image, got {type(p).__name__}", where)
             cams[t].append(p.stamp_ns)
         elif type(p) is JointSample:
