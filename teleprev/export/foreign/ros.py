@@ -8,6 +8,10 @@ Messages become teleprev payloads:
                                                    its joints and a sample is given once all are known
     sensor_msgs/msg/CompressedImage  ImageSample   the JPEG/PNG bytes as recorded
     sensor_msgs/msg/Image            ImageSample   data an RGB array (rgb8, bgr8, rgba8, bgra8, mono8)
+                                     DepthSample   16UC1 / mono16: depth in millimetres (REP 118)
+    sensor_msgs/msg/CompressedImage  DepthSample   "16UC1; compressedDepth" (image_transport's
+                                                   compressed_depth_image_transport: a 12-byte header, then
+                                                   a 16-bit PNG), millimetres
     geometry_msgs/msg/PoseStamped    PoseSample
     tf2_msgs/msg/TFMessage           TransformsSample; each child frame also reads as a pose topic
                                                    "<tf topic>/<child>" (the child in its parent)
@@ -25,8 +29,17 @@ from teleprev.errors import SessionError
 from teleprev.export.foreign.config import ImportRecipe
 from teleprev.export.foreign.episodes import cut_episodes
 from teleprev.export.recipe import IMAGE, JOINTS, POSE
-from teleprev.messages import Event, ImageSample, JointSample, Logged, PoseSample, Transform, TransformsSample
-from teleprev.session.codec import FRAME_TRANSFORMS
+from teleprev.messages import (
+    DepthSample,
+    Event,
+    ImageSample,
+    JointSample,
+    Logged,
+    PoseSample,
+    Transform,
+    TransformsSample,
+)
+from teleprev.session.codec import FRAME_TRANSFORMS, RAW_IMAGE
 from teleprev.session.reader import Episode, TopicInfo
 
 TEXT = "std_msgs/msg/String"
@@ -40,6 +53,9 @@ _SCHEMAS = {
 }
 _SCAN = 200  # messages read to learn a joint stream's names or a TF topic's child frames
 CLOCK_SKEW_NS = 5_000_000_000  # header stamps further than this from the log times are on another clock
+_DEPTH_ENCODINGS = ("16uc1", "mono16")  # sensor_msgs/Image depth: uint16 millimetres (REP 118)
+_MM = 0.001
+_COMPRESSED_DEPTH_HEADER = 12  # compressed_depth_image_transport's ConfigHeader: format (int32), depthParam[2]
 _CHANNELS = {"rgb8": (3, (0, 1, 2)), "bgr8": (3, (2, 1, 0)), "rgba8": (4, (0, 1, 2)), "bgra8": (4, (2, 1, 0)),
              "8uc3": (3, (2, 1, 0)), "mono8": (1, (0, 0, 0)), "8uc1": (1, (0, 0, 0))}
 
@@ -86,6 +102,8 @@ class RosBagReader:
         for topic, conns in sorted(self._conns.items()):
             msgtype = conns[0].msgtype
             schema = _SCHEMAS.get(msgtype, msgtype)
+            if schema == IMAGE and self._carries_depth(topic, msgtype):
+                schema = RAW_IMAGE  # read as DepthSample: the export's depth role takes it
             count = sum(c.msgcount for c in conns)
             out[topic] = TopicInfo(topic, schema, "cdr", count, None, None)
             if schema == FRAME_TRANSFORMS:
@@ -98,7 +116,7 @@ class RosBagReader:
     def _check_clocks(self) -> None:
         """Frames are planned on the stamps and episodes read by log time: the two must share a clock."""
         for topic, info in self.topics.items():
-            if info.schema not in (JOINTS, IMAGE, POSE) or topic in self._frames:
+            if info.schema not in (JOINTS, IMAGE, POSE, RAW_IMAGE) or topic in self._frames:
                 continue
             for _, log_ns, msg in self._raw([topic]):
                 stamp = self._stamp(msg.header, log_ns)
@@ -107,6 +125,14 @@ class RosBagReader:
                                        "messages were logged (another clock, e.g. simulation time); set [import] "
                                        'timestamps = "log"', str(self.path))
                 break
+
+    def _carries_depth(self, topic: str, msgtype: str) -> bool:
+        """Whether an image topic's first message is depth (16UC1, or a compressedDepth PNG)."""
+        for _, _, msg in self._raw([topic]):
+            if msgtype.endswith("CompressedImage"):
+                return "compresseddepth" in msg.format.lower()
+            return msg.encoding.lower() in _DEPTH_ENCODINGS
+        return False
 
     def _children(self, topic: str) -> list[str]:
         seen: dict[str, None] = {}
@@ -134,7 +160,7 @@ class RosBagReader:
                  end_ns: int | None = None) -> Iterator[Logged]:
         """Messages with start_ns <= log time < end_ns, in log time order, as teleprev payloads."""
         if topics is None:
-            topics = [t for t, info in self.topics.items() if info.schema in (JOINTS, IMAGE, POSE)]
+            topics = [t for t, info in self.topics.items() if info.schema in (JOINTS, IMAGE, POSE, RAW_IMAGE)]
         elif isinstance(topics, str):
             topics = [topics]
         wanted = list(topics)
@@ -167,6 +193,8 @@ class RosBagReader:
                     yield Logged(topic, log_ns, sample)
             elif schema == IMAGE:
                 yield Logged(topic, log_ns, self._image(conn.msgtype, msg, log_ns))
+            elif schema == RAW_IMAGE:
+                yield Logged(topic, log_ns, self._depth(conn.msgtype, msg, log_ns))
             elif schema == POSE:
                 p, q = msg.pose.position, msg.pose.orientation
                 yield Logged(topic, log_ns, PoseSample(self._stamp(msg.header, log_ns), msg.header.frame_id,
@@ -199,6 +227,34 @@ class RosBagReader:
                                str(self.path))
         pixels = data[: h * step].reshape(h, step)[:, : w * n].reshape(h, w, n)
         return ImageSample(stamp, msg.header.frame_id, pixels[:, :, list(order)], "raw")
+
+    def _depth(self, msgtype: str, msg, log_ns: int) -> DepthSample:
+        stamp, where = self._stamp(msg.header, log_ns), str(self.path)
+        if msgtype.endswith("CompressedImage"):
+            import cv2
+
+            data = np.asarray(msg.data, dtype=np.uint8)
+            if "compresseddepth" not in msg.format.lower() or not msg.format.lower().startswith("16uc1"):
+                raise SessionError(f"depth image at log time {log_ns}: format {msg.format!r} is not a 16UC1 "
+                                   "compressedDepth PNG", where)
+            depth = cv2.imdecode(data[_COMPRESSED_DEPTH_HEADER:], cv2.IMREAD_UNCHANGED)
+            if depth is None or depth.dtype != np.uint16 or depth.ndim != 2:
+                raise SessionError(f"depth image at log time {log_ns}: the compressedDepth data is not a 16-bit "
+                                   "PNG after its 12-byte header", where)
+            return DepthSample(stamp, msg.header.frame_id, depth, _MM)
+        enc = msg.encoding.lower()
+        if enc not in _DEPTH_ENCODINGS:
+            raise SessionError(f"depth image at log time {log_ns}: encoding {msg.encoding!r} is not 16UC1 depth "
+                               "(the topic's first image was)", where)
+        h, w, step = int(msg.height), int(msg.width), int(msg.step)
+        data = np.asarray(msg.data, dtype=np.uint8)
+        if step < 2 * w or len(data) < h * step:
+            raise SessionError(f"depth image at log time {log_ns}: {len(data)} bytes for {w}x{h} {enc} with step "
+                               f"{step}", where)
+        order = ">u2" if msg.is_bigendian else "<u2"
+        rows = data[: h * step].reshape(h, step)[:, : 2 * w]
+        depth = np.ascontiguousarray(rows).view(order).reshape(h, w).astype(np.uint16)
+        return DepthSample(stamp, msg.header.frame_id, depth, _MM)
 
     # --- joint names ---
 
