@@ -2,16 +2,20 @@
 
 On a physics rig (DeviceContext.physics) it renders the physics world (MuJoCo, from a copy of the world
 made in the camera's own thread, teleprev.world.host.WorldMirror) from the same viewpoints and field of
-view; `depth = true` also keeps each frame's depth image (metres, 0 where nothing is in range) as
-`last_depth`, for depth work that is not recorded yet."""
+view; `depth = true` also renders each frame's depth image (metres, 0 where nothing is in range), kept as
+`last_depth` and published beside the frame, with the same stamp, on /camera/<name>/depth (16-bit counts of
+0.1 mm, as a D405's) with its intrinsics on /camera/<name>/calibration. The kinematic world has no depth."""
 
 from __future__ import annotations
 
+import math
+from collections import deque
 from typing import Literal
 
 import cv2
+import numpy as np
 
-from teleprev.devices import DeviceContext, DeviceError, ImageSample
+from teleprev.devices import CameraInfo, DepthSample, DeviceContext, DeviceError, ImageSample, Sample, StreamSpec
 from teleprev_devices.sim.device import SimDevice, TimingSettings, timing
 from teleprev_devices.sim.render import VIEWS, FrameFinish, SceneRenderer
 from teleprev_devices.sim.world import shared_world
@@ -27,7 +31,7 @@ class CameraSettings(TimingSettings):
     jpeg_quality: int = 85
     noise: float = 2.0  # pixel noise (standard deviation, 0..255 scale), so that frames differ
     label: bool = True  # print the device name and session time in a corner
-    depth: bool = False  # physics rig: render each frame's depth image too (kept as last_depth)
+    depth: bool = False  # physics rig: render and record each frame's depth image too
 
     def __post_init__(self):
         super().__post_init__()
@@ -53,12 +57,23 @@ class SimCamera(SimDevice[CameraSettings], kind="camera", stream="image", payloa
         self.world = shared_world(context)
         self.physics = context.physics
         self.last_depth = None  # physics, depth = true: the latest frame's depth image (metres)
+        self._depths: deque = deque()  # depth counts of the frames acquired and not yet delivered, in order
         if self.physics is not None and settings.fov_deg != 60.0:
             raise self.bad_setting("fov_deg", "the physics world's cameras have a 60 degree field of view; "
                                               f"got {settings.fov_deg:g}")
+        if settings.depth and self.physics is None:
+            raise self.bad_setting("depth", "only a physics rig's camera renders depth ([sim] world = \"physics\")")
+
+    def streams(self) -> list[StreamSpec]:
+        streams = super().streams()
+        if self.settings.depth:
+            streams += [StreamSpec(self.topic("depth"), "depth", self.settings.rate_hz),
+                        StreamSpec(self.topic("calibration"), "calibration", self.settings.rate_hz)]
+        return streams
 
     def _open(self) -> None:
         s = self.settings
+        self._depths.clear()
         if self.physics is not None:
             self.mirror = self.physics.mirror()  # made and used on this device's reader thread (its GL context)
             self.finish = FrameFinish(s.width, s.height, s.noise, s.seed)
@@ -76,6 +91,8 @@ class SimCamera(SimDevice[CameraSettings], kind="camera", stream="image", payloa
             s = self.settings
             frame = self.mirror.render(s.view, s.width, s.height, s.depth)
             self.last_depth = frame.depth
+            if s.depth:
+                self._depths.append(_counts(frame.depth))
             return self.finish(cv2.cvtColor(frame.rgb, cv2.COLOR_RGB2BGR), self._label(true_ns))
         q = self.world.joints()
         return self.renderer.render(q, self.world.scene(true_ns, q), self._label(true_ns))
@@ -87,8 +104,34 @@ class SimCamera(SimDevice[CameraSettings], kind="camera", stream="image", payloa
             raise DeviceError("JPEG encoding failed", f"device {self.name!r}")
         return ImageSample(0, self.name, buf.tobytes(), "jpeg")
 
+    def read(self, timeout_s: float) -> list[Sample]:
+        """The frames, and with depth = true each one's depth and calibration, stamped alike (frames are
+        delivered in the order they were acquired)."""
+        out = super().read(timeout_s)
+        if not self.settings.depth:
+            return out
+        s = self.settings
+        fx = s.width / 2 / math.tan(math.radians(s.fov_deg) / 2)
+        for frame in list(out):
+            stamp = frame.payload.stamp_ns
+            out.append(Sample(self.topic("depth"), DepthSample(stamp, self.name, self._depths.popleft(), _DEPTH_UNIT)))
+            out.append(Sample(self.topic("calibration"), CameraInfo(
+                stamp, self.name, s.width, s.height, (fx, 0.0, (s.width - 1) / 2, 0.0, fx, (s.height - 1) / 2,
+                                                      0.0, 0.0, 1.0), (0.0,) * 5)))
+        return out
+
     def _label(self, true_ns: int) -> str:
         if not self.settings.label:
             return ""
         seconds = (true_ns - self.context.clock.start_ns) / 1e9
         return f"{self.name}  t={seconds:7.2f}s"
+
+
+_DEPTH_UNIT = 0.0001  # metres per count: 0.1 mm, a D405's
+
+
+def _counts(metres: np.ndarray) -> np.ndarray:
+    """Depth in metres as 16-bit counts of _DEPTH_UNIT; beyond 6.55 m, as nothing in range, 0."""
+    counts = np.rint(metres / _DEPTH_UNIT)
+    counts[counts > 65535] = 0
+    return counts.astype(np.uint16)
