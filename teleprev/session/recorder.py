@@ -28,7 +28,7 @@ from dataclasses import dataclass, field, replace
 from pathlib import Path
 
 from teleprev.errors import SessionError, describe_os_error
-from teleprev.messages import Event, ImageSample, Logged
+from teleprev.messages import DepthSample, Event, ImageSample, Logged
 from teleprev.session.writer import DEFAULT_CHUNK_SIZE, McapSessionWriter, check_metadata
 from teleprev.thread_priority import WRITER_NICE, raise_this_thread
 
@@ -166,7 +166,7 @@ class Recorder:
             return False
         if self._behind_state == 0:
             self._behind_state = 1
-        if isinstance(msg.payload, ImageSample):
+        if isinstance(msg.payload, (ImageSample, DepthSample)):  # camera frames, colour and depth
             return True
         return lag_ns > 2 * self.lag_budget_ns and not isinstance(msg.payload, Event) \
             and not msg.topic.startswith(COMMAND_PREFIX)

@@ -81,3 +81,20 @@ def test_bad_depth_is_refused_with_what_is_wrong(tmp_path):
             w.write(Logged("/camera/c/depth", T0, DepthSample(T0, "c", np.zeros((4, 4), np.float32), 0.001)))
     with pytest.raises(ValueError, match="not a positive number"):
         decoder_for("foxglove.RawImage", "protobuf", b"", "protobuf", {DEPTH_SCALE_KEY: "mm"})
+
+
+def test_a_writer_behind_sheds_depth_frames_first_as_camera_frames(tmp_path):
+    """Depth is the largest camera stream: a writer past its lag budget sheds it with the colour frames."""
+    import time
+
+    from teleprev.messages import JointSample
+    from teleprev.session.recorder import Recorder
+
+    rec = Recorder(tmp_path / "s.mcap", lag_budget_s=0.2)
+    depth = Logged("/camera/c/depth", T0, DepthSample(T0, "c", depth_image(0), 0.001))
+    assert rec.log(depth)  # on time: taken
+    time.sleep(0.25)  # the writer has not run: the oldest queued message is past the budget
+    assert not rec.log(Logged("/camera/c/depth", T0 + 1, DepthSample(T0 + 1, "c", depth_image(1), 0.001)))
+    assert rec.log(Logged("/arm/a/state", T0 + 2, JointSample(T0 + 2, ("j",), np.array([0.1]))))
+    summary = rec.start().close()
+    assert summary.streams["/camera/c/depth"].shed == 1 and summary.streams["/camera/c/depth"].written == 1
