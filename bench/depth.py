@@ -233,7 +233,7 @@ def main() -> None:
         figures["depth_frames_recorded"] = len(depth)
         # the whole process per frame: the feeding camera, the plugin, the recorder, the arm stream
         figures["depth_record_cpu_ms_per_frame"] = cpu_s * 1000 / len(depth)
-        figures["depth_frames_dropped"] = rec.summary.streams[DEPTH].dropped
+        figures["depth_frames_dropped"] = rec.summary.streams[DEPTH].dropped  # queue full, or shed (writer behind)
         sizes, cpu = storage_figures(depth)
         figures["depth_session_mb_per_min"] = {k: round(v, 1) for k, v in sizes.items()}
         figures["depth_write_ms_per_frame"] = {k: round(v, 2) for k, v in cpu.items()}

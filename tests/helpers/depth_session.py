@@ -13,7 +13,7 @@ import numpy as np
 
 from teleprev import topics as T
 from teleprev.devices import DeviceContext, DeviceRunner, Event, JointSample, Logged, Sample, SessionClock
-from teleprev.session.recorder import Recorder, RecordingSummary
+from teleprev.session.recorder import LAG_BUDGET_S, Recorder, RecordingSummary
 from teleprev_devices.realsense import RealSenseCamera, RealSenseSettings
 from teleprev_devices.realsense_software import SoftwareRealSense
 from tests.helpers.wait import wait_until
@@ -35,7 +35,8 @@ def record_depth_session(path: Path, camera: SoftwareRealSense, seconds: float, 
     """Record `seconds` of `camera` (started here) through realsense.camera into `path`: one episode
     around all of it, the arm's joints at 100 Hz."""
     clock = SessionClock()
-    recorder = Recorder(path, {"rig": {"robot": "xarm6_leap_hand", "end_effector": "leap_hand"}}).start()
+    recorder = Recorder(path, {"rig": {"robot": "xarm6_leap_hand", "end_effector": "leap_hand"}},
+                        lag_budget_s=LAG_BUDGET_S).start()  # a live session's: frames shed when the writer lags
 
     def sink(sample: Sample, receive_ns: int) -> None:
         recorder.log(Logged(sample.topic, receive_ns, sample.payload))
