@@ -134,7 +134,7 @@ class RealSenseSettings:
 
 @dataclass
 class _Stream:
-    """One opened stream: its profile and what a frame of it becomes."""
+    """One opened stream: its profile and its intrinsics."""
 
     profile: Any
     intrinsics: Any
@@ -255,7 +255,7 @@ class RealSenseCamera(Device[RealSenseSettings], kind="camera", sdk_module="pyre
             frame.keep()
             try:
                 frames.put_nowait((frame, clock.now_ns()))
-            except queue.Full:  # nobody reads: the oldest go, as a USB camera's buffers overflow
+            except queue.Full:  # read() is a second behind: this frame is lost (counted), as in a full USB buffer
                 self._count("lost_dropped_frames")
         for i, profiles in by_sensor.items():
             sensors[i].open(profiles)
