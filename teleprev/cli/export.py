@@ -210,7 +210,7 @@ def print_report(console, report, as_json: bool, details: str) -> None:
     from teleprev.export.report import export_notes, summary_table
 
     print_table(console, summary_table(report))
-    for line in export_notes(report):
-        console.print(line, highlight=False)
+    for line in export_notes(report):  # soft_wrap: a path stays whole, to be copied
+        console.print(line, highlight=False, soft_wrap=True)
     console.print(f"[green]done:[/] {report.total_episodes} episodes, {report.total_frames} frames in {report.root} "
-                  f"({details})", highlight=False)
+                  f"({details})", highlight=False, soft_wrap=True)

@@ -232,4 +232,4 @@ def _finish(player: Player, thread: threading.Thread, runners, live_view, record
     if recording is not None:
         recording.close()  # after the robot has its last command: a failed recording never stops it early
         if not recording.error:
-            console.print(f"replay recorded in {out}", highlight=False)
+            console.print(f"replay recorded in {out}", highlight=False, soft_wrap=True)
