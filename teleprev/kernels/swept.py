@@ -260,7 +260,8 @@ def _loose_pair(q, which, link_int, link_num, link_terms, shape_link, shape_loca
 def _command_pair(q0, q0_clear, q1, v1, acceleration, lower, upper, reach, spacing, start_step, link_int, link_num,
                   link_terms, shape_link, shape_local, shape_size, links, spheres, pairs, loose, tight, world, hits,
                   labels, index, point, stop):
-    """swept_command's two checks of a command q1 from q0, for the slide: (answer, q0_clear, pair).
+    """swept_command's two checks of a command q1 from q0, for the slide: (answer, q0_clear, pair, points),
+    points: about how many configurations the checks tested (the slide's budget counts them).
 
     answer SWEPT_FREE: both segments keep the clearance, decided without FCL. SWEPT_COLLIDES: not shown
     free; pair is a checked pair in contact (for the loose test where the compiled test is within its
@@ -272,23 +273,26 @@ def _command_pair(q0, q0_clear, q1, v1, acceleration, lower, upper, reach, spaci
     answer, k, q0_clear, end = _swept(q0, q1, q0_clear, 1, reach, spacing, start_step, link_int, link_num, link_terms,
                                       shape_link, shape_local, shape_size, links, spheres, pairs, loose, tight, world,
                                       hits, labels, index, point)
+    points = 1 + max(k, 0)
     if answer == SWEPT_UNSURE_START or answer == SWEPT_BAD:
-        return SWEPT_BAD, q0_clear, -1
+        return SWEPT_BAD, q0_clear, -1, points
     grown = spacing > 0 and q0_clear == 1
     if answer == SWEPT_FREE:
         answer, k, c1, end = _swept(q1, stop, -1, 1, reach, spacing, start_step, link_int, link_num, link_terms,
                                     shape_link, shape_local, shape_size, links, spheres, pairs, loose, tight, world,
                                     hits, labels, index, point)
+        points += 1 + max(k, 0)
         if answer == SWEPT_FREE:
-            return SWEPT_FREE, q0_clear, -1
+            return SWEPT_FREE, q0_clear, -1, points
         if answer == SWEPT_BAD:
-            return SWEPT_BAD, q0_clear, -1
+            return SWEPT_BAD, q0_clear, -1, points
         grown = spacing > 0 and (c1 == 1 or answer == SWEPT_UNSURE_START)  # (START: q1 itself, in point)
     if answer == SWEPT_COLLIDES:
-        return SWEPT_COLLIDES, q0_clear, index[0]
+        return SWEPT_COLLIDES, q0_clear, index[0], points
     which = 1 if answer == SWEPT_UNSURE_PLAIN or not grown else 0
     return SWEPT_COLLIDES, q0_clear, _loose_pair(point, which, link_int, link_num, link_terms, shape_link, shape_local,
-                                                 shape_size, links, spheres, pairs, loose, world, hits, labels, index)
+                                                 shape_size, links, spheres, pairs, loose, world, hits, labels,
+                                                 index), points + 1
 
 
 @njit(cache=True)
@@ -309,7 +313,8 @@ def _place(q0, base, stop, track, fraction, joints, dt, out):
 
 
 @njit(cache=True)
-def swept_slide(q0, q0_clear, track, stop, dt, acceleration, lower, upper, steps, joint_finger, link_finger, fingers,
+def swept_slide(q0, q0_clear, track, stop, dt, acceleration, lower, upper, steps, budget, joint_finger, link_finger,
+                fingers,
                 reach, spacing, start_step, link_int, link_num, link_terms, shape_link, shape_local, shape_size, links,
                 spheres, pairs, loose, tight, point, out):
     """A hand command from q0 that holds back only the fingers whose motion would collide: (answer, held,
@@ -326,7 +331,9 @@ def swept_slide(q0, q0_clear, track, stop, dt, acceleration, lower, upper, steps
        taking its whole step where the command stays free, then the joints that could not, together,
        as far along their step as a bisection of `steps` halvings finds free.
     At most fingers + 1 + (joints + steps) per braked finger checks (a LEAP Hand: at most 41, one
-    blocked finger: about 11).
+    blocked finger: about 11), and no new check once `budget` configurations have been tested (a
+    count, so a re-run finds the same command): then the search keeps what it found free so far, and
+    where that is nothing yet, answers SWEPT_COLLIDES.
     held: bit f set for a finger left short of its step. SWEPT_COLLIDES: no finger-wise command (the
     colliding pair's fingers brake already, or no pair is known): the caller brakes the whole hand.
     SWEPT_BAD: q0 within the margin, or inputs the kernel does not take: the same."""
@@ -340,14 +347,18 @@ def swept_slide(q0, q0_clear, track, stop, dt, acceleration, lower, upper, steps
     braked = np.zeros(max(fingers, 1), dtype=np.bool_)
     order = np.empty(max(fingers, 1), dtype=np.int64)
     count = 0
+    used = 0
     while True:
+        if used >= budget:
+            return SWEPT_COLLIDES, 0, q0_clear
         for i in range(n):
             joints[i] = joint_finger[i] < 0 or not braked[joint_finger[i]]
         _place(q0, stop, stop, track, 1.0, joints, dt, out)
-        answer, q0_clear, pair = _command_pair(q0, q0_clear, out[0], out[1], acceleration, lower, upper, reach, spacing,
-                                               start_step, link_int, link_num, link_terms, shape_link, shape_local,
-                                               shape_size, links, spheres, pairs, loose, tight, world, hits, labels,
-                                               index, point, stop_point)
+        answer, q0_clear, pair, points = _command_pair(q0, q0_clear, out[0], out[1], acceleration, lower, upper, reach,
+                                                       spacing, start_step, link_int, link_num, link_terms, shape_link,
+                                                       shape_local, shape_size, links, spheres, pairs, loose, tight,
+                                                       world, hits, labels, index, point, stop_point)
+        used += points
         if answer != SWEPT_COLLIDES:
             break
         choice, most = -1, 0.0
@@ -384,14 +395,18 @@ def swept_slide(q0, q0_clear, track, stop, dt, acceleration, lower, upper, steps
                     pick, most = j, abs(track[j] - stop[j])
             if pick < 0:
                 break
+            if used >= budget:
+                rest = True
+                break
             taken[pick] = True
             joints[:] = False
             joints[pick] = True
             _place(q0, best[0], stop, track, 1.0, joints, dt, out)
-            answer, q0_clear, pair = _command_pair(q0, q0_clear, out[0], out[1], acceleration, lower, upper, reach,
-                                                   spacing, start_step, link_int, link_num, link_terms, shape_link,
-                                                   shape_local, shape_size, links, spheres, pairs, loose, tight, world,
-                                                   hits, labels, index, point, stop_point)
+            answer, q0_clear, pair, points = _command_pair(q0, q0_clear, out[0], out[1], acceleration, lower, upper,
+                                                           reach, spacing, start_step, link_int, link_num, link_terms,
+                                                           shape_link, shape_local, shape_size, links, spheres, pairs,
+                                                           loose, tight, world, hits, labels, index, point, stop_point)
+            used += points
             if answer == SWEPT_BAD:
                 return SWEPT_BAD, 0, q0_clear
             if answer == SWEPT_FREE:
@@ -407,12 +422,15 @@ def swept_slide(q0, q0_clear, track, stop, dt, acceleration, lower, upper, steps
         base = best[0].copy()
         lo, hi = 0.0, 1.0
         for _ in range(steps):
+            if used >= budget:
+                break
             mid = 0.5 * (lo + hi)
             _place(q0, base, stop, track, mid, joints, dt, out)
-            answer, q0_clear, pair = _command_pair(q0, q0_clear, out[0], out[1], acceleration, lower, upper, reach,
-                                                   spacing, start_step, link_int, link_num, link_terms, shape_link,
-                                                   shape_local, shape_size, links, spheres, pairs, loose, tight, world,
-                                                   hits, labels, index, point, stop_point)
+            answer, q0_clear, pair, points = _command_pair(q0, q0_clear, out[0], out[1], acceleration, lower, upper,
+                                                           reach, spacing, start_step, link_int, link_num, link_terms,
+                                                           shape_link, shape_local, shape_size, links, spheres, pairs,
+                                                           loose, tight, world, hits, labels, index, point, stop_point)
+            used += points
             if answer == SWEPT_BAD:
                 return SWEPT_BAD, 0, q0_clear
             if answer == SWEPT_FREE:
@@ -431,6 +449,7 @@ SIGNATURES = {
                         "cached"),
     "swept_command": ("q0", "q1", "v1", "acceleration", "lower", "upper", "q0_clear", "q1_clear", SweptTable,
                       FkTable, SweptShapes, Margins, "point"),
-    "swept_slide": ("q0", "q0_clear", "track", "stop", "dt", "acceleration", "lower", "upper", "steps", Fingers,
+    "swept_slide": ("q0", "q0_clear", "track", "stop", "dt", "acceleration", "lower", "upper", "steps", "budget",
+                    Fingers,
                     SweptTable, FkTable, SweptShapes, Margins, "point", "out"),
 }

@@ -46,6 +46,9 @@ from teleprev.robot.urdf import Shape
 
 START_STEP_M = 0.0005  # from a start already inside the margin: plain shapes, link motion <= this between checks
 SLIDE_STEPS = 5  # halvings of a held finger's remaining step (its last 1/32 of a step may be left untried)
+# Configurations one slide may test (a count, so that a re-run finds the same command): about 2 ms of a
+# planner tick (8.3 ms at 120 Hz) with the LEAP Hand's fingers crowded; one blocked finger needs about 100.
+SLIDE_BUDGET = 400
 
 
 def _grow(shape: Shape, by: float) -> Shape:
@@ -286,7 +289,7 @@ class SweptCheck:
         out = np.empty((2, len(q0)))
         answer, held, _ = swept_kernels.swept_slide(
             q0, q0_clear, np.ascontiguousarray(track, dtype=np.float64), np.ascontiguousarray(stop, dtype=np.float64),
-            float(dt), acceleration, lower, upper, SLIDE_STEPS, *self._fingers, *self._kernel_args, out)
+            float(dt), acceleration, lower, upper, SLIDE_STEPS, SLIDE_BUDGET, *self._fingers, *self._kernel_args, out)
         if answer != swept_kernels.SWEPT_FREE:
             return None
         return out[0], out[1], int(held)

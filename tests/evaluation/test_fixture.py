@@ -20,7 +20,7 @@ from teleprev.session.reader import SessionReader
 FIXTURE = Path(__file__).parents[1] / "fixtures" / "sim_v1.mcap"
 FIXTURE_V2 = Path(__file__).parents[1] / "fixtures" / "sim_v2.mcap"
 FIXTURE_V3 = Path(__file__).parents[1] / "fixtures" / "sim_v3.mcap"
-FIXTURE_V5 = Path(__file__).parents[1] / "fixtures" / "sim_v5.mcap"  # the whole hand braked where a command was not free
+FIXTURE_V5 = Path(__file__).parents[1] / "fixtures" / "sim_v5.mcap"  # the whole hand braked (format 6: fingers)
 
 
 def test_every_stream_of_the_old_session_decodes():

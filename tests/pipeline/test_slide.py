@@ -104,7 +104,8 @@ def test_a_free_finger_moves_on_while_another_is_blocked(rig_motion):
         only_g[joints_g] = track[joints_g]
         only_f = braked.copy()
         only_f[joints_f] = track[joints_f]
-        free = [swept.command_free(q0, c, (c - q0) / DT, h.acceleration, h.lower, h.upper) for c in (track, only_g, only_f)]
+        free = [swept.command_free(q0, c, (c - q0) / DT, h.acceleration, h.lower, h.upper)
+                for c in (track, only_g, only_f)]
         if free != [False, True, False]:  # g's own motion is free, f's is not: f is what blocks
             continue
         old_flags, flags = [], []
