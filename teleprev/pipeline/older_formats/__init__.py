@@ -7,11 +7,14 @@
                as now
     format 5   the glove read flexion first (formats 1 to 4 read it abduction first), as now
     (format 6, the current one: a hand command that is not free holds back only the fingers whose motion
-    would collide; formats 1 to 5 braked the whole hand)
+    would collide, where formats 1 to 5 braked the whole hand; after input loss the planner resumes at the
+    engage fraction, where formats 4 and 5 resumed at full speed)
 
     numpy_arithmetic   NumpyArmIK, NumpyArmRetargeter, NumpySweptCheck, NumpyCorrector (formats 1 and 2)
     abduction_first    AbductionFirstPipeline: the compiled glove reading of formats 3 and 4
     braking_swept      BrakingSweptCheck: the whole hand brakes where a command is not free (formats 1 to 5)
+    immediate_resume   ImmediateResumePipeline, whose planner resumes at full speed after input loss
+                       (formats 4 and 5)
     step_motion        StepMotion: the commands of a step under the motion limits, and idle steps
     step_commands      StepCommandsPipeline (formats 2 and 3), NumpyPipeline (formats 1 and 2, numpy's
                        glove reading): the current step's targets, then the step's own commands
@@ -26,6 +29,7 @@ from __future__ import annotations
 from teleprev.pipeline.arithmetic import Arithmetic
 from teleprev.pipeline.older_formats.abduction_first import AbductionFirstPipeline
 from teleprev.pipeline.older_formats.braking_swept import BrakingSweptCheck
+from teleprev.pipeline.older_formats.immediate_resume import ImmediateResumePipeline, ImmediateResumePlanner
 from teleprev.pipeline.older_formats.numpy_arithmetic import (
     NumpyArmIK,
     NumpyArmRetargeter,
@@ -54,7 +58,8 @@ PLANNED_FORMAT_VERSION = 4
 FLEXION_FIRST_FORMAT_VERSION = 5
 
 __all__ = ["MOTION_FORMAT_VERSION", "COMPILED_FORMAT_VERSION", "PLANNED_FORMAT_VERSION", "FLEXION_FIRST_FORMAT_VERSION",
-           "arithmetic", "AbductionFirstPipeline", "BrakingSweptCheck", "MotionState", "NumpyArmIK",
+           "arithmetic", "AbductionFirstPipeline", "BrakingSweptCheck", "ImmediateResumePipeline",
+           "ImmediateResumePlanner", "MotionState", "NumpyArmIK",
            "NumpyArmRetargeter", "NumpyCorrector", "NumpyPipeline", "NumpySweptCheck", "StepCommandsDriver",
            "StepCommandsPipeline", "StepCommandsResult", "StepCommandsState", "StepMotion"]
 
@@ -62,7 +67,7 @@ __all__ = ["MOTION_FORMAT_VERSION", "COMPILED_FORMAT_VERSION", "PLANNED_FORMAT_V
 def arithmetic(session_format: int) -> Arithmetic:
     """The classes sessions of an older `session_format` were computed with."""
     if session_format >= FLEXION_FIRST_FORMAT_VERSION:
-        return Arithmetic(swept_check=BrakingSweptCheck)
+        return Arithmetic(swept_check=BrakingSweptCheck, pipeline=ImmediateResumePipeline)
     if session_format >= PLANNED_FORMAT_VERSION:
         return Arithmetic(swept_check=BrakingSweptCheck, pipeline=AbductionFirstPipeline)
     motion = session_format >= MOTION_FORMAT_VERSION
