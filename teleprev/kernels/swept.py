@@ -1,6 +1,7 @@
 """The swept check of a hand command's segment (teleprev.pipeline.swept.SweptCheck), in compiled code:
 the link-motion bound, the points along the segment, each point's self-collision test with the grown
-and the plain shapes, the end point's clearance, and the bisection for the last free point.
+and the plain shapes, the end point's clearance, the bisection for the last free point, and the search
+for a command that holds back only the fingers whose motion would collide (swept_slide).
 """
 
 from __future__ import annotations
@@ -34,6 +35,15 @@ class SweptShapes(NamedTuple):
 # A configuration's state under one checker: FREE / COLLIDING where the compiled test is decisive, UNSURE
 # where its answer is within the margin (the loose test finds a contact, the tight one none): FCL decides.
 POINT_FREE, POINT_COLLIDING, POINT_UNSURE = 0, 1, 2
+class Fingers(NamedTuple):
+    """The hand's kinematic chains from the palm (one per finger): which one each joint moves and each
+    checked link belongs to."""
+
+    joint_finger: np.ndarray  # (n,) int64: the finger a joint moves (-1: none)
+    link_finger: np.ndarray  # (m,) int64: the finger of each checked link (-1: the palm, which no joint moves)
+    fingers: int
+
+
 # swept_segment's answers. COLLIDES / FREE decide the segment. UNSURE_*: FCL must decide the configuration
 # left in `point` (START: q0 with the grown shapes, GROWN: point k with them, PLAIN: point k with the plain
 # shapes, END: the end point with the grown shapes), then the caller goes on. BAD: inputs the kernel
@@ -236,6 +246,202 @@ def swept_command(q0, q1, v1, acceleration, lower, upper, q0_clear, q1_clear, re
     return answer, cache, clear, c1 if spacing > 0 else -1
 
 
+@njit(cache=True)
+def _loose_pair(q, which, link_int, link_num, link_terms, shape_link, shape_local, shape_size, links, spheres, pairs,
+                loose, world, hits, labels, index):
+    """A checked pair that the loose test (shape set `which`) finds in contact at q, -1 if none."""
+    fk_into(q, link_int, link_num, link_terms, world)
+    state = self_collision_margins_into(world, shape_link, shape_local[which], shape_size[which], links,
+                                        spheres[which], pairs, loose, loose, True, hits, labels, index)
+    return index[0] if state > 0 else -1
+
+
+@njit(cache=True)
+def _command_pair(q0, q0_clear, q1, v1, acceleration, lower, upper, reach, spacing, start_step, link_int, link_num,
+                  link_terms, shape_link, shape_local, shape_size, links, spheres, pairs, loose, tight, world, hits,
+                  labels, index, point, stop):
+    """swept_command's two checks of a command q1 from q0, for the slide: (answer, q0_clear, pair, points),
+    points: about how many configurations the checks tested (the slide's budget counts them).
+
+    answer SWEPT_FREE: both segments keep the clearance, decided without FCL. SWEPT_COLLIDES: not shown
+    free; pair is a checked pair in contact (for the loose test where the compiled test is within its
+    margin, which counts as not free here) at the first configuration found, -1 if none is known.
+    SWEPT_BAD: q0's own clearance is within the margin, or inputs the kernel does not take."""
+    for i in range(q1.shape[0]):
+        v = v1[i]
+        stop[i] = _np_min(_np_max(q1[i] + v * abs(v) / (2.0 * acceleration[i]), lower[i]), upper[i])
+    answer, k, q0_clear, end = _swept(q0, q1, q0_clear, 1, reach, spacing, start_step, link_int, link_num, link_terms,
+                                      shape_link, shape_local, shape_size, links, spheres, pairs, loose, tight, world,
+                                      hits, labels, index, point)
+    points = 1 + max(k, 0)
+    if answer == SWEPT_UNSURE_START or answer == SWEPT_BAD:
+        return SWEPT_BAD, q0_clear, -1, points
+    grown = spacing > 0 and q0_clear == 1
+    if answer == SWEPT_FREE:
+        answer, k, c1, end = _swept(q1, stop, -1, 1, reach, spacing, start_step, link_int, link_num, link_terms,
+                                    shape_link, shape_local, shape_size, links, spheres, pairs, loose, tight, world,
+                                    hits, labels, index, point)
+        points += 1 + max(k, 0)
+        if answer == SWEPT_FREE:
+            return SWEPT_FREE, q0_clear, -1, points
+        if answer == SWEPT_BAD:
+            return SWEPT_BAD, q0_clear, -1, points
+        grown = spacing > 0 and (c1 == 1 or answer == SWEPT_UNSURE_START)  # (START: q1 itself, in point)
+    if answer == SWEPT_COLLIDES:
+        return SWEPT_COLLIDES, q0_clear, index[0], points
+    which = 1 if answer == SWEPT_UNSURE_PLAIN or not grown else 0
+    return SWEPT_COLLIDES, q0_clear, _loose_pair(point, which, link_int, link_num, link_terms, shape_link, shape_local,
+                                                 shape_size, links, spheres, pairs, loose, world, hits, labels,
+                                                 index), points + 1
+
+
+@njit(cache=True)
+def _place(q0, base, stop, track, fraction, joints, dt, out):
+    """A candidate command in out[0], its velocity from q0 in out[1]: on `joints` (a mask) the fraction of
+    the way from stop to track (1: track itself, bit for bit; else held between the two, so that rounding
+    cannot take it past either), base elsewhere."""
+    for i in range(q0.shape[0]):
+        if not joints[i]:
+            c = base[i]
+        elif fraction == 1.0:
+            c = track[i]
+        else:
+            c = stop[i] + fraction * (track[i] - stop[i])
+            c = _np_min(_np_max(c, min(stop[i], track[i])), max(stop[i], track[i]))
+        out[0, i] = c
+        out[1, i] = (c - q0[i]) / dt
+
+
+@njit(cache=True)
+def swept_slide(q0, q0_clear, track, stop, dt, acceleration, lower, upper, steps, budget, joint_finger, link_finger,
+                fingers,
+                reach, spacing, start_step, link_int, link_num, link_terms, shape_link, shape_local, shape_size, links,
+                spheres, pairs, loose, tight, point, out):
+    """A hand command from q0 that holds back only the fingers whose motion would collide: (answer, held,
+    q0_clear); where answer is SWEPT_FREE, the command and its velocity are in out[0], out[1].
+
+    Each joint's command lies between `stop` (braking, one step) and `track` (the capped step towards
+    the target), which both keep the limits, so any point between them keeps them too. Every candidate
+    is checked as swept_command checks a command (its segment, and the way on to where braking from it
+    would stop), and only one shown free without FCL is taken: a configuration within the compiled
+    test's margin counts as not free here.
+    1. Which fingers brake: at first none; while the candidate is not free, of the colliding pair's
+       fingers that still track, the one whose link moves more (by the reach bound) brakes.
+    2. Each braked finger, in that order, slides: its joints one by one, the most moving first, each
+       taking its whole step where the command stays free, then the joints that could not, together,
+       as far along their step as a bisection of `steps` halvings finds free.
+    At most fingers + 1 + (joints + steps) per braked finger checks (a LEAP Hand: at most 41, one
+    blocked finger: about 11), and no new check once `budget` configurations have been tested (a
+    count, so a re-run finds the same command): then the search keeps what it found free so far, and
+    where that is nothing yet, answers SWEPT_COLLIDES.
+    held: bit f set for a finger left short of its step. SWEPT_COLLIDES: no finger-wise command (the
+    colliding pair's fingers brake already, or no pair is known): the caller brakes the whole hand.
+    SWEPT_BAD: q0 within the margin, or inputs the kernel does not take: the same."""
+    n = q0.shape[0]
+    world = np.empty((link_int.shape[0], 4, 4))
+    hits = np.zeros(pairs.shape[0], dtype=np.bool_)
+    labels = np.zeros(links.shape[0], dtype=np.bool_)
+    index = np.empty(pairs.shape[0], dtype=np.int64)
+    stop_point = np.empty(n)
+    joints = np.empty(n, dtype=np.bool_)
+    braked = np.zeros(max(fingers, 1), dtype=np.bool_)
+    order = np.empty(max(fingers, 1), dtype=np.int64)
+    count = 0
+    used = 0
+    while True:
+        if used >= budget:
+            return SWEPT_COLLIDES, 0, q0_clear
+        for i in range(n):
+            joints[i] = joint_finger[i] < 0 or not braked[joint_finger[i]]
+        _place(q0, stop, stop, track, 1.0, joints, dt, out)
+        answer, q0_clear, pair, points = _command_pair(q0, q0_clear, out[0], out[1], acceleration, lower, upper, reach,
+                                                       spacing, start_step, link_int, link_num, link_terms, shape_link,
+                                                       shape_local, shape_size, links, spheres, pairs, loose, tight,
+                                                       world, hits, labels, index, point, stop_point)
+        used += points
+        if answer != SWEPT_COLLIDES:
+            break
+        choice, most = -1, 0.0
+        for side in range(2 if pair >= 0 else 0):
+            link = pairs[pair, side]
+            f = link_finger[link]
+            if f < 0 or braked[f]:
+                continue
+            moved = 0.0
+            for j in range(n):
+                if joint_finger[j] == f:
+                    moved += reach[link, j] * abs(track[j] - stop[j])
+            if moved > most:
+                choice, most = f, moved
+        if choice < 0:
+            return SWEPT_COLLIDES, 0, q0_clear
+        braked[choice] = True
+        order[count] = choice
+        count += 1
+    if answer == SWEPT_BAD:
+        return SWEPT_BAD, 0, q0_clear
+    best = out.copy()
+    held = 0
+    taken = np.empty(n, dtype=np.bool_)
+    for b in range(count):
+        f = order[b]
+        # its joints, one by one, the most moving first: each takes its whole step where that is free
+        taken[:] = False
+        rest = False
+        while True:
+            pick, most = -1, 0.0
+            for j in range(n):
+                if joint_finger[j] == f and not taken[j] and abs(track[j] - stop[j]) > most:
+                    pick, most = j, abs(track[j] - stop[j])
+            if pick < 0:
+                break
+            if used >= budget:
+                rest = True
+                break
+            taken[pick] = True
+            joints[:] = False
+            joints[pick] = True
+            _place(q0, best[0], stop, track, 1.0, joints, dt, out)
+            answer, q0_clear, pair, points = _command_pair(q0, q0_clear, out[0], out[1], acceleration, lower, upper,
+                                                           reach, spacing, start_step, link_int, link_num, link_terms,
+                                                           shape_link, shape_local, shape_size, links, spheres, pairs,
+                                                           loose, tight, world, hits, labels, index, point, stop_point)
+            used += points
+            if answer == SWEPT_BAD:
+                return SWEPT_BAD, 0, q0_clear
+            if answer == SWEPT_FREE:
+                best[:] = out
+            else:
+                rest = True
+        if not rest:
+            continue  # the finger takes its whole step
+        held |= 1 << f
+        # the joints that could not: together, as far along their step as is free
+        for j in range(n):
+            joints[j] = joint_finger[j] == f and best[0, j] != track[j]
+        base = best[0].copy()
+        lo, hi = 0.0, 1.0
+        for _ in range(steps):
+            if used >= budget:
+                break
+            mid = 0.5 * (lo + hi)
+            _place(q0, base, stop, track, mid, joints, dt, out)
+            answer, q0_clear, pair, points = _command_pair(q0, q0_clear, out[0], out[1], acceleration, lower, upper,
+                                                           reach, spacing, start_step, link_int, link_num, link_terms,
+                                                           shape_link, shape_local, shape_size, links, spheres, pairs,
+                                                           loose, tight, world, hits, labels, index, point, stop_point)
+            used += points
+            if answer == SWEPT_BAD:
+                return SWEPT_BAD, 0, q0_clear
+            if answer == SWEPT_FREE:
+                lo = mid
+                best[:] = out
+            else:
+                hi = mid
+    out[:] = best
+    return SWEPT_FREE, held, q0_clear
+
+
 # Each kernel's parameters, a table standing for its fields in order (tests/kernels/test_tables.py).
 SIGNATURES = {
     "swept_segment": ("q0", "q1", "q0_clear", "start", SweptTable, FkTable, SweptShapes, Margins, "point"),
@@ -243,4 +449,7 @@ SIGNATURES = {
                         "cached"),
     "swept_command": ("q0", "q1", "v1", "acceleration", "lower", "upper", "q0_clear", "q1_clear", SweptTable,
                       FkTable, SweptShapes, Margins, "point"),
+    "swept_slide": ("q0", "q0_clear", "track", "stop", "dt", "acceleration", "lower", "upper", "steps", "budget",
+                    Fingers,
+                    SweptTable, FkTable, SweptShapes, Margins, "point", "out"),
 }

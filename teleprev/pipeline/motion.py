@@ -6,8 +6,10 @@ paced sender; replay's smoothing (teleprev/live/player.py) steps recorded target
 
     arm     jerk-limited generator towards the target (ArmGenerator)
     hand    acceleration cap towards the target (HandLimiter), each command segment, and the way on to
-            where braking from it would stop, checked for self-collision with a clearance margin; a
-            segment that is not free brakes instead, and stops short only where even braking is not free
+            where braking from it would stop, checked for self-collision with a clearance margin; where
+            that is not free, the fingers whose motion would collide are held back and slide as far
+            towards their step as is free, the others move on (SweptCheck.slide); only where no such
+            command is found does the whole hand brake, and stop short where even braking is not free
 """
 
 from __future__ import annotations
@@ -66,7 +68,7 @@ class Motion:
             free = self.swept.segment_free(last, cmd) and self.swept.segment_free(cmd, self._stop_point(cmd, cmd_v))
         if free:
             return cmd, cmd_v, False
-        return *self._avoid(last, v, dt, dt_before, flags), True
+        return *self._avoid(last, v, cmd, dt, dt_before, flags), True
 
     def _stop_point(self, q, v):
         """Where braking at the cap from q at v would end: a command is taken only if that way is free too,
@@ -74,10 +76,17 @@ class Motion:
         h = self.hand
         return np.minimum(np.maximum(q + v * np.abs(v) / (2.0 * h.acceleration), h.lower), h.upper)
 
-    def _avoid(self, last, v, dt, dt_before, flags):
-        """The capped step's segment would come too close to a collision: brake as hard as allowed, and
-        only if even that segment is not free, stop short on the segment (safety before smoothness)."""
+    def _avoid(self, last, v, cmd, dt, dt_before, flags):
+        """The capped step `cmd` would come too close to a collision: hold back the fingers that must,
+        sliding them as far as is free (SweptCheck.slide); where that finds nothing (and in older
+        formats), brake the whole hand as hard as allowed, and only if even that segment is not free,
+        stop short on the segment (safety before smoothness)."""
         braked, bv = self.hand.stop(last, v, dt, dt_before)
+        h = self.hand
+        slid = self.swept.slide(last, cmd, braked, dt, h.acceleration, h.lower, h.upper)
+        if slid is not None:
+            flags.append("hand_swept_slid")
+            return slid[0], slid[1]
         if self.swept.segment_free(last, braked):
             flags.append("hand_swept_braked")
             return braked, bv

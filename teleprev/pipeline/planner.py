@@ -115,6 +115,8 @@ class PlannerState:
 class CommandPlanner:
     """Samples the commands at each tick from the adopted updates (see the module docstring)."""
 
+    resumes_slowly = True  # after input loss, at the engage fraction (sessions of format 5 and older: False)
+
     def __init__(self, motion: Motion, effector_guard, engage_speed_frac: float, stale_ns: int):
         self.motion = motion
         self.arm = motion.arm  # ArmGenerator
@@ -126,9 +128,11 @@ class CommandPlanner:
 
     @classmethod
     def for_pipeline(cls, pipeline) -> "CommandPlanner":
-        """The planner of a pipeline: its Motion's limits, its end effector's guard, its config."""
+        """The planner of a pipeline: its Motion's limits, its end effector's guard, its config; the class
+        its session format's pipeline names (`planner`: an older format's re-run), else this one."""
         cfg = pipeline.cfg
-        return cls(pipeline.motion, pipeline.effector.guard, cfg.engage_speed_frac, int(cfg.stale_ms * 1e6))
+        planner = getattr(pipeline, "planner", None) or cls
+        return planner(pipeline.motion, pipeline.effector.guard, cfg.engage_speed_frac, int(cfg.stale_ms * 1e6))
 
     @property
     def active(self) -> bool:
@@ -182,7 +186,7 @@ class CommandPlanner:
         if target is not None and t_ns - target.t_ns > self.stale_ns:
             flags.append("targets_stale")
             target = None
-        if executing:
+        if executing and self.resumes_slowly:
             if target is None or target.arm is None or target.hand is None:
                 s.input_lost = True
             elif s.input_lost:  # the input is back: from the held commands, at the engage fraction

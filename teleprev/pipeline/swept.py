@@ -14,6 +14,15 @@ segment) then proves every configuration on the segment keeps at least c/2 betwe
 the segment is within half a spacing of a checked one, where two links moved at most M/n <= c/2 towards
 each other. The end point itself keeps the full c.
 
+A command that is not free need not stop the whole hand (SweptCheck.slide, compiled only): a candidate
+command whose every joint lies between that joint's braking step and its capped step towards the target
+keeps the hand's limits (each limit is an interval both ends keep), so the search may hold back the fingers
+(kinematic chains from the palm) of the colliding link pairs and let the others take their step, then
+slide each held finger as far towards its step as some subset of its joints and a bisection of the rest
+allow. Each candidate is checked as a command is (its segment and the way on to its stop point) and
+taken only where the compiled test shows it free, so the judges are the same (kernels/swept.py:
+swept_slide).
+
 SweptCheck runs a segment in one numba kernel (teleprev/kernels/swept.py, swept_*) where the geometry is
 all boxes: the bound, the points, the checks in order, the end point's, and last_free_on_segment's
 bisection; otherwise, and for the older sessions re-run with numpy's arithmetic
@@ -36,6 +45,10 @@ from teleprev.robot.model import RobotModel
 from teleprev.robot.urdf import Shape
 
 START_STEP_M = 0.0005  # from a start already inside the margin: plain shapes, link motion <= this between checks
+SLIDE_STEPS = 5  # halvings of a held finger's remaining step (its last 1/32 of a step may be left untried)
+# Configurations one slide may test (a count, so that a re-run finds the same command): about 2 ms of a
+# planner tick (8.3 ms at 120 Hz) with the LEAP Hand's fingers crowded; one blocked finger needs about 100.
+SLIDE_BUDGET = 400
 
 
 def _grow(shape: Shape, by: float) -> Shape:
@@ -85,7 +98,32 @@ def reach_table(model: RobotModel, link_names: tuple[str, ...]) -> np.ndarray:
     return reach
 
 
+def finger_table(model: RobotModel, link_names: tuple[str, ...]) -> swept_kernels.Fingers:
+    """The kinematic chains from the palm: each starts at a moving joint with no moving joint above it
+    (a finger's root), numbered in the model's joint order; a link or joint above every such joint is
+    the palm's (-1)."""
+    def root(link: str) -> str | None:
+        found = None
+        while link in model.parent_joint:
+            joint = model.parent_joint[link]
+            if joint.type != "fixed":
+                found = joint.mimic.joint if joint.mimic is not None else joint.name
+            link = joint.parent
+        return found
+
+    child = {j.mimic.joint if j.mimic is not None else j.name: link for link, j in model.parent_joint.items()
+             if j.type != "fixed"}
+    joint_root = [root(child[name]) if name in child else None for name in model.joint_names]
+    roots = [name for name in model.joint_names if name in set(joint_root)]
+    number = {name: k for k, name in enumerate(roots)}
+    return swept_kernels.Fingers(np.array([number.get(r, -1) for r in joint_root], dtype=np.int64),
+                                 np.array([number.get(root(name), -1) for name in link_names], dtype=np.int64),
+                                 len(roots))
+
+
 class SweptCheck:
+    slides = True  # a command that is not free holds back only the fingers it must (slide); older formats: False
+
     def __init__(self, model: RobotModel, checker: SelfCollisionChecker, clearance_m: float):
         self.model = model
         self.checker = checker
@@ -103,6 +141,7 @@ class SweptCheck:
             self._segment_free_compiled(q, q + 1e-3)
             self._last_free_compiled(q, q + 1e-3, 1)
             self.command_free(q, q + 1e-3, q, q + 1.0, q - 1.0, q + 1.0)
+            self.slide(q, q + 1e-3, q, 0.01, q + 1.0, q - 1.0, q + 1.0)
             self._clear_cache = self._command_end = (b"", False)
 
     def _compiled_tables(self) -> tuple | None:
@@ -117,6 +156,7 @@ class SweptCheck:
                                                        (g.pairs, p.pairs))):  # same links, boxes per link and pairs
             return None
         self._point = np.empty(len(self.model.joint_names))
+        self._fingers = finger_table(self.model, self.checker.link_names)
         table = swept_kernels.SweptTable(np.ascontiguousarray(self.reach, dtype=np.float64),
                                          self.clearance / 2 if self.clearance > 0 else 0.0, START_STEP_M)
         shapes = swept_kernels.SweptShapes(
@@ -232,6 +272,27 @@ class SweptCheck:
         if q1_clear >= 0:
             self._command_end = (key1, bool(q1_clear))
         return answer == swept_kernels.SWEPT_FREE
+
+    def slide(self, q0, track, stop, dt, acceleration, lower, upper) -> tuple[np.ndarray, np.ndarray, int] | None:
+        """A command from q0 that holds back only the fingers whose motion would collide (swept_slide):
+        (command, its velocity, held: bit f for each finger left short of its step), every joint between
+        its braking step `stop` and its capped step `track`, the command and the way on to where braking
+        at `acceleration` from it stops within [lower, upper] shown free. None where no finger-wise command
+        is found (the colliding fingers brake already), where q0 is within the margin, or where the check
+        is not compiled (or not this format's): then the caller brakes the whole hand."""
+        if not self.slides or self._kernel_args is None or not dt > 0:
+            return None
+        q0 = np.ascontiguousarray(q0, dtype=np.float64)
+        key = q0.tobytes()
+        cached, end = self._clear_cache, self._command_end
+        q0_clear = int(cached[1]) if cached[0] == key else int(end[1]) if end[0] == key else -1
+        out = np.empty((2, len(q0)))
+        answer, held, _ = swept_kernels.swept_slide(
+            q0, q0_clear, np.ascontiguousarray(track, dtype=np.float64), np.ascontiguousarray(stop, dtype=np.float64),
+            float(dt), acceleration, lower, upper, SLIDE_STEPS, SLIDE_BUDGET, *self._fingers, *self._kernel_args, out)
+        if answer != swept_kernels.SWEPT_FREE:
+            return None
+        return out[0], out[1], int(held)
 
     def _last_free_compiled(self, q0, q1, steps: int) -> float | None:
         """The bisection's fraction of the segment, or None where a configuration on the way is within the

@@ -1,7 +1,8 @@
 """Sessions recorded by earlier teleprevs still read and evaluate: tests/fixtures/sim_v1.mcap (format 1:
 speed caps only), sim_v2.mcap (format 2: motion limits, numpy arithmetic) and sim_v3.mcap (format 3: the
 compiled hot path, commands computed at each pipeline step), each recorded with
-tests/fixtures/fixture_rig.toml, two episodes engaged for 3 s each.
+tests/fixtures/fixture_rig.toml, two episodes engaged for 3 s each; sim_v5.mcap (format 5: commands from the
+paced sender's planner, the whole hand braking where a command was not free), one episode of 7 s.
 
 Re-record it only when the format changes on purpose, and keep the old one as sim_v<N>.mcap: the point
 is that older sessions keep working.
@@ -19,6 +20,7 @@ from teleprev.session.reader import SessionReader
 FIXTURE = Path(__file__).parents[1] / "fixtures" / "sim_v1.mcap"
 FIXTURE_V2 = Path(__file__).parents[1] / "fixtures" / "sim_v2.mcap"
 FIXTURE_V3 = Path(__file__).parents[1] / "fixtures" / "sim_v3.mcap"
+FIXTURE_V5 = Path(__file__).parents[1] / "fixtures" / "sim_v5.mcap"  # the whole hand braked (format 6: fingers)
 
 
 def test_every_stream_of_the_old_session_decodes():
@@ -74,6 +76,24 @@ def test_an_older_format_reruns_with_its_own_arithmetic_bit_for_bit(fixture, ver
     assert "ccn" in set(r.corrector)  # the CCN's arithmetic is part of what must reproduce
     assert r.models_match, f"the shipped models are not the ones {fixture.name} was recorded with"
     assert session["bit_identical"]
+
+
+def test_a_planned_format_reruns_with_its_own_arithmetic_bit_for_bit():
+    """Format 5: the planner's commands, the whole hand braking where a command was not free (format 6
+    holds back only the colliding fingers, which would send other commands at the braked ticks)."""
+    from teleprev import topics
+    from teleprev.evaluation import reproduce
+
+    reader = SessionReader(FIXTURE_V5)
+    assert reproduce.recorded_format(reader.metadata) == 5
+    braked = sum("hand_swept_braked" in m.payload.data["flags"] for m in reader.messages([topics.COMMAND_TICK]))
+    assert braked > 5  # the fixture holds ticks whose commands format 6 would make otherwise
+    result = evaluate([FIXTURE_V5])
+    r = result.reruns[0]
+    hand = r.commands[topics.COMMAND_HAND]
+    assert (~np.isnan(hand.rerun).any(axis=1)).sum() > 500 and hand.same()
+    assert r.models_match
+    assert result.report["sessions"][0]["bit_identical"]
 
 
 def test_a_rerun_keeps_the_long_lived_objects_out_of_the_collectors_scans(monkeypatch):

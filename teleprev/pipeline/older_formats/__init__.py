@@ -5,10 +5,16 @@
     format 3   as format 2, with the compiled kernels (the current arithmetic)
     format 4   the paced sender samples the commands from the steps' targets (teleprev/pipeline/planner.py),
                as now
-    (format 5, the current one: the glove read flexion first; formats 1 to 4 read it abduction first)
+    format 5   the glove read flexion first (formats 1 to 4 read it abduction first), as now
+    (format 6, the current one: a hand command that is not free holds back only the fingers whose motion
+    would collide, where formats 1 to 5 braked the whole hand; after input loss the planner resumes at the
+    engage fraction, where formats 4 and 5 resumed at full speed)
 
     numpy_arithmetic   NumpyArmIK, NumpyArmRetargeter, NumpySweptCheck, NumpyCorrector (formats 1 and 2)
     abduction_first    AbductionFirstPipeline: the compiled glove reading of formats 3 and 4
+    braking_swept      BrakingSweptCheck: the whole hand brakes where a command is not free (formats 1 to 5)
+    immediate_resume   ImmediateResumePipeline, whose planner resumes at full speed after input loss
+                       (formats 4 and 5)
     step_motion        StepMotion: the commands of a step under the motion limits, and idle steps
     step_commands      StepCommandsPipeline (formats 2 and 3), NumpyPipeline (formats 1 and 2, numpy's
                        glove reading): the current step's targets, then the step's own commands
@@ -22,6 +28,8 @@ from __future__ import annotations
 
 from teleprev.pipeline.arithmetic import Arithmetic
 from teleprev.pipeline.older_formats.abduction_first import AbductionFirstPipeline
+from teleprev.pipeline.older_formats.braking_swept import BrakingSweptCheck
+from teleprev.pipeline.older_formats.immediate_resume import ImmediateResumePipeline, ImmediateResumePlanner
 from teleprev.pipeline.older_formats.numpy_arithmetic import (
     NumpyArmIK,
     NumpyArmRetargeter,
@@ -46,19 +54,25 @@ COMPILED_FORMAT_VERSION = 3
 # Format 4: the commands are sampled by the paced sender at the instant it sends them, from the pipeline
 # steps' targets (teleprev/pipeline/planner.py); /command/tick records which targets each tick had.
 PLANNED_FORMAT_VERSION = 4
+# Format 5: the glove is read flexion first (teleprev/human/smplx.py).
+FLEXION_FIRST_FORMAT_VERSION = 5
 
-__all__ = ["MOTION_FORMAT_VERSION", "COMPILED_FORMAT_VERSION", "PLANNED_FORMAT_VERSION", "arithmetic",
-           "AbductionFirstPipeline", "MotionState", "NumpyArmIK",
+__all__ = ["MOTION_FORMAT_VERSION", "COMPILED_FORMAT_VERSION", "PLANNED_FORMAT_VERSION", "FLEXION_FIRST_FORMAT_VERSION",
+           "arithmetic", "AbductionFirstPipeline", "BrakingSweptCheck", "ImmediateResumePipeline",
+           "ImmediateResumePlanner", "MotionState", "NumpyArmIK",
            "NumpyArmRetargeter", "NumpyCorrector", "NumpyPipeline", "NumpySweptCheck", "StepCommandsDriver",
            "StepCommandsPipeline", "StepCommandsResult", "StepCommandsState", "StepMotion"]
 
 
 def arithmetic(session_format: int) -> Arithmetic:
     """The classes sessions of an older `session_format` were computed with."""
+    if session_format >= FLEXION_FIRST_FORMAT_VERSION:
+        return Arithmetic(swept_check=BrakingSweptCheck, pipeline=ImmediateResumePipeline)
     if session_format >= PLANNED_FORMAT_VERSION:
-        return Arithmetic(pipeline=AbductionFirstPipeline)
+        return Arithmetic(swept_check=BrakingSweptCheck, pipeline=AbductionFirstPipeline)
     motion = session_format >= MOTION_FORMAT_VERSION
     if session_format >= COMPILED_FORMAT_VERSION:
-        return Arithmetic(motion, pipeline=StepCommandsPipeline, driver=StepCommandsDriver)
+        return Arithmetic(motion, swept_check=BrakingSweptCheck, pipeline=StepCommandsPipeline,
+                          driver=StepCommandsDriver)
     return Arithmetic(motion, NumpyArmIK, NumpyArmRetargeter, NumpySweptCheck, NumpyCorrector, NumpyPipeline,
                       StepCommandsDriver)

@@ -20,7 +20,7 @@ import numpy as np
 
 from teleprev.noncollision.corrector import Corrector, Prepared
 from teleprev.noncollision.mlp import SCORE_BAND
-from teleprev.pipeline.swept import SweptCheck
+from teleprev.pipeline.older_formats.braking_swept import BrakingSweptCheck
 from teleprev.retarget.arm import Anchor, ArmRetargeter
 from teleprev.robot.collision_report import CollisionReport
 from teleprev.robot.ik import ArmIK, IkResult
@@ -111,8 +111,9 @@ class NumpyArmRetargeter(ArmRetargeter):
         return self.ik.solve(target, q_start), clipped
 
 
-class NumpySweptCheck(SweptCheck):
-    """Every segment by SweptCheck's numpy check (what it falls back to where the kernels cannot run)."""
+class NumpySweptCheck(BrakingSweptCheck):
+    """Every segment by SweptCheck's numpy check (what it falls back to where the kernels cannot run);
+    the whole hand brakes where a command is not free, as in formats up to 5."""
 
     def _compiled_tables(self) -> None:
         return None

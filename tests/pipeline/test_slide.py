@@ -1,0 +1,154 @@
+"""A hand command that is not free holds back only the fingers whose motion would collide (SweptCheck.slide,
+Motion's hand step): a blocked finger slides towards its target instead of stopping, a free finger moves on,
+and no command is ever in self-collision or past a limit (the audit's own checks, over random targets)."""
+
+import numpy as np
+import pytest
+
+from teleprev.pipeline.motion import Motion
+from teleprev.pipeline.older_formats import BrakingSweptCheck
+from teleprev.robot.collision import FclSelfCollisionChecker
+
+DT = 1 / 120
+
+
+@pytest.fixture(scope="module")
+def rig_motion():
+    """The default sim rig's Motion (its hand limiter and swept check: LEAP Hand, 3 mm), and the same
+    limits with format 5's whole-hand braking."""
+    from teleprev.assembly import build_pipeline
+    from teleprev.rig import load_rig
+
+    rig = load_rig()
+    motion = build_pipeline(rig).motion
+    swept = motion.swept
+    braking = Motion(motion.arm, motion.hand, BrakingSweptCheck(swept.model, swept.checker, swept.clearance))
+    return rig, motion, braking
+
+
+def _clear_target(swept, near, rng, spread):
+    while True:
+        q = np.clip(near + rng.normal(0, spread, near.shape), swept.model.lower, swept.model.upper)
+        if swept.clear(q):
+            return q
+
+
+def _finger_joints(swept, f):
+    return np.flatnonzero(swept._fingers.joint_finger == f)
+
+
+def _blocked_from_rest(rig_motion, count, seed):
+    """Starts at rest, clear, with a clear target for one finger whose capped step is not free (format 5
+    braked the whole hand there, so it stayed put): (finger, start, target)."""
+    _, motion, _ = rig_motion
+    swept = motion.swept
+    rng = np.random.default_rng(seed)
+    found = []
+    for _ in range(20000):
+        q0 = _clear_target(swept, swept.model.neutral(), rng, 0.6)
+        f = int(rng.integers(swept._fingers.fingers))
+        target = q0.copy()
+        joints = _finger_joints(swept, f)
+        target[joints] = _clear_target(swept, q0, rng, 0.8)[joints]
+        if not swept.clear(target):
+            continue
+        rows, _ = motion.hand.command(q0, np.zeros(16), target, 0, None, None, 0.0, DT, DT, 1.0)
+        if swept.command_free(q0, rows[0], rows[1], motion.hand.acceleration, motion.hand.lower, motion.hand.upper):
+            continue
+        found.append((f, q0, target))
+        if len(found) == count:
+            break
+    assert len(found) == count
+    return found
+
+
+def test_a_blocked_finger_slides_instead_of_stopping(rig_motion):
+    _, motion, braking = rig_motion
+    swept = motion.swept
+    moved = closer = 0
+    cases = _blocked_from_rest(rig_motion, 30, seed=1)
+    for f, q0, target in cases:
+        joints = _finger_joints(swept, f)
+        old_flags = []
+        old, _ = braking.hand_step(q0, np.zeros(16), target, None, DT, DT, 1.0, old_flags)
+        assert old_flags == ["hand_swept_braked"] and np.array_equal(old, q0)  # format 5: the hand stood still
+        q, v = q0, np.zeros(16)
+        for tick in range(30):
+            flags = []
+            q1, v = motion.hand_step(q, v, target, None, DT, DT, 1.0, flags)
+            assert swept.segment_free(q, q1) and swept.clear(q1)
+            if tick == 0:
+                assert flags == ["hand_swept_slid"]
+                moved += bool(np.any(q1[joints] != q0[joints]))
+            q = q1
+        closer += np.abs(q - target)[joints].sum() < 0.5 * np.abs(q0 - target)[joints].sum()
+    assert moved >= 0.8 * len(cases), moved  # the first tick already moves the blocked finger
+    assert closer >= 0.5 * len(cases), closer  # and it makes its way along the free configurations
+
+
+def test_a_free_finger_moves_on_while_another_is_blocked(rig_motion):
+    _, motion, braking = rig_motion
+    swept, h = motion.swept, motion.hand
+    rng = np.random.default_rng(2)
+    checked = 0
+    for f, q0, target in _blocked_from_rest(rig_motion, 60, seed=3):
+        g = int((f + 1 + rng.integers(swept._fingers.fingers - 1)) % swept._fingers.fingers)
+        joints_f, joints_g = _finger_joints(swept, f), _finger_joints(swept, g)
+        target = target.copy()
+        target[joints_g] = _clear_target(swept, q0, rng, 0.5)[joints_g]
+        if not swept.clear(target):
+            continue
+        rows, _ = h.command(q0, np.zeros(16), target, 0, None, None, 0.0, DT, DT, 1.0)
+        track, braked = rows[0], q0  # from rest, braking is standing still
+        only_g = braked.copy()
+        only_g[joints_g] = track[joints_g]
+        only_f = braked.copy()
+        only_f[joints_f] = track[joints_f]
+        free = [swept.command_free(q0, c, (c - q0) / DT, h.acceleration, h.lower, h.upper)
+                for c in (track, only_g, only_f)]
+        if free != [False, True, False]:  # g's own motion is free, f's is not: f is what blocks
+            continue
+        old_flags, flags = [], []
+        old, _ = braking.hand_step(q0, np.zeros(16), target, None, DT, DT, 1.0, old_flags)
+        q1, _ = motion.hand_step(q0, np.zeros(16), target, None, DT, DT, 1.0, flags)
+        assert np.array_equal(old, q0)  # format 5: g stood still with f
+        assert flags == ["hand_swept_slid"]
+        assert np.array_equal(q1[joints_g], track[joints_g])  # g takes its whole step
+        assert np.any(q1[joints_g] != q0[joints_g])
+        assert swept.segment_free(q0, q1)
+        checked += 1
+    assert checked >= 5, checked
+
+
+def test_no_command_collides_or_passes_a_limit_over_random_targets(rig_motion):
+    """Random target sequences (clear targets, jumps and drifts, with and without a target velocity) through
+    Motion's hand step; the commands measured as `teleprev audit` measures them (limits, speed,
+    acceleration, the exact self-collision check of every command and along every segment), and FCL alone
+    on every command."""
+    from teleprev.assembly import motion_limits
+    from teleprev.evaluation.audit import audit_stream
+
+    rig, motion, _ = rig_motion
+    swept = motion.swept
+    fcl = FclSelfCollisionChecker(swept.model, swept.checker.exclusions)
+    limits = motion_limits(rig)
+    slid = 0
+    for seed in range(3):
+        rng = np.random.default_rng(100 + seed)
+        q, v = swept.model.neutral(), np.zeros(16)
+        target, target_v = q, None
+        commands = [q]
+        for tick in range(500):
+            if tick % 40 == 0:
+                target = _clear_target(swept, target, rng, 0.9 if tick % 80 == 0 else 0.3)
+                target_v = rng.normal(0, 2.0, 16) if seed == 1 else None
+            flags = []
+            q, v = motion.hand_step(q, v, target, target_v, DT, DT, 1.0, flags)
+            slid += "hand_swept_slid" in flags
+            assert not fcl.collides(q)
+            commands.append(q)
+        t_ns = np.arange(len(commands), dtype=np.int64) * int(DT * 1e9)
+        audit = audit_stream("/command/hand", "hand", limits, t_ns, np.array(commands))
+        assert audit.violations == [], audit.violations
+        assert audit.colliding == 0 and audit.swept_colliding == 0
+    assert slid > 100, slid  # the slide was exercised
