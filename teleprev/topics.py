@@ -23,6 +23,8 @@ What the pipeline computed and sent:
                                             drives the pipeline in place of the glove and suit
     /command/tick             Event         teleprev.CommandTick: per tick of the paced sender, the last
                                             update it had adopted, its lateness and flags
+    /command/wire             Event         teleprev.CommandWire: per command an actuator's own process wrote
+                                            (live/core/actuator_host.py), stamped when the write began
     /tf                       TransformsSample   robot link frames (for Foxglove's URDF panel); a depth camera
                                                  adds its own frame (its mount in the rig) so that Foxglove's
                                                  3D panel places its point cloud in the robot's scene
@@ -54,6 +56,7 @@ STEP_REPORT = "/pipeline/report"
 COMMAND_ARM = "/command/arm"
 COMMAND_HAND = "/command/hand"
 COMMAND_TICK = "/command/tick"
+COMMAND_WIRE = "/command/wire"
 POLICY_ACTION = "/policy/action"
 EPISODE = "/events/episode"
 MODE = "/events/mode"
@@ -126,6 +129,15 @@ EVENT_SCHEMAS: dict[str, dict] = {
         "stamp were sampled from the pipeline's updates up to `seq`; `late_ms`: how late the tick woke.",
         {"seq": _INT, "late_ms": _NUM, "flags": {"type": "array", "items": _STR}, "active": {"type": "boolean"}},
         ["seq", "late_ms"],
+    ),
+    "teleprev.CommandWire": _schema(
+        "teleprev.CommandWire",
+        "One command as the actuator's own process wrote it, stamped with the instant the write began: the tick "
+        "`seq` it was sampled at (its stamp on /command/arm or /command/hand is `t_ns`), how long the device's "
+        "send took (`call_ms`), and whether the device took it (`sent`; else `error` says why).",
+        {"kind": {"type": "string", "enum": ["arm", "hand"]}, "seq": _INT, "t_ns": _INT, "call_ms": _NUM,
+         "sent": {"type": "boolean"}, "error": _STR},
+        ["kind", "seq", "sent"],
     ),
     "teleprev.DeviceEvent": _schema(
         "teleprev.DeviceEvent",

@@ -282,6 +282,8 @@ class LeapSettings:
 class LeapHand(PolledActuator[LeapSettings], kind="hand", sdk_module="dynamixel_sdk", extra="leap"):
     """JointSample of "0".."15" on /hand/<name>/state; send() writes goal positions."""
 
+    own_process = True  # the bus's reads and writes both run in a paced process of their own (Actuator)
+
     def __init__(self, name: str, settings: LeapSettings, context: DeviceContext, bus: DynamixelBus | None = None):
         robot = context.robot if _has_joint(context.robot, "0") else "leap_hand_right"  # the hand alone otherwise
         super().__init__(name, settings, context, robot, tuple(str(i) for i in MOTOR_IDS),

@@ -247,6 +247,8 @@ class XArmSettings:
 class XArm(PolledActuator[XArmSettings], kind="arm", sdk_module="xarm", extra="xarm"):
     """JointSample of joint1..jointN on /arm/<name>/state; send() streams servo targets."""
 
+    own_process = True  # a recording writes its targets from a paced process of its own (Actuator)
+
     def __init__(self, name: str, settings: XArmSettings, context: DeviceContext, link: XArmLink | None = None):
         super().__init__(name, settings, context, context.robot, tuple(f"joint{i}" for i in range(1, settings.dof + 1)),
                          where=f"device {name!r} (xArm {settings.host})")

@@ -179,9 +179,17 @@ class Actuator(Device[S]):
     Commands reaching send() are already inside the joint limits, under the velocity limits and (for a
     hand) free of self-collision: the pipeline's command guard sees to that. In preview mode send() is
     never called.
+
+    `own_process = True` lets a recording run the actuator in a process of its own with the command
+    sender's real-time priority (teleprev/live/core/actuator_host.py), so that its commands reach the wire
+    on time whatever else the session does. Such a plugin is opened, read and sent to only in that process,
+    on a copy of the object the rig built (forked before it connected): it must share nothing with the
+    rig's other devices (`context.shared`, `context.task_listeners`, `context.operator`), and its samples
+    are JointSample, PoseSample or Event. Left False, it runs in the session process as every device does.
     """
 
     joint_names: tuple[str, ...] = ()
+    own_process: ClassVar[bool] = False
 
     @abstractmethod
     def send(self, command: JointSample) -> None:

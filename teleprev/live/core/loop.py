@@ -11,9 +11,12 @@ it met live.
 The loop thread only orders and dispatches: the controls are typed messages (teleprev/live/core/controls.py)
 queued among the samples; whether execute may be engaged is the ExecuteGate's to say
 (teleprev/live/core/gate.py); the commands do not wait for this loop: the sender samples them on its own clock,
-in its own process, and the CommandRelay's thread (teleprev/live/core/relay.py) passes each tick's commands to
-the arm and the end effector at once, then queues the tick for the loop to record (/command/arm,
-/command/hand and /command/tick, stamped with the instant the sender sent them).
+in its own process, and hands them at once to the actuators that run in paced processes of their own
+(teleprev/live/core/actuator_host.py: the real arm and hand, whose SDK calls put the bytes on the wire there);
+the CommandRelay's thread (teleprev/live/core/relay.py) passes each tick's commands to the actuators that
+run here (the simulated ones), then queues the tick for the loop to record (/command/arm, /command/hand and
+/command/tick, stamped with the instant the sender sampled them, which is when it handed them on). The
+actuators' processes say what they wrote and when, recorded on /command/wire.
 
 Input lost while executing (missing, stale or invalid samples, a frozen process) holds the robot; past the
 rig's bound the session goes back to preview (teleprev/live/core/input_watch.py).
@@ -47,6 +50,7 @@ from teleprev.live.core.controls import (Control, DiscardEpisode, Engage, EStop,
                                     Release, StartEpisode, StopEpisode, ToPreview, UNATTENDED, WorldLayout)
 from teleprev.live.core.episodes import EpisodeTracker
 from teleprev.live.core.gate import ExecuteGate, GateState
+from teleprev.live.core.actuator_host import WireRecord
 from teleprev.live.core.input_watch import InputEvent, InputWatch
 from teleprev.live.core.relay import CommandRelay
 from teleprev.thread_priority import raise_this_thread
@@ -120,6 +124,7 @@ class SessionLoop:
         *,
         inbox: LoopInbox | None = None,
         actuators: dict[str, Actuator] | None = None,
+        hosted: frozenset[str] = frozenset(),
         sender=None,
         frames=None,
         on_episode_start: Callable[[str], None] | None = None,
@@ -142,7 +147,8 @@ class SessionLoop:
         self.backlog = self.inbox.backlog  # samples and controls waiting (the loop is behind when this grows)
         names = (driver.pipeline.arm_names, driver.pipeline.effector_names) if driver is not None else ((), ())
         self.relay = CommandRelay(clock, actuators if actuators is not None else {}, sender, names,
-                                  on_tick=self.inbox.put, on_gone=lambda: self.halt("the command sender stopped"))
+                                  on_tick=self.inbox.put, on_gone=lambda: self.halt("the command sender stopped"),
+                                  hosted=hosted)
         self.frames = frames
         self.on_episode_start = on_episode_start
         self.judge = judge
@@ -214,6 +220,10 @@ class SessionLoop:
     def world_layout(self, layout: dict, reason: str, at_ns: int) -> None:
         self.send(WorldLayout(layout, reason, at_ns))
 
+    def wired(self, record: WireRecord) -> None:
+        """A command an actuator's own process wrote (any thread): queued, to be counted and recorded."""
+        self.inbox.put(self.clock.now_ns(), record)
+
     # ---- lifecycle -----------------------------------------------------------------------------
     def start(self) -> None:
         self._thread = threading.Thread(target=self._run, name="session-loop", daemon=True)
@@ -252,6 +262,8 @@ class SessionLoop:
                     self._apply(item)
                 elif isinstance(item, Sample):
                     self._sample(item, receive_ns)
+                elif isinstance(item, WireRecord):
+                    self._wire(item, receive_ns)
                 else:
                     self._tick(item, receive_ns)
             except Exception as exc:  # a bug must neither leave the arm moving nor end the recording
@@ -350,6 +362,14 @@ class SessionLoop:
         data = {"seq": tick.seq, "late_ms": item.late_ns / 1e6, "flags": list(tick.flags), "active": tick.active}
         self._log(Logged(topics.COMMAND_TICK, self._stamp(), Event(tick.t_ns, "teleprev.CommandTick", data)))
         self.snapshot = replace(self.snapshot, commands_sent=sum(stats.commands_sent.values()))
+
+    def _wire(self, r: WireRecord, receive_ns: int) -> None:
+        """Record one command as its actuator's process wrote it (/command/wire, stamped when the write began)."""
+        self.relay.wire(r.kind, r.sent)
+        data = {"kind": r.kind, "seq": r.seq, "t_ns": r.t_ns, "call_ms": r.call_ns / 1e6, "sent": r.sent}
+        if r.error:
+            data["error"] = r.error
+        self._event(topics.COMMAND_WIRE, "teleprev.CommandWire", data, receive_ns, stamp_ns=r.wire_ns)
 
     def _device_failed(self, data: dict) -> None:
         """A device failed: count it, tell the operator, go back to preview (a recorded mode switch, so a

@@ -1,7 +1,7 @@
 """The command sender's pipe messages as length-prefixed JSON: typed, and nothing is unpickled.
 
 A message is a frozen dataclass of a known type (`types`: name -> class), a string, or a plain value;
-numpy arrays and tuples are tagged so that they come back as they went. Floats keep every bit: JSON writes
+numpy arrays, tuples and dicts (string keys) are tagged so that they come back as they went. Floats keep every bit: JSON writes
 a float's shortest repr, which reads back to the same double (-0.0 and non-finite values included), so a
 session re-runs bit for bit whatever crossed the pipe.
 
@@ -54,6 +54,8 @@ def _encode(value):
                 "fields": {f.name: _encode(getattr(value, f.name)) for f in dataclasses.fields(value)}}
     if isinstance(value, list):
         return [_encode(v) for v in value]
+    if isinstance(value, dict):
+        return {"dict": {str(k): _encode(v) for k, v in value.items()}}
     return value  # str, int, float, bool, None
 
 
@@ -66,6 +68,8 @@ def _decode(value, types: dict[str, type]):
         return np.array(value["nd"], dtype=np.dtype(value["dtype"]))
     if "tuple" in value:
         return tuple(_decode(v, types) for v in value["tuple"])
+    if "dict" in value:
+        return {k: _decode(v, types) for k, v in value["dict"].items()}
     cls = types.get(value.get("type"))
     if cls is None:
         raise ValueError(f"the command sender's pipe carried a message of unknown type {value.get('type')!r}")

@@ -1,9 +1,11 @@
 """Between the session loop and the robot: the actuators' ports, and the paced command sender both ways.
 
 The relay thread takes each tick the sender reports, passes its commands to the arm and the end effector
-at once (the actuators' `send`: the commands never wait for the session loop), and hands the tick on for
-the loop to record. The loop passes the planner's updates (targets, mode switches) to the sender through
-`pass_updates`. `active` says whether the sender is commanding (executing, or braking to rest).
+that run in the session process (the actuators' `send`: the commands never wait for the session loop), and
+hands the tick on for the loop to record. An actuator in a process of its own (`hosted`:
+teleprev/live/core/actuator_host.py) had its command from the sender itself; its process's WireRecords
+are counted here (`wire`). The loop passes the planner's updates (targets, mode switches) to the sender
+through `pass_updates`. `active` says whether the sender is commanding (executing, or braking to rest).
 """
 
 from __future__ import annotations
@@ -21,13 +23,15 @@ from teleprev.pipeline.planner import ModeUpdate
 class CommandRelay:
     def __init__(self, clock: SessionClock, actuators: dict[str, Actuator], sender,
                  names: tuple[tuple[str, ...], tuple[str, ...]], on_tick: Callable[[int, object], None],
-                 on_gone: Callable[[], None]):
-        """`actuators` maps "arm" and "hand" to ActuatorPorts (the dict is used as it is, not copied);
+                 on_gone: Callable[[], None], hosted: frozenset[str] = frozenset()):
+        """`actuators` maps "arm" and "hand" to ActuatorPorts, or to ActuatorHosts for the kinds in `hosted`
+        (the dict is used as it is, not copied);
         `sender` a CommandSender, started before `start` (None: the pipeline sends its commands itself);
         `names` the arm's and the end effector's joint names; `on_tick(received_ns, SentTick)` and
         `on_gone()` (the sender died) are called on the relay thread."""
         self.clock = clock
         self.actuators = actuators
+        self.hosted = hosted
         self.sender = sender
         self.arm_names, self.effector_names = names
         self._on_tick = on_tick
@@ -54,12 +58,19 @@ class CommandRelay:
 
     def send(self, kind: str, command: JointSample | None) -> None:
         """Through an ActuatorPort: never raises; a device that is down or refuses is counted, not retried."""
-        if command is None:
+        if command is None or kind in self.hosted:  # (the sender handed it to the actuator's process)
             return
         port = self.actuators.get(kind)
         if port is None:
             return
         if port.send(command):
+            self.sent[kind] += 1
+        else:
+            self.errors[kind] += 1
+
+    def wire(self, kind: str, sent: bool) -> None:
+        """A command an actuator's own process wrote (sent), or that its device did not take."""
+        if sent:
             self.sent[kind] += 1
         else:
             self.errors[kind] += 1

@@ -18,29 +18,34 @@ is permitted (root, CAP_SYS_NICE or an rtprio limit); `realtime` says whether it
 SCHED_FIFO does not help a thread that waits for the interpreter lock), a process without real-time
 priority up to 147 ms, this process with SCHED_FIFO at most 1.6 ms (p99 0.15 ms).
 
-Both directions are pipes of length-prefixed JSON messages of known types (teleprev/live/core/pipe_codec.py:
-nothing is unpickled). The session process reads the ticks back on a thread of its own (`outputs`), passes
-the commands to the actuators and records them. The sender dies with the session (PR_SET_PDEATHSIG), ignores
-the terminal's signals (the session stops it after braking), and a sender that dies is seen at once (its
-pipe closes): the session then halts.
+The commands leave on the wire from paced processes too: an actuator whose plugin allows it runs in a
+process of its own with the same priority (teleprev/live/core/actuator_host.py), and the sender hands it
+each tick's command the moment the tick is sampled (`outlets`: a pipe per such actuator; its process writes
+the command at once with the plugin's SDK call). The other actuators (the simulated ones, which share the
+simulated world with the session's other devices) are passed their commands by the session process.
+
+Every direction is a pipe of length-prefixed JSON messages of known types (teleprev/live/core/pipe_codec.py:
+nothing is unpickled). The session process reads the ticks back on a thread of its own (the CommandRelay's),
+passes the commands of the actuators that have no process of their own to them, and records every tick. The
+sender dies with the session (PR_SET_PDEATHSIG), ignores the terminal's signals (the session stops it after
+braking), and a sender that dies is seen at once (its pipe closes): the session then halts.
 """
 
 from __future__ import annotations
 
-import ctypes
-import gc
 import os
 import select
-import signal
 import threading
 import time
 from dataclasses import dataclass
 
 from teleprev.clock import SessionClock
+from teleprev.live.core.paced import (DEFAULT_PRIORITY, PacedStatus, become_paced, close_held, fork_paced,
+                                      paced_pipe, reap)
 from teleprev.live.core.pipe_codec import frame, types_by_name, unframe
+from teleprev.messages import JointSample
 from teleprev.pipeline.planner import CommandPlanner, ModeUpdate, TargetUpdate, Tick
 
-DEFAULT_PRIORITY = 50  # SCHED_FIFO priority: above ordinary processes, below the kernel's own threads (99)
 _STOP = "stop"
 
 
@@ -53,30 +58,42 @@ class SentTick:
 
 
 @dataclass(frozen=True)
-class SenderStatus:
-    """The sender's first report: whether it got real-time priority, and why not."""
+class WireCommand:
+    """One tick's command for an actuator in a process of its own (the sender to that process)."""
 
-    realtime: bool
-    detail: str
+    seq: int  # the tick's
+    command: JointSample  # stamped with the tick's instant
+
+
+@dataclass(frozen=True)
+class Outlet:
+    """Where the sender hands one actuator's commands: the write end of its process's command pipe."""
+
+    kind: str  # "arm" or "hand"
+    fd: int
+    names: tuple[str, ...]  # the actuator's joints, as the planner's commands name them
 
 
 _TO_SENDER = types_by_name(TargetUpdate, ModeUpdate)  # and _STOP, a string
-_FROM_SENDER = types_by_name(SentTick, Tick, SenderStatus)
+_FROM_SENDER = types_by_name(SentTick, Tick, PacedStatus)
 
 
 class CommandSender:
     """The session process's handle on the sender process (see the module docstring)."""
 
     def __init__(self, planner: CommandPlanner, clock: SessionClock, rate_hz: float,
-                 priority: int = DEFAULT_PRIORITY):
+                 priority: int = DEFAULT_PRIORITY, outlets: tuple[Outlet, ...] = ()):
+        """`outlets`: the actuators in processes of their own (actuator_host.py), handed their commands
+        by the sender itself."""
         if not 0 < rate_hz <= 1000:
             raise ValueError(f"command_rate_hz must be in (0, 1000], got {rate_hz}")
         self.planner = planner
         self.clock = clock
         self.period_ns = int(round(1e9 / rate_hz))
         self.priority = priority
+        self.outlets = outlets
         self.pid: int | None = None
-        self.status: SenderStatus | None = None
+        self.status: PacedStatus | None = None
         self._to_sender: int | None = None  # write end of the updates pipe
         self._from_sender: int | None = None  # read end of the ticks pipe
         self._buffer = b""
@@ -88,24 +105,20 @@ class CommandSender:
 
     # ---- the session process ---------------------------------------------------------------------
     def start(self) -> "CommandSender":
-        """Fork the sender. Call before the session starts its threads: a fork copies only the calling
-        thread, so no lock another thread holds can be copied held."""
-        updates_r, updates_w = os.pipe()
-        ticks_r, ticks_w = os.pipe()
-        for fd in (updates_w, ticks_w):
-            _enlarge(fd)
-        gc.freeze()  # the objects made so far stay out of the sender's collections: no copy-on-write storm
-        pid = os.fork()
+        """Fork the sender. Call before the session starts its threads (paced.fork_paced), after the
+        actuator processes whose outlets it writes to have been forked."""
+        updates_r, updates_w = paced_pipe()
+        ticks_r, ticks_w = paced_pipe()
+        pid = fork_paced(keep={updates_r, ticks_w, *(o.fd for o in self.outlets)})
         if pid == 0:  # the sender
             try:
-                os.close(updates_w)
-                os.close(ticks_r)
-                _Sender(self.planner, self.clock, self.period_ns, self.priority, updates_r, ticks_w).run()
+                _Sender(self.planner, self.clock, self.period_ns, self.priority, updates_r, ticks_w, self.outlets).run()
             finally:
                 os._exit(0)
-        gc.unfreeze()
-        os.close(updates_r)
-        os.close(ticks_w)
+        close_held(updates_r)
+        close_held(ticks_w)
+        for outlet in self.outlets:  # the sender's alone now: its actuator's process sees it close with the sender
+            close_held(outlet.fd)
         os.set_blocking(updates_w, False)
         self.pid, self._to_sender, self._from_sender = pid, updates_w, ticks_r
         return self
@@ -128,7 +141,7 @@ class CommandSender:
                 return False
         return True
 
-    def receive(self, timeout_s: float) -> list[SentTick | SenderStatus] | None:
+    def receive(self, timeout_s: float) -> list[SentTick | PacedStatus] | None:
         """What the sender reported within timeout_s (ticks, its status); None once it has gone (its pipe
         closed: it stopped, or died)."""
         if self._from_sender is None:
@@ -138,12 +151,12 @@ class CommandSender:
             return []
         chunk = os.read(self._from_sender, 1 << 16)
         if not chunk:
-            os.close(self._from_sender)
+            close_held(self._from_sender)
             self._from_sender = None
             return None
         out, self._buffer = unframe(self._buffer + chunk, _FROM_SENDER)
         for item in out:
-            if isinstance(item, SenderStatus):
+            if isinstance(item, PacedStatus):
                 self.status = item
         return out
 
@@ -154,61 +167,29 @@ class CommandSender:
         self.send(_STOP)
         with self._send_lock:
             if self._to_sender is not None:
-                os.close(self._to_sender)
+                close_held(self._to_sender)
                 self._to_sender = None
-        deadline = time.monotonic() + timeout_s
-        while time.monotonic() < deadline:
-            if os.waitpid(self.pid, os.WNOHANG)[0]:
-                break
-            time.sleep(0.01)
-        else:
-            os.kill(self.pid, signal.SIGKILL)
-            os.waitpid(self.pid, 0)
+        reap(self.pid, timeout_s)
         self.pid = None
-
-
-def _enlarge(fd: int) -> None:
-    """A pipe of 1 MiB where Linux allows (F_SETPIPE_SZ): seconds of ticks if the reader is held up."""
-    try:
-        import fcntl
-
-        fcntl.fcntl(fd, 1031, 1 << 20)  # F_SETPIPE_SZ
-    except (OSError, AttributeError):
-        pass
 
 
 class _Sender:
     """The sender process's loop."""
 
     def __init__(self, planner: CommandPlanner, clock: SessionClock, period_ns: int, priority: int, updates: int,
-                 ticks: int):
+                 ticks: int, outlets: tuple[Outlet, ...]):
         self.planner, self.clock, self.period_ns = planner, clock, period_ns
         self.priority = priority
         self.updates, self.ticks = updates, ticks
+        self.outlets = list(outlets)
         self.inbox = b""
         self.outbox = b""
 
-    def _setup(self) -> SenderStatus:
-        for sig in (signal.SIGINT, signal.SIGTERM, signal.SIGHUP, signal.SIGQUIT):
-            signal.signal(sig, signal.SIG_IGN)  # the session stops the sender, after braking
-        try:
-            ctypes.CDLL(None, use_errno=True).prctl(1, signal.SIGKILL)  # PR_SET_PDEATHSIG: die with the session
-        except (OSError, AttributeError):
-            pass
-        os.set_blocking(self.updates, False)
-        os.set_blocking(self.ticks, False)
-        try:
-            from threadpoolctl import threadpool_limits
-
-            threadpool_limits(1)  # vectors of 6 to 16: BLAS threads would only wake up other cores
-        except Exception:
-            pass
-        try:
-            os.sched_setscheduler(0, os.SCHED_FIFO, os.sched_param(self.priority))
-            return SenderStatus(True, f"SCHED_FIFO priority {self.priority}")
-        except (PermissionError, OSError, AttributeError) as exc:
-            return SenderStatus(False, f"no real-time priority ({exc}): run as root, or grant CAP_SYS_NICE or an "
-                                       "rtprio limit (limits.conf) to let the command sender use SCHED_FIFO")
+    def _setup(self) -> PacedStatus:
+        status = become_paced(self.priority)
+        for fd in (self.updates, self.ticks, *(o.fd for o in self.outlets)):
+            os.set_blocking(fd, False)
+        return status
 
     def run(self) -> None:
         self._write(self._setup())
@@ -224,6 +205,7 @@ class _Sender:
                 return
             tick = self.planner.tick(t)
             if tick is not None:
+                self._hand_out(tick)  # on the wire first: recording can wait
                 self._write(SentTick(tick, t - due))
             self._flush()
             due = t0 + ((t - t0) // period + 1) * period  # the next tick after now: no catch-up burst
@@ -245,6 +227,21 @@ class _Sender:
                 return False
             self.planner.adopt(update)
         return True
+
+    def _hand_out(self, tick: Tick) -> None:
+        """Each outlet's command of this tick, to its actuator's process. A command is a few hundred bytes
+        in a pipe of 1 MiB that its process empties at once: a full pipe is a process that hangs (its
+        commands are dropped; the device's runner reports it), a closed one a process that has ended."""
+        for outlet in list(self.outlets):
+            q, v = (tick.arm, tick.arm_v) if outlet.kind == "arm" else (tick.hand, tick.hand_v)
+            if q is None:
+                continue
+            try:
+                os.write(outlet.fd, frame(WireCommand(tick.seq, JointSample(tick.t_ns, outlet.names, q, v))))
+            except BlockingIOError:
+                pass
+            except BrokenPipeError:
+                self.outlets.remove(outlet)
 
     def _write(self, item) -> None:
         self.outbox += frame(item)

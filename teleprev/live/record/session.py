@@ -121,17 +121,30 @@ class LiveSession:
         from teleprev.live.core.sender import CommandSender
         from teleprev.pipeline.planner import CommandPlanner
 
+        from teleprev.live.core.actuator_host import ActuatorHost
+
         inbox = LoopInbox(options.queue_size)  # the device runners' sink, and the actuators' ports, before the loop
-        self.runners = {name: DeviceRunner(dev, inbox.sink, self.clock) for name, dev in self.devices.items()}
-        self.actuators = {kind: ActuatorPort(self.devices[first[kind]], self.runners[first[kind]]) for kind in ("arm", "hand")}
-        self.sender = CommandSender(CommandPlanner.for_pipeline(self.pipeline), self.clock, rig.pipeline.command_rate_hz)
+        # The actuators whose plugins allow it run in paced processes of their own, where their commands
+        # leave on the wire (live/core/actuator_host.py); every other device has a runner thread here.
+        names = {"arm": self.pipeline.arm_names, "hand": self.pipeline.effector_names}
+        self.hosts = {kind: ActuatorHost(kind, self.devices[first[kind]], inbox.sink, self.clock, names[kind])
+                      for kind in ("arm", "hand") if self.devices[first[kind]].own_process}
+        hosted = {host.name: host for host in self.hosts.values()}
+        self.runners = {name: hosted.get(name) or DeviceRunner(dev, inbox.sink, self.clock)
+                        for name, dev in self.devices.items()}
+        self.actuators = {kind: self.hosts.get(kind) or ActuatorPort(self.devices[first[kind]], self.runners[first[kind]])
+                          for kind in ("arm", "hand")}
+        self.sender = CommandSender(CommandPlanner.for_pipeline(self.pipeline), self.clock, rig.pipeline.command_rate_hz,
+                                    outlets=tuple(host.outlet for host in self.hosts.values()))
         frames = FramePublisher(self.robot, sensor_frames(rig, self.robot, rig_calibration(rig)))
         tf_period_ns = int(1e9 / rig.pipeline.tf_rate_hz) if rig.pipeline.tf_rate_hz > 0 else 0
         self.loop = SessionLoop(self.clock, self._log, self.driver, inbox=inbox, actuators=self.actuators,
-                                sender=self.sender, frames=RobotFrames(frames, tf_period_ns),
+                                hosted=frozenset(self.hosts), sender=self.sender, frames=RobotFrames(frames, tf_period_ns),
                                 on_episode_start=self._episode_started,
                                 judge=self._judge if self.physics is not None else None,
                                 input_loss_to_preview_s=rig.session.input_loss_to_preview_s)
+        for host in self.hosts.values():
+            host.on_wire = self.loop.wired
         if self.physics is not None:  # every scene the world runs, recorded (those begun so far first)
             for entry in self.physics.layouts:
                 self._world_layout(entry)
@@ -264,7 +277,9 @@ class LiveSession:
         return meta
 
     def start(self) -> "LiveSession":
-        self.sender.start()  # forked first, before this session starts any thread
+        for host in self.hosts.values():  # forked first, before this session starts any thread
+            host.fork()
+        self.sender.start()  # after the actuators' processes, whose command pipes it writes
         self.recorder.start()
         t = self.clock.now_ns()  # first in the file, so that Foxglove's URDF layer has the robot from the start
         self._log(Logged(topics.ROBOT_DESCRIPTION, t, RobotDescription(t, self.robot.urdf_path.read_text())))
