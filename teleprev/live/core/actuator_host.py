@@ -3,8 +3,8 @@
 A command written on a thread of the session process waits for the interpreter lock and the CPU like
 everything else there: with 8 busy processes on 2 cores, targets reached the emulated xArm controller up
 to 172 ms apart, 14 in one 8.33 ms period. So an actuator whose plugin allows it (`Actuator.own_process`)
-runs whole (connect, read, send) in a process forked from the session before its threads start, with the
-sender's real-time priority (teleprev/live/core/paced.py):
+runs whole (connect, read, send) in a process forked from the session before its threads start, with
+real-time priority one below the sender's (teleprev/live/core/paced.py):
 
     main thread     waits for the sender's commands (a pipe: sender.WireCommand) and writes each at once
                     through an ActuatorPort, the plugin's SDK call; says what went out and when (WireRecord)
@@ -32,7 +32,7 @@ from teleprev import topics
 from teleprev.clock import SessionClock
 from teleprev.devices.contract import Actuator
 from teleprev.devices.runner import ActuatorPort, DeviceRunner, RunnerStats, Sink
-from teleprev.live.core.paced import (DEFAULT_PRIORITY, PacedStatus, become_paced, close_held, fork_paced,
+from teleprev.live.core.paced import (ACTUATOR_PRIORITY, PacedStatus, become_paced, close_held, fork_paced,
                                       paced_pipe, reap)
 from teleprev.live.core.pipe_codec import frame, types_by_name, unframe
 from teleprev.live.core.sender import Outlet, WireCommand
@@ -71,7 +71,7 @@ class ActuatorHost:
     """The session's handle on one actuator's process (see the module docstring)."""
 
     def __init__(self, kind: str, device: Actuator, sink: Sink, clock: SessionClock, names: tuple[str, ...],
-                 priority: int = DEFAULT_PRIORITY):
+                 priority: int = ACTUATOR_PRIORITY):
         """`sink` is the session loop's (samples and events arrive as from a DeviceRunner); `names` the
         actuator's joints as the planner's commands name them. `on_wire(WireRecord)` is called for every
         command written (set it before `start`)."""

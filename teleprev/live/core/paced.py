@@ -18,6 +18,13 @@ import signal
 from dataclasses import dataclass
 
 DEFAULT_PRIORITY = 50  # SCHED_FIFO priority: above ordinary processes, below the kernel's own threads (99)
+# The actuators' processes, one below the sender: a hand's process busy reading its bus never holds up the
+# sender's tick, and a write waits at most for the rest of a tick (a fraction of a millisecond).
+ACTUATOR_PRIORITY = DEFAULT_PRIORITY - 1
+# How long a thread of a paced process that wants the interpreter lock waits before the running thread is
+# asked for it (Python's default is 5 ms): an actuator's process writes commands on its main thread while
+# its runner and SDK threads poll; at 5 ms, writes began up to 8.3 ms after their tick (bench/hardware.py).
+SWITCH_INTERVAL_S = 0.0002
 
 _held: set[int] = set()  # pipe ends the session holds for its paced children
 
@@ -75,8 +82,12 @@ def fork_paced(keep: set[int]) -> int:
 
 def become_paced(priority: int = DEFAULT_PRIORITY) -> PacedStatus:
     """In a paced child: ignore the terminal's signals (the session stops it, after braking), die with the
-    session (PR_SET_PDEATHSIG), one BLAS thread, and SCHED_FIFO `priority` where permitted (root,
-    CAP_SYS_NICE or an rtprio limit); threads started after this inherit the priority."""
+    session (PR_SET_PDEATHSIG), one BLAS thread, the interpreter lock handed over within SWITCH_INTERVAL_S,
+    and SCHED_FIFO `priority` where permitted (root, CAP_SYS_NICE or an rtprio limit); threads started after
+    this inherit the priority."""
+    import sys
+
+    sys.setswitchinterval(SWITCH_INTERVAL_S)
     for sig in (signal.SIGINT, signal.SIGTERM, signal.SIGHUP, signal.SIGQUIT):
         signal.signal(sig, signal.SIG_IGN)
     try:

@@ -39,6 +39,8 @@ import threading
 import time
 from dataclasses import dataclass
 
+import numpy as np
+
 from teleprev.clock import SessionClock
 from teleprev.live.core.paced import (DEFAULT_PRIORITY, PacedStatus, become_paced, close_held, fork_paced,
                                       paced_pipe, reap)
@@ -82,9 +84,11 @@ class CommandSender:
     """The session process's handle on the sender process (see the module docstring)."""
 
     def __init__(self, planner: CommandPlanner, clock: SessionClock, rate_hz: float,
-                 priority: int = DEFAULT_PRIORITY, outlets: tuple[Outlet, ...] = ()):
+                 priority: int = DEFAULT_PRIORITY, outlets: tuple[Outlet, ...] = (),
+                 warm_pose: tuple[np.ndarray, np.ndarray] | None = None):
         """`outlets`: the actuators in processes of their own (actuator_host.py), handed their commands
-        by the sender itself."""
+        by the sender itself; `warm_pose`: arm and end-effector joints inside their limits, where the sender
+        runs its planner through an engage before its first tick (see _warm)."""
         if not 0 < rate_hz <= 1000:
             raise ValueError(f"command_rate_hz must be in (0, 1000], got {rate_hz}")
         self.planner = planner
@@ -92,6 +96,7 @@ class CommandSender:
         self.period_ns = int(round(1e9 / rate_hz))
         self.priority = priority
         self.outlets = outlets
+        self.warm_pose = warm_pose
         self.pid: int | None = None
         self.status: PacedStatus | None = None
         self._to_sender: int | None = None  # write end of the updates pipe
@@ -112,6 +117,8 @@ class CommandSender:
         pid = fork_paced(keep={updates_r, ticks_w, *(o.fd for o in self.outlets)})
         if pid == 0:  # the sender
             try:
+                if self.warm_pose is not None:
+                    _warm(self.planner, *self.warm_pose)
                 _Sender(self.planner, self.clock, self.period_ns, self.priority, updates_r, ticks_w, self.outlets).run()
             finally:
                 os._exit(0)
@@ -171,6 +178,27 @@ class CommandSender:
                 self._to_sender = None
         reap(self.pid, timeout_s)
         self.pid = None
+
+
+def _warm(planner: CommandPlanner, arm: np.ndarray, hand: np.ndarray) -> None:
+    """Run the planner through an engage, a move and a stop from `arm`, `hand`, then give it back its state
+    untouched. Its compiled kernels load on their first call (milliseconds each): without this, the first
+    commands of the session's first engage left up to 9 ms after their tick."""
+    original = planner.state
+    planner.state = type(original)()
+    try:
+        t, period = 0, 8_333_333
+        planner.adopt(ModeUpdate(1, t, "execute", arm, hand))
+        planner.adopt(TargetUpdate(2, t, arm + 0.01, np.zeros_like(arm), t, hand + 0.01, np.zeros_like(hand)))
+        for k in range(6):
+            planner.tick(t + k * period)
+        planner.adopt(ModeUpdate(3, t + 6 * period, "preview", arm, hand))
+        for k in range(6, 12):
+            planner.tick(t + k * period)
+    except Exception:  # warming is an optimisation: the ticks then pay for what did not load
+        pass
+    finally:
+        planner.state = original
 
 
 class _Sender:

@@ -19,6 +19,8 @@ import time
 from dataclasses import dataclass
 from pathlib import Path
 
+import numpy as np
+
 from teleprev import __version__, numeric_platform
 from teleprev.errors import ConfigError
 from teleprev.assembly import build_pipeline, rig_calibration
@@ -135,7 +137,8 @@ class LiveSession:
         self.actuators = {kind: self.hosts.get(kind) or ActuatorPort(self.devices[first[kind]], self.runners[first[kind]])
                           for kind in ("arm", "hand")}
         self.sender = CommandSender(CommandPlanner.for_pipeline(self.pipeline), self.clock, rig.pipeline.command_rate_hz,
-                                    outlets=tuple(host.outlet for host in self.hosts.values()))
+                                    outlets=tuple(host.outlet for host in self.hosts.values()),
+                                    warm_pose=self._inside_limits(self.pipeline.arm_names, self.pipeline.effector_names))
         frames = FramePublisher(self.robot, sensor_frames(rig, self.robot, rig_calibration(rig)))
         tf_period_ns = int(1e9 / rig.pipeline.tf_rate_hz) if rig.pipeline.tf_rate_hz > 0 else 0
         self.loop = SessionLoop(self.clock, self._log, self.driver, inbox=inbox, actuators=self.actuators,
@@ -155,6 +158,12 @@ class LiveSession:
         # A device carrying the operator's controls (the XR page) acts on this recording and shows its status.
         self.context.operator.act = self.act
         self.context.operator.status = lambda: operator_status(self.loop.snapshot)
+
+    def _inside_limits(self, *joint_sets: tuple[str, ...]) -> tuple[np.ndarray, ...]:
+        """Per set of the robot's joints, zero clipped into their limits (the sender warms its planner there)."""
+        robot = self.robot
+        return tuple(np.clip(np.zeros(len(names)), robot.lower[robot.indices(names)], robot.upper[robot.indices(names)])
+                     for names in joint_sets)
 
     @property
     def preview_lead_s(self) -> float:
