@@ -7,29 +7,16 @@ matching the ticks' commands on /command/arm and /command/hand."""
 from __future__ import annotations
 
 import os
-import re
 
 from teleprev import topics
 from teleprev.emulators.dynamixel_bus import DynamixelBus
 from teleprev.emulators.xarm_controller import XArmController
 from teleprev.live.record.session import LiveSession, RecordOptions
-from teleprev.rig import default_rig_path
 from teleprev.session.reader import SessionReader
 from teleprev_devices.leap import LeapHand
 from teleprev_devices.xarm import XArm
+from tests.helpers.emulated_rig import sim_operator_rig
 from tests.helpers.wait import wait_until
-
-
-def emulated_rig(tmp_path, box: XArmController, bus: DynamixelBus):
-    """The default sim rig (the simulated operator) with the emulated arm and hand in place of the sim ones."""
-    text = default_rig_path().read_text()
-    text = re.sub(r"\[devices\.cam_front\].*?(?=\n\[)", "", text, flags=re.S)  # no camera: less load
-    text = re.sub(r"\[devices\.arm\].*?(?=\n\[)", box.rig_keys("arm"), text, flags=re.S)
-    text = re.sub(r"\[devices\.hand\].*?(?=\n\[|\n#)", bus.rig_keys("hand"), text, flags=re.S)
-    text = re.sub(r"\[frames\.cam_front\].*?(?=\n\[)", "", text, flags=re.S)
-    rig = tmp_path / "rig.toml"
-    rig.write_text(text)
-    return rig
 
 
 def note_writer(cls, log):
@@ -49,9 +36,10 @@ def test_commands_are_written_from_paced_processes_not_the_session(tmp_path, mon
     monkeypatch.setattr(XArm, "_write", note_writer(XArm, log))
     monkeypatch.setattr(LeapHand, "_write", note_writer(LeapHand, log))
     box, bus = XArmController(host=None).start(), DynamixelBus().start()
-    out = tmp_path / "s.mcap"
+    out, rig = tmp_path / "s.mcap", tmp_path / "rig.toml"
+    rig.write_text(sim_operator_rig(box.rig_keys("arm"), bus.rig_keys("hand"), camera=False))  # no camera: less load
     try:
-        with LiveSession(RecordOptions(out=out, rig=emulated_rig(tmp_path, box, bus), connect_timeout_s=20)) as rec:
+        with LiveSession(RecordOptions(out=out, rig=rig, connect_timeout_s=20)) as rec:
             assert rec.wait_connected() == []
             rec.loop.start_episode()
             wait_until(lambda: rec.loop.snapshot.step is not None, 20, what="a pipeline step")
