@@ -19,8 +19,6 @@ hand's goal writes, read misses and faults.
 from __future__ import annotations
 
 import json
-import multiprocessing as mp
-import os
 import tempfile
 import time
 from collections import Counter
@@ -28,53 +26,6 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
-
-
-# ---- the emulators, as hardware outside this machine ------------------------------------------------------
-def _box_summary(box) -> dict:
-    return {"arrivals": [(a.received_ns, int(a.cycle), bool(a.taken), np.asarray(a.target, float).tolist())
-                         for a in box.arrivals],
-            "judged": [(j.speed_ratio, j.accel_ratio, j.jerk_ratio) for j in box.judged],
-            "faults": [what for _, what, _ in box.faults], "unknown": dict(box.unknown)}
-
-
-def _bus_summary(bus) -> dict:
-    return {"goal_writes": bus.goal_writes, "corrupt_requests": bus.corrupt_requests}
-
-
-def _serve(make, name: str, summarize, conn) -> None:
-    import sys
-
-    sys.setswitchinterval(0.0002)  # the thread that receives a command stamps it at once, as hardware would
-    try:
-        # below the command path's (50, 49): on this machine the emulators share the CPUs that real
-        # hardware would not, and must not take them from the processes they measure
-        os.sched_setscheduler(0, os.SCHED_FIFO, os.sched_param(40))
-    except (PermissionError, OSError):
-        pass
-    emulator = make().start()
-    conn.send(emulator.rig_keys(name))
-    conn.recv()  # until the session is over
-    summary = summarize(emulator)
-    emulator.stop()
-    conn.send(summary)
-
-
-class Emulated:
-    """An emulator in a SCHED_FIFO process of its own: `keys` for the rig, `finish()` its summary."""
-
-    def __init__(self, make, name: str, summarize):
-        ours, theirs = mp.get_context("fork").Pipe()
-        self.conn = ours
-        self.proc = mp.get_context("fork").Process(target=_serve, args=(make, name, summarize, theirs), daemon=True)
-        self.proc.start()
-        self.keys: str = ours.recv()
-
-    def finish(self) -> dict:
-        self.conn.send("stop")
-        summary = self.conn.recv()
-        self.proc.join(10)
-        return summary
 
 
 # ---- one session ------------------------------------------------------------------------------------------
@@ -118,10 +69,10 @@ def run_session(folder: Path, k: int, seconds: float, engage_after: float, previ
 
     from teleprev.emulators.dynamixel_bus import DynamixelBus
     from teleprev.emulators.xarm_controller import XArmController
-    from tests.helpers.emulated_rig import sim_operator_rig
+    from tests.helpers.emulated_rig import EmulatorProcess, box_summary, bus_summary, sim_operator_rig
 
-    box = Emulated(lambda: XArmController(host=None), "arm", _box_summary)
-    bus = Emulated(lambda: DynamixelBus(), "hand", _bus_summary)
+    box = EmulatorProcess(lambda: XArmController(host=None), "arm", box_summary)
+    bus = EmulatorProcess(lambda: DynamixelBus(), "hand", bus_summary)
     rig, out = folder / f"wire_{k:02d}.toml", folder / f"wire_{k:02d}.mcap"
     rig.write_text(sim_operator_rig(box.keys, bus.keys))
     offset_ns = time.time_ns() - time.monotonic_ns()  # the session clock from monotonic (SessionClock)

@@ -1,12 +1,23 @@
 """The default sim rig with the emulated xArm controller and LEAP Hand bus in place of the sim arm and hand:
 the simulated operator drives the real plugins and SDKs (tests/live/test_wire_process.py, bench/hardware.py).
+The emulators stand for hardware outside this machine: each runs in a real-time process of its own, below
+the command path's priority, so that the machine's load delays the commands, not the emulator's replies
+and the stamping of their arrival.
 
-    rig.write_text(sim_operator_rig(box.rig_keys("arm"), bus.rig_keys("hand"), camera=False))
+    box = EmulatorProcess(lambda: XArmController(host=None), "arm", box_summary)
+    bus = EmulatorProcess(DynamixelBus, "hand", bus_summary)
+    rig.write_text(sim_operator_rig(box.keys, bus.keys, camera=False))
+    ...                                       # record
+    arm, hand = box.finish(), bus.finish()    # what the emulators saw
 """
 
 from __future__ import annotations
 
+import multiprocessing as mp
+import os
 import re
+
+import numpy as np
 
 from teleprev.rig import default_rig_path
 
@@ -22,3 +33,53 @@ def sim_operator_rig(arm_keys: str, hand_keys: str, camera: bool = True) -> str:
     if not camera:
         text = _section(_section(text, "devices.cam_front", ""), "frames.cam_front", "")
     return text
+
+
+def box_summary(box) -> dict:
+    """The servo targets as the controller received and judged them, its faults, the registers it lacks."""
+    return {"arrivals": [(a.received_ns, int(a.cycle), bool(a.taken), np.asarray(a.target, float).tolist())
+                         for a in box.arrivals],
+            "judged": [(j.speed_ratio, j.accel_ratio, j.jerk_ratio) for j in box.judged],
+            "faults": [what for _, what, _ in box.faults], "unknown": dict(box.unknown), "commands": len(box.commands)}
+
+
+def bus_summary(bus) -> dict:
+    return {"goal_writes": bus.goal_writes, "corrupt_requests": bus.corrupt_requests}
+
+
+def _serve(make, name: str, summarize, conn) -> None:
+    import sys
+
+    sys.setswitchinterval(0.0002)  # the thread that receives a command stamps it at once, as hardware would
+    try:
+        # below the command path's (50, 49): here the emulators share the CPUs that real hardware would
+        # not, and must not take them from the processes they measure
+        os.sched_setscheduler(0, os.SCHED_FIFO, os.sched_param(40))
+    except (PermissionError, OSError):
+        pass
+    emulator = make().start()
+    conn.send(emulator.rig_keys(name))
+    conn.recv()  # until the session is over
+    summary = summarize(emulator)
+    emulator.stop()
+    conn.send(summary)
+
+
+class EmulatorProcess:
+    """An emulator in a SCHED_FIFO process of its own: `keys` for the rig, `finish()` its summary."""
+
+    def __init__(self, make, name: str, summarize):
+        ours, theirs = mp.get_context("fork").Pipe()
+        self.conn = ours
+        self.proc = mp.get_context("fork").Process(target=_serve, args=(make, name, summarize, theirs), daemon=True)
+        self.proc.start()
+        self.keys: str = ours.recv()
+
+    def finish(self, timeout_s: float = 30.0) -> dict:
+        self.conn.send("stop")
+        if not self.conn.poll(timeout_s):
+            self.proc.kill()
+            raise RuntimeError(f"the emulator's process did not answer in {timeout_s:g} s")
+        summary = self.conn.recv()
+        self.proc.join(10)
+        return summary

@@ -2,11 +2,15 @@
 session process: a recording with the emulated xArm controller and Dynamixel bus (the real SDKs), driven by
 the simulated operator, engages, and every SDK write of a command is made in a SCHED_FIFO process other
 than the session's, one per actuator. What went out is recorded: each written command on /command/wire,
-matching the ticks' commands on /command/arm and /command/hand."""
+matching the ticks' commands on /command/arm and /command/hand, and each arrived at the controller. An
+actuator's process that dies is the device's fault: the session goes back to preview and refuses a
+script's engage."""
 
 from __future__ import annotations
 
 import os
+import signal
+import time
 
 from teleprev import topics
 from teleprev.emulators.dynamixel_bus import DynamixelBus
@@ -15,7 +19,7 @@ from teleprev.live.record.session import LiveSession, RecordOptions
 from teleprev.session.reader import SessionReader
 from teleprev_devices.leap import LeapHand
 from teleprev_devices.xarm import XArm
-from tests.helpers.emulated_rig import sim_operator_rig
+from tests.helpers.emulated_rig import EmulatorProcess, box_summary, bus_summary, sim_operator_rig
 from tests.helpers.wait import wait_until
 
 
@@ -31,40 +35,78 @@ def note_writer(cls, log):
     return noted
 
 
+def emulated(tmp_path):
+    """The emulated arm and hand (in processes of their own: hardware outside this machine) and their rig."""
+    box = EmulatorProcess(lambda: XArmController(host=None), "arm", box_summary)
+    bus = EmulatorProcess(DynamixelBus, "hand", bus_summary)
+    rig = tmp_path / "rig.toml"
+    rig.write_text(sim_operator_rig(box.keys, bus.keys, camera=False))  # no camera: less load
+    return box, bus, rig
+
+
 def test_commands_are_written_from_paced_processes_not_the_session(tmp_path, monkeypatch):
     log = tmp_path / "writes.txt"
     monkeypatch.setattr(XArm, "_write", note_writer(XArm, log))
     monkeypatch.setattr(LeapHand, "_write", note_writer(LeapHand, log))
-    box, bus = XArmController(host=None).start(), DynamixelBus().start()
-    out, rig = tmp_path / "s.mcap", tmp_path / "rig.toml"
-    rig.write_text(sim_operator_rig(box.rig_keys("arm"), bus.rig_keys("hand"), camera=False))  # no camera: less load
+    box, bus, rig = emulated(tmp_path)
+    out = tmp_path / "s.mcap"
     try:
         with LiveSession(RecordOptions(out=out, rig=rig, connect_timeout_s=20)) as rec:
             assert rec.wait_connected() == []
             rec.loop.start_episode()
             wait_until(lambda: rec.loop.snapshot.step is not None, 20, what="a pipeline step")
             rec.loop.engage()
-            wait_until(lambda: len(box.commands) > 120 and bus.goal_writes > 120, 30, what="commands at the emulators")
+            sent = rec.loop.stats.commands_sent
+            wait_until(lambda: sent["arm"] > 120 and sent["hand"] > 120, 30, what="commands written")
             rec.loop.to_preview()
             assert rec.settle(5.0)
-            arm_pid, hand_pid = rec.hosts["arm"].pid, rec.hosts["hand"].pid
+            pids = {kind: host.pid for kind, host in rec.hosts.items()}
     finally:
-        box.stop()
-        bus.stop()
+        arm, hand = box.finish(), bus.finish()
 
     writes = [line.split() for line in log.read_text().splitlines()]
     by_plugin = {name: {(int(pid), int(policy)) for n, pid, policy in writes if n == name} for name in ("XArm", "LeapHand")}
-    assert by_plugin["XArm"] == {(arm_pid, os.SCHED_FIFO)}, by_plugin
-    assert by_plugin["LeapHand"] == {(hand_pid, os.SCHED_FIFO)}, by_plugin
-    assert os.getpid() not in (arm_pid, hand_pid) and arm_pid != hand_pid
+    assert all(pid != os.getpid() for p in by_plugin.values() for pid, _ in p), f"written by the session: {by_plugin}"
+    assert by_plugin["XArm"] == {(pids["arm"], os.SCHED_FIFO)}, by_plugin
+    assert by_plugin["LeapHand"] == {(pids["hand"], os.SCHED_FIFO)}, by_plugin
+    assert pids["arm"] != pids["hand"]
 
     reader = SessionReader(out)
+    assert reader.metadata["actuator_processes"] == {"arm": "SCHED_FIFO priority 49", "hand": "SCHED_FIFO priority 49"}
     wired = [m.payload for m in reader.messages([topics.COMMAND_WIRE])]
     for kind, topic in (("arm", topics.COMMAND_ARM), ("hand", topics.COMMAND_HAND)):
         commanded = [m.payload.stamp_ns for m in reader.messages([topic])]
         written = [w.data["t_ns"] for w in wired if w.data["kind"] == kind]
         assert len(commanded) > 120 and written == commanded, (kind, len(commanded), len(written))
         assert all(w.data["sent"] for w in wired if w.data["kind"] == kind)
-        # the write began when the tick was sampled, give or take the hop between two paced processes
-        assert max(w.stamp_ns - w.data["t_ns"] for w in wired if w.data["kind"] == kind) < 50_000_000
-    assert len(box.commands) == sum(1 for w in wired if w.data["kind"] == "arm")
+    # the arm's write began when the tick was sampled, give or take the hop between two paced processes (the
+    # hand's waits for a read in progress on its bus: tens of ms when a reply is missed)
+    assert max(w.stamp_ns - w.data["t_ns"] for w in wired if w.data["kind"] == "arm") < 50_000_000
+    assert arm["commands"] == sum(1 for w in wired if w.data["kind"] == "arm") and arm["faults"] == []
+    assert hand["goal_writes"] >= sum(1 for w in wired if w.data["kind"] == "hand")
+
+
+def test_an_actuator_process_that_dies_is_a_device_fault_and_execute_stays_refused(tmp_path):
+    box, bus, rig = emulated(tmp_path)
+    out = tmp_path / "s.mcap"
+    try:
+        with LiveSession(RecordOptions(out=out, rig=rig, connect_timeout_s=20)) as rec:
+            assert rec.wait_connected() == []
+            wait_until(lambda: rec.loop.snapshot.step is not None, 20, what="a pipeline step")
+            rec.loop.engage()
+            wait_until(lambda: rec.loop.stats.commands_sent["arm"] > 30, 30, what="commands at the arm")
+            killed_ns = time.monotonic_ns()
+            os.kill(rec.hosts["arm"].pid, signal.SIGKILL)
+            wait_until(lambda: rec.loop.snapshot.fault, 10, what="the fault shown to the operator")
+            assert rec.settle(5.0)
+            rec.loop.engage(unattended=True)  # a script's engage after a fault is refused
+            wait_until(lambda: "cannot switch to execute" in rec.loop.snapshot.message, 5, what="the refusal")
+            assert rec.driver.mode == "preview" and rec.runners["arm"].stats().state == "error"
+    finally:
+        arm, _ = box.finish(), bus.finish()
+    assert max(a[0] for a in arm["arrivals"]) < killed_ns  # nothing reached the arm after its process died
+    reader = SessionReader(out)
+    errors = [m.payload.data for m in reader.messages([topics.DEVICE_EVENT]) if m.payload.data["event"] == "error"]
+    assert [e["device"] for e in errors] == ["arm"] and "the actuator's process ended" in errors[0]["message"], errors
+    modes = [m.payload.data for m in reader.messages([topics.MODE])]
+    assert {"mode": "preview", "reason": "device arm failed", "halt": True} in modes, modes

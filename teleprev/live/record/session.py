@@ -322,6 +322,9 @@ class LiveSession:
             extra["world_run"] = {"steps": str(stats.steps), "late_max_ms": f"{stats.late_max_ms:.3f}",
                                   "late_batches": str(stats.late_batches),
                                   "realtime": "true" if stats.realtime else "false"}
+        if self.hosts:  # where the real actuators' commands were written: their own paced processes
+            extra["actuator_processes"] = {kind: host.status.detail if host.status else "did not start"
+                                           for kind, host in self.hosts.items()}
         try:
             self.summary = self.recorder.close(extra)
         finally:
