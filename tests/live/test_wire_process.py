@@ -65,7 +65,8 @@ def test_commands_are_written_from_paced_processes_not_the_session(tmp_path, mon
         arm, hand = box.finish(), bus.finish()
 
     writes = [line.split() for line in log.read_text().splitlines()]
-    by_plugin = {name: {(int(pid), int(policy)) for n, pid, policy in writes if n == name} for name in ("XArm", "LeapHand")}
+    by_plugin = {name: {(int(pid), int(policy)) for n, pid, policy in writes if n == name}
+                 for name in ("XArm", "LeapHand")}
     assert all(pid != os.getpid() for p in by_plugin.values() for pid, _ in p), f"written by the session: {by_plugin}"
     assert by_plugin["XArm"] == {(pids["arm"], os.SCHED_FIFO)}, by_plugin
     assert by_plugin["LeapHand"] == {(pids["hand"], os.SCHED_FIFO)}, by_plugin

@@ -113,7 +113,7 @@ class ActuatorHost:
             close_held(fd)
         self.pid = pid
 
-    def start(self) -> "ActuatorHost":
+    def start(self) -> ActuatorHost:
         """Start handing on what the process reports (a thread: after every fork)."""
         self._thread = threading.Thread(target=self._read, name=f"device-{self.name}-host", daemon=True)
         self._thread.start()
@@ -163,8 +163,8 @@ class ActuatorHost:
             now = self.clock.now_ns()
             self._stats = dataclasses.replace(self._stats, state="error", errors=self._stats.errors + 1, rate_hz=0.0,
                                               last_error=message)
-            self.sink(Sample(topics.DEVICE_EVENT, Event(now, "teleprev.DeviceEvent",
-                                                        {"device": self.name, "event": "error", "message": message})), now)
+            event = Event(now, "teleprev.DeviceEvent", {"device": self.name, "event": "error", "message": message})
+            self.sink(Sample(topics.DEVICE_EVENT, event), now)
 
 
 class _Host:

@@ -19,7 +19,7 @@ SCHED_FIFO does not help a thread that waits for the interpreter lock), a proces
 priority up to 147 ms, this process with SCHED_FIFO at most 1.6 ms (p99 0.15 ms).
 
 The commands leave on the wire from paced processes too: an actuator whose plugin allows it runs in a
-process of its own with the same priority (teleprev/live/core/actuator_host.py), and the sender hands it
+process of its own, one priority step below this one (teleprev/live/core/actuator_host.py), and the sender hands it
 each tick's command the moment the tick is sampled (`outlets`: a pipe per such actuator; its process writes
 the command at once with the plugin's SDK call). The other actuators (the simulated ones, which share the
 simulated world with the session's other devices) are passed their commands by the session process.

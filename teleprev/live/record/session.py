@@ -120,10 +120,9 @@ class LiveSession:
             if self.view is not None:
                 self.view.close()
             raise
+        from teleprev.live.core.actuator_host import ActuatorHost
         from teleprev.live.core.sender import CommandSender
         from teleprev.pipeline.planner import CommandPlanner
-
-        from teleprev.live.core.actuator_host import ActuatorHost
 
         inbox = LoopInbox(options.queue_size)  # the device runners' sink, and the actuators' ports, before the loop
         # The actuators whose plugins allow it run in paced processes of their own, where their commands
@@ -136,14 +135,14 @@ class LiveSession:
                         for name, dev in self.devices.items()}
         self.actuators = {kind: self.hosts.get(kind) or ActuatorPort(self.devices[first[kind]], self.runners[first[kind]])
                           for kind in ("arm", "hand")}
-        self.sender = CommandSender(CommandPlanner.for_pipeline(self.pipeline), self.clock, rig.pipeline.command_rate_hz,
-                                    outlets=tuple(host.outlet for host in self.hosts.values()),
-                                    warm_pose=self._inside_limits(self.pipeline.arm_names, self.pipeline.effector_names))
+        self.sender = CommandSender(CommandPlanner.for_pipeline(self.pipeline), self.clock,
+                                    rig.pipeline.command_rate_hz, outlets=tuple(h.outlet for h in self.hosts.values()),
+                                    warm_pose=self._inside_limits(names["arm"], names["hand"]))
         frames = FramePublisher(self.robot, sensor_frames(rig, self.robot, rig_calibration(rig)))
         tf_period_ns = int(1e9 / rig.pipeline.tf_rate_hz) if rig.pipeline.tf_rate_hz > 0 else 0
         self.loop = SessionLoop(self.clock, self._log, self.driver, inbox=inbox, actuators=self.actuators,
-                                hosted=frozenset(self.hosts), sender=self.sender, frames=RobotFrames(frames, tf_period_ns),
-                                on_episode_start=self._episode_started,
+                                hosted=frozenset(self.hosts), sender=self.sender,
+                                frames=RobotFrames(frames, tf_period_ns), on_episode_start=self._episode_started,
                                 judge=self._judge if self.physics is not None else None,
                                 input_loss_to_preview_s=rig.session.input_loss_to_preview_s)
         for host in self.hosts.values():
