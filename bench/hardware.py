@@ -2,8 +2,24 @@
 dynamixel-sdk, each in an engaged session against its emulator (teleprev/emulators), opencv.camera on an
 HTTP MJPEG stream, then the injected faults at random times.
 
-    python bench/hardware.py --json          # about 2 min: 30 s sessions, then 30 faults
-    python bench/hardware.py --quick         # 5 s sessions, 12 faults
+    python bench/hardware.py --json          # about 10 min: 10 recorded sessions under load, 30 s sessions, 30 faults
+    python bench/hardware.py --quick         # 1 recorded session, 5 s sessions, 12 faults
+
+Recorded sessions under load (issue 36; tests/helpers/wire_sessions.py): `teleprev record` with the simulated
+operator, the sim camera and the emulated arm and hand, its preview in a pseudo-terminal, beside --busy (8)
+processes made here, the emulators in real-time processes of their own (hardware outside this machine). The
+commands as the emulated controller received them give emulator_faults and the wire_ figures: each recorded
+arm command is matched in order and by value with its arrival; wire_arrival_gap_ms_max between two targets of
+one engaged run, wire_arrival_late_ms_p99 / _max against the tick's planned instant (its stamp less how late
+the sender woke), wire_targets_per_cycle_max, wire_speed/accel/jerk_ratio_max (the controller's judgement on
+arrival times); wire_write_after_tick_ms_p99 / leap_write_after_tick_ms_p99 (a tick's sampling to the start of
+the arm's / hand's write, /command/wire); loaded_xarm_session_ok / loaded_leap_session_ok (no device error or
+refused command, every arm command arrived, the hand's goal writes at least its commands),
+loaded_xarm_command_rate_hz, loaded_sdk_roundtrip_ms_p99 (a write to the first state showing it),
+loaded_leap_command_rate_hz, loaded_leap_read_miss_frac, loaded_leap_faults. xarm_sdk_session_ok and
+leap_sdk_session_ok hold only if they hold in the recorded sessions too.
+
+The sessions below are driven from this process's threads:
 
 Figures: xarm_sdk_session_ok / leap_sdk_session_ok (no error, no refused or failed command, the emulator saw
 every command and faulted on none), camera_stream_ok (frames at the stream's rate on the session clock,
@@ -13,12 +29,8 @@ emulator received per second; the xArm stream is paced at 125 Hz, the hand's at 
 hw_faults_silent (faults with no error event naming them within 3 s), hw_tracebacks (exceptions that
 escaped a thread, or reached the user as a Python exception instead of a sentence).
 
-From the emulators during the sessions (the bench's own command streams on threads, not a recorded session):
-emulator_faults (errors the emulated controller latched), wire_arrival_gap_ms_max, wire_targets_per_cycle_max
-and wire_speed/accel/jerk_ratio_max (the arm's targets as the controller received and judged them),
-wire_arrival_late_ms_p99 / _max (each target's arrival at the controller against the instant its sender
-planned to send it: teleprev/emulators/wire_schedule.py; the bench's streams keep their schedule as
-CommandStream.planned, a paced sender would give its ticks' due times).
+The threaded sessions' own wire timing (teleprev/emulators/wire_schedule.py against CommandStream.planned)
+is printed on stderr beside the recorded sessions' figures.
 
 The hand runs two sessions one after the other, the arm commanded beside each: first with the emulated adapter's
 latency timer left at its 16 ms default (set_latency_timer = false: a lab that may not set it), then set to
@@ -49,6 +61,15 @@ JSON keys:
     wire_speed_ratio_max        float
     wire_accel_ratio_max        float
     wire_jerk_ratio_max         float
+    wire_sessions               int
+    wire_arrival_late_ms_p99    float
+    wire_write_after_tick_ms_p99  float
+    leap_write_after_tick_ms_p99  float
+    loaded_xarm_session_ok      bool
+    loaded_leap_session_ok      bool
+    loaded_xarm_command_rate_hz  float
+    loaded_sdk_roundtrip_ms_p99  float
+    loaded_leap_faults          int
     leap_read_miss_frac         float
     leap_faults                 int
     emulator_conformance        int
@@ -80,6 +101,7 @@ from teleprev.emulators.xarm_servo import Arrival  # noqa: E402
 from teleprev_devices.leap import LeapHand, LeapSettings  # noqa: E402
 from teleprev_devices.opencv_camera import OpenCVCamera, OpenCVSettings  # noqa: E402
 from teleprev_devices.xarm import XArm, XArmSettings  # noqa: E402
+from tests.helpers import wire_sessions  # noqa: E402
 from tests.helpers.hardware import CommandStream, EventLog  # noqa: E402
 
 LEAKED = re.compile(r"failed: [A-Za-z_.]*(Error|Exception|error)\b[:(]")  # a Python exception, not a sentence
@@ -231,8 +253,14 @@ def conformance() -> int:
 
 
 def main() -> None:
-    args = parser(__doc__.split("\n\n")[0]).parse_args()
+    p = parser(__doc__.split("\n\n")[0])
+    p.add_argument("--busy", type=int, default=8, help="busy processes beside the recorded sessions")
+    p.add_argument("--sessions", type=int, default=None, help="recorded sessions (default 10; --quick 1)")
+    args = p.parse_args()
     seconds = 5.0 if args.quick else 30.0
+    recorded = wire_sessions.run_sessions(args.sessions or (1 if args.quick else 10), 6.0 if args.quick else 15.0,
+                                          2.0 if args.quick else 3.0, args.busy)
+    loaded = wire_sessions.figures(recorded)
     escaped = []
     threading.excepthook = lambda a: escaped.append(a)
     clock = SessionClock()
@@ -318,8 +346,8 @@ def main() -> None:
     messages = [e["message"] for log in (arm_log, hand_log, cam_log) for e in log.of("error")]
     leaked = [m for m in messages if LEAKED.search(m)]
     figures = {
-        "xarm_sdk_session_ok": bool(xarm_ok),
-        "leap_sdk_session_ok": all(run.ok for run in hands.values()),
+        "xarm_sdk_session_ok": bool(xarm_ok) and loaded["loaded_xarm_session_ok"],
+        "leap_sdk_session_ok": all(run.ok for run in hands.values()) and loaded["loaded_leap_session_ok"],
         "camera_stream_ok": bool(camera_ok),
         "xarm_command_rate_hz": round(xarm_rate, 1),
         "leap_command_rate_hz": hands[1].command_rate_hz,
@@ -330,8 +358,8 @@ def main() -> None:
         "sdk_roundtrip_ms_median": round(percentile(trips, 50), 2) if trips else float("nan"),
         "session_s": round(session_s, 1),
         "camera_frames_per_s": round(frames_2s / 2.0, 1),
-        "emulator_faults": emulator_faults,
-        **wire_figures,
+        # the commands of recorded sessions under load, as the controller received them
+        **loaded,
         "leap_read_miss_frac": max(run.miss_frac for run in hands.values()),
         "leap_faults": max(run.faults for run in hands.values()),
         "leap_read_miss_frac_16ms": hands[16].miss_frac,
@@ -344,6 +372,11 @@ def main() -> None:
     for name, log in (("xarm", arm_log), ("leap at 16 ms", hands[16].log), ("leap at 1 ms", hand_log)):
         for e in log.of("error")[:1]:
             print(f"{name} session: {e['message']}", file=sys.stderr)  # why a session was not ok
+    print(f"threaded sessions' wire timing: {wire_figures}, emulator faults {emulator_faults}", file=sys.stderr)
+    for k, s in enumerate(recorded):  # why a recorded session was not ok
+        for what, errors in (("xarm", s.arm_errors + s.box_faults), ("leap", s.hand_errors)):
+            if errors:
+                print(f"recorded session {k} {what}: {errors[0]}", file=sys.stderr)
     for kind, named, message in outcomes:
         if not named:
             print(f"silent or unnamed: {kind}: {message!r}", file=sys.stderr)

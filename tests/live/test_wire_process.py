@@ -79,12 +79,14 @@ def test_commands_are_written_from_paced_processes_not_the_session(tmp_path, mon
         commanded = [m.payload.stamp_ns for m in reader.messages([topic])]
         written = [w.data["t_ns"] for w in wired if w.data["kind"] == kind]
         assert len(commanded) > 120 and written == commanded, (kind, len(commanded), len(written))
-        assert all(w.data["sent"] for w in wired if w.data["kind"] == kind)
+        # each written, or (a hand's write that waited for its bus) superseded by a later one, never in a burst
+        assert all(w.data["sent"] or w.data["error"].startswith("superseded") for w in wired if w.data["kind"] == kind)
+    assert all(w.data["sent"] for w in wired if w.data["kind"] == "arm")
     # the arm's write began when the tick was sampled, give or take the hop between two paced processes (the
     # hand's waits for a read in progress on its bus: tens of ms when a reply is missed)
     assert max(w.stamp_ns - w.data["t_ns"] for w in wired if w.data["kind"] == "arm") < 50_000_000
     assert arm["commands"] == sum(1 for w in wired if w.data["kind"] == "arm") and arm["faults"] == []
-    assert hand["goal_writes"] >= sum(1 for w in wired if w.data["kind"] == "hand")
+    assert hand["goal_writes"] >= sum(1 for w in wired if w.data["kind"] == "hand" and w.data["sent"])
 
 
 def test_an_actuator_process_that_dies_is_a_device_fault_and_execute_stays_refused(tmp_path):

@@ -197,7 +197,12 @@ class _Host:
                     os.close(self.commands)
                     self.commands = None
                 commands, inbox = unframe(inbox + chunk, _TO_HOST)
-                for c in commands:
+                # The latest command wins (Actuator.send): commands that queued up while a write waited (a
+                # hand's write waits for a read in progress on its bus) are not written after it in a burst.
+                for c in commands[:-1]:
+                    self._report(WireRecord(h.kind, c.seq, c.command.stamp_ns, clock.now_ns(), 0, False,
+                                            "superseded: a later command was due before this one could be written"))
+                for c in commands[-1:]:
                     down = port.dropped_down
                     wire = clock.now_ns()
                     sent = port.send(c.command)

@@ -1,4 +1,5 @@
-"""Recorded sessions against the emulated arm and hand, measured at the emulators' receiving end (bench/hardware.py).
+"""Recorded sessions against the emulated arm and hand, measured at the emulators' receiving end
+(bench/hardware.py's figures under load).
 
 Each session is `teleprev record` with the simulated operator, the sim camera, the emulated xArm controller
 and the emulated LEAP Hand bus (the real SDKs), its preview rendering into a pseudo-terminal, unattended:
@@ -69,8 +70,7 @@ class WireSession:
 
 
 def run_session(folder: Path, k: int, seconds: float, engage_after: float, preview=(80, 24)) -> WireSession:
-    from realtime import record
-
+    from bench.realtime import record
     from teleprev.emulators.dynamixel_bus import DynamixelBus
     from teleprev.emulators.xarm_controller import XArmController
     from tests.helpers.emulated_rig import EmulatorProcess, box_summary, bus_summary, sim_operator_rig
@@ -101,7 +101,6 @@ def measure(path: Path, code: int, arm: dict, hand: dict, offset_ns: int) -> Wir
         states = [(m.log_time_ns, m.payload.positions) for m in reader.messages(["/arm/arm/state"])]
         ticks = [(m.payload.stamp_ns, m.payload.data) for m in reader.messages([topics.COMMAND_TICK])]
         commands = [m.payload for m in reader.messages([topics.COMMAND_ARM])]
-        s.hand_commands = sum(1 for _ in reader.messages([topics.COMMAND_HAND]))
         engages = [m.log_time_ns for m in reader.messages([topics.MODE]) if m.payload.data.get("mode") == "execute"]
         wired = [m.payload for m in reader.messages([topics.COMMAND_WIRE])]
         errors = {"arm": s.arm_errors, "hand": s.hand_errors}
@@ -115,6 +114,7 @@ def measure(path: Path, code: int, arm: dict, hand: dict, offset_ns: int) -> Wir
     s.hand_refused = counts.get("hand", {}).get("refused_commands", 0)
     s.read_misses = counts.get("hand", {}).get("read_misses", 0)
     s.hand_reads = counts.get("hand", {}).get("received", 0) + s.read_misses
+    s.hand_commands = sum(1 for w in wired if w.data["kind"] == "hand" and w.data["sent"])
     for w in wired:  # (/command/wire: stamped when the write began)
         s.write_ms.setdefault(w.data["kind"], []).append((w.stamp_ns - w.data["t_ns"]) / 1e6)
     s.arm_commands = len(commands)
@@ -162,7 +162,7 @@ def roundtrips_ms(sends, seen, atol: float) -> list[float]:
 
 
 def run_sessions(count: int, seconds: float, engage_after: float, busy: int) -> list[WireSession]:
-    import common
+    from bench import common
 
     folder = Path(tempfile.mkdtemp(prefix="wire-"))
     sessions = []
@@ -186,15 +186,17 @@ def figures(sessions: list[WireSession]) -> dict:
     engaged = sum(s.engaged_s for s in sessions)
     writes = {kind: [w for s in sessions for w in s.write_ms.get(kind, [])] for kind in ("arm", "hand")}
 
+    def rate(count: int) -> float:  # per engaged second
+        return round(count / engaged, 1) if engaged else float("nan")
+
     def p(values, q):
         return round(float(np.percentile(values, q)), 2) if values else float("nan")
 
     trips = [r for s in sessions for r in s.roundtrip_ms]
     return {
         "wire_sessions": len(sessions),
-        "xarm_command_rate_hz": round(sum(s.arm_commands for s in sessions) / engaged, 1) if engaged else float("nan"),
-        "sdk_roundtrip_ms_p99": p(trips, 99),
-        "sdk_roundtrip_ms_median": p(trips, 50),
+        "loaded_xarm_command_rate_hz": rate(sum(s.arm_commands for s in sessions)),
+        "loaded_sdk_roundtrip_ms_p99": p(trips, 99),
         "wire_arrival_gap_ms_max": round(max(gaps), 2) if gaps else float("nan"),
         "wire_arrival_gap_ms_p99": p(gaps, 99),
         "wire_arrival_late_ms_p99": p(late, 99),
@@ -206,9 +208,9 @@ def figures(sessions: list[WireSession]) -> dict:
         "wire_write_after_tick_ms_p99": p(writes["arm"], 99),
         "leap_write_after_tick_ms_p99": p(writes["hand"], 99),
         "emulator_faults": sum(len(s.box_faults) for s in sessions),
-        "xarm_sdk_session_ok": all(s.xarm_ok for s in sessions),
-        "leap_sdk_session_ok": all(s.leap_ok for s in sessions),
-        "leap_command_rate_hz": round(sum(s.goal_writes for s in sessions) / engaged, 1) if engaged else float("nan"),
-        "leap_read_miss_frac": round(sum(s.read_misses for s in sessions) / reads, 4) if reads else float("nan"),
-        "leap_faults": sum(len(s.hand_errors) for s in sessions),
+        "loaded_xarm_session_ok": all(s.xarm_ok for s in sessions),
+        "loaded_leap_session_ok": all(s.leap_ok for s in sessions),
+        "loaded_leap_command_rate_hz": rate(sum(s.goal_writes for s in sessions)),
+        "loaded_leap_read_miss_frac": round(sum(s.read_misses for s in sessions) / reads, 4) if reads else float("nan"),
+        "loaded_leap_faults": sum(len(s.hand_errors) for s in sessions),
     }
