@@ -98,13 +98,18 @@ def measure(path: Path, code: int, arm: dict, hand: dict, offset_ns: int) -> Wir
         return s
     s.recorded = True
     with SessionReader(path) as reader:
-        states = [(m.log_time_ns, m.payload.positions) for m in reader.messages(["/arm/arm/state"])]
-        ticks = [(m.payload.stamp_ns, m.payload.data) for m in reader.messages([topics.COMMAND_TICK])]
-        commands = [m.payload for m in reader.messages([topics.COMMAND_ARM])]
-        engages = [m.log_time_ns for m in reader.messages([topics.MODE]) if m.payload.data.get("mode") == "execute"]
-        wired = [m.payload for m in reader.messages([topics.COMMAND_WIRE])]
+        def read(topic):  # (a session that never engaged has no commands)
+            return list(reader.messages([topic])) if topic in reader.topics else []
+
+        states = [(m.log_time_ns, m.payload.positions) for m in read("/arm/arm/state")]
+        ticks = [(m.payload.stamp_ns, m.payload.data) for m in read(topics.COMMAND_TICK)]
+        wired = [m.payload for m in read(topics.COMMAND_WIRE)]
+        # the commands that went out (/command/wire): a superseded one never reached the controller
+        sent = {w.data["t_ns"] for w in wired if w.data["kind"] == "arm" and w.data["sent"]}
+        commands = [m.payload for m in read(topics.COMMAND_ARM) if m.payload.stamp_ns in sent]
+        engages = [m.log_time_ns for m in read(topics.MODE) if m.payload.data.get("mode") == "execute"]
         errors = {"arm": s.arm_errors, "hand": s.hand_errors}
-        for m in reader.messages([topics.DEVICE_EVENT]):
+        for m in read(topics.DEVICE_EVENT):
             d = m.payload.data
             if d.get("event") == "error" and d.get("device") in errors:
                 errors[d["device"]].append(d.get("message", ""))
