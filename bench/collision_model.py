@@ -233,7 +233,11 @@ def main() -> None:
         "corrector_max_step_rad": float(np.max(jumps)) if jumps else float("nan"),
     })
     extra = {
-        **{k: v for k, v in cpn_figs.items() if k.startswith("cpn_boundary_") or k in ("cpn_threshold", "cpn_precision", "cpn_config_fpr")},
+        **{
+            k: v
+            for k, v in cpn_figs.items()
+            if k.startswith("cpn_boundary_") or k in ("cpn_threshold", "cpn_precision", "cpn_config_fpr")
+        },
         "cpn_worst_link": min(per_link, key=per_link.get),
         **{k: v for k, v in ccn_figs.items() if k not in figures},
         "ccn_us_p50": common.percentile(t_ccn, 50) * 1e6,

@@ -77,7 +77,7 @@ class Load:
 
         self.procs = [mp.get_context("fork").Process(target=_spin, daemon=True) for _ in range(processes)]
 
-    def __enter__(self) -> "Load":
+    def __enter__(self) -> Load:
         for p in self.procs:
             p.start()
         return self

@@ -123,12 +123,16 @@ def timed(args: list[str]) -> float:
     env = os.environ | {"HF_HUB_OFFLINE": "1", "COLUMNS": "100"}
     before = resource.getrusage(resource.RUSAGE_CHILDREN)
     t = time.perf_counter()
-    done = subprocess.run([sys.executable, "-m", "teleprev.cli.app", *args], capture_output=True, text=True, env=env, cwd=ROOT)
+    done = subprocess.run(
+        [sys.executable, "-m", "teleprev.cli.app", *args], capture_output=True, text=True, env=env, cwd=ROOT
+    )
     wall = time.perf_counter() - t
     after = resource.getrusage(resource.RUSAGE_CHILDREN)
     BUSY.append((after.ru_utime - before.ru_utime + after.ru_stime - before.ru_stime) / wall)
     if done.returncode != 0:
-        raise SystemExit(f"teleprev {' '.join(args)} failed ({done.returncode}):\n{done.stdout[-2000:]}\n{done.stderr[-2000:]}")
+        raise SystemExit(
+            f"teleprev {' '.join(args)} failed ({done.returncode}):\n{done.stdout[-2000:]}\n{done.stderr[-2000:]}"
+        )
     return wall
 
 
@@ -168,7 +172,9 @@ def best_walls(argv: dict, commands: list[str], runs: int, tmp: Path, figures: d
     return walls
 
 
-def encoder_thread_figures(export_argv, thread_counts: list[int], runs: int, tmp: Path, sessions: int) -> dict[str, float]:
+def encoder_thread_figures(
+    export_argv, thread_counts: list[int], runs: int, tmp: Path, sessions: int
+) -> dict[str, float]:
     """Sessions per minute of the export with each worker's video encoder capped at each thread count, with 1
     and 2 workers (best of `runs`)."""
     figures = {}
@@ -218,7 +224,9 @@ def main() -> None:
             walls = best_walls(argv, commands, runs, tmp, figures)
             figures.update(encoder_thread_figures(argv["export"], thread_counts, runs, tmp, sessions))
         for command in commands:
-            figures[f"corpus_speedup_2_workers_{command}"] = walls[f"{command}_wall_s_workers1"] / walls[f"{command}_wall_s_workers2"]
+            figures[f"corpus_speedup_2_workers_{command}"] = (
+                walls[f"{command}_wall_s_workers1"] / walls[f"{command}_wall_s_workers2"]
+            )
         figures["corpus_speedup_2_workers"] = min(figures[f"corpus_speedup_2_workers_{c}"] for c in commands)
         figures.update(walls)
         for command, seconds in (("eval", eval_s), ("export", export_s)):

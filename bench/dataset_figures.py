@@ -79,7 +79,8 @@ def filtered_export_ok(folder: Path) -> bool:
     from teleprev.export.recipe import load_recipe
     from teleprev.export.run import ExportOptions, export
     from teleprev.export.selection import Selection, plan_exports, read_facts
-    from teleprev.export.synthetic import EpisodeSpec as E, SyntheticSession, write_session
+    from teleprev.export.synthetic import EpisodeSpec as E
+    from teleprev.export.synthetic import SyntheticSession, write_session
 
     def session(name, episodes, seed):
         return write_session(folder / name, SyntheticSession(episodes, width=160, height=120, pause_s=0.5, seed=seed))
@@ -88,7 +89,9 @@ def filtered_export_ok(folder: Path) -> bool:
                                 E("pour", 1.0, outcome="success")), 1),
              session("b.mcap", (E("pour", 1.0), E("pick_place", 1.0, outcome="success"),
                                 E("pick_place", 1.0, outcome="success", discarded=True)), 2)]
-    marked_y = [(Path(f.session).name, f.index) for f in read_facts(paths) if f.outcome == "success" and not f.discarded]
+    marked_y = [
+        (Path(f.session).name, f.index) for f in read_facts(paths) if f.outcome == "success" and not f.discarded
+    ]
     root = folder / "success"
     options = ExportOptions(paths, "bench/success", root, load_recipe("default"))
     (only,), _ = plan_exports(options, Selection(only="success"), None, "session", 0)

@@ -75,13 +75,20 @@ def make_sessions(folder: Path, quick: bool) -> dict[str, Path]:
                                                          seed=2), "short")}
     speed_s, long_s = 60.0, 600.0
     specs = {
-        "speed": SyntheticSession((EpisodeSpec("pick_place", speed_s / 2), EpisodeSpec("pour", speed_s / 2)),
-                                  width=640, height=480, seed=1),
+        "speed": SyntheticSession(
+            (EpisodeSpec("pick_place", speed_s / 2), EpisodeSpec("pour", speed_s / 2)), width=640, height=480, seed=1
+        ),
         # memory (frames from a bank of 300): one minute; ten minutes in one-minute episodes; and ten
         # minutes in one episode, the worst case for the per-episode buffers (ours and lerobot's)
         "short": SyntheticSession((EpisodeSpec("pick_place", 60.0),), width=640, height=480, frame_bank=300, seed=2),
-        "long": SyntheticSession(tuple(EpisodeSpec("pick_place", long_s / 10) for _ in range(10)), width=640, height=480,
-                                 frame_bank=300, pause_s=0.2, seed=3),
+        "long": SyntheticSession(
+            tuple(EpisodeSpec("pick_place", long_s / 10) for _ in range(10)),
+            width=640,
+            height=480,
+            frame_bank=300,
+            pause_s=0.2,
+            seed=3,
+        ),
         "long1": SyntheticSession((EpisodeSpec("pick_place", long_s),), width=640, height=480, frame_bank=300, seed=4),
     }
     return {name: _write(folder, spec, name) for name, spec in specs.items()}
@@ -120,7 +127,9 @@ def min_psnr(session: Path, root: Path, samples: int = 60) -> float:
         n = int(ep["length"])
         picks = np.linspace(0, n - 1, max(2, samples // len(ds.meta.episodes))).round().astype(int)
         ts = [float(ep[f"videos/{key}/from_timestamp"]) + int(k) / ds.fps for k in picks]
-        frames = decode_video_frames(root / ds.meta.get_video_file_path(e, key), ts, 1e-4, backend="pyav", return_uint8=True)
+        frames = decode_video_frames(
+            root / ds.meta.get_video_file_path(e, key), ts, 1e-4, backend="pyav", return_uint8=True
+        )
         decoded.extend(frames.permute(0, 2, 3, 1).numpy())
     wanted = {read_frame_code(img): img for img in decoded}
     worst = float("inf")

@@ -68,7 +68,15 @@ import common  # noqa: E402  (sets one-thread environment before numpy loads)
 ROOT = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(ROOT))
 from tests.helpers.faults import (  # noqa: E402
-    alive, fsize_limit, has_traceback, mcap_opens, run_cli, small_disk, start_cli, wait_for_file, workers_of,
+    alive,
+    fsize_limit,
+    has_traceback,
+    mcap_opens,
+    run_cli,
+    small_disk,
+    start_cli,
+    wait_for_file,
+    workers_of,
 )
 
 SIGNALS = (signal.SIGKILL, signal.SIGTERM, signal.SIGHUP)
@@ -215,8 +223,13 @@ def record_full_disk(work: Path, k: int, size: int) -> Row:
         finally:
             if proc.poll() is None:
                 proc.kill()
-        row = Row("record", f"full disk at {size // 1000} kB", proc.returncode, announced=one_line(proc_result(proc, stderr)),
-                  traceback=has_traceback(stdout + stderr))
+        row = Row(
+            "record",
+            f"full disk at {size // 1000} kB",
+            proc.returncode,
+            announced=one_line(proc_result(proc, stderr)),
+            traceback=has_traceback(stdout + stderr),
+        )
         saved = work / f"disk{k}.recovered.mcap"
         run = run_cli(["recover", out, "-o", saved], timeout=120)
         row.traceback |= has_traceback(run.stdout + run.stderr)
@@ -354,9 +367,26 @@ def device_dies(work: Path, k: int, clip_s: float) -> Row:
     rig_text += '\n[devices.cam_clip]\nplugin = "opencv.camera"\nsource = "clip.mp4"\n'
     (folder / "rig.toml").write_text(rig_text)
     out = folder / "s.mcap"
-    run = run_cli(["record", folder / "rig.toml", "--duration", str(clip_s + 2.5), "--no-preview", "--engage-after", "0.3",
-                   "-o", out], timeout=180)
-    row = Row("record", f"camera clip ends after {clip_s:.1f} s", run.returncode, traceback=has_traceback(run.stdout + run.stderr))
+    run = run_cli(
+        [
+            "record",
+            folder / "rig.toml",
+            "--duration",
+            str(clip_s + 2.5),
+            "--no-preview",
+            "--engage-after",
+            "0.3",
+            "-o",
+            out,
+        ],
+        timeout=180,
+    )
+    row = Row(
+        "record",
+        f"camera clip ends after {clip_s:.1f} s",
+        run.returncode,
+        traceback=has_traceback(run.stdout + run.stderr),
+    )
     row.opens = mcap_opens(out)
     from teleprev.session.reader import SessionReader
     from teleprev.session.summary import summarize
@@ -581,10 +611,31 @@ def main() -> None:
     rng = random.Random(args.seed)
     # --quick: every kind of fault once, each signal once (SIGKILL to record, SIGTERM to recover, SIGHUP to export),
     # quiet only; the input family: one long loss (NaN) and one freeze
-    n = dict(record_signal=1, full_disk=1, device=1, recover_signal=1, export_signal=1, export_disk=1, flip=2, cut=1,
-             input=1) \
-        if args.quick else dict(record_signal=8, full_disk=8, device=4, recover_signal=5, export_signal=3, export_disk=3,
-                                flip=100, cut=40, input=3)
+    n = (
+        dict(
+            record_signal=1,
+            full_disk=1,
+            device=1,
+            recover_signal=1,
+            export_signal=1,
+            export_disk=1,
+            flip=2,
+            cut=1,
+            input=1,
+        )
+        if args.quick
+        else dict(
+            record_signal=8,
+            full_disk=8,
+            device=4,
+            recover_signal=5,
+            export_signal=3,
+            export_disk=3,
+            flip=100,
+            cut=40,
+            input=3,
+        )
+    )
     os.environ.setdefault("HF_HUB_OFFLINE", "1")
     rows: list[Row] = []
 

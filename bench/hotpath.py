@@ -6,8 +6,10 @@ preparation (one thread).
 Compares the compiled checker (numba kernels) with the fcl checker it replaced and with a
 vectorised-numpy version of the same separating-axis test, checks it against FCL on uniform random
 configurations, times the checker the pipeline runs (SelfCollisionChecker: compiled, FCL within the
-margin; its answers must equal FCL's exactly), and times what compiling costs: cold (empty kernel cache, in a fresh process), from
-the cache (--quick: from the cache only), and whether `teleprev --help` stays fast. The glove preparation (Pipeline.prepare_hands: decode,
+margin; its answers must equal FCL's exactly), and times what compiling costs: cold (empty kernel cache, in a fresh
+process), from
+the cache (--quick: from the cache only), and whether `teleprev --help` stays fast. The glove preparation
+(Pipeline.prepare_hands: decode,
 checks, angles, retargeting, clip, and for the LEAP Hand the exact check) is timed with the numpy
 arithmetic (the earliest sessions') and the compiled one (teleprev/kernels/glove.py), the two
 interleaved sample by sample: one sample as the live step prepares it, and a session's worth as eval does.
@@ -178,7 +180,9 @@ def agreement(hand, fcl_checker, compiled, strict, pipeline_checker, n: int, rng
         disagree += int(differ.sum())
         margin_side += int(extra_only.sum())
         missed += int((expected & ~ours).any(axis=1).sum())
-        label_diff += int((compiled.labels_from_pairs(ours) != fcl_checker.labels_from_pairs(expected)).any(axis=1).sum())
+        label_diff += int(
+            (compiled.labels_from_pairs(ours) != fcl_checker.labels_from_pairs(expected)).any(axis=1).sum()
+        )
     return {
         "compiled_vs_fcl_disagreements": disagree,
         "compiled_vs_fcl_margin_side": margin_side,
@@ -192,8 +196,8 @@ def agreement(hand, fcl_checker, compiled, strict, pipeline_checker, n: int, rng
 def prepare_hand_figures(quick: bool, rng) -> dict:
     """Pipeline.prepare_hands per glove sample, numpy vs compiled, for the LEAP Hand (angles, retargeting,
     exact check) and a parallel gripper (the angles only), alone and in a batch."""
-    from teleprev.human.smplx import HAND_POSE_NAMES, hand_pose_from_angles
     from teleprev.assembly import build_pipeline
+    from teleprev.human.smplx import HAND_POSE_NAMES, hand_pose_from_angles
     from teleprev.messages import JointSample
     from teleprev.rig import default_rig_path, load_rig
 
@@ -217,7 +221,9 @@ def prepare_hand_figures(quick: bool, rng) -> dict:
             batch[name] = (time.perf_counter() - t) / n * 1e6
         figures[f"prepare_{label}hand_us_p50_numpy"] = common.percentile(t_old, 50) * 1e6
         figures[f"prepare_{label}hand_us_p50_compiled"] = common.percentile(t_new, 50) * 1e6
-        figures[f"prepare_{label}hand_speedup"] = figures[f"prepare_{label}hand_us_p50_numpy"] / figures[f"prepare_{label}hand_us_p50_compiled"]
+        figures[f"prepare_{label}hand_speedup"] = (
+            figures[f"prepare_{label}hand_us_p50_numpy"] / figures[f"prepare_{label}hand_us_p50_compiled"]
+        )
         figures[f"prepare_{label}hands_batch_us_per_sample_numpy"] = batch["numpy"]
         figures[f"prepare_{label}hands_batch_us_per_sample_compiled"] = batch["compiled"]
     return figures

@@ -122,7 +122,9 @@ def _session(folder: Path, name: str) -> tuple[LiveSession, int]:
 
 def _dead_receivers(rec: LiveSession) -> int:
     """VMC receiver threads that are not running (call before the session stops)."""
-    return sum(1 for d in VMC_DEVICES if rec.devices[d]._receiver is None or not rec.devices[d]._receiver._thread.is_alive())
+    return sum(
+        1 for d in VMC_DEVICES if rec.devices[d]._receiver is None or not rec.devices[d]._receiver._thread.is_alive()
+    )
 
 
 def _failures(path: Path) -> int:
@@ -171,11 +173,22 @@ def fuzz(folder: Path, n: int, rate: float) -> dict:
     path = folder / "fuzz.mcap"
     deaths = dead + _failures(path)
     counts = summarize(path).device_counts["glove"]
-    return {"sent": sent, "read": read, "good": good, "seconds": seconds, "deaths": deaths, "non_finite": _non_finite(path),
-            "glove_samples": _glove_samples(path),
-            "skipped": sum(v for k, v in counts.items() if k not in ("received", "lost_input", "loop_dropped",
-                                                                    "sink_errors", "failures") and not k.startswith("lost_")),
-            "lost": device_lost(counts)}
+    return {
+        "sent": sent,
+        "read": read,
+        "good": good,
+        "seconds": seconds,
+        "deaths": deaths,
+        "non_finite": _non_finite(path),
+        "glove_samples": _glove_samples(path),
+        "skipped": sum(
+            v
+            for k, v in counts.items()
+            if k not in ("received", "lost_input", "loop_dropped", "sink_errors", "failures")
+            and not k.startswith("lost_")
+        ),
+        "lost": device_lost(counts),
+    }
 
 
 def _wait_for_gap(runner, timeout_s: float = 30.0) -> None:
@@ -311,14 +324,17 @@ def main() -> None:
     from rich.console import Console
 
     Console(stderr=args.json).print(
-        f"fuzz: {f['sent']} datagrams sent ({f['good']} good frames) in {f['seconds']:.1f} s = {f['sent'] / f['seconds']:.0f}/s, "
+        f"fuzz: {f['sent']} datagrams sent ({f['good']} good frames) in {f['seconds']:.1f} s = "
+        f"{f['sent'] / f['seconds']:.0f}/s, "
         f"{f['read']} read by the receiver; "
         f"glove samples recorded {f['glove_samples']}; skipped {f['skipped']}; lost (counted) {f['lost']}\n"
         f"flood: {fl['sent']} frames ({fl['sent'] - 41} back to back in {fl['seconds'] * 1e3:.0f} ms), recorded "
         f"{fl['recorded']}, missing {fl['missing']}, counted {fl['counted']} (socket overruns {fl['overruns']}, "
         f"sequence gaps {fl['gaps']}, queue {fl['queue']}, loop {fl['loop']})\n"
         f"recovery: {rc['n']} trials, median {rc['median_ms']:.2f} ms, p95 {rc['p95_ms']:.2f} ms\n"
-        "(machine shared with other engineers: timings are noisy)", highlight=False)
+        "(machine shared with other engineers: timings are noisy)",
+        highlight=False,
+    )
     figures = {
         "fuzz_packets": f["read"],
         "receiver_deaths": f["deaths"] + fl["deaths"] + rc["deaths"],

@@ -3,7 +3,8 @@
     python bench/interop.py [--json] [--quick]
 
 Figures:
-  import_realtime_x     seconds of recording imported per second of wall time: a 60 s (--quick: 6 s) ROS 2 MCAP written by
+  import_realtime_x     seconds of recording imported per second of wall time: a 60 s (--quick: 6 s) ROS 2 MCAP
+  written by
                         rosbags (one 640x480 JPEG camera at 30 fps, 100 Hz joint states from two publishers
                         on /joint_states, a 50 Hz pose and /tf, start/stop events) through `teleprev import`
                         with datasets/imports/ros2_arm.toml (30 fps, h264), the median of 3 imports; lerobot's
@@ -37,13 +38,12 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 import common  # noqa: E402  (sets one-thread environment before numpy loads)
 
 
-
 def import_speed(folder: Path, seconds: float, repeat: int) -> dict:
+    import numpy as np
+
     from teleprev.export.foreign.config import load_import_recipe
     from teleprev.export.foreign.run import import_files
     from teleprev.export.foreign.samples import ForeignSpec, ros2_mcap_file, write_ros2
-
-    import numpy as np
 
     t = time.perf_counter()
     bag = ros2_mcap_file(write_ros2(folder / "speed", ForeignSpec(episodes=((0.0, seconds),), width=640, height=480)))
@@ -95,7 +95,9 @@ def formats(folder: Path, speed: dict) -> dict:
 
     # ros2_arm.toml's [import.joints]: the arm, then the gripper
     ros_names = [f"joint_states.{j}" for j in (*ARM, "gripper")]
-    results = {"ros2-mcap": check_dataset(speed["root"], "bench/interop", 30 * int(speed["recorded_s"]) - 30, ros_names)}
+    results = {
+        "ros2-mcap": check_dataset(speed["root"], "bench/interop", 30 * int(speed["recorded_s"]) - 30, ros_names)
+    }
     spec = ForeignSpec(episodes=((0.0, 3.0),), raw_images=True)
     sqlite = write_ros2(folder / "sqlite", spec, storage="sqlite3")
     import_files([sqlite], load_import_recipe("ros2_arm"), "bench/sqlite", folder / "sqlite_out")

@@ -177,7 +177,9 @@ def main() -> None:
         "collision_check_us_p50": "<= 300",
         "labels_per_s": ">= 3,000",
     }
-    common.report("bench/kinematics.py: LEAP Hand FK and collision, xArm6 IK (one thread)", figures, targets_text, args.json)
+    common.report(
+        "bench/kinematics.py: LEAP Hand FK and collision, xArm6 IK (one thread)", figures, targets_text, args.json
+    )
 
 
 if __name__ == "__main__":

@@ -40,9 +40,9 @@ TASKS = ("pick_place", "hang", "pour", "box_rotation", "cup_stack")
 
 def operator_inputs(task: str, seconds: float, seed: int = 0):
     """(t_ns, glove sample, suit sample or None) at 120 Hz; the suit updates every second glove sample."""
-    from teleprev_devices.sim.operator import SimOperator
     from teleprev.human.smplx import HAND_POSE_NAMES, hand_pose_from_angles
     from teleprev.messages import JointSample, PoseSample
+    from teleprev_devices.sim.operator import SimOperator
 
     op = SimOperator(seed, task, "fixed")
     wrist = None
@@ -58,8 +58,8 @@ def operator_inputs(task: str, seconds: float, seed: int = 0):
 
 
 def step_timing(seconds: float) -> dict:
-    from teleprev.messages import JointSample
     from teleprev.assembly import build_pipeline
+    from teleprev.messages import JointSample
     from teleprev.pipeline.step import PipelineState, StepInputs
     from teleprev.rig import load_rig
 
@@ -71,7 +71,13 @@ def step_timing(seconds: float) -> dict:
         hand = np.zeros(len(pipeline.effector_names))
         task_times = []
         for k, (t_ns, glove, wrist) in enumerate(operator_inputs(task, seconds)):
-            inputs = StepInputs(t_ns, glove, wrist, JointSample(t_ns, pipeline.arm_names, arm), JointSample(t_ns, pipeline.effector_names, hand))
+            inputs = StepInputs(
+                t_ns,
+                glove,
+                wrist,
+                JointSample(t_ns, pipeline.arm_names, arm),
+                JointSample(t_ns, pipeline.effector_names, hand),
+            )
             if k == 120:
                 state, _ = pipeline.set_mode(state, "execute", inputs)
             t0 = time.perf_counter()
@@ -99,9 +105,9 @@ def preview_rate(seconds: float) -> dict:
 
     from rich.console import Console
 
-    from teleprev.session.reader import SessionReader
-    from teleprev.live.record.session import RecordOptions, LiveSession
     from teleprev.live.record.run import run_script
+    from teleprev.live.record.session import LiveSession, RecordOptions
+    from teleprev.session.reader import SessionReader
 
     with tempfile.TemporaryDirectory() as tmp:
         out = Path(tmp) / "preview.mcap"
@@ -156,7 +162,10 @@ def dex_retargeting(seconds: float) -> dict:
             t0 = time.perf_counter()
             solver.retarget(vectors)
             times.append(time.perf_counter() - t0)
-    return {"dexretargeting_ms_p50": common.percentile(times, 50) * 1e3, "dexretargeting_ms_p99": common.percentile(times, 99) * 1e3}
+    return {
+        "dexretargeting_ms_p50": common.percentile(times, 50) * 1e3,
+        "dexretargeting_ms_p99": common.percentile(times, 99) * 1e3,
+    }
 
 
 def at_loop_priority(fn, *args):

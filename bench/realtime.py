@@ -108,7 +108,9 @@ def record(rig: Path, out: Path, seconds: float, episodes: int, engage_after: fl
     if size is None:
         done = subprocess.run([*cmd, "--no-preview"], capture_output=True, text=True, env=env, timeout=seconds + 120)
         if done.returncode != 0 and done.stderr.strip():  # (the fault session exits 1, saying nothing)
-            print(f"{out.name}: teleprev record exited {done.returncode}: {done.stderr.strip()[-2000:]}", file=sys.stderr)
+            print(
+                f"{out.name}: teleprev record exited {done.returncode}: {done.stderr.strip()[-2000:]}", file=sys.stderr
+            )
         return done.returncode
     master, slave = pty.openpty()
     fcntl.ioctl(slave, termios.TIOCSWINSZ, struct.pack("HHHH", size[1], size[0], 0, 0))

@@ -51,9 +51,9 @@ import subprocess
 import sys
 import tempfile
 import time
+from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Callable
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 import common  # noqa: E402  (sets one-thread environment before numpy loads)
@@ -96,10 +96,10 @@ def _jpegs(seed: int, n: int) -> list[bytes]:
 
 
 def reference_streams(seed: int = 0) -> list[Stream]:
+    from teleprev import topics as T
     from teleprev.human.smplx import BODY_JOINTS, HAND_POSE_NAMES
     from teleprev.messages import Event, ImageSample, JointSample, PoseSample, Transform, TransformsSample
     from teleprev.robot.model import load_robot
-    from teleprev import topics as T
 
     rng = np.random.default_rng(seed)
     robot = load_robot("xarm6_leap_hand")
@@ -308,9 +308,9 @@ def sync_error(tmp: Path, seconds: float) -> dict:
     transport delay; they convert back to the session clock with ClockSync, as real devices do."""
     import time as _time
 
+    from teleprev.live.record.session import LiveSession, RecordOptions
     from teleprev.rig import default_rig_path
     from teleprev.session.reader import SessionReader
-    from teleprev.live.record.session import RecordOptions, LiveSession
     from teleprev.topics import parse_device_topic
 
     path = tmp / "sync.mcap"

@@ -52,7 +52,7 @@ def main() -> None:
     seconds = 6.0 if args.quick else 30.0
 
     from teleprev.evaluation.evaluate import evaluate
-    from teleprev.live.record.session import RecordOptions, LiveSession
+    from teleprev.live.record.session import LiveSession, RecordOptions
 
     with tempfile.TemporaryDirectory() as tmp:
         path = Path(tmp) / "bench.mcap"
@@ -92,7 +92,9 @@ def main() -> None:
 
     formats = {f"bit_identical_format{FORMAT_VERSION}": bool(result.report["sessions"][0]["bit_identical"])}
     for fixture in sorted((Path(__file__).resolve().parents[1] / "tests" / "fixtures").glob("sim_v*.mcap")):
-        formats[f"bit_identical_format{fixture.stem[5:]}"] = bool(evaluate([fixture]).report["sessions"][0]["bit_identical"])
+        formats[f"bit_identical_format{fixture.stem[5:]}"] = bool(
+            evaluate([fixture]).report["sessions"][0]["bit_identical"]
+        )
     load.__exit__(None, None, None)
     figures = {
         "eval_realtime_x": o["duration_s"] / wall,
@@ -113,7 +115,12 @@ def main() -> None:
     }
     targets = {"eval_realtime_x": ">= 100 (cold, one process, video not decoded)", "eval_cpu_realtime_x": ">= 150",
                "bit_identical": "true, every session format"}
-    common.report(f"bench/replay.py: re-running a recorded session, {args.busy} busy processes beside it", figures, targets, args.json)
+    common.report(
+        f"bench/replay.py: re-running a recorded session, {args.busy} busy processes beside it",
+        figures,
+        targets,
+        args.json,
+    )
 
 
 if __name__ == "__main__":

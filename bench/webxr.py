@@ -42,8 +42,8 @@ from bench.common import parser, percentile, report  # noqa: E402
 from teleprev import topics  # noqa: E402
 from teleprev.session.reader import SessionReader  # noqa: E402
 from teleprev_devices.webxr import hands  # noqa: E402
-from tests.helpers.xr_browser import Quest3Browser, recorded_motion  # noqa: E402
 from tests.helpers.ports import free_tcp_port  # noqa: E402
+from tests.helpers.xr_browser import Quest3Browser, recorded_motion  # noqa: E402
 from tests.helpers.xr_page import webxr_rig  # noqa: E402
 
 
@@ -115,7 +115,9 @@ def measure(path: Path, sent, numbered: int) -> dict:
     n = min(len(right), len(page_right))
     joint_err = max(np.abs(right[:n, :, :3] - page_right[:n, :, :3]).max(initial=0.0),
                     np.abs(left[:n, :, :3] - page_left[:n, :, :3]).max(initial=0.0)) if n else float("nan")
-    wrist_err = np.linalg.norm(wrists[:n] @ hands.A - page_right[:n, 0, :3], axis=1).max(initial=0.0) if n else float("nan")
+    wrist_err = (
+        np.linalg.norm(wrists[:n] @ hands.A - page_right[:n, 0, :3], axis=1).max(initial=0.0) if n else float("nan")
+    )
     lag = [(steps[g] - sent.sent_ms[k] * 1e6) / 1e6 for k, g in enumerate(gloves[:len(sent.sent_ms)]) if g in steps]
     executing = 0
     for (t0, mode), (t1, _) in zip(modes, modes[1:] + [(np.iinfo(np.int64).max, "")]):

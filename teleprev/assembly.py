@@ -24,8 +24,8 @@ from teleprev.pipeline.swept import SweptCheck
 from teleprev.pipeline.trajectory import ArmGenerator, HandLimiter
 from teleprev.retarget.calibration import Calibration, load_calibration
 from teleprev.rig import Rig
-from teleprev.robot.ik import ArmIK
 from teleprev.robot.collision import SelfCollisionChecker
+from teleprev.robot.ik import ArmIK
 from teleprev.robot.limits import arm_limits, effector_limits
 from teleprev.robot.model import RobotModel, load_robot
 from teleprev.topics import FORMAT_VERSION
@@ -156,10 +156,16 @@ def motion_limits(rig: Rig) -> dict[str, dict]:
     robot = load_robot(rig.rig.robot)
     ik = ArmIK(robot, cfg.tcp_link or rig.effector.tcp_link)
     table = arm_limits(rig.rig.robot)
-    arm = {"names": ik.chain.joint_names, "lower": ik.chain.lower, "upper": ik.chain.upper,
-           "velocity": _capped_speed(rig, "arm_speed", ik.chain.velocity_limit),
-           "acceleration": _limit(rig, "arm_acceleration", table.acceleration if table else None, "arm acceleration limit"),
-           "jerk": _limit(rig, "arm_jerk", table.jerk if table else None, "arm jerk limit")}
+    arm = {
+        "names": ik.chain.joint_names,
+        "lower": ik.chain.lower,
+        "upper": ik.chain.upper,
+        "velocity": _capped_speed(rig, "arm_speed", ik.chain.velocity_limit),
+        "acceleration": _limit(
+            rig, "arm_acceleration", table.acceleration if table else None, "arm acceleration limit"
+        ),
+        "jerk": _limit(rig, "arm_jerk", table.jerk if table else None, "arm jerk limit"),
+    }
     effector, row = rig.effector, effector_limits(rig.rig.end_effector)
     accel = 0.0
     if row is None or row.acceleration is not None:

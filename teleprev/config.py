@@ -105,7 +105,7 @@ def _convert(value: Any, tp: Any, where: str) -> Any:
     raise TypeError(f"unsupported config type {tp!r} at {where}")
 
 
-def from_table(cls: type[T], table: dict, where: str) -> T:
+def from_table[T](cls: type[T], table: dict, where: str) -> T:
     """Build dataclass `cls` from a TOML table; `where` names the file and table for error messages."""
     if not isinstance(table, dict):
         raise ConfigError(f"expected a table, got {table!r}", where)

@@ -17,7 +17,7 @@ Recorded as (see teleprev/session/topics.py):
 from __future__ import annotations
 
 from dataclasses import dataclass, field
-from typing import Any, Union
+from typing import Any
 
 import numpy as np
 
@@ -130,8 +130,8 @@ class RobotDescription:
     urdf: str
 
 
-Payload = Union[JointSample, PoseSample, ImageSample, DepthSample, CameraInfo, TransformsSample, Event,
-                RobotDescription]
+Payload = (JointSample | PoseSample | ImageSample | DepthSample | CameraInfo | TransformsSample | Event
+           | RobotDescription)
 
 
 @dataclass(frozen=True, slots=True)

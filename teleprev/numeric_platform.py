@@ -40,7 +40,9 @@ def pin() -> None:
 
 def pinned() -> bool:
     """Whether this process computes on PLATFORM (recorded in session metadata next to the model hashes)."""
-    return os.environ.get("OPENBLAS_CORETYPE") == "Haswell" and "AVX512_SKX" in os.environ.get("NPY_DISABLE_CPU_FEATURES", "")
+    return os.environ.get("OPENBLAS_CORETYPE") == "Haswell" and "AVX512_SKX" in os.environ.get(
+        "NPY_DISABLE_CPU_FEATURES", ""
+    )
 
 
 def describe() -> str:

@@ -96,7 +96,9 @@ class SensorFrame:
         for key in ("xyz", "look_at"):
             value = getattr(self, key)
             if value is not None and not all(abs(v) <= FRAME_REACH_M for v in value):
-                raise ValueError(f"{key} must be within ±{FRAME_REACH_M:g} m of the parent frame (metres), got {list(value)}")
+                raise ValueError(
+                    f"{key} must be within ±{FRAME_REACH_M:g} m of the parent frame (metres), got {list(value)}"
+                )
         if self.rpy is not None and not all(abs(v) <= 2 * math.pi for v in self.rpy):
             raise ValueError(f"rpy is in radians, each within ±2π; got {list(self.rpy)} (degrees?)")
         if self.look_at is not None and tuple(self.look_at) == tuple(self.xyz):
@@ -160,7 +162,7 @@ class Rig:
     def effector(self) -> EndEffector:
         return end_effector(self.rig.end_effector)
 
-    def with_device_settings(self, plugin_family: str, option: str, **changes) -> "Rig":
+    def with_device_settings(self, plugin_family: str, option: str, **changes) -> Rig:
         """This rig with `changes` made to the settings of every device of a plugin family: a command-line
         `option` (e.g. record --webxr-host, family "webxr") over the rig file. A ConfigError naming the option
         when no device is of the family or the settings refuse the value."""
@@ -303,7 +305,9 @@ def _check_robot(rig: RigSection, pipeline: PipelineConfig, where: str) -> None:
     """The robot's URDF exists and has the link the wrist drives."""
     urdf = resolve_urdf(rig.robot)
     if not urdf.is_file():
-        raise ConfigError(f"no such robot {rig.robot!r} (a URDF path, or the name of one in urdf/)", f"{where} [rig].robot")
+        raise ConfigError(
+            f"no such robot {rig.robot!r} (a URDF path, or the name of one in urdf/)", f"{where} [rig].robot"
+        )
     if pipeline.tcp_link and pipeline.tcp_link not in load_robot(urdf).links:
         raise ConfigError(f"the robot {rig.robot!r} has no link {pipeline.tcp_link!r}", f"{where} [pipeline].tcp_link")
 
@@ -319,7 +323,12 @@ def _check_motion_limits(rig: RigSection, pipeline: PipelineConfig, where: str) 
     for key, row, bound, unit in (
         ("arm_acceleration", arm.acceleration if arm else None, MAX_ARM_ACCELERATION, "rad/s²"),
         ("arm_jerk", arm.jerk if arm else None, MAX_ARM_JERK, "rad/s³"),
-        ("hand_acceleration", effector.acceleration if effector else None, MAX_HAND_ACCELERATION, "rad/s² (m/s² for a gripper)"),
+        (
+            "hand_acceleration",
+            effector.acceleration if effector else None,
+            MAX_HAND_ACCELERATION,
+            "rad/s² (m/s² for a gripper)",
+        ),
     ):
         value = getattr(pipeline, key)
         if value is None:
@@ -328,7 +337,9 @@ def _check_motion_limits(rig: RigSection, pipeline: PipelineConfig, where: str) 
             raise ConfigError(f"{value:g} {unit} is looser than the robot's own limit ({row:g}, "
                               "teleprev/robot/limits.py); a rig may only tighten it", f"{where} [pipeline].{key}")
         if value > bound:
-            raise ConfigError(f"{value:g} {unit} is more than any robot takes (at most {bound:g})", f"{where} [pipeline].{key}")
+            raise ConfigError(
+                f"{value:g} {unit} is more than any robot takes (at most {bound:g})", f"{where} [pipeline].{key}"
+            )
 
 
 # A device's own motion-limit settings (what its controller runs at, or faults past), by the names plugins

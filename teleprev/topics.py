@@ -135,13 +135,20 @@ EVENT_SCHEMAS: dict[str, dict] = {
         "One command as the actuator's own process wrote it, stamped with the instant the write began: the tick "
         "`seq` it was sampled at (its stamp on /command/arm or /command/hand is `t_ns`), how long the device's "
         "send took (`call_ms`), and whether the device took it (`sent`; else `error` says why).",
-        {"kind": {"type": "string", "enum": ["arm", "hand"]}, "seq": _INT, "t_ns": _INT, "call_ms": _NUM,
-         "sent": {"type": "boolean"}, "error": _STR},
+        {
+            "kind": {"type": "string", "enum": ["arm", "hand"]},
+            "seq": _INT,
+            "t_ns": _INT,
+            "call_ms": _NUM,
+            "sent": {"type": "boolean"},
+            "error": _STR,
+        },
         ["kind", "seq", "sent"],
     ),
     "teleprev.DeviceEvent": _schema(
         "teleprev.DeviceEvent",
-        "A device opened (connected), failed (error, disconnected), stopped sending (gap), came back (recovered), or sent input that was counted and skipped (skipped).",
+        "A device opened (connected), failed (error, disconnected), stopped sending (gap), came back (recovered), "
+        "or sent input that was counted and skipped (skipped).",
         {
             "device": _STR,
             "event": {"type": "string", "enum": ["connected", "gap", "recovered", "error", "disconnected", "skipped"]},

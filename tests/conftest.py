@@ -1,4 +1,6 @@
+# isort: off
 import teleprev  # noqa: F401  first: it pins the numeric platform before numpy loads
+# isort: on
 import numpy as np
 import pytest
 

@@ -25,20 +25,43 @@ def rig_with(tmp_path, table: str, line: str):
     return path
 
 
-@pytest.mark.parametrize("table, line, where, said", [
-    ("pipeline", "workspace_min = [0.80, -0.45, 0.05]", "[pipeline]", "workspace_min must be below workspace_max"),
-    ("pipeline", "workspace_max = [nan, 0.45, 0.65]", "[pipeline].workspace_max[0]", "expected a finite number, got nan"),
-    ("pipeline", "arm_acceleration = 1e308", "[pipeline].arm_acceleration", "looser than the robot's own limit (10"),
-    ("pipeline", "arm_jerk = inf", "[pipeline].arm_jerk", "expected a finite number, got inf"),
-    ("pipeline", "hand_acceleration = 500.0", "[pipeline].hand_acceleration", "looser than the robot's own limit (200"),
-    ("pipeline", "wrist_scale = 0.0", "[pipeline]", "wrist_scale must be in (0, 10]"),
-    ("frames.cam_front", "xyz = [1e300, 0.5, 0.95]", "[frames.cam_front]", "xyz must be within ±100 m"),
-    ("frames.cam_front", "look_at = [nan, 0.0, 0.2]", "[frames.cam_front].look_at[0]", "expected a finite number"),
-    ("frames.suit", "rpy = [0.0, 90.0, 0.0]", "[frames.suit]", "rpy is in radians"),
-    ("devices.glove", "clock_drift_ppm = nan", "[devices.glove].clock_drift_ppm", "expected a finite number, got nan"),
-    ("devices.glove", "latency_ms = 1e12", "[devices.glove]", "latency_ms must be in [0, 1000] ms"),
-    ("devices.cam_front", "clock_offset_s = 1e15", "[devices.cam_front]", "clock_offset_s must be within"),
-])
+@pytest.mark.parametrize(
+    "table, line, where, said",
+    [
+        ("pipeline", "workspace_min = [0.80, -0.45, 0.05]", "[pipeline]", "workspace_min must be below workspace_max"),
+        (
+            "pipeline",
+            "workspace_max = [nan, 0.45, 0.65]",
+            "[pipeline].workspace_max[0]",
+            "expected a finite number, got nan",
+        ),
+        (
+            "pipeline",
+            "arm_acceleration = 1e308",
+            "[pipeline].arm_acceleration",
+            "looser than the robot's own limit (10",
+        ),
+        ("pipeline", "arm_jerk = inf", "[pipeline].arm_jerk", "expected a finite number, got inf"),
+        (
+            "pipeline",
+            "hand_acceleration = 500.0",
+            "[pipeline].hand_acceleration",
+            "looser than the robot's own limit (200",
+        ),
+        ("pipeline", "wrist_scale = 0.0", "[pipeline]", "wrist_scale must be in (0, 10]"),
+        ("frames.cam_front", "xyz = [1e300, 0.5, 0.95]", "[frames.cam_front]", "xyz must be within ±100 m"),
+        ("frames.cam_front", "look_at = [nan, 0.0, 0.2]", "[frames.cam_front].look_at[0]", "expected a finite number"),
+        ("frames.suit", "rpy = [0.0, 90.0, 0.0]", "[frames.suit]", "rpy is in radians"),
+        (
+            "devices.glove",
+            "clock_drift_ppm = nan",
+            "[devices.glove].clock_drift_ppm",
+            "expected a finite number, got nan",
+        ),
+        ("devices.glove", "latency_ms = 1e12", "[devices.glove]", "latency_ms must be in [0, 1000] ms"),
+        ("devices.cam_front", "clock_offset_s = 1e15", "[devices.cam_front]", "clock_offset_s must be within"),
+    ],
+)
 def test_refused_at_load_naming_file_table_and_key(tmp_path, table, line, where, said):
     path = rig_with(tmp_path, table, line)
     with pytest.raises(ConfigError) as exc:
@@ -48,12 +71,14 @@ def test_refused_at_load_naming_file_table_and_key(tmp_path, table, line, where,
 
 def test_a_tighter_limit_is_taken_and_a_robot_the_table_lacks_has_a_bound(tmp_path):
     assert load_rig(rig_with(tmp_path, "pipeline", "arm_acceleration = 8.0")).pipeline.arm_acceleration == 8.0
-    from teleprev.rig import _check_motion_limits, RigSection
     from teleprev.pipeline.config import PipelineConfig
+    from teleprev.rig import RigSection, _check_motion_limits
 
     unknown = RigSection(robot="my_arm", end_effector="parallel_gripper")
     _check_motion_limits(unknown, PipelineConfig(arm_acceleration=50.0, arm_jerk=5000.0), "rig.toml")
-    with pytest.raises(ConfigError, match=r"rig.toml \[pipeline\].arm_acceleration: 1000 rad/s² is more than any robot"):
+    with pytest.raises(
+        ConfigError, match=r"rig.toml \[pipeline\].arm_acceleration: 1000 rad/s² is more than any robot"
+    ):
         _check_motion_limits(unknown, PipelineConfig(arm_acceleration=1000.0), "rig.toml")
 
 

@@ -14,8 +14,9 @@ import ipaddress
 import threading
 from abc import abstractmethod
 from collections import deque
+from collections.abc import Callable
 from dataclasses import dataclass
-from typing import Callable, Generic, Protocol, TypeVar
+from typing import Protocol, TypeVar
 
 from teleprev.devices import Device, DeviceContext, DeviceError, Sample
 
@@ -47,14 +48,14 @@ class ListenSettings:
 QUEUE = 256  # items kept per subscriber that is not reading fast enough
 
 
-class Subscription(Generic[T]):
+class Subscription[T]:
     def __init__(self, size: int = QUEUE):
         self.items: deque[T] = deque(maxlen=size)
         self.ready = threading.Condition()
         self.overflow = 0  # items pushed out of the queue before the device read them
 
 
-class Fanout(Generic[T]):
+class Fanout[T]:
     def __init__(self, where: str):
         self.where = where
         self.failure = ""  # set when the receiver broke; subscribers then raise
@@ -114,7 +115,9 @@ R = TypeVar("R", bound=Receiver)
 _SHARED_LOCK = threading.Lock()
 
 
-def acquire(shared: dict, key: tuple, open_: Callable[[], R], conflict: Callable[[R], str] = lambda r: "") -> R:
+def acquire[R: Receiver](
+    shared: dict, key: tuple, open_: Callable[[], R], conflict: Callable[[R], str] = lambda r: ""
+) -> R:
     """The receiver under `key` in context.shared, opened by the first plugin that asks (a failed one is
     closed and opened again). `conflict(receiver)`: why this plugin's settings cannot share it ("" if they can)."""
     with _SHARED_LOCK:

@@ -39,9 +39,10 @@ from __future__ import annotations
 import math
 import os
 import select
+from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Protocol, Sequence
+from typing import Protocol
 
 import numpy as np
 
@@ -103,7 +104,9 @@ class DynamixelBus(Protocol):
     registers' raw unsigned integers."""
 
     def open(self) -> None: ...
-    def write(self, ids: Sequence[int], address: int, size: int, values: Sequence[int]) -> None: ...  # each motor answers
+    def write(
+        self, ids: Sequence[int], address: int, size: int, values: Sequence[int]
+    ) -> None: ...  # each motor answers
     def sync_read(self, ids: Sequence[int], address: int, size: int) -> dict[int, int]: ...
     def sync_write(self, ids: Sequence[int], address: int, size: int, values: Sequence[int]) -> None: ...
     def close(self) -> None: ...

@@ -43,8 +43,12 @@ class OpenCVSettings:
             raise ValueError(f"source must be a camera index >= 0, a file or a URL, got {self.source}")
         if isinstance(self.source, str) and not self.source.strip():
             raise ValueError("source must not be empty")
-        if (self.width == 0) != (self.height == 0) or not (self.width == 0 or 16 <= self.width <= 8192 and 16 <= self.height <= 8192):
-            raise ValueError(f"width and height must both be 0 (as delivered) or 16..8192, got {self.width}x{self.height}")
+        if (self.width == 0) != (self.height == 0) or not (
+            self.width == 0 or 16 <= self.width <= 8192 and 16 <= self.height <= 8192
+        ):
+            raise ValueError(
+                f"width and height must both be 0 (as delivered) or 16..8192, got {self.width}x{self.height}"
+            )
         if not 0 <= self.fps <= 1000:
             raise ValueError(f"fps must be 0..1000, got {self.fps}")
         if not 0.05 <= self.stall_timeout_s <= 60:
@@ -98,7 +102,11 @@ class OpenCVCamera(Device[OpenCVSettings], kind="camera"):
             cap = cv2.VideoCapture(s.source if self.is_camera else str(self.path or s.source))
         if not cap.isOpened():
             cap.release()
-            what = f"camera index {s.source}" if self.is_camera else (f"stream {s.source}" if self.is_url else f"video file {self.path}")
+            what = (
+                f"camera index {s.source}"
+                if self.is_camera
+                else (f"stream {s.source}" if self.is_url else f"video file {self.path}")
+            )
             raise DeviceError(f"cannot open {what} (unplugged, in use, or not a format OpenCV reads)", self.where)
         if self.is_camera or self.is_url:
             if s.width:

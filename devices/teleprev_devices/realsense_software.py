@@ -11,7 +11,8 @@ camera does: its frames stop (`pause`), its hardware clock jumps (`jump_clock_ms
     camera.stop()
 
 The scene is a tilted table at 0.3..0.9 m with a box sliding across it, 2 % holes (depth 0) and 0.5 mm of
-sensor noise, colour a gradient; `depth_for(frame_number)` gives back the exact counts a frame was fed with, and `fed` the hardware
+sensor noise, colour a gradient; `depth_for(frame_number)` gives back the exact counts a frame was fed with, and `fed`
+the hardware
 time of each.
 """
 

@@ -19,15 +19,25 @@ from __future__ import annotations
 
 import dataclasses
 import time
+from collections.abc import Iterator
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Iterator
 
 import numpy as np
 
 from teleprev.devices import (
-    Actuator, ConfigError, Device, DeviceContext, DeviceError, ImageSample, JointSample, Logged, Sample, SessionError,
-    StreamSpec, parse_device_topic,
+    Actuator,
+    ConfigError,
+    Device,
+    DeviceContext,
+    DeviceError,
+    ImageSample,
+    JointSample,
+    Logged,
+    Sample,
+    SessionError,
+    StreamSpec,
+    parse_device_topic,
 )
 
 _PAYLOAD = {"hand": "joints", "body": "joints", "wrist": "pose", "image": "image", "state": "joints"}

@@ -31,8 +31,9 @@ from __future__ import annotations
 
 import threading
 import time
+from collections.abc import Callable
 from dataclasses import dataclass
-from typing import Callable, Protocol
+from typing import Protocol
 
 import numpy as np
 
@@ -166,8 +167,11 @@ class SdkXArmLink:
         self.api.set_timeout(self.reply_timeout_s)
         if not self._first_report.wait(self.report_timeout_s):
             self.disconnect()
-            raise DeviceError(f"the controller's report stream (port 30003) sent nothing in {self.report_timeout_s:g} s "
-                              "after connecting", self.where)
+            raise DeviceError(
+                f"the controller's report stream (port 30003) sent nothing in {self.report_timeout_s:g} s "
+                "after connecting",
+                self.where,
+            )
 
     def joint_limits(self) -> list[tuple[float, float]] | None:
         return sdk_joint_limits(self.api)
@@ -238,7 +242,9 @@ class XArmSettings:
         if not 0 < self.max_step_rad <= 0.5:
             raise ValueError(f"max_step_rad must be in (0, 0.5], got {self.max_step_rad}")
         if not (self.max_acceleration > 0 and self.max_jerk > 0):
-            raise ValueError(f"max_acceleration and max_jerk must be > 0, got {self.max_acceleration} and {self.max_jerk}")
+            raise ValueError(
+                f"max_acceleration and max_jerk must be > 0, got {self.max_acceleration} and {self.max_jerk}"
+            )
         if not (0 < self.reply_timeout_s <= 5 and 0 < self.report_timeout_s <= 10):
             raise ValueError("reply_timeout_s must be in (0, 5] and report_timeout_s in (0, 10], got "
                              f"{self.reply_timeout_s} and {self.report_timeout_s}")

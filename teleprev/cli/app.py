@@ -11,15 +11,13 @@ import sys
 import typer
 
 from teleprev import __version__
-from teleprev.cli import INTERRUPTED, INTERRUPTED_EXIT
+from teleprev.cli import INTERRUPTED, INTERRUPTED_EXIT, collision, robot
 from teleprev.cli import calibrate as calibrate_cli
-from teleprev.cli import collision
 from teleprev.cli import devices as devices_cli
 from teleprev.cli import export as export_cli
 from teleprev.cli import import_ as import_cli
 from teleprev.cli import record as record_cli
 from teleprev.cli import replay as replay_cli
-from teleprev.cli import robot
 from teleprev.cli import rollout as rollout_cli
 from teleprev.cli import session as session_cli
 from teleprev.cli import study as study_cli
@@ -70,7 +68,9 @@ def _version(value: bool) -> None:
 
 @app.callback()
 def _root(
-    version: bool = typer.Option(False, "--version", "-V", callback=_version, is_eager=True, help="Print the version and exit."),
+    version: bool = typer.Option(
+        False, "--version", "-V", callback=_version, is_eager=True, help="Print the version and exit."
+    ),
 ) -> None:
     """teleprev: teleoperation with preview for robot-learning data collection."""
 
@@ -96,7 +96,9 @@ def foxglove_port_default(argv: list[str]) -> list[str]:
     out = []
     for k, arg in enumerate(argv):
         if arg == "--foxglove" and not (k + 1 < len(argv) and argv[k + 1].isdigit()):
-            out.append("--foxglove=8765")  # teleprev.live.view.foxglove_view.DEFAULT_PORT (not imported: --help stays fast)
+            out.append(
+                "--foxglove=8765"
+            )  # teleprev.live.view.foxglove_view.DEFAULT_PORT (not imported: --help stays fast)
             continue
         out.append(arg)
     return out

@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 from pathlib import Path
-from typing import Optional
 
 import typer
 
@@ -17,10 +16,14 @@ STEPS = (
 
 
 def calibrate(
-    rig: Optional[Path] = typer.Argument(None, help="Rig file (TOML) whose glove and suit to read. Default: the all-simulated rig."),
+    rig: Path | None = typer.Argument(
+        None, help="Rig file (TOML) whose glove and suit to read. Default: the all-simulated rig."
+    ),
     out: Path = typer.Option(Path("calibration.toml"), "--out", "-o", help="Calibration file to write."),
     seconds: float = typer.Option(1.5, "--seconds", help="How long each pose is averaged."),
-    hold: Optional[float] = typer.Option(None, "--hold", help="Unattended: wait this long for each pose instead of asking for Enter."),
+    hold: float | None = typer.Option(
+        None, "--hold", help="Unattended: wait this long for each pose instead of asking for Enter."
+    ),
     operator: str = typer.Option("", "--operator", help="Operator name, stored in the file."),
     webxr_host: str = typer.Option("", "--webxr-host", help=WEBXR_HOST_HELP),
 ) -> None:
@@ -30,14 +33,14 @@ def calibrate(
     import numpy as np
     from rich.console import Console
 
+    from teleprev.cli.pages import announce_pages
+    from teleprev.clock import SessionClock
     from teleprev.devices.runner import DeviceRunner
     from teleprev.errors import DeviceError
     from teleprev.human.smplx import hand_pose_from_values
-    from teleprev.retarget.calibration_fit import calibrate as compute
     from teleprev.retarget.calibration import write_calibration
+    from teleprev.retarget.calibration_fit import calibrate as compute
     from teleprev.rig import load_rig
-    from teleprev.cli.pages import announce_pages
-    from teleprev.clock import SessionClock
 
     console = Console()
     _check_before_the_first_pose(out, hold, seconds)
@@ -81,15 +84,21 @@ def calibrate(
             time.sleep(seconds)
             collecting[0] = False
             if not samples["hand"] or not samples["wrist"]:
-                raise DeviceError(f"no glove or suit data arrived while holding '{pose}'; check `teleprev devices check`", str(r.path))
+                raise DeviceError(
+                    f"no glove or suit data arrived while holding '{pose}'; check `teleprev devices check`", str(r.path)
+                )
             held[pose] = {k: list(v) for k, v in samples.items()}
-            console.print(f"  [green]ok[/]: {len(held[pose]['hand'])} glove and {len(held[pose]['wrist'])} suit samples")
+            console.print(
+                f"  [green]ok[/]: {len(held[pose]['hand'])} glove and {len(held[pose]['wrist'])} suit samples"
+            )
     finally:
         for listener in context.task_listeners:
             listener("calibration:done")
         for runner in runners:
             runner.stop()
-    cal = compute(np.array(held["open"]["hand"]), np.array(held["fist"]["hand"]), np.array(held["neutral"]["wrist"]), operator)
+    cal = compute(
+        np.array(held["open"]["hand"]), np.array(held["fist"]["hand"]), np.array(held["neutral"]["wrist"]), operator
+    )
     try:
         path = write_calibration(cal, out)
     except OSError as exc:  # the folder went away or filled up since the check: the poses are not lost
@@ -103,7 +112,7 @@ def calibrate(
                   f"reference it from the rig with \\[rig] calibration = \"{path}\"")
 
 
-def _check_before_the_first_pose(out: Path, hold: Optional[float], seconds: float) -> None:
+def _check_before_the_first_pose(out: Path, hold: float | None, seconds: float) -> None:
     """What would lose the operator's three poses, refused before the first: no terminal to press Enter in,
     or an --out that cannot be written (its folder is created now)."""
     import os

@@ -45,7 +45,9 @@ def _hidden(text: str) -> tuple[int, ...]:
     try:
         sizes = tuple(int(v) for v in text.split(",") if v.strip())
     except ValueError:
-        raise typer.BadParameter(f"--hidden: expected comma-separated layer widths such as 256,256,256, got {text!r}") from None
+        raise typer.BadParameter(
+            f"--hidden: expected comma-separated layer widths such as 256,256,256, got {text!r}"
+        ) from None
     if not sizes or any(s <= 0 for s in sizes):
         raise typer.BadParameter(f"--hidden: layer widths must be positive, got {text!r}")
     return sizes
@@ -63,8 +65,12 @@ def _setup(robot: str):
 def dataset(
     out: Path = typer.Argument(..., help="Folder to write the parquet shards into (an interrupted run resumes)."),
     robot: str = ROBOT,
-    uniform: int = typer.Option(600_000, "--uniform", "-u", min=0, help="Configurations sampled uniformly in the joint limits."),
-    boundary: int = typer.Option(600_000, "--boundary", "-b", min=0, help="Configurations near the collision boundary."),
+    uniform: int = typer.Option(
+        600_000, "--uniform", "-u", min=0, help="Configurations sampled uniformly in the joint limits."
+    ),
+    boundary: int = typer.Option(
+        600_000, "--boundary", "-b", min=0, help="Configurations near the collision boundary."
+    ),
     seed: int = typer.Option(0, help="Random seed (shard k draws from (seed, k))."),
     shard_size: int = typer.Option(20_000, min=100, help="Configurations per shard file."),
     bisection_steps: int = typer.Option(8, min=1, max=30, help="Bisection steps towards the boundary."),
@@ -78,7 +84,14 @@ def dataset(
     import time
 
     from rich.console import Console
-    from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn, TimeRemainingColumn
+    from rich.progress import (
+        BarColumn,
+        MofNCompleteColumn,
+        Progress,
+        TextColumn,
+        TimeElapsedColumn,
+        TimeRemainingColumn,
+    )
 
     from teleprev.noncollision.dataset import DatasetSettings, generate, pending_shards, prepare
     from teleprev.noncollision.sampling import BoundarySettings
@@ -89,13 +102,24 @@ def dataset(
         raise typer.BadParameter(f"--jitter-min {jitter_min} is larger than --jitter-max {jitter_max}")
     model, checker = _setup(robot)
     settings = DatasetSettings(
-        robot=robot, urdf_sha256=model.urdf_sha256, uniform=uniform, boundary=boundary, seed=seed, shard_size=shard_size,
+        robot=robot,
+        urdf_sha256=model.urdf_sha256,
+        uniform=uniform,
+        boundary=boundary,
+        seed=seed,
+        shard_size=shard_size,
         sampling=BoundarySettings(bisection_steps, jitter_per_pair, jitter_min, jitter_max),
     )
     console = Console()
     workers = workers or os.cpu_count() or 1
     t0 = time.perf_counter()
-    columns = (TextColumn("{task.description}"), BarColumn(), MofNCompleteColumn(), TimeElapsedColumn(), TimeRemainingColumn())
+    columns = (
+        TextColumn("{task.description}"),
+        BarColumn(),
+        MofNCompleteColumn(),
+        TimeElapsedColumn(),
+        TimeRemainingColumn(),
+    )
     with Progress(*columns, console=console) as progress:
         prepare(out, settings)
         todo = pending_shards(out, settings)
@@ -112,20 +136,35 @@ def dataset(
 def train_cpn_cmd(
     ctx: typer.Context,
     data: Path = typer.Argument(..., help="A dataset folder from `teleprev collision dataset`."),
-    out: Path = typer.Option(Path("models/cpn_leap_hand.safetensors"), "--out", "-o", help="Model file (a model card .md is written beside it)."),
+    out: Path = typer.Option(
+        Path("models/cpn_leap_hand.safetensors"),
+        "--out",
+        "-o",
+        help="Model file (a model card .md is written beside it).",
+    ),
     robot: str = ROBOT,
-    architecture: str = typer.Option("grouped", help="grouped (one MLP per pair of fingers, noisy-OR per link) or plain (one MLP)."),
+    architecture: str = typer.Option(
+        "grouped", help="grouped (one MLP per pair of fingers, noisy-OR per link) or plain (one MLP)."
+    ),
     hidden: str = typer.Option("128,128,128", help="Hidden layer widths (of each group's MLP)."),
     activation: str = typer.Option("relu", help="relu (fastest at runtime), silu or tanh."),
     epochs: int = typer.Option(24, min=1),
     batch_size: int = typer.Option(1024, min=1),
     lr: float = typer.Option(2e-3, min=0.0, help="Peak learning rate (one-cycle schedule)."),
-    pos_weight: float = typer.Option(2.0, min=0.0, help="Extra weight on colliding labels, times each link's negative/positive ratio."),
-    pair_weight: float = typer.Option(1.0, min=0.0, help="Grouped: weight of the auxiliary per-pair BCE (0: link labels only)."),
-    target_recall: float = typer.Option(0.998, min=0.0, max=1.0, help="Recall of colliding link labels the threshold must reach on validation."),
+    pos_weight: float = typer.Option(
+        2.0, min=0.0, help="Extra weight on colliding labels, times each link's negative/positive ratio."
+    ),
+    pair_weight: float = typer.Option(
+        1.0, min=0.0, help="Grouped: weight of the auxiliary per-pair BCE (0: link labels only)."
+    ),
+    target_recall: float = typer.Option(
+        0.998, min=0.0, max=1.0, help="Recall of colliding link labels the threshold must reach on validation."
+    ),
     seed: int = typer.Option(0),
     device: str = DEVICE,
-    heldout_uniform: int = typer.Option(50_000, min=0, help="Fresh uniform samples for the model card's figures (0: skip)."),
+    heldout_uniform: int = typer.Option(
+        50_000, min=0, help="Fresh uniform samples for the model card's figures (0: skip)."
+    ),
     heldout_boundary: int = typer.Option(20_000, min=0, help="Fresh boundary samples for the model card's figures."),
 ) -> None:
     """Train the Self-Collision Prediction Network (per-link BCE, Adam) and pick its threshold for recall."""
@@ -140,12 +179,25 @@ def train_cpn_cmd(
         raise typer.BadParameter("--architecture must be grouped or plain")
     model, checker = _setup(robot)
     console = Console()
-    settings = CPNSettings(architecture=architecture, hidden=_hidden(hidden), activation=activation, epochs=epochs, batch_size=batch_size, lr=lr,
-                           pos_weight=pos_weight, pair_weight=pair_weight, target_recall=target_recall, seed=seed, device=device)
+    settings = CPNSettings(
+        architecture=architecture,
+        hidden=_hidden(hidden),
+        activation=activation,
+        epochs=epochs,
+        batch_size=batch_size,
+        lr=lr,
+        pos_weight=pos_weight,
+        pair_weight=pair_weight,
+        target_recall=target_recall,
+        seed=seed,
+        device=device,
+    )
 
     def log(e) -> None:
-        console.print(f"epoch {e.epoch:3d}/{epochs}  train {e.train_loss:.4f}  val {e.val_loss:.4f}  "
-                      f"worst-link AUC {e.val_auc_min_link:.4f}  recall@0.5 {e.val_recall_at_half:.4f}  {e.seconds:.1f} s")
+        console.print(
+            f"epoch {e.epoch:3d}/{epochs}  train {e.train_loss:.4f}  val {e.val_loss:.4f}  "
+            f"worst-link AUC {e.val_auc_min_link:.4f}  recall@0.5 {e.val_recall_at_half:.4f}  {e.seconds:.1f} s"
+        )
 
     result = train_cpn(data, model, checker, settings, log)
     _save_with_card(ctx, "cpn", out, result, model, checker, data, heldout_uniform, heldout_boundary, console)
@@ -154,9 +206,16 @@ def train_cpn_cmd(
 @app.command("train-ccn")
 def train_ccn_cmd(
     ctx: typer.Context,
-    data: Path = typer.Argument(..., help="A dataset folder from `teleprev collision dataset` (its colliding configurations are the inputs)."),
+    data: Path = typer.Argument(
+        ..., help="A dataset folder from `teleprev collision dataset` (its colliding configurations are the inputs)."
+    ),
     cpn: Path = typer.Option(Path("models/cpn_leap_hand.safetensors"), "--cpn", help="The trained CPN (kept frozen)."),
-    out: Path = typer.Option(Path("models/ccn_leap_hand.safetensors"), "--out", "-o", help="Model file (a model card .md is written beside it)."),
+    out: Path = typer.Option(
+        Path("models/ccn_leap_hand.safetensors"),
+        "--out",
+        "-o",
+        help="Model file (a model card .md is written beside it).",
+    ),
     robot: str = ROBOT,
     alpha: float = typer.Option(1.0, min=0.0, help="Weight of the MSE term (equation 8)."),
     beta: float = typer.Option(1.0, min=0.0, help="Weight of the collision-probability term (equation 8)."),
@@ -169,8 +228,12 @@ def train_ccn_cmd(
     max_train: int = typer.Option(0, min=0, help="Use at most this many training configurations (0: all)."),
     seed: int = typer.Option(0),
     device: str = DEVICE,
-    heldout_uniform: int = typer.Option(20_000, min=0, help="Fresh colliding uniform samples for the model card's figures."),
-    heldout_trajectory: int = typer.Option(5_000, min=0, help="Fresh colliding retargeted-trajectory frames for the card."),
+    heldout_uniform: int = typer.Option(
+        20_000, min=0, help="Fresh colliding uniform samples for the model card's figures."
+    ),
+    heldout_trajectory: int = typer.Option(
+        5_000, min=0, help="Fresh colliding retargeted-trajectory frames for the card."
+    ),
 ) -> None:
     """Train the Invalid Configuration Correction Network against the frozen CPN."""
     from rich.console import Console
@@ -188,14 +251,18 @@ def train_ccn_cmd(
     console.print(f"alpha = {alpha:g}, beta = {beta:g}")
 
     def log(e) -> None:
-        console.print(f"epoch {e.epoch:3d}/{epochs}  loss {e.loss:.5f}  mse {e.mse:.5f}  p(collision) {e.collision:.4f}  "
-                      f"val valid (exact) {e.val_valid_frac:.4f}  deviation {e.val_mean_dev_rad:.4f} rad  {e.seconds:.1f} s")
+        console.print(
+            f"epoch {e.epoch:3d}/{epochs}  loss {e.loss:.5f}  mse {e.mse:.5f}  p(collision) {e.collision:.4f}  "
+            f"val valid (exact) {e.val_valid_frac:.4f}  deviation {e.val_mean_dev_rad:.4f} rad  {e.seconds:.1f} s"
+        )
 
     result = train_ccn(data, cpn, model, checker, settings, log)
     grid_md = None
     if grid is not None and grid.with_suffix(".md").is_file():
         grid_md = grid.with_suffix(".md").read_text().split("\n\n", 1)[-1].strip()
-    _save_with_card(ctx, "ccn", out, result, model, checker, data, heldout_uniform, heldout_trajectory, console, grid_md)
+    _save_with_card(
+        ctx, "ccn", out, result, model, checker, data, heldout_uniform, heldout_trajectory, console, grid_md
+    )
 
 
 def _save_with_card(ctx, kind, out, result, model, checker, data, n_a, n_b, console, grid_md=None) -> None:
@@ -257,10 +324,15 @@ def grid_search_cmd(
     a, b = _floats(alphas, "--alphas"), _floats(betas, "--betas")
     model, checker = _setup(robot)
     console = Console()
-    settings = CCNSettings(hidden=_hidden(hidden), epochs=epochs, max_train=max_train, val_exact=val_exact, seed=seed, device=device)
+    settings = CCNSettings(
+        hidden=_hidden(hidden), epochs=epochs, max_train=max_train, val_exact=val_exact, seed=seed, device=device
+    )
 
     def log(p) -> None:
-        console.print(f"alpha {p.alpha:<6g} beta {p.beta:<6g}  valid {p.valid_frac:.4f}  deviation {p.mean_dev_rad:.4f} rad  ({p.seconds:.0f} s)")
+        console.print(
+            f"alpha {p.alpha:<6g} beta {p.beta:<6g}  valid {p.valid_frac:.4f}  deviation {p.mean_dev_rad:.4f} rad  "
+            f"({p.seconds:.0f} s)"
+        )
 
     result = grid_search(data, cpn, model, checker, a, b, settings, min_valid, log)
     js, md = write_grid(result, out)
@@ -268,6 +340,12 @@ def grid_search_cmd(
     for col in ("alpha", "beta", "valid (exact)", "mean deviation (rad)", ""):
         table.add_column(col, justify="right")
     for p in result.points:
-        table.add_row(f"{p.alpha:g}", f"{p.beta:g}", f"{p.valid_frac:.4f}", f"{p.mean_dev_rad:.4f}", "chosen" if p == result.chosen else "")
+        table.add_row(
+            f"{p.alpha:g}",
+            f"{p.beta:g}",
+            f"{p.valid_frac:.4f}",
+            f"{p.mean_dev_rad:.4f}",
+            "chosen" if p == result.chosen else "",
+        )
     console.print(table)
     console.print(f"chosen alpha = {result.chosen.alpha:g}, beta = {result.chosen.beta:g}; wrote {js} and {md}")

@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 from pathlib import Path
-from typing import Optional
 
 import typer
 
@@ -43,7 +42,7 @@ def list_plugins() -> None:
 
 @app.command("check")
 def check(
-    rig: Optional[Path] = typer.Argument(None, help="Rig file (TOML); default: the all-sim rig."),
+    rig: Path | None = typer.Argument(None, help="Rig file (TOML); default: the all-sim rig."),
     seconds: float = typer.Option(3.0, "--seconds", "-s", min=0.1, help="How long to read from every device."),
     webxr_host: str = typer.Option("", "--webxr-host", help=WEBXR_HOST_HELP),
 ) -> None:
@@ -56,11 +55,11 @@ def check(
     from rich.table import Table
 
     from teleprev import topics
+    from teleprev.cli.pages import announce_pages
     from teleprev.clock import SessionClock
     from teleprev.devices import DeviceRunner
     from teleprev.errors import TeleprevError
     from teleprev.rig import default_rig_path, load_rig
-    from teleprev.cli.pages import announce_pages
 
     console = Console()
     loaded = load_rig(rig or default_rig_path())
@@ -139,7 +138,7 @@ def emulate(
                                          "Hand's Dynamixel bus on a pseudo-terminal)"),
     host: str = typer.Option("127.0.0.1", help="xarm: the loopback address to serve on (127.x.y.z)."),
     dof: int = typer.Option(6, help="xarm: 6 or 7 joints."),
-    port: Optional[Path] = typer.Option(None, help="leap: the path the bus appears at (default: a temporary one)."),
+    port: Path | None = typer.Option(None, help="leap: the path the bus appears at (default: a temporary one)."),
     seconds: float = typer.Option(0.0, min=0.0, help="Stop after this long (0: at Ctrl-C)."),
 ) -> None:
     """Run an emulated xArm controller or LEAP Hand bus that the real SDKs drive, and print the rig keys that

@@ -7,7 +7,7 @@ the command.
 from __future__ import annotations
 
 from pathlib import Path
-from typing import List, Literal, Optional
+from typing import Literal
 
 import typer
 
@@ -18,48 +18,84 @@ Codec = Literal["h264", "hevc", "av1"]
 
 
 def export(
-    sessions: List[str] = typer.Argument(..., help="Session files (.mcap), folders of them or globs ('sessions/*.mcap'), "
-                                         "exported in this order.", show_default=False),
+    sessions: list[str] = typer.Argument(
+        ...,
+        help="Session files (.mcap), folders of them or globs ('sessions/*.mcap'), exported in this order.",
+        show_default=False,
+    ),
     repo_id: str = typer.Option(..., "--repo-id", help="Dataset name, e.g. lab/pick_place.", show_default=False),
-    root: Optional[Path] = typer.Option(None, "--root", help="Dataset folder (default: ./datasets/out/<repo-id>).",
-                                        show_default=False),
-    fps: int = typer.Option(0, "--fps", min=0, help="Frames per second (default: the recipe's, else the reference camera's rate).",
-                            show_default=False),
-    recipe: str = typer.Option("default", "--recipe", help="Recipe file, or the name of one in datasets/recipes/ (default, with_glove)."),
+    root: Path | None = typer.Option(
+        None, "--root", help="Dataset folder (default: ./datasets/out/<repo-id>).", show_default=False
+    ),
+    fps: int = typer.Option(
+        0,
+        "--fps",
+        min=0,
+        help="Frames per second (default: the recipe's, else the reference camera's rate).",
+        show_default=False,
+    ),
+    recipe: str = typer.Option(
+        "default", "--recipe", help="Recipe file, or the name of one in datasets/recipes/ (default, with_glove)."
+    ),
     append: bool = typer.Option(False, "--append", help="Add the sessions to an existing dataset (LeRobot's resume)."),
-    include_discarded: bool = typer.Option(False, "--include-discarded", help="Export episodes the operator discarded too."),
+    include_discarded: bool = typer.Option(
+        False, "--include-discarded", help="Export episodes the operator discarded too."
+    ),
     workers: int = typer.Option(1, "--workers", "-j", help="Export sessions in this many processes, then merge them."),
-    ray: Optional[str] = typer.Option(None, "--ray", metavar="[ADDRESS]",
-                                      help="Run the sessions on Ray: alone, start a local instance (with -j CPUs, default "
-                                           "all); auto, HOST:PORT or ray://HOST:PORT: join that cluster. Needs `uv sync "
-                                           "--extra ray`.", show_default=False),
-    codec: Optional[Codec] = typer.Option(None, "--codec", help="Video codec (default: the recipe's, h264).",
-                                          show_default=False),
-    crf: Optional[int] = typer.Option(None, "--crf", help="Video quality: lower is better and larger (h264 default 23).",
-                                      show_default=False),
-    preset: Optional[str] = typer.Option(None, "--preset", help="Encoder preset (x264: ultrafast..veryslow; av1: 0..13).",
-                                         show_default=False),
-    gop: Optional[int] = typer.Option(None, "--gop", help="Keyframe interval (default 2: fast random access in training).",
-                                      show_default=False),
-    streaming: Optional[bool] = typer.Option(None, "--streaming/--no-streaming",
-                                             help="Encode while frames arrive (default), or write PNGs and encode after.",
-                                             show_default=False),
-    encoder: Optional[str] = typer.Option(None, "--encoder", help="Streaming encoder: teleprev (fast, default) or lerobot.",
-                                          show_default=False),
-    on_gap: Optional[str] = typer.Option(None, "--on-gap", help="A stream gap inside an episode: split it, drop it, or fail.",
-                                         show_default=False),
-    max_gap_ms: Optional[float] = typer.Option(None, "--max-gap-ms", help="Longest silence of a stream that is not a gap.",
-                                               show_default=False),
-    only: Optional[str] = typer.Option(None, "--only", help="Only episodes marked success (y), failure (f), or unmarked.",
-                                       show_default=False),
-    task: Optional[str] = typer.Option(None, "--task", help="Only episodes of this task (its id or instruction).",
-                                       show_default=False),
-    participant: Optional[str] = typer.Option(None, "--participant", help="Only sessions of this study participant.",
-                                              show_default=False),
-    condition: Optional[str] = typer.Option(None, "--condition", help="Only sessions of this study condition.",
-                                            show_default=False),
-    holdout: Optional[float] = typer.Option(None, "--holdout", help="Hold this fraction out as a second dataset, "
-                                            "<repo-id>_holdout, beside the first.", show_default=False),
+    ray: str | None = typer.Option(
+        None,
+        "--ray",
+        metavar="[ADDRESS]",
+        help="Run the sessions on Ray: alone, start a local instance (with -j CPUs, default "
+        "all); auto, HOST:PORT or ray://HOST:PORT: join that cluster. Needs `uv sync "
+        "--extra ray`.",
+        show_default=False,
+    ),
+    codec: Codec | None = typer.Option(
+        None, "--codec", help="Video codec (default: the recipe's, h264).", show_default=False
+    ),
+    crf: int | None = typer.Option(
+        None, "--crf", help="Video quality: lower is better and larger (h264 default 23).", show_default=False
+    ),
+    preset: str | None = typer.Option(
+        None, "--preset", help="Encoder preset (x264: ultrafast..veryslow; av1: 0..13).", show_default=False
+    ),
+    gop: int | None = typer.Option(
+        None, "--gop", help="Keyframe interval (default 2: fast random access in training).", show_default=False
+    ),
+    streaming: bool | None = typer.Option(
+        None,
+        "--streaming/--no-streaming",
+        help="Encode while frames arrive (default), or write PNGs and encode after.",
+        show_default=False,
+    ),
+    encoder: str | None = typer.Option(
+        None, "--encoder", help="Streaming encoder: teleprev (fast, default) or lerobot.", show_default=False
+    ),
+    on_gap: str | None = typer.Option(
+        None, "--on-gap", help="A stream gap inside an episode: split it, drop it, or fail.", show_default=False
+    ),
+    max_gap_ms: float | None = typer.Option(
+        None, "--max-gap-ms", help="Longest silence of a stream that is not a gap.", show_default=False
+    ),
+    only: str | None = typer.Option(
+        None, "--only", help="Only episodes marked success (y), failure (f), or unmarked.", show_default=False
+    ),
+    task: str | None = typer.Option(
+        None, "--task", help="Only episodes of this task (its id or instruction).", show_default=False
+    ),
+    participant: str | None = typer.Option(
+        None, "--participant", help="Only sessions of this study participant.", show_default=False
+    ),
+    condition: str | None = typer.Option(
+        None, "--condition", help="Only sessions of this study condition.", show_default=False
+    ),
+    holdout: float | None = typer.Option(
+        None,
+        "--holdout",
+        help="Hold this fraction out as a second dataset, <repo-id>_holdout, beside the first.",
+        show_default=False,
+    ),
     split_by: str = typer.Option("session", "--split-by", help="Hold out whole sessions, or single episodes."),
     seed: int = typer.Option(0, "--seed", help="Seed of the held-out draw (the same seed gives the same split)."),
     as_json: bool = typer.Option(False, "--json", help="Print the summary as one JSON object instead of a table."),
@@ -72,7 +108,8 @@ def export(
     from teleprev.corpus.sessions import resolve_sessions
     from teleprev.errors import ConfigError
     from teleprev.export.recipe import load_recipe
-    from teleprev.export.run import ExportOptions, export as run_export, with_video
+    from teleprev.export.run import ExportOptions, with_video
+    from teleprev.export.run import export as run_export
     from teleprev.export.selection import SPLITS, Selection, plan_exports
 
     if workers < 1:
@@ -108,7 +145,9 @@ def export(
     if as_json:  # one JSON object, the held-out dataset's summary inside it
         import json
 
-        typer.echo(json.dumps({**_as_json(reports[0]), **({"holdout": _as_json(reports[1])} if len(reports) > 1 else {})}))
+        typer.echo(
+            json.dumps({**_as_json(reports[0]), **({"holdout": _as_json(reports[1])} if len(reports) > 1 else {})})
+        )
     if any(r.failed for r in reports):
         raise typer.Exit(1)  # the rest is in the dataset; a script must still notice
 
@@ -117,7 +156,14 @@ class _Bars:
     """Rich progress bars: one per session (episodes) and one for the episode being written (frames)."""
 
     def __init__(self, console):
-        from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn, TimeRemainingColumn
+        from rich.progress import (
+            BarColumn,
+            MofNCompleteColumn,
+            Progress,
+            TextColumn,
+            TimeElapsedColumn,
+            TimeRemainingColumn,
+        )
 
         self.progress = Progress(TextColumn("{task.description}"), BarColumn(), MofNCompleteColumn(),
                                  TimeElapsedColumn(), TimeRemainingColumn(), console=console, transient=False)
@@ -164,22 +210,39 @@ class _Bars:
 
 def _as_json(report) -> dict:
     return {
-        "root": str(report.root), "repo_id": report.repo_id, "fps": report.fps,
-        "episodes": report.episodes, "frames": report.frames, "duration_s": round(report.duration_s, 3),
-        "total_episodes": report.total_episodes, "total_frames": report.total_frames,
-        "wall_s": round(report.wall_s, 3), "startup_s": round(report.startup_s, 3), "realtime_x": round(report.realtime_x, 2),
-        "max_align_err_ms": round(report.align_err_ms, 3), "size_bytes": report.size_bytes, "failed": report.failed,
+        "root": str(report.root),
+        "repo_id": report.repo_id,
+        "fps": report.fps,
+        "episodes": report.episodes,
+        "frames": report.frames,
+        "duration_s": round(report.duration_s, 3),
+        "total_episodes": report.total_episodes,
+        "total_frames": report.total_frames,
+        "wall_s": round(report.wall_s, 3),
+        "startup_s": round(report.startup_s, 3),
+        "realtime_x": round(report.realtime_x, 2),
+        "max_align_err_ms": round(report.align_err_ms, 3),
+        "size_bytes": report.size_bytes,
+        "failed": report.failed,
         "skipped": report.skipped,
         "cleaned": report.cleaned,
         "selection": report.selection,
-        "sessions": [{
-            "session": s.session, "source_episodes": s.source_episodes, "episodes": s.lerobot_episodes,
-            "frames": s.frames, "duration_s": round(s.duration_s, 3), "notes": s.notes,
-            "dropped": {e.index: e.dropped for e in s.episodes if e.dropped},
-            "split": {e.index: e.gaps for e in s.episodes if e.pieces > 1},
-            "align_err_ms": round(s.align_err_ms, 3), "image_err_ms": round(s.image_err_ms, 3),
-            "held_frames": sum(e.held_frames for e in s.episodes),
-        } for s in report.sessions],
+        "sessions": [
+            {
+                "session": s.session,
+                "source_episodes": s.source_episodes,
+                "episodes": s.lerobot_episodes,
+                "frames": s.frames,
+                "duration_s": round(s.duration_s, 3),
+                "notes": s.notes,
+                "dropped": {e.index: e.dropped for e in s.episodes if e.dropped},
+                "split": {e.index: e.gaps for e in s.episodes if e.pieces > 1},
+                "align_err_ms": round(s.align_err_ms, 3),
+                "image_err_ms": round(s.image_err_ms, 3),
+                "held_frames": sum(e.held_frames for e in s.episodes),
+            }
+            for s in report.sessions
+        ],
     }
 
 

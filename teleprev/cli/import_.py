@@ -6,7 +6,6 @@ Only typer and the standard library at import time (see cli/export.py)."""
 from __future__ import annotations
 
 from pathlib import Path
-from typing import List, Optional
 
 import typer
 
@@ -14,18 +13,34 @@ from teleprev.cli.export import DEFAULT_ROOT, Codec, print_report, run_stoppable
 
 
 def import_(
-    files: List[Path] = typer.Argument(..., help="ROS 2 .mcap files, rosbag2 folders (sqlite3 or mcap) or Foxglove-schema "
-                                       ".mcap files, imported in this order.", show_default=False),
-    recipe: str = typer.Option(..., "--recipe", help="Import recipe: which topics become which features, how episodes "
-                               "are cut: a file, or the name of one in datasets/imports/ (ros2_arm).", show_default=False),
+    files: list[Path] = typer.Argument(
+        ...,
+        help="ROS 2 .mcap files, rosbag2 folders (sqlite3 or mcap) or Foxglove-schema "
+        ".mcap files, imported in this order.",
+        show_default=False,
+    ),
+    recipe: str = typer.Option(
+        ...,
+        "--recipe",
+        help="Import recipe: which topics become which features, how episodes "
+        "are cut: a file, or the name of one in datasets/imports/ (ros2_arm).",
+        show_default=False,
+    ),
     repo_id: str = typer.Option(..., "--repo-id", help="Dataset name, e.g. lab/pick_place.", show_default=False),
-    root: Optional[Path] = typer.Option(None, "--root", help="Dataset folder (default: ./datasets/out/<repo-id>).",
-                                        show_default=False),
-    fps: int = typer.Option(0, "--fps", min=0, help="Frames per second (default: the recipe's, else the reference camera's rate).",
-                            show_default=False),
+    root: Path | None = typer.Option(
+        None, "--root", help="Dataset folder (default: ./datasets/out/<repo-id>).", show_default=False
+    ),
+    fps: int = typer.Option(
+        0,
+        "--fps",
+        min=0,
+        help="Frames per second (default: the recipe's, else the reference camera's rate).",
+        show_default=False,
+    ),
     append: bool = typer.Option(False, "--append", help="Add the files to an existing dataset."),
-    codec: Optional[Codec] = typer.Option(None, "--codec", help="Video codec (default: the recipe's).",
-                                          show_default=False),
+    codec: Codec | None = typer.Option(
+        None, "--codec", help="Video codec (default: the recipe's).", show_default=False
+    ),
     as_json: bool = typer.Option(False, "--json", help="Print the summary as one JSON object instead of a table."),
 ) -> None:
     """Import robot recordings (ROS 2 MCAP, rosbag2, Foxglove MCAP) into a LeRobot dataset."""

@@ -65,7 +65,11 @@ def _writable(folder: Path, where: str) -> None:
     try:
         fd, probe = tempfile.mkstemp(prefix=".teleprev-probe-", dir=folder)
     except OSError as exc:
-        reason = "is read-only" if exc.errno in (errno.EROFS, errno.EACCES, errno.EPERM) else (exc.strerror or str(exc)).lower()
+        reason = (
+            "is read-only"
+            if exc.errno in (errno.EROFS, errno.EACCES, errno.EPERM)
+            else (exc.strerror or str(exc)).lower()
+        )
         raise ConfigError(f"cannot write in {folder}: it {reason}" if reason == "is read-only"
                           else f"cannot write in {folder}: {reason}", where) from None
     os.close(fd)

@@ -4,7 +4,7 @@ has started serving it."""
 from __future__ import annotations
 
 import time
-from typing import Iterable
+from collections.abc import Iterable
 
 from teleprev.devices import Device
 
@@ -31,6 +31,8 @@ def announce_pages(console, devices: Iterable[Device], wait_s: float = 5.0) -> l
             console.print(f"XR page: open [bold]{url}[/] in the headset's browser", highlight=False, soft_wrap=True)
             if url.startswith("https://127.0.0.1:"):
                 port = url.split(":")[2].split("/")[0]
-                console.print(f"  (a Quest on USB reaches it after `adb reverse tcp:{port} tcp:{port}`)", highlight=False)
+                console.print(
+                    f"  (a Quest on USB reaches it after `adb reverse tcp:{port} tcp:{port}`)", highlight=False
+                )
             segno.make(url, error="l").terminal(out=console.file, compact=True)
     return printed

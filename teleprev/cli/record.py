@@ -3,65 +3,106 @@
 from __future__ import annotations
 
 from pathlib import Path
-from typing import Literal, Optional
+from typing import Literal
 
 import typer
 
 WEBXR_HOST_HELP = ("Where the XR page (webxr.* devices) listens, over the rig's host: 0.0.0.0 opens it to the "
                    "network, and its URL then carries a pairing token.")
-TASKS_HELP = "Task label of the episodes (the sim operator performs it): pick_place, hang, pour, box_rotation, cup_stack."
+TASKS_HELP = (
+    "Task label of the episodes (the sim operator performs it): pick_place, hang, pour, box_rotation, cup_stack."
+)
 View = Literal["front", "side", "top"]  # the robot views of the terminal preview
 
 
 def record(
-    rig: Optional[Path] = typer.Argument(None, help="Rig file (TOML). Default: the all-simulated rig."),
-    out: Optional[Path] = typer.Option(None, "--out", "-o", help="Session file to write (default: sessions/<time>_<task>.mcap)."),
-    task: str = typer.Option("", "--task", "-t", help=TASKS_HELP),
-    task_text: str = typer.Option("", "--task-text", help="The task as an instruction in words, e.g. 'pick up the cube and "
-                                  "place it in the bowl' (default: the rig's \\[tasks] entry); exports give it to the "
-                                  "policy, the id stays in the session."),
-    duration: Optional[float] = typer.Option(None, "--duration", help="Run unattended for this many seconds, then stop."),
-    episodes: int = typer.Option(1, "--episodes", min=1, help="With --duration: split it into this many episodes; "
-                                 "with --episode-time: record this many timed episodes."),
-    episode_time: Optional[float] = typer.Option(
-        None, "--episode-time", help="Timed episodes of this many seconds each (instead of --duration), with "
-                                     "--reset-time between them; keys n, d, a still work."),
-    reset_time: Optional[float] = typer.Option(
-        None, "--reset-time", help="With --episode-time: seconds of reset between episodes, the robot in preview (default 0)."),
-    marks: Optional[str] = typer.Option(
-        None, "--marks", help="With --episode-time: mark the episodes success (y), failure (f) or not (-) in turn, "
-                              "one character per episode, cycling (e.g. yf-)."),
-    cues: bool = typer.Option(True, "--cues/--no-cues", help="With --episode-time: the terminal bell, and spoken "
-                                                             "words where spd-say, espeak or say is installed, at each boundary."),
-    engage_after: Optional[float] = typer.Option(
-        None, "--engage-after", help="Unattended: switch to execute this many seconds into each episode (default: stay in preview)."
+    rig: Path | None = typer.Argument(None, help="Rig file (TOML). Default: the all-simulated rig."),
+    out: Path | None = typer.Option(
+        None, "--out", "-o", help="Session file to write (default: sessions/<time>_<task>.mcap)."
     ),
-    preview: bool = typer.Option(True, "--preview/--no-preview", help="Show the terminal preview (--no-preview runs headless)."),
+    task: str = typer.Option("", "--task", "-t", help=TASKS_HELP),
+    task_text: str = typer.Option(
+        "",
+        "--task-text",
+        help="The task as an instruction in words, e.g. 'pick up the cube and "
+        "place it in the bowl' (default: the rig's \\[tasks] entry); exports give it to the "
+        "policy, the id stays in the session.",
+    ),
+    duration: float | None = typer.Option(None, "--duration", help="Run unattended for this many seconds, then stop."),
+    episodes: int = typer.Option(
+        1,
+        "--episodes",
+        min=1,
+        help="With --duration: split it into this many episodes; with --episode-time: record this many timed episodes.",
+    ),
+    episode_time: float | None = typer.Option(
+        None,
+        "--episode-time",
+        help="Timed episodes of this many seconds each (instead of --duration), with "
+        "--reset-time between them; keys n, d, a still work.",
+    ),
+    reset_time: float | None = typer.Option(
+        None,
+        "--reset-time",
+        help="With --episode-time: seconds of reset between episodes, the robot in preview (default 0).",
+    ),
+    marks: str | None = typer.Option(
+        None,
+        "--marks",
+        help="With --episode-time: mark the episodes success (y), failure (f) or not (-) in turn, "
+        "one character per episode, cycling (e.g. yf-).",
+    ),
+    cues: bool = typer.Option(
+        True,
+        "--cues/--no-cues",
+        help="With --episode-time: the terminal bell, and spoken "
+        "words where spd-say, espeak or say is installed, at each boundary.",
+    ),
+    engage_after: float | None = typer.Option(
+        None,
+        "--engage-after",
+        help="Unattended: switch to execute this many seconds into each episode (default: stay in preview).",
+    ),
+    preview: bool = typer.Option(
+        True, "--preview/--no-preview", help="Show the terminal preview (--no-preview runs headless)."
+    ),
     view: View = typer.Option("side", "--view", help="Robot view."),
     fps: float = typer.Option(25.0, "--fps", help="Terminal preview redraws per second."),
-    models: Optional[Path] = typer.Option(None, "--models", help="Folder with CPN/CCN weights (default: the rig's, else models/)."),
+    models: Path | None = typer.Option(
+        None, "--models", help="Folder with CPN/CCN weights (default: the rig's, else models/)."
+    ),
     operator: str = typer.Option("", "--operator", help="Operator name, stored with the session."),
     participant: str = typer.Option("", "--participant", help="User-study participant id."),
     condition: str = typer.Option("", "--condition", help="User-study condition, e.g. 'w/ preview'."),
     practice: bool = typer.Option(False, "--practice", help="Mark the session as practice; press r when ready."),
     connect_timeout: float = typer.Option(
-        5.0, "--connect-timeout", help="Unattended or headless: fail unless every device has sent something within this many seconds."),
+        5.0,
+        "--connect-timeout",
+        help="Unattended or headless: fail unless every device has sent something within this many seconds.",
+    ),
     webxr_host: str = typer.Option("", "--webxr-host", help=WEBXR_HOST_HELP),
-    foxglove: Optional[int] = typer.Option(None, "--foxglove", metavar="[PORT]", min=0, max=65535,
-                                           help="Also show the session live in Foxglove: a WebSocket server on "
-                                           "127.0.0.1:PORT (default 8765) with the file's topics.", show_default=False),
+    foxglove: int | None = typer.Option(
+        None,
+        "--foxglove",
+        metavar="[PORT]",
+        min=0,
+        max=65535,
+        help="Also show the session live in Foxglove: a WebSocket server on "
+        "127.0.0.1:PORT (default 8765) with the file's topics.",
+        show_default=False,
+    ),
 ) -> None:
     """Record a session: devices, pipeline, preview and execute, episodes, all into one MCAP file."""
     from rich.console import Console
     from rich.markup import escape
 
-    from teleprev.cli.outputs import check_output
-    from teleprev.cli.signals import StopSignals
-    from teleprev.live.record.session import RecordOptions, LiveSession, default_session_path
-    from teleprev.cli.pages import announce_pages
-    from teleprev.live.record.cues import Cues
-    from teleprev.live.record.run import run_interactive, run_script, run_timed, print_summary
     from teleprev import topics
+    from teleprev.cli.outputs import check_output
+    from teleprev.cli.pages import announce_pages
+    from teleprev.cli.signals import StopSignals
+    from teleprev.live.record.cues import Cues
+    from teleprev.live.record.run import print_summary, run_interactive, run_script, run_timed
+    from teleprev.live.record.session import LiveSession, RecordOptions, default_session_path
 
     plan = check_options(rig, task, duration, engage_after, connect_timeout, episodes, episode_time, reset_time, marks)
     check_fps(fps)
@@ -141,9 +182,9 @@ def never_engaged(loop, engage_after: float | None) -> str:
     return f"never engaged (--engage-after {engage_after:g} s): {why}; the session is recorded, all in preview"
 
 
-def check_options(rig: Optional[Path], task: str, duration: Optional[float], engage_after: Optional[float],
-                  connect_timeout: float, episodes: int = 1, episode_time: Optional[float] = None,
-                  reset_time: Optional[float] = None, marks: Optional[str] = None):
+def check_options(rig: Path | None, task: str, duration: float | None, engage_after: float | None,
+                  connect_timeout: float, episodes: int = 1, episode_time: float | None = None,
+                  reset_time: float | None = None, marks: str | None = None):
     """The values no device has to be opened to refuse: one line each (teleprev.errors.ConfigError).
     Returns the plan of timed episodes (--episode-time), or None."""
     from teleprev.errors import ConfigError

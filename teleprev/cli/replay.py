@@ -3,7 +3,7 @@
 from __future__ import annotations
 
 from pathlib import Path
-from typing import Literal, Optional
+from typing import Literal
 
 import typer
 
@@ -11,22 +11,51 @@ from teleprev.cli.record import View
 
 
 def replay(
-    session: Path = typer.Argument(..., help="Session file (.mcap), or a LeRobot dataset folder (its `action` column; "
-                                   "with --episode and --config)."),
-    episode: Optional[int] = typer.Option(None, "--episode", "-e", help="Play one episode (default: the whole session)."),
-    speed: float = typer.Option(1.0, "--speed", "-x", min=0.01, help="Playback speed multiple (capped so no joint exceeds its limit)."),
-    to: Literal["preview", "sim", "arm"] = typer.Option("preview", "--to", help="preview (screen only), sim (the simulated robot) or arm (the rig's robot)."),
-    rig: Optional[Path] = typer.Option(None, "--rig", "--config", help="Rig whose robot receives the commands with --to arm, "
-                                       "and whose limits apply (default: the recorded rig; a dataset needs one)."),
-    engage_after: Optional[float] = typer.Option(None, "--engage-after", help="Engage automatically after this many seconds (else press space)."),
+    session: Path = typer.Argument(
+        ...,
+        help="Session file (.mcap), or a LeRobot dataset folder (its `action` column; with --episode and --config).",
+    ),
+    episode: int | None = typer.Option(None, "--episode", "-e", help="Play one episode (default: the whole session)."),
+    speed: float = typer.Option(
+        1.0, "--speed", "-x", min=0.01, help="Playback speed multiple (capped so no joint exceeds its limit)."
+    ),
+    to: Literal["preview", "sim", "arm"] = typer.Option(
+        "preview", "--to", help="preview (screen only), sim (the simulated robot) or arm (the rig's robot)."
+    ),
+    rig: Path | None = typer.Option(
+        None,
+        "--rig",
+        "--config",
+        help="Rig whose robot receives the commands with --to arm, "
+        "and whose limits apply (default: the recorded rig; a dataset needs one).",
+    ),
+    engage_after: float | None = typer.Option(
+        None, "--engage-after", help="Engage automatically after this many seconds (else press space)."
+    ),
     view: View = typer.Option("side", "--view", help="Robot view."),
     preview: bool = typer.Option(True, "--preview/--no-preview", help="Show the terminal preview."),
-    smooth: bool = typer.Option(False, "--smooth", help="Send the commands as the pipeline's jerk-limited generator re-commands them (needed with --to arm for a session that fails `teleprev audit`)."),
-    foxglove: Optional[int] = typer.Option(None, "--foxglove", metavar="[PORT]", min=0, max=65535,
-                                           help="Also play the session's topics live to Foxglove: a WebSocket server "
-                                           "on 127.0.0.1:PORT (default 8765).", show_default=False),
-    out: Optional[Path] = typer.Option(None, "--out", "-o", help="Record the replay (what the robot was sent, and its "
-                                       "states) as a session here.", show_default=False),
+    smooth: bool = typer.Option(
+        False,
+        "--smooth",
+        help="Send the commands as the pipeline's jerk-limited generator re-commands them "
+        "(needed with --to arm for a session that fails `teleprev audit`).",
+    ),
+    foxglove: int | None = typer.Option(
+        None,
+        "--foxglove",
+        metavar="[PORT]",
+        min=0,
+        max=65535,
+        help="Also play the session's topics live to Foxglove: a WebSocket server on 127.0.0.1:PORT (default 8765).",
+        show_default=False,
+    ),
+    out: Path | None = typer.Option(
+        None,
+        "--out",
+        "-o",
+        help="Record the replay (what the robot was sent, and its states) as a session here.",
+        show_default=False,
+    ),
 ) -> None:
     """Play a session's commands, or a LeRobot dataset episode's actions, back: on screen and optionally to the
     simulated or a real robot.
@@ -35,12 +64,10 @@ def replay(
     from rich.console import Console
 
     from teleprev.cli.outputs import check_output
-    from teleprev.live.replay.playback import play
-
-    from teleprev.errors import ConfigError
-    from teleprev.preview.keys import KeyReader
-
     from teleprev.cli.values import check_finite, check_seconds
+    from teleprev.errors import ConfigError
+    from teleprev.live.replay.playback import play
+    from teleprev.preview.keys import KeyReader
 
     check_finite("--speed", speed, "a finite multiple of the recorded speed (at least 0.01)")
     check_seconds("--engage-after", engage_after, zero_ok=True)
@@ -81,20 +108,42 @@ def replay(
 
 
 def eval_(
-    sessions: list[str] = typer.Argument(..., help="Session files (.mcap), folders of them or globs ('sessions/*.mcap')."),
-    models: Optional[Path] = typer.Option(None, "--models", help="CPN/CCN weights to evaluate (default: the shipped models)."),
-    config: Optional[Path] = typer.Option(None, "--config", help="Rig file to evaluate with (default: the rig recorded in each session)."),
-    out: Optional[Path] = typer.Option(None, "--out", "-o", help="Write the report as JSON here (for CI and as a later baseline)."),
-    baseline: Optional[Path] = typer.Option(None, "--baseline", help="An earlier report: exit 1 if a metric regressed past its tolerance."),
-    tolerances: Optional[Path] = typer.Option(None, "--tolerances", help="Tolerances TOML (default: teleprev/evaluation/tolerances.toml)."),
-    plots: Optional[Path] = typer.Option(None, "--plots", help="Write a PNG per episode (recorded vs re-run joints), and corpus.png for many sessions, into this folder."),
+    sessions: list[str] = typer.Argument(
+        ..., help="Session files (.mcap), folders of them or globs ('sessions/*.mcap')."
+    ),
+    models: Path | None = typer.Option(
+        None, "--models", help="CPN/CCN weights to evaluate (default: the shipped models)."
+    ),
+    config: Path | None = typer.Option(
+        None, "--config", help="Rig file to evaluate with (default: the rig recorded in each session)."
+    ),
+    out: Path | None = typer.Option(
+        None, "--out", "-o", help="Write the report as JSON here (for CI and as a later baseline)."
+    ),
+    baseline: Path | None = typer.Option(
+        None, "--baseline", help="An earlier report: exit 1 if a metric regressed past its tolerance."
+    ),
+    tolerances: Path | None = typer.Option(
+        None, "--tolerances", help="Tolerances TOML (default: teleprev/evaluation/tolerances.toml)."
+    ),
+    plots: Path | None = typer.Option(
+        None,
+        "--plots",
+        help="Write a PNG per episode (recorded vs re-run joints), and corpus.png for many sessions, into this folder.",
+    ),
     workers: int = typer.Option(1, "--workers", "-j", min=1, help="Re-run sessions in this many processes."),
-    ray: Optional[str] = typer.Option(None, "--ray", metavar="[ADDRESS]",
-                                      help="Run the sessions on Ray: alone, start a local instance (with -j CPUs, default "
-                                           "all); auto, HOST:PORT or ray://HOST:PORT: join that cluster. Needs `uv sync "
-                                           "--extra ray`.", show_default=False),
-    rows: int = typer.Option(30, "--rows", min=1,
-                             help="Sessions shown in the table of a corpus (the worst; the report has all)."),
+    ray: str | None = typer.Option(
+        None,
+        "--ray",
+        metavar="[ADDRESS]",
+        help="Run the sessions on Ray: alone, start a local instance (with -j CPUs, default "
+        "all); auto, HOST:PORT or ray://HOST:PORT: join that cluster. Needs `uv sync "
+        "--extra ray`.",
+        show_default=False,
+    ),
+    rows: int = typer.Option(
+        30, "--rows", min=1, help="Sessions shown in the table of a corpus (the worst; the report has all)."
+    ),
 ) -> None:
     """Re-run the pipeline on recorded raw streams, measure it, and catch regressions.
 
@@ -145,9 +194,15 @@ def eval_(
 
 
 def audit(
-    sessions: list[Path] = typer.Argument(..., help="Session files (.mcap) or LeRobot dataset folders (their `action` column)."),
-    config: Optional[Path] = typer.Option(None, "--config", help="Rig whose limits apply (default: the rig recorded in each session; required for a dataset)."),
-    json_out: Optional[Path] = typer.Option(None, "--json", help="Write the audit as JSON here."),
+    sessions: list[Path] = typer.Argument(
+        ..., help="Session files (.mcap) or LeRobot dataset folders (their `action` column)."
+    ),
+    config: Path | None = typer.Option(
+        None,
+        "--config",
+        help="Rig whose limits apply (default: the rig recorded in each session; required for a dataset).",
+    ),
+    json_out: Path | None = typer.Option(None, "--json", help="Write the audit as JSON here."),
 ) -> None:
     """Check a session's commands, or a dataset's actions, against the robot's limits.
 

@@ -22,7 +22,14 @@ def info(urdf: str = URDF_ARG) -> None:
     model = load_robot(urdf)
     console = Console()
     table = Table(title=f"{model.name}  ({model.urdf_path})", title_justify="left")
-    for col, just in (("joint", "left"), ("type", "left"), ("lower", "right"), ("upper", "right"), ("speed", "right"), ("mimics", "left")):
+    for col, just in (
+        ("joint", "left"),
+        ("type", "left"),
+        ("lower", "right"),
+        ("upper", "right"),
+        ("speed", "right"),
+        ("mimics", "left"),
+    ):
         table.add_column(col, justify=just)
     for j in model.desc.joints:
         if j.type == "fixed":
@@ -34,8 +41,8 @@ def info(urdf: str = URDF_ARG) -> None:
         )
     console.print(table)
     console.print(f"{len(model.joint_names)} actuated joints, {len(model.link_names)} links, "
-                  f"{sum(len(l.collisions) for l in model.links.values())} collision shapes")
-    if not any(l.collisions for l in model.links.values()):
+                  f"{sum(len(link.collisions) for link in model.links.values())} collision shapes")
+    if not any(link.collisions for link in model.links.values()):
         return
     from teleprev.robot.exclusions import exclusions_path
 
@@ -46,7 +53,9 @@ def info(urdf: str = URDF_ARG) -> None:
 
     report = SelfCollisionChecker(model).check(model.neutral())
     if report.colliding:
-        console.print(f"neutral pose: [bold red]in self-collision[/] ({', '.join(f'{a}-{b}' for a, b in report.pairs)})")
+        console.print(
+            f"neutral pose: [bold red]in self-collision[/] ({', '.join(f'{a}-{b}' for a, b in report.pairs)})"
+        )
     else:
         console.print("neutral pose: [bold green]collision-free[/]")
 
@@ -84,7 +93,9 @@ def check(
             done += n
             progress.advance(task, n)
     console = Console()
-    console.print(f"[bold]{model.name}[/]: {any_hit / samples:.1%} of {samples} uniform configurations are in self-collision")
+    console.print(
+        f"[bold]{model.name}[/]: {any_hit / samples:.1%} of {samples} uniform configurations are in self-collision"
+    )
     table = Table(title="per link", title_justify="left")
     table.add_column("link")
     table.add_column("in collision", justify="right")
@@ -100,7 +111,9 @@ def check(
 @app.command("exclusions")
 def exclusions(
     urdf: str = URDF_ARG,
-    samples: int = typer.Option(20_000, "--samples", "-n", min=0, help="Uniform samples used to find pairs that always touch."),
+    samples: int = typer.Option(
+        20_000, "--samples", "-n", min=0, help="Uniform samples used to find pairs that always touch."
+    ),
     seed: int = typer.Option(0, help="Random seed."),
 ) -> None:
     """Write the list of link pairs the self-collision check leaves out, next to the URDF."""

@@ -3,25 +3,42 @@
 from __future__ import annotations
 
 from pathlib import Path
-from typing import Optional
 
 import typer
 
 
 def rollout(
-    policy: Path = typer.Option(..., "--policy", help="A policy saved by lerobot-train: its pretrained_model folder "
-                                "(e.g. outputs/train/act/checkpoints/last/pretrained_model)."),
-    config: Optional[Path] = typer.Option(None, "--config", help="Rig file (TOML). Default: the all-simulated rig."),
+    policy: Path = typer.Option(
+        ...,
+        "--policy",
+        help="A policy saved by lerobot-train: its pretrained_model folder "
+        "(e.g. outputs/train/act/checkpoints/last/pretrained_model).",
+    ),
+    config: Path | None = typer.Option(None, "--config", help="Rig file (TOML). Default: the all-simulated rig."),
     episodes: int = typer.Option(1, "--episodes", help="How many episodes to run."),
-    episode_time: float = typer.Option(10.0, "--episode-time", help="Seconds per episode (preview first, then execute)."),
-    engage_after: float = typer.Option(1.0, "--engage-after", help="Seconds of preview at the start of each episode "
-                                       "before the robot executes the policy's actions."),
-    reset_time: float = typer.Option(0.0, "--reset-time", help="Seconds between episodes, the robot in preview "
-                                     "(to reset the scene)."),
-    out: Optional[Path] = typer.Option(None, "--out", "-o", help="Session file to write (default: sessions/<time>_rollout.mcap)."),
-    recipe: Optional[str] = typer.Option(None, "--recipe", help="The export recipe the policy's dataset was made with "
-                                         "(a name in datasets/recipes/ or a file; default: default)."),
-    models: Optional[Path] = typer.Option(None, "--models", help="Folder with CPN/CCN weights (default: the rig's, else models/)."),
+    episode_time: float = typer.Option(
+        10.0, "--episode-time", help="Seconds per episode (preview first, then execute)."
+    ),
+    engage_after: float = typer.Option(
+        1.0,
+        "--engage-after",
+        help="Seconds of preview at the start of each episode before the robot executes the policy's actions.",
+    ),
+    reset_time: float = typer.Option(
+        0.0, "--reset-time", help="Seconds between episodes, the robot in preview (to reset the scene)."
+    ),
+    out: Path | None = typer.Option(
+        None, "--out", "-o", help="Session file to write (default: sessions/<time>_rollout.mcap)."
+    ),
+    recipe: str | None = typer.Option(
+        None,
+        "--recipe",
+        help="The export recipe the policy's dataset was made with "
+        "(a name in datasets/recipes/ or a file; default: default).",
+    ),
+    models: Path | None = typer.Option(
+        None, "--models", help="Folder with CPN/CCN weights (default: the rig's, else models/)."
+    ),
     task: str = typer.Option("", "--task", "-t", help="Task id of the episodes (the policy reads its instruction)."),
 ) -> None:
     """Run a trained LeRobot policy on the rig: each episode previewed, then executed through the same
@@ -32,9 +49,9 @@ def rollout(
     from teleprev.cli.outputs import check_output
     from teleprev.cli.record import never_engaged
     from teleprev.cli.signals import StopSignals
-    from teleprev.live.rollout.rollout import Rollout, RolloutOptions, check_rollout
     from teleprev.live.record.run import print_summary
     from teleprev.live.record.session import default_session_path
+    from teleprev.live.rollout.rollout import Rollout, RolloutOptions, check_rollout
 
     options = RolloutOptions(policy=policy, out=out or default_session_path("rollout"), rig=config, episodes=episodes,
                              episode_time_s=episode_time, engage_after_s=engage_after, reset_time_s=reset_time,
@@ -73,7 +90,9 @@ def rollout(
         raise typer.Exit(1)
     failure = stats.failure or recording.loop.failure
     if failure:
-        errors.print(f"[bold red]error:[/] {escape(failure)} (the robot was braked to rest)", highlight=False, soft_wrap=True)
+        errors.print(
+            f"[bold red]error:[/] {escape(failure)} (the robot was braked to rest)", highlight=False, soft_wrap=True
+        )
         raise typer.Exit(1)
     if recording.loop.stats.device_failures:
         raise typer.Exit(1)

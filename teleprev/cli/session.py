@@ -16,7 +16,7 @@ def _time(ns: int | None) -> str:
         return "-"
     import datetime as dt
 
-    return dt.datetime.fromtimestamp(ns / 1e9, dt.timezone.utc).strftime("%Y-%m-%d %H:%M:%S.%f")[:-3] + " UTC"
+    return dt.datetime.fromtimestamp(ns / 1e9, dt.UTC).strftime("%Y-%m-%d %H:%M:%S.%f")[:-3] + " UTC"
 
 
 def _size(n: int) -> str:
@@ -92,7 +92,9 @@ def info(
     if s.device_counts:
         lost = {d: device_lost(c) for d, c in s.device_counts.items()}
         detail = ", ".join(f"{d} {n}" for d, n in sorted(lost.items()) if n)
-        head.add_row("lost before recording", f"[bold red]{sum(lost.values())}[/] ({detail}; see devices)" if detail else "0")
+        head.add_row(
+            "lost before recording", f"[bold red]{sum(lost.values())}[/] ({detail}; see devices)" if detail else "0"
+        )
     if s.preview_only:
         head.add_row("commands", f"[yellow]none[/]: {PREVIEW_ONLY}")
     if s.sender is not None:
@@ -138,11 +140,17 @@ def info(
         for name, c in sorted(s.device_counts.items()):
             skipped = sum(v for k, v in c.items() if k not in _NOT_SKIPPED and not k.startswith("lost_"))
             lost = device_lost(c)
-            dev.add_row(name, str(c.get("received", 0)), f"[bold red]{lost}[/]" if lost else "0",
-                        *(str(c.get(k, 0)) for k in ("lost_socket_overruns", "lost_sequence_gaps", "lost_queue_overflow",
-                                                     "loop_dropped")),
-                        f"[yellow]{skipped}[/]" if skipped else "0",
-                        f"[bold red]{c.get('failures', 0)}[/]" if c.get("failures") else "0")
+            dev.add_row(
+                name,
+                str(c.get("received", 0)),
+                f"[bold red]{lost}[/]" if lost else "0",
+                *(
+                    str(c.get(k, 0))
+                    for k in ("lost_socket_overruns", "lost_sequence_gaps", "lost_queue_overflow", "loop_dropped")
+                ),
+                f"[yellow]{skipped}[/]" if skipped else "0",
+                f"[bold red]{c.get('failures', 0)}[/]" if c.get("failures") else "0",
+            )
         print_table(console, dev)
 
     if s.device_events:
@@ -178,10 +186,9 @@ def recover(
     from rich.console import Console
     from rich.table import Table
 
+    from teleprev.cli.signals import StopSignals
     from teleprev.session.reader import check_written_by_teleprev
     from teleprev.session.recover import recover as do_recover
-
-    from teleprev.cli.signals import StopSignals
 
     check_written_by_teleprev(session)
 

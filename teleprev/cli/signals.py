@@ -7,7 +7,8 @@ clean-up). `check()` raises for one that arrived but whose KeyboardInterrupt was
 exception raised inside a callback it cannot propagate from (a `__del__`, a weakref or ctypes callback, as
 numba's loading of its runtime has), and a Ctrl-C lost that way must not let start-up go on to engage the
 robot. For the same reason a signal LOST_AFTER_S or more after the one that raised, the command still not
-finishing, raises again; one sooner (a burst, a double Ctrl-C) is the same stop and is only noted. Inside `deferred()` (building what a clean-up
+finishing, raises again; one sooner (a burst, a double Ctrl-C) is the same stop and is only noted. Inside `deferred()`
+(building what a clean-up
 needs to exist whole: the session file, the devices) a signal is only noted, for the `check()` after it.
 
 Once the command is finishing, later signals are noted and nothing more: a second Ctrl-C 20 ms after the

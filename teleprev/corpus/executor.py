@@ -26,9 +26,10 @@ import os
 import signal
 import time
 from collections import deque
+from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any, Callable
+from typing import Any
 
 from teleprev.errors import ConfigError, TeleprevError
 
@@ -78,7 +79,9 @@ def fault_plan(text: str | None = None) -> dict[str, int]:
     return plan
 
 
-def run_task(fn: Callable, context: Any, item: Any, label: str, attempt: int, faults: dict[str, int], emit: Emit) -> tuple:
+def run_task(
+    fn: Callable, context: Any, item: Any, label: str, attempt: int, faults: dict[str, int], emit: Emit
+) -> tuple:
     """One task inside a worker, as both executors run it: ("done", value) or ("error", kind, message, where)."""
     if attempt <= faults.get(Path(label).name, 0):
         os._exit(FAULT_EXIT_CODE)  # the injected fault: the worker vanishes mid-task, as a crash would
@@ -210,8 +213,9 @@ class LocalExecutor:
 
         def start() -> _Slot:
             parent, child = ctx.Pipe()
-            proc = ctx.Process(target=_serve, args=(child, fn, context, os.getpid()), name=f"teleprev-worker-{len(slots)}",
-                               daemon=True)
+            proc = ctx.Process(
+                target=_serve, args=(child, fn, context, os.getpid()), name=f"teleprev-worker-{len(slots)}", daemon=True
+            )
             proc.start()
             child.close()
             return _Slot(proc, parent)
@@ -229,8 +233,16 @@ class LocalExecutor:
                 pending.appendleft((i, attempt + 1))
             else:
                 code = slot.proc.exitcode
-                finish(Outcome(i, labels[i], error=f"its worker died on each of {attempt} attempts (last exit code {code})",
-                               kind="died", where=labels[i], attempts=attempt))
+                finish(
+                    Outcome(
+                        i,
+                        labels[i],
+                        error=f"its worker died on each of {attempt} attempts (last exit code {code})",
+                        kind="died",
+                        where=labels[i],
+                        attempts=attempt,
+                    )
+                )
 
         def read(slot: _Slot) -> bool:
             """Handle what the worker sent; False when its pipe is closed (the worker is gone)."""
@@ -374,7 +386,9 @@ class RayExecutor:
                     if result[0] == "done":
                         finish(Outcome(i, labels[i], value=result[1], attempts=attempt))
                     else:
-                        finish(Outcome(i, labels[i], error=result[2], kind=result[1], where=result[3], attempts=attempt))
+                        finish(
+                            Outcome(i, labels[i], error=result[2], kind=result[1], where=result[3], attempts=attempt)
+                        )
         finally:
             for ref in running:
                 ray.cancel(ref, force=True)

@@ -21,15 +21,24 @@ from teleprev.devices.pacing import wait_until_due
 from teleprev.devices.physics import WORLDS, LayoutRecord, PhysicsAccess
 from teleprev.devices.polled import DeviceFault, JointLimits, PolledActuator, PolledSettings
 from teleprev.devices.registry import GROUP, available, load_plugin
-from teleprev.devices.servo_limits import FAULT_TOLERANCE, ServoStreamRule, ServoViolation
 from teleprev.devices.runner import ActuatorPort, DeviceRunner, RunnerStats, Sink, default_gap_s
-from teleprev.thread_priority import raise_this_thread
-from teleprev.errors import (ConfigError, DeviceError, DeviceStartError, SessionError, TeleprevError,
-                             describe_exception)
+from teleprev.devices.servo_limits import FAULT_TOLERANCE, ServoStreamRule, ServoViolation
+from teleprev.errors import ConfigError, DeviceError, DeviceStartError, SessionError, TeleprevError, describe_exception
 from teleprev.human import smplx
-from teleprev.messages import (CameraInfo, DepthSample, Event, ImageSample, JointSample, Logged, PoseSample, Sample,
-                               Transform, TransformsSample)
+from teleprev.messages import (
+    CameraInfo,
+    DepthSample,
+    Event,
+    ImageSample,
+    JointSample,
+    Logged,
+    PoseSample,
+    Sample,
+    Transform,
+    TransformsSample,
+)
 from teleprev.robot.effectors import EFFECTORS, EndEffector, end_effector
+from teleprev.thread_priority import raise_this_thread
 from teleprev.topics import KIND_TOPICS, device_topic, parse_device_topic
 from teleprev.world import places as world_places
 
@@ -60,20 +69,67 @@ def __getattr__(name: str) -> Any:
 
 __all__ = [
     # the contract
-    "KINDS", "Actuator", "Device", "DeviceContext", "NoSettings", "OperatorLink", "StreamSpec", "wait_until_due",
-    "DeviceFault", "JointLimits", "PolledActuator", "PolledSettings", "FAULT_TOLERANCE", "ServoStreamRule", "ServoViolation",
+    "KINDS",
+    "Actuator",
+    "Device",
+    "DeviceContext",
+    "NoSettings",
+    "OperatorLink",
+    "StreamSpec",
+    "wait_until_due",
+    "DeviceFault",
+    "JointLimits",
+    "PolledActuator",
+    "PolledSettings",
+    "FAULT_TOLERANCE",
+    "ServoStreamRule",
+    "ServoViolation",
     # running and finding plugins
-    "ActuatorPort", "DeviceRunner", "RunnerStats", "Sink", "default_gap_s", "GROUP", "available", "load_plugin",
+    "ActuatorPort",
+    "DeviceRunner",
+    "RunnerStats",
+    "Sink",
+    "default_gap_s",
+    "GROUP",
+    "available",
+    "load_plugin",
     "raise_this_thread",  # a plugin's own receiving thread, at the session loop's priority
     # samples, time and topics
-    "Event", "ImageSample", "JointSample", "Logged", "PoseSample", "Sample", "DepthSample", "CameraInfo", "Transform",
+    "Event",
+    "ImageSample",
+    "JointSample",
+    "Logged",
+    "PoseSample",
+    "Sample",
+    "DepthSample",
+    "CameraInfo",
+    "Transform",
     "TransformsSample",
-    "ClockSync", "SessionClock", "KIND_TOPICS", "device_topic", "parse_device_topic",
+    "ClockSync",
+    "SessionClock",
+    "KIND_TOPICS",
+    "device_topic",
+    "parse_device_topic",
     # errors
-    "ConfigError", "DeviceError", "DeviceStartError", "SessionError", "TeleprevError", "describe_exception",
+    "ConfigError",
+    "DeviceError",
+    "DeviceStartError",
+    "SessionError",
+    "TeleprevError",
+    "describe_exception",
     # what built-in plugins use: SMPL-X names, rotations, the robot, the end-effector table, recorded sessions
-    "smplx", "transforms", "EFFECTORS", "EndEffector", "end_effector", "world_places",
+    "smplx",
+    "transforms",
+    "EFFECTORS",
+    "EndEffector",
+    "end_effector",
+    "world_places",
     # the physics world of a [sim] world = "physics" rig (DeviceContext.physics)
-    "WORLDS", "LayoutRecord", "PhysicsAccess",
-    "RobotModel", "load_robot", "robot_geometry", "SessionReader",
+    "WORLDS",
+    "LayoutRecord",
+    "PhysicsAccess",
+    "RobotModel",
+    "load_robot",
+    "robot_geometry",
+    "SessionReader",
 ]

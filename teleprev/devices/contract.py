@@ -20,10 +20,11 @@ import importlib
 import importlib.util
 import typing
 from abc import ABC, abstractmethod
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
 from types import ModuleType
-from typing import Any, Callable, ClassVar, Generic, TypeVar
+from typing import Any, ClassVar, TypeVar
 
 from teleprev.clock import SessionClock
 from teleprev.devices.physics import PhysicsAccess
@@ -85,7 +86,7 @@ class NoSettings:
 S = TypeVar("S")
 
 
-class Device(ABC, Generic[S]):
+class Device[S](ABC):
     """A source of timestamped samples, configured by the dataclass S that the rig's [devices.<name>]
     table is read into. A plugin names its kind, and the optional SDK its hardware needs, as it subclasses:
 

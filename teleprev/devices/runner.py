@@ -23,17 +23,17 @@ import statistics
 import threading
 import time
 from collections import deque
+from collections.abc import Callable
 from dataclasses import dataclass, field
-from typing import Callable
 
 import numpy as np
 
-from teleprev.devices.contract import Actuator, Device
-from teleprev.errors import DeviceError, DeviceStartError, describe_exception
-from teleprev.thread_priority import raise_this_thread
-from teleprev.messages import Event, JointSample, PoseSample, Sample
 from teleprev import topics
 from teleprev.clock import SessionClock
+from teleprev.devices.contract import Actuator, Device
+from teleprev.errors import DeviceError, DeviceStartError, describe_exception
+from teleprev.messages import Event, JointSample, PoseSample, Sample
+from teleprev.thread_priority import raise_this_thread
 
 Sink = Callable[[Sample, int], None]
 
@@ -310,12 +310,22 @@ class DeviceRunner:
             if self._invalid:
                 current["invalid_samples"] = self._invalid
             self._counters = current
-        new = {k: v - self._counters_reported.get(k, 0) for k, v in current.items() if v > self._counters_reported.get(k, 0)}
+        new = {
+            k: v - self._counters_reported.get(k, 0)
+            for k, v in current.items()
+            if v > self._counters_reported.get(k, 0)
+        }
         if new:
             self._counters_reported = current
-            lost = ", ".join(f"{v} to {k[5:].replace('_', ' ')}" for k, v in sorted(new.items()) if k.startswith("lost_"))
-            skipped = ", ".join(f"{v} {k.replace('_', ' ')}" for k, v in sorted(new.items()) if not k.startswith("lost_"))
-            self._emit("skipped", now, "; ".join(p for p in (lost and f"lost {lost}", skipped and f"skipped {skipped}") if p))
+            lost = ", ".join(
+                f"{v} to {k[5:].replace('_', ' ')}" for k, v in sorted(new.items()) if k.startswith("lost_")
+            )
+            skipped = ", ".join(
+                f"{v} {k.replace('_', ' ')}" for k, v in sorted(new.items()) if not k.startswith("lost_")
+            )
+            self._emit(
+                "skipped", now, "; ".join(p for p in (lost and f"lost {lost}", skipped and f"skipped {skipped}") if p)
+            )
 
     def _emit(self, event: str, now: int, message: str = "", since_ns: int | None = None) -> None:
         data = {"device": self.name, "event": event, "message": message}

@@ -13,8 +13,8 @@ refuses by it before a command leaves the host, so no command reaches a controll
 from __future__ import annotations
 
 from collections import deque
+from collections.abc import Callable
 from dataclasses import dataclass
-from typing import Callable
 
 import numpy as np
 

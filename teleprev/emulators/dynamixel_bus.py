@@ -154,7 +154,9 @@ class Motor:
                 if self._limit_error(f, value, pending):
                     return wire.DATA_LIMIT_ERROR
                 continue
-            if not f.low <= value <= f.high or (f.address == wire.OPERATING_MODE[0] and value not in wire.OPERATING_MODES):
+            if not f.low <= value <= f.high or (
+                f.address == wire.OPERATING_MODE[0] and value not in wire.OPERATING_MODES
+            ):
                 return wire.DATA_RANGE_ERROR
             if self._limit_error(f, value, pending):
                 return wire.DATA_LIMIT_ERROR

@@ -19,7 +19,9 @@ PING, READ, WRITE, REBOOT, STATUS, SYNC_READ, SYNC_WRITE = 0x01, 0x02, 0x03, 0x0
 FAST_SYNC_READ, BULK_READ, BULK_WRITE, FAST_BULK_READ = 0x8A, 0x92, 0x93, 0x9A  # dynamixel_sdk.robotis_def
 
 # status error numbers
-RESULT_FAIL, INSTRUCTION_ERROR, CRC_ERROR, DATA_RANGE_ERROR, DATA_LENGTH_ERROR, DATA_LIMIT_ERROR, ACCESS_ERROR = range(1, 8)
+RESULT_FAIL, INSTRUCTION_ERROR, CRC_ERROR, DATA_RANGE_ERROR, DATA_LENGTH_ERROR, DATA_LIMIT_ERROR, ACCESS_ERROR = range(
+    1, 8
+)
 ALERT = 0x80
 
 # Control table of the XC330-M288-T (e-Manual): address, size
@@ -133,8 +135,13 @@ OVERHEATING = 0x04
 MOTOR_ENCODER = 0x08
 ELECTRICAL_SHOCK = 0x10
 OVERLOAD = 0x20
-HARDWARE_ERRORS = {INPUT_VOLTAGE: "input voltage error", OVERHEATING: "overheating", MOTOR_ENCODER: "motor encoder error",
-                   ELECTRICAL_SHOCK: "electrical shock", OVERLOAD: "overload"}
+HARDWARE_ERRORS = {
+    INPUT_VOLTAGE: "input voltage error",
+    OVERHEATING: "overheating",
+    MOTOR_ENCODER: "motor encoder error",
+    ELECTRICAL_SHOCK: "electrical shock",
+    OVERLOAD: "overload",
+}
 
 
 def crc16(data: bytes) -> int:

@@ -7,7 +7,7 @@ import errno
 import random
 import socket
 import threading
-from typing import Callable
+from collections.abc import Callable
 
 from teleprev.errors import TeleprevError
 
@@ -83,7 +83,7 @@ class Listener:
         while not self._stop.is_set():
             try:
                 conn, _ = self.sock.accept()
-            except (socket.timeout, BlockingIOError):
+            except (TimeoutError, BlockingIOError):
                 continue
             except OSError:
                 return

@@ -28,10 +28,10 @@ from pathlib import Path
 import numpy as np
 
 from teleprev import topics
-from teleprev.evaluation.controller_resets import ActuatorHistory
-from teleprev.pipeline.derivatives import RESUME_GAP_NS, runs, stream_peaks
 from teleprev.errors import SessionError
+from teleprev.evaluation.controller_resets import ActuatorHistory
 from teleprev.export.actions import is_dataset, read_actions
+from teleprev.pipeline.derivatives import RESUME_GAP_NS, runs, stream_peaks
 
 SWEPT_STEP_M = 0.0005
 TOLERANCE = 1e-6
@@ -63,7 +63,11 @@ class StreamAudit:
 
     @property
     def violations(self) -> list[str]:
-        out = [f"{k} {v:.3f} x the limit" for k, v in self.ratios.items() if v > 1.0 + TOLERANCE + self.rounding.get(k, 0.0)]
+        out = [
+            f"{k} {v:.3f} x the limit"
+            for k, v in self.ratios.items()
+            if v > 1.0 + TOLERANCE + self.rounding.get(k, 0.0)
+        ]
         if self.not_finite:
             out.append(f"{self.not_finite} commands not finite (NaN or inf)")
         if self.position_outside:
@@ -88,9 +92,14 @@ class AuditReport:
         return not any(s.violations for s in self.streams) and not self.hand_state_colliding
 
     def as_dict(self) -> dict:
-        return {"session": self.session, "ok": self.ok, "note": self.note, "hand_state_samples": self.hand_state_samples,
-                "hand_state_colliding": self.hand_state_colliding,
-                "streams": [{**asdict(s), "ratios": s.ratios, "violations": s.violations} for s in self.streams]}
+        return {
+            "session": self.session,
+            "ok": self.ok,
+            "note": self.note,
+            "hand_state_samples": self.hand_state_samples,
+            "hand_state_colliding": self.hand_state_colliding,
+            "streams": [{**asdict(s), "ratios": s.ratios, "violations": s.violations} for s in self.streams],
+        }
 
 
 def _runs(t_ns: np.ndarray) -> list[slice]:
@@ -189,9 +198,13 @@ def audit_session(path: str | Path, rig_path: str | Path | None = None) -> Audit
         for topic, side in ((topics.COMMAND_ARM, "arm"), (topics.COMMAND_HAND, "hand")):
             t, q, names = _joint_samples(reader, topic) if topic in reader.topics else (np.zeros(0, np.int64), None, ())
             if len(t) and names != limits[side]["names"]:
-                raise SessionError(f"{topic} commands joints {names}, the rig's robot has {limits[side]['names']}", str(path))
+                raise SessionError(
+                    f"{topic} commands joints {names}, the rig's robot has {limits[side]['names']}", str(path)
+                )
             history = actuator_history(reader, side, limits[side]["names"]) if len(t) else None
-            report.streams.append(audit_stream(topic, side, limits, t, q, rests=history.for_stream(t) if history else None))
+            report.streams.append(
+                audit_stream(topic, side, limits, t, q, rests=history.for_stream(t) if history else None)
+            )
         hand_limits = limits["hand"]
         state_topics = [tp for tp in reader.topics if tp.startswith("/hand/") and tp.endswith("/state")]
         if state_topics and hand_limits.get("checker") is not None:
@@ -209,7 +222,9 @@ def audit_dataset(root: str | Path, rig_path: str | Path | None) -> AuditReport:
 
     root = Path(root)
     if rig_path is None:
-        raise SessionError("a dataset does not carry its rig: pass --config RIG (the robot whose limits apply)", str(root))
+        raise SessionError(
+            "a dataset does not carry its rig: pass --config RIG (the robot whose limits apply)", str(root)
+        )
     limits = motion_limits(load_rig(rig_path))
     data = read_actions(root, limits)
     stamps, action = data.stamps, data.action
@@ -262,8 +277,11 @@ def print_report(report: AuditReport, console) -> None:
         table.add_column("limit", justify="right")
         table.add_column("ratio", justify="right")
         ratios = s.ratios
-        for name, measured, limit in (("speed", s.speed_max, s.speed_limit), ("acceleration", s.accel_max, s.accel_limit),
-                                      ("jerk", s.jerk_max, s.jerk_limit)):
+        for name, measured, limit in (
+            ("speed", s.speed_max, s.speed_limit),
+            ("acceleration", s.accel_max, s.accel_limit),
+            ("jerk", s.jerk_max, s.jerk_limit),
+        ):
             if limit:
                 r = ratios[name if name != "acceleration" else "accel"]
                 style = "red" if r > 1 + TOLERANCE else "green"
@@ -278,7 +296,10 @@ def print_report(report: AuditReport, console) -> None:
     if report.note:
         console.print(f"[yellow]{report.note}[/]")
     if report.hand_state_colliding is not None:
-        console.print(f"measured hand state in self-collision: {report.hand_state_colliding} of {report.hand_state_samples} samples")
+        console.print(
+            f"measured hand state in self-collision: {report.hand_state_colliding} of {report.hand_state_samples} "
+            "samples"
+        )
     console.print("[green]audit passed[/]" if report.ok else "[red]audit failed[/]: " + "; ".join(
         f"{s.topic}: {v}" for s in report.streams for v in s.violations) + (
         f"; hand state in self-collision {report.hand_state_colliding}x" if report.hand_state_colliding else ""))

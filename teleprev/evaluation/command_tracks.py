@@ -25,7 +25,7 @@ class CommandTrack:
     rerun: np.ndarray  # (N, joints), NaN rows where the re-run sent nothing at t
     recorded: np.ndarray  # (N, joints), NaN rows where the recording has nothing at t
 
-    def select(self, lo: int, hi: int) -> "CommandTrack":
+    def select(self, lo: int, hi: int) -> CommandTrack:
         rows = (self.t_ns >= lo) & (self.t_ns < hi)
         return CommandTrack(self.t_ns[rows], self.rerun[rows], self.recorded[rows])
 

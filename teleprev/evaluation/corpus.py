@@ -16,9 +16,9 @@ the small metrics dict travels back; the corpus figure (plots.plot_corpus) is dr
 from __future__ import annotations
 
 import time
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Callable
 
 from teleprev.corpus.executor import Outcome, run_task
 from teleprev.evaluation.report import Regression, Tolerances, compare, default_tolerances, make_report
@@ -59,8 +59,13 @@ def badness(entry: dict) -> tuple:
     reproducing the recording, share of steps the Corrector had to fall back on, largest correction."""
     o = entry["overall"]
     steps = max(int(o.get("steps", 0)), 1)
-    return (len(entry.get("regressions", [])), float(o.get("collision_after_frac", 0.0)), not entry.get("bit_identical", True),
-            int(o.get("fallback", 0)) / steps, float(o.get("deviation_max_rad", 0.0)))
+    return (
+        len(entry.get("regressions", [])),
+        float(o.get("collision_after_frac", 0.0)),
+        not entry.get("bit_identical", True),
+        int(o.get("fallback", 0)) / steps,
+        float(o.get("deviation_max_rad", 0.0)),
+    )
 
 
 def _session_baselines(baseline: dict | None) -> dict[str, dict]:
@@ -85,8 +90,14 @@ def evaluate_corpus(sessions: list[str | Path], models=None, rig=None, baseline:
     if executor is None:
         outcomes = []
         for i, (path, label) in enumerate(zip(paths, labels)):
-            result = run_task(eval_one, job, path, label, 1, {}, lambda e: None)  # no fault injection here: it would end this process
-            o = Outcome(i, label, value=result[1]) if result[0] == "done" else Outcome(i, label, error=result[2], kind=result[1], where=result[3])
+            result = run_task(
+                eval_one, job, path, label, 1, {}, lambda e: None
+            )  # no fault injection here: it would end this process
+            o = (
+                Outcome(i, label, value=result[1])
+                if result[0] == "done"
+                else Outcome(i, label, error=result[2], kind=result[1], where=result[3])
+            )
             outcomes.append(o)
             done(o)
         how = {"executor": "in-process", "workers": 1}
@@ -102,8 +113,16 @@ def evaluate_corpus(sessions: list[str | Path], models=None, rig=None, baseline:
         entry = dict(o.value)
         entry["session"] = labels[o.index]
         entries.append(entry)
-    report = make_report([(e["session"], {"overall": e["overall"], "episodes": e["episodes"]},
-                           {k: v for k, v in e.items() if k not in ("session", "overall", "episodes")}) for e in entries])
+    report = make_report(
+        [
+            (
+                e["session"],
+                {"overall": e["overall"], "episodes": e["episodes"]},
+                {k: v for k, v in e.items() if k not in ("session", "overall", "episodes")},
+            )
+            for e in entries
+        ]
+    )
     if baseline is not None:
         theirs = _session_baselines(baseline)
         for s in report["sessions"]:
@@ -131,8 +150,12 @@ def evaluate_corpus(sessions: list[str | Path], models=None, rig=None, baseline:
 
 
 _COLUMNS = (
-    ("steps", "steps", "{}"), ("collision_after_frac", "in coll.", "{:.1%}"), ("collision_before_frac", "fixed", "{:.1%}"),
-    ("fallback", "fallback", "{}"), ("deviation_max_rad", "corr. max", "{:.3f}"), ("latency_ms_p99", "p99 ms", "{:.2f}"),
+    ("steps", "steps", "{}"),
+    ("collision_after_frac", "in coll.", "{:.1%}"),
+    ("collision_before_frac", "fixed", "{:.1%}"),
+    ("fallback", "fallback", "{}"),
+    ("deviation_max_rad", "corr. max", "{:.3f}"),
+    ("latency_ms_p99", "p99 ms", "{:.2f}"),
 )
 
 
@@ -145,10 +168,16 @@ def corpus_table(report: dict, limit: int | None = None):
     total = len(sessions) + len(failed)
     shown = total if limit is None else min(limit, total)
     with_baseline = any("regressions" in s for s in sessions)
-    title = f"{total} sessions, worst first" + (f" (the {shown} worst shown; the report has all)" if shown < total else "")
+    title = f"{total} sessions, worst first" + (
+        f" (the {shown} worst shown; the report has all)" if shown < total else ""
+    )
     table = Table(title=title, title_justify="left")
     table.add_column("#", justify="right")
-    table.add_column("session", no_wrap=True, min_width=min(max((len(Path(s["session"]).name) for s in sessions + failed), default=7), 24))
+    table.add_column(
+        "session",
+        no_wrap=True,
+        min_width=min(max((len(Path(s["session"]).name) for s in sessions + failed), default=7), 24),
+    )
     for _, label, _ in _COLUMNS:
         table.add_column(label, justify="right")
     table.add_column("repro.", justify="center")
@@ -158,14 +187,26 @@ def corpus_table(report: dict, limit: int | None = None):
             for f in failed]
     for s in sessions:
         o, regs = s["overall"], s.get("regressions")
-        rows.append((str(s["rank"]), Path(s["session"]).name, *[fmt.format(o[key]) if key in o else "" for key, _, fmt in _COLUMNS],
-                     "[green]yes[/]" if s.get("bit_identical") else "[yellow]no[/]",
-                     *([] if not with_baseline else ["-" if regs is None else f"[red]{len(regs)}[/]" if regs else "0"])))
+        rows.append(
+            (
+                str(s["rank"]),
+                Path(s["session"]).name,
+                *[fmt.format(o[key]) if key in o else "" for key, _, fmt in _COLUMNS],
+                "[green]yes[/]" if s.get("bit_identical") else "[yellow]no[/]",
+                *([] if not with_baseline else ["-" if regs is None else f"[red]{len(regs)}[/]" if regs else "0"]),
+            )
+        )
     for row in rows[:shown]:
         table.add_row(*row)
-    table.caption = ("in coll.: hand commands in self-collision; fixed: steps the Corrector changed; corr. max: largest "
-                     "correction (rad); repro.: reproduces the recorded commands bit for bit"
-                     + ("; regressed: metrics past their tolerance against the same session in the baseline" if with_baseline else ""))
+    table.caption = (
+        "in coll.: hand commands in self-collision; fixed: steps the Corrector changed; corr. max: largest "
+        "correction (rad); repro.: reproduces the recorded commands bit for bit"
+        + (
+            "; regressed: metrics past their tolerance against the same session in the baseline"
+            if with_baseline
+            else ""
+        )
+    )
     return table
 
 
@@ -173,8 +214,12 @@ def print_corpus(console, result: CorpusEvaluation, limit: int | None = None) ->
     report = result.report
     console.print(corpus_table(report, limit))
     o, c = report["overall"], report["corpus"]
-    console.print(f"evaluated {o.get('duration_s', 0):.1f} s of recording from {c['evaluated']} session(s) in {c['wall_s']:.1f} s "
-                  f"({c['wall_realtime_x']:.1f}x real time, {c['executor']}, {c['workers']} worker(s))", highlight=False)
+    console.print(
+        f"evaluated {o.get('duration_s', 0):.1f} s of recording from {c['evaluated']} session(s) in "
+        f"{c['wall_s']:.1f} s "
+        f"({c['wall_realtime_x']:.1f}x real time, {c['executor']}, {c['workers']} worker(s))",
+        highlight=False,
+    )
     if result.failed:
         from rich.markup import escape
 

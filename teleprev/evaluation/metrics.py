@@ -19,10 +19,10 @@ import json
 
 import numpy as np
 
+from teleprev import topics
 from teleprev.evaluation.command_tracks import CommandTrack
 from teleprev.evaluation.reproduce import Rerun
 from teleprev.pipeline.derivatives import stream_peaks
-from teleprev import topics
 
 HOLD_FLAGS = {"glove_stale", "glove_invalid", "glove_out_of_range", "suit_stale", "suit_invalid", "suit_out_of_range"}
 
@@ -53,7 +53,9 @@ def step_metrics(r: Rerun, rows: np.ndarray, hand_collides: np.ndarray | None, s
     action = r.corrector[rows]
     corrected = action != "held"
     retargeted, fixed = r.rerun[topics.RETARGETED][rows], r.rerun[topics.CORRECTED][rows]
-    stepped = ~np.isnan(retargeted).all(axis=1) if retargeted.shape[1] else np.zeros(n, dtype=bool)  # idle steps retarget nothing
+    stepped = (
+        ~np.isnan(retargeted).all(axis=1) if retargeted.shape[1] else np.zeros(n, dtype=bool)
+    )  # idle steps retarget nothing
     dev = np.nanmax(np.abs(fixed[stepped] - retargeted[stepped]), axis=1) if stepped.any() else np.zeros(0)
     dev = dev[~np.isnan(dev)]
     out["collision_before_frac"] = float(np.isin(action, ("ccn", "fallback")).sum() / max(corrected.sum(), 1))
@@ -73,7 +75,9 @@ def step_metrics(r: Rerun, rows: np.ndarray, hand_collides: np.ndarray | None, s
     out["latency_ms_p50"], out["latency_ms_p99"] = float(np.percentile(lat, 50)), float(np.percentile(lat, 99))
     flags = [r.flags[i] for i in np.flatnonzero(rows)]
     out["held_frac"] = float(sum(bool(HOLD_FLAGS & set(f)) for f in flags) / n)
-    out["reproduced"] = _same(r.rerun[topics.CORRECTED][rows], r.recorded[topics.CORRECTED][rows]) and arm.same() and hand.same()
+    out["reproduced"] = (
+        _same(r.rerun[topics.CORRECTED][rows], r.recorded[topics.CORRECTED][rows]) and arm.same() and hand.same()
+    )
     return out
 
 

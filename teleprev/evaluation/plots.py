@@ -8,8 +8,8 @@ from pathlib import Path
 
 import numpy as np
 
-from teleprev.evaluation.reproduce import Rerun
 from teleprev import topics
+from teleprev.evaluation.reproduce import Rerun
 
 GROUP = 4  # end-effector joints per panel (a LEAP Hand finger)
 
@@ -102,13 +102,21 @@ def plot_corpus(report: dict, out_dir: str | Path, max_sessions: int = 40) -> Pa
     out_dir.mkdir(parents=True, exist_ok=True)
     sessions = report["sessions"][:max_sessions]
     names = [Path(s["session"]).name for s in sessions]
-    panels = (("collision_before_frac", "steps the Corrector changed"), ("deviation_max_rad", "largest correction (rad)"),
-              ("latency_ms_p99", "step p99 (ms)"), ("realtime_x", "re-run speed (x real time)"))
-    fig, axes = plt.subplots(1, len(panels), figsize=(3.2 * len(panels) + 2, 0.28 * len(sessions) + 1.6), sharey=True, squeeze=False)
+    panels = (
+        ("collision_before_frac", "steps the Corrector changed"),
+        ("deviation_max_rad", "largest correction (rad)"),
+        ("latency_ms_p99", "step p99 (ms)"),
+        ("realtime_x", "re-run speed (x real time)"),
+    )
+    fig, axes = plt.subplots(
+        1, len(panels), figsize=(3.2 * len(panels) + 2, 0.28 * len(sessions) + 1.6), sharey=True, squeeze=False
+    )
     y = np.arange(len(sessions))
     for ax, (key, label) in zip(axes[0], panels):
         values = [float(s["overall"].get(key, 0.0)) for s in sessions]
-        colors = ["tab:red" if s.get("regressions") or not s.get("bit_identical", True) else "tab:blue" for s in sessions]
+        colors = [
+            "tab:red" if s.get("regressions") or not s.get("bit_identical", True) else "tab:blue" for s in sessions
+        ]
         ax.barh(y, values, color=colors)
         ax.set_title(label, fontsize=9)
         ax.tick_params(labelsize=7)

@@ -49,7 +49,8 @@ class Regression:
     allowed: float
 
     def describe(self) -> str:
-        return f"{self.metric}: {self.baseline:.6g} -> {self.now:.6g} (moved {self.now - self.baseline:+.6g}, allowed {self.allowed:.6g})"
+        return (f"{self.metric}: {self.baseline:.6g} -> {self.now:.6g} "
+                f"(moved {self.now - self.baseline:+.6g}, allowed {self.allowed:.6g})")
 
 
 def load_tolerances(path: str | Path) -> Tolerances:
@@ -81,7 +82,10 @@ def make_report(sessions: list[tuple[str, dict, dict]]) -> dict:
     return {
         "report_version": REPORT_VERSION,
         "overall": overall,
-        "sessions": [{"session": path, **facts, "overall": m["overall"], "episodes": m["episodes"]} for path, m, facts in sessions],
+        "sessions": [
+            {"session": path, **facts, "overall": m["overall"], "episodes": m["episodes"]}
+            for path, m, facts in sessions
+        ],
     }
 
 
@@ -120,14 +124,25 @@ def read_report(path: str | Path) -> dict:
 
 
 _SHOWN = (
-    ("steps", "steps", "{}"), ("collision_before_frac", "hand in collision before correction", "{:.1%}"),
-    ("collision_after_frac", "hand commands in collision", "{:.1%}"), ("deviation_mean_rad", "correction mean (rad)", "{:.4f}"),
-    ("deviation_max_rad", "correction max (rad)", "{:.4f}"), ("untouched", "untouched", "{}"), ("ccn", "ccn", "{}"),
-    ("fallback", "fallback", "{}"), ("arm_speed_max", "arm speed max (rad/s)", "{:.3f}"), ("hand_speed_max", "hand speed max", "{:.3f}"),
-    ("arm_accel_max", "arm acceleration max (rad/s^2)", "{:.3g}"), ("hand_accel_max", "hand acceleration max", "{:.3g}"),
-    ("arm_jerk_max", "arm jerk max (rad/s^3)", "{:.3g}"), ("hand_jerk_max", "hand jerk max", "{:.3g}"),
-    ("latency_ms_p50", "step p50 (ms)", "{:.3f}"), ("latency_ms_p99", "step p99 (ms)", "{:.3f}"), ("held_frac", "held input", "{:.1%}"),
-    ("dropped_inputs", "dropped inputs", "{}"), ("reproduced", "reproduces the recording", "{}"),
+    ("steps", "steps", "{}"),
+    ("collision_before_frac", "hand in collision before correction", "{:.1%}"),
+    ("collision_after_frac", "hand commands in collision", "{:.1%}"),
+    ("deviation_mean_rad", "correction mean (rad)", "{:.4f}"),
+    ("deviation_max_rad", "correction max (rad)", "{:.4f}"),
+    ("untouched", "untouched", "{}"),
+    ("ccn", "ccn", "{}"),
+    ("fallback", "fallback", "{}"),
+    ("arm_speed_max", "arm speed max (rad/s)", "{:.3f}"),
+    ("hand_speed_max", "hand speed max", "{:.3f}"),
+    ("arm_accel_max", "arm acceleration max (rad/s^2)", "{:.3g}"),
+    ("hand_accel_max", "hand acceleration max", "{:.3g}"),
+    ("arm_jerk_max", "arm jerk max (rad/s^3)", "{:.3g}"),
+    ("hand_jerk_max", "hand jerk max", "{:.3g}"),
+    ("latency_ms_p50", "step p50 (ms)", "{:.3f}"),
+    ("latency_ms_p99", "step p99 (ms)", "{:.3f}"),
+    ("held_frac", "held input", "{:.1%}"),
+    ("dropped_inputs", "dropped inputs", "{}"),
+    ("reproduced", "reproduces the recording", "{}"),
 )
 
 
@@ -138,16 +153,25 @@ def print_report(console: Console, report: dict, regressions: list[Regression] |
         table.add_column("metric", no_wrap=True)
         table.add_column("session", justify="right", style="bold")
         for e in s["episodes"]:
-            table.add_column(f"ep {e['episode']}\n{e['task']}" + ("\n(discarded)" if e["discarded"] else ""), justify="right")
+            table.add_column(
+                f"ep {e['episode']}\n{e['task']}" + ("\n(discarded)" if e["discarded"] else ""), justify="right"
+            )
         for key, label, fmt in _SHOWN:
             cells = [s["overall"], *s["episodes"]]
             if any(key in c for c in cells):
                 table.add_row(label, *[fmt.format(c[key]) if key in c else "" for c in cells])
         console.print(table)
     o = report["overall"]
-    console.print(f"evaluated {o.get('duration_s', 0):.1f} s of recording in {o.get('rerun_wall_s', 0):.1f} s ({o.get('realtime_x', 0):.1f}x real time)")
+    console.print(
+        f"evaluated {o.get('duration_s', 0):.1f} s of recording in {o.get('rerun_wall_s', 0):.1f} s "
+        f"({o.get('realtime_x', 0):.1f}x real time)"
+    )
     for s in report["sessions"]:
-        verdict = "[green]reproduces the recorded commands bit for bit[/]" if s.get("bit_identical") else "[yellow]does not reproduce the recorded commands[/]"
+        verdict = (
+            "[green]reproduces the recorded commands bit for bit[/]"
+            if s.get("bit_identical")
+            else "[yellow]does not reproduce the recorded commands[/]"
+        )
         console.print(f"{Path(s['session']).name}: {verdict}  (models {s.get('models', '?')}, rig {s.get('rig', '?')})")
     if regressions is not None:
         if regressions:

@@ -20,19 +20,18 @@ from pathlib import Path
 import numpy as np
 from threadpoolctl import threadpool_limits
 
-from teleprev import numeric_platform
-from teleprev.errors import SessionError
-from teleprev.messages import Event, JointSample
+from teleprev import numeric_platform, topics
 from teleprev.assembly import build_driver, build_pipeline, rig_calibration
+from teleprev.errors import SessionError
 from teleprev.evaluation.command_tracks import CommandTrack, RecordedTick, replay_ticks, track
 from teleprev.evaluation.controller_resets import ActuatorHistory
-from teleprev.pipeline.planner import CommandPlanner
+from teleprev.messages import Event, JointSample
 from teleprev.pipeline.driver import InputTopics, PipelineDriver
+from teleprev.pipeline.planner import CommandPlanner
 from teleprev.pipeline.step import Pipeline, StepResult
 from teleprev.retarget.calibration import load_calibration_text
 from teleprev.rig import load_recorded_rig, load_rig
 from teleprev.robot.effectors import EndEffector
-from teleprev import topics
 from teleprev.session.codec import JOINT_STATES
 from teleprev.session.reader import Episode, JointTable, SessionReader
 
@@ -191,7 +190,9 @@ def _rerun(reader: SessionReader, path: Path, models, rig_path, started: float) 
     try:
         inputs = InputTopics(**json.loads(meta["pipeline"]["inputs"]))
     except (KeyError, TypeError, ValueError):
-        raise SessionError("the session does not say which streams fed its pipeline (metadata 'pipeline')", str(path)) from None
+        raise SessionError(
+            "the session does not say which streams fed its pipeline (metadata 'pipeline')", str(path)
+        ) from None
     missing = [t for t in (inputs.hand, inputs.wrist, inputs.arm, inputs.effector) if t not in reader.schemas]
     if missing:
         raise SessionError(f"the session lacks the pipeline's input streams {missing}", str(path))
@@ -208,7 +209,9 @@ def _rerun(reader: SessionReader, path: Path, models, rig_path, started: float) 
     # inputs; an output topic of another schema comes through as messages and is skipped, as before.
     tables = {k: JointTable() for k in outputs if reader.schemas.get(k) == JOINT_STATES}
     if inputs.action and inputs.action not in reader.schemas:
-        raise SessionError(f"the session lacks the policy's actions ({inputs.action}) that drove its pipeline", str(path))
+        raise SessionError(
+            f"the session lacks the policy's actions ({inputs.action}) that drove its pipeline", str(path)
+        )
     # a policy's rollout: its recorded actions are the input that steps the pipeline (PipelineDriver)
     streamed = [inputs.hand, inputs.wrist, inputs.arm, inputs.effector, *([inputs.action] if inputs.action else []),
                 topics.MODE, topics.COMMAND_TICK,
@@ -276,9 +279,25 @@ def _rerun(reader: SessionReader, path: Path, models, rig_path, started: float) 
         notes.append(f"recorded on numeric platform {recorded_platform!r}, re-run on {numeric_platform.describe()!r}: "
                      "the last bits may differ")
     return Rerun(
-        path, t, np.array(steps.mode), np.array(steps.corrector), np.array(steps.latency_ns, dtype=np.int64), steps.flags,
-        arm_names, eff_names,
-        pipeline.effector.spec, rerun, recorded, reader.episodes(), meta, _models_match(meta, pipeline), rig_source,
-        reader.duration_s, n_inputs,
-        time.perf_counter() - started, notes, commands, histories,
+        path,
+        t,
+        np.array(steps.mode),
+        np.array(steps.corrector),
+        np.array(steps.latency_ns, dtype=np.int64),
+        steps.flags,
+        arm_names,
+        eff_names,
+        pipeline.effector.spec,
+        rerun,
+        recorded,
+        reader.episodes(),
+        meta,
+        _models_match(meta, pipeline),
+        rig_source,
+        reader.duration_s,
+        n_inputs,
+        time.perf_counter() - started,
+        notes,
+        commands,
+        histories,
     )

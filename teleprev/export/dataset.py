@@ -125,7 +125,11 @@ def check_compatible(info: dict, features: dict, fps: int, robot_type: str, vide
                           f"({', '.join(sorted(features))})", where)
     for name, ours in features.items():
         t = theirs[name]
-        if t.get("dtype") != ours["dtype"] or tuple(t.get("shape", ())) != tuple(ours["shape"]) or t.get("names") != ours["names"]:
+        if (
+            t.get("dtype") != ours["dtype"]
+            or tuple(t.get("shape", ())) != tuple(ours["shape"])
+            or t.get("names") != ours["names"]
+        ):
             raise ConfigError(f"feature {name!r} differs: dataset {t.get('dtype')} {t.get('shape')} {t.get('names')}, "
                               f"sessions {ours['dtype']} {list(ours['shape'])} {ours['names']}", where)
         codec = (t.get("info") or {}).get("video.codec")
@@ -164,8 +168,9 @@ def prepare_lerobot() -> None:
     """Before writing: FFmpeg's encoder chatter and the datasets library's progress bars would bury the
     export's own; and lerobot's per-episode embed_images step is skipped where it does nothing."""
     import av
-    import datasets
     from lerobot.datasets import dataset_writer
+
+    import datasets
 
     av.logging.set_libav_level(av.logging.ERROR)
     datasets.disable_progress_bars()

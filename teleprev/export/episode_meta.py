@@ -26,8 +26,13 @@ def rows_for(reports: list[SessionReport], facts: list[EpisodeFacts]) -> list[di
     for r in reports:
         for e in r.episodes:
             f = known.get((r.session, e.index))
-            row = {"outcome": f.outcome if f else "", "participant": f.participant if f else "",
-                   "condition": f.condition if f else "", "source_session": Path(r.session).name, "source_episode": e.index}
+            row = {
+                "outcome": f.outcome if f else "",
+                "participant": f.participant if f else "",
+                "condition": f.condition if f else "",
+                "source_session": Path(r.session).name,
+                "source_episode": e.index,
+            }
             rows += [row] * e.pieces
     return rows
 

@@ -72,7 +72,11 @@ def export_parallel(paths: list[Path], parts: list[Path], job: Job, executor, re
 def merge(executor, parts: list[Path], repo_id: str, root: Path, existing: Path | None = None) -> None:
     """Aggregate the part datasets (after the existing dataset, when appending) into `root`, as a task
     of the executor (its workers have lerobot imported; this process has not)."""
-    item = ([str(Path(p).resolve()) for p in parts], str(Path(root).resolve()), str(Path(existing).resolve()) if existing else None)
+    item = (
+        [str(Path(p).resolve()) for p in parts],
+        str(Path(root).resolve()),
+        str(Path(existing).resolve()) if existing else None,
+    )
     outcome = executor.map(merge_parts, repo_id, [item], labels=[str(root)])[0]
     if not outcome.ok:
         raise SessionError(f"merging the parts with lerobot's aggregate_datasets failed: {outcome.error}", str(root))

@@ -52,12 +52,12 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Literal
 
+from teleprev import topics as T
 from teleprev.config import from_table, read_toml
 from teleprev.errors import ConfigError, SessionError
 from teleprev.export.video import VideoSettings
 from teleprev.paths import data_dir
 from teleprev.session.summary import PREVIEW_ONLY, is_preview_only
-from teleprev import topics as T
 
 JOINTS, POSE, IMAGE = "foxglove.JointStates", "foxglove.PoseInFrame", "foxglove.CompressedImage"
 DEPTH = "depth"  # a Source's schema for a depth stream (recorded as foxglove.RawImage, or a PNG CompressedImage)
@@ -163,7 +163,9 @@ def recipe_from_table(data: dict, path: str | Path) -> Recipe:
         if names.count(f.name) > 1:
             raise ConfigError("feature defined twice", where)
         if f.name in LEROBOT_RESERVED or "/" in f.name:
-            raise ConfigError(f"not a usable feature name (reserved by LeRobot: {', '.join(LEROBOT_RESERVED)}; no '/')", where)
+            raise ConfigError(
+                f"not a usable feature name (reserved by LeRobot: {', '.join(LEROBOT_RESERVED)}; no '/')", where
+            )
         for s in f.streams:
             _parse_stream(s, where)
     return Recipe(recipe.feature, recipe.export, recipe.video, recipe.description, str(path))
@@ -175,7 +177,9 @@ def _parse_stream(text: str, where: str) -> tuple[str, str]:
         return "", text
     role, _, device = text.partition(":")
     if role not in ROLES:
-        raise ConfigError(f"unknown stream {text!r} (roles: {', '.join(ROLES)}; or a topic such as /arm/arm/state)", where)
+        raise ConfigError(
+            f"unknown stream {text!r} (roles: {', '.join(ROLES)}; or a topic such as /arm/arm/state)", where
+        )
     if device and ROLES[role].topic:
         raise ConfigError(f"{role!r} is a pipeline stream, not a device's: write it without ':{device}'", where)
     return role, device
@@ -217,7 +221,9 @@ class ResolvedFeature:
         return self.sources[0].schema in (IMAGE, DEPTH)
 
 
-def resolve(recipe: Recipe, session_topics: dict, metadata: dict[str, dict[str, str]], where: str) -> list[ResolvedFeature]:
+def resolve(
+    recipe: Recipe, session_topics: dict, metadata: dict[str, dict[str, str]], where: str
+) -> list[ResolvedFeature]:
     """The recipe's features with their topics in this session. `session_topics` maps topic -> info with
     a `.schema` (SessionReader.topics). Raises SessionError naming what the session lacks."""
     schemas = {t: info.schema for t, info in session_topics.items()}
@@ -239,8 +245,10 @@ def resolve(recipe: Recipe, session_topics: dict, metadata: dict[str, dict[str, 
             sources.extend(_sources(entry, schemas, devices, inputs, fwhere, what))
         images = [s for s in sources if s.schema in (IMAGE, DEPTH)]
         if images and len(images) != len(sources):
-            raise ConfigError(f"mixes camera and joint streams ({', '.join(spec.streams)}); give cameras their own feature",
-                              f"{recipe.path} [[feature]] {spec.name!r}")
+            raise ConfigError(
+                f"mixes camera and joint streams ({', '.join(spec.streams)}); give cameras their own feature",
+                f"{recipe.path} [[feature]] {spec.name!r}",
+            )
         if images:
             if len(images) > 1 and "{camera}" not in spec.name:
                 raise ConfigError("takes several cameras: put {camera} in its name, e.g. observation.images.{camera}",
@@ -280,7 +288,9 @@ def _sources(entry: str, schemas: dict[str, str], devices: dict[str, list[str]],
         if role.topic not in schemas:
             hint = ""
             if role.topic.startswith("/command/"):
-                hint = f": {PREVIEW_ONLY}" if is_preview_only(schemas) else " (commands are recorded only in execute mode)"
+                hint = (
+                    f": {PREVIEW_ONLY}" if is_preview_only(schemas) else " (commands are recorded only in execute mode)"
+                )
             raise SessionError(f"stream {entry!r} ({role.topic}) is not in this session{hint}", where)
         return [_checked(entry, role.topic, schemas, role.schema, role.prefix, where)]
     found = sorted(devices.get(f"{role.kind}/{role.stream}", []))

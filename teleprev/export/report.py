@@ -120,9 +120,11 @@ def summary_table(report: ExportReport):
         "total", str(sum(s.source_episodes for s in report.sessions)), str(sum(dropped(s) for s in report.sessions)),
         str(report.episodes), str(report.frames), f"{report.duration_s:.1f} s", f"{report.align_err_ms:.1f} ms", "",
     )
-    table.caption = (f"rec.: episodes recorded; dropped: left out; episodes: LeRobot episodes made of the rest (more where "
-                     f"a gap split one); {report.fps} fps; align err: worst distance between a frame's time and the "
-                     "state/action samples used for it; held: frames whose camera image is the previous one")
+    table.caption = (
+        f"rec.: episodes recorded; dropped: left out; episodes: LeRobot episodes made of the rest (more where "
+        f"a gap split one); {report.fps} fps; align err: worst distance between a frame's time and the "
+        "state/action samples used for it; held: frames whose camera image is the previous one"
+    )
     return table
 
 
@@ -151,7 +153,9 @@ def export_notes(report: ExportReport) -> list[str]:
         lines.append(f"[yellow]{len(report.skipped)} session(s) skipped[/]:")
         lines += [f"  {escape(session)}: {escape(why)}" for session, why in report.skipped.items()]
     if report.failed:
-        lines.append(f"[red]{len(report.failed)} session(s) failed and were left out[/] (export them again with --append):")
+        lines.append(
+            f"[red]{len(report.failed)} session(s) failed and were left out[/] (export them again with --append):"
+        )
         from rich.markup import escape
 
         lines += [f"  [red]{escape(why)}[/]" for why in report.failed.values()]

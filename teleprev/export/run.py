@@ -12,9 +12,9 @@ from __future__ import annotations
 
 import os
 import time
+from collections.abc import Callable
 from dataclasses import dataclass, replace
 from pathlib import Path
-from typing import Callable
 
 from teleprev.errors import ConfigError, SessionError, out_of_space
 from teleprev.export import dataset as D
@@ -23,9 +23,9 @@ from teleprev.export.recipe import Recipe
 from teleprev.export.repo_id import check_repo_id
 from teleprev.export.report import ExportReport, SessionReport, folder_size
 from teleprev.export.selection import episode_facts
+from teleprev.export.session import ExportSettings, Progress, Reporter, SessionSource, export_session, no_progress
 from teleprev.export.space import space_error
 from teleprev.export.swap import clean_stale
-from teleprev.export.session import ExportSettings, Progress, Reporter, SessionSource, no_progress, export_session
 from teleprev.export.video import VideoSettings
 
 
@@ -59,7 +59,9 @@ def export(options: ExportOptions, report: Reporter = no_progress) -> ExportRepo
     for line in cleaned:
         report(Progress("note", line))
     if target.exists() and not options.append and (not target.is_dir() or any(target.iterdir())):
-        raise ConfigError("already exists; pass --append to add these sessions to it, or choose another --root", str(target))
+        raise ConfigError(
+            "already exists; pass --append to add these sessions to it, or choose another --root", str(target)
+        )
     info = None
     fps = options.fps
     if options.append:
@@ -69,8 +71,12 @@ def export(options: ExportOptions, report: Reporter = no_progress) -> ExportRepo
         D.check_files(target, info)
         fps = fps or int(info.get("fps", 0))
 
-    parallel = options.open_reader is None and (options.ray is not None or (options.workers > 1 and len(options.sessions) > 1))
-    executor = _local_workers(options) if parallel else None  # started now: lerobot loads while the sessions are checked
+    parallel = options.open_reader is None and (
+        options.ray is not None or (options.workers > 1 and len(options.sessions) > 1)
+    )
+    executor = (
+        _local_workers(options) if parallel else None
+    )  # started now: lerobot loads while the sessions are checked
     sources, skipped = _open_all(options, fps)
     facts = [f for s in sources for f in episode_facts(s.reader, s.path)]  # before workers: the readers close
     first_episode = int(info.get("total_episodes", 0)) if info is not None else 0
@@ -214,7 +220,9 @@ def _local_workers(options: ExportOptions):
     return executor
 
 
-def _parallel(options, staging, features, robot, fps, settings, video, report, failed, executor=None) -> list[SessionReport]:
+def _parallel(
+    options, staging, features, robot, fps, settings, video, report, failed, executor=None
+) -> list[SessionReport]:
     from teleprev.corpus.executor import make_executor
     from teleprev.export.parallel import PRELOAD, Job, export_parallel, merge
 

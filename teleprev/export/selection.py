@@ -111,7 +111,9 @@ def _value(label: str, f: EpisodeFacts) -> str:
             "--condition": f.condition or "(none)"}[flag]
 
 
-def split(kept: list[EpisodeFacts], fraction: float, by: str, seed: int) -> tuple[list[EpisodeFacts], list[EpisodeFacts]]:
+def split(
+    kept: list[EpisodeFacts], fraction: float, by: str, seed: int
+) -> tuple[list[EpisodeFacts], list[EpisodeFacts]]:
     """(main, holdout): round(fraction x the sessions or episodes) of them held out, drawn by `seed`
     (the same seed and input give the same split); each part keeps the recorded order."""
     if not 0.0 < fraction < 1.0:
@@ -143,7 +145,9 @@ def plan_exports(options, selection, holdout: float | None, split_by: str, seed:
     chosen = select(read_facts(options.sessions), selection, options.include_discarded)
     counts = dict(chosen.counts)
     if holdout is None:
-        return [replace(options, selected=by_session(chosen.kept), sessions=_with(options.sessions, chosen.kept))], counts
+        return [
+            replace(options, selected=by_session(chosen.kept), sessions=_with(options.sessions, chosen.kept))
+        ], counts
     main, held = split(chosen.kept, holdout, split_by, seed)
     held_id = f"{options.repo_id}_holdout"
     check_repo_id(held_id)

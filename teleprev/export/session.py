@@ -8,19 +8,19 @@ from __future__ import annotations
 
 import itertools
 import math
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Callable
 
 import numpy as np
 
+from teleprev import topics
 from teleprev.errors import ConfigError, SessionError
 from teleprev.export.recipe import DEPTH, IMAGE, Recipe, ResolvedFeature, resolve
 from teleprev.export.report import EpisodeReport, SessionReport
 from teleprev.export.streams import probe_joint_names, read_episode
 from teleprev.export.timeline import EpisodePlan, plan_episode
 from teleprev.messages import DepthSample, ImageSample
-from teleprev import topics
 from teleprev.robot.effectors import EFFECTORS
 from teleprev.topics import TASKS_RECORD
 
@@ -196,7 +196,9 @@ class ExportSettings:
     selected: dict[str, frozenset[int]] | None = None  # session -> the episodes to export (None: every one)
 
 
-def export_session(source: SessionSource, dataset, settings: ExportSettings, report: Reporter = no_progress) -> SessionReport:
+def export_session(
+    source: SessionSource, dataset, settings: ExportSettings, report: Reporter = no_progress
+) -> SessionReport:
     """Write the session's episodes into `dataset` (a LeRobotDataset in write mode)."""
     name = str(source.path)
     episodes = source.reader.episodes()
@@ -217,7 +219,9 @@ def export_session(source: SessionSource, dataset, settings: ExportSettings, rep
     return result
 
 
-def _export_episode(source: SessionSource, dataset, settings: ExportSettings, ep, end_ns: int, report: Reporter) -> EpisodeReport:
+def _export_episode(
+    source: SessionSource, dataset, settings: ExportSettings, ep, end_ns: int, report: Reporter
+) -> EpisodeReport:
     name = str(source.path)
     task = source.task_of(ep)
     rep = EpisodeReport(name, ep.index, task)
@@ -260,7 +264,9 @@ def _export_episode(source: SessionSource, dataset, settings: ExportSettings, ep
     if inner and export.on_gap != "split":
         text = "; ".join(rep.gaps)
         if export.on_gap == "fail":
-            raise SessionError(f"episode {ep.index}: {text} (on_gap = \"fail\"; \"split\" would cut the episode there)", name)
+            raise SessionError(
+                f'episode {ep.index}: {text} (on_gap = "fail"; "split" would cut the episode there)', name
+            )
         rep.dropped = f"gap: {text}"
         return rep
     if not len(plan.frames.time_ns):
@@ -337,11 +343,15 @@ def _describe(plan: EpisodePlan, stamps: dict[str, np.ndarray], labels: dict[str
         text = ", ".join(silence(k, g.first) for k in g.streams)
         if g.at_edge:
             rep.trimmed_s += (g.stop - g.first) / fps
-            rep.notes.append(f"trimmed {(g.stop - g.first) / fps:.2f} s at the {'start' if g.first == 0 else 'end'}: {text}")
+            rep.notes.append(
+                f"trimmed {(g.stop - g.first) / fps:.2f} s at the {'start' if g.first == 0 else 'end'}: {text}"
+            )
         else:
             rep.gaps.append(text)
     for first, stop in plan.short:
-        rep.notes.append(f"left out {stop - first} frames at {(t[first] - start_ns) / _NS:.2f} s (shorter than min_episode_s)")
+        rep.notes.append(
+            f"left out {stop - first} frames at {(t[first] - start_ns) / _NS:.2f} s (shorter than min_episode_s)"
+        )
 
 
 def _write_pieces(source: SessionSource, dataset, plan: EpisodePlan, joints, cams, window: tuple[int, int], task: str,
@@ -360,7 +370,9 @@ def _write_pieces(source: SessionSource, dataset, plan: EpisodePlan, joints, cam
             key = _key(s.topic, _timing(f, s))
             look = plan.lookups[key]
             if look.next is not None:
-                cols.append(_sampled(joints[s.topic], look, frames_all, _interpolation(source, s.topic, joints[s.topic])))
+                cols.append(
+                    _sampled(joints[s.topic], look, frames_all, _interpolation(source, s.topic, joints[s.topic]))
+                )
             else:
                 cols.append(joints[s.topic].values[look.index[frames_all]])
             align.append(look.err_ns[frames_all])

@@ -11,7 +11,8 @@ _MB = 1e6
 
 
 def space_error(what: str, target: Path, sessions: list[Path], append: bool) -> ConfigError:
-    """`what` ran out (errors.out_of_space). After the staging folder is gone: the free space left where the dataset is written, and what the
+    """`what` ran out (errors.out_of_space). After the staging folder is gone: the free space left where the
+    dataset is written, and what the
     export needs, estimated as the sessions' size (their video and joint streams; the dataset comes out
     smaller) plus, when appending, the dataset's newest files that are copied."""
     parent = Path(target).resolve().parent

@@ -75,7 +75,9 @@ def probe_joint_names(reader, topic: str, schema: str) -> tuple[str, ...]:
         return POSE_NAMES
     for msg in reader.messages([topic]):
         if not isinstance(msg.payload, JointSample):
-            raise SessionError(f"{topic} holds {type(msg.payload).__name__} messages, expected joint states", str(reader.path))
+            raise SessionError(
+                f"{topic} holds {type(msg.payload).__name__} messages, expected joint states", str(reader.path)
+            )
         return tuple(msg.payload.names)
     raise SessionError(f"{topic} has no messages", str(reader.path))
 
@@ -96,7 +98,9 @@ def read_episode(reader, joint_topics: dict[str, tuple[str, ...]], camera_topics
         t = msg.topic
         if t in cams:
             if not isinstance(p, (ImageSample, DepthSample)):
-                raise SessionError(f"{t} at log time {msg.log_time_ns}: expected an image, got {type(p).__name__}", where)
+                raise SessionError(
+                    f"{t} at log time {msg.log_time_ns}: expected an image, got {type(p).__name__}", where
+                )
             cams[t].append(p.stamp_ns)
         elif type(p) is JointSample:
             names = joint_topics[t]
@@ -120,7 +124,9 @@ def read_episode(reader, joint_topics: dict[str, tuple[str, ...]], camera_topics
     return out_j, out_c
 
 
-def _reorder(p: JointSample, names: tuple[str, ...], index: dict[str, int], topic: str, log_ns: int, where: str) -> np.ndarray:
+def _reorder(
+    p: JointSample, names: tuple[str, ...], index: dict[str, int], topic: str, log_ns: int, where: str
+) -> np.ndarray:
     if len(p.names) != len(names) or set(p.names) != set(names):
         raise SessionError(f"{topic} at log time {log_ns}: joints {list(p.names)} differ from the stream's "
                            f"first message {list(names)}", where)

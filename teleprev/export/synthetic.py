@@ -16,14 +16,32 @@ from pathlib import Path
 
 import numpy as np
 
+from teleprev import topics as T
 from teleprev.messages import Event, ImageSample, JointSample, Logged, PoseSample
 from teleprev.robot.effectors import end_effector
-from teleprev import topics as T
 
 ARM_JOINTS = tuple(f"joint{i}" for i in range(1, 7))
-GLOVE_JOINTS = tuple(f"{j}.{a}" for j in ("index1", "index2", "index3", "middle1", "middle2", "middle3", "pinky1",
-                                             "pinky2", "pinky3", "ring1", "ring2", "ring3", "thumb1", "thumb2", "thumb3")
-                     for a in "xyz")
+GLOVE_JOINTS = tuple(
+    f"{j}.{a}"
+    for j in (
+        "index1",
+        "index2",
+        "index3",
+        "middle1",
+        "middle2",
+        "middle3",
+        "pinky1",
+        "pinky2",
+        "pinky3",
+        "ring1",
+        "ring2",
+        "ring3",
+        "thumb1",
+        "thumb2",
+        "thumb3",
+    )
+    for a in "xyz"
+)
 CODE_BITS = 20
 _NS = 1_000_000_000
 
@@ -92,7 +110,9 @@ def glove_q(t_s: np.ndarray | float) -> np.ndarray:
 COMMAND_LEAD_S = 0.05  # the robot follows its command 50 ms behind
 
 
-def _stamps(timing: StreamTiming, t0: int, t1: int, rng: np.random.Generator, epoch: int) -> tuple[np.ndarray, np.ndarray]:
+def _stamps(
+    timing: StreamTiming, t0: int, t1: int, rng: np.random.Generator, epoch: int
+) -> tuple[np.ndarray, np.ndarray]:
     """(stamp_ns, log_ns) of a stream's samples due in [t0, t1): the ticks of its drifting clock from
     `epoch`, jittered; logged after its transport delay."""
     period = _NS / timing.rate_hz * (1 + timing.drift_ppm * 1e-6)
@@ -192,7 +212,11 @@ def write_session(path: str | Path, spec: SyntheticSession) -> Path:
               "arm": T.device_topic("arm", "arm", "state"), "effector": T.device_topic("hand", "hand", "state")}
     metadata = {
         "rig": {"name": "synthetic", "robot": robot, "end_effector": ee, "toml": ""},
-        "session": {"task": spec.episodes[0].task if spec.episodes else "", "operator": "synthetic", "end_effector": ee},
+        "session": {
+            "task": spec.episodes[0].task if spec.episodes else "",
+            "operator": "synthetic",
+            "end_effector": ee,
+        },
         "pipeline": {"inputs": json.dumps(inputs)},
         **spec.metadata,
     }
@@ -231,26 +255,64 @@ def write_session(path: str | Path, spec: SyntheticSession) -> Path:
                 lambda s: JointSample(s, ee_names, effector_q(ee, (s - epoch) / _NS - COMMAND_LEAD_S)))
             g, glg = _stamps(spec.glove, t0, t1, rng, epoch)
             if spec.extra_topics:
-                add(T.device_topic("glove", "glove", "hand"), g, glg, lambda s: JointSample(s, GLOVE_JOINTS, glove_q((s - epoch) / _NS)))
+                add(
+                    T.device_topic("glove", "glove", "hand"),
+                    g,
+                    glg,
+                    lambda s: JointSample(s, GLOVE_JOINTS, glove_q((s - epoch) / _NS)),
+                )
                 w, wlg = _stamps(spec.suit, t0, t1, rng, epoch)
-                add(T.device_topic("suit", "suit", "wrist"), w, wlg, lambda s: PoseSample(
-                    s, "suit", np.array([0.3, 0.0, 0.2]) + 0.01 * np.sin((s - epoch) / _NS), np.array([0.0, 0.0, 0.0, 1.0])))
+                add(
+                    T.device_topic("suit", "suit", "wrist"),
+                    w,
+                    wlg,
+                    lambda s: PoseSample(
+                        s,
+                        "suit",
+                        np.array([0.3, 0.0, 0.2]) + 0.01 * np.sin((s - epoch) / _NS),
+                        np.array([0.0, 0.0, 0.0, 1.0]),
+                    ),
+                )
             # pipeline outputs: one step per glove sample, stamped with the glove sample's log time
             for start, stop, ep in windows:
                 inside = (glg >= start) & (glg < stop)
                 steps = glg[inside]
                 if spec.extra_topics:
-                    add(T.RETARGETED, steps, steps + 1000, lambda s: JointSample(s, ee_names, effector_q(ee, (s - epoch) / _NS) + 0.01))
-                    add(T.CORRECTED, steps, steps + 2000, lambda s: JointSample(s, ee_names, effector_q(ee, (s - epoch) / _NS)))
+                    add(
+                        T.RETARGETED,
+                        steps,
+                        steps + 1000,
+                        lambda s: JointSample(s, ee_names, effector_q(ee, (s - epoch) / _NS) + 0.01),
+                    )
+                    add(
+                        T.CORRECTED,
+                        steps,
+                        steps + 2000,
+                        lambda s: JointSample(s, ee_names, effector_q(ee, (s - epoch) / _NS)),
+                    )
                 execute = steps[steps >= start + int(ep.commands_after_s * _NS)]
-                add(T.COMMAND_ARM, execute, execute + 3000, lambda s: JointSample(s, ARM_JOINTS, arm_q((s - epoch) / _NS)))
-                add(T.COMMAND_HAND, execute, execute + 4000, lambda s: JointSample(s, ee_names, effector_q(ee, (s - epoch) / _NS)))
+                add(
+                    T.COMMAND_ARM,
+                    execute,
+                    execute + 3000,
+                    lambda s: JointSample(s, ARM_JOINTS, arm_q((s - epoch) / _NS)),
+                )
+                add(
+                    T.COMMAND_HAND,
+                    execute,
+                    execute + 4000,
+                    lambda s: JointSample(s, ee_names, effector_q(ee, (s - epoch) / _NS)),
+                )
             for ci, cam in enumerate(spec.cameras):
                 timing = StreamTiming(spec.camera.rate_hz, spec.camera.latency_ms, spec.camera.jitter_ms,
                                       spec.camera.drift_ppm, phase_ms=7.0 * ci)
                 s, lg = _stamps(timing, t0, t1, rng, epoch)
                 for stamp, log in zip(s.tolist(), lg.tolist()):
-                    if any(start + a * _NS <= stamp < start + b * _NS for start, _, ep in windows for a, b in ep.camera_gaps):
+                    if any(
+                        start + a * _NS <= stamp < start + b * _NS
+                        for start, _, ep in windows
+                        for a, b in ep.camera_gaps
+                    ):
                         continue
                     n = frame_number[cam]
                     frame_number[cam] += 1
@@ -259,14 +321,18 @@ def write_session(path: str | Path, spec: SyntheticSession) -> Path:
                     else:
                         img = render_frame(spec, n, (stamp - epoch) / _NS, ci, noise[n % len(noise)])
                         data = cv2.imencode(".jpg", img, [cv2.IMWRITE_JPEG_QUALITY, spec.jpeg_quality])[1].tobytes()
-                    out.append(Logged(T.device_topic("camera", cam, "image"), log, ImageSample(stamp, cam, data, "jpeg")))
+                    out.append(
+                        Logged(T.device_topic("camera", cam, "image"), log, ImageSample(stamp, cam, data, "jpeg"))
+                    )
             for i, (start, stop, ep) in enumerate(windows):
                 events = [(start, {"event": "start", "episode": i, "task": ep.task}),
                           (stop, {"event": "stop", "episode": i, "task": ep.task})]
                 if ep.discarded:
                     events.append((stop + 1, {"event": "discard", "episode": i, "task": ep.task}))
                 if ep.outcome:
-                    events.append((stop + 2, {"event": "outcome", "episode": i, "task": ep.task, "outcome": ep.outcome}))
+                    events.append(
+                        (stop + 2, {"event": "outcome", "episode": i, "task": ep.task, "outcome": ep.outcome})
+                    )
                 for at, data in events:
                     if t0 <= at < t1:
                         out.append(Logged(T.EPISODE, at, Event(at, "teleprev.EpisodeEvent", data)))

@@ -18,7 +18,8 @@ curls across the palm.
 
 Sessions recorded by earlier versions read hands the other way round, R = B Ry(abduction) Rz(flexion) Rx(twist) B.T
 (abduction first, the twist nearest zero taken off): angles_from_hand_pose_abduction_first, kept as it was
-so that they re-run bit for bit (teleprev/pipeline/older_formats/ picks it). It is singular at 90 degrees of flexion (a small sideways deviation of a
+so that they re-run bit for bit (teleprev/pipeline/older_formats/ picks it). It is singular at 90 degrees of flexion
+(a small sideways deviation of a
 flexed finger reads as a large abduction) and flips a thumb turned more than 90 degrees about its bone.
 """
 
@@ -27,7 +28,6 @@ from __future__ import annotations
 import functools
 
 import numpy as np
-
 
 FINGERS = ("index", "middle", "pinky", "ring", "thumb")
 HAND_JOINTS: tuple[str, ...] = tuple(f"{f}{i}" for f in FINGERS for i in (1, 2, 3))

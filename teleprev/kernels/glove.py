@@ -24,7 +24,6 @@ Compiled on the first call and cached on disk (cache=True); warm(), run by scrip
 from __future__ import annotations
 
 import math
-
 from typing import NamedTuple
 
 import numpy as np

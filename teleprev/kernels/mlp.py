@@ -71,7 +71,10 @@ def _exp(x):
     """exp(x) in float64 for x clamped to [-88, 88], relative error below 1e-10: x / 1024, a degree-7
     Taylor polynomial, squared ten times. Only + and * (no library call): the same bits everywhere."""
     x = min(max(x, -EXP_CLAMP), EXP_CLAMP) * (1.0 / 1024.0)
-    p = 1.0 + x * (1.0 + x * (0.5 + x * (1.0 / 6.0 + x * (1.0 / 24.0 + x * (1.0 / 120.0 + x * (1.0 / 720.0 + x * (1.0 / 5040.0)))))))
+    p = 1.0 + x * (
+        1.0
+        + x * (0.5 + x * (1.0 / 6.0 + x * (1.0 / 24.0 + x * (1.0 / 120.0 + x * (1.0 / 720.0 + x * (1.0 / 5040.0))))))
+    )
     for _ in range(10):
         p = p * p
     return p

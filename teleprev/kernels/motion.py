@@ -12,7 +12,6 @@ the first call and cached on disk (cache=True); warm(), run by scripts/setup.sh,
 from __future__ import annotations
 
 import math
-
 from typing import NamedTuple
 
 import numpy as np

@@ -65,17 +65,23 @@ def cpn_card(path: Path, net: MLP, heldout: dict, dataset_command: str, command:
     ]
     for key in ("auc_min_link", "recall", "config_fnr"):
         if f"cpn_boundary_{key}" in heldout:
-            rows.append((f"cpn_boundary_{key} (boundary held-out)", _fmt(heldout[f"cpn_boundary_{key}"]), "(harder: all within ~0.1 rad of contact)"))
+            rows.append(
+                (
+                    f"cpn_boundary_{key} (boundary held-out)",
+                    _fmt(heldout[f"cpn_boundary_{key}"]),
+                    "(harder: all within ~0.1 rad of contact)",
+                )
+            )
     text = f"""# CPN: LEAP Hand self-collision prediction network
 
-`{path.with_suffix('.safetensors').name}`: joint configuration (16 joints, radians) -> per-link collision probability
-for the {len(net.info.link_names)} links with collision geometry ({', '.join(net.info.link_names)}).
+`{path.with_suffix(".safetensors").name}`: joint configuration (16 joints, radians) -> per-link collision probability
+for the {len(net.info.link_names)} links with collision geometry ({", ".join(net.info.link_names)}).
 Appendix A.1 of TelePreview (arXiv 2412.13548). Loaded by `teleprev.noncollision.mlp.load_model` (numpy, no torch).
 
 ## Data
 
-{_dataset(t.get('dataset', {}))}
-Split: {t.get('dataset', {}).get('train', 0):,} training / {t.get('dataset', {}).get('val', 0):,} validation.
+{_dataset(t.get("dataset", {}))}
+Split: {t.get("dataset", {}).get("train", 0):,} training / {t.get("dataset", {}).get("val", 0):,} validation.
 Made with:
 
 ```
@@ -89,26 +95,26 @@ Made with:
 ## Training
 
 Mean per-link binary cross-entropy (equation 5), each link's positive term weighted by
-{s.get('pos_weight')} x its negative/positive ratio (missed collisions cost more than false alarms){_pair_loss(net, s)}; Adam,
-one-cycle learning rate peaking at {s.get('lr')}, batch {s.get('batch_size')}, {s.get('epochs')} epochs, seed {s.get('seed')};
-weights of the epoch with the best validation loss (epoch {t.get('best_epoch')}).
-Operating threshold {net.info.threshold:.4g}: the largest at which the validation set reaches recall >= {s.get('target_recall')}
-of colliding link labels and <= {s.get('target_config_fnr')} colliding configurations predicted entirely free.
+{s.get("pos_weight")} x its negative/positive ratio (missed collisions cost more than false alarms){_pair_loss(net, s)}; Adam,
+one-cycle learning rate peaking at {s.get("lr")}, batch {s.get("batch_size")}, {s.get("epochs")} epochs, seed {s.get("seed")};
+weights of the epoch with the best validation loss (epoch {t.get("best_epoch")}).
+Operating threshold {net.info.threshold:.4g}: the largest at which the validation set reaches recall >= {s.get("target_recall")}
+of colliding link labels and <= {s.get("target_config_fnr")} colliding configurations predicted entirely free.
 
 Validation per epoch (loss, worst-link AUC, recall at 0.5):
 
-{_history_table(hist, ('val_loss', 'val_auc_min_link', 'val_recall_at_half'))}
+{_history_table(hist, ("val_loss", "val_auc_min_link", "val_recall_at_half"))}
 
 ## Held-out figures
 
-Fresh data generated after training ({heldout.get('cpn_heldout_uniform', 0):,} uniform, {heldout.get('cpn_heldout_boundary', 0):,} boundary samples, seed {heldout.get('cpn_heldout_seed', '')}),
+Fresh data generated after training ({heldout.get("cpn_heldout_uniform", 0):,} uniform, {heldout.get("cpn_heldout_boundary", 0):,} boundary samples, seed {heldout.get("cpn_heldout_seed", "")}),
 labelled by the exact checker, at the operating threshold:
 
 {_table(rows)}
 
-Per-link ROC AUC (uniform held-out): {', '.join(f'{k} {v:.4f}' for k, v in per_link.items())}.
+Per-link ROC AUC (uniform held-out): {", ".join(f"{k} {v:.4f}" for k, v in per_link.items())}.
 
-{_footer(command, t.get('seconds', 0.0), t.get('device', 'cpu'))}"""
+{_footer(command, t.get("seconds", 0.0), t.get("device", "cpu"))}"""
     out = path.with_suffix(".md")
     out.write_text(text)
     return out
@@ -117,8 +123,10 @@ Per-link ROC AUC (uniform held-out): {', '.join(f'{k} {v:.4f}' for k, v in per_l
 def _pair_loss(net: MLP, s: dict) -> str:
     if net.info.combine != "noisy_or" or not s.get("pair_weight"):
         return ""
-    return (f", plus {s['pair_weight']} x the mean per-pair BCE of the output slots against the dataset's per-pair labels "
-            "(each slot is one checked link pair; positives weighted the same way)")
+    return (
+        f", plus {s['pair_weight']} x the mean per-pair BCE of the output slots against the dataset's per-pair labels "
+        "(each slot is one checked link pair; positives weighted the same way)"
+    )
 
 
 def _history_table(hist: list[dict], keys: tuple[str, ...]) -> str:
@@ -144,16 +152,16 @@ def ccn_card(path: Path, net: MLP, heldout: dict, grid_md: str | None, dataset_c
     grid = f"\n## Loss weights (grid search)\n\n{grid_md}\n" if grid_md else ""
     text = f"""# CCN: LEAP Hand invalid configuration correction network
 
-`{path.with_suffix('.safetensors').name}`: a self-colliding configuration (16 joints, radians) -> a corrected one nearby,
+`{path.with_suffix(".safetensors").name}`: a self-colliding configuration (16 joints, radians) -> a corrected one nearby,
 q_hat = clip(q + half_range * net(q), lower, upper). Appendix A.2 of TelePreview (arXiv 2412.13548).
 Used by `teleprev.noncollision.corrector.Corrector`, which checks every proposal with the exact checker and falls
-back when it still collides. Trained against the CPN `{t.get('cpn', {}).get('file')}` (sha256 `{t.get('cpn', {}).get('sha256', '')[:16]}…`).
+back when it still collides. Trained against the CPN `{t.get("cpn", {}).get("file")}` (sha256 `{t.get("cpn", {}).get("sha256", "")[:16]}…`).
 
 ## Data
 
-The {t.get('dataset', {}).get('invalid', 0):,} colliding configurations of {_dataset(t.get('dataset', {}))}
-Split: {t.get('dataset', {}).get('train', 0):,} training / {t.get('dataset', {}).get('val', 0):,} validation
-({s.get('val_exact')} of them checked exactly every epoch). Made with:
+The {t.get("dataset", {}).get("invalid", 0):,} colliding configurations of {_dataset(t.get("dataset", {}))}
+Split: {t.get("dataset", {}).get("train", 0):,} training / {t.get("dataset", {}).get("val", 0):,} validation
+({s.get("val_exact")} of them checked exactly every epoch). Made with:
 
 ```
 {dataset_command}
@@ -166,21 +174,21 @@ Split: {t.get('dataset', {}).get('train', 0):,} training / {t.get('dataset', {})
 ## Training
 
 L = alpha * MSE(q_hat, q) + beta * mean link probability of the frozen CPN at q_hat (equations 6-8),
-alpha = {s.get('alpha')}, beta = {s.get('beta')}; Adam, one-cycle learning rate peaking at {s.get('lr')}, batch {s.get('batch_size')},
-{s.get('epochs')} epochs, seed {s.get('seed')}. Convergence monitored by the exact collision rate of the outputs on the
-validation set; the epoch with the highest validity is kept (epoch {t.get('best_epoch')}).
+alpha = {s.get("alpha")}, beta = {s.get("beta")}; Adam, one-cycle learning rate peaking at {s.get("lr")}, batch {s.get("batch_size")},
+{s.get("epochs")} epochs, seed {s.get("seed")}. Convergence monitored by the exact collision rate of the outputs on the
+validation set; the epoch with the highest validity is kept (epoch {t.get("best_epoch")}).
 
-{_history_table(t.get('history', []), ('loss', 'mse', 'collision', 'val_valid_frac', 'val_mean_dev_rad'))}
+{_history_table(t.get("history", []), ("loss", "mse", "collision", "val_valid_frac", "val_mean_dev_rad"))}
 {grid}
 ## Held-out figures
 
-Fresh invalid configurations generated after training: {heldout.get('ccn_n_invalid', 0):,} in all, colliding uniform samples
+Fresh invalid configurations generated after training: {heldout.get("ccn_n_invalid", 0):,} in all, colliding uniform samples
 and colliding frames of retargeted human hand trajectories (open, fist, pinch, spread, crossed fingers), checked with the
 exact checker:
 
 {_table(rows)}
 
-{_footer(command, t.get('seconds', 0.0), t.get('device', 'cpu'))}"""
+{_footer(command, t.get("seconds", 0.0), t.get("device", "cpu"))}"""
     out = path.with_suffix(".md")
     out.write_text(text)
     return out

@@ -97,7 +97,8 @@ def find_models(models_dir: Path, model: RobotModel) -> tuple[Path, Path]:
             )
         if len(found[kind]) > 1:
             raise ModelError(
-                f"several {kind.upper()} files for robot {model.name!r}: {', '.join(p.name for p in found[kind])}; keep one",
+                f"several {kind.upper()} files for robot {model.name!r}: {', '.join(p.name for p in found[kind])}; "
+                "keep one",
                 str(models_dir),
             )
     return found["cpn"][0], found["ccn"][0]
@@ -114,7 +115,9 @@ class Corrector:
         self.files = dict(files or {})  # the weight files by role ("cpn", "ccn"), when loaded from files
         self.neutral = model.neutral()
         if checker.collides(self.neutral):
-            raise ModelError("the neutral (open) hand is in self-collision, so there is no safe fallback pose", str(model.urdf_path))
+            raise ModelError(
+                "the neutral (open) hand is in self-collision, so there is no safe fallback pose", str(model.urdf_path)
+            )
         s = np.linspace(0.0, 1.0, settings.segment_points + 1)[1:]
         self._segment = s[:, None]
         self._extend = np.linspace(1.0, 2.0, 9)[1:, None]
@@ -137,7 +140,7 @@ class Corrector:
         self._cpn.predicts_free(self.neutral[None])
 
     @classmethod
-    def load(cls, models_dir: Path | None, model: RobotModel, checker: SelfCollisionChecker | None = None) -> "Corrector":
+    def load(cls, models_dir: Path | None, model: RobotModel, checker: SelfCollisionChecker | None = None) -> Corrector:
         """The CPN and CCN for `model` from `models_dir` (None: the shipped models/ folder)."""
         from teleprev.paths import data_dir
 
@@ -151,7 +154,9 @@ class Corrector:
                 f"trained against another CPN than {cpn_path.name}; retrain the CCN (`teleprev collision train-ccn`)",
                 str(ccn_path),
             )
-        return cls(model, checker, cpn, CCN(ccn_net, model.lower, model.upper), files={"cpn": cpn_path, "ccn": ccn_path})
+        return cls(
+            model, checker, cpn, CCN(ccn_net, model.lower, model.upper), files={"cpn": cpn_path, "ccn": ccn_path}
+        )
 
     def model_hashes(self) -> dict[str, str]:
         """{role: sha256} of the weight files loaded (a session records them, eval compares them)."""
@@ -199,7 +204,8 @@ class Corrector:
         in one kernel call; the shortened proposals are checked exactly in one batched pass, the full
         proposals only for the rows whose shortened one collides (or was not found); deviations in one
         array operation. Each (report, colliding links) is built once per distinct set of colliding pairs
-        (a session holds few; the free rows share one), and shared, read-only, by the rows that have it. The same checks in the same
+        (a session holds few; the free rows share one), and shared, read-only, by the rows that have it. The same
+        checks in the same
         order as _ccn_answer row by row: the same answers."""
         n_rows = len(q0)
         untouched = np.abs(q0 - q_in).max(axis=1).tolist()
@@ -217,8 +223,12 @@ class Corrector:
                 report = CollisionReport(label, tuple(names[k] for k in np.flatnonzero(pairs[i])))
                 known = seen[key] = (report, tuple(report.colliding_links(link_names)))
             reports[i], links[i] = known
-        out = [None if collides else Prepared(q_in[i], q0[i], reports[i], None, Correction(q0[i], "untouched", (), untouched[i]))
-               for i, collides in enumerate(hit.tolist())]
+        out = [
+            None
+            if collides
+            else Prepared(q_in[i], q0[i], reports[i], None, Correction(q0[i], "untouched", (), untouched[i]))
+            for i, collides in enumerate(hit.tolist())
+        ]
         if not len(rows):
             return out
         proposals, shortened, his = self._nets.propose_shorten(q0[rows])
@@ -250,7 +260,9 @@ class Corrector:
             start += k + 1
         return out
 
-    def correct(self, q: np.ndarray, previous: np.ndarray | None = None, prepared: Prepared | None = None) -> Correction:
+    def correct(
+        self, q: np.ndarray, previous: np.ndarray | None = None, prepared: Prepared | None = None
+    ) -> Correction:
         """`prepared`: `prepare`'s answer for q, when computed ahead."""
         if prepared is None:
             prepared = self.prepare(np.asarray(q, dtype=float)[None])[0]

@@ -14,10 +14,10 @@ from __future__ import annotations
 
 import json
 import os
+from collections.abc import Callable
 from concurrent.futures import ProcessPoolExecutor, as_completed
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
-from typing import Callable
 
 import numpy as np
 
@@ -55,15 +55,18 @@ class DatasetSettings:
         """The `teleprev collision dataset` command that makes this dataset."""
         s = self.sampling
         return (
-            f"teleprev collision dataset {out} --robot {self.robot} --uniform {self.uniform} --boundary {self.boundary} "
+            f"teleprev collision dataset {out} --robot {self.robot} --uniform {self.uniform} --boundary "
+            f"{self.boundary} "
             f"--seed {self.seed} --shard-size {self.shard_size} --bisection-steps {s.steps} "
             f"--jitter-per-pair {s.jitter_per_pair} --jitter-min {s.jitter_min} --jitter-max {s.jitter_max}"
         )
 
     @staticmethod
-    def from_json(data: dict, where: str) -> "DatasetSettings":
+    def from_json(data: dict, where: str) -> DatasetSettings:
         if data.get("format") != FORMAT:
-            raise ModelError(f"not a teleprev collision dataset (format {data.get('format')!r}, expected {FORMAT!r})", where)
+            raise ModelError(
+                f"not a teleprev collision dataset (format {data.get('format')!r}, expected {FORMAT!r})", where
+            )
         try:
             body = {k: v for k, v in data.items() if k != "format"}
             body["sampling"] = BoundarySettings(**body.get("sampling", {}))
@@ -160,7 +163,9 @@ def prepare(out: Path, settings: DatasetSettings) -> None:
         except (json.JSONDecodeError, UnicodeDecodeError):
             raise ModelError("unreadable dataset settings; delete the folder or choose another", str(path)) from None
         if existing != settings.to_json():
-            diff = sorted(k for k in set(existing) | set(settings.to_json()) if existing.get(k) != settings.to_json().get(k))
+            diff = sorted(
+                k for k in set(existing) | set(settings.to_json()) if existing.get(k) != settings.to_json().get(k)
+            )
             raise ModelError(
                 f"this folder holds a dataset made with other settings (differs in: {', '.join(diff)}); "
                 "use the same settings to resume, or another folder", str(path)
@@ -191,7 +196,9 @@ def generate(
     import multiprocessing
 
     ctx = multiprocessing.get_context("spawn")  # workers import only numpy and fcl; no inherited threads
-    with ProcessPoolExecutor(min(workers, len(todo)), mp_context=ctx, initializer=_init_worker, initargs=(settings.robot,)) as pool:
+    with ProcessPoolExecutor(
+        min(workers, len(todo)), mp_context=ctx, initializer=_init_worker, initargs=(settings.robot,)
+    ) as pool:
         futures = [pool.submit(_write_shard, settings, str(out), k) for k in todo]
         try:
             for fut in as_completed(futures):
@@ -221,7 +228,10 @@ def load_settings(path: Path) -> DatasetSettings:
     path = Path(path)
     settings_path = path / SETTINGS_FILE
     if not settings_path.is_file():
-        raise ModelError(f"no {SETTINGS_FILE}: not a collision dataset folder (make one with `teleprev collision dataset`)", str(path))
+        raise ModelError(
+            f"no {SETTINGS_FILE}: not a collision dataset folder (make one with `teleprev collision dataset`)",
+            str(path),
+        )
     try:
         return DatasetSettings.from_json(json.loads(settings_path.read_text()), str(settings_path))
     except (json.JSONDecodeError, UnicodeDecodeError):
@@ -236,20 +246,28 @@ def load_dataset(path: Path, urdf_sha256: str | None = None) -> CollisionDataset
     settings = load_settings(path)
     if urdf_sha256 is not None and settings.urdf_sha256 != urdf_sha256:
         raise ModelError(
-            f"generated for a different URDF (sha256 {settings.urdf_sha256[:12]}…, the robot's is {urdf_sha256[:12]}…); "
-            "generate the dataset again", str(path),
+            f"generated for a different URDF (sha256 {settings.urdf_sha256[:12]}…, the robot's is "
+            f"{urdf_sha256[:12]}…); "
+            "generate the dataset again",
+            str(path),
         )
     missing = pending_shards(path, settings)
     if missing:
         raise ModelError(
-            f"incomplete: {len(missing)} of {settings.n_shards} shards missing or unreadable (first: {shard_path(path, missing[0]).name}); "
-            "rerun the same `teleprev collision dataset` command to finish it", str(path),
+            f"incomplete: {len(missing)} of {settings.n_shards} shards missing or unreadable (first: "
+            f"{shard_path(path, missing[0]).name}); "
+            "rerun the same `teleprev collision dataset` command to finish it",
+            str(path),
         )
     parts, names = [], None
     for k in range(settings.n_shards):
         table = pq.read_table(shard_path(path, k))
         meta = json.loads(table.schema.metadata[META_KEY])
-        shard_names = (tuple(meta["joint_names"]), tuple(meta["link_names"]), tuple(tuple(p) for p in meta["link_pairs"]))
+        shard_names = (
+            tuple(meta["joint_names"]),
+            tuple(meta["link_names"]),
+            tuple(tuple(p) for p in meta["link_pairs"]),
+        )
         if names is not None and shard_names != names:
             raise ModelError("joint, link or pair names differ from the first shard's", str(shard_path(path, k)))
         names = shard_names

@@ -30,7 +30,12 @@ def cpn_heldout(model: RobotModel, checker: SelfCollisionChecker, cpn: CPN, n_un
                 seed: int = EVAL_SEED) -> dict:
     rng = np.random.default_rng([seed, 1])
     uni = sampling.uniform(model, checker, n_uniform, rng)
-    out = {"cpn_threshold": cpn.threshold, "cpn_heldout_uniform": n_uniform, "cpn_heldout_boundary": n_boundary, "cpn_heldout_seed": seed}
+    out = {
+        "cpn_threshold": cpn.threshold,
+        "cpn_heldout_uniform": n_uniform,
+        "cpn_heldout_boundary": n_boundary,
+        "cpn_heldout_seed": seed,
+    }
     fig = cpn_figures(_prob(cpn, uni.q), uni.labels, cpn.threshold)
     out.update(fig.as_dict())
     out["cpn_auc_per_link"] = {n: round(float(a), 5) for n, a in zip(checker.link_names, fig.auc_per_link)}
@@ -77,7 +82,11 @@ def ccn_heldout(checker: SelfCollisionChecker, ccn: CCN, invalid: InvalidSet) ->
     out_q = ccn(invalid.q)
     valid = ~sampling.colliding(checker, out_q)
     dev = np.abs(out_q - invalid.q).mean(axis=1)
-    fig = {"ccn_valid_frac": float(valid.mean()), "ccn_mean_dev_rad": float(dev.mean()), "ccn_n_invalid": int(len(valid))}
+    fig = {
+        "ccn_valid_frac": float(valid.mean()),
+        "ccn_mean_dev_rad": float(dev.mean()),
+        "ccn_n_invalid": int(len(valid)),
+    }
     for src in ("uniform", "trajectory"):
         sel = invalid.source == src
         if sel.any():

@@ -9,9 +9,9 @@ really matters (the optimiser is invariant to the loss scale), so pairs with equ
 from __future__ import annotations
 
 import json
+from collections.abc import Callable
 from dataclasses import asdict, dataclass, replace
 from pathlib import Path
-from typing import Callable
 
 from teleprev.noncollision.train_ccn import CCNSettings, invalid_configurations, train_ccn
 from teleprev.robot.collision import SelfCollisionChecker
@@ -50,7 +50,10 @@ class GridResult:
         ]
         for p in self.points:
             mark = "**chosen**" if p == self.chosen else ""
-            lines.append(f"| {p.alpha:g} | {p.beta:g} | {p.beta / p.alpha:.3g} | {p.valid_frac:.4f} | {p.mean_dev_rad:.4f} | {mark} |")
+            lines.append(
+                f"| {p.alpha:g} | {p.beta:g} | {p.beta / p.alpha:.3g} | {p.valid_frac:.4f} | {p.mean_dev_rad:.4f} | "
+                f"{mark} |"
+            )
         return "\n".join(lines)
 
 
@@ -76,8 +79,17 @@ def grid_search(
     points = []
     for alpha in alphas:
         for beta in betas:
-            r = train_ccn(dataset_path, cpn_path, model, checker, replace(settings, alpha=alpha, beta=beta), invalid=invalid)
-            point = GridPoint(alpha, beta, r.val_figures["valid_frac"], r.val_figures["mean_dev_rad"], r.best_epoch, round(r.seconds, 1))
+            r = train_ccn(
+                dataset_path, cpn_path, model, checker, replace(settings, alpha=alpha, beta=beta), invalid=invalid
+            )
+            point = GridPoint(
+                alpha,
+                beta,
+                r.val_figures["valid_frac"],
+                r.val_figures["mean_dev_rad"],
+                r.best_epoch,
+                round(r.seconds, 1),
+            )
             points.append(point)
             if log:
                 log(point)
@@ -93,13 +105,18 @@ def write_grid(result: GridResult, out: Path) -> tuple[Path, Path]:
     c = result.chosen
     md.write_text(
         "# CCN loss weights: grid search\n\n"
-        f"Validity is the exact (fcl) collision-free fraction of CCN outputs on {result.settings.val_exact} held-out invalid "
-        f"configurations; each point trained {result.settings.epochs} epochs on at most {result.settings.max_train or 'all'} "
+        f"Validity is the exact (fcl) collision-free fraction of CCN outputs on {result.settings.val_exact} "
+        "held-out invalid "
+        f"configurations; each point trained {result.settings.epochs} epochs on at most "
+        f"{result.settings.max_train or 'all'} "
         "invalid configurations.\n\n"
         + result.markdown()
         + f"\n\nChosen: alpha = {c.alpha:g}, beta = {c.beta:g} "
-        + (f"(smallest deviation with validity >= {result.min_valid:g}).\n" if c.valid_frac >= result.min_valid
-           else f"(no pair reached validity {result.min_valid:g}: the most valid one).\n")
+        + (
+            f"(smallest deviation with validity >= {result.min_valid:g}).\n"
+            if c.valid_frac >= result.min_valid
+            else f"(no pair reached validity {result.min_valid:g}: the most valid one).\n"
+        )
     )
     return js, md
 
@@ -114,4 +131,6 @@ def read_chosen(path: Path) -> tuple[float, float]:
     except FileNotFoundError:
         raise ConfigError("no such grid-search result", str(path)) from None
     except (json.JSONDecodeError, KeyError, TypeError, ValueError):
-        raise ConfigError("not a grid-search result (expected the .json that `teleprev collision grid-search` writes)", str(path)) from None
+        raise ConfigError(
+            "not a grid-search result (expected the .json that `teleprev collision grid-search` writes)", str(path)
+        ) from None

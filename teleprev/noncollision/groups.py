@@ -27,7 +27,7 @@ class Group:
         return {"inputs": list(self.inputs), "outputs": [list(o) for o in self.outputs]}
 
     @staticmethod
-    def from_json(data: dict) -> "Group":
+    def from_json(data: dict) -> Group:
         return Group(tuple(data["inputs"]), tuple(tuple(o) for o in data["outputs"]))
 
 

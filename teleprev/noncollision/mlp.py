@@ -340,7 +340,9 @@ def read_info(path: Path) -> tuple[ModelInfo, dict[str, np.ndarray]]:
     for i, (g, a, b) in enumerate(expected):
         for key, want in ((f"layers.{i}.weight", (g, a, b)), (f"layers.{i}.bias", (g, b))):
             if tuple(tensors[key].shape) != want:
-                raise ModelError(f"tensor {key} has shape {tuple(tensors[key].shape)}, the architecture {arch} needs {want}", where)
+                raise ModelError(
+                    f"tensor {key} has shape {tuple(tensors[key].shape)}, the architecture {arch} needs {want}", where
+                )
             if not np.all(np.isfinite(tensors[key])):
                 raise ModelError(f"tensor {key} holds non-finite values", where)
     return info, tensors
@@ -358,11 +360,17 @@ def load_model(path: Path, kind: str, robot, link_names: tuple[str, ...] | None 
             f"{robot.urdf_sha256[:12]}…); retrain it for this robot (`teleprev collision train-{kind}`)", where,
         )
     if info.joint_names != tuple(robot.joint_names):
-        raise ModelError(f"joint names {list(info.joint_names)} differ from the robot's {list(robot.joint_names)}", where)
+        raise ModelError(
+            f"joint names {list(info.joint_names)} differ from the robot's {list(robot.joint_names)}", where
+        )
     if link_names is not None and info.kind == "cpn" and info.link_names != tuple(link_names):
         raise ModelError(f"link names {list(info.link_names)} differ from the checker's {list(link_names)}", where)
     layers = len(info.layer_shapes())
-    return MLP(info, [tensors[f"layers.{i}.weight"] for i in range(layers)], [tensors[f"layers.{i}.bias"] for i in range(layers)])
+    return MLP(
+        info,
+        [tensors[f"layers.{i}.weight"] for i in range(layers)],
+        [tensors[f"layers.{i}.bias"] for i in range(layers)],
+    )
 
 
 # ---- the two networks at runtime --------------------------------------------------------------------

@@ -36,7 +36,9 @@ class Projection:
     exact_checks: int
 
 
-def descend(cpn: CPN, model: RobotModel, q: np.ndarray, q_in: np.ndarray, settings: ProjectionSettings) -> tuple[np.ndarray, bool]:
+def descend(
+    cpn: CPN, model: RobotModel, q: np.ndarray, q_in: np.ndarray, settings: ProjectionSettings
+) -> tuple[np.ndarray, bool]:
     """One step of the projection; also whether the CPN predicts the new point free."""
     _, grad = cpn.mean_prob_grad(q, scaled=True)
     g = grad[0]

@@ -7,7 +7,8 @@ the last bracket (one free, one colliding, both within |segment| / 2**steps of t
 jittered copies at a log-uniform range of distances so the band around the boundary is covered too.
 
 Each sample keeps its m per-link labels and, for the record, which checked link pairs collide (the
-link labels are the OR of those). Every configuration is rounded to float32 before it is labelled, so the stored (float32) values carry
+link labels are the OR of those). Every configuration is rounded to float32 before it is labelled, so the stored
+(float32) values carry
 exactly the labels the checker gave them.
 """
 
@@ -51,11 +52,11 @@ class Samples:
     def __len__(self) -> int:
         return len(self.q)
 
-    def take(self, index) -> "Samples":
+    def take(self, index) -> Samples:
         return Samples(self.q[index], self.labels[index], self.pairs[index], self.source[index])
 
     @staticmethod
-    def concat(parts: list["Samples"]) -> "Samples":
+    def concat(parts: list[Samples]) -> Samples:
         return Samples(*(np.concatenate([getattr(p, f) for p in parts]) for f in ("q", "labels", "pairs", "source")))
 
 

@@ -77,7 +77,7 @@ class TorchMLP(torch.nn.Module):
         return MLP(info or self.info, weights, biases)
 
     @staticmethod
-    def from_numpy(net: MLP) -> "TorchMLP":
+    def from_numpy(net: MLP) -> TorchMLP:
         module = TorchMLP(net.info)
         with torch.no_grad():
             for w, b, wn, bn in zip(module.weights, module.biases, net.w, net.b):

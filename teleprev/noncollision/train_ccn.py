@@ -11,9 +11,9 @@ configurations (fcl, every epoch); the epoch with the lowest rate is kept (ties:
 from __future__ import annotations
 
 import time
+from collections.abc import Callable
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
-from typing import Callable
 
 import numpy as np
 
@@ -97,7 +97,9 @@ def train_ccn(
     from teleprev.noncollision.torch_util import TorchMLP, pick_device, seed_everything
 
     t_start = time.perf_counter()
-    q_all, data_info = invalid if invalid is not None else invalid_configurations(dataset_path, model, checker.link_names)
+    q_all, data_info = (
+        invalid if invalid is not None else invalid_configurations(dataset_path, model, checker.link_names)
+    )
     cpn_np = load_model(cpn_path, "cpn", model, checker.link_names)
     device = pick_device(settings.device)
     gen = seed_everything(settings.seed)
@@ -167,10 +169,16 @@ def train_ccn(
     result.dataset = {**data_info, "train": len(train_idx), "val": len(val_idx)}
     result.seconds = time.perf_counter() - t_start
     training = {
-        "settings": {**asdict(settings), "hidden": list(settings.hidden)}, "best_epoch": result.best_epoch,
-        "history": [{k: round(v, 5) if isinstance(v, float) else v for k, v in asdict(h).items()} for h in result.history],
-        "val": result.val_figures, "dataset": result.dataset, "device": result.device,
-        "seconds": round(result.seconds, 1), "cpn": {"file": Path(cpn_path).name, "sha256": file_sha256(cpn_path)},
+        "settings": {**asdict(settings), "hidden": list(settings.hidden)},
+        "best_epoch": result.best_epoch,
+        "history": [
+            {k: round(v, 5) if isinstance(v, float) else v for k, v in asdict(h).items()} for h in result.history
+        ],
+        "val": result.val_figures,
+        "dataset": result.dataset,
+        "device": result.device,
+        "seconds": round(result.seconds, 1),
+        "cpn": {"file": Path(cpn_path).name, "sha256": file_sha256(cpn_path)},
     }
     info = ModelInfo(**{**info.__dict__, "training": training})
     result.net = _to_numpy(net, info)

@@ -17,9 +17,9 @@ colliding link labels, and the target rate of colliding configurations flagged s
 from __future__ import annotations
 
 import time
+from collections.abc import Callable
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
-from typing import Callable
 
 import numpy as np
 
@@ -99,7 +99,9 @@ def train_cpn(
         raise ValueError(f"unknown CPN architecture {settings.architecture!r} (grouped or plain)")
     data = load_dataset(dataset_path, model.urdf_sha256)
     if data.link_names != tuple(link_names):
-        raise ModelError(f"dataset links {list(data.link_names)} differ from the checker's {list(link_names)}", str(dataset_path))
+        raise ModelError(
+            f"dataset links {list(data.link_names)} differ from the checker's {list(link_names)}", str(dataset_path)
+        )
     if data.joint_names != tuple(model.joint_names):
         raise ModelError(f"dataset joints {list(data.joint_names)} differ from the robot's", str(dataset_path))
     device = pick_device(settings.device)
@@ -199,13 +201,25 @@ def train_cpn(
     fig = cpn_figures(prob, val_labels, threshold)
     result.val_figures = {"threshold": threshold, **fig.as_dict(prefix=""), "n": fig.n,
                           "auc_per_link": dict(zip(link_names, (round(float(a), 5) for a in fig.auc_per_link)))}
-    result.dataset = {"path": str(dataset_path), "samples": len(data.samples), "train": len(train_idx), "val": len(val_idx),
-                      **{k: v for k, v in data.settings.to_json().items() if k not in ("format",)}}
+    result.dataset = {
+        "path": str(dataset_path),
+        "samples": len(data.samples),
+        "train": len(train_idx),
+        "val": len(val_idx),
+        **{k: v for k, v in data.settings.to_json().items() if k not in ("format",)},
+    }
     result.seconds = time.perf_counter() - t_start
-    training = {"settings": {**asdict(settings), "hidden": list(settings.hidden)}, "best_epoch": result.best_epoch,
-                "history": [{k: round(v, 5) if isinstance(v, float) else v for k, v in asdict(h).items()} for h in result.history],
-                "val": {k: v for k, v in result.val_figures.items() if k != "auc_per_link"},
-                "dataset": result.dataset, "device": result.device, "seconds": round(result.seconds, 1)}
+    training = {
+        "settings": {**asdict(settings), "hidden": list(settings.hidden)},
+        "best_epoch": result.best_epoch,
+        "history": [
+            {k: round(v, 5) if isinstance(v, float) else v for k, v in asdict(h).items()} for h in result.history
+        ],
+        "val": {k: v for k, v in result.val_figures.items() if k != "auc_per_link"},
+        "dataset": result.dataset,
+        "device": result.device,
+        "seconds": round(result.seconds, 1),
+    }
     info = ModelInfo(**{**info.__dict__, "training": training})
     result.net = net.cpu().to_numpy(info)
     return result

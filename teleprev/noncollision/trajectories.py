@@ -42,11 +42,23 @@ def shape_angles(shape: str, rng: np.random.Generator) -> tuple[np.ndarray, np.n
     elif shape == "pinch":
         flex = {"index": (u(0.5, 1.0), u(0.5, 1.1), u(0.3, 0.8)), "thumb": (u(0.3, 0.9), u(0.3, 0.9), u(0.2, 0.8))}
         flex |= {f: (u(0.1, 1.2), u(0.1, 1.2), u(0.1, 0.8)) for f in ("middle", "ring", "pinky")}
-        abd = {"index": u(-0.1, 0.2), "middle": u(-0.1, 0.1), "ring": u(-0.1, 0.1), "pinky": u(-0.2, 0.0), "thumb": u(0.3, 1.0)}
+        abd = {
+            "index": u(-0.1, 0.2),
+            "middle": u(-0.1, 0.1),
+            "ring": u(-0.1, 0.1),
+            "pinky": u(-0.2, 0.0),
+            "thumb": u(0.3, 1.0),
+        }
     elif shape == "spread":
         flex = {f: (u(-0.1, 0.3), u(0.0, 0.3), u(0.0, 0.2)) for f in FINGERS}
         flex["thumb"] = (u(-0.2, 0.2), u(-0.1, 0.3), u(-0.1, 0.2))
-        abd = {"index": u(0.2, 0.45), "middle": u(-0.1, 0.1), "ring": u(-0.45, -0.2), "pinky": u(-0.6, -0.3), "thumb": u(-0.4, 0.1)}
+        abd = {
+            "index": u(0.2, 0.45),
+            "middle": u(-0.1, 0.1),
+            "ring": u(-0.45, -0.2),
+            "pinky": u(-0.6, -0.3),
+            "thumb": u(-0.4, 0.1),
+        }
     elif shape == "crossed":  # middle over index, or index over middle
         flex = {f: (u(0.0, 0.6), u(0.0, 0.5), u(0.0, 0.4)) for f in FINGERS}
         flex["thumb"] = (u(0.0, 0.8), u(0.0, 0.8), u(0.0, 0.6))
@@ -78,7 +90,9 @@ def angle_trajectory(rng: np.random.Generator, seconds: float, rate_hz: float) -
     abd_k = np.array([k[1] for k in keys])
     ts = np.arange(n) / rate_hz
     seg = np.clip(np.searchsorted(times, ts, side="right") - 1, 0, len(times) - 2)
-    s = _min_jerk(np.clip((ts - np.array(times)[seg]) / (np.array(times)[seg + 1] - np.array(times)[seg]), 0.0, 1.0))[:, None]
+    s = _min_jerk(np.clip((ts - np.array(times)[seg]) / (np.array(times)[seg + 1] - np.array(times)[seg]), 0.0, 1.0))[
+        :, None
+    ]
     flex = flex_k[seg] + s * (flex_k[seg + 1] - flex_k[seg])
     abd = abd_k[seg] + s * (abd_k[seg + 1] - abd_k[seg])
     # a slow wobble on every angle, as a real hand never holds still

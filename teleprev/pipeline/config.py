@@ -53,7 +53,9 @@ class PipelineConfig:
         if not 0 < self.engage_speed_frac <= 1:
             raise ValueError(f"engage_speed_frac must be in (0, 1], got {self.engage_speed_frac!r}")
         if self.gripper_joint not in HAND_JOINTS:
-            raise ValueError(f"gripper_joint must be an SMPL-X hand joint ({', '.join(HAND_JOINTS)}), got {self.gripper_joint!r}")
+            raise ValueError(
+                f"gripper_joint must be an SMPL-X hand joint ({', '.join(HAND_JOINTS)}), got {self.gripper_joint!r}"
+            )
         if not 10 <= self.command_rate_hz <= 1000:
             raise ValueError(f"command_rate_hz must be in [10, 1000], got {self.command_rate_hz!r}")
         if not 0 <= self.tf_rate_hz < float("inf"):

@@ -10,7 +10,8 @@ takes the first command after a pause, and the first of all, as the start of a n
 rest where it stands (sim.arm does, and so does teleprev.devices.ServoStreamRule): so each run is measured
 from three commands at rest on the last command before it, one controller cycle (RESUME_PERIOD_NS) apart,
 ahead of its own. Where the stream's caller knows better (`rests`: the arm's measured state where its
-controller was reset in the pause, or before the first run), that is where the run starts from. A stream that resumes with a jump reads as
+controller was reset in the pause, or before the first run), that is where the run starts from. A stream that resumes
+with a jump reads as
 the acceleration the controller sees. A dataset's actions are no command stream a controller starts: they
 are measured per episode without that lead-in (`from_rest=False`).
 """

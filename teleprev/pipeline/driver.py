@@ -15,11 +15,11 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from teleprev import topics
 from teleprev.messages import Event, JointSample, Logged, PoseSample
 from teleprev.pipeline.frozen import evolve
 from teleprev.pipeline.planner import ModeUpdate, TargetUpdate
 from teleprev.pipeline.step import HandInput, Pipeline, PipelineState, StepInputs, StepResult
-from teleprev import topics
 
 
 @dataclass(frozen=True)
@@ -31,7 +31,7 @@ class InputTopics:
     action: str = ""  # joint targets asked for directly (a policy's, topics.POLICY_ACTION): the trigger instead
 
     @classmethod
-    def for_devices(cls, glove: str, suit: str, arm: str, hand: str) -> "InputTopics":
+    def for_devices(cls, glove: str, suit: str, arm: str, hand: str) -> InputTopics:
         return cls(
             topics.device_topic("glove", glove, "hand"),
             topics.device_topic("suit", suit, "wrist"),
@@ -55,7 +55,9 @@ class PipelineDriver:
     def __init__(self, pipeline: Pipeline, inputs: InputTopics):
         self.pipeline = pipeline
         self.topics = inputs
-        self._input_topics = frozenset(t for t in (inputs.hand, inputs.wrist, inputs.arm, inputs.effector, inputs.action) if t)
+        self._input_topics = frozenset(
+            t for t in (inputs.hand, inputs.wrist, inputs.arm, inputs.effector, inputs.action) if t
+        )
         self.state = PipelineState()
         self.latest: dict[str, object] = {}
         self.last_result: StepResult | None = None
@@ -162,4 +164,7 @@ class PipelineDriver:
 
 
 def _json_ready(report: dict) -> dict:
-    return {k: (float(v) if isinstance(v, np.floating) else bool(v) if isinstance(v, np.bool_) else v) for k, v in report.items()}
+    return {
+        k: (float(v) if isinstance(v, np.floating) else bool(v) if isinstance(v, np.bool_) else v)
+        for k, v in report.items()
+    }

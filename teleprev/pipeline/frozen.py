@@ -12,7 +12,7 @@ from typing import TypeVar
 T = TypeVar("T")
 
 
-def evolve(obj: T, **changes) -> T:
+def evolve[T](obj: T, **changes) -> T:
     """`obj` with `changes` applied; a name that is not a field is an error, as in dataclasses.replace."""
     cls = type(obj)
     new = object.__new__(cls)

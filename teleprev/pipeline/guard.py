@@ -30,7 +30,9 @@ class JointGuard:
         self.checker = checker
         self.bisection_steps = bisection_steps
 
-    def step(self, last: np.ndarray, target: np.ndarray, dt: float, speed_frac: float = 1.0, target_valid: bool = False) -> np.ndarray:
+    def step(
+        self, last: np.ndarray, target: np.ndarray, dt: float, speed_frac: float = 1.0, target_valid: bool = False
+    ) -> np.ndarray:
         """The next command from `last` (itself a valid command) towards `target`.
 
         `target_valid` says the target itself passed the exact check (the Corrector's output did), so a

@@ -40,8 +40,14 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from teleprev.kernels.motion import (ESTIMATE_BLEND, ESTIMATE_GIVEN, ESTIMATE_HELD, ESTIMATE_NONE, ESTIMATE_RAW,
-                                     velocity_estimate)
+from teleprev.kernels.motion import (
+    ESTIMATE_BLEND,
+    ESTIMATE_GIVEN,
+    ESTIMATE_HELD,
+    ESTIMATE_NONE,
+    ESTIMATE_RAW,
+    velocity_estimate,
+)
 from teleprev.pipeline.derivatives import RESUME_GAP_NS, RESUME_PERIOD_NS
 from teleprev.pipeline.frozen import evolve
 from teleprev.pipeline.motion import ENGAGED_TOL, EXTRAPOLATE_MAX_NS, FEEDFORWARD_MAX_GAP_NS, RESUME_STEP_S, Motion
@@ -127,7 +133,7 @@ class CommandPlanner:
         self.state = PlannerState()
 
     @classmethod
-    def for_pipeline(cls, pipeline) -> "CommandPlanner":
+    def for_pipeline(cls, pipeline) -> CommandPlanner:
         """The planner of a pipeline: its Motion's limits, its end effector's guard, its config; the class
         its session format's pipeline names (`planner`: an older format's re-run), else this one."""
         cfg = pipeline.cfg

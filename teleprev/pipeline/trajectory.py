@@ -20,8 +20,16 @@ from functools import cached_property
 
 import numpy as np
 
-from teleprev.kernels.motion import (ESTIMATE_GIVEN, ESTIMATE_NONE, ArmLimits, HandLimits, arm_plan, arm_sample,
-                                     far_from_limits, hand_command)
+from teleprev.kernels.motion import (
+    ESTIMATE_GIVEN,
+    ESTIMATE_NONE,
+    ArmLimits,
+    HandLimits,
+    arm_plan,
+    arm_sample,
+    far_from_limits,
+    hand_command,
+)
 
 REST_VELOCITY = 1e-6  # rad/s: below this (and no acceleration) a joint is at rest
 REST_ACCELERATION = 1e-5
@@ -38,12 +46,12 @@ class JointMotion:
     a: np.ndarray
 
     @classmethod
-    def rest(cls, q: np.ndarray) -> "JointMotion":
+    def rest(cls, q: np.ndarray) -> JointMotion:
         q = np.asarray(q, dtype=float)
         return cls(q, np.zeros_like(q), np.zeros_like(q))
 
     @classmethod
-    def known(cls, q: np.ndarray, v: np.ndarray, a: np.ndarray, at_rest: bool) -> "JointMotion":
+    def known(cls, q: np.ndarray, v: np.ndarray, a: np.ndarray, at_rest: bool) -> JointMotion:
         """A JointMotion whose at_rest the caller has computed already (kernels.arm_sample). Built as
         frozen.evolve builds copies (a frozen dataclass's __init__ costs about a microsecond)."""
         s = object.__new__(cls)

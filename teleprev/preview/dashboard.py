@@ -2,7 +2,8 @@
 
 Built fresh from a LoopSnapshot and the device rows on every redraw. What fits is chosen by priority:
 the banner (with timed episodes' countdown of the current period), the keys (every one of them, on as
-many lines as the width needs), the episode line and the device table always; the pictures share what is left, the robot first, then the hand, then the camera,
+many lines as the width needs), the episode line and the device table always; the pictures share what is left, the
+robot first, then the hand, then the camera,
 each only where it has room to be read (at 80x24: robot, hand and camera side by side).
 """
 
@@ -17,7 +18,6 @@ from rich.text import Text
 from teleprev.preview.camera_view import CameraView
 from teleprev.preview.robot_view import Layer, RobotView
 from teleprev.status import DeviceRow, LoopSnapshot  # what the live session hands the preview to draw
-
 
 KEYS = (("space", "preview/execute"), ("x", "e-stop"), ("s/e", "start/end episode"),
         ("n", "next episode"),
@@ -97,7 +97,16 @@ def episode_line(snap: LoopSnapshot, now_ns: int, hints: tuple[str, ...] = ()) -
 
 def device_table(rows: list[DeviceRow]) -> Table:
     table = Table(expand=True, box=None, padding=(0, 1))
-    for col, just in (("device", "left"), ("kind", "left"), ("state", "left"), ("rate", "right"), ("latency", "right"), ("drops", "right"), ("lost", "right"), ("errors", "right")):
+    for col, just in (
+        ("device", "left"),
+        ("kind", "left"),
+        ("state", "left"),
+        ("rate", "right"),
+        ("latency", "right"),
+        ("drops", "right"),
+        ("lost", "right"),
+        ("errors", "right"),
+    ):
         table.add_column(col, justify=just, no_wrap=True)
     for r in rows:
         state_style = {"ok": "green", "gap": "bold yellow", "error": "bold red"}.get(r.state, "dim")
@@ -146,7 +155,9 @@ class Dashboard:
             layers.append(Layer(preview, PREVIEW_ROBOT_STYLE, fixed, FIXED_STYLE))
         if not layers:
             return Text("waiting for the arm's state ...", style="dim")
-        title = Text.assemble(("real", REAL_STYLE), "  ", ("preview", PREVIEW_ROBOT_STYLE), "  ", ("fixed", FIXED_STYLE))
+        title = Text.assemble(
+            ("real", REAL_STYLE), "  ", ("preview", PREVIEW_ROBOT_STYLE), "  ", ("fixed", FIXED_STYLE)
+        )
         return Group(title, self.robot_view.render(layers, cols, rows - 1))
 
     def hand_panel(self, snap: LoopSnapshot, cols: int, rows: int) -> RenderableType:
@@ -159,7 +170,9 @@ class Dashboard:
             # what retargeting asked for, with the links that collided, over what the hand will do
             layers.insert(0, Layer(step.retargeted, "dim", fixed, FIXED_STYLE))
         action = step.report.get("corrector", "")
-        caption = Text(f"hand: {action}" + (f" ({', '.join(sorted(fixed))})" if fixed else ""), style=FIXED_STYLE if fixed else "")
+        caption = Text(
+            f"hand: {action}" + (f" ({', '.join(sorted(fixed))})" if fixed else ""), style=FIXED_STYLE if fixed else ""
+        )
         return Group(caption, self.hand_view.render(layers, cols, rows - 1))
 
     def render(self, snap: LoopSnapshot, devices: list[DeviceRow], width: int, height: int, now_ns: int,

@@ -10,7 +10,7 @@ import os
 import select
 import sys
 import threading
-from typing import Callable
+from collections.abc import Callable
 
 
 class KeyReader:
@@ -29,7 +29,7 @@ class KeyReader:
         except (AttributeError, OSError, ValueError):  # no fileno (io.UnsupportedOperation is both), or closed
             return False
 
-    def __enter__(self) -> "KeyReader":
+    def __enter__(self) -> KeyReader:
         if not self.is_terminal:
             return self
         import termios

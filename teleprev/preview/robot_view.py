@@ -67,7 +67,9 @@ class RobotView:
         u_axis, v_axis = _AXES[self.view]
         geos = [(layer, self.shapes.at(layer.q)) for layer in layers]
         if self.bounds is None:
-            pts = np.concatenate([np.concatenate([g.box_corners.reshape(-1, 3), g.cyl_ends.reshape(-1, 3)]) for _, g in geos])
+            pts = np.concatenate(
+                [np.concatenate([g.box_corners.reshape(-1, 3), g.cyl_ends.reshape(-1, 3)]) for _, g in geos]
+            )
             u, v = pts @ u_axis, pts @ v_axis
             pad = 0.05 * max(np.ptp(u), np.ptp(v), 1e-3)
             self.bounds = (u.min() - pad, u.max() + pad, v.min() - pad, v.max() + pad)
@@ -78,7 +80,9 @@ class RobotView:
         off_v = (canvas.height - 1 - scale * (v1 - v0)) / 2
 
         def to_dots(p: np.ndarray) -> np.ndarray:
-            return np.stack([off_u + (p @ u_axis - u0) * scale, canvas.height - 1 - off_v - (p @ v_axis - v0) * scale], axis=1)
+            return np.stack(
+                [off_u + (p @ u_axis - u0) * scale, canvas.height - 1 - off_v - (p @ v_axis - v0) * scale], axis=1
+            )
 
         for layer, geo in geos:
             a, b, link = self._segments(geo, to_dots, scale)

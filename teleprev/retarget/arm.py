@@ -20,7 +20,6 @@ import numpy as np
 from teleprev.robot.ik import ArmIK, IkResult
 
 
-
 @dataclass(frozen=True)
 class Anchor:
     wrist: np.ndarray  # 4x4, suit frame

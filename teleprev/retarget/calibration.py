@@ -41,7 +41,9 @@ class Calibration:
 
     def leap_map(self) -> dict[str, JointMap]:
         return {
-            name: replace(m, scale=self.joints[name].scale, offset=self.joints[name].offset) if name in self.joints else m
+            name: replace(m, scale=self.joints[name].scale, offset=self.joints[name].offset)
+            if name in self.joints
+            else m
             for name, m in DEFAULT_LEAP_MAP.items()
         }
 

@@ -30,7 +30,9 @@ def mean_angles(hand_poses: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     return flexion.mean(axis=0), abduction.mean(axis=0)
 
 
-def calibrate(open_poses: np.ndarray, fist_poses: np.ndarray, neutral_wrist: np.ndarray, operator: str = "") -> Calibration:
+def calibrate(
+    open_poses: np.ndarray, fist_poses: np.ndarray, neutral_wrist: np.ndarray, operator: str = ""
+) -> Calibration:
     """open_poses, fist_poses: (N, 15, 3) hand poses held still; neutral_wrist: (N, 3, 3) wrist rotations."""
     open_f, open_a = mean_angles(open_poses)
     fist_f, _ = mean_angles(fist_poses)

@@ -9,6 +9,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
+
 @dataclass(frozen=True)
 class GripperMap:
     """Opening (metres) = fully open at zero flexion, closed at `closed_flexion`, linear in between."""
@@ -30,7 +31,9 @@ class VacuumMap:
 
     def __post_init__(self):
         if self.off_flexion >= self.on_flexion:
-            raise ValueError(f"vacuum off threshold {self.off_flexion} must be below the on threshold {self.on_flexion}")
+            raise ValueError(
+                f"vacuum off threshold {self.off_flexion} must be below the on threshold {self.on_flexion}"
+            )
 
     def __call__(self, flexion: float, was_on: bool) -> bool:
         if flexion >= self.on_flexion:

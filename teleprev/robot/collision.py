@@ -11,7 +11,8 @@ margin turned the other way (overlapping by more than 1 nm), FCL finds. Where th
 FCL's answer; where they differ (a pair within a nanometre of touching) FCL is asked. So the answers
 are FCL's, bit for bit: sessions recorded with the FCL checker re-run identically.
 
-In FclSelfCollisionChecker fcl decides every contact. Two vectorised numpy filters only decide which shape pairs fcl needs to
+In FclSelfCollisionChecker fcl decides every contact. Two vectorised numpy filters only decide which shape pairs fcl
+needs to
 look at: bounding spheres, then, for box pairs, the face axes of the separating-axis test (a pair they
 let through may still be apart, and fcl decides; a pair they drop is apart for sure).
 Link pairs that are never checked (parent and child, and pairs that touch in every sampled
@@ -23,9 +24,10 @@ from __future__ import annotations
 import fcl
 import numpy as np
 
+from teleprev.kernels import boxes as boxes_kernels
+from teleprev.kernels import collision as collision_kernels
 from teleprev.robot.collision_report import CollisionReport, link_labels
 from teleprev.robot.compiled_collision import CompiledSelfCollisionChecker
-from teleprev.kernels import boxes as boxes_kernels, collision as collision_kernels
 from teleprev.robot.exclusions import Exclusions, load_exclusions
 from teleprev.robot.model import RobotModel
 
@@ -148,7 +150,9 @@ class FclSelfCollisionChecker:
         seen: set[int] = set()
         placed: set[int] = set()
         objects = self._objects
-        for lp, a, b in zip(self._lp[candidates].tolist(), self._si[candidates].tolist(), self._sj[candidates].tolist()):
+        for lp, a, b in zip(
+            self._lp[candidates].tolist(), self._si[candidates].tolist(), self._sj[candidates].tolist()
+        ):
             if lp in seen:
                 continue
             for s in (a, b):
@@ -245,7 +249,9 @@ class SelfCollisionChecker(FclSelfCollisionChecker):
             return super().check(q)
         labels = np.zeros(self._n_labels, dtype=bool)
         index = np.empty(len(self.link_pairs), dtype=np.int64)
-        n = collision_kernels.check_margins(np.ascontiguousarray(q, dtype=np.float64), *self._args, False, labels, index)
+        n = collision_kernels.check_margins(
+            np.ascontiguousarray(q, dtype=np.float64), *self._args, False, labels, index
+        )
         report = self.report_of(n, labels, index)
         return report if report is not None else super().check(q)
 

@@ -18,7 +18,8 @@ import itertools
 import numpy as np
 
 from teleprev.errors import UrdfError
-from teleprev.kernels import boxes as boxes_kernels, collision as collision_kernels
+from teleprev.kernels import boxes as boxes_kernels
+from teleprev.kernels import collision as collision_kernels
 from teleprev.robot.collision_report import CollisionReport, link_labels
 from teleprev.robot.compiled_kinematics import CompiledKinematics
 from teleprev.robot.exclusions import Exclusions, load_exclusions

@@ -43,11 +43,27 @@ class EndEffector:
 EFFECTORS: dict[str, EndEffector] = {
     e.name: e
     for e in (
-        EndEffector("leap_hand", "LeapHand (16-DoF)", "xarm6_leap_hand", "palm_lower", tuple(str(i) for i in range(16)),
-                    hand_urdf="leap_hand_right", grasp_link="palm_lower", grasp_offset=(-0.03, -0.035, -0.05)),
-        EndEffector("parallel_gripper", "Parallel-jaw Gripper (1-DoF)", "xarm6_parallel_gripper", "gripper_tcp",
-                    ("gripper",), grasp_link="gripper_tcp"),
-        EndEffector("vacuum", "Vacuum Gripper (binary)", "xarm6_vacuum", "vacuum_tcp", ("vacuum",), grasp_link="vacuum_tcp"),
+        EndEffector(
+            "leap_hand",
+            "LeapHand (16-DoF)",
+            "xarm6_leap_hand",
+            "palm_lower",
+            tuple(str(i) for i in range(16)),
+            hand_urdf="leap_hand_right",
+            grasp_link="palm_lower",
+            grasp_offset=(-0.03, -0.035, -0.05),
+        ),
+        EndEffector(
+            "parallel_gripper",
+            "Parallel-jaw Gripper (1-DoF)",
+            "xarm6_parallel_gripper",
+            "gripper_tcp",
+            ("gripper",),
+            grasp_link="gripper_tcp",
+        ),
+        EndEffector(
+            "vacuum", "Vacuum Gripper (binary)", "xarm6_vacuum", "vacuum_tcp", ("vacuum",), grasp_link="vacuum_tcp"
+        ),
     )
 }
 

@@ -12,7 +12,6 @@ import tomllib
 from dataclasses import dataclass
 from pathlib import Path
 
-
 from teleprev.errors import UrdfError
 from teleprev.robot.model import RobotModel
 
@@ -67,14 +66,15 @@ def load_exclusions(model: RobotModel) -> Exclusions:
         raise UrdfError(f"not valid TOML ({exc})", str(path)) from None
     if data.get("urdf_sha256") not in (None, model.urdf_sha256):
         raise UrdfError(
-            f"written for a different version of {model.urdf_path.name}; rerun `teleprev robot exclusions {model.urdf_path}`",
+            f"written for a different version of {model.urdf_path.name}; rerun `teleprev robot exclusions "
+            f"{model.urdf_path}`",
             str(path),
         )
     pairs = []
     for k, entry in enumerate(data.get("pair", [])):
         links = entry.get("links")
         where = f"{path}: pair #{k + 1}"
-        if not (isinstance(links, list) and len(links) == 2 and all(isinstance(l, str) for l in links)):
+        if not (isinstance(links, list) and len(links) == 2 and all(isinstance(name, str) for name in links)):
             raise UrdfError("'links' must be a list of two link names", where)
         for link in links:
             if link not in model.links:
@@ -89,7 +89,8 @@ def write_exclusions(model: RobotModel, exclusions: Exclusions) -> Path:
     lines = [
         f"# Link pairs that teleprev's self-collision check of {model.urdf_path.name} leaves out.",
         "#   adjacent: joined by a joint, so their shapes touch by construction",
-        f"#   always:   in contact in every one of the {exclusions.samples} uniform samples drawn when this file was written",
+        f"#   always:   in contact in every one of the {exclusions.samples} uniform samples drawn when this file "
+        "was written",
         f"# Written by `teleprev robot exclusions {model.urdf_path.name} --samples {exclusions.samples}` on {today}.",
         f'urdf_sha256 = "{model.urdf_sha256}"',
         f"samples = {exclusions.samples}",

@@ -17,7 +17,9 @@ import numpy as np
 from teleprev.robot.model import RobotModel
 
 # Corner i of a box is at (±x, ±y, ±z) / 2 in its frame, with the signs of the bits of i (x: bit 0).
-BOX_CORNER_SIGNS = np.array([[1 if i & 1 else -1, 1 if i & 2 else -1, 1 if i & 4 else -1] for i in range(8)], dtype=float)
+BOX_CORNER_SIGNS = np.array(
+    [[1 if i & 1 else -1, 1 if i & 2 else -1, 1 if i & 4 else -1] for i in range(8)], dtype=float
+)
 BOX_EDGES: tuple[tuple[int, int], ...] = (
     (0, 1), (2, 3), (4, 5), (6, 7), (0, 2), (1, 3), (4, 6), (5, 7), (0, 4), (1, 5), (2, 6), (3, 7),
 )

@@ -8,9 +8,9 @@ number of operations on bigger arrays. Joint values are always float64 radians (
 from __future__ import annotations
 
 import functools
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Mapping, Sequence
 
 import numpy as np
 
@@ -121,7 +121,7 @@ class RobotModel:
         self._terms = np.stack([k1, k2, slide], axis=1).reshape(n, 3, 16)
         levels = []
         for d in range(1, max(depth.values()) + 1):
-            kids = [self.link_index[l] for l in order if depth[l] == d]
+            kids = [self.link_index[name] for name in order if depth[name] == d]
             parents = np.array([self.link_index[joint_of_child[order[k]].parent] for k in kids])
             # Breadth-first order keeps each level contiguous, so children are a plain slice; a level with
             # one link (a serial arm) indexes with ints, which numpy does fastest.
@@ -137,7 +137,9 @@ class RobotModel:
         try:
             return np.array([self.joint_index[n] for n in names], dtype=int)
         except KeyError as exc:
-            raise UrdfError(f"unknown joint name {exc.args[0]!r} (joints: {', '.join(self.joint_names)})", str(self.urdf_path)) from None
+            raise UrdfError(
+                f"unknown joint name {exc.args[0]!r} (joints: {', '.join(self.joint_names)})", str(self.urdf_path)
+            ) from None
 
     def vector(self, values: Mapping[str, float], default: np.ndarray | None = None) -> np.ndarray:
         """A joint vector from a name -> value mapping; joints not named keep `default` (zeros)."""
@@ -184,7 +186,7 @@ class RobotModel:
             world[..., lv.child, :, :] = world[..., lv.parent, :, :] @ local[..., lv.child, :, :]
         return LinkPoses(world, self.link_index)
 
-    def chain_to(self, tip: str) -> "RobotModel":
+    def chain_to(self, tip: str) -> RobotModel:
         """The serial chain from the root to `tip` as a model of its own (e.g. the arm of arm + hand)."""
         self.link(tip)
         keep, link = [], tip
@@ -196,7 +198,7 @@ class RobotModel:
         names = {self.desc.root} | {j.child for j in keep}
         desc = UrdfDescription(
             f"{self.name}[{self.desc.root}->{tip}]", self.urdf_path, self.urdf_sha256,
-            {n: l for n, l in self.links.items() if n in names}, tuple(keep), self.desc.root,
+            {n: link for n, link in self.links.items() if n in names}, tuple(keep), self.desc.root,
         )
         return RobotModel(desc)
 

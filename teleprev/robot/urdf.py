@@ -110,7 +110,9 @@ def _shape(elem: ET.Element, where: str) -> Shape:
     elif prim.tag in ("cylinder", "capsule"):
         size = _floats(prim.get("radius"), 1, pwhere, "radius") + _floats(prim.get("length"), 1, pwhere, "length")
     elif prim.tag == "mesh":
-        raise UrdfError("meshes are not supported; describe the link with boxes, cylinders, capsules or spheres", pwhere)
+        raise UrdfError(
+            "meshes are not supported; describe the link with boxes, cylinders, capsules or spheres", pwhere
+        )
     else:
         raise UrdfError(f"unknown geometry <{prim.tag}>", pwhere)
     if any(s <= 0 for s in size):
@@ -142,7 +144,9 @@ def _joint(elem: ET.Element, file: str) -> Joint:
     if child is None or child.get("link") is None:
         raise UrdfError("missing <child link=...>", where)
     axis_elem = elem.find("axis")
-    axis = np.array(_floats(axis_elem.get("xyz") if axis_elem is not None else None, 3, f"{where} <axis>", "xyz", "1 0 0"))
+    axis = np.array(
+        _floats(axis_elem.get("xyz") if axis_elem is not None else None, 3, f"{where} <axis>", "xyz", "1 0 0")
+    )
     if jtype != "fixed":
         norm = np.linalg.norm(axis)
         if norm < 1e-9:
@@ -219,7 +223,9 @@ def parse_urdf(path: str | Path) -> UrdfDescription:
         if j.mimic is not None:
             target = by_name.get(j.mimic.joint)
             if target is None or not target.actuated:
-                raise UrdfError(f"mimics {j.mimic.joint!r}, which is not an actuated joint", f"{file}: <joint name=\"{j.name}\">")
+                raise UrdfError(
+                    f"mimics {j.mimic.joint!r}, which is not an actuated joint", f'{file}: <joint name="{j.name}">'
+                )
     roots = [name for name in links if name not in children]
     if len(roots) != 1:
         raise UrdfError(f"expected one root link, found {len(roots)}: {roots}", file)

@@ -4,7 +4,7 @@ JointTables instead."""
 
 from __future__ import annotations
 
-from typing import Iterator
+from collections.abc import Iterator
 
 from teleprev.errors import SessionError
 from teleprev.messages import Logged

@@ -4,7 +4,7 @@ a usable one, record by record)."""
 
 from __future__ import annotations
 
-from typing import Iterator
+from collections.abc import Iterator
 
 import numpy as np
 

@@ -25,9 +25,9 @@ of -0.0 reads back as +0.0. Joint values (explicit presence) and everything else
 from __future__ import annotations
 
 import json
+from collections.abc import Callable
 from dataclasses import dataclass
 from itertools import repeat
-from typing import Callable
 
 import numpy as np
 

@@ -3,8 +3,8 @@ chunks as bytes per channel with their log time order (LocatedMessages, MessageO
 
 from __future__ import annotations
 
+from collections.abc import Iterator
 from dataclasses import dataclass
-from typing import Iterator
 
 import numpy as np
 

@@ -4,7 +4,7 @@ are released after each, so memory stays bounded by a few chunks."""
 
 from __future__ import annotations
 
-from typing import Iterator
+from collections.abc import Iterator
 
 from teleprev.messages import Logged
 from teleprev.session import records as mr

@@ -11,10 +11,10 @@ short by a crash has no summary: opening it raises SessionError pointing at `tel
 from __future__ import annotations
 
 import os
+from collections.abc import Iterable, Iterator
 from dataclasses import dataclass
 from functools import cached_property
 from pathlib import Path
-from typing import Iterable, Iterator
 
 import numpy as np
 
@@ -97,7 +97,9 @@ class SessionReader:
                 raise SessionError(f"the file is cut short or damaged ({exc}); run `teleprev recover {where}` "
                                    "to rewrite what it holds into a valid session", where) from None
             if summary is None or (not summary.chunks and summary.statistics and summary.statistics.message_count):
-                summary = index_by_scan(f, self.file_bytes, self.path)  # written without a summary, or without chunk indexes
+                summary = index_by_scan(
+                    f, self.file_bytes, self.path
+                )  # written without a summary, or without chunk indexes
             if not any_mcap and not any(name == TELEPREV_RECORD for name, _, _ in summary.metadata):
                 library = _writer_library(f)
                 raise SessionError(f"not a teleprev session: an MCAP file written by {library or 'another tool'} "

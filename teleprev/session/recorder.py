@@ -114,7 +114,9 @@ class Recorder:
         self.path = Path(path)
         self.queue_size = queue_size
         self.flush_interval_s = flush_interval_s
-        self._writer = McapSessionWriter(self.path, metadata, chunk_size=chunk_size, fsync=fsync, attachments=attachments)
+        self._writer = McapSessionWriter(
+            self.path, metadata, chunk_size=chunk_size, fsync=fsync, attachments=attachments
+        )
         self._queue: deque = deque()  # (monotonic ns when queued, message); the writer pops from the left
         self.lag_budget_ns = int(lag_budget_s * 1e9) if lag_budget_s is not None else None
         self._on_behind = on_behind

@@ -73,7 +73,7 @@ class SenderSummary:
 
     @classmethod
     def from_ticks(cls, stamps: list[int], late_ms: list[float], active: list[bool], engages_ns: list[int],
-                   meta: dict[str, str]) -> "SenderSummary":
+                   meta: dict[str, str]) -> SenderSummary:
         late = np.asarray(late_ms, dtype=float)
         gap = 0.0
         if len(stamps) > 1:

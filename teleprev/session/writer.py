@@ -87,7 +87,7 @@ class McapSessionWriter:
             "format_version": str(FORMAT_VERSION),
             "software_version": __version__,
             "created_ns": str(now),
-            "created": _dt.datetime.fromtimestamp(now / 1e9, _dt.timezone.utc).isoformat(timespec="milliseconds"),
+            "created": _dt.datetime.fromtimestamp(now / 1e9, _dt.UTC).isoformat(timespec="milliseconds"),
         })
         for name, rec in records.items():
             self.add_metadata(name, rec)

@@ -66,6 +66,13 @@ def session_facts(path: str | Path) -> SessionFacts:
         start_ns = reader.start_ns
     ee = s.get("end_effector") or meta.get("rig", {}).get("end_effector", "")
     task = s.get("task") or next((e.task for e in episodes if e.task), "")
-    fields = {"participant": s.get("participant", ""), "condition": s.get("condition", ""), "end_effector": ee, "task": task}
+    fields = {
+        "participant": s.get("participant", ""),
+        "condition": s.get("condition", ""),
+        "end_effector": ee,
+        "task": task,
+    }
     answers = survey.load(survey.Target(path, survey.sidecar_path(path), start_ns, fields))
-    return SessionFacts(path, fields["participant"], fields["condition"], ee, task, practice, practice_s, episodes, answers)
+    return SessionFacts(
+        path, fields["participant"], fields["condition"], ee, task, practice, practice_s, episodes, answers
+    )

@@ -38,7 +38,9 @@ def plot_likert(out: Path, groups: list[Group]) -> Path | None:
     for i, (g, label) in enumerate(rated):
         means = [g.likert[q.key].mean for q in QUESTIONS]
         errs = [_err(g.likert[q.key].std) for q in QUESTIONS]
-        ax.bar(x + (i - (len(rated) - 1) / 2) * width, means, width, yerr=errs, capsize=3, label=f"{label} (n={g.surveys})")
+        ax.bar(
+            x + (i - (len(rated) - 1) / 2) * width, means, width, yerr=errs, capsize=3, label=f"{label} (n={g.surveys})"
+        )
     ax.set_xticks(x, [q.label + (f"\n({BETTER})" if q.higher_is_better else "") for q in QUESTIONS])
     ax.set_ylim(0, 5.5)
     ax.set_yticks(range(1, 6))

@@ -21,10 +21,20 @@ class Question:
 QUESTIONS: tuple[Question, ...] = (
     Question("mental_demand", "Mental demand", "How mentally demanding was the task?", "Very Low", "Very High"),
     Question("physical_demand", "Physical demand", "How physically demanding was the task?", "Very Low", "Very High"),
-    Question("frustration", "Frustration", "How frustrated did you feel while using the system?", "Not at all", "Extremely"),
-    Question("overall_effort", "Overall effort", "How much overall effort did the task require?", "Very Little", "Very Much"),
-    Question("perceived_success", "Perceived success", "How successful do you feel you were in completing the tasks?",
-             "Very Unsuccessful", "Very Successful", higher_is_better=True),
+    Question(
+        "frustration", "Frustration", "How frustrated did you feel while using the system?", "Not at all", "Extremely"
+    ),
+    Question(
+        "overall_effort", "Overall effort", "How much overall effort did the task require?", "Very Little", "Very Much"
+    ),
+    Question(
+        "perceived_success",
+        "Perceived success",
+        "How successful do you feel you were in completing the tasks?",
+        "Very Unsuccessful",
+        "Very Successful",
+        higher_is_better=True,
+    ),
 )
 KEYS = tuple(q.key for q in QUESTIONS)
 

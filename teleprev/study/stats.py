@@ -42,7 +42,7 @@ class Summary:
     n: int
 
     @classmethod
-    def of(cls, values) -> "Summary":
+    def of(cls, values) -> Summary:
         v = np.asarray([x for x in values if x is not None], dtype=float)
         if len(v) == 0:
             return cls(None, None, 0)
@@ -127,11 +127,16 @@ class ColumnMap:
     def __post_init__(self):
         both = {c.strip().lower() for c in self.with_preview} & {c.strip().lower() for c in self.without_preview}
         if both:
-            raise ConfigError(f"condition {sorted(both)[0]!r} is named both --with-preview and --without-preview", "teleprev study")
+            raise ConfigError(
+                f"condition {sorted(both)[0]!r} is named both --with-preview and --without-preview", "teleprev study"
+            )
 
     def column(self, condition: str) -> str | None:
         c = condition.strip().lower()
-        explicit = {WITH: {x.strip().lower() for x in self.with_preview}, WITHOUT: {x.strip().lower() for x in self.without_preview}}
+        explicit = {
+            WITH: {x.strip().lower() for x in self.with_preview},
+            WITHOUT: {x.strip().lower() for x in self.without_preview},
+        }
         for col in (WITH, WITHOUT):
             if c in explicit[col]:
                 return col
@@ -155,7 +160,9 @@ class TableIIIRow:
     improvement_s: float | None  # with - without: negative when faster with preview
 
 
-def table_iii(sessions: list[SessionFacts], columns: ColumnMap = ColumnMap(), task: str | None = None) -> list[TableIIIRow]:
+def table_iii(
+    sessions: list[SessionFacts], columns: ColumnMap = ColumnMap(), task: str | None = None
+) -> list[TableIIIRow]:
     """A row per (task, end effector) with episodes in either preview column."""
     placed: dict[tuple[str, str], dict[str, list]] = {}  # (task, end effector) -> column -> episodes
     for s in sessions:

@@ -8,7 +8,8 @@ file): a crafted session must not be able to point the write at another file.
      "session": "x.mcap", "session_start_ns": 1700000000000000000,
      "participant": "p07", "condition": "w/ preview", "end_effector": "leap_hand", "task": "pick_place",
      "answered": "2026-11-22T10:42:27+00:00",
-     "answers": {"mental_demand": 2, "physical_demand": 3, "frustration": 1, "overall_effort": 2, "perceived_success": 5}}
+     "answers": {"mental_demand": 2, "physical_demand": 3, "frustration": 1, "overall_effort": 2, "perceived_success":
+     5}}
 
 `session_start_ns` ties the answers to the recording (it survives renaming the file), so a sidecar copied
 next to another session is refused instead of counted. The file is written whole or not at all (a
@@ -21,9 +22,9 @@ import datetime as _dt
 import json
 import os
 import secrets
+from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Callable
 
 from teleprev.errors import ConfigError, SessionError
 from teleprev.study.questionnaire import KEYS, QUESTIONS, VERSION, parse_answer  # noqa: F401 (KEYS, QUESTIONS re-exported)
@@ -89,7 +90,9 @@ def ask(prompt: Callable[[str], str], say: Callable[[str], None]) -> dict[str, i
 def check_free(t: Target, replace: bool) -> None:
     """Refuse before anything is asked when a survey is stored and may not be replaced."""
     if t.sidecar.exists() and not replace:
-        raise SessionError(f"a survey is already stored in {t.sidecar.name}; pass --replace to answer again", str(t.session))
+        raise SessionError(
+            f"a survey is already stored in {t.sidecar.name}; pass --replace to answer again", str(t.session)
+        )
 
 
 def store(t: Target, answers: dict[str, int], replace: bool = False) -> Path:
@@ -104,7 +107,7 @@ def store(t: Target, answers: dict[str, int], replace: bool = False) -> Path:
         "session": t.session.name,
         "session_start_ns": t.start_ns,
         **{k: v for k, v in t.fields.items() if k != "practice"},
-        "answered": _dt.datetime.now(_dt.timezone.utc).isoformat(timespec="seconds"),
+        "answered": _dt.datetime.now(_dt.UTC).isoformat(timespec="seconds"),
         "answers": {k: answers[k] for k in KEYS},
     }
     tmp = t.sidecar.with_name(f".{t.sidecar.name}.{os.getpid()}.{secrets.token_hex(4)}.tmp")
@@ -135,7 +138,9 @@ def load(t: Target) -> dict[str, int] | None:
         raise SessionError(f"answers to questionnaire {data.get('questionnaire')!r}, not {VERSION!r}", str(path))
     owner = data.get("session_start_ns")
     if owner is not None and t.start_ns is not None and owner != t.start_ns:
-        raise SessionError(f"the survey belongs to another recording ({data.get('session', '?')}), not {t.session.name}", str(path))
+        raise SessionError(
+            f"the survey belongs to another recording ({data.get('session', '?')}), not {t.session.name}", str(path)
+        )
     answers = {}
     for k in KEYS:
         v = data["answers"].get(k)

@@ -39,7 +39,13 @@ def _with_n(s: Summary, digits: int = 1) -> str:
 
 
 def improvement_text(r: TableIIIRow) -> str:
-    return "n/a" if r.improvement_s is None else f"{r.improvement_s:.1f}" if r.improvement_s < 0 else f"+{r.improvement_s:.1f}"
+    return (
+        "n/a"
+        if r.improvement_s is None
+        else f"{r.improvement_s:.1f}"
+        if r.improvement_s < 0
+        else f"+{r.improvement_s:.1f}"
+    )
 
 
 def print_tables(console: Console, groups: list[Group], rows: list[TableIIIRow], pooled: dict[str, list[str]]) -> None:
@@ -52,23 +58,40 @@ def print_tables(console: Console, groups: list[Group], rows: list[TableIIIRow],
     for task in tasks:
         on = f", {task or '(no task)'}" if len(tasks) > 1 else ""
         stats = [g.tasks.get(task) for g in groups]
-        t.add_row(f"execution time (s){on}", *("no episodes" if s is None else _with_n(s.execution_time_s) for s in stats))
-        t.add_row(f"success rate{on}", *("no episodes" if s is None else
-                                          f"{_pct(s.success_rate)} of {s.judged}" + (f", {s.unmarked} unmarked" if s.unmarked else "")
-                                          for s in stats))
+        t.add_row(
+            f"execution time (s){on}", *("no episodes" if s is None else _with_n(s.execution_time_s) for s in stats)
+        )
+        t.add_row(
+            f"success rate{on}",
+            *(
+                "no episodes"
+                if s is None
+                else f"{_pct(s.success_rate)} of {s.judged}" + (f", {s.unmarked} unmarked" if s.unmarked else "")
+                for s in stats
+            ),
+        )
     if not tasks:
         t.add_row("execution time (s)", *("no episodes" for _ in groups))
-    t.add_row("practice time (s)", *(_with_n(g.practice_time_s) if g.practice_sessions else "no practice" for g in groups))
+    t.add_row(
+        "practice time (s)", *(_with_n(g.practice_time_s) if g.practice_sessions else "no practice" for g in groups)
+    )
     for q in QUESTIONS:
         t.add_row(f"{q.label} ({BETTER if q.higher_is_better else WORSE})",
                   *(_with_n(g.likert[q.key], 2) if g.surveys else "no survey" for g in groups))
     console.print(t)
     if not rows:
-        console.print("[yellow]Table III: no condition is w/ or w/o preview[/] (name them with --with-preview / --without-preview)")
+        console.print(
+            "[yellow]Table III: no condition is w/ or w/o preview[/] (name them with --with-preview / "
+            "--without-preview)"
+        )
         return
     for task in dict.fromkeys(r.task for r in rows):
-        t3 = Table(title=f"Table III{f' ({task})' if task else ''}: average execution time (s)",
-                   title_justify="left", caption="improvement = w/ - w/o; negative is faster with preview", caption_justify="left")
+        t3 = Table(
+            title=f"Table III{f' ({task})' if task else ''}: average execution time (s)",
+            title_justify="left",
+            caption="improvement = w/ - w/o; negative is faster with preview",
+            caption_justify="left",
+        )
         for col in ("End-Effector", "w/o Preview", "w/ Preview", "Improvement"):
             t3.add_column(col, justify="left" if col == "End-Effector" else "right")
         for r in rows:
@@ -89,9 +112,21 @@ def write_csv(out: Path, groups: list[Group], rows: list[TableIIIRow]) -> list[P
     per_group = out / "study.csv"
     with per_group.open("w", newline="") as f:
         w = csv.writer(f)
-        w.writerow(["condition", "end_effector", "sessions", "participants",
-                    "practice_sessions", "practice_time_mean_s", "practice_time_std_s", "practice_time_n",
-                    "surveys", "sessions_without_survey", *(f"{q.key}_{s}" for q in QUESTIONS for s in ("mean", "std", "n"))])
+        w.writerow(
+            [
+                "condition",
+                "end_effector",
+                "sessions",
+                "participants",
+                "practice_sessions",
+                "practice_time_mean_s",
+                "practice_time_std_s",
+                "practice_time_n",
+                "surveys",
+                "sessions_without_survey",
+                *(f"{q.key}_{s}" for q in QUESTIONS for s in ("mean", "std", "n")),
+            ]
+        )
         for g in groups:
             p = g.practice_time_s
             w.writerow([g.condition, g.end_effector, g.sessions, g.participants,
@@ -100,17 +135,51 @@ def write_csv(out: Path, groups: list[Group], rows: list[TableIIIRow]) -> list[P
     per_task = out / "execution_time.csv"
     with per_task.open("w", newline="") as f:
         w = csv.writer(f)
-        w.writerow(["condition", "end_effector", "task", "execution_time_mean_s", "execution_time_std_s", "execution_time_n",
-                    "success_rate", "episodes_judged", "episodes_unmarked"])
+        w.writerow(
+            [
+                "condition",
+                "end_effector",
+                "task",
+                "execution_time_mean_s",
+                "execution_time_std_s",
+                "execution_time_n",
+                "success_rate",
+                "episodes_judged",
+                "episodes_unmarked",
+            ]
+        )
         for g in groups:
             for s in g.tasks.values():
                 e = s.execution_time_s
-                w.writerow([g.condition, g.end_effector, s.task, _cell(e.mean), _cell(e.std), e.n, _cell(s.success_rate), s.judged, s.unmarked])
+                w.writerow(
+                    [
+                        g.condition,
+                        g.end_effector,
+                        s.task,
+                        _cell(e.mean),
+                        _cell(e.std),
+                        e.n,
+                        _cell(s.success_rate),
+                        s.judged,
+                        s.unmarked,
+                    ]
+                )
     table3 = out / "table_iii.csv"
     with table3.open("w", newline="") as f:
         w = csv.writer(f)
-        w.writerow(["task", "end_effector", "without_mean_s", "without_std_s", "without_n", "with_mean_s", "with_std_s", "with_n",
-                    "improvement_s"])
+        w.writerow(
+            [
+                "task",
+                "end_effector",
+                "without_mean_s",
+                "without_std_s",
+                "without_n",
+                "with_mean_s",
+                "with_std_s",
+                "with_n",
+                "improvement_s",
+            ]
+        )
         for r in rows:
             w.writerow([r.task, r.end_effector, _cell(r.without.mean), _cell(r.without.std), r.without.n,
                         _cell(r.with_.mean), _cell(r.with_.std), r.with_.n, _cell(r.improvement_s)])

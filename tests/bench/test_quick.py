@@ -169,4 +169,6 @@ def test_quick_mode_prints_every_declared_figure(bench: Path, quick_runs):
     figures = json.loads(lines[-1], parse_constant=refuse)
     assert isinstance(figures, dict), f"{bench.name}: the last line is not a JSON object: {lines[-1][:200]}"
     wrong = problems(figures, keys)
-    assert not wrong, f"{bench.name} --quick --json:\n  " + "\n  ".join(wrong) + f"\nits stderr's end:\n{stderr[-3000:]}"
+    assert not wrong, (
+        f"{bench.name} --quick --json:\n  " + "\n  ".join(wrong) + f"\nits stderr's end:\n{stderr[-3000:]}"
+    )

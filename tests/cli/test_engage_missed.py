@@ -1,9 +1,9 @@
 """`teleprev record --engage-after` that never engaged exits 1 and says why in one line (issue 42, item 4):
 a session that asked to execute and ran all in preview is a failed run for the script that started it."""
 
-from teleprev.session.reader import SessionReader
 from teleprev.robot.collision import SelfCollisionChecker
 from teleprev.robot.model import load_robot
+from teleprev.session.reader import SessionReader
 from tests.helpers.cli import teleprev
 from tests.helpers.sessions import COLLIDING_LEAP_HOME, colliding_hand_rig
 

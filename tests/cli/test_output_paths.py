@@ -25,8 +25,20 @@ def layout(tmp: Path) -> dict[str, Path]:
 
 # (command before the path, the option, after the path, which bad path, what the line says)
 CASES = {
-    "record --out folder": (["record", "--duration", "1", "--no-preview", "--out"], [], "folder", "--out", "is a folder"),
-    "record --out under a file": (["record", "--duration", "1", "--no-preview", "--out"], [], "deep under a file", "--out", "is a file, not a folder"),
+    "record --out folder": (
+        ["record", "--duration", "1", "--no-preview", "--out"],
+        [],
+        "folder",
+        "--out",
+        "is a folder",
+    ),
+    "record --out under a file": (
+        ["record", "--duration", "1", "--no-preview", "--out"],
+        [],
+        "deep under a file",
+        "--out",
+        "is a file, not a folder",
+    ),
     "rollout --out folder": (["rollout", "--policy", "nowhere", "--out"], [], "folder", "--out", "is a folder"),
     "replay --out folder": (["replay", FIXTURE, "--out"], [], "folder", "--out", "is a folder"),
     "replay --out under a file": (["replay", FIXTURE, "--out"], [], "under a file", "--out", "is a file, not a folder"),
@@ -34,11 +46,23 @@ CASES = {
     "eval --out folder": (["eval", FIXTURE, "--out"], [], "folder", "--out", "is a folder"),
     "eval --out missing folder": (["eval", FIXTURE, "--out"], [], "missing folder", "--out", "does not exist"),
     "eval --plots file": (["eval", FIXTURE, "--plots"], [], "file", "--plots", "is a file"),
-    "eval --plots under a file": (["eval", FIXTURE, "--plots"], [], "under a file", "--plots", "is a file, not a folder"),
+    "eval --plots under a file": (
+        ["eval", FIXTURE, "--plots"],
+        [],
+        "under a file",
+        "--plots",
+        "is a file, not a folder",
+    ),
     "eval --baseline folder": (["eval", FIXTURE, "--baseline"], [], "folder", "--baseline", "is a folder"),
     "eval --baseline missing": (["eval", FIXTURE, "--baseline"], [], "missing folder", "--baseline", "no such report"),
     "audit --json folder": (["audit", FIXTURE, "--json"], [], "folder", "--json", "is a folder"),
-    "audit --json under a file": (["audit", FIXTURE, "--json"], [], "under a file", "--json", "is a file, not a folder"),
+    "audit --json under a file": (
+        ["audit", FIXTURE, "--json"],
+        [],
+        "under a file",
+        "--json",
+        "is a file, not a folder",
+    ),
     "audit --json missing folder": (["audit", FIXTURE, "--json"], [], "missing folder", "--json", "does not exist"),
     "study --out file": (["study", FIXTURE, "--out"], [], "file", "--out", "is a file"),
 }
@@ -60,7 +84,9 @@ def test_a_bad_output_path_is_refused_before_the_work(tmp_path, case):
 def read_only(tmp_path):
     folder = tmp_path / "ro"
     folder.mkdir()
-    if subprocess.run(["mount", "-t", "tmpfs", "-o", "ro,size=4m", "tmpfs", str(folder)], capture_output=True).returncode:
+    if subprocess.run(
+        ["mount", "-t", "tmpfs", "-o", "ro,size=4m", "tmpfs", str(folder)], capture_output=True
+    ).returncode:
         pytest.skip("no read-only mount here (needs root and mount)")
     yield folder
     subprocess.run(["umount", "-l", str(folder)], capture_output=True)

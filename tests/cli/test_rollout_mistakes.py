@@ -56,20 +56,37 @@ def header_length_flipped(policy: Path) -> None:
 CASES = {
     "missing": (None, [], "no such policy folder"),
     "no weights": (dict(files=()), [], "model.safetensors missing"),
-    "state": (dict(inputs={"observation.state": (20,), "observation.images.cam_front": IMAGE}), [],
-              "the policy's observation.state has shape [20], this rig gives [22]"),
-    "image": (dict(inputs={"observation.state": STATE, "observation.images.cam_front": (3, 96, 96)}), [],
-              "the policy's observation.images.cam_front has shape [3, 96, 96], this rig gives [3, 480, 640]"),
-    "camera": (dict(inputs={"observation.state": STATE, "observation.images.wrist": IMAGE}), [],
-               "the policy observes observation.images.wrist, which recipe"),
+    "state": (
+        dict(inputs={"observation.state": (20,), "observation.images.cam_front": IMAGE}),
+        [],
+        "the policy's observation.state has shape [20], this rig gives [22]",
+    ),
+    "image": (
+        dict(inputs={"observation.state": STATE, "observation.images.cam_front": (3, 96, 96)}),
+        [],
+        "the policy's observation.images.cam_front has shape [3, 96, 96], this rig gives [3, 480, 640]",
+    ),
+    "camera": (
+        dict(inputs={"observation.state": STATE, "observation.images.wrist": IMAGE}),
+        [],
+        "the policy observes observation.images.wrist, which recipe",
+    ),
     "action": (dict(action=(7,)), [], "the policy's action is [7]; this rig's is 22 joints"),
-    "gripper rig": ({}, ["--config", RIGS / "sim_gripper.toml"], "observation.state has shape [22], this rig gives [7]"),
+    "gripper rig": (
+        {},
+        ["--config", RIGS / "sim_gripper.toml"],
+        "observation.state has shape [22], this rig gives [7]",
+    ),
     "truncated weights": (dict(damage=truncated), [], "the policy's weights cannot be read"),
     "header byte": (dict(damage=header_flipped), [], "the policy's weights cannot be read"),
     "header length": (dict(damage=header_length_flipped), [], "the policy's weights cannot be read"),
     "episodes": ({}, ["--episodes", "0"], "--episodes must be 1 or more, got 0"),
     "episode time": ({}, ["--episode-time", "-2"], "--episode-time must be a positive number of seconds, got -2"),
-    "engage": ({}, ["--episode-time", "3", "--engage-after", "3"], "--engage-after must be 0 or more seconds and less than"),
+    "engage": (
+        {},
+        ["--episode-time", "3", "--engage-after", "3"],
+        "--engage-after must be 0 or more seconds and less than",
+    ),
 }
 
 

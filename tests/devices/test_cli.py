@@ -25,8 +25,13 @@ def test_list_shows_every_plugin_with_kind_module_and_missing_extras():
     result = runner.invoke(app, ["devices", "list"], env={"COLUMNS": "160"})
     assert result.exit_code == 0, result.output
     lines = {line.split()[1]: line for line in result.output.splitlines() if line.startswith("│")}
-    for name, kind in (("vmc.suit", "suit"), ("vmc.glove", "glove"), ("opencv.camera", "camera"), ("replay.hand", "hand"),
-                       ("sim.glove", "glove")):
+    for name, kind in (
+        ("vmc.suit", "suit"),
+        ("vmc.glove", "glove"),
+        ("opencv.camera", "camera"),
+        ("replay.hand", "hand"),
+        ("sim.glove", "glove"),
+    ):
         assert kind in lines[name] and "ok" in lines[name]
     assert "teleprev_devices.vmc:VmcSuit" in lines["vmc.suit"]
     import importlib.util
@@ -78,7 +83,11 @@ def test_check_reads_a_rig_and_reports_rates_and_the_device_that_is_silent(tmp_p
         sender.join()
     out = result.output
     assert result.exit_code == 1, out  # the silent glove fails the check
-    rows = {line.split()[0]: line.split() for line in out.splitlines() if line.strip().split(" ")[0] in ("cam", "suit", "glove")}
+    rows = {
+        line.split()[0]: line.split()
+        for line in out.splitlines()
+        if line.strip().split(" ")[0] in ("cam", "suit", "glove")
+    }
     cam, suit, glove = rows["cam"], rows["suit"], rows["glove"]
     assert cam[1:4] == ["opencv.camera", "camera", "ok"] and 20 <= int(cam[4]) <= 31
     cam_rate, cam_nominal = map(float, cam[5].split("/"))
@@ -101,7 +110,9 @@ def test_check_reports_a_device_that_cannot_open_and_keeps_the_others(tmp_path):
     assert "no such video file" in result.output and "unplugged.avi" in result.output and "…" not in result.output
     cam = next(line.split() for line in result.output.splitlines() if line.strip().startswith("cam "))
     assert cam[3] == "ok" and int(cam[4]) >= 8
-    gone = next(line.split() for line in result.output.splitlines() if line.strip().startswith("unplugged_wrist_camera "))
+    gone = next(
+        line.split() for line in result.output.splitlines() if line.strip().startswith("unplugged_wrist_camera ")
+    )
     assert gone[1:4] == ["opencv.camera", "camera", "error"]
 
 
@@ -111,20 +122,38 @@ GLOVE = '[devices.glove]\nplugin = "sim.glove"\n'
 @pytest.mark.parametrize(
     "body, message",
     [
-        ('[devices.suit]\nplugin = "vmc.suit"\nprot = 39539\n', r"rig.toml \[devices.suit\]: unknown key 'prot' \(known keys: host, port"),
-        ('[devices.suit]\nplugin = "vmc.suit"\nport = "39539"\n', r"rig.toml \[devices.suit\].port: expected an integer, got '39539'"),
-        ('[devices.cam]\nplugin = "opencv.camra"\n', r"rig.toml \[devices.cam\]: unknown device plugin 'opencv.camra' \(installed: .*opencv.camera"),
-        ('[devices.cam]\nsource = 0\n', r"rig.toml \[devices.cam\]: missing required key 'plugin'"),
+        (
+            '[devices.suit]\nplugin = "vmc.suit"\nprot = 39539\n',
+            r"rig.toml \[devices.suit\]: unknown key 'prot' \(known keys: host, port",
+        ),
+        (
+            '[devices.suit]\nplugin = "vmc.suit"\nport = "39539"\n',
+            r"rig.toml \[devices.suit\].port: expected an integer, got '39539'",
+        ),
+        (
+            '[devices.cam]\nplugin = "opencv.camra"\n',
+            r"rig.toml \[devices.cam\]: unknown device plugin 'opencv.camra' \(installed: .*opencv.camera",
+        ),
+        ("[devices.cam]\nsource = 0\n", r"rig.toml \[devices.cam\]: missing required key 'plugin'"),
         ('[devices.glove]\nplugin = "replay.glove"\n', r"rig.toml \[devices.glove\]: session is required"),
         ('[rig]\nname = "x"\n', r"rig.toml: no devices"),
         # values, not only keys (issue 15 item 8)
         ('[pipeline]\ntrigger = "suit"\n' + GLOVE, r"rig.toml \[pipeline\]: unknown key 'trigger': it was removed"),
         ('[pipeline]\ntrigger = "glove"\n' + GLOVE, r"rig.toml \[pipeline\]: unknown key 'trigger'"),
-        ('[pipeline]\ngripper_joint = "index9"\n' + GLOVE, r"rig.toml \[pipeline\]: gripper_joint must be an SMPL-X hand joint"),
-        ('[pipeline]\ntcp_link = "palm"\n' + GLOVE, r"rig.toml \[pipeline\].tcp_link: the robot 'xarm6_leap_hand' has no link 'palm'"),
+        (
+            '[pipeline]\ngripper_joint = "index9"\n' + GLOVE,
+            r"rig.toml \[pipeline\]: gripper_joint must be an SMPL-X hand joint",
+        ),
+        (
+            '[pipeline]\ntcp_link = "palm"\n' + GLOVE,
+            r"rig.toml \[pipeline\].tcp_link: the robot 'xarm6_leap_hand' has no link 'palm'",
+        ),
         ('[rig]\nrobot = "xarm9"\n' + GLOVE, r"rig.toml \[rig\].robot: no such robot 'xarm9'"),
         ('[rig]\nend_effector = "suction"\n' + GLOVE, r"rig.toml \[rig\].end_effector: expected one of"),
-        ('[rig]\ncalibration = "calib/none.toml"\n' + GLOVE, r"rig.toml \[rig\].calibration: no such file .*calib/none.toml"),
+        (
+            '[rig]\ncalibration = "calib/none.toml"\n' + GLOVE,
+            r"rig.toml \[rig\].calibration: no such file .*calib/none.toml",
+        ),
         ('[rig]\nmodels = "no_models"\n' + GLOVE, r"rig.toml \[rig\].models: no such folder .*no_models"),
         ('[devices.glove]\nplugin = "sim.glove"\ntask = "juggle"\n', r"rig.toml \[devices.glove\]: task must be"),
     ],
@@ -150,7 +179,11 @@ def test_cli_prints_rig_errors_as_one_line(tmp_path):
     rig.write_text('[devices.suit]\nplugin = "vmc.suit"\nhost = "not-an-ip"\n')
     result = teleprev("devices", "check", rig)
     assert result.returncode == 2
-    assert "error:" in result.stderr and "[devices.suit]" in result.stderr and "host must be an IPv4 address" in result.stderr
+    assert (
+        "error:" in result.stderr
+        and "[devices.suit]" in result.stderr
+        and "host must be an IPv4 address" in result.stderr
+    )
     assert "Traceback" not in result.stderr
 
 

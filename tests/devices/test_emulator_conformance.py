@@ -5,18 +5,17 @@
 from __future__ import annotations
 
 import statistics
-import struct
 import time
 
+import dynamixel_sdk as sdk  # the real SDKs: scripts/test.sh installs the leap and xarm extras
 import numpy as np
 import pytest
+from xarm.wrapper import XArmAPI
 
-import dynamixel_sdk as sdk  # the real SDKs: scripts/test.sh installs the leap and xarm extras
 from teleprev.emulators import dynamixel_wire as dxl
 from teleprev.emulators import xarm_wire as xw
 from teleprev.emulators.dynamixel_bus import DynamixelBus
 from teleprev.emulators.xarm_controller import XArmController
-from xarm.wrapper import XArmAPI
 
 
 # ---- the Dynamixel bus (e-Manual: Protocol 2.0, XC330-M288-T control table; FTDI AN232B-04) --------------

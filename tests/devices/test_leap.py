@@ -10,13 +10,19 @@ import time
 import numpy as np
 import pytest
 
+from teleprev.clock import SessionClock
 from teleprev.devices.contract import DeviceContext
-from teleprev_devices.leap import (
-    GOAL_POSITION, LeapHand, LeapSettings, SdkDynamixelBus, angles_from_ticks, signed32, ticks_from_angles,
-)
 from teleprev.errors import ConfigError, DeviceError
 from teleprev.messages import JointSample
-from teleprev.clock import SessionClock
+from teleprev_devices.leap import (
+    GOAL_POSITION,
+    LeapHand,
+    LeapSettings,
+    SdkDynamixelBus,
+    angles_from_ticks,
+    signed32,
+    ticks_from_angles,
+)
 
 NAMES = tuple(str(i) for i in range(16))
 

@@ -7,10 +7,10 @@ from __future__ import annotations
 import struct
 import time
 
+import dynamixel_sdk as sdk  # the real SDK: scripts/test.sh installs the leap extra (a missing one fails here)
 import numpy as np
 import pytest
 
-import dynamixel_sdk as sdk  # the real SDK: scripts/test.sh installs the leap extra (a missing one fails here)
 from teleprev.clock import SessionClock
 from teleprev.devices import DeviceContext, DeviceRunner
 from teleprev.emulators import dynamixel_wire as wire

@@ -8,10 +8,10 @@ import cv2
 import numpy as np
 import pytest
 
-from teleprev.devices.contract import DeviceContext
-from teleprev_devices.opencv_camera import OpenCVCamera, OpenCVSettings
-from teleprev.errors import ConfigError, DeviceError
 from teleprev.clock import SessionClock
+from teleprev.devices.contract import DeviceContext
+from teleprev.errors import ConfigError, DeviceError
+from teleprev_devices.opencv_camera import OpenCVCamera, OpenCVSettings
 
 FRAMES, FPS, W, H = 12, 40.0, 160, 120
 

@@ -25,7 +25,9 @@ def teleprev_imports(path: Path) -> list[tuple[int, str]]:
             found += [(node.lineno, a.name) for a in node.names]
         elif isinstance(node, ast.ImportFrom) and node.level == 0 and node.module:
             # `from teleprev import transforms` imports teleprev.transforms
-            found += [(node.lineno, f"teleprev.{a.name}" if node.module == "teleprev" else node.module) for a in node.names]
+            found += [
+                (node.lineno, f"teleprev.{a.name}" if node.module == "teleprev" else node.module) for a in node.names
+            ]
     return [(line, m) for line, m in found if m == "teleprev" or m.startswith("teleprev.")]
 
 

@@ -8,12 +8,12 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from teleprev import topics
+from teleprev.clock import SessionClock
 from teleprev.devices.contract import Actuator, Device, DeviceContext, StreamSpec
 from teleprev.devices.runner import ActuatorPort, DeviceRunner, default_gap_s
 from teleprev.errors import DeviceError
 from teleprev.messages import Event, JointSample, Sample
-from teleprev import topics
-from teleprev.clock import SessionClock
 from tests.helpers.wait import wait_until
 
 
@@ -306,7 +306,9 @@ class Faulty(Ticker):
         if out and self.n % 3 == 0:
             return [Sample(self.topic, JointSample(out[0].payload.stamp_ns, ("a",), np.array([np.nan])))]
         if out and self.n % 5 == 0:
-            return [Sample(self.topic, PoseSample(out[0].payload.stamp_ns, "suit", np.zeros(3), np.array([0, 0, 1e3, 1.0])))]
+            return [
+                Sample(self.topic, PoseSample(out[0].payload.stamp_ns, "suit", np.zeros(3), np.array([0, 0, 1e3, 1.0])))
+            ]
         return out
 
 

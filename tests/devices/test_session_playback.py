@@ -7,12 +7,12 @@ import time
 import numpy as np
 import pytest
 
+from teleprev.clock import SessionClock
 from teleprev.devices.contract import DeviceContext
-from teleprev_devices.session_playback import ReplayArm, ReplayGlove, ReplaySettings, ReplaySuit
 from teleprev.errors import ConfigError
 from teleprev.human.smplx import HAND_POSE_NAMES
 from teleprev.messages import JointSample, Logged, PoseSample
-from teleprev.clock import SessionClock
+from teleprev_devices.session_playback import ReplayArm, ReplayGlove, ReplaySettings, ReplaySuit
 
 T0 = 1_700_000_000_000_000_000
 PERIOD = 10_000_000  # 100 Hz
@@ -30,7 +30,13 @@ def session(tmp_path_factory):
         t = T0 + k * PERIOD
         rec.log(Logged("/glove/right/hand", t, JointSample(t - LATENCY, HAND_POSE_NAMES, np.full(45, k * 0.01))))
         if k % 2 == 0:
-            rec.log(Logged("/suit/s1/wrist", t + 1, PoseSample(t - 2 * LATENCY, "suit", np.array([k, 0.0, 1.0]), np.array([0, 0, 0, 1.0]))))
+            rec.log(
+                Logged(
+                    "/suit/s1/wrist",
+                    t + 1,
+                    PoseSample(t - 2 * LATENCY, "suit", np.array([k, 0.0, 1.0]), np.array([0, 0, 0, 1.0])),
+                )
+            )
             rec.log(Logged("/suit/s2/wrist", t + 2, PoseSample(t, "suit", np.zeros(3), np.array([0, 0, 0, 1.0]))))
         rec.log(Logged("/arm/arm/state", t + 3, JointSample(t, ("joint1", "joint2"), np.array([k, -k], dtype=float))))
     rec.close()
@@ -92,7 +98,9 @@ def test_bad_settings_name_what_and_where(session, tmp_path):
     ctx = DeviceContext(SessionClock(), rig_dir=tmp_path)
     with pytest.raises(ConfigError, match=r"\[devices.g\].session: cannot play back .*nope.mcap: no such session file"):
         ReplayGlove("g", ReplaySettings(session="nope.mcap"), ctx)
-    with pytest.raises(ConfigError, match=r"\[devices.g\].device: no glove device 'left'.*recorded glove devices: right"):
+    with pytest.raises(
+        ConfigError, match=r"\[devices.g\].device: no glove device 'left'.*recorded glove devices: right"
+    ):
         ReplayGlove("g", ReplaySettings(session=str(session), device="left"), ctx)
     with pytest.raises(ConfigError, match=r"'/suit/s1/wrist' is not a glove stream"):
         ReplayGlove("g", ReplaySettings(session=str(session), topic="/suit/s1/wrist"), ctx)

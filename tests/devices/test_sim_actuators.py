@@ -5,14 +5,14 @@ import time
 import numpy as np
 import pytest
 
+from teleprev.clock import SessionClock
 from teleprev.devices.contract import DeviceContext
+from teleprev.errors import ConfigError, DeviceError
+from teleprev.messages import JointSample
 from teleprev_devices.sim.arm import ArmSettings, SimArm
 from teleprev_devices.sim.follow import JointFollower
 from teleprev_devices.sim.hand import HandSettings, SimHand
 from teleprev_devices.sim.world import shared_world
-from teleprev.errors import ConfigError, DeviceError
-from teleprev.messages import JointSample
-from teleprev.clock import SessionClock
 
 LEAP = tuple(str(i) for i in range(16))
 
@@ -101,7 +101,8 @@ def test_arm_faults_on_a_command_over_its_limits_and_stops_until_reconnected(sca
     t0 = ctx.clock.now_ns() + 50_000_000
     if scale is not None:  # peak acceleration 13.8 rad/s^2 (38% over), jerk 288 rad/s^3 (within)
         stream = smooth_stream(home, t0, 0.6, seconds=0.5)
-    else:  # at 0.02 rad/s, then a step to 10 rad/s^2 (the limit): jerk by divided differences 10 / (2 x 8.3 ms) = 600 rad/s^3
+    else:  # at 0.02 rad/s, then a step to 10 rad/s^2 (the limit):
+        # jerk by divided differences 10 / (2 x 8.3 ms) = 600 rad/s^3
         t = np.arange(1, 40) / 120.0
         ramp = np.maximum(t - 20 / 120.0, 0.0)
         stream = [(t0 + int(round(tk * 1e9)), home + (0.02 * tk + 5.0 * rk**2) * np.ones(6)) for tk, rk in zip(t, ramp)]

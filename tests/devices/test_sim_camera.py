@@ -4,12 +4,12 @@ import cv2
 import numpy as np
 import pytest
 
+from teleprev.clock import SessionClock
 from teleprev.devices.contract import DeviceContext
-from teleprev_devices.sim.camera import CameraSettings, SimCamera
-from teleprev_devices.sim.world import shared_world
 from teleprev.robot.geometry import BOX_EDGES, BOX_FACES, RobotShapes, robot_geometry
 from teleprev.robot.model import load_robot
-from teleprev.clock import SessionClock
+from teleprev_devices.sim.camera import CameraSettings, SimCamera
+from teleprev_devices.sim.world import shared_world
 
 ARM = tuple(f"joint{i}" for i in range(1, 7))
 HOME = np.array([0.0, -0.27, -0.11, 0.0, -0.85, -1.571])
@@ -103,7 +103,9 @@ def test_geometry_is_the_urdf_primitives_at_the_configuration():
         assert np.allclose(geo.box_corners[i].mean(axis=0), pose[:3, 3])
         local = (geo.box_corners[i] - pose[:3, 3]) @ pose[:3, :3]
         assert np.allclose(np.abs(local), np.array(shape.size) / 2)
-        edges = np.linalg.norm(geo.box_corners[i][[a for a, _ in BOX_EDGES]] - geo.box_corners[i][[b for _, b in BOX_EDGES]], axis=1)
+        edges = np.linalg.norm(
+            geo.box_corners[i][[a for a, _ in BOX_EDGES]] - geo.box_corners[i][[b for _, b in BOX_EDGES]], axis=1
+        )
         assert np.allclose(np.sort(edges), np.sort(np.repeat(shape.size, 4)))
         for face in BOX_FACES:  # each face loop is a planar quad, counter-clockwise seen from outside
             c = geo.box_corners[i][list(face)]
@@ -119,14 +121,14 @@ def test_geometry_is_the_urdf_primitives_at_the_configuration():
     # The one-off helper gives the same; collision geometry is available too.
     assert np.allclose(robot_geometry(model, q, base).box_corners, geo.box_corners)
     assert len(RobotShapes(model, "collision").at(q).box_pose) == sum(
-        s.kind == "box" for l in model.links.values() for s in l.collisions)
+        s.kind == "box" for link in model.links.values() for s in link.collisions)
 
 
 def test_an_object_the_hand_closes_on_moves_with_it_and_drops_when_released():
     from teleprev.robot.effectors import EFFECTORS
-    from teleprev_devices.sim.world import SimWorld
     from teleprev.robot.ik import ArmIK
     from teleprev.transforms import make_transform
+    from teleprev_devices.sim.world import SimWorld
 
     world = SimWorld("xarm6_leap_hand", "leap_hand")
     world.set_home(dict(zip(ARM, HOME)))
@@ -151,4 +153,6 @@ def test_an_object_the_hand_closes_on_moves_with_it_and_drops_when_released():
     world.set_joints(tuple(str(i) for i in range(16)), open_hand)
     (dropped,) = world.scene(0)
     assert dropped.held is None
-    assert dropped.pose[2, 3] == pytest.approx(cup.pose[2, 3]) and dropped.pose[1, 3] == pytest.approx(cup.pose[1, 3] + 0.1, abs=2e-3)
+    assert dropped.pose[2, 3] == pytest.approx(cup.pose[2, 3]) and dropped.pose[1, 3] == pytest.approx(
+        cup.pose[1, 3] + 0.1, abs=2e-3
+    )

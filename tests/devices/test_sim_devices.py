@@ -9,14 +9,13 @@ import cv2
 import numpy as np
 import pytest
 
-from teleprev.devices.contract import DeviceContext
-from teleprev_devices.sim.glove import GloveSettings, SimGlove
-from teleprev.human.smplx import hand_pose_from_angles
-from teleprev_devices.sim.suit import SimSuit, SuitSettings
-from teleprev.errors import ConfigError, DeviceError
-from teleprev.human.smplx import HAND_POSE_NAMES
-from teleprev.rig import load_rig
 from teleprev.clock import SessionClock
+from teleprev.devices.contract import DeviceContext
+from teleprev.errors import ConfigError, DeviceError
+from teleprev.human.smplx import HAND_POSE_NAMES, hand_pose_from_angles
+from teleprev.rig import load_rig
+from teleprev_devices.sim.glove import GloveSettings, SimGlove
+from teleprev_devices.sim.suit import SimSuit, SuitSettings
 
 RUN_S = 1.5
 

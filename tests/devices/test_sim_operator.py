@@ -3,9 +3,9 @@
 import numpy as np
 import pytest
 
+from teleprev.retarget.hand import LeapRetargeter
 from teleprev_devices.sim.operator import SimOperator
 from teleprev_devices.sim.tasks import TASKS
-from teleprev.retarget.hand import LeapRetargeter
 
 RATE = 120.0
 

@@ -2,9 +2,9 @@
 
 import pytest
 
+from teleprev.clock import SessionClock
 from teleprev.errors import ConfigError
 from teleprev.rig import default_rig_path, load_rig
-from teleprev.clock import SessionClock
 
 
 @pytest.mark.parametrize(
@@ -17,15 +17,25 @@ from teleprev.clock import SessionClock
 )
 def test_rig_loads_and_builds_its_devices(name, robot, end_effector, hand_joints):
     rig = load_rig(default_rig_path().parent / f"{name}.toml")
-    assert (rig.rig.name, rig.rig.robot, rig.rig.end_effector, rig.rig.task) == (name, robot, end_effector, "pick_place")
+    assert (rig.rig.name, rig.rig.robot, rig.rig.end_effector, rig.rig.task) == (
+        name,
+        robot,
+        end_effector,
+        "pick_place",
+    )
     assert {d.kind: d.plugin for d in rig.devices.values()} == {
         "glove": "sim.glove", "suit": "sim.suit", "camera": "sim.camera", "arm": "sim.arm", "hand": "sim.hand"}
     rig.require("glove", "suit", "camera", "arm", "hand")
     ctx = rig.device_context(SessionClock())
     devices = {n: e.cls(n, e.settings, ctx) for n, e in rig.devices.items()}
     topics = {n: [s.topic for s in d.streams()] for n, d in devices.items()}
-    assert topics == {"glove": ["/glove/glove/hand"], "suit": ["/suit/suit/wrist"], "cam_front": ["/camera/cam_front/image"],
-                      "arm": ["/arm/arm/state"], "hand": ["/hand/hand/state"]}
+    assert topics == {
+        "glove": ["/glove/glove/hand"],
+        "suit": ["/suit/suit/wrist"],
+        "cam_front": ["/camera/cam_front/image"],
+        "arm": ["/arm/arm/state"],
+        "hand": ["/hand/hand/state"],
+    }
     assert devices["hand"].joint_names == hand_joints
     assert devices["arm"].joint_names == tuple(f"joint{i}" for i in range(1, 7))
 

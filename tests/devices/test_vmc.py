@@ -9,17 +9,17 @@ import numpy as np
 import pytest
 from pythonosc.udp_client import SimpleUDPClient
 
+from teleprev import topics
+from teleprev.clock import SessionClock
 from teleprev.devices.contract import DeviceContext
 from teleprev.devices.runner import DeviceRunner
-from teleprev_devices.vmc import VmcGlove, VmcSuit
-from teleprev_devices.vmc.plugins import BODY_POSE_NAMES, VmcSettings, VmcSuitSettings
 from teleprev.human.smplx import JOINT_INDEX, angles_from_hand_pose, hand_pose_from_values
 from teleprev.transforms import axis_angle_to_matrix, matrix_to_quat, quat_to_matrix
+from teleprev_devices.vmc import VmcGlove, VmcSuit
+from teleprev_devices.vmc.plugins import BODY_POSE_NAMES, VmcSettings, VmcSuitSettings
 from tests.helpers.ports import free_port
 from tests.helpers.vmc import arm_frame, arm_messages, bone, bundle, msg, unity_quat
 from tests.helpers.wait import wait_until
-from teleprev import topics
-from teleprev.clock import SessionClock
 
 
 @pytest.fixture
@@ -145,8 +145,10 @@ def test_garbage_is_counted_and_skipped_without_stopping_the_stream(context):
         sender.sendto(bundle(bone("RightRingProximal", (0, 0, 0), (0, 0, float("nan"), 1))).dgram, ("127.0.0.1", port))
         sender.sendto(bundle(msg("/VMC/Ext/Bone/Pos", "RightRingDistal", "x", 1.0)).dgram, ("127.0.0.1", port))
         # garbage next to a good bone in one bundle: the good bone still counts
-        sender.sendto(bundle(bone("NoSuchBone"), bone("RightMiddleProximal", (0, 0, 0), (float("inf"), 0, 0, 1)), good).dgram,
-                      ("127.0.0.1", port))
+        sender.sendto(
+            bundle(bone("NoSuchBone"), bone("RightMiddleProximal", (0, 0, 0), (float("inf"), 0, 0, 1)), good).dgram,
+            ("127.0.0.1", port),
+        )
         samples = read_until(glove, 1)
         assert len(samples) == 1
         pose = hand_pose_from_values(samples[0].payload.names, samples[0].payload.positions)
@@ -198,7 +200,12 @@ def test_suit_and_glove_share_one_port_and_the_runner_reports_skipped_garbage():
     assert len(by_topic["/suit/s/wrist"]) == 31
     assert len(by_topic["/glove/g/hand"]) == 30
     events = [e.data for e in by_topic[topics.DEVICE_EVENT]]
-    assert {(e["device"], e["event"]) for e in events} >= {("s", "connected"), ("g", "connected"), ("s", "skipped"), ("g", "skipped")}
+    assert {(e["device"], e["event"]) for e in events} >= {
+        ("s", "connected"),
+        ("g", "connected"),
+        ("s", "skipped"),
+        ("g", "skipped"),
+    }
     assert any("1 malformed packets" in e["message"] for e in events if e["event"] == "skipped")
     assert not [e for e in events if e["event"] == "error"]  # skipped input is no failure
     assert runners[1].stats().skipped["malformed_packets"] == 1

@@ -9,12 +9,12 @@ import time
 import numpy as np
 import pytest
 
+from teleprev.clock import SessionClock
 from teleprev.devices.contract import DeviceContext
 from teleprev.devices.runner import DeviceRunner
-from teleprev_devices.xarm import SdkXArmLink, XArm, XArmSettings
 from teleprev.errors import ConfigError, DeviceError
 from teleprev.messages import JointSample
-from teleprev.clock import SessionClock
+from teleprev_devices.xarm import SdkXArmLink, XArm, XArmSettings
 from tests.helpers.wait import wait_until
 
 HOME = [0.0, -0.27, -0.11, 0.0, -0.85, -1.571]

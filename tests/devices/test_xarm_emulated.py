@@ -8,6 +8,7 @@ import time
 
 import numpy as np
 import pytest
+from xarm.wrapper import XArmAPI  # the real SDK: scripts/test.sh installs the xarm extra (a missing one fails here)
 
 from teleprev.clock import SessionClock
 from teleprev.devices import DeviceContext, DeviceError, DeviceRunner
@@ -18,7 +19,6 @@ from teleprev.messages import JointSample
 from teleprev_devices.xarm import XArm, XArmSettings
 from tests.helpers.hardware import CommandStream, EventLog
 from tests.helpers.wait import wait_until
-from xarm.wrapper import XArmAPI  # the real SDK: scripts/test.sh installs the xarm extra (a missing one fails here)
 
 
 @pytest.fixture(scope="module")

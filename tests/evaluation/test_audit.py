@@ -6,8 +6,8 @@ from pathlib import Path
 
 import pytest
 
-from tests.helpers.cli import teleprev
 from teleprev.evaluation.audit import audit_session
+from tests.helpers.cli import teleprev
 
 FIXTURE = Path(__file__).parents[1] / "fixtures" / "sim_v1.mcap"
 

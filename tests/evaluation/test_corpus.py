@@ -25,7 +25,9 @@ def corpus(sim_corpus):
 
 
 def figures(report: dict) -> dict:
-    return {Path(s["session"]).name: {k: v for k, v in s["overall"].items() if k not in TIMING} for s in report["sessions"]}
+    return {
+        Path(s["session"]).name: {k: v for k, v in s["overall"].items() if k not in TIMING} for s in report["sessions"]
+    }
 
 
 def test_workers_give_the_figures_one_process_gives(corpus):
@@ -44,7 +46,11 @@ def test_a_worker_that_dies_is_retried_once_then_its_session_reported_failed(cor
     paths = [str(p) for p in resolve_sessions([corpus])]
     monkeypatch.setenv(FAULT_ENV, "b.mcap@1")  # b's worker dies on the first attempt only
     outcomes = LocalExecutor(2, PRELOAD).map(eval_one, EvalJob(), paths)
-    assert [(Path(o.label).name, o.ok, o.attempts) for o in outcomes] == [("a.mcap", True, 1), ("b.mcap", True, 2), ("c.mcap", True, 1)]
+    assert [(Path(o.label).name, o.ok, o.attempts) for o in outcomes] == [
+        ("a.mcap", True, 1),
+        ("b.mcap", True, 2),
+        ("c.mcap", True, 1),
+    ]
     assert outcomes[1].value["bit_identical"] is True
 
     monkeypatch.setenv(FAULT_ENV, "b.mcap")  # and now on every attempt
@@ -53,7 +59,14 @@ def test_a_worker_that_dies_is_retried_once_then_its_session_reported_failed(cor
     assert "its worker died on each of 2 attempts (last exit code 70)" in result.failed[paths[1]]
     assert sorted(Path(s["session"]).name for s in result.report["sessions"]) == ["a.mcap", "c.mcap"]
     assert result.report["corpus"] | {"wall_s": 0, "wall_realtime_x": 0} == {
-        "sessions": 3, "evaluated": 2, "failed": 1, "executor": "local", "workers": 2, "wall_s": 0, "wall_realtime_x": 0}
+        "sessions": 3,
+        "evaluated": 2,
+        "failed": 1,
+        "executor": "local",
+        "workers": 2,
+        "wall_s": 0,
+        "wall_realtime_x": 0,
+    }
     pngs = sorted(p.name for p in (tmp_path / "plots").iterdir())
     assert pngs == ["a_episode0.png", "c_episode0.png", "corpus.png"]
     assert all((tmp_path / "plots" / p).read_bytes()[:4] == b"\x89PNG" for p in pngs)
@@ -77,7 +90,9 @@ def test_the_cli_reports_a_corpus_worst_first_and_exits_1_on_a_failed_session(co
             s["overall"]["hand_speed_max"] *= 0.5
     base.write_text(json.dumps(report))
     (folder / "broken.mcap").unlink()
-    again = subprocess.run(run + ["--baseline", str(base)], capture_output=True, text=True, env=os.environ | {"COLUMNS": "120"})
+    again = subprocess.run(
+        run + ["--baseline", str(base)], capture_output=True, text=True, env=os.environ | {"COLUMNS": "120"}
+    )
     assert again.returncode == 0, again.stdout + again.stderr  # the overall figures did not move past their tolerance
     ranked = json.loads(out.read_text())["sessions"]
     assert Path(ranked[0]["session"]).name == "c.mcap" and ranked[0]["rank"] == 1

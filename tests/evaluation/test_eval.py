@@ -5,10 +5,10 @@ import json
 import numpy as np
 import pytest
 
-from tests.helpers.sessions import record_sim
-from tests.helpers.cli import teleprev
 from teleprev.evaluation.evaluate import evaluate
 from teleprev.evaluation.report import Tolerance, Tolerances, compare
+from tests.helpers.cli import teleprev
+from tests.helpers.sessions import record_sim
 
 
 @pytest.fixture(scope="module")
@@ -41,8 +41,12 @@ def test_a_perturbed_calibration_does_not_reproduce_and_says_what_moved(gripper_
     rig = tmp_path / "rig.toml"
     rig.write_text(meta["rig"]["toml"].replace("[rig]", f'[rig]\ncalibration = "{cal}"', 1))
     baseline = evaluate([gripper_session]).report
-    perturbed = evaluate([gripper_session], rig=rig, baseline=baseline,
-                         tolerances=Tolerances({"reproduced": Tolerance(), "arm_speed_max": Tolerance(rel=0.0, worse="either")}))
+    perturbed = evaluate(
+        [gripper_session],
+        rig=rig,
+        baseline=baseline,
+        tolerances=Tolerances({"reproduced": Tolerance(), "arm_speed_max": Tolerance(rel=0.0, worse="either")}),
+    )
     assert perturbed.report["sessions"][0]["bit_identical"] is False
     moved = {r.metric for r in perturbed.regressions}
     assert "reproduced" in moved
@@ -66,7 +70,9 @@ def test_regression_gate_passes_its_own_baseline_and_fails_past_a_tolerance(grip
 def test_compare_names_each_metric_and_how_far_it_moved():
     base = {"overall": {"a": 1.0, "b": 0.10, "c": 5.0, "ok": True}}
     now = {"overall": {"a": 1.05, "b": 0.30, "c": 2.0, "ok": False}}
-    tol = Tolerances({"a": Tolerance(rel=0.1), "b": Tolerance(abs=0.1), "c": Tolerance(abs=1, worse="lower"), "ok": Tolerance()})
+    tol = Tolerances(
+        {"a": Tolerance(rel=0.1), "b": Tolerance(abs=0.1), "c": Tolerance(abs=1, worse="lower"), "ok": Tolerance()}
+    )
     got = {r.metric: r for r in compare(base, now, tol)}
     assert set(got) == {"b", "c", "ok"}
     assert "+0.2" in got["b"].describe()
@@ -77,7 +83,9 @@ def test_plots_are_written_per_episode(gripper_session, tmp_path):
 
     result = evaluate([gripper_session])
     paths = plot_episodes(result.reruns[0], tmp_path)
-    assert len(paths) == 2 and all(p.stat().st_size > 5000 and p.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n" for p in paths)
+    assert len(paths) == 2 and all(
+        p.stat().st_size > 5000 and p.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n" for p in paths
+    )
     # the Corrector's changes are drawn as one span per run of changed steps (a line per step took a minute)
     t = np.arange(8) * 0.01
     changed = np.array([0, 1, 1, 0, 0, 1, 0, 1], dtype=bool)

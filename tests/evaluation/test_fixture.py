@@ -13,8 +13,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from teleprev.messages import ImageSample, JointSample, TransformsSample
 from teleprev.evaluation.evaluate import evaluate
+from teleprev.messages import ImageSample, JointSample, TransformsSample
 from teleprev.session.reader import SessionReader
 
 FIXTURE = Path(__file__).parents[1] / "fixtures" / "sim_v1.mcap"

@@ -38,14 +38,28 @@ def sessions(tmp_path_factory):
     d = tmp_path_factory.mktemp("sessions")
     return SimpleNamespace(
         dir=d,
-        a=write_session(d / "a.mcap", SyntheticSession(
-            (EpisodeSpec("pick_place", 2.0), EpisodeSpec("pour", 1.5, outcome="success")), seed=1)),
-        b=write_session(d / "b.mcap", SyntheticSession(
-            (EpisodeSpec("hang", 2.0), EpisodeSpec("hang", 1.0, discarded=True), EpisodeSpec("cup_stack", 2.0)), seed=2)),
+        a=write_session(
+            d / "a.mcap",
+            SyntheticSession((EpisodeSpec("pick_place", 2.0), EpisodeSpec("pour", 1.5, outcome="success")), seed=1),
+        ),
+        b=write_session(
+            d / "b.mcap",
+            SyntheticSession(
+                (EpisodeSpec("hang", 2.0), EpisodeSpec("hang", 1.0, discarded=True), EpisodeSpec("cup_stack", 2.0)),
+                seed=2,
+            ),
+        ),
         # a 0.4 s camera gap in the first episode; the second is in preview (no commands) for 0.5 s
-        c=write_session(d / "c.mcap", SyntheticSession(
-            (EpisodeSpec("pour", 2.0, camera_gaps=((0.8, 1.2),)), EpisodeSpec("box_rotation", 2.0, commands_after_s=0.5)),
-            seed=3)),
+        c=write_session(
+            d / "c.mcap",
+            SyntheticSession(
+                (
+                    EpisodeSpec("pour", 2.0, camera_gaps=((0.8, 1.2),)),
+                    EpisodeSpec("box_rotation", 2.0, commands_after_s=0.5),
+                ),
+                seed=3,
+            ),
+        ),
     )
 
 
@@ -140,7 +154,9 @@ def test_a_session_loads_back_with_its_episodes_features_tasks_values_and_images
     for e, ep in enumerate(ds.meta.episodes):
         t0 = float(ep[f"videos/{CAM}/from_timestamp"])
         ts = [t0 + k / FPS for k in range(int(ep["length"]))]
-        frames = decode_video_frames(root / ds.meta.get_video_file_path(e, CAM), ts, 1e-4, backend="pyav", return_uint8=True)
+        frames = decode_video_frames(
+            root / ds.meta.get_video_file_path(e, CAM), ts, 1e-4, backend="pyav", return_uint8=True
+        )
         images.extend(frames.permute(0, 2, 3, 1).numpy())
     assert len(images) == len(ds)
     numbers = [read_frame_code(img) for img in images]
@@ -254,7 +270,9 @@ def test_two_sessions_then_a_third_appended_give_every_episode(appended):
     assert [t for ep in ds.meta.episodes for t in ep["tasks"]] == [
         "pick_place", "pour", "hang", "cup_stack", "pour", "pour", "box_rotation"]
     assert ds.num_frames == first.frames + second.frames
-    assert float(ds[len(ds) - 1]["timestamp"]) == pytest.approx((int(ds.meta.episodes[6]["length"]) - 1) / FPS, abs=1e-6)
+    assert float(ds[len(ds) - 1]["timestamp"]) == pytest.approx(
+        (int(ds.meta.episodes[6]["length"]) - 1) / FPS, abs=1e-6
+    )
 
 
 def test_discarded_episodes_on_request_and_gaps_that_drop_or_fail(sessions, tmp_path):
@@ -317,7 +335,15 @@ def test_two_cameras_and_the_glove_recipe(tmp_path):
     f = ds.features
     assert f["observation.images.cam_front"]["dtype"] == f["observation.images.cam_wrist"]["dtype"] == "video"
     assert f["observation.glove"]["names"] == [f"glove.{j}" for j in GLOVE_JOINTS] and len(GLOVE_JOINTS) == 45
-    assert f["observation.wrist"]["names"] == ["wrist.x", "wrist.y", "wrist.z", "wrist.qx", "wrist.qy", "wrist.qz", "wrist.qw"]
+    assert f["observation.wrist"]["names"] == [
+        "wrist.x",
+        "wrist.y",
+        "wrist.z",
+        "wrist.qx",
+        "wrist.qy",
+        "wrist.qz",
+        "wrist.qw",
+    ]
     assert f["corrected"]["names"] == [f"corrected.{i}" for i in range(16)]
     assert f["retargeted"]["names"] == [f"retargeted.{i}" for i in range(16)]
     with SessionReader(path) as r:
@@ -325,12 +351,19 @@ def test_two_cameras_and_the_glove_recipe(tmp_path):
         for m in r.messages(["/camera/cam_front/image", "/camera/cam_wrist/image"]):
             rgb = cv2.imdecode(np.frombuffer(m.payload.data, np.uint8), cv2.IMREAD_COLOR_RGB)
             frames[(m.topic.split("/")[2], read_frame_code(rgb))] = m.payload.stamp_ns
-        wrist_samples = [(m.payload.stamp_ns, np.r_[m.payload.position, m.payload.orientation]) for m in r.messages(["/suit/suit/wrist"])]
+        wrist_samples = [
+            (m.payload.stamp_ns, np.r_[m.payload.position, m.payload.orientation])
+            for m in r.messages(["/suit/suit/wrist"])
+        ]
     wrist_stamps = np.array([t for t, _ in wrist_samples])
     for i in (0, len(ds) // 2, len(ds) - 1):
         item = ds[i]
-        codes = {cam: read_frame_code((item[f"observation.images.{cam}"].permute(1, 2, 0).numpy() * 255).round().astype(np.uint8))
-                 for cam in ("cam_front", "cam_wrist")}
+        codes = {
+            cam: read_frame_code(
+                (item[f"observation.images.{cam}"].permute(1, 2, 0).numpy() * 255).round().astype(np.uint8)
+            )
+            for cam in ("cam_front", "cam_wrist")
+        }
         t = frames[("cam_front", codes["cam_front"])]
         t_wrist = frames[("cam_wrist", codes["cam_wrist"])]
         later = [s for (cam, _), s in frames.items() if cam == "cam_wrist" and t_wrist < s <= t]
@@ -404,7 +437,9 @@ def corrupt_copy(src: Path, dst: Path, episode: int) -> Path:
 def test_a_failure_half_way_leaves_no_half_dataset_and_no_changed_one(sessions, exported_a, tmp_path):
     bad = corrupt_copy(sessions.a, tmp_path / "bad.mcap", episode=1)
     root = tmp_path / "out" / "ds"
-    with pytest.raises(SessionError, match=r"bad.mcap: the image on /camera/cam_front/image at log time \d+ does not decode"):
+    with pytest.raises(
+        SessionError, match=r"bad.mcap: the image on /camera/cam_front/image at log time \d+ does not decode"
+    ):
         export(ExportOptions([sessions.b, bad], "lab/bad", root, load_recipe()))
     assert not root.exists() and leftovers(root) == []
     # appending the same session to a dataset fails the same way, and the dataset stays as it was
@@ -431,7 +466,6 @@ def test_an_interrupted_export_leaves_nothing(sessions, tmp_path):
 
 def test_skipping_lerobots_noop_image_embedding_gives_the_same_table():
     import datasets
-
     from teleprev.export.dataset import prepare_lerobot
 
     prepare_lerobot()

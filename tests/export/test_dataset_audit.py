@@ -7,9 +7,9 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from teleprev.evaluation.audit import audit_path
 from tests.helpers.cli import teleprev
 from tests.helpers.sessions import record_sim
-from teleprev.evaluation.audit import audit_path
 
 RIGS = Path(__file__).parents[2] / "rigs"
 
@@ -45,7 +45,9 @@ def test_our_export_is_matched_by_name_and_measured_as_lerobot_loads_it(exported
     q = np.array([np.asarray(r["action"], dtype=float)[cols] for r in rows])
     v = np.diff(q, axis=0) / np.diff(t)[:, None]
     a = 2 * np.diff(v, axis=0) / (t[2:] - t[:-2])[:, None]
-    assert np.isclose(arm.speed_max, np.abs(v).max(), rtol=1e-4) and np.isclose(arm.accel_max, np.abs(a).max(), rtol=1e-4)
+    assert np.isclose(arm.speed_max, np.abs(v).max(), rtol=1e-4) and np.isclose(
+        arm.accel_max, np.abs(a).max(), rtol=1e-4
+    )
     # An action is the first command sent in its frame, stamped with the frame's time: up to one command
     # period (8 ms) of jitter on 33 ms frames, which divided differences amplify, so no bound on the ratio.
     assert 0 < arm.ratios["accel"]
@@ -56,7 +58,9 @@ def _foreign(root: Path, jump: float) -> Path:
     from lerobot.datasets.lerobot_dataset import LeRobotDataset
 
     features = {"action": {"dtype": "float32", "shape": (7,), "names": [f"motor_{i}" for i in range(7)]}}
-    ds = LeRobotDataset.create("someone/else", fps=30, features=features, root=root, robot_type="xarm6", use_videos=False)
+    ds = LeRobotDataset.create(
+        "someone/else", fps=30, features=features, root=root, robot_type="xarm6", use_videos=False
+    )
     for i in range(40):
         a = np.zeros(7, np.float32)
         a[0] = 0.01 * np.sin(i / 10.0) + (jump if i >= 20 else 0.0)
@@ -77,7 +81,9 @@ def test_someone_elses_dataset_matched_by_position_and_a_jump_fails_the_cli(tmp_
     assert run.returncode == 1, run.stdout + run.stderr
     data = json.loads(out.read_text())
     assert [d["ok"] for d in data] == [True, False]
-    assert data[1]["streams"][0]["ratios"]["accel"] > 3  # 0.05 rad in one frame at 30 fps: 2 x 1.5 rad/s over 2 frames = 45 rad/s^2
+    assert (
+        data[1]["streams"][0]["ratios"]["accel"] > 3
+    )  # 0.05 rad in one frame at 30 fps: 2 x 1.5 rad/s over 2 frames = 45 rad/s^2
 
 
 def test_a_dataset_needs_a_rig_and_matching_joints(exported, tmp_path):

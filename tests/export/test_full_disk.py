@@ -24,11 +24,18 @@ def test_append_on_a_full_disk_leaves_the_dataset_as_it_was(tmp_path):
             (disk / "filler").write_bytes(b"\0" * max(0, free - 150_000))
         else:  # no mount here: a file-size limit instead
             preexec = fsize_limit(150_000)
-        run = run_cli(["export", b, "--repo-id", "lab/full", "--root", root, "--append"], preexec_fn=preexec, timeout=300)
+        run = run_cli(
+            ["export", b, "--repo-id", "lab/full", "--root", root, "--append"], preexec_fn=preexec, timeout=300
+        )
         assert run.returncode == 2 and not has_traceback(run.stdout + run.stderr), run.stderr
         lines = [line for line in run.stderr.splitlines() if line.strip()]
         assert len(lines) == 1, run.stderr
-        assert ("no space left" in lines[0] or "size limit" in lines[0]) and "MB free" in lines[0] and "needs about" in lines[0] and str(root) in lines[0]
+        assert (
+            ("no space left" in lines[0] or "size limit" in lines[0])
+            and "MB free" in lines[0]
+            and "needs about" in lines[0]
+            and str(root) in lines[0]
+        )
         assert tree(root) == before  # byte for byte
         assert not list(disk.glob(".ds.export-*"))  # the partial export is gone
 

@@ -14,8 +14,15 @@ import pytest
 from teleprev.errors import ConfigError, SessionError
 from teleprev.export.foreign.config import load_import_recipe
 from teleprev.export.foreign.run import import_files
-from teleprev.export.foreign.samples import (ARM, T0_NS, ForeignSpec, gripper_q, ros2_mcap_file, write_foxglove_mcap,
-                                             write_ros2)
+from teleprev.export.foreign.samples import (
+    ARM,
+    T0_NS,
+    ForeignSpec,
+    gripper_q,
+    ros2_mcap_file,
+    write_foxglove_mcap,
+    write_ros2,
+)
 from teleprev.export.recipe import load_recipe
 from teleprev.export.synthetic import arm_q, read_frame_code
 from tests.helpers.cli import teleprev
@@ -59,10 +66,16 @@ def _column(ds, name: str) -> np.ndarray:
 
 def test_ros2_mcap_events_resampled_to_one_fps_with_derived_actions(tmp_path):
     bag = ros2_mcap_file(write_ros2(tmp_path / "bag", TWO, storage="mcap"))
-    recipe = load_import_recipe(_recipe(tmp_path, 'episodes = "events"\nevents_topic = "/episode_events"\n'
-                                        'task = "pick up the cube and place it in the bowl"\nrobot_type = "xarm6"\n'
-                                        '[import.joints]\n"/joint_states" = ["joint1","joint2","joint3","joint4","joint5",'
-                                        '"joint6","gripper"]', ROS_FEATURES))
+    recipe = load_import_recipe(
+        _recipe(
+            tmp_path,
+            'episodes = "events"\nevents_topic = "/episode_events"\n'
+            'task = "pick up the cube and place it in the bowl"\nrobot_type = "xarm6"\n'
+            '[import.joints]\n"/joint_states" = ["joint1","joint2","joint3","joint4","joint5",'
+            '"joint6","gripper"]',
+            ROS_FEATURES,
+        )
+    )
     report = import_files([bag], recipe, "t/x", tmp_path / "out")
     assert report.total_episodes == 2
     umask = os.umask(0o022)
@@ -135,7 +148,9 @@ timing = "next"
 name = "observation.images.front"
 streams = ["/camera/front"]
 """
-    recipe_path = _recipe(tmp_path, f'episodes = "file"\ntask = "reach"\nurdf = "{ROOT / "urdf" / "xarm6.urdf"}"', features)
+    recipe_path = _recipe(
+        tmp_path, f'episodes = "file"\ntask = "reach"\nurdf = "{ROOT / "urdf" / "xarm6.urdf"}"', features
+    )
     recipe = load_import_recipe(recipe_path)
     assert recipe.urdf_joints == ARM and recipe.robot_type  # joint names (and the robot) from the URDF
     out = teleprev("import", path, "--recipe", recipe_path, "--repo-id", "t/fox", "--root", tmp_path / "out", "--json")
@@ -152,7 +167,9 @@ streams = ["/camera/front"]
 
 def test_bad_import_recipes_and_files_say_what_is_wrong(tmp_path):
     bag = write_ros2(tmp_path / "bag", ForeignSpec(episodes=((0.0, 1.0),)), storage="sqlite3")
-    missing = load_import_recipe(_recipe(tmp_path, '[import.joints]\n"/joint_states" = ["joint1", "elbow"]', ROS_FEATURES))
+    missing = load_import_recipe(
+        _recipe(tmp_path, '[import.joints]\n"/joint_states" = ["joint1", "elbow"]', ROS_FEATURES)
+    )
     with pytest.raises(SessionError, match=r"\[import.joints\] /joint_states: no joints \['elbow'\]"):
         import_files([bag], missing, "t/x", tmp_path / "out1")
     no_topic = load_import_recipe(_recipe(tmp_path, "", '[[feature]]\nname = "observation.state"\nstreams = ["/arm"]'))
@@ -221,5 +238,10 @@ def test_a_bag_that_stores_no_message_definitions_reads_with_the_standard_ones(t
                           tmp_path / "out")
     assert report.total_episodes == 1 and report.total_frames > 20
     with pytest.raises(SessionError) as exc:  # recorded, but nothing was published
-        import_files([without_definitions("empty", ForeignSpec(episodes=((0.0, 0.0),), events=False))], recipe, "t/e", tmp_path / "e")
+        import_files(
+            [without_definitions("empty", ForeignSpec(episodes=((0.0, 0.0),), events=False))],
+            recipe,
+            "t/e",
+            tmp_path / "e",
+        )
     assert "typestore" not in str(exc.value) and "holds no messages" in str(exc.value), str(exc.value)

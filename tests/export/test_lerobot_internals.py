@@ -164,7 +164,6 @@ def test_lerobot_writes_with_our_encoder_on_create_and_resume(choice, tmp_path, 
     """End to end through lerobot's DatasetWriter: the encoder it uses is ours, it takes our videos
     and statistics, and it leaves no temporary folder behind."""
     import datasets
-
     from teleprev.export import dataset as D
     from teleprev.export import lerobot_video
 

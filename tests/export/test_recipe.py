@@ -32,7 +32,12 @@ def test_shipped_recipes_load_and_resolve_on_the_sim_layout():
     assert {"default", "with_glove"} <= set(names)
     feats = resolve(load_recipe(), topics(SIM_TOPICS), {}, "s.mcap")
     by_name = {f.name: f for f in feats}
-    assert list(by_name) == ["observation.state", "action", "observation.images.cam_front", "observation.images.cam_top"]
+    assert list(by_name) == [
+        "observation.state",
+        "action",
+        "observation.images.cam_front",
+        "observation.images.cam_top",
+    ]
     assert [s.topic for s in by_name["observation.state"].sources] == ["/arm/arm/state", "/hand/hand/state"]
     assert [s.prefix for s in by_name["observation.state"].sources] == ["arm", "hand"]
     assert [s.topic for s in by_name["action"].sources] == ["/command/arm", "/command/hand"]
@@ -52,15 +57,22 @@ def test_roles_fit_any_rig_and_ask_for_a_name_when_ambiguous(tmp_path):
     feats = resolve(load_recipe(), topics(rig), meta, "s.mcap")
     assert [s.topic for s in feats[0].sources] == ["/arm/right/state", "/hand/gripper/state"]
     assert len(feats) == 2  # no camera: no video feature
-    two = recipe_file(tmp_path, '[[feature]]\nname = "observation.state"\nstreams = ["arm_state:left", "arm_state:right", "/hand/gripper/state"]\n')
+    two = recipe_file(
+        tmp_path,
+        '[[feature]]\nname = "observation.state"\nstreams = ["arm_state:left", "arm_state:right", '
+        '"/hand/gripper/state"]\n',
+    )
     feats = resolve(load_recipe(two), topics(rig), {}, "s.mcap")
     assert [s.prefix for s in feats[0].sources] == ["left", "right", "gripper"]
 
 
 def test_a_session_without_a_requested_stream_is_named(tmp_path):
     preview_only = {t: s for t, s in SIM_TOPICS.items() if not t.startswith("/command/")}
-    with pytest.raises(SessionError, match=r"s.mcap: feature 'action': stream 'arm_command' \(/command/arm\) is not in "
-                                           r"this session: the robot was never engaged: the whole session ran in PREVIEW"):
+    with pytest.raises(
+        SessionError,
+        match=r"s.mcap: feature 'action': stream 'arm_command' \(/command/arm\) is not in "
+        r"this session: the robot was never engaged: the whole session ran in PREVIEW",
+    ):
         resolve(load_recipe(), topics(preview_only), {}, "s.mcap")
     no_glove = {t: s for t, s in SIM_TOPICS.items() if not t.startswith("/glove/")}
     with pytest.raises(SessionError, match="'observation.glove': stream 'glove': this session has no glove device"):
@@ -69,20 +81,34 @@ def test_a_session_without_a_requested_stream_is_named(tmp_path):
     with pytest.raises(SessionError, match=r"no camera device 'cam_side'.*found: cam_front, cam_top"):
         resolve(load_recipe(one), topics(SIM_TOPICS), {}, "s.mcap")
     wrong = recipe_file(tmp_path, '[[feature]]\nname = "observation.state"\nstreams = ["/events/episode"]\n')
-    with pytest.raises(SessionError, match="/events/episode holds teleprev.EpisodeEvent messages, expected foxglove.JointStates"):
+    with pytest.raises(
+        SessionError, match="/events/episode holds teleprev.EpisodeEvent messages, expected foxglove.JointStates"
+    ):
         resolve(load_recipe(wrong), topics(SIM_TOPICS), {}, "s.mcap")
 
 
-@pytest.mark.parametrize("text, message", [
-    ('[[feature]]\nname = "action"\nstreams = ["arm_cmd"]\n', r"unknown stream 'arm_cmd' \(roles: arm_state"),
-    ('[[feature]]\nname = "timestamp"\nstreams = ["arm_state"]\n', "not a usable feature name"),
-    ('[[feature]]\nname = "a"\nstreams = ["arm_state"]\n[[feature]]\nname = "a"\nstreams = ["glove"]\n', "feature defined twice"),
-    ('[export]\nfps = -3\n[[feature]]\nname = "a"\nstreams = ["arm_state"]\n', r"\[export\]|export.*fps must be"),
-    ('[export]\non_gap = "stretch"\n[[feature]]\nname = "a"\nstreams = ["arm_state"]\n', r"export.on_gap: expected one of 'split', 'drop', 'fail'"),
-    ('[video]\ncodec = "mjpeg"\n[[feature]]\nname = "a"\nstreams = ["arm_state"]\n', "video.codec: expected one of 'h264', 'hevc', 'av1'"),
-    ('[[feature]]\nname = "a"\nstreams = ["arm_command:arm"]\n', "a pipeline stream, not a device's"),
-    ('[[feature]]\nname = "a"\nstream = ["arm_state"]\n', "unknown key 'stream'"),
-])
+@pytest.mark.parametrize(
+    "text, message",
+    [
+        ('[[feature]]\nname = "action"\nstreams = ["arm_cmd"]\n', r"unknown stream 'arm_cmd' \(roles: arm_state"),
+        ('[[feature]]\nname = "timestamp"\nstreams = ["arm_state"]\n', "not a usable feature name"),
+        (
+            '[[feature]]\nname = "a"\nstreams = ["arm_state"]\n[[feature]]\nname = "a"\nstreams = ["glove"]\n',
+            "feature defined twice",
+        ),
+        ('[export]\nfps = -3\n[[feature]]\nname = "a"\nstreams = ["arm_state"]\n', r"\[export\]|export.*fps must be"),
+        (
+            '[export]\non_gap = "stretch"\n[[feature]]\nname = "a"\nstreams = ["arm_state"]\n',
+            r"export.on_gap: expected one of 'split', 'drop', 'fail'",
+        ),
+        (
+            '[video]\ncodec = "mjpeg"\n[[feature]]\nname = "a"\nstreams = ["arm_state"]\n',
+            "video.codec: expected one of 'h264', 'hevc', 'av1'",
+        ),
+        ('[[feature]]\nname = "a"\nstreams = ["arm_command:arm"]\n', "a pipeline stream, not a device's"),
+        ('[[feature]]\nname = "a"\nstream = ["arm_state"]\n', "unknown key 'stream'"),
+    ],
+)
 def test_bad_recipes_name_the_file_and_the_key(tmp_path, text, message):
     with pytest.raises(ConfigError, match=message) as err:
         load_recipe(recipe_file(tmp_path, text))
@@ -100,5 +126,7 @@ def test_mixed_or_unnamed_camera_features_are_refused(tmp_path):
 
 
 def test_an_unknown_recipe_lists_the_shipped_ones():
-    with pytest.raises(ConfigError, match=r"no such recipe file \(recipes in .*datasets/recipes: default, sent_commands, with_glove"):
+    with pytest.raises(
+        ConfigError, match=r"no such recipe file \(recipes in .*datasets/recipes: default, sent_commands, with_glove"
+    ):
         load_recipe("nope")

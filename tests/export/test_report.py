@@ -32,6 +32,9 @@ def test_the_speed_line_separates_loading_lerobot_from_exporting():
 
     ep = EpisodeReport("s.mcap", 0, "pour", pieces=1, frames=300, duration_s=10.0)
     report = ExportReport(Path("out"), "local/x", 30, [SessionReport("s.mcap", 1, [ep])], wall_s=6.0, startup_s=4.0)
-    assert "10.0 s of recording in 6.0 s (1.7x real time; 4.0 s of it loading lerobot, 5.0x without)" in export_notes(report)[-1]
+    assert (
+        "10.0 s of recording in 6.0 s (1.7x real time; 4.0 s of it loading lerobot, 5.0x without)"
+        in export_notes(report)[-1]
+    )
     report.startup_s = 0.1  # lerobot already loaded (a second export in one process): nothing to separate
     assert "(1.7x real time)" in export_notes(report)[-1]

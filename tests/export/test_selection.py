@@ -28,9 +28,17 @@ def marked(tmp_path_factory):
     a = _session(d / "a.mcap", "p1", "vr", (EpisodeSpec("pick_place", 1.0, outcome="success"),
                                             EpisodeSpec("pick_place", 1.0, outcome="failure"),
                                             EpisodeSpec("pour", 1.0, outcome="success")), seed=11)
-    b = _session(d / "b.mcap", "p2", "screen", (EpisodeSpec("pour", 1.0),
-                                                EpisodeSpec("pick_place", 1.0, outcome="success"),
-                                                EpisodeSpec("pick_place", 1.0, outcome="success", discarded=True)), seed=12)
+    b = _session(
+        d / "b.mcap",
+        "p2",
+        "screen",
+        (
+            EpisodeSpec("pour", 1.0),
+            EpisodeSpec("pick_place", 1.0, outcome="success"),
+            EpisodeSpec("pick_place", 1.0, outcome="success", discarded=True),
+        ),
+        seed=12,
+    )
     return SimpleNamespace(dir=d, a=a, b=b)
 
 
@@ -62,7 +70,13 @@ def test_only_success_exports_exactly_the_episodes_marked_y_with_their_marks(mar
     assert episodes_of(ds) == [
         {"source_session": "a.mcap", "source_episode": 0, "outcome": "success", "participant": "p1", "condition": "vr"},
         {"source_session": "a.mcap", "source_episode": 2, "outcome": "success", "participant": "p1", "condition": "vr"},
-        {"source_session": "b.mcap", "source_episode": 1, "outcome": "success", "participant": "p2", "condition": "screen"},
+        {
+            "source_session": "b.mcap",
+            "source_episode": 1,
+            "outcome": "success",
+            "participant": "p2",
+            "condition": "screen",
+        },
     ]
     episode, done, success = marks(ds)
     last = np.r_[episode[1:] != episode[:-1], True]  # the last frame of each episode
@@ -108,9 +122,16 @@ def test_holdout_writes_a_second_dataset_deterministic_for_a_seed(marked, tmp_pa
     assert (summary["total_episodes"], summary["holdout"]["total_episodes"]) == (4, 1)
     assert summary["holdout"]["root"] == str(tmp_path / "train_holdout")
     train, held = load("t/train", root), load("t/train_holdout", tmp_path / "train_holdout")
-    keys = lambda ds: [(e["source_session"], e["source_episode"]) for e in episodes_of(ds)]
+    def keys(ds):
+        return [(e["source_session"], e["source_episode"]) for e in episodes_of(ds)]
     assert len(keys(held)) == 1 and len(keys(train)) == 4  # round(0.25 x 5)
-    assert sorted(keys(train) + keys(held)) == [("a.mcap", 0), ("a.mcap", 1), ("a.mcap", 2), ("b.mcap", 0), ("b.mcap", 1)]
+    assert sorted(keys(train) + keys(held)) == [
+        ("a.mcap", 0),
+        ("a.mcap", 1),
+        ("a.mcap", 2),
+        ("b.mcap", 0),
+        ("b.mcap", 1),
+    ]
     kept = select(read_facts([marked.a, marked.b]), Selection()).kept
     for seed in (7, 8, 9):  # the same seed, the same split; the draw depends on it
         assert split(kept, 0.25, "episode", seed) == split(kept, 0.25, "episode", seed)

@@ -68,7 +68,9 @@ def test_plan_trims_the_ends_splits_at_gaps_and_names_the_streams():
     arm = np.arange(0, 5_000, 10) * MS
     cmd = np.arange(1_000, 5_000, 8) * MS  # execute mode from 1 s on
     cmd = cmd[(cmd < 2_500 * MS) | (cmd >= 3_000 * MS)]  # back to preview for half a second
-    plan = plan_episode("cam", cam, {"arm": (arm, False), "cmd": (cmd, True)}, 0, 5_000 * MS, FPS, 100 * MS, min_frames=15)
+    plan = plan_episode(
+        "cam", cam, {"arm": (arm, False), "cmd": (cmd, True)}, 0, 5_000 * MS, FPS, 100 * MS, min_frames=15
+    )
     assert len(plan.gaps) == 2
     lead, inner = plan.gaps
     assert lead.at_edge and lead.streams == ("cmd",) and lead.first == 0

@@ -29,8 +29,13 @@ class Ran:
 
 
 # Python's warning filters in a process started without -W options: what a child would print
-_CHILD_FILTERS = (("default", DeprecationWarning, "__main__"), ("ignore", DeprecationWarning, ""),
-                  ("ignore", PendingDeprecationWarning, ""), ("ignore", ImportWarning, ""), ("ignore", ResourceWarning, ""))
+_CHILD_FILTERS = (
+    ("default", DeprecationWarning, "__main__"),
+    ("ignore", DeprecationWarning, ""),
+    ("ignore", PendingDeprecationWarning, ""),
+    ("ignore", ImportWarning, ""),
+    ("ignore", ResourceWarning, ""),
+)
 
 
 def teleprev(*args, stdin: str = "", cwd: Path = ROOT, columns: int = 200) -> Ran:

@@ -58,7 +58,9 @@ def iwer_pose(name: str) -> np.ndarray:
     return joints
 
 
-_THUMB = [hands.JOINT_INDEX[j] for j in ("thumb-metacarpal", "thumb-phalanx-proximal", "thumb-phalanx-distal", "thumb-tip")]
+_THUMB = [
+    hands.JOINT_INDEX[j] for j in ("thumb-metacarpal", "thumb-phalanx-proximal", "thumb-phalanx-distal", "thumb-tip")
+]
 _WRIST, _METACARPAL = hands.JOINT_INDEX["wrist"], hands.JOINT_INDEX["thumb-metacarpal"]
 
 
@@ -109,7 +111,9 @@ def sweep() -> dict[str, list[np.ndarray]]:
     """{what: right hands (25, 8)}: IWER's poses, the finger flexion sweep and the thumb twist sweep (on
     each of IWER's poses)."""
     iwer = [iwer_pose(n) for n in IWER_POSE_NAMES]
-    flexion = [flexed_hand(f, d, t) for f in FLEXION_SWEEP_DEG for d in DEVIATION_SWEEP_DEG for t in FINGER_TWIST_SWEEP_DEG]
+    flexion = [
+        flexed_hand(f, d, t) for f in FLEXION_SWEEP_DEG for d in DEVIATION_SWEEP_DEG for t in FINGER_TWIST_SWEEP_DEG
+    ]
     thumb = [with_thumb_twist(p, np.radians(t)) for p in iwer for t in THUMB_TWIST_SWEEP_DEG]
     return {"iwer": iwer, "flexion": flexion, "thumb_twist": thumb}
 

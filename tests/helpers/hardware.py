@@ -16,9 +16,9 @@ from contextlib import nullcontext
 import numpy as np
 
 from teleprev import topics
-from teleprev.errors import DeviceError
 from teleprev.devices.servo_limits import STREAM_GAP_NS
 from teleprev.emulators.wire_schedule import PlannedSend
+from teleprev.errors import DeviceError
 from teleprev.messages import JointSample
 from tests.helpers.wait import WaitTimeout, wait_until
 

@@ -17,7 +17,8 @@ PRELUDE = textwrap.dedent("""
     from teleprev.pipeline.step import PipelineState, StepInputs
     from teleprev.rig import load_rig
 
-    modules = [importlib.import_module("teleprev.kernels." + m.name) for m in pkgutil.iter_modules(teleprev.kernels.__path__)]
+    modules = [importlib.import_module("teleprev.kernels." + m.name) for m in
+    pkgutil.iter_modules(teleprev.kernels.__path__)]
 
     def loaded():
         return {(m.__name__, name, str(sig)) for m in modules for name, f in vars(m).items()

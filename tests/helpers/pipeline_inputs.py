@@ -15,7 +15,9 @@ ARM_HOME = np.array([0.0, -0.5, -0.6, 0.0, 1.1, 0.0])
 
 def hand_sample(t_ns: int, flexion, abduction=None) -> JointSample:
     abduction = np.zeros(15) if abduction is None else abduction
-    return JointSample(t_ns, HAND_POSE_NAMES, hand_pose_from_angles(np.asarray(flexion, float), np.asarray(abduction, float)).ravel())
+    return JointSample(
+        t_ns, HAND_POSE_NAMES, hand_pose_from_angles(np.asarray(flexion, float), np.asarray(abduction, float)).ravel()
+    )
 
 
 def wrist_sample(t_ns: int, k: int) -> PoseSample:
@@ -28,8 +30,11 @@ def inputs(k: int, arm_names, effector_names, effector_q, flexion=None) -> StepI
     t = int(k * 1e9 / RATE_HZ)
     flexion = np.full(15, 0.3 + 0.5 * (1 - np.cos(k / 40))) if flexion is None else flexion
     return StepInputs(
-        t, hand_sample(t, flexion), wrist_sample(t, k),
-        JointSample(t, tuple(arm_names), ARM_HOME.copy()), JointSample(t, tuple(effector_names), np.asarray(effector_q, float)),
+        t,
+        hand_sample(t, flexion),
+        wrist_sample(t, k),
+        JointSample(t, tuple(arm_names), ARM_HOME.copy()),
+        JointSample(t, tuple(effector_names), np.asarray(effector_q, float)),
     )
 
 

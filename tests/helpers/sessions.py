@@ -6,15 +6,22 @@ import time
 from collections.abc import Callable
 from pathlib import Path
 
+from teleprev.live.record.session import LiveSession, RecordOptions
 from teleprev.rig import default_rig_path
-from teleprev.live.record.session import RecordOptions, LiveSession
 from tests.helpers.wait import WaitTimeout, wait_until
 
 RIGS = default_rig_path().parent
 
 
-def record_sim(out: Path, rig: str = "sim.toml", seconds: float = 3.0, episodes: int = 1, engage_after: float | None = 1.0,
-               task: str = "pick_place", **options) -> LiveSession:
+def record_sim(
+    out: Path,
+    rig: str = "sim.toml",
+    seconds: float = 3.0,
+    episodes: int = 1,
+    engage_after: float | None = 1.0,
+    task: str = "pick_place",
+    **options,
+) -> LiveSession:
     """Record `episodes` episodes of `seconds` each; engage `engage_after` s into each (None: preview only)."""
     rec = LiveSession(RecordOptions(out=out, rig=RIGS / rig, task=task, **options))
     rec.start()

@@ -28,7 +28,9 @@ def msg(address: str, *args, types: str | None = None):
 
 def bone(name: str, pos=(0.0, 0.0, 0.0), quat=(0.0, 0.0, 0.0, 1.0), address="/VMC/Ext/Bone/Pos", double=False):
     """A bone's message; float32 values as senders send them, or float64 (`double`) for values beyond float32."""
-    return msg(address, name, *[float(v) for v in pos], *[float(v) for v in quat], types="s" + ("d" if double else "f") * 7)
+    return msg(
+        address, name, *[float(v) for v in pos], *[float(v) for v in quat], types="s" + ("d" if double else "f") * 7
+    )
 
 
 def bundle(*messages):
@@ -109,7 +111,7 @@ class VmcSender:
         with self._lock:
             self._extra.append(datagram)
 
-    def start(self, rate_hz: float = 60.0, seconds: float | None = None) -> "VmcSender":
+    def start(self, rate_hz: float = 60.0, seconds: float | None = None) -> VmcSender:
         self._thread = threading.Thread(target=self._run, args=(rate_hz, seconds), daemon=True)
         self._thread.start()
         return self
@@ -224,7 +226,9 @@ class HumanLikeSender(VmcSender):
         self._tremor_phase = rng.uniform(0, 2 * np.pi, len(FINGERS))
 
     @staticmethod
-    def _strokes(rng, seconds: float, shortest: float, longest: float, draw) -> list[tuple[float, float, object, object]]:
+    def _strokes(
+        rng, seconds: float, shortest: float, longest: float, draw
+    ) -> list[tuple[float, float, object, object]]:
         """(start, end, from, to) strokes back to back, each held a moment before the next."""
         out, t, value = [], 0.0, draw(rng) * 0
         while t < seconds:

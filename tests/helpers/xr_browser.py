@@ -70,7 +70,7 @@ class Quest3Browser:
     def version(self) -> str:
         return self.browser.version
 
-    def __enter__(self) -> "Quest3Browser":
+    def __enter__(self) -> Quest3Browser:
         return self
 
     def __exit__(self, *exc) -> None:
@@ -105,7 +105,9 @@ class Quest3Browser:
                                   "status: window.teleprev.state.status, actions: window.teleprev.actions})")
 
     def sent(self) -> SentFrames:
-        raw = self.page.evaluate("({values: window.teleprev.log.map(v => Array.from(v)), heads: window.teleprev.heads})")
+        raw = self.page.evaluate(
+            "({values: window.teleprev.log.map(v => Array.from(v)), heads: window.teleprev.heads})"
+        )
         heads = raw["heads"]
         return SentFrames(np.array([h["seq"] for h in heads]), np.array([h["present"] for h in heads]),
                           np.array([h["sent_ms"] for h in heads]), np.array(raw["values"], dtype=np.float32))
@@ -118,7 +120,10 @@ def recorded_motion(frames: int, rate_hz: float = 60.0) -> list[dict]:
     reader = SessionReader(FIXTURE)
     try:
         glove = [(m.payload.stamp_ns, m.payload.positions) for m in reader.messages(["/glove/glove/hand"])]
-        suit = [(m.payload.stamp_ns, m.payload.position, m.payload.orientation) for m in reader.messages(["/suit/suit/wrist"])]
+        suit = [
+            (m.payload.stamp_ns, m.payload.position, m.payload.orientation)
+            for m in reader.messages(["/suit/suit/wrist"])
+        ]
     finally:
         reader.close()
     g_t = np.array([t for t, _ in glove])

@@ -27,8 +27,11 @@ def local_rotations(flexion, abduction, twist=None) -> np.ndarray:
     twist = np.zeros(15) if twist is None else np.asarray(twist, dtype=float)
     out = np.empty((15, 3, 3))
     for j in range(15):
-        turn = (axis_angle_to_matrix(np.array([0.0, 0.0, flexion[j]])) @ axis_angle_to_matrix(np.array([0.0, abduction[j], 0.0]))
-                @ axis_angle_to_matrix(np.array([twist[j], 0.0, 0.0])))
+        turn = (
+            axis_angle_to_matrix(np.array([0.0, 0.0, flexion[j]]))
+            @ axis_angle_to_matrix(np.array([0.0, abduction[j], 0.0]))
+            @ axis_angle_to_matrix(np.array([twist[j], 0.0, 0.0]))
+        )
         out[j] = B[j] @ turn @ B[j].T
     return out
 

@@ -10,7 +10,9 @@ import pytest
 
 import teleprev.kernels
 
-MODULES = [importlib.import_module("teleprev.kernels." + m.name) for m in pkgutil.iter_modules(teleprev.kernels.__path__)]
+MODULES = [
+    importlib.import_module("teleprev.kernels." + m.name) for m in pkgutil.iter_modules(teleprev.kernels.__path__)
+]
 
 
 def _expanded(layout: tuple) -> list[str]:

@@ -9,9 +9,9 @@ from pathlib import Path
 
 import numpy as np
 
+from teleprev.assembly import build_pipeline
 from teleprev.live.replay.player import Playback, smooth
 from teleprev.rig import load_rig
-from teleprev.assembly import build_pipeline
 from teleprev.session.reader import SessionReader
 from tests.helpers.cli import teleprev
 
@@ -20,15 +20,20 @@ SIM_RIG = Path(__file__).parents[2] / "rigs" / "sim.toml"
 
 def dataset_actions(root: Path, episode: int, monkeypatch, cache: Path) -> tuple[np.ndarray, np.ndarray, list[str]]:
     """(timestamps s, actions, names) of one episode, as lerobot loads them (offline, its table cache in `cache`)."""
-    import datasets
     from lerobot.datasets.lerobot_dataset import LeRobotDataset
+
+    import datasets
 
     monkeypatch.setenv("HF_HUB_OFFLINE", "1")
     monkeypatch.setattr(datasets.config, "HF_DATASETS_CACHE", cache)
 
     ds = LeRobotDataset("lab/sim", root=root, video_backend="pyav", episodes=[episode])
     table = ds.hf_dataset.with_format("numpy")
-    return np.asarray(table["timestamp"]), np.asarray(table["action"], dtype=float), list(ds.features["action"]["names"])
+    return (
+        np.asarray(table["timestamp"]),
+        np.asarray(table["action"], dtype=float),
+        list(ds.features["action"]["names"]),
+    )
 
 
 def played(session: Path, topic: str) -> tuple[np.ndarray, np.ndarray, tuple[str, ...]]:
@@ -40,7 +45,9 @@ def played(session: Path, topic: str) -> tuple[np.ndarray, np.ndarray, tuple[str
     return (t - t[0]) / 1e9, np.array([m.positions for m in msgs]), msgs[0].names
 
 
-def test_a_dataset_episode_replays_to_sim_recorded_as_a_session_that_passes_the_audit(sim_dataset, tmp_path, monkeypatch):
+def test_a_dataset_episode_replays_to_sim_recorded_as_a_session_that_passes_the_audit(
+    sim_dataset, tmp_path, monkeypatch
+):
     out = tmp_path / "replay.mcap"
     ran = teleprev("replay", sim_dataset, "--episode", "0", "--to", "sim", "--config", SIM_RIG, "--smooth",
                    "--engage-after", "0", "--no-preview", "--out", out)
@@ -72,10 +79,16 @@ def _over_the_upper_limit(pipeline, seed: int = 1, streams: int = 12) -> list[fl
     for _ in range(streams):
         t = np.arange(0, 40) * 33_333_333
         q = np.zeros((len(t), n))
-        swing = arm.upper[0] - rng.uniform(0, 0.3) + rng.uniform(0.2, 1.0) * np.sin(np.arange(len(t)) * rng.uniform(0.2, 1.0))
+        swing = (
+            arm.upper[0]
+            - rng.uniform(0, 0.3)
+            + rng.uniform(0.2, 1.0) * np.sin(np.arange(len(t)) * rng.uniform(0.2, 1.0))
+        )
         q[:, 0] = np.minimum(swing, arm.upper[0])
         hand = np.tile(np.clip(np.zeros(len(guard.lower)), guard.lower, guard.upper), (len(t), 1))
-        p = Playback(t, q, hand, tuple(f"joint{i + 1}" for i in range(n)), tuple(f"h{i}" for i in range(hand.shape[1])), "test")
+        p = Playback(
+            t, q, hand, tuple(f"joint{i + 1}" for i in range(n)), tuple(f"h{i}" for i in range(hand.shape[1])), "test"
+        )
         over.append(float((smooth(p, pipeline.motion, guard).arm[:, 0] - arm.upper[0]).max()))
     return over
 
@@ -86,7 +99,9 @@ def test_smoothing_brakes_for_a_joint_limit_instead_of_passing_it(monkeypatch):
     pipeline = build_pipeline(load_rig(SIM_RIG))
     assert max(_over_the_upper_limit(pipeline)) <= 0.0
     # tracking without the live planner's braking test passes the limit on one of these (by ~2e-9 rad)
-    monkeypatch.setattr(ArmGenerator, "track_inside", lambda self, s, target, v, dt, frac=1.0: self.track(s, target, v, dt, frac)[0])
+    monkeypatch.setattr(
+        ArmGenerator, "track_inside", lambda self, s, target, v, dt, frac=1.0: self.track(s, target, v, dt, frac)[0]
+    )
     assert max(_over_the_upper_limit(pipeline)) > 0.0
 
 

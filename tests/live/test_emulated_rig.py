@@ -49,7 +49,9 @@ def test_an_emulated_rig_records_exports_replays_to_the_arm_and_audits(tmp_path)
             wait_until(lambda: len(box.commands) > 150, 60, what="150 arm commands", poll_s=0.05)
         except WaitTimeout:
             record.kill()
-            raise AssertionError(f"the arm was commanded {len(box.commands)} times: {record.communicate()[0]}") from None
+            raise AssertionError(
+                f"the arm was commanded {len(box.commands)} times: {record.communicate()[0]}"
+            ) from None
         assert bus.goal_writes > 50
         box.inject("collision")  # mid-episode, in execute
         commanded = len(box.commands)

@@ -34,8 +34,8 @@ def test_an_engage_while_engaged_changes_nothing(tmp_path):
 
     from teleprev import topics
     from teleprev.assembly import motion_limits
-    from teleprev.pipeline.derivatives import stream_peaks
     from teleprev.evaluation.audit import audit_session
+    from teleprev.pipeline.derivatives import stream_peaks
     from teleprev.session.reader import SessionReader
 
     path = tmp_path / "s.mcap"

@@ -31,7 +31,9 @@ def record_mode_updates(rec: LiveSession) -> list[ModeUpdate]:
 
 
 def _faulting_rig(tmp_path, after_s: float):
-    text = default_rig_path().read_text().replace('plugin = "sim.arm"', f'plugin = "sim.arm"\nfault_after_s = {after_s}')
+    text = (
+        default_rig_path().read_text().replace('plugin = "sim.arm"', f'plugin = "sim.arm"\nfault_after_s = {after_s}')
+    )
     rig = tmp_path / "rig.toml"
     rig.write_text(text)
     return rig

@@ -36,7 +36,10 @@ def test_every_topic_it_shows_is_recorded_with_the_schema_its_panel_reads(sim_se
     with SessionReader(sim_session) as reader:
         schemas = reader.schemas
     assert panels["ThreeDee"] == {"/robot_description"} and schemas["/robot_description"] == "std_msgs/msg/String"
-    assert panels["Image"] == {"/camera/cam_front/image"} and schemas["/camera/cam_front/image"] == "foxglove.CompressedImage"
+    assert (
+        panels["Image"] == {"/camera/cam_front/image"}
+        and schemas["/camera/cam_front/image"] == "foxglove.CompressedImage"
+    )
     assert panels["Plot"] == {"/arm/arm/state", "/command/arm", "/pipeline/corrected", "/pipeline/retargeted"}
     assert all(schemas[t] == "foxglove.JointStates" for t in panels["Plot"])
     assert panels["RawMessages"] == {"/events/mode", "/events/episode"} <= set(schemas)

@@ -16,8 +16,8 @@ import pytest
 
 from teleprev.cli.app import foxglove_port_default
 from teleprev.errors import ConfigError
-from teleprev.live.view.foxglove_view import FoxgloveView
 from teleprev.live.record.session import LiveSession, RecordOptions
+from teleprev.live.view.foxglove_view import FoxgloveView
 from teleprev.rig import default_rig_path
 from teleprev.robot.model import load_robot
 from teleprev.session.codec import decoder_for
@@ -55,7 +55,7 @@ async def _watch(port: int, seconds: float, connect_within: float = 20.0,
         while time.monotonic() < end:
             try:
                 frame = await asyncio.wait_for(ws.recv(), max(0.01, end - time.monotonic()))
-            except asyncio.TimeoutError:
+            except TimeoutError:
                 break
             except Exception:  # the server went away (the replay ended)
                 break
@@ -98,7 +98,11 @@ def live(tmp_path_factory):
     result = {}
     rec.start()
     try:
-        watcher = threading.Thread(target=lambda: result.update(zip(("channels", "got"), asyncio.run(_watch(rec.view.port, 20.0, enough=_enough)))))
+        watcher = threading.Thread(
+            target=lambda: result.update(
+                zip(("channels", "got"), asyncio.run(_watch(rec.view.port, 20.0, enough=_enough)))
+            )
+        )
         watcher.start()
         rec.loop.start_episode("pick_place")
         time.sleep(0.5)
@@ -151,8 +155,17 @@ def test_replay_plays_the_session_to_foxglove(live):
 
 
 def test_the_port_is_optional_and_a_busy_port_is_refused_clearly():
-    assert foxglove_port_default(["record", "--foxglove", "--no-preview"]) == ["record", "--foxglove=8765", "--no-preview"]
-    assert foxglove_port_default(["replay", "s.mcap", "--foxglove", "9000"]) == ["replay", "s.mcap", "--foxglove", "9000"]
+    assert foxglove_port_default(["record", "--foxglove", "--no-preview"]) == [
+        "record",
+        "--foxglove=8765",
+        "--no-preview",
+    ]
+    assert foxglove_port_default(["replay", "s.mcap", "--foxglove", "9000"]) == [
+        "replay",
+        "s.mcap",
+        "--foxglove",
+        "9000",
+    ]
     assert foxglove_port_default(["record", "--foxglove"]) == ["record", "--foxglove=8765"]
     first = FoxgloveView(0)
     try:
@@ -178,5 +191,7 @@ def test_a_late_joiner_gets_the_robot_and_the_mode_once_each(protocol):
         channels, got = asyncio.run(_watch(view.port, 1.5, protocol=protocol))
     finally:
         view.close()
-    assert [_decode(channels[topics.ROBOT_DESCRIPTION], d).urdf for _, d in got[topics.ROBOT_DESCRIPTION]] == ["<robot name='r'/>"]
+    assert [_decode(channels[topics.ROBOT_DESCRIPTION], d).urdf for _, d in got[topics.ROBOT_DESCRIPTION]] == [
+        "<robot name='r'/>"
+    ]
     assert [_decode(channels[topics.MODE], d).data["mode"] for _, d in got[topics.MODE]] == ["execute"]

@@ -85,4 +85,6 @@ def test_frames_tables_are_checked():
     with pytest.raises(ConfigError, match=r"\[frames.cam_side\]: names no camera of this rig"):
         load_rig_text(base + '\n[frames.cam_side]\nxyz = [0.0, 0.0, 1.0]\n', "r.toml")
     with pytest.raises(ConfigError, match="give rpy or look_at, not both"):
-        load_rig_text(base.replace("look_at = [0.30, 0.0, 0.20]", "look_at = [0.3, 0.0, 0.2]\nrpy = [0.0, 0.0, 0.0]"), "r.toml")
+        load_rig_text(
+            base.replace("look_at = [0.30, 0.0, 0.20]", "look_at = [0.3, 0.0, 0.2]\nrpy = [0.0, 0.0, 0.0]"), "r.toml"
+        )

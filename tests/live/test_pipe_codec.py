@@ -6,11 +6,11 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from teleprev.live.core.pipe_codec import frame, types_by_name, unframe
-from teleprev.live.core.paced import PacedStatus
-from teleprev.live.core.sender import SentTick
 from teleprev.devices.runner import RunnerStats
 from teleprev.live.core.actuator_host import Forwarded
+from teleprev.live.core.paced import PacedStatus
+from teleprev.live.core.pipe_codec import frame, types_by_name, unframe
+from teleprev.live.core.sender import SentTick
 from teleprev.messages import Event, JointSample, Sample
 from teleprev.pipeline.planner import ModeUpdate, TargetUpdate, Tick
 
@@ -50,7 +50,9 @@ def test_a_message_of_an_unknown_type_is_refused():
 def test_an_actuator_process_reports_come_back_whole():
     """Samples and device events (dicts) and the runner's stats, as an actuator's own process sends them."""
     state = Sample("/arm/arm/state", JointSample(17, ("joint1", "joint2"), np.array([0.1, -0.0])))
-    event = Sample("/events/device", Event(18, "teleprev.DeviceEvent", {"device": "arm", "event": "gap", "since_ns": 3}))
+    event = Sample(
+        "/events/device", Event(18, "teleprev.DeviceEvent", {"device": "arm", "event": "gap", "since_ns": 3})
+    )
     stats = RunnerStats(name="arm", kind="arm", state="ok", received=4, errors=0, rate_hz=99.5, nominal_hz=100.0,
                         latency_ms=0.2, latency_max_ms=1.5, last_receive_ns=19, last_error="", connects=1, gaps=0,
                         sink_errors=0, skipped={"refused_commands": 2}, topics={"/arm/arm/state": 4})

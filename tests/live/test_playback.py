@@ -6,9 +6,9 @@ import time
 import numpy as np
 import pytest
 
-from tests.helpers.sessions import record_sim
 from teleprev.live.replay.playback import build_player
 from teleprev.live.replay.player import load_playback, safe_speed
+from tests.helpers.sessions import record_sim
 
 
 @pytest.fixture(scope="module")

@@ -6,18 +6,19 @@ import numpy as np
 import pytest
 from rich.console import Console
 
+from teleprev import topics
+from teleprev.robot.collision import SelfCollisionChecker
+from teleprev.robot.model import load_robot
+from teleprev.session.reader import SessionReader
 from tests.helpers.cli import teleprev
 from tests.helpers.sessions import engage_until_accepted, record_sim, record_what_is_sent
 from tests.helpers.wait import wait_until
-from teleprev.robot.collision import SelfCollisionChecker
-from teleprev.robot.model import load_robot
-from teleprev import topics
-from teleprev.session.reader import SessionReader
 
 
 def test_a_whole_session_in_preview_sends_no_motion_command(tmp_path):
-    from teleprev.live.record.session import RecordOptions, LiveSession
     import time
+
+    from teleprev.live.record.session import LiveSession, RecordOptions
 
     rec = LiveSession(RecordOptions(out=tmp_path / "p.mcap"))
     doubles = record_what_is_sent(rec)
@@ -75,13 +76,28 @@ def test_executed_commands_keep_to_the_acceleration_and_jerk_limits_and_the_arm_
 
 def test_unattended_record_cli_writes_every_stream(tmp_path):
     out = tmp_path / "cli.mcap"
-    run = teleprev("record", "--out", out, "--duration", "4", "--episodes", "2", "--engage-after", "1", "--task", "pour")
+    run = teleprev(
+        "record", "--out", out, "--duration", "4", "--episodes", "2", "--engage-after", "1", "--task", "pour"
+    )
     assert run.returncode == 0, run.stderr
     reader = SessionReader(out)
     have = set(reader.topics)
-    for needed in ("/glove/glove/hand", "/suit/suit/wrist", "/camera/cam_front/image", "/arm/arm/state", "/hand/hand/state",
-                   topics.RETARGETED, topics.CORRECTED, topics.ARM_TARGET, topics.COMMAND_ARM, topics.COMMAND_HAND,
-                   topics.MODE, topics.EPISODE, topics.TF, topics.STEP_REPORT):
+    for needed in (
+        "/glove/glove/hand",
+        "/suit/suit/wrist",
+        "/camera/cam_front/image",
+        "/arm/arm/state",
+        "/hand/hand/state",
+        topics.RETARGETED,
+        topics.CORRECTED,
+        topics.ARM_TARGET,
+        topics.COMMAND_ARM,
+        topics.COMMAND_HAND,
+        topics.MODE,
+        topics.EPISODE,
+        topics.TF,
+        topics.STEP_REPORT,
+    ):
         assert needed in have, needed
     episodes = reader.episodes()
     assert [e.task for e in episodes] == ["pour", "pour"]
@@ -90,9 +106,10 @@ def test_unattended_record_cli_writes_every_stream(tmp_path):
 
 
 def test_the_terminal_preview_shows_the_mode_and_the_robot(executed):
-    from teleprev.live.record.session import RecordOptions, LiveSession
-    from teleprev.live.record.run import make_dashboard
     import time
+
+    from teleprev.live.record.run import make_dashboard
+    from teleprev.live.record.session import LiveSession, RecordOptions
 
     rec = LiveSession(RecordOptions(out=executed.parent / "screen.mcap"))
     rec.start()

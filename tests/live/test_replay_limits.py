@@ -9,10 +9,10 @@ import numpy as np
 import pytest
 
 from teleprev.errors import ConfigError
-from tests.helpers.cli import teleprev
 from teleprev.live.replay import playback
 from teleprev.live.replay.playback import build_player
 from teleprev.pipeline.derivatives import divided_differences
+from tests.helpers.cli import teleprev
 
 FIXTURE = Path(__file__).parents[1] / "fixtures" / "sim_v1.mcap"  # format 1: speed caps only, fails the audit
 SIM_RIG = Path(__file__).parents[2] / "rigs" / "sim.toml"  # its robot is the sim arm and hand
@@ -41,7 +41,9 @@ def _play_to_sim_arm(smoothed: bool):
 
 
 def test_the_cli_refuses_to_send_a_session_that_fails_the_audit_to_the_robot():
-    run = teleprev("replay", FIXTURE, "--episode", "0", "--to", "arm", "--rig", SIM_RIG, "--no-preview", "--engage-after", "0.1")
+    run = teleprev(
+        "replay", FIXTURE, "--episode", "0", "--to", "arm", "--rig", SIM_RIG, "--no-preview", "--engage-after", "0.1"
+    )
     assert run.returncode == 1, run.stdout + run.stderr
     said = " ".join(run.stdout.split())  # rich wraps lines
     assert "fails the audit" in said and "--smooth" in said and "accel" in said

@@ -49,7 +49,9 @@ def test_record_export_train_rollout_audit_eval_export(tmp_path, sim_session, mo
     # whatever the policy's rate (291 and 415 in two runs on a busy 2-core machine)
     assert len(episodes) == EPISODES and len(actions) > 30 and len(commands) > 150
     names = actions[0][1].names
-    assert names[:6] == tuple(f"arm.joint{k}" for k in range(1, 7)) and names[6:] == tuple(f"hand.{k}" for k in range(16))
+    assert names[:6] == tuple(f"arm.joint{k}" for k in range(1, 7)) and names[6:] == tuple(
+        f"hand.{k}" for k in range(16)
+    )
     engages = [t for t, d in modes if d["mode"] == "execute"]
     assert len(engages) == EPISODES
     for ep, engaged in zip(episodes, engages):

@@ -42,4 +42,6 @@ def test_a_signal_finalizes_the_session(tmp_path, signals, gap_s):
     with SessionReader(out, verify_crc=True) as reader:  # a complete file: footer, summary, counters
         assert RECORDER_RECORD in reader.metadata
         assert reader.topics["/glove/glove/hand"].message_count > 10
-        assert sum(1 for _ in reader.messages(["/glove/glove/hand"])) == reader.topics["/glove/glove/hand"].message_count
+        assert (
+            sum(1 for _ in reader.messages(["/glove/glove/hand"])) == reader.topics["/glove/glove/hand"].message_count
+        )

@@ -121,7 +121,9 @@ def test_keys_during_timed_episodes(tmp_path):
     assert refusal == [f"cannot switch to execute: {RESTING}"]
     with SessionReader(path) as reader:
         ep = reader.episodes()
-        switches = [m.payload.data["mode"] for m in reader.messages([topics.MODE])] if topics.MODE in reader.topics else []
+        switches = (
+            [m.payload.data["mode"] for m in reader.messages([topics.MODE])] if topics.MODE in reader.topics else []
+        )
     assert "execute" not in switches  # the refused space engaged nothing
     assert [e.discarded for e in ep] == [False, True, True, False]
     assert ep[0].stop_ns == pressed["n1"]

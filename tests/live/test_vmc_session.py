@@ -13,8 +13,8 @@ from teleprev.live.record.session import LiveSession, RecordOptions
 from teleprev.session.reader import SessionReader
 from teleprev.session.summary import device_lost, summarize
 from tests.helpers.cli import teleprev
-from tests.helpers.sessions import engage_until_accepted, wait_opened
 from tests.helpers.ports import free_port
+from tests.helpers.sessions import engage_until_accepted, wait_opened
 from tests.helpers.vmc import VmcSender, bone, bundle, finger_messages, msg, rig_text
 from tests.helpers.wait import wait_until
 
@@ -126,7 +126,9 @@ def test_headless_record_whose_devices_never_connect_fails_within_the_connect_ti
     rig.write_text(rig_text(port).replace('plugin = "sim.hand"', 'plugin = "leap.hand"\nport = "/dev/no-such-u2d2"'))
     out = tmp_path / "s.mcap"
     t0 = time.monotonic()
-    proc = teleprev("record", rig, "--out", out, "--duration", "60", "--connect-timeout", "1", "--no-preview", columns=80)
+    proc = teleprev(
+        "record", rig, "--out", out, "--duration", "60", "--connect-timeout", "1", "--no-preview", columns=80
+    )
     took = time.monotonic() - t0
     assert proc.returncode == 1, proc.stdout + proc.stderr
     err = " ".join(proc.stderr.split())

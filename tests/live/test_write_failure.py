@@ -50,7 +50,9 @@ def test_a_full_disk_stops_the_robot_and_the_preview_says_why(tmp_path):
         # EINVAL (a character device cannot sync), which no full disk gives.
         fill_after_flush(rec.recorder._writer)
         failed_at = time.monotonic()
-        wait_until(lambda: rec.loop.snapshot.mode == "preview", 10, what="preview (the write failure reaching the loop)")
+        wait_until(
+            lambda: rec.loop.snapshot.mode == "preview", 10, what="preview (the write failure reaching the loop)"
+        )
         reached_s = time.monotonic() - failed_at
         snap = rec.loop.snapshot
         assert reached_s < 3 * rec.recorder.flush_interval_s + 1.0  # the next flush fails, the loop hears at once

@@ -1,6 +1,7 @@
 """Compiled CPN / CCN inference (teleprev/kernels/mlp.py): agrees with the numpy networks to float32
 rounding, answers a row the same bits whatever batch it is in, and the Corrector on them keeps every
-guarantee of the numpy one (NumpyCorrector, formats 1 and 2) (every answer passes the exact checker; prepare-then-correct == correct)."""
+guarantee of the numpy one (NumpyCorrector, formats 1 and 2) (every answer passes the exact checker;
+prepare-then-correct == correct)."""
 
 import numpy as np
 import pytest
@@ -9,7 +10,6 @@ from teleprev.noncollision.compiled import CompiledCCN, CompiledCPN, CompiledMLP
 from teleprev.noncollision.corrector import Corrector
 from teleprev.noncollision.mlp import CCN, CPN
 from teleprev.pipeline.older_formats import NumpyCorrector
-
 from tests.noncollision.test_mlp import _random_net
 
 
@@ -95,7 +95,12 @@ def test_every_batch_width_answers_as_a_single_row(hand, hand_checker, activatio
              for x in q]
     for size in range(2, 18):
         x = q[:size]
-        slots, free, proposals, batch = nets.cpn.mlp.slots(x), nets.cpn.predicts_free(x), nets.ccn(x), nets.propose_shorten(x)
+        slots, free, proposals, batch = (
+            nets.cpn.mlp.slots(x),
+            nets.cpn.predicts_free(x),
+            nets.ccn(x),
+            nets.propose_shorten(x),
+        )
         for k in range(size):
             assert np.array_equal(slots[k], alone[k][0]) and free[k] == alone[k][1]
             assert proposals[k].tobytes() == alone[k][2].tobytes()
@@ -132,8 +137,8 @@ def test_compiled_corrector_answers_pass_the_exact_checker(compiled_corrector, h
 
 
 def test_compiled_fallback_never_collides(hand, hand_checker, shipped, colliding):
-    from tests.noncollision.test_corrector import _assert_valid
     from teleprev.noncollision.mlp import MLP
+    from tests.noncollision.test_corrector import _assert_valid
 
     net = shipped.ccn.net
     zero = MLP(net.info, net.w[:-1] + [np.zeros_like(net.w[-1])],

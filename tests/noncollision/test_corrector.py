@@ -64,7 +64,11 @@ def test_out_of_limits_input_clamped(corrector, hand, hand_checker):
 def forced_fallback(hand, hand_checker, corrector):
     """The shipped CPN with a CCN that proposes its input unchanged: every invalid input falls back."""
     net = corrector.ccn.net
-    zero = MLP(net.info, net.w[:-1] + [np.zeros_like(net.w[-1])], [b[:, 0, :] for b in net.b[:-1]] + [np.zeros_like(net.b[-1][:, 0, :])])
+    zero = MLP(
+        net.info,
+        net.w[:-1] + [np.zeros_like(net.w[-1])],
+        [b[:, 0, :] for b in net.b[:-1]] + [np.zeros_like(net.b[-1][:, 0, :])],
+    )
     return Corrector(hand, hand_checker, corrector.cpn, CCN(zero, hand.lower, hand.upper))
 
 
@@ -74,7 +78,9 @@ def test_fallback_alone_never_collides(forced_fallback, hand, hand_checker, inva
     free_pool = hand.sample_uniform(3000, rng)
     free_pool = free_pool[~hand_checker.pair_matrix(free_pool).any(axis=1)]
     for k, q in enumerate(invalid[:300]):
-        previous = free_pool[k] if k % 3 == 1 else (q if k % 3 == 2 else None)  # free, colliding (must be ignored), none
+        previous = (
+            free_pool[k] if k % 3 == 1 else (q if k % 3 == 2 else None)
+        )  # free, colliding (must be ignored), none
         r = forced_fallback.correct(q, previous)
         assert r.action == "fallback"
         outs.append(r.q)

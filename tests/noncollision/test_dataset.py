@@ -8,7 +8,11 @@ import pytest
 
 from teleprev.errors import ModelError
 from teleprev.noncollision.dataset import (
-    DatasetSettings, generate, load_dataset, pending_shards, shard_path,
+    DatasetSettings,
+    generate,
+    load_dataset,
+    pending_shards,
+    shard_path,
 )
 
 

@@ -19,9 +19,25 @@ def _run(*args):
 def test_tiny_end_to_end(tmp_path, hand, hand_checker):
     data, models = tmp_path / "data", tmp_path / "models"
     cpn, ccn = models / "cpn_leap_hand.safetensors", models / "ccn_leap_hand.safetensors"
-    out = _run("collision", "dataset", data, "--uniform", 4000, "--boundary", 4000, "--shard-size", 2000, "--workers", 2, "--seed", 1)
+    out = _run(
+        "collision",
+        "dataset",
+        data,
+        "--uniform",
+        4000,
+        "--boundary",
+        4000,
+        "--shard-size",
+        2000,
+        "--workers",
+        2,
+        "--seed",
+        1,
+    )
     assert "wrote 8,000 configurations" in out
-    assert "resumed" in _run("collision", "dataset", data, "--uniform", 4000, "--boundary", 4000, "--shard-size", 2000, "--seed", 1)
+    assert "resumed" in _run(
+        "collision", "dataset", data, "--uniform", 4000, "--boundary", 4000, "--shard-size", 2000, "--seed", 1
+    )
 
     out = _run("collision", "train-cpn", data, "--out", cpn, "--epochs", 6, "--hidden", "64,64", "--batch-size", 256,
                "--heldout-uniform", 2000, "--heldout-boundary", 1000)
@@ -36,12 +52,33 @@ def test_tiny_end_to_end(tmp_path, hand, hand_checker):
     assert len(json.loads(grid.with_suffix(".json").read_text())["points"]) == 2 and chosen["beta"] in (0.3, 3.0)
     assert "**chosen**" in grid.with_suffix(".md").read_text()
 
-    out = _run("collision", "train-ccn", data, "--cpn", cpn, "--out", ccn, "--grid", grid.with_suffix(".json"),
-               "--epochs", 3, "--hidden", "64,64", "--val-exact", 200, "--heldout-uniform", 500, "--heldout-trajectory", 200)
+    out = _run(
+        "collision",
+        "train-ccn",
+        data,
+        "--cpn",
+        cpn,
+        "--out",
+        ccn,
+        "--grid",
+        grid.with_suffix(".json"),
+        "--epochs",
+        3,
+        "--hidden",
+        "64,64",
+        "--val-exact",
+        200,
+        "--heldout-uniform",
+        500,
+        "--heldout-trajectory",
+        200,
+    )
     assert f"beta = {chosen['beta']:g}" in out and "held-out: ccn_valid_frac" in out
     with safe_open(str(ccn), framework="numpy") as f:
         meta = f.metadata()
-    assert meta["urdf_sha256"] == hand.urdf_sha256 and json.loads(meta["training"])["settings"]["beta"] == chosen["beta"]
+    assert (
+        meta["urdf_sha256"] == hand.urdf_sha256 and json.loads(meta["training"])["settings"]["beta"] == chosen["beta"]
+    )
     assert "ccn_valid_frac" in (models / "ccn_leap_hand.md").read_text()
 
     corrector = Corrector.load(models, hand, hand_checker)

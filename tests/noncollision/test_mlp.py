@@ -13,9 +13,19 @@ def _random_net(hand, checker, kind, activation, rng):
     else:
         groups, combine = single_group(hand.joint_names, hand.joint_names), "identity"
     info = ModelInfo(
-        kind, hand.name, hand.urdf_sha256, hand.joint_names, checker.link_names, groups, combine, (32, 24), activation,
-        0.5 * (hand.lower + hand.upper), 0.5 * (hand.upper - hand.lower),
-        threshold=0.3 if kind == "cpn" else None, output_scale=0.5 * (hand.upper - hand.lower) if kind == "ccn" else None,
+        kind,
+        hand.name,
+        hand.urdf_sha256,
+        hand.joint_names,
+        checker.link_names,
+        groups,
+        combine,
+        (32, 24),
+        activation,
+        0.5 * (hand.lower + hand.upper),
+        0.5 * (hand.upper - hand.lower),
+        threshold=0.3 if kind == "cpn" else None,
+        output_scale=0.5 * (hand.upper - hand.lower) if kind == "ccn" else None,
     )
     shapes = info.layer_shapes()
     return MLP(info, [rng.standard_normal(s).astype(np.float32) * 0.5 for s in shapes],
@@ -62,7 +72,9 @@ def test_mean_probability_gradient(hand, hand_checker, activation):
     q = hand.sample_uniform(4, rng)
     _, grad = cpn.mean_prob_grad(q)
     eps = 1e-3
-    numeric = np.stack([(cpn.prob(q + eps * e).mean(1) - cpn.prob(q - eps * e).mean(1)) / (2 * eps) for e in np.eye(16)], axis=1)
+    numeric = np.stack(
+        [(cpn.prob(q + eps * e).mean(1) - cpn.prob(q - eps * e).mean(1)) / (2 * eps) for e in np.eye(16)], axis=1
+    )
     assert np.allclose(grad, numeric, atol=2e-3 * np.abs(numeric).max())
 
 

@@ -5,8 +5,8 @@ import pytest
 
 from teleprev.errors import ConfigError
 from teleprev.human.smplx import JOINT_INDEX, hand_pose_from_angles
-from teleprev.retarget.calibration_fit import FIST_TARGET, calibrate
 from teleprev.retarget.calibration import load_calibration, write_calibration
+from teleprev.retarget.calibration_fit import FIST_TARGET, calibrate
 from teleprev.retarget.hand import LeapRetargeter
 from teleprev.transforms import axis_angle_to_matrix
 

@@ -6,15 +6,15 @@ from pathlib import Path
 
 import pytest
 
-from tests.helpers.sessions import RIGS, record_sim
+from teleprev.assembly import build_pipeline
 from teleprev.errors import UrdfError
 from teleprev.evaluation.reproduce import rerun_session
-from teleprev.assembly import build_pipeline
 from teleprev.paths import data_dir
 from teleprev.pipeline.effectors import Effector, LeapEffector
 from teleprev.rig import load_rig
 from teleprev.robot.effectors import EFFECTORS
 from teleprev.session.reader import SessionReader
+from tests.helpers.sessions import RIGS, record_sim
 
 SIM_RIGS = {"leap_hand": "sim.toml", "parallel_gripper": "sim_gripper.toml", "vacuum": "sim_vacuum.toml"}
 

@@ -7,11 +7,17 @@ live step) has the same bits as in a batch (eval)."""
 import numpy as np
 import pytest
 
-from teleprev.human.smplx import (HAND_POSE_NAMES, TWIST_NOISE, angles_from_hand_pose, hand_pose_from_angles,
-                                  hand_pose_from_values, hand_values)
 from teleprev.assembly import build_pipeline
-from teleprev.messages import JointSample
+from teleprev.human.smplx import (
+    HAND_POSE_NAMES,
+    TWIST_NOISE,
+    angles_from_hand_pose,
+    hand_pose_from_angles,
+    hand_pose_from_values,
+    hand_values,
+)
 from teleprev.kernels import glove as hand_kernels
+from teleprev.messages import JointSample
 from teleprev.pipeline.step import MAX_ABDUCTION, MAX_FLEXION, MAX_JOINT_ROTATION, MIN_FLEXION, HandInput
 from teleprev.rig import load_rig
 from tests.helpers.pipeline_inputs import twisted
@@ -24,8 +30,13 @@ SIM_RIGS = {"leap_hand": "sim.toml", "parallel_gripper": "sim_gripper.toml", "va
 def pipelines():
     """{effector: (numpy pipeline, compiled pipeline)} for each end effector's sim rig: the numpy one of
     formats 1 and 2 and the compiled one of format 4, both reading abduction first."""
-    return {name: (build_pipeline(load_rig(RIGS / rig), session_format=2), build_pipeline(load_rig(RIGS / rig), session_format=4))
-            for name, rig in SIM_RIGS.items()}
+    return {
+        name: (
+            build_pipeline(load_rig(RIGS / rig), session_format=2),
+            build_pipeline(load_rig(RIGS / rig), session_format=4),
+        )
+        for name, rig in SIM_RIGS.items()
+    }
 
 
 @pytest.fixture(scope="module")

@@ -4,13 +4,12 @@ joint limits, the hand through the Corrector (never in self-collision), unusable
 import numpy as np
 import pytest
 
+from teleprev import topics
 from teleprev.assembly import build_pipeline
-from teleprev.messages import JointSample
+from teleprev.messages import JointSample, Logged
 from teleprev.pipeline.driver import InputTopics, PipelineDriver
 from teleprev.pipeline.step import PipelineState, StepInputs
 from teleprev.rig import load_rig
-from teleprev.messages import Logged
-from teleprev import topics
 from tests.helpers.sessions import RIGS
 
 T0 = 10**12
@@ -92,5 +91,9 @@ def test_with_an_action_topic_the_driver_steps_on_actions_only(pipelines):
     assert driver.feed(Logged(inputs.hand, T0, glove)).result is None  # the glove steps nothing
     q = np.zeros(len(p.action_names))
     out = driver.feed(Logged(topics.POLICY_ACTION, T0 + 1, JointSample(T0, p.action_names, q)))
-    assert out.result is not None and [t for t, _ in out.logged][:3] == [topics.RETARGETED, topics.CORRECTED, topics.ARM_TARGET]
+    assert out.result is not None and [t for t, _ in out.logged][:3] == [
+        topics.RETARGETED,
+        topics.CORRECTED,
+        topics.ARM_TARGET,
+    ]
     assert len(driver.take_updates()) == 1

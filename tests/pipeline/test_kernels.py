@@ -131,7 +131,12 @@ class ReferenceArmGenerator:
                 base.append(q + w * dt)
             else:
                 cp.append(q - (t - w * dt))
-        inp.current_velocity, inp.current_acceleration, inp.max_velocity, inp.min_velocity = cv, s.a.tolist(), vmax, vmin
+        inp.current_velocity, inp.current_acceleration, inp.max_velocity, inp.min_velocity = (
+            cv,
+            s.a.tolist(),
+            vmax,
+            vmin,
+        )
         if target is None:
             inp.control_interface, inp.current_position = g._velocity_interface, g._zero
         else:
@@ -224,7 +229,9 @@ def test_the_arm_plan_with_motions_estimate_equals_feedforward_then_track(genera
         elif estimate == ESTIMATE_ZERO:
             want_v = np.zeros_like(target)
         else:
-            want_v = numpy_estimate(target, before, before_v if estimate == ESTIMATE_BLEND else None, gap_ns / 1e9, keep)
+            want_v = numpy_estimate(
+                target, before, before_v if estimate == ESTIMATE_BLEND else None, gap_ns / 1e9, keep
+            )
         goal = target + want_v * ahead
         plan = generator.plan(s, target, dt, frac, estimate, before, before_v, gap_ns / 1e9, keep, ahead)
         assert _bits_equal(plan[PLAN_ESTIMATE], want_v) and _bits_equal(plan[PLAN_GOAL], goal)
@@ -287,7 +294,10 @@ def test_the_targets_velocity_estimate_is_numpys_bits(rng):
         elif est.hand_v is None:
             want, kind = (target - before) / (gap / 1e9), "raw"
         else:
-            want, kind = numpy_estimate(target, before, before_v, gap / 1e9, math.exp(-gap / FEEDFORWARD_TAU_NS)), "blend"
+            want, kind = (
+                numpy_estimate(target, before, before_v, gap / 1e9, math.exp(-gap / FEEDFORWARD_TAU_NS)),
+                "blend",
+            )
         assert _bits_equal(got, want), kind
         kinds.add(kind)
     assert kinds == {"zero", "raw", "blend"}

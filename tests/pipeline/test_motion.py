@@ -8,13 +8,13 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from tests.helpers.pipeline_inputs import inputs
-from teleprev.errors import ConfigError
 from teleprev.assembly import build_pipeline
+from teleprev.errors import ConfigError
 from teleprev.pipeline.config import PipelineConfig
 from teleprev.pipeline.older_formats import StepCommandsState
 from teleprev.rig import Rig, RigSection, load_rig_text
 from teleprev.robot.limits import arm_limits, effector_limits
+from tests.helpers.pipeline_inputs import inputs
 
 ARM = arm_limits("xarm6")
 GRIPPER = effector_limits("parallel_gripper")
@@ -81,7 +81,9 @@ def test_arm_commands_stay_within_velocity_acceleration_and_jerk_and_track_the_t
     assert_within(t, q, 2.14, ARM.acceleration, ARM.jerk)
     _, hand = commands(results, "effector_command")
     assert_within(t, hand, 0.15, GRIPPER.acceleration)
-    engaged = [k for k, (_, r) in enumerate(results) if r.arm_command is not None and "engaging" not in r.report["flags"]]
+    engaged = [
+        k for k, (_, r) in enumerate(results) if r.arm_command is not None and "engaging" not in r.report["flags"]
+    ]
     assert engaged and engaged[0] < 400, "the engage ramp never finished"
     err = [np.abs(results[k][1].arm_command - results[k][1].arm_target).max() for k in engaged[100:]]
     assert np.median(err) < 0.01  # tracks the moving target closely (velocity feed-forward)
@@ -94,7 +96,9 @@ def test_a_stale_suit_brakes_the_arm_to_rest_within_the_limits_then_holds(pipeli
     def make(k):
         i = inputs(k, p.arm_names, p.effector_names, [0.05])
         if k >= stale_from:
-            i = dataclasses.replace(i, wrist=dataclasses.replace(i.wrist, stamp_ns=inputs(stale_from, (), (), [0.0]).t_ns - 10**9))
+            i = dataclasses.replace(
+                i, wrist=dataclasses.replace(i.wrist, stamp_ns=inputs(stale_from, (), (), [0.0]).t_ns - 10**9)
+            )
         return i
 
     _, results = run(p, 600, engage_at=100, make=make)
@@ -145,7 +149,9 @@ def test_idle_steps_brake_when_no_trigger_sample_comes(pipeline):
     t, q = commands(results)
     ts, qs = list(t), list(q)
     for k in range(1, 100):  # the glove went quiet: arm state samples at 100 Hz keep the clock going
-        i = dataclasses.replace(inputs(300, p.arm_names, p.effector_names, [0.05]), t_ns=last_t + 25_000_000 + k * 10_000_000)
+        i = dataclasses.replace(
+            inputs(300, p.arm_names, p.effector_names, [0.05]), t_ns=last_t + 25_000_000 + k * 10_000_000
+        )
         r = p.idle_step(state, i)
         if r is None:
             break
@@ -194,7 +200,9 @@ plugin = "sim.glove"
 ])
 def test_bad_limits_in_a_rig_name_the_file_and_key(robot, pipeline, match):
     with pytest.raises(ConfigError, match=match) as err:
-        build_pipeline(load_rig_text(RIG.format(robot=robot, pipeline=pipeline), "rigs/bad.toml", Path("rigs/bad.toml")))
+        build_pipeline(
+            load_rig_text(RIG.format(robot=robot, pipeline=pipeline), "rigs/bad.toml", Path("rigs/bad.toml"))
+        )
     assert "rigs/bad.toml" in str(err.value)
     key = pipeline.split(" =")[0]
     assert key in str(err.value)
@@ -220,7 +228,9 @@ def test_after_a_stall_the_commands_start_again_from_rest_at_the_last_one(pipeli
     t, q = commands(more)
     assert np.abs(q[0] - last).max() < 1e-4  # from rest at the last command, not 120 ms further on
     # within the limits from rest: two samples of the arm standing there first
-    assert_within(np.r_[t[0] - 2 * 10**7, t[0] - 10**7, t], np.vstack([last, last, q]), 2.14, ARM.acceleration, ARM.jerk)
+    assert_within(
+        np.r_[t[0] - 2 * 10**7, t[0] - 10**7, t], np.vstack([last, last, q]), 2.14, ARM.acceleration, ARM.jerk
+    )
 
 
 def test_after_a_stall_with_an_idle_step_first_the_next_command_still_starts_from_rest(pipeline):
@@ -230,12 +240,16 @@ def test_after_a_stall_with_an_idle_step_first_the_next_command_still_starts_fro
     p = pipeline
     state, results = run(p, 300, engage_at=100)
     last, last_t = state.arm_cmd.copy(), results[-1][0].t_ns
-    idle = p.idle_step(state, dataclasses.replace(inputs(300, p.arm_names, p.effector_names, [0.05]), t_ns=last_t + 107_000_000))
+    idle = p.idle_step(
+        state, dataclasses.replace(inputs(300, p.arm_names, p.effector_names, [0.05]), t_ns=last_t + 107_000_000)
+    )
     assert idle is not None and "commands_resumed" in idle.report["flags"] and idle.arm_command is None
     _, more = run(p, 100, state=idle.state, make=lambda k: inputs(314 + k, p.arm_names, p.effector_names, [0.05]))
     t, q = commands(more)
     assert np.abs(q[0] - last).max() < 1e-4
-    assert_within(np.r_[t[0] - 2 * 10**7, t[0] - 10**7, t], np.vstack([last, last, q]), 2.14, ARM.acceleration, ARM.jerk)
+    assert_within(
+        np.r_[t[0] - 2 * 10**7, t[0] - 10**7, t], np.vstack([last, last, q]), 2.14, ARM.acceleration, ARM.jerk
+    )
 
 
 def test_a_stop_that_would_pass_a_joint_limit_holds_the_command_at_the_limit(pipeline):
@@ -250,7 +264,9 @@ def test_a_stop_that_would_pass_a_joint_limit_holds_the_command_at_the_limit(pip
     q[0] = upper[0] - 0.05
     v = np.zeros_like(q)
     v[0] = 1.5  # rad/s towards the limit: a jerk-limited stop needs ~0.13 rad
-    fast = dataclasses.replace(state, arm_cmd=q, motion=dataclasses.replace(state.motion, arm=JointMotion(q, v, np.zeros_like(q))))
+    fast = dataclasses.replace(
+        state, arm_cmd=q, motion=dataclasses.replace(state.motion, arm=JointMotion(q, v, np.zeros_like(q)))
+    )
     s = fast.motion.arm
     for _ in range(30):
         s = p.motion.arm.stop(s, 1 / 120)

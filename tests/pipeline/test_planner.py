@@ -33,7 +33,9 @@ class Script:
     def mode(self, mode: str, t: int, arm=None) -> ModeUpdate:
         self.seq += 1
         start = self.arm_start if arm is None else arm
-        return ModeUpdate(self.seq, t, mode, start if mode == "execute" else None, self.hand0 if mode == "execute" else None)
+        return ModeUpdate(
+            self.seq, t, mode, start if mode == "execute" else None, self.hand0 if mode == "execute" else None
+        )
 
     def target(self, t: int, arm, arm_v=None, hand=None, hand_v=None) -> TargetUpdate:
         self.seq += 1

@@ -6,8 +6,8 @@ from dataclasses import replace
 import numpy as np
 import pytest
 
-from teleprev.human.smplx import HAND_POSE_NAMES, JOINT_FRAMES, hand_pose_from_angles
 from teleprev.assembly import build_driver, build_pipeline
+from teleprev.human.smplx import HAND_POSE_NAMES, JOINT_FRAMES, hand_pose_from_angles
 from teleprev.messages import JointSample, Logged
 from teleprev.pipeline.driver import InputTopics
 from teleprev.rig import load_rig

@@ -59,7 +59,9 @@ def test_fist_curls_every_finger_joint(retarget, hand):
 
 
 def test_pinch_moves_only_thumb_and_index(retarget, hand):
-    q = hand.as_dict(retarget(_pose(index1=(0.7, 0.05), index2=(0.9, 0), index3=(0.4, 0), thumb1=(0.5, 0.3), thumb2=(0.6, 0))))
+    q = hand.as_dict(
+        retarget(_pose(index1=(0.7, 0.05), index2=(0.9, 0), index3=(0.4, 0), thumb1=(0.5, 0.3), thumb2=(0.6, 0)))
+    )
     assert (q["0"], q["1"], q["2"], q["3"]) == pytest.approx((-0.05, 0.7, 0.9, 0.4))
     assert all(q[str(j)] == pytest.approx(0.0, abs=1e-12) for j in range(4, 12))
 

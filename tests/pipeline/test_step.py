@@ -8,11 +8,11 @@ import dataclasses
 import numpy as np
 import pytest
 
-from tests.helpers.pipeline_inputs import inputs
 from teleprev.assembly import build_pipeline
 from teleprev.pipeline.config import PipelineConfig
 from teleprev.pipeline.older_formats import StepCommandsState
 from teleprev.rig import Rig, RigSection
+from tests.helpers.pipeline_inputs import inputs
 
 
 def _rig(end_effector: str, robot: str, **pipeline) -> Rig:
@@ -53,7 +53,10 @@ def test_execute_ramps_from_the_measured_pose_then_follows_within_speed_caps(gri
     assert len(commands) == 500
     first_t, first_arm, _ = commands[0]
     # the first command is one capped step away from the measured home pose
-    assert np.max(np.abs(first_arm - results[100][0].arm.positions)) <= p.arm_guard.speed.max() * 0.5 * p.arm_guard.max_dt + 1e-12
+    assert (
+        np.max(np.abs(first_arm - results[100][0].arm.positions))
+        <= p.arm_guard.speed.max() * 0.5 * p.arm_guard.max_dt + 1e-12
+    )
     caps_arm, caps_eff = p.arm_guard.speed, p.effector.guard.speed
     for (t0, a0, e0), (t1, a1, e1) in zip(commands, commands[1:]):
         dt = (t1 - t0) / 1e9
@@ -61,7 +64,9 @@ def test_execute_ramps_from_the_measured_pose_then_follows_within_speed_caps(gri
         assert np.all(np.abs(e1 - e0) <= caps_eff * dt + 1e-12)
         assert np.all(a1 >= p.arm_guard.lower) and np.all(a1 <= p.arm_guard.upper)
     # the ramp ends, after which commands track the targets
-    engaged = [k for k, (_, r) in enumerate(results) if r.arm_command is not None and "engaging" not in r.report["flags"]]
+    engaged = [
+        k for k, (_, r) in enumerate(results) if r.arm_command is not None and "engaging" not in r.report["flags"]
+    ]
     assert engaged, "the engage ramp never finished"
     k = engaged[len(engaged) // 2]
     assert np.allclose(results[k][1].arm_command, results[k][1].arm_target, atol=1e-3)
@@ -85,12 +90,36 @@ def test_switching_back_to_preview_stops_commands_and_reanchors(gripper_pipeline
 @pytest.mark.parametrize(
     "corrupt, flag, holds",
     [
-        (lambda i: dataclasses.replace(i, hand=dataclasses.replace(i.hand, positions=np.full(45, np.nan))), "glove_invalid", "effector"),
-        (lambda i: dataclasses.replace(i, hand=dataclasses.replace(i.hand, stamp_ns=i.t_ns - 10**9)), "glove_stale", "effector"),
-        (lambda i: dataclasses.replace(i, hand=dataclasses.replace(i.hand, positions=i.hand.positions * 20)), "glove_out_of_range", "effector"),
-        (lambda i: dataclasses.replace(i, wrist=dataclasses.replace(i.wrist, position=np.array([np.nan, 0, 1]))), "suit_invalid", "arm"),
-        (lambda i: dataclasses.replace(i, wrist=dataclasses.replace(i.wrist, stamp_ns=i.t_ns - 10**9)), "suit_stale", "arm"),
-        (lambda i: dataclasses.replace(i, wrist=dataclasses.replace(i.wrist, position=np.array([40.0, 0, 1]))), "suit_out_of_range", "arm"),
+        (
+            lambda i: dataclasses.replace(i, hand=dataclasses.replace(i.hand, positions=np.full(45, np.nan))),
+            "glove_invalid",
+            "effector",
+        ),
+        (
+            lambda i: dataclasses.replace(i, hand=dataclasses.replace(i.hand, stamp_ns=i.t_ns - 10**9)),
+            "glove_stale",
+            "effector",
+        ),
+        (
+            lambda i: dataclasses.replace(i, hand=dataclasses.replace(i.hand, positions=i.hand.positions * 20)),
+            "glove_out_of_range",
+            "effector",
+        ),
+        (
+            lambda i: dataclasses.replace(i, wrist=dataclasses.replace(i.wrist, position=np.array([np.nan, 0, 1]))),
+            "suit_invalid",
+            "arm",
+        ),
+        (
+            lambda i: dataclasses.replace(i, wrist=dataclasses.replace(i.wrist, stamp_ns=i.t_ns - 10**9)),
+            "suit_stale",
+            "arm",
+        ),
+        (
+            lambda i: dataclasses.replace(i, wrist=dataclasses.replace(i.wrist, position=np.array([40.0, 0, 1]))),
+            "suit_out_of_range",
+            "arm",
+        ),
     ],
 )
 def test_bad_input_holds_the_last_valid_command_and_is_flagged(gripper_pipeline, corrupt, flag, holds):
@@ -142,7 +171,10 @@ def test_measured_rows_are_measured_one_by_one(gripper_pipeline, rng):
     for k in (3, 17):
         plain[k].positions[k % len(names)] = (np.nan, np.inf)[k % 2]
     shuffled = tuple(reversed(names))
-    odd = [JointSample(2000, shuffled, rng.standard_normal(len(names))), JointSample(2001, names[:-1], np.zeros(len(names) - 1))]
+    odd = [
+        JointSample(2000, shuffled, rng.standard_normal(len(names))),
+        JointSample(2001, names[:-1], np.zeros(len(names) - 1)),
+    ]
     for samples in (plain, plain[:1], [], plain[:20] + odd + plain[20:]):
         stamps, rows = p.measured_rows(samples, names)
         expected = [(s.stamp_ns, q) for s in samples if (q := p.measured(s, names)) is not None]

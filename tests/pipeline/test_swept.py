@@ -41,7 +41,9 @@ def test_no_point_moves_further_than_the_bound(swept):
         q0 = m.sample_uniform(1, rng)[0]
         q1 = np.clip(q0 + rng.normal(0, 0.2, q0.shape), m.lower, m.upper)
         start = _corners(swept, q0)
-        moved = max(np.linalg.norm(_corners(swept, q0 + s * (q1 - q0)) - start, axis=1).max() for s in np.linspace(0, 1, 11))
+        moved = max(
+            np.linalg.norm(_corners(swept, q0 + s * (q1 - q0)) - start, axis=1).max() for s in np.linspace(0, 1, 11)
+        )
         assert moved <= swept.motion_bound(q0, q1) + 1e-12
 
 
@@ -81,7 +83,9 @@ def test_the_clearance_is_distance_between_links(swept):
             for s in (a, b):
                 plain._objects[s].setRotation(shapes[s, :3, :3])
                 plain._objects[s].setTranslation(shapes[s, :3, 3])
-            nearest = min(nearest, fcl.distance(plain._objects[a], plain._objects[b], fcl.DistanceRequest(), fcl.DistanceResult()))
+            nearest = min(
+                nearest, fcl.distance(plain._objects[a], plain._objects[b], fcl.DistanceRequest(), fcl.DistanceResult())
+            )
         assert nearest < 0.003 + 1e-9
         checked += 1
         if checked >= 5:

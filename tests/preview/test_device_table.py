@@ -4,8 +4,8 @@ import io
 
 from rich.console import Console
 
-from teleprev.status import DeviceRow
 from teleprev.preview.dashboard import device_table
+from teleprev.status import DeviceRow
 
 
 def render(rows) -> str:

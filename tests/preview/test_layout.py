@@ -12,13 +12,13 @@ import numpy as np
 import pytest
 from rich.console import Console
 
-from teleprev.status import DeviceRow, LoopSnapshot
 from teleprev.live.record.run import ROBOT_BOUNDS
 from teleprev.messages import ImageSample
 from teleprev.preview.camera_view import picture
 from teleprev.preview.dashboard import KEYS, Dashboard
 from teleprev.preview.robot_view import RobotView
 from teleprev.robot.model import load_robot
+from teleprev.status import DeviceRow, LoopSnapshot
 
 ARM = tuple(f"joint{i}" for i in range(1, 7))
 
@@ -26,7 +26,9 @@ ARM = tuple(f"joint{i}" for i in range(1, 7))
 @pytest.fixture(scope="module")
 def dashboard():
     robot, hand = load_robot("xarm6_leap_hand"), load_robot("leap_hand_right")
-    return Dashboard(RobotView(robot, "side", ROBOT_BOUNDS["side"]), RobotView(hand, "side"), ARM, hand.joint_names, robot)
+    return Dashboard(
+        RobotView(robot, "side", ROBOT_BOUNDS["side"]), RobotView(hand, "side"), ARM, hand.joint_names, robot
+    )
 
 
 def snapshot(hand_joints: int) -> LoopSnapshot:
@@ -113,7 +115,9 @@ def test_the_camera_picture_keeps_its_colours_and_aspect():
 
 def test_the_xr_pages_url_shows_until_the_page_streams_and_the_screen_still_fits(dashboard):
     url = "https://192.168.1.7:8443/?token=Zq3vR8xWb2LkP0mN4tYs1A"
-    waiting = [replace(d, state="connecting", hint=f"XR page: {url}") if d.kind in ("glove", "suit") else d for d in DEVICES]
+    waiting = [
+        replace(d, state="connecting", hint=f"XR page: {url}") if d.kind in ("glove", "suit") else d for d in DEVICES
+    ]
     console = Console(file=io.StringIO(), width=80, height=24, record=True, color_system="truecolor")
     console.print(dashboard.render(snapshot(16), waiting, 80, 24, 0, camera=camera_frame()))
     lines = console.export_text().rstrip("\n").splitlines()

@@ -12,8 +12,16 @@ from teleprev.messages import JointSample
 from teleprev.rig import load_rig
 from teleprev_devices.webxr import hands
 from tests.helpers import hand_poses
-from tests.helpers.hand_poses import (IWER_POSE_NAMES, THUMB_TWIST_SWEEP_DEG, flexed_hand, iwer_pose, through_vmc,
-                                      through_webxr, thumb_twist, with_thumb_twist)
+from tests.helpers.hand_poses import (
+    IWER_POSE_NAMES,
+    THUMB_TWIST_SWEEP_DEG,
+    flexed_hand,
+    iwer_pose,
+    through_vmc,
+    through_webxr,
+    thumb_twist,
+    with_thumb_twist,
+)
 
 THUMB = [smplx.JOINT_INDEX[j] for j in ("thumb1", "thumb2", "thumb3")]
 

@@ -18,7 +18,8 @@ def test_help_and_version_answer():
 
 
 def test_help_imports_no_heavy_libraries():
-    code = "import sys; import teleprev.cli.app; print(sorted(m for m in ('numpy','torch','lerobot','cv2','numba') if m in sys.modules))"
+    code = ("import sys; import teleprev.cli.app; "
+            "print(sorted(m for m in ('numpy','torch','lerobot','cv2','numba') if m in sys.modules))")
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True).stdout.strip()
     assert out == "[]"
 
@@ -38,6 +39,8 @@ def test_robot_check_prints_rates_per_link():
 
 def test_robot_info_on_a_missing_file_is_one_clear_line(tmp_path):
     missing = tmp_path / "nope.urdf"
-    result = subprocess.run([sys.executable, "-m", "teleprev.cli.app", "robot", "info", str(missing)], capture_output=True, text=True)
+    result = subprocess.run(
+        [sys.executable, "-m", "teleprev.cli.app", "robot", "info", str(missing)], capture_output=True, text=True
+    )
     assert result.returncode == 2
     assert "error:" in result.stderr and "nope.urdf" in result.stderr and "Traceback" not in result.stderr

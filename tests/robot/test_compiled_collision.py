@@ -14,7 +14,8 @@ import numpy as np
 import pytest
 
 from teleprev.errors import UrdfError
-from teleprev.kernels import boxes as boxes_kernels, collision as collision_kernels
+from teleprev.kernels import boxes as boxes_kernels
+from teleprev.kernels import collision as collision_kernels
 from teleprev.robot.collision import SelfCollisionChecker
 from teleprev.robot.compiled_collision import CompiledSelfCollisionChecker
 from teleprev.robot.compiled_kinematics import CompiledKinematics
@@ -230,8 +231,10 @@ def test_importing_compiles_nothing_and_needs_no_fcl():
         "import teleprev.robot.compiled_collision\n"
         "from numba.core.registry import CPUDispatcher\n"
         "import importlib, pkgutil, teleprev.kernels\n"
-        "mods = [importlib.import_module('teleprev.kernels.' + m.name) for m in pkgutil.iter_modules(teleprev.kernels.__path__)]\n"
-        "print(sorted(n for k in mods for n, f in vars(k).items() if isinstance(f, CPUDispatcher) and f.signatures), 'fcl' in sys.modules)\n"
+        "mods = [importlib.import_module('teleprev.kernels.' + m.name) for m in "
+        "pkgutil.iter_modules(teleprev.kernels.__path__)]\n"
+        "print(sorted(n for k in mods for n, f in vars(k).items() if isinstance(f, CPUDispatcher) and "
+        "f.signatures), 'fcl' in sys.modules)\n"
     )
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True).stdout.strip()
     assert out == "[] False"
@@ -328,7 +331,9 @@ def test_box_state_is_the_two_single_margin_answers(rng):
             loose = boxes_kernels.boxes_apart(poses, a, b, size, boxes_kernels.MARGIN)
             tight = boxes_kernels.boxes_apart(poses, a, b, size, -boxes_kernels.MARGIN)
             state = boxes_kernels.boxes_state(poses, a, b, size, boxes_kernels.MARGIN, -boxes_kernels.MARGIN)
-            expected = boxes_kernels.BOX_APART if loose else boxes_kernels.BOX_LOOSE if tight else boxes_kernels.BOX_BOTH
+            expected = (
+                boxes_kernels.BOX_APART if loose else boxes_kernels.BOX_LOOSE if tight else boxes_kernels.BOX_BOTH
+            )
             assert state == expected
             states.add(state)
     assert states == {boxes_kernels.BOX_APART, boxes_kernels.BOX_LOOSE, boxes_kernels.BOX_BOTH}

@@ -46,7 +46,9 @@ def test_reachable_targets_from_near_warm_starts_match_numpy(xarm6, iks, rng):
         converged += 1
         reached = numpy_ik.pose(result.q)
         assert np.linalg.norm(reached[:3, 3] - target[:3, 3]) <= compiled_ik.position_tolerance * (1 + 1e-9)
-        assert np.linalg.norm(rotation_error(target[:3, :3], reached[:3, :3])) <= compiled_ik.rotation_tolerance * (1 + 1e-9)
+        assert np.linalg.norm(rotation_error(target[:3, :3], reached[:3, :3])) <= compiled_ik.rotation_tolerance * (
+            1 + 1e-9
+        )
         assert result.position_error <= compiled_ik.position_tolerance
         assert result.rotation_error <= compiled_ik.rotation_tolerance
     assert converged >= 995

@@ -45,10 +45,22 @@ def test_all_zero_leap_hand_tips_match_reference_table(hand):
     """Compose the reference table's rows by hand (robots.md) and compare with FK at q = 0."""
     h = 1.57079
     base = _t((0, 0.038, 0.098), (0, -h, 0))
-    index = base @ _t((-0.0070, 0.0230, -0.0187), (h, h, 0)) @ _t((-0.0122, 0.0381, 0.0145), (-h, 0, h)) \
-        @ _t((0.015, 0.0143, -0.013), (h, -h, 0)) @ _t((0, -0.0361, 0.0002), (0, 0, 0)) @ _t((0, -0.048, 0.015), (0, 0, 0))
-    thumb = base @ _t((-0.0693, -0.0012, -0.0216), (0, h, 0)) @ _t((0, 0.0143, -0.013), (h, -h, 0)) \
-        @ _t((0, 0.0145, -0.017), (-h, 0, 0)) @ _t((0, 0.0466, 0.0002), (0, 0, 3.14159)) @ _t((0, -0.06, -0.015), (0, 0, 0))
+    index = (
+        base
+        @ _t((-0.0070, 0.0230, -0.0187), (h, h, 0))
+        @ _t((-0.0122, 0.0381, 0.0145), (-h, 0, h))
+        @ _t((0.015, 0.0143, -0.013), (h, -h, 0))
+        @ _t((0, -0.0361, 0.0002), (0, 0, 0))
+        @ _t((0, -0.048, 0.015), (0, 0, 0))
+    )
+    thumb = (
+        base
+        @ _t((-0.0693, -0.0012, -0.0216), (0, h, 0))
+        @ _t((0, 0.0143, -0.013), (h, -h, 0))
+        @ _t((0, 0.0145, -0.017), (-h, 0, 0))
+        @ _t((0, 0.0466, 0.0002), (0, 0, 3.14159))
+        @ _t((0, -0.06, -0.015), (0, 0, 0))
+    )
     poses = hand.fk(np.zeros(16))
     assert np.allclose(poses.position("index_tip_head"), index[:3, 3], atol=1e-12)
     assert np.allclose(poses.position("thumb_tip_head"), thumb[:3, 3], atol=1e-12)
@@ -76,7 +88,14 @@ def test_xarm6_matches_published_dh(xarm6, rng):
         for i in range(6):
             th = q[i] + offset[i]
             ct, st, ca, sa = math.cos(th), math.sin(th), math.cos(alpha[i]), math.sin(alpha[i])
-            t = t @ np.array([[ct, -st * ca, st * sa, a[i] * ct], [st, ct * ca, -ct * sa, a[i] * st], [0, sa, ca, d[i]], [0, 0, 0, 1]])
+            t = t @ np.array(
+                [
+                    [ct, -st * ca, st * sa, a[i] * ct],
+                    [st, ct * ca, -ct * sa, a[i] * st],
+                    [0, sa, ca, d[i]],
+                    [0, 0, 0, 1],
+                ]
+            )
         # the published a2 (289.48866 mm) and the URDF's hypot(53.5, 284.5) = 289.48661 mm differ by 2 um
         assert np.allclose(xarm6.fk(q).position("link_eef"), t[:3, 3], atol=1e-5)
 

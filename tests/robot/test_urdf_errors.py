@@ -37,8 +37,14 @@ def test_malformed_xml_names_the_file(tmp_path):
         (('<limit lower="-1" upper="1" velocity="1" effort="1"/>', ""), '<joint name="j">', "needs <limit"),
         (('<child link="b"/>', '<child link="c"/>'), '<joint name="j">', "'c' is not defined"),
         (('type="revolute"', 'type="spherical"'), '<joint name="j">', "unsupported joint type"),
-        (('<link name="b"/>', '<link name="b"><collision><geometry><mesh filename="x.stl"/></geometry></collision></link>'),
-         '<link name="b"> <collision> <mesh>', "meshes are not supported"),
+        (
+            (
+                '<link name="b"/>',
+                '<link name="b"><collision><geometry><mesh filename="x.stl"/></geometry></collision></link>',
+            ),
+            '<link name="b"> <collision> <mesh>',
+            "meshes are not supported",
+        ),
         (('upper="1"', 'upper="-2"'), '<joint name="j"> <limit>', "above upper"),
     ],
 )

@@ -109,7 +109,9 @@ def test_a_changed_byte_outside_the_chunks_is_named_and_recover_loses_nothing(se
         run = teleprev("recover", path, "-o", out)
         assert run.returncode == 0, run.stderr
         with SessionReader(session) as clean, SessionReader(out) as saved:
-            assert {t: i.message_count for t, i in saved.topics.items()} == {t: i.message_count for t, i in clean.topics.items()}
+            assert {t: i.message_count for t, i in saved.topics.items()} == {
+                t: i.message_count for t, i in clean.topics.items()
+            }
 
 
 def _metadata_record(path, name: str) -> tuple[int, int]:

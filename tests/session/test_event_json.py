@@ -7,8 +7,8 @@ import json
 
 import pytest
 
-from teleprev.session.codec import _json_loads, decoder_for, encode
 from teleprev.messages import Event
+from teleprev.session.codec import _json_loads, decoder_for, encode
 
 TICK = b'{"seq":241,"late_ms":0.045129,"flags":[],"active":true,"stamp_ns":1795809907139503529}'
 CASES = [

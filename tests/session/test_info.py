@@ -9,10 +9,10 @@ import numpy as np
 import pytest
 from typer.testing import CliRunner
 
+from teleprev import topics as T
 from teleprev.cli.app import app
 from teleprev.errors import SessionError
 from teleprev.messages import Event, JointSample, Logged
-from teleprev import topics as T
 from teleprev.session.reader import Episode, SessionReader
 from teleprev.session.recorder import Recorder
 from teleprev.session.summary import summarize

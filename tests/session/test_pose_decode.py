@@ -9,8 +9,17 @@ import foxglove.messages as fm
 import numpy as np
 
 from teleprev.messages import PoseSample
-from teleprev.session.codec import (_POSE_TAIL_BYTES, POSE_IN_FRAME, PoseInFrameDecoder, _parse_pose_in_frame,
-                                   _PoseLayout, _protobuf_class, _stamp, decoder_for, encode)
+from teleprev.session.codec import (
+    _POSE_TAIL_BYTES,
+    POSE_IN_FRAME,
+    PoseInFrameDecoder,
+    _parse_pose_in_frame,
+    _PoseLayout,
+    _protobuf_class,
+    _stamp,
+    decoder_for,
+    encode,
+)
 
 T0 = 1_700_000_000_123_456_789
 FIXTURE = Path(__file__).resolve().parents[1] / "fixtures" / "sim_v3.mcap"
@@ -204,11 +213,13 @@ def test_reading_poses_does_not_load_the_protobuf_runtime(tmp_path):
     import subprocess
     import sys
 
-    code = ("import sys\nfrom teleprev.session.reader import SessionReader\n"
-            f"with SessionReader({str(FIXTURE)!r}) as r:\n"
-            "    poses = [m for m in r.messages(topics=[t for t, s in r.schemas.items() if s == 'foxglove.PoseInFrame'])]\n"
-            "assert poses, 'no poses'\n"
-            "print(len(poses), 'google.protobuf' in sys.modules)\n")
+    code = (
+        "import sys\nfrom teleprev.session.reader import SessionReader\n"
+        f"with SessionReader({str(FIXTURE)!r}) as r:\n"
+        "    poses = [m for m in r.messages(topics=[t for t, s in r.schemas.items() if s == 'foxglove.PoseInFrame'])]\n"
+        "assert poses, 'no poses'\n"
+        "print(len(poses), 'google.protobuf' in sys.modules)\n"
+    )
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True).stdout.split()
     assert int(out[0]) > 100 and out[1] == "False"
 

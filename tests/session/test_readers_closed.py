@@ -39,7 +39,9 @@ def nothing_left_open(path: Path):
         warnings.simplefilter("always", ResourceWarning)
         yield
         gc.collect()  # a reader nobody closed is collected here: its file warns as it goes
-    unclosed = [str(w.message) for w in caught if issubclass(w.category, ResourceWarning) and path.name in str(w.message)]
+    unclosed = [
+        str(w.message) for w in caught if issubclass(w.category, ResourceWarning) and path.name in str(w.message)
+    ]
     assert not unclosed, unclosed
     assert handles_on(path) == 0
 
@@ -101,8 +103,8 @@ def test_a_refused_episode_closes_the_session(session):
 
 def test_a_foxglove_import_refused_at_its_metadata_closes_the_file(session):
     """A damaged metadata record fails after the file is open: the reader is closed on the way out."""
-    from teleprev.export.foreign.foxglove import FoxgloveReader
     from teleprev.export.foreign.config import load_import_recipe
+    from teleprev.export.foreign.foxglove import FoxgloveReader
     from teleprev.session import records as mr
 
     with open(session, "rb") as f:

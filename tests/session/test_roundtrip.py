@@ -9,9 +9,9 @@ import numpy as np
 import pytest
 
 from teleprev import __version__
+from teleprev import topics as T
 from teleprev.errors import SessionError
 from teleprev.messages import Event, ImageSample, JointSample, Logged, PoseSample, Transform, TransformsSample
-from teleprev import topics as T
 from teleprev.session.codec import JointStatesDecoder, encode
 from teleprev.session.reader import SessionReader
 from teleprev.session.writer import McapSessionWriter

@@ -16,16 +16,18 @@ from tests.helpers.study_sessions import scripted
 
 def crafted(path, **meta):
     """A study session whose metadata is then rewritten with `meta` (as a hostile file would be)."""
-    from teleprev.session.reader import SessionReader
-    from teleprev.session.writer import McapSessionWriter
     from teleprev import topics
     from teleprev.messages import Event, Logged
+    from teleprev.session.reader import SessionReader
+    from teleprev.session.writer import McapSessionWriter
 
     records = {"session": {"participant": "p1", "condition": "w/ preview", "end_effector": "leap_hand",
                            "task": "pick_place", "practice": "false"}}
     records.update(meta)
     with McapSessionWriter(path, records) as w:
-        w.write(Logged(topics.MODE, 10**12, Event(10**12, "teleprev.ModeSwitch", {"mode": "preview", "reason": "start"})))
+        w.write(
+            Logged(topics.MODE, 10**12, Event(10**12, "teleprev.ModeSwitch", {"mode": "preview", "reason": "start"}))
+        )
     with SessionReader(path) as reader:
         assert reader.metadata["session"]["participant"] == "p1"
     return path
@@ -82,6 +84,10 @@ def test_a_rig_files_truth_log_stays_in_its_folder(tmp_path):
     from teleprev.rig import load_rig
 
     rig = tmp_path / "rig.toml"
-    rig.write_text(default_rig_path().read_text().replace('plugin = "sim.glove"', 'plugin = "sim.glove"\ntruth_log = "../x.mcap"', 1))
+    rig.write_text(
+        default_rig_path()
+        .read_text()
+        .replace('plugin = "sim.glove"', 'plugin = "sim.glove"\ntruth_log = "../x.mcap"', 1)
+    )
     with pytest.raises(ConfigError, match="truth_log must be a path inside"):
         load_rig(rig)

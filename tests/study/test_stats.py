@@ -12,22 +12,43 @@ from teleprev.errors import ConfigError
 from teleprev.study import survey
 from teleprev.study.facts import session_facts
 from teleprev.study.stats import ColumnMap, Summary, group, preview_column, table_iii
-from tests.helpers.study_sessions import scripted
 from tests.helpers.cli import teleprev
+from tests.helpers.study_sessions import scripted
+
 
 def study_sessions(d):
     ok, fail = "success", "failure"
     return [
-        scripted(d / "a.mcap", "w/o preview", "leap_hand", [(20, ok, False), (26, ok, False), (40, fail, False)], answers=(4, 4, 3, 4, 2)),
+        scripted(
+            d / "a.mcap",
+            "w/o preview",
+            "leap_hand",
+            [(20, ok, False), (26, ok, False), (40, fail, False)],
+            answers=(4, 4, 3, 4, 2),
+        ),
         scripted(d / "b.mcap", "w/o preview", "leap_hand", [(23, ok, False), (30, None, False)], participant="p2"),
-        scripted(d / "c.mcap", "w/ preview", "leap_hand", [(12, ok, False), (16, ok, False), (99, ok, True)], answers=(2, 3, 1, 2, 5)),
-        scripted(d / "d.mcap", "W/ Preview", "leap_hand", [(14, ok, False), (18, None, False), (60, ok, False, False)],
-                 participant="p2", answers=(3, 2, 2, 3, 4)),
+        scripted(
+            d / "c.mcap",
+            "w/ preview",
+            "leap_hand",
+            [(12, ok, False), (16, ok, False), (99, ok, True)],
+            answers=(2, 3, 1, 2, 5),
+        ),
+        scripted(
+            d / "d.mcap",
+            "W/ Preview",
+            "leap_hand",
+            [(14, ok, False), (18, None, False), (60, ok, False, False)],
+            participant="p2",
+            answers=(3, 2, 2, 3, 4),
+        ),
         scripted(d / "e.mcap", "w/ preview", "leap_hand", practice_s=95.0),
         scripted(d / "f.mcap", "w/ preview", "leap_hand", practice_s=125.0, participant="p2", task="warm-up"),
         scripted(d / "g.mcap", "w/o preview", "leap_hand", practice_s=-1),  # never pressed ready
         scripted(d / "h.mcap", "without preview", "parallel_gripper", [(17, ok, False)]),
-        scripted(d / "i.mcap", "with preview", "parallel_gripper", [(14, ok, False), (15, ok, False), (9, fail, False)]),
+        scripted(
+            d / "i.mcap", "with preview", "parallel_gripper", [(14, ok, False), (15, ok, False), (9, fail, False)]
+        ),
         scripted(d / "j.mcap", "baseline", "leap_hand", [(30, ok, False), (40, ok, False)], practice_s=None),
         scripted(d / "k.mcap", "baseline", "leap_hand", practice_s=200.0, practice_start=False),
         scripted(d / "l.mcap", "w/ preview", "leap_hand", [(50, ok, False)], task="pour"),
@@ -50,7 +71,9 @@ def test_session_facts_read_back(facts):
     assert [e.duration_s for e in d.episodes] == [14.0, 18.0, None]  # the outcome comes after the stop
     assert [e.outcome for e in d.episodes] == ["success", None, "success"]
     assert by["e.mcap"].practice_time_s == pytest.approx(95.0)
-    assert by["k.mcap"].practice_time_s == pytest.approx(203.0)  # no practice_start event: from the session's first message
+    assert by["k.mcap"].practice_time_s == pytest.approx(
+        203.0
+    )  # no practice_start event: from the session's first message
     assert by["g.mcap"].practice and by["g.mcap"].practice_time_s is None
     assert by["a.mcap"].answers == dict(zip(survey.KEYS, (4, 4, 3, 4, 2)))
     assert by["b.mcap"].answers is None and by["l.mcap"].task == "pour"
@@ -70,7 +93,9 @@ def test_groups_have_the_expected_values(facts):
 
     with_ = groups[("w/ preview", "leap_hand")]
     assert list(with_.tasks) == ["pick_place", "pour"]  # execution time per task; the pour session is in the group
-    assert with_.tasks["pick_place"].execution_time_s == Summary(pytest.approx(14.0), pytest.approx(8 ** 0.5), 2)  # 12, 16 (99 discarded)
+    assert with_.tasks["pick_place"].execution_time_s == Summary(
+        pytest.approx(14.0), pytest.approx(8**0.5), 2
+    )  # 12, 16 (99 discarded)
     assert with_.tasks["pour"].execution_time_s == Summary(50.0, None, 1)
     # practice is per condition, whatever task it was recorded under: 95 and 125 s
     assert with_.practice_time_s == Summary(pytest.approx(110.0), pytest.approx(21.2132, abs=1e-4), 2)
@@ -92,8 +117,13 @@ def test_groups_have_the_expected_values(facts):
     assert baseline.practice_time_s == Summary(200.0 + 3.0, None, 1)
 
     only_pour = {(g.condition, g.end_effector): g for g in group(facts, task="pour")}
-    assert list(only_pour[("w/ preview", "leap_hand")].tasks) == ["pour"] and only_pour[("baseline", "leap_hand")].tasks == {}
-    assert only_pour[("w/ preview", "leap_hand")].practice_time_s.n == 2  # --task narrows episodes, not practice or ratings
+    assert (
+        list(only_pour[("w/ preview", "leap_hand")].tasks) == ["pour"]
+        and only_pour[("baseline", "leap_hand")].tasks == {}
+    )
+    assert (
+        only_pour[("w/ preview", "leap_hand")].practice_time_s.n == 2
+    )  # --task narrows episodes, not practice or ratings
 
 
 def test_table_iii_pools_matching_conditions_per_task(facts):
@@ -121,9 +151,22 @@ def test_explicit_columns_replace_the_automatic_match(facts):
         ColumnMap(("baseline",), ("Baseline ",))
 
 
-@pytest.mark.parametrize("text, column", [("w/ preview", "with"), ("With Preview", "with"), ("W/  PREVIEW", "with"), ("preview", "with"),
-                                          ("w/o preview", "without"), ("w/o-preview", "without"), ("no preview", "without"),
-                                          ("Without preview", "without"), ("baseline", None), ("", None), ("preview v2", None)])
+@pytest.mark.parametrize(
+    "text, column",
+    [
+        ("w/ preview", "with"),
+        ("With Preview", "with"),
+        ("W/  PREVIEW", "with"),
+        ("preview", "with"),
+        ("w/o preview", "without"),
+        ("w/o-preview", "without"),
+        ("no preview", "without"),
+        ("Without preview", "without"),
+        ("baseline", None),
+        ("", None),
+        ("preview v2", None),
+    ],
+)
 def test_conditions_map_to_table_iii_columns(text, column):
     assert preview_column(text) == column
 
@@ -149,9 +192,16 @@ def test_study_cli_prints_and_writes_tables_and_plots(paths, tmp_path):
     assert float(w["practice_time_mean_s"]) == pytest.approx(110.0) and w["practice_time_n"] == "2"
     g = rows[("with preview", "parallel_gripper")]
     assert g["mental_demand_mean"] == "" and g["surveys"] == "0" and g["sessions_without_survey"] == "1"
-    assert rows[("w/o preview", "leap_hand")]["practice_time_mean_s"] == "" and rows[("w/o preview", "leap_hand")]["sessions"] == "3"
-    ex = {(r["condition"], r["end_effector"], r["task"]): r for r in csv.DictReader((out / "execution_time.csv").open())}
-    assert float(ex[("w/o preview", "leap_hand", "pick_place")]["execution_time_mean_s"]) == pytest.approx(23.0)  # a.mcap counted once
+    assert (
+        rows[("w/o preview", "leap_hand")]["practice_time_mean_s"] == ""
+        and rows[("w/o preview", "leap_hand")]["sessions"] == "3"
+    )
+    ex = {
+        (r["condition"], r["end_effector"], r["task"]): r for r in csv.DictReader((out / "execution_time.csv").open())
+    }
+    assert float(ex[("w/o preview", "leap_hand", "pick_place")]["execution_time_mean_s"]) == pytest.approx(
+        23.0
+    )  # a.mcap counted once
     assert ex[("w/o preview", "leap_hand", "pick_place")]["execution_time_n"] == "3"
     assert ex[("without preview", "parallel_gripper", "pick_place")]["execution_time_std_s"] == ""
     assert float(ex[("w/ preview", "leap_hand", "pour")]["execution_time_mean_s"]) == pytest.approx(50.0)
@@ -169,4 +219,9 @@ def test_study_cli_task_filter_and_no_data(paths, tmp_path):
     assert "likert.png not written" in run.stdout and "practice_time.png not written" in run.stdout
     assert not (out / "likert.png").exists()
     run = teleprev("study", paths[-1], "--task", "pick_place", columns=80)
-    assert run.returncode == 2 and "--task" in run.stderr and "'pick_place'" in run.stderr and "their tasks: pour" in run.stderr
+    assert (
+        run.returncode == 2
+        and "--task" in run.stderr
+        and "'pick_place'" in run.stderr
+        and "their tasks: pour" in run.stderr
+    )

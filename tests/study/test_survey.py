@@ -6,17 +6,17 @@ import json
 import time
 
 import pytest
-from tests.helpers.cli import teleprev
-from tests.helpers.sessions import RIGS
-from tests.helpers.study_sessions import scripted
 
 from teleprev.errors import ConfigError, SessionError
+from teleprev.live.record.session import LiveSession, RecordOptions
 from teleprev.messages import Event, Logged
-from teleprev.live.record.session import RecordOptions, LiveSession
 from teleprev.session.writer import McapSessionWriter
 from teleprev.study import survey
 from teleprev.study.facts import session_facts
 from teleprev.study.questionnaire import QUESTIONS, parse_answer
+from tests.helpers.cli import teleprev
+from tests.helpers.sessions import RIGS
+from tests.helpers.study_sessions import scripted
 
 
 def cli(*args, stdin=None):
@@ -120,7 +120,9 @@ def test_unusable_survey_files_are_named(session, tmp_path):
         session_facts(session)
     # a survey copied next to another recording is not counted for it
     (tmp_path / "o").mkdir()
-    other = scripted(tmp_path / "o" / "s.mcap", "w/ preview", "vacuum", [(10, "success", False)], answers=(1, 1, 1, 1, 1))
+    other = scripted(
+        tmp_path / "o" / "s.mcap", "w/ preview", "vacuum", [(10, "success", False)], answers=(1, 1, 1, 1, 1)
+    )
     with McapSessionWriter(tmp_path / "late.mcap", {"session": {"condition": "x"}}) as w:
         w.write(Logged("/events/mode", 5 * 10**12, Event(5 * 10**12, "teleprev.ModeSwitch", {"mode": "preview"})))
     (tmp_path / "late.survey.json").write_bytes((other.parent / "s.survey.json").read_bytes())

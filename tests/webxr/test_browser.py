@@ -1,6 +1,7 @@
 """teleprev's XR page in a real browser: Debian's Chromium, driven by playwright, is a Meta Quest 3 with hand
 tracking (Meta's IWER) playing a recorded operator's hand into the page. What teleprev records is what the
-browser produced, joint for joint; the left hand's pinches engage the robot and start an episode; and `teleprev devices check`
+browser produced, joint for joint; the left hand's pinches engage the robot and start an episode; and `teleprev
+devices check`
 finds the page that stayed open."""
 
 from __future__ import annotations
@@ -16,9 +17,9 @@ from teleprev.session.reader import SessionReader
 from teleprev_devices.webxr import hands
 from tests.helpers.cli import teleprev
 from tests.helpers.ports import free_tcp_port
+from tests.helpers.wait import wait_until
 from tests.helpers.xr_browser import Quest3Browser, recorded_motion
 from tests.helpers.xr_hands import RADIUS_M, local_rotations, matrices, xr_hand
-from tests.helpers.wait import wait_until
 from tests.helpers.xr_page import webxr_rig
 
 FRAMES = 180  # 3 s at the headless browser's 60 frames a second
@@ -86,7 +87,9 @@ def test_a_quest3_streams_a_recorded_hand_that_teleprev_records_joint_for_joint(
     # ... and the session is one like any other: it evaluates, audits and exports.
     session = str(tmp_path / "s.mcap")
     evaluated = teleprev("eval", session)
-    assert evaluated.returncode == 0 and "reproduces the recorded commands bit for bit" in evaluated.stdout, evaluated.stdout
+    assert evaluated.returncode == 0 and "reproduces the recorded commands bit for bit" in evaluated.stdout, (
+        evaluated.stdout
+    )
     assert teleprev("audit", session).returncode == 0
     root = tmp_path / "ds"
     exported = teleprev("export", session, "--repo-id", "lab/xr", "--root", str(root))

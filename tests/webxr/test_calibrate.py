@@ -12,10 +12,9 @@ from teleprev.retarget.calibration import load_calibration
 from teleprev.transforms import rpy_to_matrix
 from teleprev_devices.webxr import hands
 from tests.helpers.cli import teleprev
-from tests.helpers.xr_hands import local_rotations, xr_hand
-from tests.helpers.xr_page import PageClient
 from tests.helpers.ports import free_tcp_port
-from tests.helpers.xr_page import webxr_rig
+from tests.helpers.xr_hands import local_rotations, xr_hand
+from tests.helpers.xr_page import PageClient, webxr_rig
 
 
 def test_calibrate_learns_the_yaw_between_the_headsets_forward_and_the_robots(tmp_path):

@@ -44,7 +44,9 @@ def test_a_finger_twisting_about_its_bone_never_reads_as_abduction(angles):
     f, a = smplx.angles_from_hand_pose(pose)
     np.testing.assert_allclose(a, abduction, atol=1e-9)
     np.testing.assert_allclose(f, flexion, atol=1e-9)
-    assert np.abs(pose - hands.hand_pose(synthetic_hand(flexion, abduction)).reshape(15, 3)).max() > 0.1  # twist is real
+    assert (
+        np.abs(pose - hands.hand_pose(synthetic_hand(flexion, abduction)).reshape(15, 3)).max() > 0.1
+    )  # twist is real
 
 
 def test_the_wrist_lands_in_the_suit_frame_forward_left_up():

@@ -152,6 +152,8 @@ def test_actions_without_a_recording_are_answered_not_done(xr, tmp_path):
 
 def test_a_port_in_use_is_a_clear_device_error(xr, tmp_path):
     glove, suit = xr
-    other = WebXrGlove("h", WebXrSettings(port=glove._receiver.port, cert_dir=str(tmp_path / "cert")), DeviceContext(SessionClock()))
+    other = WebXrGlove(
+        "h", WebXrSettings(port=glove._receiver.port, cert_dir=str(tmp_path / "cert")), DeviceContext(SessionClock())
+    )
     with pytest.raises(DeviceError, match=r"cannot listen on 127.0.0.1:\d+ .*another program"):
         other.connect()

@@ -65,7 +65,9 @@ class SimActuator(SimDevice[A], Actuator[A], stream="state", payload="joints"):
         setting = self.settings.max_velocity
         if setting > 0:
             if np.any(setting > urdf_velocity):
-                raise self.bad_setting("max_velocity", f"{setting:g} is above the URDF's limit ({urdf_velocity.min():g})")
+                raise self.bad_setting(
+                    "max_velocity", f"{setting:g} is above the URDF's limit ({urdf_velocity.min():g})"
+                )
             self.max_velocity = np.full_like(urdf_velocity, setting)
 
     def _open(self) -> None:

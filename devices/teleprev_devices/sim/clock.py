@@ -96,7 +96,9 @@ class TruthLog:
             if self.path == path:
                 return
             if self.path is not None:
-                raise ConfigError(f"sim devices of one rig must share one truth_log file (already writing {self.path})", str(path))
+                raise ConfigError(
+                    f"sim devices of one rig must share one truth_log file (already writing {self.path})", str(path)
+                )
             path.parent.mkdir(parents=True, exist_ok=True)
             self._file = path.open("a", newline="")
             self._writer = csv.writer(self._file)
@@ -110,7 +112,9 @@ class TruthLog:
             if len(self._records) > self._max:
                 self._records.popitem(last=False)
             if self._writer is not None:
-                self._writer.writerow([record.topic, record.stamp_ns, record.true_ns, record.device_ns, record.receive_ns])
+                self._writer.writerow(
+                    [record.topic, record.stamp_ns, record.true_ns, record.device_ns, record.receive_ns]
+                )
 
     def true_ns(self, topic: str, stamp_ns: int) -> int | None:
         with self._lock:

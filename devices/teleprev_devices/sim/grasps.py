@@ -9,7 +9,7 @@ squeezed together crosses the index over the middle finger: the self-collisions 
 
 from __future__ import annotations
 
-from typing import Callable
+from collections.abc import Callable
 
 import numpy as np
 
@@ -53,9 +53,15 @@ def power(c: float) -> HandAngles:
     """Cylindrical power grasp around a cup; the thumb wraps across the fingers as c grows."""
     f1, f2, f3 = 0.75 + 0.55 * c, 0.85 + 0.55 * c, 0.55 + 0.45 * c
     return _hand(
-        {"index": (f1, f2, f3), "middle": (f1, f2, f3), "ring": (f1 + 0.05, f2, f3), "pinky": (f1 + 0.1, f2 + 0.05, f3)},
+        {
+            "index": (f1, f2, f3),
+            "middle": (f1, f2, f3),
+            "ring": (f1 + 0.05, f2, f3),
+            "pinky": (f1 + 0.1, f2 + 0.05, f3),
+        },
         {"index": 0.02, "middle": 0.0, "ring": -0.03, "pinky": -0.06},
-        (0.50 + 0.40 * c, 0.45 + 0.30 * c, 0.30 + 0.40 * c), -0.30 - 0.60 * c,
+        (0.50 + 0.40 * c, 0.45 + 0.30 * c, 0.30 + 0.40 * c),
+        -0.30 - 0.60 * c,
     )
 
 

@@ -21,7 +21,9 @@ class HandSettings(ActuatorSettings):
     def __post_init__(self):
         super().__post_init__()
         if self.max_velocity < 0 or self.switch_ms <= 0:
-            raise ValueError(f"max_velocity must be >= 0 and switch_ms > 0, got {self.max_velocity} and {self.switch_ms}")
+            raise ValueError(
+                f"max_velocity must be >= 0 and switch_ms > 0, got {self.max_velocity} and {self.switch_ms}"
+            )
 
 
 class SimHand(SimActuator[HandSettings], kind="hand"):

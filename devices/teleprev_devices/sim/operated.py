@@ -28,16 +28,18 @@ class OperatorSettings(TimingSettings):
         return TASKS if task_mode(self.task)[1] == "follow" else ()
 
 
-O = TypeVar("O", bound=OperatorSettings)
+OperatorT = TypeVar("OperatorT", bound=OperatorSettings)
 
 
-class OperatorDevice(SimDevice[O]):
+class OperatorDevice(SimDevice[OperatorT]):
     """A sim device streaming the operator, with sensor noise: `noise` maps each setting that is a noise
     standard deviation to how many values it perturbs per sample."""
 
     noise: ClassVar[dict[str, int]] = {}
 
-    def __init__(self, name: str, settings: O, context: DeviceContext):
+    def __init__(self, name: str, settings: OperatorT, context: DeviceContext):
         super().__init__(name, settings, context)
         self.operator = shared_operator(context, name, settings.seed, settings.task)
-        self.noise_blocks = {key: NoiseBlock(self._rng, getattr(settings, key), dims) for key, dims in self.noise.items()}
+        self.noise_blocks = {
+            key: NoiseBlock(self._rng, getattr(settings, key), dims) for key, dims in self.noise.items()
+        }

@@ -42,9 +42,9 @@ from typing import Literal
 
 import numpy as np
 
+from teleprev.devices import ConfigError, smplx, transforms
 from teleprev_devices.sim import grasps
 from teleprev_devices.sim.tasks import SCRIPTS, TASKS, SceneObject, Script
-from teleprev.devices import ConfigError, smplx, transforms
 
 REST_WRIST = np.array([0.30, -0.15, 1.00])
 # Palm left (+y), thumb up (+z), fingers forward (+x), as columns of the SMPL-X hand frame's axes
@@ -142,7 +142,9 @@ class _Tremor:
     def __init__(self, rng: np.random.Generator, dims: int, tremor: float, sway: float):
         freq = np.concatenate([rng.uniform(8.0, 12.0, (dims, 2)), rng.uniform(0.15, 0.6, (dims, 2))], axis=1)
         self.omega = 2 * np.pi * freq
-        self.amp = np.concatenate([rng.uniform(0.5, 1.0, (dims, 2)) * tremor / 2, rng.uniform(0.5, 1.0, (dims, 2)) * sway / 2], axis=1)
+        self.amp = np.concatenate(
+            [rng.uniform(0.5, 1.0, (dims, 2)) * tremor / 2, rng.uniform(0.5, 1.0, (dims, 2)) * sway / 2], axis=1
+        )
         self.phase = rng.uniform(0.0, 2 * np.pi, (dims, 4))
 
     def __call__(self, t: float) -> np.ndarray:
@@ -210,7 +212,9 @@ class SimOperator:
             t += ph.duration
             wrist.hold_until(t)
             hand.hold_until(t)
-        self._episodes.append(_Episode(index, task, script, start, t, phase_starts, [p.name for p in script.phases], wrist, hand))
+        self._episodes.append(
+            _Episode(index, task, script, start, t, phase_starts, [p.name for p in script.phases], wrist, hand)
+        )
         del self._episodes[:-_KEEP_EPISODES]
 
     def _episode(self, t: float) -> _Episode:

@@ -13,8 +13,8 @@ from dataclasses import dataclass
 import cv2
 import numpy as np
 
-from teleprev_devices.sim.world import TABLE, PlacedObject, yaw_pose
 from teleprev.devices import RobotModel, robot_geometry
+from teleprev_devices.sim.world import TABLE, PlacedObject, yaw_pose
 
 _SHIFT = 4  # sub-pixel bits for cv2 polygon coordinates
 _SCALE = 1 << _SHIFT
@@ -154,7 +154,9 @@ class SceneRenderer:
         corners = centres[:, None, :] + (sizes[:, None, :] / 2 * _CORNER_SIGNS) @ np.swapaxes(rot, -1, -2)
         uv, z = self.camera.project(corners)
         normals = _FACE_NORMALS @ np.swapaxes(rot, -1, -2)  # (B, 6, 3)
-        face_centres = centres[:, None, :] + normals * (sizes[:, None, :] / 2 * np.abs(_FACE_NORMALS)).sum(-1, keepdims=True)
+        face_centres = centres[:, None, :] + normals * (sizes[:, None, :] / 2 * np.abs(_FACE_NORMALS)).sum(
+            -1, keepdims=True
+        )
         facing = np.einsum("bfi,bfi->bf", normals, self.camera.eye - face_centres) > 0
         shades = _shade(colours[:, None, :], normals)
         depth = np.linalg.norm(centres - self.camera.eye, axis=1).tolist()

@@ -4,7 +4,8 @@ DeviceContext.shared and created by whichever device asks first."""
 from __future__ import annotations
 
 import threading
-from typing import Any, Callable
+from collections.abc import Callable
+from typing import Any
 
 _LOCK = threading.Lock()  # devices may be opened on different threads
 

@@ -31,5 +31,7 @@ class SimSuit(OperatorDevice[SuitSettings], kind="suit", stream="wrist", payload
         if self.settings.noise_m > 0:
             position = position + self.noise_blocks["noise_m"].next()
         if self.settings.noise_rad > 0:
-            rotation = transforms.rpy_to_matrix(*self.noise_blocks["noise_rad"].next()) @ rotation  # a small random turn
+            rotation = (
+                transforms.rpy_to_matrix(*self.noise_blocks["noise_rad"].next()) @ rotation
+            )  # a small random turn
         return PoseSample(0, "suit", np.asarray(position, dtype=float), transforms.matrix_to_quat(rotation))

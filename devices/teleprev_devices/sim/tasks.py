@@ -93,7 +93,9 @@ def _rest(b: _Builder, rest_position: np.ndarray) -> None:
 
 
 def _cup(name: str, xy: np.ndarray, colour, height: float = 0.10) -> SceneObject:
-    return SceneObject(name, "cylinder", (0.04, height), (float(xy[0]), float(xy[1]), TABLE_Z + height / 2), 0.0, colour)
+    return SceneObject(
+        name, "cylinder", (0.04, height), (float(xy[0]), float(xy[1]), TABLE_Z + height / 2), 0.0, colour
+    )
 
 
 def _side_grasp_point(centre: np.ndarray, z: float) -> np.ndarray:
@@ -109,7 +111,12 @@ def _pick(b: _Builder, cup: np.ndarray, grasp_z: float, yaw: float, squeeze: flo
     b.add("reach", 1.2, above, _v(0, 0, yaw), grasps.open_hand(b.rng.uniform(0, 1)), hand_window=(0.3, 1.0))
     b.add("approach", 0.6, _side_grasp_point(cup, grasp_z))
     b.add("grasp", 0.5, hand=grasps.power(c))
-    b.add("lift", 0.7, _side_grasp_point(cup, grasp_z + b.rng.uniform(0.10, 0.14)), hand=grasps.power(min(1.0, c + squeeze)))
+    b.add(
+        "lift",
+        0.7,
+        _side_grasp_point(cup, grasp_z + b.rng.uniform(0.10, 0.14)),
+        hand=grasps.power(min(1.0, c + squeeze)),
+    )
     return c
 
 
@@ -151,9 +158,17 @@ def hang(rng: np.random.Generator, rest: np.ndarray) -> Script:
     b.add("retreat", 0.6, peg + _v(-0.13, -0.03, peg_z + 0.03), _v(0, 0, 0))
     _rest(b, rest)
     objects = (
-        SceneObject("spoon", "box", (0.16, 0.025, 0.012), (spoon[0], spoon[1], TABLE_Z + 0.006), world_places.SPOON_YAW,
-                    (190, 190, 200)),
-        SceneObject("peg_stand", "box", (0.03, 0.03, 0.26), (peg[0] + 0.03, peg[1], TABLE_Z + 0.13), 0.0, (40, 90, 140), False),
+        SceneObject(
+            "spoon",
+            "box",
+            (0.16, 0.025, 0.012),
+            (spoon[0], spoon[1], TABLE_Z + 0.006),
+            world_places.SPOON_YAW,
+            (190, 190, 200),
+        ),
+        SceneObject(
+            "peg_stand", "box", (0.03, 0.03, 0.26), (peg[0] + 0.03, peg[1], TABLE_Z + 0.13), 0.0, (40, 90, 140), False
+        ),
         SceneObject("peg", "box", (0.07, 0.012, 0.012), (peg[0] - 0.005, peg[1], peg_z), 0.0, (40, 90, 140), False),
     )
     return Script("hang", tuple(b.phases), objects, _spots(spoon=(spoon, world_places.SPOON_YAW), peg=(peg, 0.0)))

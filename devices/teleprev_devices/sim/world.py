@@ -19,9 +19,9 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from teleprev_devices.sim.shared import get_or_create
-from teleprev_devices.sim.tasks import TABLE_Z, SCRIPTS, SceneObject
 from teleprev.devices import EFFECTORS, RobotModel, load_robot, transforms, world_places
+from teleprev_devices.sim.shared import get_or_create
+from teleprev_devices.sim.tasks import SCRIPTS, TABLE_Z, SceneObject
 
 TABLE = SceneObject("table", "box", (1.2, 1.3, 0.04), (0.30, 0.0, -0.02), 0.0, (95, 120, 150), False)
 
@@ -47,8 +47,16 @@ class SimWorld:
         self._shared = shared if shared is not None else {}
         self._lock = threading.Lock()
         # Until an arm reports, the robot stands at the sim arm's default home.
-        self._q = self.model.clip(self.model.vector({f"joint{i + 1}": v for i, v in enumerate(world_places.ARM_HOME)
-                                                     if f"joint{i + 1}" in self.model.joint_index}, self.model.neutral()))
+        self._q = self.model.clip(
+            self.model.vector(
+                {
+                    f"joint{i + 1}": v
+                    for i, v in enumerate(world_places.ARM_HOME)
+                    if f"joint{i + 1}" in self.model.joint_index
+                },
+                self.model.neutral(),
+            )
+        )
         self.vacuum_on = False
         self.anchor = np.array(world_places.DEFAULT_ANCHOR)
         # The point that closes on objects (the end-effector table's grasp point); for the LEAP Hand also,

@@ -19,10 +19,16 @@ from typing import TypeVar
 import numpy as np
 
 from teleprev.devices import (
-    DeviceContext, JointSample, PoseSample, Sample, StreamSpec, smplx, transforms,
+    DeviceContext,
+    JointSample,
+    PoseSample,
+    Sample,
+    StreamSpec,
+    smplx,
+    transforms,
 )
-from teleprev_devices.vmc import unity
 from teleprev_devices.fanout import FanoutDevice, ListenSettings
+from teleprev_devices.vmc import unity
 from teleprev_devices.vmc.receiver import Frame, VmcReceiver, acquire, release
 
 BODY_POSE_NAMES: tuple[str, ...] = tuple(f"{j}.{c}" for j in smplx.BODY_JOINTS for c in "xyz")
@@ -34,7 +40,9 @@ _FINGERS = frozenset(unity.RIGHT_HAND_BONES)
 @dataclass
 class VmcSettings(ListenSettings):
     port: int = 39539  # VMC's usual receiving port
-    allow: tuple[str, ...] = ()  # senders accepted (addresses or networks, e.g. "192.168.1.7", "10.0.0.0/24"); empty: any
+    allow: tuple[
+        str, ...
+    ] = ()  # senders accepted (addresses or networks, e.g. "192.168.1.7", "10.0.0.0/24"); empty: any
 
     def __post_init__(self):
         super().__post_init__()
@@ -42,7 +50,9 @@ class VmcSettings(ListenSettings):
             try:
                 ipaddress.IPv4Network(a, strict=False)
             except ValueError:
-                raise ValueError(f"allow: {a!r} is not an IPv4 address or network (e.g. 192.168.1.7 or 10.0.0.0/24)") from None
+                raise ValueError(
+                    f"allow: {a!r} is not an IPv4 address or network (e.g. 192.168.1.7 or 10.0.0.0/24)"
+                ) from None
 
 
 @dataclass

@@ -29,9 +29,11 @@ import numpy as np
 import pythonosc
 from pythonosc.osc_packet import OscPacket
 
-from teleprev_devices.fanout import Fanout, acquire as acquire_shared, release as release_shared
-from teleprev_devices.vmc.unity import KNOWN_BONES
 from teleprev.devices import ClockSync, DeviceStartError, SessionClock, describe_exception, raise_this_thread
+from teleprev_devices.fanout import Fanout
+from teleprev_devices.fanout import acquire as acquire_shared
+from teleprev_devices.fanout import release as release_shared
+from teleprev_devices.vmc.unity import KNOWN_BONES
 
 _MAX_DATAGRAM = 65535
 # Linux reports the datagrams its receive buffer had no room for (a running total) with each datagram
@@ -141,7 +143,7 @@ class VmcReceiver:
             while not self._stop.is_set():
                 try:
                     data, ancillary, _, sender = self._sock.recvmsg(_MAX_DATAGRAM, _ANCILLARY)
-                except socket.timeout:
+                except TimeoutError:
                     continue
                 except OSError as exc:
                     if not self._stop.is_set():

@@ -45,7 +45,16 @@ KNOWN_BONES = frozenset(HUMAN_BODY_BONES)
 
 # Hips up the right arm. Optional bones (absent from many rigs, so not sent) are skipped: in Unity's
 # hierarchy the next bone then hangs from the previous one directly.
-RIGHT_ARM_CHAIN = ("Hips", "Spine", "Chest", "UpperChest", "RightShoulder", "RightUpperArm", "RightLowerArm", "RightHand")
+RIGHT_ARM_CHAIN = (
+    "Hips",
+    "Spine",
+    "Chest",
+    "UpperChest",
+    "RightShoulder",
+    "RightUpperArm",
+    "RightLowerArm",
+    "RightHand",
+)
 RIGHT_ARM_REQUIRED = frozenset({"Hips", "Spine", "RightUpperArm", "RightLowerArm", "RightHand"})
 
 _FINGER_BONE = {"index": "Index", "middle": "Middle", "pinky": "Little", "ring": "Ring", "thumb": "Thumb"}

@@ -55,7 +55,7 @@ def _covers(cert: Path, addresses: set[str]) -> bool:
     except (ValueError, x509.ExtensionNotFound):
         return False
     have = {str(a) for a in names.get_values_for_type(x509.IPAddress)}
-    left = c.not_valid_after_utc - _dt.datetime.now(_dt.timezone.utc)
+    left = c.not_valid_after_utc - _dt.datetime.now(_dt.UTC)
     return addresses <= have and left > _dt.timedelta(days=RENEW_DAYS)
 
 
@@ -67,7 +67,7 @@ def _make(cert: Path, key: Path, addresses: list[str]) -> None:
 
     private = ec.generate_private_key(ec.SECP256R1())
     name = x509.Name([x509.NameAttribute(NameOID.COMMON_NAME, "teleprev webxr")])
-    now = _dt.datetime.now(_dt.timezone.utc)
+    now = _dt.datetime.now(_dt.UTC)
     alt = [x509.DNSName("localhost"), *(x509.IPAddress(ipaddress.ip_address(a)) for a in addresses)]
     built = (x509.CertificateBuilder().subject_name(name).issuer_name(name).public_key(private.public_key())
              .serial_number(x509.random_serial_number()).not_valid_before(now - _dt.timedelta(minutes=5))

@@ -76,11 +76,17 @@ class WebXrGlove(_WebXrDevice[WebXrSettings], kind="glove"):
         xr = frame.xr
         out = []
         if xr.right is not None:
-            out.append(Sample(self.topic("hand"), JointSample(frame.stamp_ns, smplx.HAND_POSE_NAMES, hands.hand_pose(xr.right))))
+            out.append(
+                Sample(
+                    self.topic("hand"), JointSample(frame.stamp_ns, smplx.HAND_POSE_NAMES, hands.hand_pose(xr.right))
+                )
+            )
         for side in hands.HANDS:
             joints = xr.hand(side)
             if joints is not None:
-                out.append(Sample(self.topic(f"xr_{side}"), JointSample(frame.stamp_ns, hands.RAW_NAMES, joints.reshape(-1))))
+                out.append(
+                    Sample(self.topic(f"xr_{side}"), JointSample(frame.stamp_ns, hands.RAW_NAMES, joints.reshape(-1)))
+                )
         return out
 
 

@@ -28,14 +28,26 @@ from pathlib import Path
 
 import numpy as np
 
-from teleprev.devices import (ClockSync, DeviceError, DeviceStartError, OperatorLink, SessionClock, describe_exception,
-                              raise_this_thread)
-from teleprev_devices.fanout import Fanout, acquire as acquire_shared, release as release_shared
+from teleprev.devices import (
+    ClockSync,
+    DeviceError,
+    DeviceStartError,
+    OperatorLink,
+    SessionClock,
+    describe_exception,
+    raise_this_thread,
+)
+from teleprev_devices.fanout import Fanout
+from teleprev_devices.fanout import acquire as acquire_shared
+from teleprev_devices.fanout import release as release_shared
 from teleprev_devices.webxr import certificate, wire
 
 PAGE_DIR = Path(__file__).parent / "page"
-PAGE_FILES = {"/": ("index.html", "text/html; charset=utf-8"), "/index.html": ("index.html", "text/html; charset=utf-8"),
-              "/xr.js": ("xr.js", "text/javascript; charset=utf-8")}
+PAGE_FILES = {
+    "/": ("index.html", "text/html; charset=utf-8"),
+    "/index.html": ("index.html", "text/html; charset=utf-8"),
+    "/xr.js": ("xr.js", "text/javascript; charset=utf-8"),
+}
 SOCKET_PATH = "/ws"
 STATUS_PERIOD_S = 0.25
 LOOPBACK = "127.0.0.1"
@@ -105,7 +117,9 @@ class XrServer:
         failure: list[str] = []
         self.port = port
         self.priority = ""  # the server thread's nice value once it runs, or why it could not be raised
-        self._thread = threading.Thread(target=self._run, args=(port, started, failure), name=f"webxr-{port}", daemon=True)
+        self._thread = threading.Thread(
+            target=self._run, args=(port, started, failure), name=f"webxr-{port}", daemon=True
+        )
         self._thread.start()
         started.wait(10.0)  # (set when serving, or when it could not)
         if failure or not started.is_set():
@@ -155,7 +169,9 @@ class XrServer:
             server = await serve(self._connection, self.host, port, ssl=context, process_request=self._request,
                                  max_size=MAX_MESSAGE, compression=None, ping_interval=5, ping_timeout=10)
         except OSError as exc:
-            failure.append(f"{_CANNOT_LISTEN} {self.host}:{port} ({exc.strerror or exc}); is another program using the port?")
+            failure.append(
+                f"{_CANNOT_LISTEN} {self.host}:{port} ({exc.strerror or exc}); is another program using the port?"
+            )
             started.set()
             return
         async with server:
@@ -175,7 +191,9 @@ class XrServer:
             given = urllib.parse.parse_qs(url.query).get("token", [""])[0]
             if not hmac.compare_digest(given.encode(), self.credentials.token.encode()):
                 self.counters.refused_connections += 1
-                return connection.respond(403, "this page needs the pairing token teleprev printed (its URL's ?token=...)\n")
+                return connection.respond(
+                    403, "this page needs the pairing token teleprev printed (its URL's ?token=...)\n"
+                )
         if url.path == SOCKET_PATH:
             return None
         if url.path not in PAGE_FILES:

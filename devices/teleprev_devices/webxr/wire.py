@@ -62,7 +62,9 @@ def unpack(data: bytes) -> XrFrame:
 
 
 def pack(seq: int, time_ms: float, sent_ms: float, head=None, left=None, right=None) -> bytes:
-    present = (HEADSET if head is not None else 0) | (LEFT if left is not None else 0) | (RIGHT if right is not None else 0)
+    present = (
+        (HEADSET if head is not None else 0) | (LEFT if left is not None else 0) | (RIGHT if right is not None else 0)
+    )
     values = np.zeros(_FLOATS, dtype="<f4")
     for part, start, size in ((head, 0, 7), (left, 7, 200), (right, 207, 200)):
         if part is not None:

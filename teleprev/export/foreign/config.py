@@ -69,7 +69,9 @@ class ImportRecipe:
             return seen
         missing = [n for n in wanted if n not in seen]
         if self.section.joints.get(topic) and missing:
-            raise SessionError(f"[import.joints] {topic}: no joints {missing} in this stream (it has {list(seen)})", where)
+            raise SessionError(
+                f"[import.joints] {topic}: no joints {missing} in this stream (it has {list(seen)})", where
+            )
         names = tuple(n for n in wanted if n in seen)
         if not names:
             raise SessionError(f"{topic} has none of the URDF's joints (it has {list(seen)}, the URDF {list(wanted)})",

@@ -5,15 +5,15 @@ episode events, and joint streams given with the recipe's joints in its order (a
 
 from __future__ import annotations
 
+from collections.abc import Iterator
 from pathlib import Path
-from typing import Iterator
 
 import numpy as np
 
+from teleprev.errors import SessionError
 from teleprev.export.foreign.config import ImportRecipe
 from teleprev.export.foreign.episodes import cut_episodes
 from teleprev.export.recipe import JOINTS
-from teleprev.errors import SessionError
 from teleprev.messages import JointSample, Logged
 from teleprev.session.reader import Episode, SessionReader
 

@@ -47,8 +47,17 @@ def open_foreign(path: Path, recipe: ImportRecipe):
     return (RosBagReader if detect_format(path) == "ros2" else FoxgloveReader)(path, recipe)
 
 
-def import_files(paths: list[Path], recipe: ImportRecipe, repo_id: str, root: Path, *, fps: int = 0,
-                 append: bool = False, video: VideoSettings | None = None, report: Reporter = no_progress) -> ExportReport:
+def import_files(
+    paths: list[Path],
+    recipe: ImportRecipe,
+    repo_id: str,
+    root: Path,
+    *,
+    fps: int = 0,
+    append: bool = False,
+    video: VideoSettings | None = None,
+    report: Reporter = no_progress,
+) -> ExportReport:
     options = ExportOptions(list(paths), repo_id, Path(root), recipe.recipe, fps=fps, append=append, video=video,
                             open_reader=partial(open_foreign, recipe=recipe))
     return export(options, report)

@@ -119,12 +119,16 @@ def write_ros2(path: str | Path, spec: ForeignSpec = ForeignSpec(), storage: str
                 w.write(c["image"], ns + lat, ts.serialize_cdr(msg, image_type))
             elif kind == "pose":
                 p, q = pose_parts(t)
-                P, Q = T["geometry_msgs/msg/Point"](x=p[0], y=p[1], z=p[2]), T["geometry_msgs/msg/Quaternion"](x=q[0], y=q[1], z=q[2], w=q[3])
+                P, Q = (
+                    T["geometry_msgs/msg/Point"](x=p[0], y=p[1], z=p[2]),
+                    T["geometry_msgs/msg/Quaternion"](x=q[0], y=q[1], z=q[2], w=q[3]),
+                )
                 pose = T["geometry_msgs/msg/PoseStamped"](header=header(ns, "base_link"),
                                                           pose=T["geometry_msgs/msg/Pose"](position=P, orientation=Q))
                 w.write(c["pose"], ns + lat, ts.serialize_cdr(pose, "geometry_msgs/msg/PoseStamped"))
-                tr = T["geometry_msgs/msg/Transform"](translation=T["geometry_msgs/msg/Vector3"](x=p[0], y=p[1], z=p[2]),
-                                                      rotation=Q)
+                tr = T["geometry_msgs/msg/Transform"](
+                    translation=T["geometry_msgs/msg/Vector3"](x=p[0], y=p[1], z=p[2]), rotation=Q
+                )
                 tf = T["tf2_msgs/msg/TFMessage"](transforms=[T["geometry_msgs/msg/TransformStamped"](
                     header=header(ns, "base_link"), child_frame_id="tool0", transform=tr)])
                 w.write(c["tf"], ns + lat, ts.serialize_cdr(tf, "tf2_msgs/msg/TFMessage"))
@@ -147,7 +151,11 @@ def write_foxglove_mcap(path: str | Path, spec: ForeignSpec = ForeignSpec()) -> 
         w = Writer(f, compression=CompressionType.ZSTD)
         w.start(profile="", library="interop-sample")
         channels = {}
-        for topic, cls in (("/joints", fm.JointStates), ("/camera/front", fm.CompressedImage), ("/ee_pose", fm.PoseInFrame)):
+        for topic, cls in (
+            ("/joints", fm.JointStates),
+            ("/camera/front", fm.CompressedImage),
+            ("/ee_pose", fm.PoseInFrame),
+        ):
             schema = cls.get_schema()
             sid = w.register_schema(schema.name, schema.encoding, bytes(schema.data))
             channels[topic] = w.register_channel(topic, "protobuf", sid)
@@ -161,12 +169,16 @@ def write_foxglove_mcap(path: str | Path, spec: ForeignSpec = ForeignSpec()) -> 
                 w.add_message(channels["/joints"], ns + lat, data, ns + lat)
             elif kind == "image":
                 ok, jpg = cv2.imencode(".jpg", _frame(spec, value, t), [cv2.IMWRITE_JPEG_QUALITY, 90])
-                data = fm.CompressedImage(timestamp=stamp, frame_id="camera", data=jpg.tobytes(), format="jpeg").encode()
+                data = fm.CompressedImage(
+                    timestamp=stamp, frame_id="camera", data=jpg.tobytes(), format="jpeg"
+                ).encode()
                 w.add_message(channels["/camera/front"], ns + lat, data, ns + lat)
             elif kind == "pose":
                 q = arm_q(t)
-                pose = fm.Pose(position=fm.Vector3(x=0.3 + 0.1 * q[0], y=0.1 * q[1], z=0.4 + 0.1 * q[2]),
-                               orientation=fm.Quaternion(x=0.0, y=0.0, z=float(np.sin(q[3] / 2)), w=float(np.cos(q[3] / 2))))
+                pose = fm.Pose(
+                    position=fm.Vector3(x=0.3 + 0.1 * q[0], y=0.1 * q[1], z=0.4 + 0.1 * q[2]),
+                    orientation=fm.Quaternion(x=0.0, y=0.0, z=float(np.sin(q[3] / 2)), w=float(np.cos(q[3] / 2))),
+                )
                 data = fm.PoseInFrame(timestamp=stamp, frame_id="base_link", pose=pose).encode()
                 w.add_message(channels["/ee_pose"], ns + lat, data, ns + lat)
         w.finish()

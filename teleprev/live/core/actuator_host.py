@@ -32,8 +32,15 @@ from teleprev import topics
 from teleprev.clock import SessionClock
 from teleprev.devices.contract import Actuator
 from teleprev.devices.runner import ActuatorPort, DeviceRunner, RunnerStats, Sink
-from teleprev.live.core.paced import (ACTUATOR_PRIORITY, PacedStatus, become_paced, close_held, fork_paced,
-                                      paced_pipe, reap)
+from teleprev.live.core.paced import (
+    ACTUATOR_PRIORITY,
+    PacedStatus,
+    become_paced,
+    close_held,
+    fork_paced,
+    paced_pipe,
+    reap,
+)
 from teleprev.live.core.pipe_codec import frame, types_by_name, unframe
 from teleprev.live.core.sender import Outlet, WireCommand
 from teleprev.messages import Event, JointSample, PoseSample, Sample

@@ -47,7 +47,14 @@ class EpisodeTracker:
         """The operator's mark of the running (or last) episode."""
         if self.index < 0:
             return []
-        return [{"event": "outcome", "episode": self.index, "task": self.task, "outcome": "success" if success else "failure"}]
+        return [
+            {
+                "event": "outcome",
+                "episode": self.index,
+                "task": self.task,
+                "outcome": "success" if success else "failure",
+            }
+        ]
 
     @staticmethod
     def judged(index: int, task: str, mark: str, reason: str) -> dict:

@@ -78,5 +78,7 @@ class ExecuteGate:
             return Refusal(GateState.HELD, "; ".join(self._holds.values()))
         if self._fault and unattended:
             tell, self._fault_told = not self._fault_told, True
-            return Refusal(GateState.FAULTED, f"{self._fault} (an unattended session does not engage again after a fault)", tell)
+            return Refusal(
+                GateState.FAULTED, f"{self._fault} (an unattended session does not engage again after a fault)", tell
+            )
         return None

@@ -35,24 +35,39 @@ import threading
 import time
 import traceback
 from collections import Counter
+from collections.abc import Callable
 from dataclasses import dataclass, field, replace
-from typing import Any, Callable
+from typing import Any
 
 import numpy as np
 
-from teleprev.devices.contract import Actuator
-from teleprev.messages import Event, ImageSample, JointSample, Logged, PoseSample, Sample
-from teleprev.pipeline.driver import PipelineDriver
 from teleprev import topics
 from teleprev.clock import SessionClock
-from teleprev.status import LoopSnapshot
-from teleprev.live.core.controls import (Control, DiscardEpisode, Engage, EStop, Halt, Hold, MarkOutcome, OperatorNote,
-                                    Release, StartEpisode, StopEpisode, ToPreview, UNATTENDED, WorldLayout)
+from teleprev.devices.contract import Actuator
+from teleprev.live.core.actuator_host import WireRecord
+from teleprev.live.core.controls import (
+    UNATTENDED,
+    Control,
+    DiscardEpisode,
+    Engage,
+    EStop,
+    Halt,
+    Hold,
+    MarkOutcome,
+    OperatorNote,
+    Release,
+    StartEpisode,
+    StopEpisode,
+    ToPreview,
+    WorldLayout,
+)
 from teleprev.live.core.episodes import EpisodeTracker
 from teleprev.live.core.gate import ExecuteGate, GateState
-from teleprev.live.core.actuator_host import WireRecord
 from teleprev.live.core.input_watch import InputEvent, InputWatch
 from teleprev.live.core.relay import CommandRelay
+from teleprev.messages import Event, ImageSample, JointSample, Logged, PoseSample, Sample
+from teleprev.pipeline.driver import PipelineDriver
+from teleprev.status import LoopSnapshot
 from teleprev.thread_priority import raise_this_thread
 
 _STOP = object()
@@ -67,7 +82,11 @@ class StreamCounter:
     latency_ns: int = 0  # receive - acquisition of the last sample
 
     def rate_hz(self) -> float:
-        return (self.count - 1) * 1e9 / (self.last_ns - self.first_ns) if self.count > 1 and self.last_ns > self.first_ns else 0.0
+        return (
+            (self.count - 1) * 1e9 / (self.last_ns - self.first_ns)
+            if self.count > 1 and self.last_ns > self.first_ns
+            else 0.0
+        )
 
 
 @dataclass
@@ -166,7 +185,9 @@ class SessionLoop:
         self._thread: threading.Thread | None = None
         self.failure = ""  # why the loop no longer runs the pipeline (it raised), or ""
         self.priority = ""  # the loop thread's nice value once it runs, or why it could not be raised
-        self.taps: list[Callable[[Logged], Any]] = []  # each sample as logged, on this thread (e.g. a policy's observations)
+        self.taps: list[
+            Callable[[Logged], Any]
+        ] = []  # each sample as logged, on this thread (e.g. a policy's observations)
         self._handlers: dict[type, Callable[[Any, int], str | None]] = {
             Engage: self._engage, ToPreview: self._to_preview, EStop: self._estop, Halt: self._halt,
             Hold: self._hold, Release: self._release, StartEpisode: self._episode, StopEpisode: self._episode,
@@ -442,7 +463,9 @@ class SessionLoop:
         refusal = self.gate.refusal(unattended) if mode == "execute" else None
         if refusal is not None:
             if refusal.tell:  # why it stays in preview, once per fault
-                self._event(topics.OPERATOR, "teleprev.OperatorEvent", {"event": "engage_refused", "detail": refusal.why}, now)
+                self._event(
+                    topics.OPERATOR, "teleprev.OperatorEvent", {"event": "engage_refused", "detail": refusal.why}, now
+                )
             refused = refusal.why
         else:
             refused = self.driver.request_mode("estop" if halt else mode, t) if self.driver else "no pipeline"

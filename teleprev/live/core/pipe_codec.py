@@ -1,7 +1,8 @@
 """The command sender's pipe messages as length-prefixed JSON: typed, and nothing is unpickled.
 
 A message is a frozen dataclass of a known type (`types`: name -> class), a string, or a plain value;
-numpy arrays, tuples and dicts (string keys) are tagged so that they come back as they went. Floats keep every bit: JSON writes
+numpy arrays, tuples and dicts (string keys) are tagged so that they come back as they went. Floats keep every bit:
+JSON writes
 a float's shortest repr, which reads back to the same double (-0.0 and non-finite values included), so a
 session re-runs bit for bit whatever crossed the pipe.
 

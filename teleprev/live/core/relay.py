@@ -12,7 +12,7 @@ from __future__ import annotations
 
 import threading
 from collections import Counter
-from typing import Callable
+from collections.abc import Callable
 
 from teleprev.clock import SessionClock
 from teleprev.devices.contract import Actuator

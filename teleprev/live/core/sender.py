@@ -42,8 +42,15 @@ from dataclasses import dataclass
 import numpy as np
 
 from teleprev.clock import SessionClock
-from teleprev.live.core.paced import (DEFAULT_PRIORITY, PacedStatus, become_paced, close_held, fork_paced,
-                                      paced_pipe, reap)
+from teleprev.live.core.paced import (
+    DEFAULT_PRIORITY,
+    PacedStatus,
+    become_paced,
+    close_held,
+    fork_paced,
+    paced_pipe,
+    reap,
+)
 from teleprev.live.core.pipe_codec import frame, types_by_name, unframe
 from teleprev.messages import JointSample
 from teleprev.pipeline.planner import CommandPlanner, ModeUpdate, TargetUpdate, Tick
@@ -109,7 +116,7 @@ class CommandSender:
         self._send_lock = threading.Lock()
 
     # ---- the session process ---------------------------------------------------------------------
-    def start(self) -> "CommandSender":
+    def start(self) -> CommandSender:
         """Fork the sender. Call before the session starts its threads (paced.fork_paced), after the
         actuator processes whose outlets it writes to have been forked."""
         updates_r, updates_w = paced_pipe()

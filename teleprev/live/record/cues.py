@@ -39,7 +39,7 @@ class Cues:
         self._thread: threading.Thread | None = None
 
     @classmethod
-    def for_terminal(cls, stream: TextIO | None) -> "Cues":
+    def for_terminal(cls, stream: TextIO | None) -> Cues:
         """The bell on `stream` when it is a terminal (never into a log file), and speech when installed."""
         try:
             bell = stream if stream is not None and stream.isatty() else None

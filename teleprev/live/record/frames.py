@@ -8,13 +8,13 @@ from __future__ import annotations
 
 import numpy as np
 
+from teleprev.errors import ConfigError
 from teleprev.messages import JointSample, Transform, TransformsSample
 from teleprev.retarget.calibration import Calibration
 from teleprev.rig import Rig, SensorFrame
 from teleprev.robot.frames import FramePublisher
 from teleprev.robot.model import RobotModel
 from teleprev.transforms import matrix_to_quat, rpy_to_matrix
-from teleprev.errors import ConfigError
 
 SUIT_FRAME = "suit"
 
@@ -30,7 +30,9 @@ def sensor_frames(rig: Rig, robot: RobotModel, calibration: Calibration) -> tupl
         if frame.rpy is not None:
             rotation = rpy_to_matrix(*frame.rpy)
         elif frame.look_at is not None:
-            rotation = optical_look_at(np.asarray(frame.xyz, float), np.asarray(frame.look_at, float), f"{rig.path} [frames.{name}]")
+            rotation = optical_look_at(
+                np.asarray(frame.xyz, float), np.asarray(frame.look_at, float), f"{rig.path} [frames.{name}]"
+            )
         elif name == SUIT_FRAME:
             rotation = calibration.suit_to_robot()
         else:

@@ -50,8 +50,14 @@ def operator_status(snapshot) -> dict:
     step = snapshot.step
     report = step.report if step is not None else {}
     return {
-        "recording": True, "mode": snapshot.mode, "episode": snapshot.episode, "episode_active": snapshot.episode_active,
-        "task": snapshot.task, "corrector": report.get("corrector", ""),
-        "corrected_links": sorted(report.get("colliding_links", ())), "message": snapshot.message, "fault": snapshot.fault,
+        "recording": True,
+        "mode": snapshot.mode,
+        "episode": snapshot.episode,
+        "episode_active": snapshot.episode_active,
+        "task": snapshot.task,
+        "corrector": report.get("corrector", ""),
+        "corrected_links": sorted(report.get("colliding_links", ())),
+        "message": snapshot.message,
+        "fault": snapshot.fault,
         "commands_sent": snapshot.commands_sent,
     }

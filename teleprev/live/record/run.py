@@ -18,15 +18,15 @@ from dataclasses import dataclass, field
 from rich.console import Console
 from rich.live import Live
 
-from teleprev.preview.dashboard import Dashboard
-from teleprev.preview.keys import KeyReader
-from teleprev.preview.robot_view import RobotView
-from teleprev.robot.model import load_robot
 from teleprev.live.core.controls import UNATTENDED, Control, Engage, StartEpisode, StopEpisode, ToPreview
 from teleprev.live.record.cues import Cues
 from teleprev.live.record.operator_actions import handle_key
 from teleprev.live.record.schedule import EpisodeTimes, Period, Schedule
 from teleprev.live.record.session import LiveSession
+from teleprev.preview.dashboard import Dashboard
+from teleprev.preview.keys import KeyReader
+from teleprev.preview.robot_view import RobotView
+from teleprev.robot.model import load_robot
 from teleprev.session.summary import PREVIEW_ONLY, device_lost
 
 # Fixed view bounds (metres) that hold an xArm's workspace, so the picture does not rescale.
@@ -407,8 +407,10 @@ def print_summary(console: Console, recording: LiveSession, summary) -> None:
     lost = {name: device_lost(c) for name, c in counts.items()}
     detail = ", ".join(f"{name} {n}" for name, n in sorted(lost.items()) if n)
     console.print(
-        f"episodes: {recording.loop.episodes.index + 1}   commands sent: {sum(recording.loop.stats.commands_sent.values())}"
-        f"   lost before recording: {sum(lost.values())}{f' ({detail})' if detail else ''}   file: {recording.options.out}"
+        f"episodes: {recording.loop.episodes.index + 1}   commands sent: "
+        f"{sum(recording.loop.stats.commands_sent.values())}"
+        f"   lost before recording: {sum(lost.values())}{f' ({detail})' if detail else ''}   file: "
+        f"{recording.options.out}"
     )
     if not sum(recording.loop.stats.commands_sent.values()):
         console.print(f"[yellow]preview only:[/] {PREVIEW_ONLY}", highlight=False)

@@ -32,7 +32,7 @@ class EpisodeTimes:
     engage_after_s: float | None = None
     marks: str = ""
 
-    def check(self) -> "EpisodeTimes":
+    def check(self) -> EpisodeTimes:
         """Itself, or ConfigError naming the option (as `teleprev record` spells it) that is wrong."""
         if not isinstance(self.episodes, int) or self.episodes < 1:
             raise ConfigError(f"--episodes must be 1 or more, got {self.episodes}")
@@ -70,7 +70,7 @@ class EpisodeTimes:
                 "marks": self.marks, "preview_before_end_s": repr(rest_s)}
 
     @classmethod
-    def from_record(cls, record: dict[str, str]) -> "EpisodeTimes":
+    def from_record(cls, record: dict[str, str]) -> EpisodeTimes:
         engage = record.get("engage_after_s", "")
         return cls(int(record["episodes"]), float(record["episode_s"]), float(record.get("reset_s", "0")),
                    float(engage) if engage else None, record.get("marks", ""))

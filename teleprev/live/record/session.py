@@ -21,21 +21,20 @@ from pathlib import Path
 
 import numpy as np
 
-from teleprev import __version__, numeric_platform
-from teleprev.errors import ConfigError
+from teleprev import __version__, numeric_platform, topics
 from teleprev.assembly import build_pipeline, rig_calibration
-from teleprev.pipeline.driver import InputTopics, PipelineDriver
-from teleprev.status import DeviceRow
-from teleprev.rig import Rig, load_rig
-from teleprev.robot.frames import FramePublisher
-from teleprev.robot.model import load_robot
-from teleprev import topics
 from teleprev.clock import SessionClock
-from teleprev.live.record.frames import RobotFrames, sensor_frames
+from teleprev.errors import ConfigError
 from teleprev.live.core.loop import LoopInbox, SessionLoop
+from teleprev.live.record.frames import RobotFrames, sensor_frames
 from teleprev.live.record.operator_actions import ACTION_KEYS, handle_key, operator_status
 from teleprev.live.record.schedule import PLAN_RECORD, EpisodeTimes
 from teleprev.messages import Logged, RobotDescription
+from teleprev.pipeline.driver import InputTopics, PipelineDriver
+from teleprev.rig import Rig, load_rig
+from teleprev.robot.frames import FramePublisher
+from teleprev.robot.model import load_robot
+from teleprev.status import DeviceRow
 
 URDF_MEDIA_TYPE = "application/xml"  # the rig's URDF, attached to the session as <name>.urdf
 # What a switch to preview may wait for before it reaches the sender: a busy session loop (its queue)
@@ -111,11 +110,18 @@ class LiveSession:
             from teleprev.live.view.foxglove_view import FoxgloveView, session_channels
 
             # every channel declared before the server starts: a client that connects at once sees them all
-            self.view = FoxgloveView(options.foxglove, session_channels([s for dev in self.devices.values() for s in dev.streams()]))
+            self.view = FoxgloveView(
+                options.foxglove, session_channels([s for dev in self.devices.values() for s in dev.streams()])
+            )
         try:
-            self.recorder = Recorder(out, self._metadata(), attachments={urdf.name: (URDF_MEDIA_TYPE, urdf.read_bytes())},
-                                     on_failure=self._recording_failed, lag_budget_s=LAG_BUDGET_S,
-                                     on_behind=self._recording_behind)
+            self.recorder = Recorder(
+                out,
+                self._metadata(),
+                attachments={urdf.name: (URDF_MEDIA_TYPE, urdf.read_bytes())},
+                on_failure=self._recording_failed,
+                lag_budget_s=LAG_BUDGET_S,
+                on_behind=self._recording_behind,
+            )
         except BaseException:
             if self.view is not None:
                 self.view.close()
@@ -133,8 +139,10 @@ class LiveSession:
         hosted = {host.name: host for host in self.hosts.values()}
         self.runners = {name: hosted.get(name) or DeviceRunner(dev, inbox.sink, self.clock)
                         for name, dev in self.devices.items()}
-        self.actuators = {kind: self.hosts.get(kind) or ActuatorPort(self.devices[first[kind]], self.runners[first[kind]])
-                          for kind in ("arm", "hand")}
+        self.actuators = {
+            kind: self.hosts.get(kind) or ActuatorPort(self.devices[first[kind]], self.runners[first[kind]])
+            for kind in ("arm", "hand")
+        }
         self.sender = CommandSender(CommandPlanner.for_pipeline(self.pipeline), self.clock,
                                     rig.pipeline.command_rate_hz, outlets=tuple(h.outlet for h in self.hosts.values()),
                                     warm_pose=self._inside_limits(names["arm"], names["hand"]))
@@ -258,10 +266,16 @@ class LiveSession:
         meta = {
             "rig": rig_record(rig),
             "calibration": {"path": str(cal_path or ""), "toml": cal_path.read_text() if cal_path else ""},
-            "session": {"operator": o.operator or rig.rig.operator, "task": self.task, "participant": o.participant or rig.rig.participant,
-                        "condition": o.condition or rig.rig.condition, "end_effector": rig.rig.end_effector,
-                        "practice": "true" if o.practice else "false", "software_version": __version__,
-                        "numeric_platform": numeric_platform.describe()},
+            "session": {
+                "operator": o.operator or rig.rig.operator,
+                "task": self.task,
+                "participant": o.participant or rig.rig.participant,
+                "condition": o.condition or rig.rig.condition,
+                "end_effector": rig.rig.end_effector,
+                "practice": "true" if o.practice else "false",
+                "software_version": __version__,
+                "numeric_platform": numeric_platform.describe(),
+            },
         }
         tasks = dict(rig.tasks)
         if o.task_text:
@@ -284,7 +298,7 @@ class LiveSession:
         meta["study"] = {"survey_sidecar": Path(o.out).with_suffix(".survey.json").name}
         return meta
 
-    def start(self) -> "LiveSession":
+    def start(self) -> LiveSession:
         for host in self.hosts.values():  # forked first, before this session starts any thread
             host.fork()
         self.sender.start()  # after the actuators' processes, whose command pipes it writes
@@ -308,14 +322,24 @@ class LiveSession:
         self.loop.stop()
         stats = self.loop.stats
         status = self.sender.status
-        extra = {"loop": {"dropped": json.dumps(dict(stats.dropped)), "commands_sent": json.dumps(dict(stats.commands_sent)),
-                          "command_errors": json.dumps(dict(stats.command_errors)),
-                          "device_failures": json.dumps(dict(stats.device_failures)), "failure": self.loop.failure,
-                          "priority": self.loop.priority},
-                 "sender": {"rate_hz": f"{1e9 / self.sender.period_ns:g}", "ticks": str(stats.ticks),
-                            "realtime": "true" if status and status.realtime else "false",
-                            "detail": status.detail if status else "", "dropped_updates": str(self.sender.dropped_updates)},
-                 "devices": {name: json.dumps(counts) for name, counts in self.device_counts().items()}}
+        extra = {
+            "loop": {
+                "dropped": json.dumps(dict(stats.dropped)),
+                "commands_sent": json.dumps(dict(stats.commands_sent)),
+                "command_errors": json.dumps(dict(stats.command_errors)),
+                "device_failures": json.dumps(dict(stats.device_failures)),
+                "failure": self.loop.failure,
+                "priority": self.loop.priority,
+            },
+            "sender": {
+                "rate_hz": f"{1e9 / self.sender.period_ns:g}",
+                "ticks": str(stats.ticks),
+                "realtime": "true" if status and status.realtime else "false",
+                "detail": status.detail if status else "",
+                "dropped_updates": str(self.sender.dropped_updates),
+            },
+            "devices": {name: json.dumps(counts) for name, counts in self.device_counts().items()},
+        }
         if self.physics is not None:
             stats = self.physics.link().stats()
             extra["world_run"] = {"steps": str(stats.steps), "late_max_ms": f"{stats.late_max_ms:.3f}",
@@ -333,7 +357,7 @@ class LiveSession:
                 self.physics.close()
         return self.summary
 
-    def __enter__(self) -> "LiveSession":
+    def __enter__(self) -> LiveSession:
         return self.start()
 
     def __exit__(self, *exc) -> None:

@@ -12,19 +12,27 @@ from rich.console import Console, Group
 from rich.live import Live
 from rich.text import Text
 
-from teleprev.errors import ConfigError, DeviceError
-from teleprev.messages import JointSample
 from teleprev.assembly import build_pipeline, rig_calibration
+from teleprev.clock import SessionClock
+from teleprev.errors import ConfigError, DeviceError
+from teleprev.export.actions import is_dataset
+from teleprev.live.record.run import ROBOT_BOUNDS
+from teleprev.live.replay.player import (
+    ROUNDING,
+    Player,
+    load_dataset_playback,
+    load_playback,
+    safe_speed,
+    smooth,
+    validate,
+)
+from teleprev.live.replay.replay_recording import ReplayRecording
+from teleprev.messages import JointSample
 from teleprev.preview.keys import KeyReader
 from teleprev.preview.robot_view import Layer, RobotView
-from teleprev.export.actions import is_dataset
-from teleprev.live.replay.player import ROUNDING, Player, load_dataset_playback, load_playback, safe_speed, smooth, validate
-from teleprev.live.replay.replay_recording import ReplayRecording
 from teleprev.rig import load_recorded_rig, load_rig
 from teleprev.robot.model import load_robot
-from teleprev.clock import SessionClock
 from teleprev.session.reader import SessionReader
-from teleprev.live.record.run import ROBOT_BOUNDS
 
 
 class StateTap:
@@ -97,7 +105,10 @@ def build_player(session: Path, episode, speed: float, to: str, rig_path=None, s
             devices = {kind: cls(f"replay_{kind}", cls.Settings(), context) for kind, cls in entries.items()}
         else:
             rig.require("arm", "hand")
-            devices = {kind: rig.of_kind(kind)[0].cls(rig.of_kind(kind)[0].name, rig.of_kind(kind)[0].settings, context) for kind in ("arm", "hand")}
+            devices = {
+                kind: rig.of_kind(kind)[0].cls(rig.of_kind(kind)[0].name, rig.of_kind(kind)[0].settings, context)
+                for kind in ("arm", "hand")
+            }
         recording = ReplayRecording(out, rig, session, episode, clock) if out is not None else None
         actuators = recording.actuators(devices) if recording else devices
         sink = recording.sink(tap.sink) if recording else tap.sink
@@ -109,11 +120,21 @@ def build_player(session: Path, episode, speed: float, to: str, rig_path=None, s
         if arm is None or hand is None:
             return None  # not connected yet: the ramp waits
 
-        pick = lambda s, names: np.array([s.positions[s.names.index(n)] for n in names])
+        def pick(s, names):
+            return np.array([s.positions[s.names.index(n)] for n in names])
         return pick(arm, playback.arm_names), pick(hand, playback.effector_names)
 
-    player = Player(playback, effective, actuators, pipeline.arm_guard, eff_guard, measured, rig.pipeline.engage_speed_frac,
-                    motion=pipeline.motion, clock=clock)
+    player = Player(
+        playback,
+        effective,
+        actuators,
+        pipeline.arm_guard,
+        eff_guard,
+        measured,
+        rig.pipeline.engage_speed_frac,
+        motion=pipeline.motion,
+        clock=clock,
+    )
     if recording is not None:
         recording.playing = lambda: player.state.mode == "playing"
     return player, runners, tap, rig, message, recording
@@ -130,8 +151,12 @@ def _start_view(port: int | None, session: Path, player: Player, console: Consol
     stop = threading.Event()
     p = player.p
     lo, hi = int(p.t_ns[0]) - 1_000_000_000, int(p.t_ns[-1]) + 1_000_000_000  # the window around the played steps
-    thread = threading.Thread(target=stream_session, name="foxglove-replay", daemon=True,
-                              args=(view, session, lo, hi, player.speed, lambda: player.state.mode in ("playing", "done"), stop))
+    thread = threading.Thread(
+        target=stream_session,
+        name="foxglove-replay",
+        daemon=True,
+        args=(view, session, lo, hi, player.speed, lambda: player.state.mode in ("playing", "done"), stop),
+    )
     thread.start()
     console.print(f"Foxglove: open connection {view.url}", highlight=False)
     return view, stop, thread
@@ -198,13 +223,21 @@ def _show(session: Path, player: Player, thread: threading.Thread, to: str, rig,
         joints = dict(zip(p.arm_names, p.arm[k]))
         if p.effector_names[0] in robot.joint_index:
             joints.update(zip(p.effector_names, p.effector[k]))
-        banner = {"preview": ("REPLAY: PREVIEW (the robot holds; space to engage)", "bold black on yellow"),
-                  "ramp": ("REPLAY: moving to the start", "bold white on red"),
-                  "playing": ("REPLAY: PLAYING", "bold white on red"), "done": ("REPLAY: done", "bold")}[player.state.mode]
-        info = Text(f"{session.name}  step {k + 1}/{len(p.t_ns)}  {(p.t_ns[k] - p.t_ns[0]) / 1e9:6.2f} s  speed {player.speed:.2f}x  "
-                    f"({p.source}; {p.adjusted} steps adjusted by the guards)")
+        banner = {
+            "preview": ("REPLAY: PREVIEW (the robot holds; space to engage)", "bold black on yellow"),
+            "ramp": ("REPLAY: moving to the start", "bold white on red"),
+            "playing": ("REPLAY: PLAYING", "bold white on red"),
+            "done": ("REPLAY: done", "bold"),
+        }[player.state.mode]
+        info = Text(
+            f"{session.name}  step {k + 1}/{len(p.t_ns)}  {(p.t_ns[k] - p.t_ns[0]) / 1e9:6.2f} s  speed "
+            f"{player.speed:.2f}x  "
+            f"({p.source}; {p.adjusted} steps adjusted by the guards)"
+        )
         size = console.size
-        picture = robot_view.render([Layer(robot.vector(joints), "cyan")], max(size.width - 2, 20), max(size.height - 5, 6))
+        picture = robot_view.render(
+            [Layer(robot.vector(joints), "cyan")], max(size.width - 2, 20), max(size.height - 5, 6)
+        )
         return Group(Text(banner[0], style=banner[1], justify="center"), info, Text(message, style="yellow"), picture)
 
     with KeyReader(lambda key: player.engage() if key == " " else player.stop() if key in ("q", "\x1b") else None):

@@ -19,13 +19,12 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from teleprev import topics
 from teleprev.errors import ConfigError, DeviceError, SessionError
 from teleprev.messages import JointSample
-from teleprev.pipeline.derivatives import divided_differences, runs
+from teleprev.pipeline.derivatives import RESUME_GAP_NS, divided_differences, runs
 from teleprev.pipeline.guard import JointGuard
-from teleprev.pipeline.derivatives import RESUME_GAP_NS
 from teleprev.pipeline.trajectory import JointMotion
-from teleprev import topics
 from teleprev.session.reader import SessionReader
 
 
@@ -106,8 +105,16 @@ def _playback(reader: SessionReader, path, episode: int | None) -> Playback:
         e.append(last_e)
     # Each side is sent at its own recorded stamps only: a held value at the other side's stamps would be
     # a stop-and-go that no robot should follow.
-    return Playback(np.array(stamps, dtype=np.int64), np.array(a), np.array(e), tuple(arm_names), tuple(eff_names), source,
-                    arm_sent=np.array([s in arm for s in stamps]), effector_sent=np.array([s in eff for s in stamps]))
+    return Playback(
+        np.array(stamps, dtype=np.int64),
+        np.array(a),
+        np.array(e),
+        tuple(arm_names),
+        tuple(eff_names),
+        source,
+        arm_sent=np.array([s in arm for s in stamps]),
+        effector_sent=np.array([s in eff for s in stamps]),
+    )
 
 
 def validate(p: Playback, arm_guard: JointGuard, effector_guard: JointGuard) -> Playback:
@@ -205,7 +212,9 @@ class _Generated:
                 and np.max(np.abs(self.effector - effector)) < 1e-9)
 
 
-def smooth(p: Playback, motion, effector_guard: JointGuard, speed: float = 1.0, max_step_s: float = 1 / 120) -> Playback:
+def smooth(
+    p: Playback, motion, effector_guard: JointGuard, speed: float = 1.0, max_step_s: float = 1 / 120
+) -> Playback:
     """The played sequence as the pipeline's own generator would command it (`replay --smooth`), in the
     time it is played at `speed`: from rest at the first command, meeting each recorded command as a
     moving target (at most `max_step_s` apart, so no pause is long enough for a servo arm to stand),
@@ -266,8 +275,19 @@ class Player:
     """Sends a validated Playback to actuators ("arm", "hand") at `speed`; `measured()` gives the robot's
     current (arm, effector) joints for the engage ramp."""
 
-    def __init__(self, playback: Playback, speed: float, actuators: dict, arm_guard: JointGuard, effector_guard: JointGuard,
-                 measured=None, engage_speed_frac: float = 0.5, rate_hz: float = 120.0, motion=None, clock=None):
+    def __init__(
+        self,
+        playback: Playback,
+        speed: float,
+        actuators: dict,
+        arm_guard: JointGuard,
+        effector_guard: JointGuard,
+        measured=None,
+        engage_speed_frac: float = 0.5,
+        rate_hz: float = 120.0,
+        motion=None,
+        clock=None,
+    ):
         self.p = playback
         self.motion = motion  # teleprev.pipeline.motion.Motion: the engage ramp keeps its limits
         self.clock = clock  # stamps the commands with the time they are sent (a robot runs them then)
@@ -292,7 +312,10 @@ class Player:
         return self.clock.now_ns() if self.clock is not None else time.perf_counter_ns()
 
     def _send(self, arm: np.ndarray, eff: np.ndarray, t_ns: int, to_arm: bool = True, to_hand: bool = True) -> None:
-        for kind, names, q, due in (("arm", self.p.arm_names, arm, to_arm), ("hand", self.p.effector_names, eff, to_hand)):
+        for kind, names, q, due in (
+            ("arm", self.p.arm_names, arm, to_arm),
+            ("hand", self.p.effector_names, eff, to_hand),
+        ):
             if not due:
                 continue
             device = self.actuators.get(kind)

@@ -26,9 +26,16 @@ class ReplayRecording:
         from teleprev.session.recorder import Recorder
 
         self.clock = clock
-        meta = {"rig": rig_record(rig),
-                "session": {"task": TASK, "operator": "", "end_effector": rig.rig.end_effector, "software_version": __version__},
-                "replay": {"source": str(source), "episode": "" if episode is None else str(episode)}}
+        meta = {
+            "rig": rig_record(rig),
+            "session": {
+                "task": TASK,
+                "operator": "",
+                "end_effector": rig.rig.end_effector,
+                "software_version": __version__,
+            },
+            "replay": {"source": str(source), "episode": "" if episode is None else str(episode)},
+        }
         self.recorder = Recorder(out, meta).start()
         self.started = False
         self.playing = lambda: True  # whether the player is past its engage ramp (build_player sets it)
@@ -44,7 +51,9 @@ class ReplayRecording:
 
     def _episode(self, event: str) -> None:
         now = self.clock.now_ns()
-        self._write(topics.EPISODE, now, Event(now, "teleprev.EpisodeEvent", {"event": event, "episode": 0, "task": TASK}))
+        self._write(
+            topics.EPISODE, now, Event(now, "teleprev.EpisodeEvent", {"event": event, "episode": 0, "task": TASK})
+        )
 
     def actuators(self, devices: dict) -> dict:
         """The devices, each wrapped so that every command it is sent is recorded first."""

@@ -33,7 +33,7 @@ class PolicyCard:
     dataset_fps: int  # 0: unknown (the training dataset's folder is gone)
 
     @classmethod
-    def read(cls, path: Path) -> "PolicyCard":
+    def read(cls, path: Path) -> PolicyCard:
         """Refuses (ConfigError naming the folder) what is no saved LeRobot policy."""
         path = Path(path)
         where = str(path)
@@ -44,15 +44,20 @@ class PolicyCard:
             raise ConfigError(f"not a saved LeRobot policy: {', '.join(missing)} missing", where)
         processors = sorted(p.name for p in path.glob("policy_*processor*.json"))
         if not any("preprocessor" in p for p in processors) or not any("postprocessor" in p for p in processors):
-            raise ConfigError("the policy's pre/post-processors (policy_preprocessor.json, policy_postprocessor.json) are "
-                              "missing: save it with lerobot-train", where)
+            raise ConfigError(
+                "the policy's pre/post-processors (policy_preprocessor.json, policy_postprocessor.json) are "
+                "missing: save it with lerobot-train",
+                where,
+            )
         try:
             config = json.loads((path / "config.json").read_text())
             inputs = {k: tuple(v["shape"]) for k, v in config["input_features"].items()}
             outputs = {k: tuple(v["shape"]) for k, v in config["output_features"].items()}
             kind = str(config["type"])
         except (ValueError, KeyError, TypeError) as exc:
-            raise ConfigError(f"config.json is not a LeRobot policy config ({type(exc).__name__}: {exc})", where) from None
+            raise ConfigError(
+                f"config.json is not a LeRobot policy config ({type(exc).__name__}: {exc})", where
+            ) from None
         check_weights(path / "model.safetensors")
         return cls(path, kind, inputs, outputs, _dataset_fps(path))
 
@@ -95,7 +100,7 @@ class LeRobotPolicy:
         self.plans_ahead = card.type == "act"
 
     @classmethod
-    def load(cls, path: Path) -> "LeRobotPolicy":
+    def load(cls, path: Path) -> LeRobotPolicy:
         import torch
         from lerobot.configs.policies import PreTrainedConfig
         from lerobot.policies.factory import get_policy_class, make_pre_post_processors
@@ -125,8 +130,10 @@ class LeRobotPolicy:
     def warm_up(self) -> None:
         """One inference on a blank observation, then a reset: torch's first call (allocations, kernel
         choice) costs seconds, which the first episode's first plan must not wait for."""
-        blank = {name: np.zeros((shape[1], shape[2], shape[0]), np.uint8) if len(shape) == 3 else np.zeros(shape, np.float32)
-                 for name, shape in self.card.inputs.items()}
+        blank = {
+            name: np.zeros((shape[1], shape[2], shape[0]), np.uint8) if len(shape) == 3 else np.zeros(shape, np.float32)
+            for name, shape in self.card.inputs.items()
+        }
         self.chunk(blank, "")
         self.reset()
 

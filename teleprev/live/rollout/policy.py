@@ -27,9 +27,10 @@ import math
 import threading
 import time
 from collections import deque
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from types import SimpleNamespace
-from typing import Callable, Protocol
+from typing import Protocol
 
 import numpy as np
 
@@ -59,7 +60,7 @@ class PolicyFeatures:
     action: ResolvedFeature
 
     @classmethod
-    def for_streams(cls, recipe: Recipe, streams: dict[str, str], inputs: dict[str, str]) -> "PolicyFeatures":
+    def for_streams(cls, recipe: Recipe, streams: dict[str, str], inputs: dict[str, str]) -> PolicyFeatures:
         """The recipe's features over a live session's streams (topic -> StreamSpec payload) and the
         pipeline's inputs (InputTopics' fields, which pick the device where a rig has several)."""
         schemas = {t: SimpleNamespace(schema=SCHEMAS.get(p, p)) for t, p in streams.items()}
@@ -158,7 +159,7 @@ class PolicyRunner:
         self._acted = True  # an action was handed on since the episode started
         self._threads: list[threading.Thread] = []
 
-    def start(self) -> "PolicyRunner":
+    def start(self) -> PolicyRunner:
         self._threads = [threading.Thread(target=self._infer, name="policy-inference", daemon=True),
                          threading.Thread(target=self._pace, name="policy-pacing", daemon=True)]
         for t in self._threads:

@@ -22,11 +22,11 @@ from teleprev import topics
 from teleprev.clock import SessionClock
 from teleprev.errors import ConfigError
 from teleprev.export.recipe import Recipe, load_recipe
-from teleprev.live.rollout.lerobot_policy import PolicyCard
-from teleprev.live.rollout.policy import LatestSamples, PolicyFeatures, PolicyRunner, observe
 from teleprev.live.record.run import run_timed
 from teleprev.live.record.schedule import EpisodeTimes
 from teleprev.live.record.session import LiveSession, RecordOptions
+from teleprev.live.rollout.lerobot_policy import PolicyCard
+from teleprev.live.rollout.policy import LatestSamples, PolicyFeatures, PolicyRunner, observe
 from teleprev.messages import JointSample, Sample
 from teleprev.pipeline.step import action_names as joint_action_names
 from teleprev.rig import Rig, load_rig
@@ -115,8 +115,11 @@ def check_rollout(options: RolloutOptions) -> RolloutPlan:
             given[f.name] = None if None in sizes else (sum(sizes),)
     missing = sorted(set(card.inputs) - set(given))
     if missing:
-        raise ConfigError(f"the policy observes {', '.join(missing)}, which recipe {recipe.path} does not make from this "
-                          f"rig's streams (it makes {', '.join(given) or 'nothing'})", where)
+        raise ConfigError(
+            f"the policy observes {', '.join(missing)}, which recipe {recipe.path} does not make from this "
+            f"rig's streams (it makes {', '.join(given) or 'nothing'})",
+            where,
+        )
     for name, shape in card.inputs.items():
         if given[name] is not None and tuple(given[name]) != tuple(shape):
             raise ConfigError(f"the policy's {name} has shape {list(shape)}, this rig gives {list(given[name])}", where)

@@ -87,8 +87,12 @@ class FoxgloveView:
 
         if topic not in self._channels:
             spec = schema_for(payload)
-            self._channels[topic] = Channel(topic, schema=Schema(name=spec.name, encoding=spec.encoding, data=spec.data),
-                                            message_encoding=spec.message_encoding, context=self._context)
+            self._channels[topic] = Channel(
+                topic,
+                schema=Schema(name=spec.name, encoding=spec.encoding, data=spec.data),
+                message_encoding=spec.message_encoding,
+                context=self._context,
+            )
 
     def log(self, msg: Logged) -> None:
         """Queue a message to publish; never blocks (a full queue drops it)."""
@@ -130,7 +134,9 @@ _EVENTS = {T.EPISODE: "teleprev.EpisodeEvent", T.MODE: "teleprev.ModeSwitch", T.
 def session_channels(device_streams) -> dict[str, object]:
     """The topics of a live recording, each with a payload of its type: the devices' streams (StreamSpec),
     the pipeline's, /tf, the events and the robot description."""
-    out: dict[str, object] = {spec.topic: _EXAMPLES[spec.payload] for spec in device_streams if spec.payload in _EXAMPLES}
+    out: dict[str, object] = {
+        spec.topic: _EXAMPLES[spec.payload] for spec in device_streams if spec.payload in _EXAMPLES
+    }
     out[ROBOT_DESCRIPTION] = RobotDescription(0, "")
     out[T.TF] = TransformsSample(0, ())
     for topic in (T.RETARGETED, T.CORRECTED, T.ARM_TARGET, T.COMMAND_ARM, T.COMMAND_HAND):
