@@ -26,7 +26,7 @@ def test_a_deleted_folder_at_close_is_a_session_error(tmp_path):
 
 def test_the_recorded_rig_is_recorded_again_from_its_text():
     """`replay SESSION --to sim --out X` without --rig records the session's own rig in X's metadata."""
-    from teleprev.live.record.session import rig_record
+    from teleprev.live.record.metadata import rig_record
     from teleprev.rig import load_recorded_rig
     from teleprev.session.reader import SessionReader
 

@@ -1,6 +1,6 @@
 """What the operator (keys, the XR page) and scripts ask of a recording, as typed messages.
 
-SessionLoop's methods (engage, to_preview, estop, halt, hold, release, start_episode, ...) make one of
+LoopControls' methods (engage, to_preview, estop, halt, hold, release, start_episode, ...) make one of
 these and queue it; the loop thread carries them out in the order they arrive among the samples, so a
 replay of the file meets them where the live session did. None is ever dropped.
 
@@ -11,6 +11,10 @@ or a key asked for it, however late the loop gets to it (None: when the loop doe
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import TYPE_CHECKING, Any
+
+if TYPE_CHECKING:
+    from teleprev.live.core.actuator_host import WireRecord
 
 UNATTENDED = "script"  # the reason an unattended engage is recorded with
 
@@ -107,3 +111,60 @@ class OperatorNote:
 
 Control = (Engage | ToPreview | EStop | Halt | Hold | Release | StartEpisode | StopEpisode | DiscardEpisode
            | MarkOutcome | OperatorNote | WorldLayout)
+
+
+class LoopControls:
+    """The session loop's controls, callable from any thread: each queues a typed message for the loop
+    thread (never dropped), which carries them out in arrival order among the samples."""
+
+    inbox: Any  # the loop's LoopInbox
+    clock: Any  # the session clock
+
+    def send(self, control: Control) -> None:
+        self.inbox.put(None, control)
+
+    def engage(self, reason: str = "key", unattended: bool = False) -> None:
+        """To execute; `unattended` (a script's engage, recorded as "script") is refused after a device
+        fault until the operator engages."""
+        self.send(Engage(UNATTENDED if unattended else reason, unattended))
+
+    def to_preview(self, reason: str = "key") -> None:
+        self.send(ToPreview(reason))
+
+    def estop(self) -> None:
+        self.send(EStop())
+
+    def halt(self, why: str) -> None:
+        """Back to preview (the robot brakes to rest), and execute is refused from then on."""
+        self.send(Halt(why))
+
+    def hold(self, source: str, why: str, reason: str = "hold") -> None:
+        """Back to preview, and execute is refused until `source` releases its hold."""
+        if not why:
+            raise ValueError("a hold says why execute is refused (release(source) lifts it)")
+        self.send(Hold(source, why, reason))
+
+    def release(self, source: str) -> None:
+        self.send(Release(source))
+
+    def start_episode(self, task: str = "", at_ns: int | None = None) -> None:
+        self.send(StartEpisode(task, at_ns))
+
+    def stop_episode(self, at_ns: int | None = None) -> None:
+        self.send(StopEpisode(at_ns))
+
+    def discard_episode(self, at_ns: int | None = None) -> None:
+        self.send(DiscardEpisode(at_ns))
+
+    def mark_outcome(self, success: bool) -> None:
+        self.send(MarkOutcome(success))
+
+    def note(self, event: str, detail: str = "", show: bool = False) -> None:
+        self.send(OperatorNote(event, detail, show))
+
+    def world_layout(self, layout: dict, reason: str, at_ns: int) -> None:
+        self.send(WorldLayout(layout, reason, at_ns))
+
+    def wired(self, record: WireRecord) -> None:
+        """A command an actuator's own process wrote (any thread): queued, to be counted and recorded."""
+        self.inbox.put(self.clock.now_ns(), record)

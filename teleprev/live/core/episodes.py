@@ -56,6 +56,22 @@ class EpisodeTracker:
             }
         ]
 
+    def apply_judged(self, control, t_ns: int, judge) -> tuple[list[dict], str]:
+        """apply, with each episode that stops marked by `judge` (a physics rig's outcome now, as (mark,
+        reason), or None) beside the operator's y/f; and the operator's message about it ("": none)."""
+        stopping = self.task
+        events = self.apply(control, t_ns)
+        message = ""
+        if judge is not None:
+            for stop in [e for e in events if e["event"] == "stop"]:
+                judged = judge()
+                if judged is not None:
+                    mark, reason = judged
+                    events.insert(events.index(stop) + 1, self.judged(stop["episode"], stopping, mark, reason))
+                    message = (f"episode {stop['episode'] + 1} ({stopping}): {mark.upper()}, "
+                               f"by the physics world: {reason}")
+        return events, message
+
     @staticmethod
     def judged(index: int, task: str, mark: str, reason: str) -> dict:
         """The physics world's mark of episode `index` (judged when it stopped), beside the operator's."""

@@ -46,13 +46,13 @@ from teleprev.clock import SessionClock
 from teleprev.devices.contract import Actuator
 from teleprev.live.core.actuator_host import WireRecord
 from teleprev.live.core.controls import (
-    UNATTENDED,
     Control,
     DiscardEpisode,
     Engage,
     EStop,
     Halt,
     Hold,
+    LoopControls,
     MarkOutcome,
     OperatorNote,
     Release,
@@ -64,8 +64,8 @@ from teleprev.live.core.controls import (
 from teleprev.live.core.episodes import EpisodeTracker
 from teleprev.live.core.gate import ExecuteGate, GateState
 from teleprev.live.core.input_watch import InputEvent, InputWatch
-from teleprev.live.core.relay import CommandRelay
-from teleprev.messages import Event, ImageSample, JointSample, Logged, PoseSample, Sample
+from teleprev.live.core.relay import CommandRelay, tick_records
+from teleprev.messages import Event, ImageSample, Logged, PoseSample, Sample
 from teleprev.pipeline.driver import PipelineDriver
 from teleprev.status import LoopSnapshot
 from teleprev.thread_priority import raise_this_thread
@@ -134,7 +134,10 @@ class LoopInbox:
         return self.queue.qsize()
 
 
-class SessionLoop:
+class SessionLoop(LoopControls):
+    """The one thread that orders every input, records it and feeds the pipeline; the controls any thread
+    may call are LoopControls' (typed messages queued here)."""
+
     def __init__(
         self,
         clock: SessionClock,
@@ -185,65 +188,14 @@ class SessionLoop:
         self._thread: threading.Thread | None = None
         self.failure = ""  # why the loop no longer runs the pipeline (it raised), or ""
         self.priority = ""  # the loop thread's nice value once it runs, or why it could not be raised
-        self.taps: list[
-            Callable[[Logged], Any]
-        ] = []  # each sample as logged, on this thread (e.g. a policy's observations)
+        # each sample as logged, on this thread (e.g. a policy's observations)
+        self.taps: list[Callable[[Logged], Any]] = []
         self._handlers: dict[type, Callable[[Any, int], str | None]] = {
             Engage: self._engage, ToPreview: self._to_preview, EStop: self._estop, Halt: self._halt,
             Hold: self._hold, Release: self._release, StartEpisode: self._episode, StopEpisode: self._episode,
             DiscardEpisode: self._episode, MarkOutcome: self._episode, OperatorNote: self._note,
             WorldLayout: self._world_layout,
         }
-
-    # ---- controls (any thread): queued for the loop thread, never dropped --------------------------
-    def send(self, control: Control) -> None:
-        self.inbox.put(None, control)
-
-    def engage(self, reason: str = "key", unattended: bool = False) -> None:
-        """To execute; `unattended` (a script's engage, recorded as "script") is refused after a device
-        fault until the operator engages."""
-        self.send(Engage(UNATTENDED if unattended else reason, unattended))
-
-    def to_preview(self, reason: str = "key") -> None:
-        self.send(ToPreview(reason))
-
-    def estop(self) -> None:
-        self.send(EStop())
-
-    def halt(self, why: str) -> None:
-        """Back to preview (the robot brakes to rest), and execute is refused from then on."""
-        self.send(Halt(why))
-
-    def hold(self, source: str, why: str, reason: str = "hold") -> None:
-        """Back to preview, and execute is refused until `source` releases its hold."""
-        if not why:
-            raise ValueError("a hold says why execute is refused (release(source) lifts it)")
-        self.send(Hold(source, why, reason))
-
-    def release(self, source: str) -> None:
-        self.send(Release(source))
-
-    def start_episode(self, task: str = "", at_ns: int | None = None) -> None:
-        self.send(StartEpisode(task, at_ns))
-
-    def stop_episode(self, at_ns: int | None = None) -> None:
-        self.send(StopEpisode(at_ns))
-
-    def discard_episode(self, at_ns: int | None = None) -> None:
-        self.send(DiscardEpisode(at_ns))
-
-    def mark_outcome(self, success: bool) -> None:
-        self.send(MarkOutcome(success))
-
-    def note(self, event: str, detail: str = "", show: bool = False) -> None:
-        self.send(OperatorNote(event, detail, show))
-
-    def world_layout(self, layout: dict, reason: str, at_ns: int) -> None:
-        self.send(WorldLayout(layout, reason, at_ns))
-
-    def wired(self, record: WireRecord) -> None:
-        """A command an actuator's own process wrote (any thread): queued, to be counted and recorded."""
-        self.inbox.put(self.clock.now_ns(), record)
 
     # ---- lifecycle -----------------------------------------------------------------------------
     def start(self) -> None:
@@ -364,25 +316,18 @@ class SessionLoop:
         )
 
     def _pass_updates(self) -> None:
-        """The planner's updates the driver made (format 4), to the sender."""
+        """The planner's updates the driver made, to the sender."""
         if self.relay.sender is not None:
             self.relay.pass_updates(self.driver.take_updates())
 
     def _tick(self, item, receive_ns: int) -> None:
         """Record one of the sender's ticks: its commands and which updates it had (CommandTick)."""
-        tick = item.tick
-        stats = self.stats
-        stats.ticks += 1
-        if len(stats.late_ns) < 1_000_000:
-            stats.late_ns.append(item.late_ns)
-        relay = self.relay
-        for topic, names, q, v in ((topics.COMMAND_ARM, relay.arm_names, tick.arm, tick.arm_v),
-                                   (topics.COMMAND_HAND, relay.effector_names, tick.hand, tick.hand_v)):
-            if q is not None:
-                self._log(Logged(topic, self._stamp(receive_ns), JointSample(tick.t_ns, names, q, v)))
-        data = {"seq": tick.seq, "late_ms": item.late_ns / 1e6, "flags": list(tick.flags), "active": tick.active}
-        self._log(Logged(topics.COMMAND_TICK, self._stamp(), Event(tick.t_ns, "teleprev.CommandTick", data)))
-        self.snapshot = replace(self.snapshot, commands_sent=sum(stats.commands_sent.values()))
+        self.stats.ticks += 1
+        if len(self.stats.late_ns) < 1_000_000:
+            self.stats.late_ns.append(item.late_ns)
+        for msg in tick_records(item, self.relay, self._stamp, receive_ns):
+            self._log(msg)
+        self.snapshot = replace(self.snapshot, commands_sent=sum(self.stats.commands_sent.values()))
 
     def _wire(self, r: WireRecord, receive_ns: int) -> None:
         """Record one command as its actuator's process wrote it (/command/wire, stamped when the write began)."""
@@ -463,9 +408,8 @@ class SessionLoop:
         refusal = self.gate.refusal(unattended) if mode == "execute" else None
         if refusal is not None:
             if refusal.tell:  # why it stays in preview, once per fault
-                self._event(
-                    topics.OPERATOR, "teleprev.OperatorEvent", {"event": "engage_refused", "detail": refusal.why}, now
-                )
+                self._event(topics.OPERATOR, "teleprev.OperatorEvent",
+                            {"event": "engage_refused", "detail": refusal.why}, now)
             refused = refusal.why
         else:
             refused = self.driver.request_mode("estop" if halt else mode, t) if self.driver else "no pipeline"
@@ -486,17 +430,7 @@ class SessionLoop:
 
     def _episode(self, c: StartEpisode | StopEpisode | DiscardEpisode | MarkOutcome, now: int) -> str:
         at = now if getattr(c, "at_ns", None) is None else int(c.at_ns)
-        stopping = self.episodes.task
-        events = self.episodes.apply(c, at)
-        message = ""
-        if self.judge is not None:
-            for stop in [e for e in events if e["event"] == "stop"]:
-                judged = self.judge()
-                if judged is not None:
-                    mark, reason = judged
-                    events.insert(events.index(stop) + 1, self.episodes.judged(stop["episode"], stopping, mark, reason))
-                    message = (f"episode {stop['episode'] + 1} ({stopping}): {mark.upper()}, by the physics world: "
-                               f"{reason}")
+        events, message = self.episodes.apply_judged(c, at, self.judge)
         if isinstance(c, StartEpisode) and self.on_episode_start:
             self.on_episode_start(self.episodes.task)
         for e in events:
@@ -506,7 +440,6 @@ class SessionLoop:
     def _world_layout(self, c: WorldLayout, now: int) -> None:
         self._event(topics.WORLD, "teleprev.WorldLayout", {"layout": c.layout, "reason": c.reason}, now,
                     stamp_ns=c.at_ns)
-        return None
 
     def _note(self, c: OperatorNote, now: int) -> str:
         self._event(topics.OPERATOR, "teleprev.OperatorEvent", {"event": c.event, "detail": c.detail}, now)

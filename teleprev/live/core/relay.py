@@ -14,9 +14,10 @@ import threading
 from collections import Counter
 from collections.abc import Callable
 
+from teleprev import topics
 from teleprev.clock import SessionClock
 from teleprev.devices.contract import Actuator
-from teleprev.messages import JointSample
+from teleprev.messages import Event, JointSample, Logged
 from teleprev.pipeline.planner import ModeUpdate
 
 
@@ -76,7 +77,7 @@ class CommandRelay:
             self.errors[kind] += 1
 
     def pass_updates(self, updates) -> None:
-        """The planner's updates (format 4), to the sender, in order (on the session loop's thread)."""
+        """The planner's updates, to the sender, in order (on the session loop's thread)."""
         for update in updates:
             if isinstance(update, ModeUpdate):
                 self._mode_seq = update.seq
@@ -108,3 +109,16 @@ class CommandRelay:
                 if tick.hand is not None:
                     self.send("hand", JointSample(tick.t_ns, self.effector_names, tick.hand, tick.hand_v))
                 self._on_tick(received, item)
+
+
+def tick_records(item, relay: CommandRelay, stamp, receive_ns: int) -> list[Logged]:
+    """One of the sender's ticks as the session records it: its commands (stamped at the tick, logged at
+    `receive_ns`) and which updates it had (CommandTick). `stamp` makes log times strictly increasing."""
+    tick, out = item.tick, []
+    for topic, names, q, v in ((topics.COMMAND_ARM, relay.arm_names, tick.arm, tick.arm_v),
+                               (topics.COMMAND_HAND, relay.effector_names, tick.hand, tick.hand_v)):
+        if q is not None:
+            out.append(Logged(topic, stamp(receive_ns), JointSample(tick.t_ns, names, q, v)))
+    data = {"seq": tick.seq, "late_ms": item.late_ns / 1e6, "flags": list(tick.flags), "active": tick.active}
+    out.append(Logged(topics.COMMAND_TICK, stamp(), Event(tick.t_ns, "teleprev.CommandTick", data)))
+    return out

@@ -21,14 +21,15 @@ from pathlib import Path
 
 import numpy as np
 
-from teleprev import __version__, numeric_platform, topics
+from teleprev import topics
 from teleprev.assembly import build_pipeline, rig_calibration
 from teleprev.clock import SessionClock
 from teleprev.errors import ConfigError
 from teleprev.live.core.loop import LoopInbox, SessionLoop
 from teleprev.live.record.frames import RobotFrames, sensor_frames
+from teleprev.live.record.metadata import session_metadata
 from teleprev.live.record.operator_actions import ACTION_KEYS, handle_key, operator_status
-from teleprev.live.record.schedule import PLAN_RECORD, EpisodeTimes
+from teleprev.live.record.schedule import EpisodeTimes
 from teleprev.messages import Logged, RobotDescription
 from teleprev.pipeline.driver import InputTopics, PipelineDriver
 from teleprev.rig import Rig, load_rig
@@ -63,15 +64,6 @@ class RecordOptions:
 def default_session_path(task: str) -> Path:
     stamp = _dt.datetime.now().strftime("%Y%m%d_%H%M%S")
     return Path("sessions") / f"{stamp}_{task or 'session'}.mcap"
-
-
-def rig_record(rig) -> dict[str, str]:
-    """The session's "rig" metadata record: the rig file's text (`load_recorded_rig` reads it back) and
-    what it names."""
-    toml = rig.text if rig.text is not None else rig.path.read_text() if rig.path else ""
-    return {"path": str(rig.path), "toml": toml, "name": rig.rig.name,
-            "robot": rig.rig.robot, "end_effector": rig.rig.end_effector,
-            "robot_urdf_sha256": load_robot(rig.rig.robot).urdf_sha256}
 
 
 class LiveSession:
@@ -116,7 +108,7 @@ class LiveSession:
         try:
             self.recorder = Recorder(
                 out,
-                self._metadata(),
+                session_metadata(self),
                 attachments={urdf.name: (URDF_MEDIA_TYPE, urdf.read_bytes())},
                 on_failure=self._recording_failed,
                 lag_budget_s=LAG_BUDGET_S,
@@ -260,44 +252,6 @@ class LiveSession:
         for listener in self.context.task_listeners:
             listener(task)
 
-    def _metadata(self) -> dict[str, dict[str, str]]:
-        rig, o = self.rig, self.options
-        cal_path = rig.resolve(rig.rig.calibration) if rig.rig.calibration else None
-        meta = {
-            "rig": rig_record(rig),
-            "calibration": {"path": str(cal_path or ""), "toml": cal_path.read_text() if cal_path else ""},
-            "session": {
-                "operator": o.operator or rig.rig.operator,
-                "task": self.task,
-                "participant": o.participant or rig.rig.participant,
-                "condition": o.condition or rig.rig.condition,
-                "end_effector": rig.rig.end_effector,
-                "practice": "true" if o.practice else "false",
-                "software_version": __version__,
-                "numeric_platform": numeric_platform.describe(),
-            },
-        }
-        tasks = dict(rig.tasks)
-        if o.task_text:
-            tasks[self.task] = o.task_text
-        if tasks:  # task id -> instruction: an export gives LeRobot the instruction, the episodes keep the id
-            meta[topics.TASKS_RECORD] = tasks
-        hashes = self.pipeline.model_hashes()
-        if hashes is not None:
-            meta["models"] = hashes
-        meta["pipeline"] = {"inputs": json.dumps(self.driver.topics.__dict__)}
-        if o.episode_plan is not None:
-            meta[PLAN_RECORD] = o.episode_plan.to_record(self.preview_lead_s)
-        if o.policy is not None:
-            meta["policy"] = dict(o.policy)
-        if self.physics is not None:  # its scenes are events on /events/world
-            meta["world"] = {"world": rig.sim.world, "rate_hz": f"{rig.sim.rate_hz:g}",
-                             "end_effector": rig.rig.end_effector}
-        # The post-condition questionnaire is answered after the file is closed: it goes in a sidecar
-        # next to the session, which the session names here so that nothing recorded is rewritten.
-        meta["study"] = {"survey_sidecar": Path(o.out).with_suffix(".survey.json").name}
-        return meta
-
     def start(self) -> LiveSession:
         for host in self.hosts.values():  # forked first, before this session starts any thread
             host.fork()
@@ -374,7 +328,8 @@ class LiveSession:
             if not silent or time.monotonic() >= deadline:
                 break
             if any(s.start_failure for s in silent.values()):  # no wait makes it start: say it at once
-                return self._cannot_start(silent)
+                self.cannot_start = True
+                return cannot_start_lines(silent, self.rig)
             time.sleep(0.02)
         problems = []
         for name, s in silent.items():
@@ -385,17 +340,6 @@ class LiveSession:
                     "raise --connect-timeout)")
             problems.append(f"device {name!r} ({plugin}) sent nothing within {timeout_s:g} s: {tried}{what}")
         return problems
-
-    def _cannot_start(self, stats: dict) -> list[str]:
-        """One line per reason devices cannot start (the devices sharing a receiver share its reason)."""
-        by_reason: dict[str, list[str]] = {}
-        for name, s in stats.items():
-            if s.start_failure:
-                by_reason.setdefault(s.start_failure, []).append(name)
-        self.cannot_start = True
-        return [f"{'devices' if len(names) > 1 else 'device'} {', '.join(repr(n) for n in names)} "
-                f"({', '.join(dict.fromkeys(self.rig.devices[n].plugin for n in names))}) cannot start: {reason}"
-                for reason, names in by_reason.items()]
 
     def device_rows(self) -> list[DeviceRow]:
         rows = []
@@ -421,3 +365,14 @@ class LiveSession:
                          "loop_dropped": self._loop_dropped(name), "sink_errors": s.sink_errors,
                          "failures": self.loop.stats.device_failures.get(name, 0)}
         return out
+
+
+def cannot_start_lines(stats: dict, rig: Rig) -> list[str]:
+    """One line per reason devices cannot start (the devices sharing a receiver share its reason)."""
+    by_reason: dict[str, list[str]] = {}
+    for name, s in stats.items():
+        if s.start_failure:
+            by_reason.setdefault(s.start_failure, []).append(name)
+    return [f"{'devices' if len(names) > 1 else 'device'} {', '.join(repr(n) for n in names)} "
+            f"({', '.join(dict.fromkeys(rig.devices[n].plugin for n in names))}) cannot start: {reason}"
+            for reason, names in by_reason.items()]

@@ -22,7 +22,7 @@ class ReplayRecording:
     slow or full disk never delays or stops a command."""
 
     def __init__(self, out: Path, rig, source: Path, episode: int | None, clock):
-        from teleprev.live.record.session import rig_record
+        from teleprev.live.record.metadata import rig_record
         from teleprev.session.recorder import Recorder
 
         self.clock = clock
