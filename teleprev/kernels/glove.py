@@ -1,13 +1,13 @@
 """Compiled (numba) preparation of glove samples: the pipeline's per-sample arithmetic from the 45
-axis-angle values to the effector's retargeted joints, for sessions of format 3 on (Pipeline.compiled).
+axis-angle values to the effector's retargeted joints, for the live step and eval (Pipeline.compiled).
 
 Per row, in one pass and in this order (the order of the numpy path, Pipeline._prepare_hand):
     decode      the 15 joints' axis-angle vectors, in HAND_POSE_NAMES order (the name lookup is Python's)
     checks      every value finite (else INVALID), every joint's rotation <= MAX_JOINT_ROTATION (else
                 OUT_OF_RANGE)
     angles      angles_from_hand_pose (teleprev/human/smplx.py): the quaternion, turned into the joint
-                frame, then the bone's direction as flexion and abduction (format 5 on); OUT_OF_RANGE too
-                where flexion or abduction is beyond the human bounds. Formats 3 and 4 read them abduction
+                frame, then the bone's direction as flexion and abduction; OUT_OF_RANGE too
+                where flexion or abduction is beyond the human bounds. Older sessions read them abduction
                 first, the twist about the bone taken off where above TWIST_NOISE
                 (prepare_rows_abduction_first, angles_from_hand_pose_abduction_first)
     retarget    LeapRetargeter.from_angles: angle[source] * gain + offset, clipped to the joint limits
@@ -16,7 +16,7 @@ Per row, in one pass and in this order (the order of the numpy path, Pipeline._p
 The same row code runs for one sample (the live step) and for a session's samples (eval), and each row
 depends on nothing but its own values, so a sample gets the same bits either way. The arithmetic follows
 the numpy expressions but not bit for bit (libm's sin/cos/atan2 and the per-joint untwist may differ in
-the last bits, tests/pipeline/test_hand_kernels.py bounds it): a new session format, format 3. The
+the last bits, tests/pipeline/test_hand_kernels.py bounds it), so it began a session format of its own. The
 kernels that call each other live in this file only, so that the on-disk cache is invalidated with them.
 Compiled on the first call and cached on disk (cache=True); warm(), run by scripts/setup.sh, fills the cache.
 """
@@ -104,7 +104,7 @@ def _prepare_row(values, frames, limits, table, angles, q):
 
 @njit(cache=True, inline="always")
 def _prepare_row_abduction_first(values, frames, limits, table, angles, q):
-    """_prepare_row as sessions of formats 3 and 4 computed it (smplx.angles_from_hand_pose_abduction_first):
+    """_prepare_row as older sessions computed it (smplx.angles_from_hand_pose_abduction_first):
     the twist about the bone taken off, then abduction first. Kept unchanged."""
     flag = _checks(values, limits)
     if flag != OK:
@@ -159,7 +159,7 @@ def prepare_rows(values, frames, limits, table):
 
 @njit(cache=True)
 def prepare_rows_abduction_first(values, frames, limits, table):
-    """prepare_rows with the reading of sessions of formats 3 and 4 (_prepare_row_abduction_first)."""
+    """prepare_rows with the reading of older sessions (_prepare_row_abduction_first)."""
     rows = values.shape[0]
     flags = np.empty(rows, dtype=np.int64)
     angles = np.zeros((rows, 30))
