@@ -313,7 +313,7 @@ def _place(q0, base, stop, track, fraction, joints, dt, out):
 
 
 @njit(cache=True)
-def swept_slide(q0, q0_clear, track, stop, dt, acceleration, lower, upper, steps, budget, joint_finger, link_finger,
+def swept_slide(q0, q0_clear, track, stop, away, target, dt, acceleration, lower, upper, steps, budget, joint_finger, link_finger,
                 fingers,
                 reach, spacing, start_step, link_int, link_num, link_terms, shape_link, shape_local, shape_size, links,
                 spheres, pairs, loose, tight, point, out):
@@ -346,6 +346,7 @@ def swept_slide(q0, q0_clear, track, stop, dt, acceleration, lower, upper, steps
     joints = np.empty(n, dtype=np.bool_)
     braked = np.zeros(max(fingers, 1), dtype=np.bool_)
     order = np.empty(max(fingers, 1), dtype=np.int64)
+    partner = np.full(max(fingers, 1), -1, dtype=np.int64)  # the other finger of the pair that braked it
     count = 0
     used = 0
     while True:
@@ -375,6 +376,8 @@ def swept_slide(q0, q0_clear, track, stop, dt, acceleration, lower, upper, steps
                 choice, most = f, moved
         if choice < 0:
             return SWEPT_COLLIDES, 0, q0_clear
+        other = link_finger[pairs[pair, 0]]
+        partner[choice] = link_finger[pairs[pair, 1]] if other == choice else other
         braked[choice] = True
         order[count] = choice
         count += 1
@@ -438,6 +441,71 @@ def swept_slide(q0, q0_clear, track, stop, dt, acceleration, lower, upper, steps
                 best[:] = out
             else:
                 hi = mid
+    # 3. A held finger that did not move past its braking step and the finger of the pair that braked it
+    #    (its partner) may be in each other's way (two interleaved fingers): the one nearer its target
+    #    gives way, so that the other takes its whole step. The giver's joints retreat one at a time (the
+    #    model's order: the abduction first), then together: each to its capped step away from its
+    #    target (`away`: row 0 the step towards the lower limit, row 1 the upper; a joint at its target
+    #    tries both). The first free candidate is taken.
+    for b in range(count):
+        f = order[b]
+        g = partner[f]
+        if g < 0 or g == f or not held >> f & 1 or used >= budget:
+            continue
+        stuck = True
+        for j in range(n):
+            if joint_finger[j] == f and best[0, j] != stop[j]:
+                stuck = False
+        if not stuck:
+            continue
+        far_f = far_g = 0.0
+        for j in range(n):
+            if joint_finger[j] == f:
+                far_f = max(far_f, abs(target[j] - q0[j]))
+            elif joint_finger[j] == g:
+                far_g = max(far_g, abs(target[j] - q0[j]))
+        mover, giver = (f, g) if far_f >= far_g else (g, f)
+        for j in range(n):
+            joints[j] = joint_finger[j] == mover
+        _place(q0, best[0], stop, track, 1.0, joints, dt, out)
+        stepped = out[0].copy()
+        found = False
+        for c in range(4 * n + 2):  # with the mover's whole step, then with the mover held
+            with_step = c < 2 * n + 1
+            base = stepped if with_step else best[0]
+            c = c % (2 * n + 1)
+            j0 = c >> 1
+            if c < 2 * n:
+                if joint_finger[j0] != giver:
+                    continue
+                side = c & 1
+                if target[j0] != q0[j0] and side != (1 if target[j0] < q0[j0] else 0):
+                    continue
+            if used >= budget:
+                break
+            for j in range(n):
+                out[0, j] = base[j]
+                if joint_finger[j] == giver and (c == 2 * n or j == j0):
+                    side = (c & 1) if c < 2 * n else (1 if target[j] < q0[j] else 0)
+                    if c == 2 * n and target[j] == q0[j]:
+                        continue
+                    out[0, j] = away[side, j]
+                out[1, j] = (out[0, j] - q0[j]) / dt
+            answer, q0_clear, pair, points = _command_pair(q0, q0_clear, out[0], out[1], acceleration, lower, upper,
+                                                           reach, spacing, start_step, link_int, link_num, link_terms,
+                                                           shape_link, shape_local, shape_size, links, spheres, pairs,
+                                                           loose, tight, world, hits, labels, index, point, stop_point)
+            used += points
+            if answer == SWEPT_BAD:
+                return SWEPT_BAD, 0, q0_clear
+            if answer == SWEPT_FREE:
+                if with_step:
+                    held = (held & ~(1 << mover)) | (1 << giver)
+                best[:] = out
+                found = True
+                break
+        if found:
+            break
     out[:] = best
     return SWEPT_FREE, held, q0_clear
 
@@ -449,7 +517,7 @@ SIGNATURES = {
                         "cached"),
     "swept_command": ("q0", "q1", "v1", "acceleration", "lower", "upper", "q0_clear", "q1_clear", SweptTable,
                       FkTable, SweptShapes, Margins, "point"),
-    "swept_slide": ("q0", "q0_clear", "track", "stop", "dt", "acceleration", "lower", "upper", "steps", "budget",
+    "swept_slide": ("q0", "q0_clear", "track", "stop", "away", "target", "dt", "acceleration", "lower", "upper", "steps", "budget",
                     Fingers,
                     SweptTable, FkTable, SweptShapes, Margins, "point", "out"),
 }

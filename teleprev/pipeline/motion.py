@@ -52,12 +52,12 @@ class Motion:
         velocity estimated as `estimate` says (HandLimiter.command, one kernel call), then only along a
         segment that keeps the clearance; a command equal to `last` has velocity zero."""
         rows, unchanged = self.hand.command(last, v, target, estimate, before, before_v, keep, dt, dt_before, frac)
-        cmd, cmd_v, avoided = self._keep_clear(last, v, rows[0], rows[1], dt, dt_before, flags)
+        cmd, cmd_v, avoided = self._keep_clear(last, v, rows[0], rows[1], target, dt, dt_before, frac, flags)
         if avoided:
             unchanged = not np.any(cmd != last)
         return cmd, np.zeros_like(cmd_v) if unchanged else cmd_v, rows[2]
 
-    def _keep_clear(self, last, v, cmd, cmd_v, dt, dt_before, flags):
+    def _keep_clear(self, last, v, cmd, cmd_v, target, dt, dt_before, frac, flags):
         """(cmd, cmd_v, False) where the segment from `last` to cmd and on to its stop point keeps the
         clearance, else _avoid's command and velocity and True."""
         if self.swept is None:
@@ -68,7 +68,7 @@ class Motion:
             free = self.swept.segment_free(last, cmd) and self.swept.segment_free(cmd, self._stop_point(cmd, cmd_v))
         if free:
             return cmd, cmd_v, False
-        return *self._avoid(last, v, cmd, dt, dt_before, flags), True
+        return *self._avoid(last, v, cmd, target, dt, dt_before, frac, flags), True
 
     def _stop_point(self, q, v):
         """Where braking at the cap from q at v would end: a command is taken only if that way is free too,
@@ -76,14 +76,19 @@ class Motion:
         h = self.hand
         return np.minimum(np.maximum(q + v * np.abs(v) / (2.0 * h.acceleration), h.lower), h.upper)
 
-    def _avoid(self, last, v, cmd, dt, dt_before, flags):
+    def _avoid(self, last, v, cmd, target, dt, dt_before, frac, flags):
         """The capped step `cmd` would come too close to a collision: hold back the fingers that must,
         sliding them as far as is free (SweptCheck.slide); where that finds nothing (and in older
         formats), brake the whole hand as hard as allowed, and only if even that segment is not free,
         stop short on the segment (safety before smoothness)."""
         braked, bv = self.hand.stop(last, v, dt, dt_before)
         h = self.hand
-        slid = self.swept.slide(last, cmd, braked, dt, h.acceleration, h.lower, h.upper)
+        slid = None
+        if self.swept.slides:
+            # each joint's capped step towards either limit: a blocked finger's ways out (SweptCheck.slide)
+            away = np.stack([h.command(last, v, edge, ESTIMATE_NONE, None, None, 0.0, dt, dt_before, frac)[0][0]
+                             for edge in (h.lower, h.upper)])
+            slid = self.swept.slide(last, cmd, braked, away, cmd if target is None else target, dt, h.acceleration, h.lower, h.upper)
         if slid is not None:
             flags.append("hand_swept_slid")
             return slid[0], slid[1]

@@ -141,7 +141,7 @@ class SweptCheck:
             self._segment_free_compiled(q, q + 1e-3)
             self._last_free_compiled(q, q + 1e-3, 1)
             self.command_free(q, q + 1e-3, q, q + 1.0, q - 1.0, q + 1.0)
-            self.slide(q, q + 1e-3, q, 0.01, q + 1.0, q - 1.0, q + 1.0)
+            self.slide(q, q + 1e-3, q, np.stack([q, q]), q + 1e-3, 0.01, q + 1.0, q - 1.0, q + 1.0)
             self._clear_cache = self._command_end = (b"", False)
 
     def _compiled_tables(self) -> tuple | None:
@@ -273,13 +273,16 @@ class SweptCheck:
             self._command_end = (key1, bool(q1_clear))
         return answer == swept_kernels.SWEPT_FREE
 
-    def slide(self, q0, track, stop, dt, acceleration, lower, upper) -> tuple[np.ndarray, np.ndarray, int] | None:
+    def slide(self, q0, track, stop, away, target, dt, acceleration, lower, upper) -> tuple[np.ndarray, np.ndarray, int] | None:
         """A command from q0 that holds back only the fingers whose motion would collide (swept_slide):
         (command, its velocity, held: bit f for each finger left short of its step), every joint between
         its braking step `stop` and its capped step `track`, the command and the way on to where braking
         at `acceleration` from it stops within [lower, upper] shown free. None where no finger-wise command
         is found (the colliding fingers brake already), where q0 is within the margin, or where the check
-        is not compiled (or not this format's): then the caller brakes the whole hand."""
+        is not compiled (or not this format's): then the caller brakes the whole hand. Two fingers stuck in each
+        other's way: the one nearer its `target` gives way, a joint at a time, to `away` (row 0: each joint's
+        capped step towards its lower limit, row 1 its upper; the limiter's own commands, so within every
+        limit), checked the same way (swept_slide's step 3)."""
         if not self.slides or self._kernel_args is None or not dt > 0:
             return None
         q0 = np.ascontiguousarray(q0, dtype=np.float64)
@@ -289,7 +292,7 @@ class SweptCheck:
         out = np.empty((2, len(q0)))
         answer, held, _ = swept_kernels.swept_slide(
             q0, q0_clear, np.ascontiguousarray(track, dtype=np.float64), np.ascontiguousarray(stop, dtype=np.float64),
-            float(dt), acceleration, lower, upper, SLIDE_STEPS, SLIDE_BUDGET, *self._fingers, *self._kernel_args, out)
+            np.ascontiguousarray(away, dtype=np.float64), np.ascontiguousarray(target, dtype=np.float64), float(dt), acceleration, lower, upper, SLIDE_STEPS, SLIDE_BUDGET, *self._fingers, *self._kernel_args, out)
         if answer != swept_kernels.SWEPT_FREE:
             return None
         return out[0], out[1], int(held)
