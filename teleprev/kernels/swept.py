@@ -330,8 +330,13 @@ def swept_slide(q0, q0_clear, track, stop, away, target, dt, acceleration, lower
     2. Each braked finger, in that order, slides: its joints one by one, the most moving first, each
        taking its whole step where the command stays free, then the joints that could not, together,
        as far along their step as a bisection of `steps` halvings finds free.
-    At most fingers + 1 + (joints + steps) per braked finger checks (a LEAP Hand: at most 41, one
-    blocked finger: about 11), and no new check once `budget` configurations have been tested (a
+    3. A braked finger that got nowhere (still at its braking step) and the finger of the pair that
+       braked it may each be in the other's way (two interleaved fingers, which 1-2 hold for good):
+       the one nearer its `target` gives way, its joints stepping away from their targets (to `away`:
+       the limiter's capped step towards the lower limit, row 0, or the upper, row 1), while the other
+       takes its whole step, else while it stays.
+    At most fingers + 1 + (joints + steps) per braked finger checks in 1-2 (a LEAP Hand: at most 41, one
+    blocked finger: about 11), 2 (2 finger joints + 1) per stuck finger in 3, and no new check once `budget` configurations have been tested (a
     count, so a re-run finds the same command): then the search keeps what it found free so far, and
     where that is nothing yet, answers SWEPT_COLLIDES.
     held: bit f set for a finger left short of its step. SWEPT_COLLIDES: no finger-wise command (the

@@ -21,7 +21,9 @@ keeps the hand's limits (each limit is an interval both ends keep), so the searc
 slide each held finger as far towards its step as some subset of its joints and a bisection of the rest
 allow. Each candidate is checked as a command is (its segment and the way on to its stop point) and
 taken only where the compiled test shows it free, so the judges are the same (kernels/swept.py:
-swept_slide).
+swept_slide). Two interleaved fingers, each in the other's way, cannot get out between braking and
+tracking: there the one nearer its target gives way, its joints taking the limiter's capped step away
+from their targets (a command the limiter itself gives, so within every limit), checked the same way.
 
 SweptCheck runs a segment in one numba kernel (teleprev/kernels/swept.py, swept_*) where the geometry is
 all boxes: the bound, the points, the checks in order, the end point's, and last_free_on_segment's
