@@ -132,8 +132,8 @@ def warm() -> None:
     swept.swept_last_free(q, q1, 1, -1, *reach, *table, *shapes, *margins, point, np.empty(2))
     swept.swept_command(q, q1, q, q + 1.0, q - 1.0, q + 1.0, -1, -1, *reach, *table, *shapes, *margins, point)
     fingers = swept.Fingers(np.zeros(2, dtype=i64), np.zeros(2, dtype=i64), 1)
-    swept.swept_slide(q, -1, q1, q, np.stack([q, q]), q1, 0.01, q + 1.0, q - 1.0, q + 1.0, 1, 10, *fingers, *reach, *table, *shapes, *margins,
-                      point, np.empty((2, 2)))
+    swept.swept_slide(q, -1, q1, q, np.stack([q, q]), q1, 0.01, q + 1.0, q - 1.0, q + 1.0, 1, 10, *fingers, *reach,
+                      *table, *shapes, *margins, point, np.empty((2, 2)))
 
     x = np.zeros(2)
     hand = motion.HandLimits(x - 1.0, x + 1.0, x + 1.0, x + 1.0, 0.8)

@@ -313,10 +313,9 @@ def _place(q0, base, stop, track, fraction, joints, dt, out):
 
 
 @njit(cache=True)
-def swept_slide(q0, q0_clear, track, stop, away, target, dt, acceleration, lower, upper, steps, budget, joint_finger, link_finger,
-                fingers,
-                reach, spacing, start_step, link_int, link_num, link_terms, shape_link, shape_local, shape_size, links,
-                spheres, pairs, loose, tight, point, out):
+def swept_slide(q0, q0_clear, track, stop, away, target, dt, acceleration, lower, upper, steps, budget,
+                joint_finger, link_finger, fingers, reach, spacing, start_step, link_int, link_num, link_terms,
+                shape_link, shape_local, shape_size, links, spheres, pairs, loose, tight, point, out):
     """A hand command from q0 that holds back only the fingers whose motion would collide: (answer, held,
     q0_clear); where answer is SWEPT_FREE, the command and its velocity are in out[0], out[1].
 
@@ -336,9 +335,9 @@ def swept_slide(q0, q0_clear, track, stop, away, target, dt, acceleration, lower
        the limiter's capped step towards the lower limit, row 0, or the upper, row 1), while the other
        takes its whole step, else while it stays.
     At most fingers + 1 + (joints + steps) per braked finger checks in 1-2 (a LEAP Hand: at most 41, one
-    blocked finger: about 11), 2 (2 finger joints + 1) per stuck finger in 3, and no new check once `budget` configurations have been tested (a
-    count, so a re-run finds the same command): then the search keeps what it found free so far, and
-    where that is nothing yet, answers SWEPT_COLLIDES.
+    blocked finger: about 11), at most 2 (2 joints + 1) per stuck finger in 3 (LEAP: 18), and no new check
+    once `budget` configurations have been tested (a count, so a re-run finds the same command): then the
+    search keeps what it found free so far, and where that is nothing yet, answers SWEPT_COLLIDES.
     held: bit f set for a finger left short of its step. SWEPT_COLLIDES: no finger-wise command (the
     colliding pair's fingers brake already, or no pair is known): the caller brakes the whole hand.
     SWEPT_BAD: q0 within the margin, or inputs the kernel does not take: the same."""
@@ -522,7 +521,7 @@ SIGNATURES = {
                         "cached"),
     "swept_command": ("q0", "q1", "v1", "acceleration", "lower", "upper", "q0_clear", "q1_clear", SweptTable,
                       FkTable, SweptShapes, Margins, "point"),
-    "swept_slide": ("q0", "q0_clear", "track", "stop", "away", "target", "dt", "acceleration", "lower", "upper", "steps", "budget",
-                    Fingers,
+    "swept_slide": ("q0", "q0_clear", "track", "stop", "away", "target", "dt", "acceleration", "lower", "upper",
+                    "steps", "budget", Fingers,
                     SweptTable, FkTable, SweptShapes, Margins, "point", "out"),
 }

@@ -88,7 +88,8 @@ class Motion:
             # each joint's capped step towards either limit: a blocked finger's ways out (SweptCheck.slide)
             away = np.stack([h.command(last, v, edge, ESTIMATE_NONE, None, None, 0.0, dt, dt_before, frac)[0][0]
                              for edge in (h.lower, h.upper)])
-            slid = self.swept.slide(last, cmd, braked, away, cmd if target is None else target, dt, h.acceleration, h.lower, h.upper)
+            slid = self.swept.slide(last, cmd, braked, away, cmd if target is None else target, dt, h.acceleration,
+                                    h.lower, h.upper)
         if slid is not None:
             flags.append("hand_swept_slid")
             return slid[0], slid[1]

@@ -275,7 +275,8 @@ class SweptCheck:
             self._command_end = (key1, bool(q1_clear))
         return answer == swept_kernels.SWEPT_FREE
 
-    def slide(self, q0, track, stop, away, target, dt, acceleration, lower, upper) -> tuple[np.ndarray, np.ndarray, int] | None:
+    def slide(self, q0, track, stop, away, target, dt, acceleration, lower,
+              upper) -> tuple[np.ndarray, np.ndarray, int] | None:
         """A command from q0 that holds back only the fingers whose motion would collide (swept_slide):
         (command, its velocity, held: bit f for each finger left short of its step), every joint between
         its braking step `stop` and its capped step `track`, the command and the way on to where braking
@@ -294,7 +295,8 @@ class SweptCheck:
         out = np.empty((2, len(q0)))
         answer, held, _ = swept_kernels.swept_slide(
             q0, q0_clear, np.ascontiguousarray(track, dtype=np.float64), np.ascontiguousarray(stop, dtype=np.float64),
-            np.ascontiguousarray(away, dtype=np.float64), np.ascontiguousarray(target, dtype=np.float64), float(dt), acceleration, lower, upper, SLIDE_STEPS, SLIDE_BUDGET, *self._fingers, *self._kernel_args, out)
+            np.ascontiguousarray(away, dtype=np.float64), np.ascontiguousarray(target, dtype=np.float64), float(dt),
+            acceleration, lower, upper, SLIDE_STEPS, SLIDE_BUDGET, *self._fingers, *self._kernel_args, out)
         if answer != swept_kernels.SWEPT_FREE:
             return None
         return out[0], out[1], int(held)
@@ -308,7 +310,8 @@ class SweptCheck:
         cached = self._clear_cache
         q0_clear = int(cached[1]) if cached[0] == key else -1
         end = np.empty_like(q0)
-        answer, lo, q0_clear, cache = swept_kernels.swept_last_free(q0, q1, int(steps), q0_clear, *self._kernel_args, end)
+        answer, lo, q0_clear, cache = swept_kernels.swept_last_free(q0, q1, int(steps), q0_clear, *self._kernel_args,
+                                                                    end)
         if answer != swept_kernels.SWEPT_FREE:
             return None
         if cache == 1:
