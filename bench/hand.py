@@ -124,8 +124,10 @@ def command_and_target(path: Path) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     from teleprev.session.reader import SessionReader
 
     with SessionReader(path) as reader:
-        cmds = [(m.payload.stamp_ns, np.asarray(m.payload.positions, float)) for m in reader.messages([topics.COMMAND_HAND])]
-        targets = [(m.payload.stamp_ns, np.asarray(m.payload.positions, float)) for m in reader.messages([topics.CORRECTED])]
+        def stamped(topic):
+            return [(m.payload.stamp_ns, np.asarray(m.payload.positions, float)) for m in reader.messages([topic])]
+
+        cmds, targets = stamped(topics.COMMAND_HAND), stamped(topics.CORRECTED)
     cmds.sort(key=lambda c: c[0])
     targets.sort(key=lambda c: c[0])
     t_target = np.array([t for t, _ in targets])

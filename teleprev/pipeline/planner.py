@@ -121,7 +121,7 @@ class PlannerState:
 class CommandPlanner:
     """Samples the commands at each tick from the adopted updates (see the module docstring)."""
 
-    resumes_slowly = True  # after input loss, at the engage fraction (sessions of format 5 and older: False)
+    resumes_slowly = True  # after input loss, at the engage fraction (older sessions: False, older_formats)
 
     def __init__(self, motion: Motion, effector_guard, engage_speed_frac: float, stale_ns: int):
         self.motion = motion
