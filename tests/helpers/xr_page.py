@@ -55,9 +55,12 @@ class PageClient:
         self._connecting.__exit__(None, None, None)
 
 
-def webxr_rig(tmp_path, port: int = 0):
-    """The shipped webxr_sim rig on `port` (0: any free one), its certificate kept in tmp_path."""
+def webxr_rig(tmp_path, port: int = 0, input_loss_to_preview_s: float | None = None):
+    """The shipped webxr_sim rig on `port` (0: any free one), its certificate kept in tmp_path; with
+    `input_loss_to_preview_s`, that [session] bound instead of the default."""
     text = (data_dir("rigs") / "webxr_sim.toml").read_text().replace("port = 8443", f"port = {port}")
+    if input_loss_to_preview_s is not None:
+        text += f"\n[session]\ninput_loss_to_preview_s = {input_loss_to_preview_s}\n"
     text = text.replace('rate_hz = 72.0', f'rate_hz = 72.0\ncert_dir = "{tmp_path / "cert"}"')
     path = tmp_path / "webxr.toml"
     path.write_text(text)

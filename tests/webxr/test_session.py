@@ -40,7 +40,10 @@ class Player(threading.Thread):
 
 
 def test_the_page_engages_records_what_it_sent_and_a_lost_hand_holds_the_robot(tmp_path):
-    rec = LiveSession(RecordOptions(out=tmp_path / "s.mcap", rig=webxr_rig(tmp_path)))
+    # a hand lost for 1.2 s brakes and holds; the [session] bound is raised past it, so that the session
+    # stays in execute (tests/live/test_input_loss.py: past the bound it goes back to preview)
+    rig = webxr_rig(tmp_path, input_loss_to_preview_s=3.0)
+    rec = LiveSession(RecordOptions(out=tmp_path / "s.mcap", rig=rig))
     rec.start()
     page = player = None
     try:
