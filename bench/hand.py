@@ -8,7 +8,7 @@
                                 metacarpal turned -150..+60 degrees about its bone (tests/helpers/hand_poses.py),
                                 each through the WebXR path (the page's frame, wire.py, hands.hand_pose) and
                                 the VMC path (OSC over UDP into a real vmc.glove), prepared by the current
-                                format's pipeline. The table also shows format 4's reading (abduction first)
+                                format's pipeline. The table also shows the older reading (abduction first)
     engage_missed_exit_nonzero  `teleprev record --engage-after` (a child process, the real CLI) on a rig whose
                                 hand starts in self-collision, so that every engage is refused: true when it
                                 exits non-zero with one error line saying it never engaged
@@ -27,7 +27,7 @@ The real-hand-like stream: grasps of the whole hand (a common closure, each fing
 the thumb opposing) one after another, minimum-jerk between them, at 120 Hz, held where the path passes
 a configuration without the clearance (as the Corrector holds a target clear), fed to the planner
 (CommandPlanner: the paced sender's arithmetic, the default rig's Motion) as TargetUpdates with their
-velocity, engaged where it starts. The slide's own effect: the same stream with format 5's whole-hand
+velocity, engaged where it starts. The slide's own effect: the same stream with the older whole-hand
 braking (hand_follow_r_min_stream_braking, hand_stall_ms_max_stream_braking in the table).
     hand_follow_r_min_loaded    hand_follow_r_min of the five tasks recorded again beside LOAD_PROCESSES busy
                                 processes (bench/common.py: Load, made here; --quick: one task, 2)
@@ -76,7 +76,7 @@ CLI = [sys.executable, "-c", "from teleprev.cli.app import main; main()"]
 
 
 def pose_rejection(quick: bool) -> tuple[float, float, int]:
-    """(rejected fraction now, with format 4's reading, hands per path) over both input paths."""
+    """(rejected fraction now, with the older reading, hands per path) over both input paths."""
     from teleprev.assembly import build_pipeline
     from teleprev.rig import load_rig
     from tests.helpers.hand_poses import sweep, through_vmc, through_webxr

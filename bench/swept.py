@@ -5,8 +5,8 @@
 Re-runs the fixture sessions (tests/fixtures/sim_v*.mcap) to collect the hand's command segments as the
 pipeline checks them (Motion.hand_step: the step, then the way to its stop point; the stop-short
 bisection where the step is not free), then replays exactly those calls, in order, through the numpy
-SweptCheck (NumpySweptCheck, formats 2) and the compiled one (SweptCheck: one kernel per segment, FCL within the
-margin) in the same run, and counts the answers on which they differ (must be 0). Also random segments
+SweptCheck (NumpySweptCheck, the earliest sessions') and the compiled one (SweptCheck: one kernel per
+segment, FCL within the margin) in the same run, and counts the answers on which they differ (must be 0). Also random segments
 from inside the margin, zero-length and long ones.
 
     swept_us_p50 / _numpy        one segment_free call (median over the recorded calls)
@@ -20,7 +20,7 @@ the ticks whose command is not free). Its cost per planner tick, on the recorded
 random clear target sequences that make the hand collide often (the default rig's Motion, 120 Hz):
 
     hand_tick_us_p50 / _p99 / _max               Motion.hand_step with the slide, random targets
-    hand_tick_us_p50_braking / _p99 / _max       the same ticks' inputs with format 5's whole-hand braking
+    hand_tick_us_p50_braking / _p99 / _max       the same ticks' inputs with the older whole-hand braking
     hand_tick_slid_frac                          the fraction of those ticks the slide changed
     slide_us_p50 / _p99                          one SweptCheck.slide call, where it ran
     slide_us_max_compute                         the 10 slowest of those calls again, each the fastest of
@@ -119,7 +119,7 @@ def recorded_calls() -> tuple[list[list[tuple]], list[tuple], float]:
 def random_ticks(swept, sequences: int) -> dict[str, float]:
     """The planner's hand tick (Motion.hand_step, one of 1/120 s) along random sequences of clear targets
     (a jump every 1/3 s; tests/pipeline/test_slide.py drives the same), timed with the slide and, from the
-    same inputs, with format 5's whole-hand braking."""
+    same inputs, with the older whole-hand braking."""
     from teleprev.assembly import build_pipeline
     from teleprev.pipeline.motion import Motion
     from teleprev.pipeline.older_formats import BrakingSweptCheck

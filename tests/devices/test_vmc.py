@@ -332,7 +332,10 @@ def test_a_clock_outlier_is_counted_and_recorded_as_an_event():
     hands = [s.payload.stamp_ns for s in got if s.topic == "/glove/g/hand"]
     assert len(hands) == 12
     kept = np.array(hands[:7] + hands[8:])  # the others keep the offset: 10 ms apart, the outlier's gap aside
-    assert np.allclose(np.diff(kept), [10e6] * 6 + [20e6] + [10e6] * 3, atol=1)
+    # The offset is the least delay seen so far, so a first datagram that waited for a busy CPU moves the
+    # next stamps by that wait (0.3 ms seen beside another test process); an outlier taken in would move
+    # them by 5 s.
+    assert np.allclose(np.diff(kept), [10e6] * 6 + [20e6] + [10e6] * 3, atol=2e6)
 
 
 def test_only_allowed_senders_get_through_and_the_others_are_counted(context):
