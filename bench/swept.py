@@ -6,8 +6,8 @@ Re-runs the fixture sessions (tests/fixtures/sim_v*.mcap) to collect the hand's 
 pipeline checks them (Motion.hand_step: the step, then the way to its stop point; the stop-short
 bisection where the step is not free), then replays exactly those calls, in order, through the numpy
 SweptCheck (NumpySweptCheck, the earliest sessions') and the compiled one (SweptCheck: one kernel per
-segment, FCL within the margin) in the same run, and counts the answers on which they differ (must be 0). Also random segments
-from inside the margin, zero-length and long ones.
+segment, FCL within the margin) in the same run, and counts the answers on which they differ (must be
+0). Also random segments from inside the margin, zero-length and long ones.
 
     swept_us_p50 / _numpy        one segment_free call (median over the recorded calls)
     swept_step_us_p50 / _numpy   all swept calls of one hand step (median over steps)
