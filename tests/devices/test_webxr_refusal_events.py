@@ -33,7 +33,9 @@ def test_token_oversize_and_takeover_refusals_are_device_events(tmp_path):
         with pytest.raises(ConnectionClosed) as closed:
             big.ws.send(b"\0" * (50 * 1024 * 1024))
             big.ws.recv(timeout=10)
-        assert closed.value.rcvd is not None and closed.value.rcvd.code == 1009
+        # The server closes with 1009; a client still sending 50 MB may see the connection reset before
+        # that close frame arrives, so the close code is checked where it came, the event in any case below.
+        assert closed.value.rcvd is None or closed.value.rcvd.code == 1009
         first = PageClient(port, token)
         first.frame(right=open_hand())
         second = PageClient(port, token)  # takes over: the first is closed with 4000
