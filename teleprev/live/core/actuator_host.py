@@ -41,7 +41,7 @@ from teleprev.live.core.paced import (
     paced_pipe,
     reap,
 )
-from teleprev.live.core.pipe_codec import frame, types_by_name, unframe
+from teleprev.live.core.pipe_codec import frame, types_by_name, unframe, write_what_fits
 from teleprev.live.core.sender import Outlet, WireCommand
 from teleprev.messages import Event, JointSample, PoseSample, Sample
 
@@ -238,12 +238,4 @@ class _Host:
     def _flush(self) -> None:
         """As much of the outbox as the pipe takes now (never block: the rest goes with the next report)."""
         with self._lock:
-            while self._outbox:
-                try:
-                    n = os.write(self.reports, self._outbox)
-                except BlockingIOError:
-                    return
-                except BrokenPipeError:
-                    self._outbox = b""
-                    return
-                self._outbox = self._outbox[n:]
+            self._outbox = write_what_fits(self.reports, self._outbox)

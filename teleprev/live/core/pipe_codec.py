@@ -14,6 +14,7 @@ from __future__ import annotations
 
 import dataclasses
 import json
+import os
 import struct
 
 import numpy as np
@@ -28,6 +29,20 @@ def types_by_name(*classes: type) -> dict[str, type]:
 def frame(message) -> bytes:
     data = json.dumps(_encode(message), separators=(",", ":")).encode()
     return _HEADER.pack(len(data)) + data
+
+
+def write_what_fits(fd: int, data: bytes) -> bytes:
+    """Write as much of `data` as a non-blocking pipe takes now and return the rest (b"" once the reader
+    is gone: nothing more can be delivered)."""
+    while data:
+        try:
+            n = os.write(fd, data)
+        except BlockingIOError:
+            return data
+        except BrokenPipeError:
+            return b""
+        data = data[n:]
+    return data
 
 
 def unframe(buffer: bytes, types: dict[str, type]) -> tuple[list, bytes]:

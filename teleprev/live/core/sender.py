@@ -51,7 +51,7 @@ from teleprev.live.core.paced import (
     paced_pipe,
     reap,
 )
-from teleprev.live.core.pipe_codec import frame, types_by_name, unframe
+from teleprev.live.core.pipe_codec import frame, types_by_name, unframe, write_what_fits
 from teleprev.messages import JointSample
 from teleprev.pipeline.planner import CommandPlanner, ModeUpdate, TargetUpdate, Tick
 
@@ -284,12 +284,4 @@ class _Sender:
 
     def _flush(self) -> None:
         """As much of the outbox as the pipe takes now; the rest at the next tick (never block)."""
-        while self.outbox:
-            try:
-                n = os.write(self.ticks, self.outbox)
-            except BlockingIOError:
-                return
-            except BrokenPipeError:
-                self.outbox = b""
-                return
-            self.outbox = self.outbox[n:]
+        self.outbox = write_what_fits(self.ticks, self.outbox)
