@@ -38,7 +38,8 @@ braking (hand_follow_r_min_stream_braking, hand_stall_ms_max_stream_braking in t
 
 The table also shows, per finger, its lowest r (quiet and loaded), the longest stall under load, and the
 fraction of command ticks whose hand command the swept check changed: hand_swept_slid (the fingers that
-would collide held back, the others moving on) and hand_swept_braked / _stopped (the whole hand).
+would collide held back, the others moving on) and hand_swept_braked / _braked_straight / _braked_in_margin /
+_stopped (the whole hand).
 --follow-only measures the follow figures alone (no pose sweep, no engage run, no input age).
 
 JSON keys:
@@ -71,7 +72,8 @@ FINGERS = {"index": range(0, 4), "middle": range(4, 8), "ring": range(8, 12), "t
 STALL_RAD = 0.2  # a finger's command this far from its target is not following it
 STILL_RAD = 0.02  # a target that stays this close to where it stopped is still
 LOAD_PROCESSES = 4  # busy processes beside the loaded recordings (issue 42)
-SWEPT_FLAGS = ("hand_swept_slid", "hand_swept_braked", "hand_swept_stopped")
+SWEPT_FLAGS = ("hand_swept_slid", "hand_swept_braked", "hand_swept_braked_straight", "hand_swept_braked_in_margin",
+               "hand_swept_stopped")
 CLI = [sys.executable, "-c", "from teleprev.cli.app import main; main()"]
 
 

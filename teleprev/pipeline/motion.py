@@ -9,7 +9,9 @@ paced sender; replay's smoothing (teleprev/live/player.py) steps recorded target
             where braking from it would stop, checked for self-collision with a clearance margin; where
             that is not free, the fingers whose motion would collide are held back and slide as far
             towards their step as is free, the others move on (SweptCheck.slide); only where no such
-            command is found does the whole hand brake, and stop short where even braking is not free
+            command is found does the whole hand brake (joint by joint, else keeping its direction), into
+            the clearance margin where no link collides on the way, and stop short only where even
+            braking would collide
 """
 
 from __future__ import annotations
@@ -80,7 +82,15 @@ class Motion:
         """The capped step `cmd` would come too close to a collision: hold back the fingers that must,
         sliding them as far as is free (SweptCheck.slide); where that finds nothing (and in older
         formats), brake the whole hand as hard as allowed, and only if even that segment is not free,
-        stop short on the segment (safety before smoothness)."""
+        stop short on the segment (safety before smoothness).
+
+        The way on from the last command that its check showed free is the straight segment to where each
+        joint's braking would end; the braking steps do not follow it where the joints move at different
+        speeds (each slows by the same amount per step), so after a command at the margin's edge (a slide)
+        the braked segment can graze the margin, or collide. Stopping short there broke the acceleration cap
+        (250 rad/s^2 where the cap is 200, `teleprev audit`), so the hand then brakes keeping its direction
+        (HandLimiter.stop_straight), and, where neither braking is free, into the margin wherever no link
+        collides on the way (SweptCheck.brakes_in_margin; formats up to 8 stopped short)."""
         braked, bv = self.hand.stop(last, v, dt, dt_before)
         h = self.hand
         slid = None
@@ -96,6 +106,15 @@ class Motion:
         if self.swept.segment_free(last, braked):
             flags.append("hand_swept_braked")
             return braked, bv
+        if self.swept.brakes_in_margin:
+            straight, sv = self.hand.stop_straight(last, v, dt, dt_before)
+            if self.swept.segment_free(last, straight):
+                flags.append("hand_swept_braked_straight")
+                return straight, sv
+            for q, qv in ((braked, bv), (straight, sv)):
+                if self.swept.segment_collision_free(last, q):
+                    flags.append("hand_swept_braked_in_margin")
+                    return q, qv
         flags.append("hand_swept_stopped")
         q = self.swept.last_free_on_segment(last, braked)
         return q, (q - last) / dt if dt > 0 else np.zeros_like(v)

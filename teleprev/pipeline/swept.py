@@ -125,6 +125,10 @@ def finger_table(model: RobotModel, link_names: tuple[str, ...]) -> swept_kernel
 
 class SweptCheck:
     slides = True  # a command that is not free holds back only the fingers it must (slide); older formats: False
+    # Where the whole hand brakes and that segment is not free with the clearance, it brakes keeping its
+    # direction, else into the margin where no link collides on the way (segment_collision_free), rather
+    # than stopping short (Motion._avoid); formats up to 8: False.
+    brakes_in_margin = True
 
     def __init__(self, model: RobotModel, checker: SelfCollisionChecker, clearance_m: float):
         self.model = model
@@ -198,6 +202,11 @@ class SweptCheck:
         if self.clearance > 0 and self.clear(q0):
             points = self._points(q0, q1, self.clearance / 2)
             return self.grown.first_collision(points[:-1]) is None and self.clear(points[-1])
+        return self.segment_collision_free(q0, q1)
+
+    def segment_collision_free(self, q0: np.ndarray, q1: np.ndarray) -> bool:
+        """No two links collide on the segment q0 -> q1: the plain shapes every START_STEP_M of link motion
+        (as `teleprev audit` checks a command segment), without the clearance."""
         return self.checker.first_collision(self._points(q0, q1, START_STEP_M)) is None
 
     def last_free_on_segment(self, q0: np.ndarray, q1: np.ndarray, steps: int = 10) -> np.ndarray:

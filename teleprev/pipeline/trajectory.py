@@ -253,6 +253,21 @@ class HandLimiter:
         rows, _ = self.command(q, v, None, ESTIMATE_NONE, None, None, 0.0, dt, dt_before)
         return rows[0], rows[1]
 
+    def stop_straight(self, q: np.ndarray, v: np.ndarray, dt: float,
+                      dt_before: float) -> tuple[np.ndarray, np.ndarray]:
+        """One step of braking that keeps the direction of v: every joint's velocity scaled down by the same
+        factor, as far as the cap lets the joint that needs it most (so the commands stay on the straight line
+        along v, where stop's per-joint braking bends away from it when the joints move at different speeds)."""
+        if dt <= 0:
+            return q, v
+        span = dt + (dt_before if dt_before > 0 else dt)
+        moving = v != 0
+        if not moving.any():
+            return q, v
+        keep = max(0.0, float(np.max(1.0 - self.acceleration[moving] * 0.5 * span / np.abs(v[moving]))))
+        c = np.minimum(np.maximum(q + (keep * v) * dt, self.lower), self.upper)
+        return c, (c - q) / dt
+
     def command(self, q: np.ndarray, v: np.ndarray, target: np.ndarray | None, estimate: int,
                 before: np.ndarray | None, before_v: np.ndarray | None, keep: float, dt: float, dt_before: float,
                 speed_frac: float = 1.0) -> tuple[np.ndarray, bool]:

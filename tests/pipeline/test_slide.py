@@ -65,6 +65,7 @@ def _blocked_from_rest(rig_motion, count, seed):
 def test_a_blocked_finger_slides_instead_of_stopping(rig_motion):
     _, motion, braking = rig_motion
     swept = motion.swept
+    fcl = FclSelfCollisionChecker(swept.model, swept.checker.exclusions)
     moved = closer = 0
     cases = _blocked_from_rest(rig_motion, 30, seed=1)
     for f, q0, target in cases:
@@ -73,10 +74,14 @@ def test_a_blocked_finger_slides_instead_of_stopping(rig_motion):
         old, _ = braking.hand_step(q0, np.zeros(16), target, None, DT, DT, 1.0, old_flags)
         assert old_flags == ["hand_swept_braked"] and np.array_equal(old, q0)  # format 5: the hand stood still
         q, v = q0, np.zeros(16)
+        in_margin = False
         for tick in range(30):
             flags = []
             q1, v = motion.hand_step(q, v, target, None, DT, DT, 1.0, flags)
-            assert swept.segment_free(q, q1) and swept.clear(q1)
+            assert swept.segment_collision_free(q, q1) and not fcl.collides(q1)
+            # the clearance is kept, but by braking into it where no other braking is free, until out again
+            in_margin = "hand_swept_braked_in_margin" in flags or in_margin and not swept.clear(q1)
+            assert in_margin or swept.segment_free(q, q1) and swept.clear(q1)
             if tick == 0:
                 assert flags == ["hand_swept_slid"]
                 moved += bool(np.any(q1[joints] != q0[joints]))
@@ -180,3 +185,101 @@ def test_interleaved_fingers_get_out_within_150_ms(rig_motion, start, target):
         errors.append(max(np.abs(q - target)[f:f + 4].max() for f in range(0, 16, 4)))
     assert gave_way  # some joint moved away from its target on the way
     assert errors[-1] <= 0.2, errors
+
+
+# A slide's command at the margin's edge (index moving at 6 rad/s towards its target at its upper limit, from
+# a planner stream at 120 Hz): its check showed the straight way to where each joint's braking ends free,
+# but the next tick's braking (each joint slowing by the same amount) grazes the margin. Format 6 stopped
+# short there: 6.0 -> 1.0 rad/s in one tick, 3x the acceleration cap as `teleprev audit` measures it.
+GRAZING = dict(
+    q=[-0.5799048219343634, -0.314, 1.67145850255273, 0.07522905807220925, -0.4431675771768359, 0.1272107686696985,
+       1.658052296333145, 1.1393115203109345, 1.047, -0.16292250965601301, 0.9397803308472179, 2.042,
+       1.157873657147604, 0.9815263727775084, 0.7247003196195562, 0.22496376631868506],
+    v=[0.0, 0.0, 0.0, -0.528118155819358, -3.3722042058617094, 0.0, 6.000000000000012, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0,
+       0.0, 0.0, 0.0],
+    target=[-0.5799048219343634, -0.314, 1.67145850255273, 0.07522905807220925, -0.46593699139340566,
+            0.1272107686696985, 1.885, 1.1393115203109345, 1.047, -0.16292250965601301, 0.9397803308472179, 2.042,
+            1.157873657147604, 1.479780439633532, 0.7247003196195562, 0.22496376631868506],
+)
+TICK_NS = 8_333_333
+SEED = 39  # a stream in which format 6 stopped short three times (1.43x the cap; the browser test once saw 1.427x)
+
+
+def _audited(rig, t_ns, commands):
+    """`teleprev audit`'s measure of a hand command stream (as the controller runs it: from rest before)."""
+    from teleprev.assembly import motion_limits
+    from teleprev.evaluation.audit import audit_stream
+
+    return audit_stream("/command/hand", "hand", motion_limits(rig), np.asarray(t_ns, dtype=np.int64),
+                        np.array(commands), from_rest=False)
+
+
+def test_braking_that_grazes_the_margin_brakes_on_within_the_cap(rig_motion):
+    from teleprev.pipeline.older_formats import StoppingShortSweptCheck
+
+    rig, motion, _ = rig_motion
+    swept = motion.swept
+    fcl = FclSelfCollisionChecker(swept.model, swept.checker.exclusions)
+    q, v, target = (np.array(GRAZING[k]) for k in ("q", "v", "target"))
+    dt = TICK_NS / 1e9
+    before = q - v * dt  # the command before, one tick back
+    stamps = [0, TICK_NS, 2 * TICK_NS]
+    old_swept = StoppingShortSweptCheck(swept.model, swept.checker, swept.clearance)
+    old_flags, flags = [], []
+    old, _ = Motion(motion.arm, motion.hand, old_swept).hand_step(q, v, target, None, dt, dt, 1.0, old_flags)
+    assert old_flags == ["hand_swept_stopped"]  # formats up to 8
+    assert any(s.startswith("accel") for s in _audited(rig, stamps, [before, q, old]).violations)
+
+    q1, v1 = motion.hand_step(q, v, target, None, dt, dt, 1.0, flags)
+    assert flags == ["hand_swept_braked_in_margin"]
+    assert not swept.segment_free(q, q1)  # the braking step did come within the clearance
+    audit = _audited(rig, stamps, [before, q, q1])
+    assert audit.violations == [], audit.violations
+    assert audit.swept_colliding == 0 and not fcl.collides(q1)
+    assert 0.0 < v1[6] < v[6]  # braking, not stopped
+
+
+def _planner_stream(pipeline, seed: int, ticks: int = 600) -> list:
+    """The ticks of a command planner at 120 Hz from an engage: clear targets jumping every 250 ms, and short
+    losses of the input (each resumed at the engage fraction)."""
+    from teleprev.pipeline.planner import CommandPlanner, ModeUpdate, TargetUpdate
+
+    swept = pipeline.motion.swept
+    planner = CommandPlanner.for_pipeline(pipeline)
+    rng = np.random.default_rng(seed)
+    arm = np.array([0.0, -0.27, -0.11, 0.0, -0.85, -1.571])
+    t, seq, target, lost_until = 1_000_000_000, 2, swept.model.neutral(), -1
+    planner.adopt(TargetUpdate(1, t, arm, None, t, target, None))
+    planner.adopt(ModeUpdate(2, t, "execute", arm, target))
+    sent = []
+    for k in range(ticks):
+        t += TICK_NS
+        if k % 30 == 0:
+            target = _clear_target(swept, target, rng, 0.9 if rng.random() < 0.5 else 0.3)
+        if rng.random() < 0.02:
+            lost_until = k + int(rng.integers(1, 30))
+        if k > lost_until:
+            seq += 1
+            planner.adopt(TargetUpdate(seq, t - 1, arm, None, t - 1, target, None))
+        elif rng.random() < 0.5:
+            seq += 1
+            planner.adopt(TargetUpdate(seq, t - 1, arm, None, t - 1, None, None))
+        sent.append(planner.tick(t))
+    return sent
+
+
+def test_a_planner_stream_of_slides_keeps_every_limit_as_audited(rig_motion):
+    """The whole /command/hand stream of _planner_stream as `teleprev audit` measures it. Format 6 (its
+    pipeline here too) stopped short after a slide in this stream, past the acceleration cap."""
+    from teleprev.assembly import build_pipeline
+
+    rig = rig_motion[0]
+    for session_format, ok in ((6, False), (None, True)):
+        pipeline = build_pipeline(rig) if session_format is None else build_pipeline(rig, session_format=6)
+        sent = _planner_stream(pipeline, seed=SEED)
+        flags = [f for tick in sent for f in tick.flags]
+        assert flags.count("hand_swept_slid") > 50 and "input_resumed" in flags  # what the stream is about
+        audit = _audited(rig, [x.t_ns for x in sent], [x.hand for x in sent])
+        assert audit.colliding == 0 and audit.swept_colliding == 0
+        assert (audit.violations == []) == ok, (session_format, audit.violations)
+        assert ("hand_swept_stopped" not in flags) == ok

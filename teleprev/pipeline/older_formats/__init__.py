@@ -6,12 +6,17 @@
     format 4   the paced sender samples the commands from the steps' targets (teleprev/pipeline/planner.py),
                as now
     format 5   the glove read flexion first (formats 1 to 4 read it abduction first), as now
-    (format 6, the current one: a hand command that is not free holds back only the fingers whose motion
-    would collide, where formats 1 to 5 braked the whole hand; after input loss the planner resumes at the
-    engage fraction, where formats 4 and 5 resumed at full speed)
+    format 6   a hand command that is not free holds back only the fingers whose motion would collide,
+               where formats 1 to 5 braked the whole hand; after input loss the planner resumes at the
+               engage fraction, where formats 4 and 5 resumed at full speed
+    (format 9, the current one: where the whole hand brakes and its segment is not free with the
+    clearance, it brakes keeping its direction, else on into the margin if no link collides on the way;
+    formats 1 to 8 stopped short)
 
     numpy_arithmetic   NumpyArmIK, NumpyArmRetargeter, NumpySweptCheck, NumpyCorrector (formats 1 and 2)
     abduction_first    AbductionFirstPipeline: the compiled glove reading of formats 3 and 4
+    stopping_short     StoppingShortSweptCheck: the hand stops short where braking is not free with the
+                       clearance (formats 1 to 8)
     braking_swept      BrakingSweptCheck: the whole hand brakes where a command is not free (formats 1 to 5)
     immediate_resume   ImmediateResumePipeline, whose planner resumes at full speed after input loss
                        (formats 4 and 5)
@@ -44,6 +49,7 @@ from teleprev.pipeline.older_formats.step_commands import (
 )
 from teleprev.pipeline.older_formats.step_driver import StepCommandsDriver
 from teleprev.pipeline.older_formats.step_motion import MotionState, StepMotion
+from teleprev.pipeline.older_formats.stopping_short import StoppingShortSweptCheck
 
 # Format 2: commands go through the motion limits; idle steps may command between trigger samples; a
 # ModeSwitch with reason "estop" stops commanding at once.
@@ -56,16 +62,21 @@ COMPILED_FORMAT_VERSION = 3
 PLANNED_FORMAT_VERSION = 4
 # Format 5: the glove is read flexion first (teleprev/human/smplx.py).
 FLEXION_FIRST_FORMAT_VERSION = 5
+# Format 6: a hand command that is not free slides the fingers that would collide; after input loss the
+# planner resumes at the engage fraction.
+SLIDING_FORMAT_VERSION = 6
 
 __all__ = ["MOTION_FORMAT_VERSION", "COMPILED_FORMAT_VERSION", "PLANNED_FORMAT_VERSION", "FLEXION_FIRST_FORMAT_VERSION",
-           "arithmetic", "AbductionFirstPipeline", "BrakingSweptCheck", "ImmediateResumePipeline",
-           "ImmediateResumePlanner", "MotionState", "NumpyArmIK",
+           "SLIDING_FORMAT_VERSION", "arithmetic", "AbductionFirstPipeline", "BrakingSweptCheck",
+           "ImmediateResumePipeline", "ImmediateResumePlanner", "MotionState", "NumpyArmIK",
            "NumpyArmRetargeter", "NumpyCorrector", "NumpyPipeline", "NumpySweptCheck", "StepCommandsDriver",
-           "StepCommandsPipeline", "StepCommandsResult", "StepCommandsState", "StepMotion"]
+           "StepCommandsPipeline", "StepCommandsResult", "StepCommandsState", "StepMotion", "StoppingShortSweptCheck"]
 
 
 def arithmetic(session_format: int) -> Arithmetic:
     """The classes sessions of an older `session_format` were computed with."""
+    if session_format >= SLIDING_FORMAT_VERSION:
+        return Arithmetic(swept_check=StoppingShortSweptCheck)
     if session_format >= FLEXION_FIRST_FORMAT_VERSION:
         return Arithmetic(swept_check=BrakingSweptCheck, pipeline=ImmediateResumePipeline)
     if session_format >= PLANNED_FORMAT_VERSION:
