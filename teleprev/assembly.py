@@ -79,9 +79,10 @@ def hand_clearance_m(rig: Rig) -> float:
     return (cfg.hand_clearance_mm if cfg.hand_clearance_mm is not None else (row.clearance_mm if row else 0.0)) / 1000.0
 
 
-def build_motion(rig: Rig, ik: ArmIK, arm_speed: np.ndarray, effector, swept: SweptCheck | None = None) -> Motion:
-    """The arm's jerk-limited generator and the hand's acceleration cap and swept check, from the robot
-    table (teleprev/robot/limits.py) and the rig's [pipeline] keys."""
+def build_motion(rig: Rig, ik: ArmIK, arm_speed: np.ndarray, effector, swept: SweptCheck | None = None,
+                 hand_limiter: type = HandLimiter) -> Motion:
+    """The arm's jerk-limited generator and the hand's acceleration cap (`hand_limiter`: the session format's
+    class) and swept check, from the robot table (teleprev/robot/limits.py) and the rig's [pipeline] keys."""
     table = arm_limits(rig.rig.robot)
     n = len(arm_speed)
     accel = _limit(rig, "arm_acceleration", table.acceleration if table else None, "arm acceleration limit")
@@ -92,7 +93,7 @@ def build_motion(rig: Rig, ik: ArmIK, arm_speed: np.ndarray, effector, swept: Sw
     if row is None or row.acceleration is not None:
         g = effector.guard
         hand_accel = _limit(rig, "hand_acceleration", row.acceleration if row else None, "hand acceleration limit")
-        hand = HandLimiter(g.lower, g.upper, g.speed, np.full(len(g.lower), hand_accel))
+        hand = hand_limiter(g.lower, g.upper, g.speed, np.full(len(g.lower), hand_accel))
     return Motion(arm, hand, swept)
 
 
@@ -115,7 +116,7 @@ def build_pipeline(rig: Rig, models: str | Path | None = None, calibration: Cali
     arm = how.arm_retargeter(ik, cfg.wrist_scale, cfg.workspace_min, cfg.workspace_max, calibration.suit_to_robot())
     effector, swept = build_effector(rig, robot, cfg, max_dt, calibration, models, how)
     return how.pipeline(cfg, arm, arm_guard, effector,
-                        build_motion(rig, ik, arm_speed, effector, swept) if how.motion else None)
+                        build_motion(rig, ik, arm_speed, effector, swept, how.hand_limiter) if how.motion else None)
 
 
 def build_driver(pipeline: Pipeline, inputs: InputTopics, session_format: int = FORMAT_VERSION) -> PipelineDriver:

@@ -136,7 +136,7 @@ def warm() -> None:
                       *table, *shapes, *margins, point, np.empty((2, 2)))
 
     x = np.zeros(2)
-    hand = motion.HandLimits(x - 1.0, x + 1.0, x + 1.0, x + 1.0, 0.8)
+    hand = motion.HandLimits(x - 1.0, x + 1.0, x + 1.0, x + 1.0, 0.8, True)
     for tracking in (True, False):
         motion.hand_command(x, x, tracking, x, motion.ESTIMATE_BLEND, x, x, 0.5, 0.01, 0.01, 1.0, *hand)
     plan = motion.arm_plan(x, x, x, motion.ESTIMATE_BLEND, x, x, 0.01, 0.5, 0.0, 0.01, 1.0,

@@ -26,6 +26,8 @@ class HandLimits(NamedTuple):
     velocity: np.ndarray
     acceleration: np.ndarray
     brake_fraction: float  # of the acceleration cap, for the braking envelope
+    # the same envelope towards the joint limit ahead, whatever the target's velocity (formats up to 8: False)
+    brakes_for_limits: bool
 
 
 class ArmLimits(NamedTuple):
@@ -48,7 +50,7 @@ def _min(a, b):
 
 
 @njit(cache=True, inline="always")
-def _track_joint(q, v, g, tv, dt, span, cap, lo, hi, a, brake_fraction):
+def _track_joint(q, v, g, tv, dt, span, cap, lo, hi, a, brake_fraction, brakes_for_limits):
     """HandLimiter.track for one joint: (command, its velocity); g the target, tv its velocity (0.0: none)."""
     dv = a * 0.5 * span
     g = _min(_max(g, lo), hi)
@@ -61,6 +63,13 @@ def _track_joint(q, v, g, tv, dt, span, cap, lo, hi, a, brake_fraction):
     brake = math.sqrt(2.0 * ab * abs(e) + half * half) - 0.5 * ab * dt
     step = e / dt
     want = _min(step, tv + brake) if e >= 0 else _max(step, tv - brake)
+    if brakes_for_limits:
+        # Met moving, a target short of a joint limit may be followed faster than the joint can stop before
+        # the limit, where the command would be held (past the cap): the same envelope towards the limit.
+        if want > 0:
+            want = _min(want, math.sqrt(2.0 * ab * _max(hi - q, 0.0) + half * half) - half)
+        elif want < 0:
+            want = _max(want, half - math.sqrt(2.0 * ab * _max(q - lo, 0.0) + half * half))
     want = _min(_max(want, -cap), cap)
     w = _min(_max(want, v - dv), v + dv)
     bound = _max(cap, abs(v))
@@ -117,7 +126,7 @@ def velocity_estimate(target, mode, before, before_v, gap, keep):
 
 @njit(cache=True)
 def hand_command(q, v, tracking, target, mode, before, before_v, keep, dt, dt_before, speed_frac, lower, upper,
-                 velocity, acceleration, brake_fraction):
+                 velocity, acceleration, brake_fraction, brakes_for_limits):
     """Motion's hand step before the swept check, in one call: `tracking`, the target's velocity estimate
     (`mode`, over the gap dt) and HandLimiter.track towards `target` with it (ESTIMATE_NONE: no target
     velocity); else HandLimiter.stop. A dt <= 0 leaves q and v as they are. Arrays the mode does not read
@@ -137,7 +146,7 @@ def hand_command(q, v, tracking, target, mode, before, before_v, keep, dt, dt_be
                 cap = velocity[i] * speed_frac
                 clipped = _min(_max(tv, -0.9 * cap), 0.9 * cap) if mode != ESTIMATE_NONE else 0.0
                 c, w = _track_joint(q[i], v[i], target[i], clipped, dt, span, cap, lower[i], upper[i],
-                                    acceleration[i], brake_fraction)
+                                    acceleration[i], brake_fraction, brakes_for_limits)
         elif dt > 0:
             c, w = _stop_joint(q[i], v[i], dt, span, lower[i], upper[i], acceleration[i])
         out[0, i] = c

@@ -12,6 +12,7 @@ from dataclasses import dataclass
 from teleprev.pipeline.driver import PipelineDriver
 from teleprev.pipeline.step import Pipeline
 from teleprev.pipeline.swept import SweptCheck
+from teleprev.pipeline.trajectory import HandLimiter
 from teleprev.retarget.arm import ArmRetargeter
 from teleprev.robot.ik import ArmIK
 
@@ -22,6 +23,7 @@ class Arithmetic:
     arm_ik: type = ArmIK
     arm_retargeter: type = ArmRetargeter
     swept_check: type = SweptCheck
+    hand_limiter: type = HandLimiter
     corrector: type | None = None  # None: noncollision.corrector.Corrector (loaded for the rigs that have one)
     pipeline: type = Pipeline
     driver: type = PipelineDriver  # what feeds the pipeline its samples

@@ -216,12 +216,15 @@ class HandLimiter:
     intervals), which is what the divided difference on the command stamps measures.
     """
 
+    brakes_for_limits = True  # the braking envelope towards the joint limit ahead too (formats up to 8: False)
+
     def __init__(self, lower: np.ndarray, upper: np.ndarray, velocity: np.ndarray, acceleration: np.ndarray):
         self.lower = float_vector(lower)
         self.upper = float_vector(upper)
         self.velocity = float_vector(velocity)
         self.acceleration = float_vector(acceleration)
-        self._limits = HandLimits(self.lower, self.upper, self.velocity, self.acceleration, BRAKE_FRACTION)
+        self._limits = HandLimits(self.lower, self.upper, self.velocity, self.acceleration, BRAKE_FRACTION,
+                                  self.brakes_for_limits)
         q = self.lower  # load the kernel from numba's cache now, not in a live loop's first steps
         self.command(q, q, q, ESTIMATE_NONE, None, None, 0.0, 0.01, 0.01)
 
@@ -234,7 +237,8 @@ class HandLimiter:
         of the cap, dropped where the target is about to stop at a joint limit; then land on the target at
         the end of the step, unless that closes in faster than, in the target's frame, steps of dt each
         slowing by a*dt could still stop within the distance (braking planned at BRAKE_FRACTION of the cap
-        leaves room to land exactly); the velocity changes by at most the cap over the step."""
+        leaves room to land exactly), or (brakes_for_limits) than such steps could stop before the joint
+        limit ahead; the velocity changes by at most the cap over the step."""
         if dt <= 0:
             return q, v
         estimate = ESTIMATE_NONE if target_v is None else ESTIMATE_GIVEN

@@ -10,13 +10,16 @@
                where formats 1 to 5 braked the whole hand; after input loss the planner resumes at the
                engage fraction, where formats 4 and 5 resumed at full speed
     (format 9, the current one: where the whole hand brakes and its segment is not free with the
-    clearance, it brakes keeping its direction, else on into the margin if no link collides on the way;
-    formats 1 to 8 stopped short)
+    clearance, it brakes keeping its direction, else on into the margin if no link collides on the way,
+    where formats 1 to 8 stopped short; a hand joint keeps its braking envelope towards the joint limit
+    ahead, where formats 1 to 8 kept it in the target's frame only)
 
     numpy_arithmetic   NumpyArmIK, NumpyArmRetargeter, NumpySweptCheck, NumpyCorrector (formats 1 and 2)
     abduction_first    AbductionFirstPipeline: the compiled glove reading of formats 3 and 4
     stopping_short     StoppingShortSweptCheck: the hand stops short where braking is not free with the
                        clearance (formats 1 to 8)
+    target_frame_limiter  TargetFrameHandLimiter: the hand's braking envelope in the target's frame only
+                       (formats 1 to 8)
     braking_swept      BrakingSweptCheck: the whole hand brakes where a command is not free (formats 1 to 5)
     immediate_resume   ImmediateResumePipeline, whose planner resumes at full speed after input loss
                        (formats 4 and 5)
@@ -50,6 +53,7 @@ from teleprev.pipeline.older_formats.step_commands import (
 from teleprev.pipeline.older_formats.step_driver import StepCommandsDriver
 from teleprev.pipeline.older_formats.step_motion import MotionState, StepMotion
 from teleprev.pipeline.older_formats.stopping_short import StoppingShortSweptCheck
+from teleprev.pipeline.older_formats.target_frame_limiter import TargetFrameHandLimiter
 
 # Format 2: commands go through the motion limits; idle steps may command between trigger samples; a
 # ModeSwitch with reason "estop" stops commanding at once.
@@ -70,20 +74,23 @@ __all__ = ["MOTION_FORMAT_VERSION", "COMPILED_FORMAT_VERSION", "PLANNED_FORMAT_V
            "SLIDING_FORMAT_VERSION", "arithmetic", "AbductionFirstPipeline", "BrakingSweptCheck",
            "ImmediateResumePipeline", "ImmediateResumePlanner", "MotionState", "NumpyArmIK",
            "NumpyArmRetargeter", "NumpyCorrector", "NumpyPipeline", "NumpySweptCheck", "StepCommandsDriver",
-           "StepCommandsPipeline", "StepCommandsResult", "StepCommandsState", "StepMotion", "StoppingShortSweptCheck"]
+           "StepCommandsPipeline", "StepCommandsResult", "StepCommandsState", "StepMotion", "StoppingShortSweptCheck",
+           "TargetFrameHandLimiter"]
 
 
 def arithmetic(session_format: int) -> Arithmetic:
     """The classes sessions of an older `session_format` were computed with."""
     if session_format >= SLIDING_FORMAT_VERSION:
-        return Arithmetic(swept_check=StoppingShortSweptCheck)
+        return Arithmetic(swept_check=StoppingShortSweptCheck, hand_limiter=TargetFrameHandLimiter)
     if session_format >= FLEXION_FIRST_FORMAT_VERSION:
-        return Arithmetic(swept_check=BrakingSweptCheck, pipeline=ImmediateResumePipeline)
+        return Arithmetic(swept_check=BrakingSweptCheck, hand_limiter=TargetFrameHandLimiter,
+                          pipeline=ImmediateResumePipeline)
     if session_format >= PLANNED_FORMAT_VERSION:
-        return Arithmetic(swept_check=BrakingSweptCheck, pipeline=AbductionFirstPipeline)
+        return Arithmetic(swept_check=BrakingSweptCheck, hand_limiter=TargetFrameHandLimiter,
+                          pipeline=AbductionFirstPipeline)
     motion = session_format >= MOTION_FORMAT_VERSION
     if session_format >= COMPILED_FORMAT_VERSION:
-        return Arithmetic(motion, swept_check=BrakingSweptCheck, pipeline=StepCommandsPipeline,
-                          driver=StepCommandsDriver)
-    return Arithmetic(motion, NumpyArmIK, NumpyArmRetargeter, NumpySweptCheck, NumpyCorrector, NumpyPipeline,
-                      StepCommandsDriver)
+        return Arithmetic(motion, swept_check=BrakingSweptCheck, hand_limiter=TargetFrameHandLimiter,
+                          pipeline=StepCommandsPipeline, driver=StepCommandsDriver)
+    return Arithmetic(motion, NumpyArmIK, NumpyArmRetargeter, NumpySweptCheck, TargetFrameHandLimiter,
+                      NumpyCorrector, NumpyPipeline, StepCommandsDriver)
