@@ -6,13 +6,17 @@
     format 4   the paced sender samples the commands from the steps' targets (teleprev/pipeline/planner.py),
                as now
     format 5   the glove read flexion first (formats 1 to 4 read it abduction first), as now
-    (format 6, the current one: a hand command that is not free holds back only the fingers whose motion
-    would collide, where formats 1 to 5 braked the whole hand; after input loss the planner resumes at the
-    engage fraction, where formats 4 and 5 resumed at full speed)
+    format 6   a hand command that is not free holds back only the fingers whose motion would collide,
+               where formats 1 to 5 braked the whole hand; after input loss the planner resumes at the
+               engage fraction, where formats 4 and 5 resumed at full speed
+    (format 7, the current one: an engage from rest starts the arm from the last command while its
+    controller holds it, where formats up to 6 started it from the measured arm)
 
     numpy_arithmetic   NumpyArmIK, NumpyArmRetargeter, NumpySweptCheck, NumpyCorrector (formats 1 and 2)
     abduction_first    AbductionFirstPipeline: the compiled glove reading of formats 3 and 4
     braking_swept      BrakingSweptCheck: the whole hand brakes where a command is not free (formats 1 to 5)
+    measured_engage    MeasuredEngagePipeline, whose planner engages the arm from its measured state
+                       (formats 4 to 6)
     immediate_resume   ImmediateResumePipeline, whose planner resumes at full speed after input loss
                        (formats 4 and 5)
     step_motion        StepMotion: the commands of a step under the motion limits, and idle steps
@@ -30,6 +34,7 @@ from teleprev.pipeline.arithmetic import Arithmetic
 from teleprev.pipeline.older_formats.abduction_first import AbductionFirstPipeline
 from teleprev.pipeline.older_formats.braking_swept import BrakingSweptCheck
 from teleprev.pipeline.older_formats.immediate_resume import ImmediateResumePipeline, ImmediateResumePlanner
+from teleprev.pipeline.older_formats.measured_engage import MeasuredEngagePipeline, MeasuredEngagePlanner
 from teleprev.pipeline.older_formats.numpy_arithmetic import (
     NumpyArmIK,
     NumpyArmRetargeter,
@@ -56,16 +61,22 @@ COMPILED_FORMAT_VERSION = 3
 PLANNED_FORMAT_VERSION = 4
 # Format 5: the glove is read flexion first (teleprev/human/smplx.py).
 FLEXION_FIRST_FORMAT_VERSION = 5
+# Format 6: the fingers whose motion would collide are held back alone (SweptCheck.slide); after input loss
+# the planner resumes at the engage fraction.
+SLIDING_FORMAT_VERSION = 6
 
 __all__ = ["MOTION_FORMAT_VERSION", "COMPILED_FORMAT_VERSION", "PLANNED_FORMAT_VERSION", "FLEXION_FIRST_FORMAT_VERSION",
-           "arithmetic", "AbductionFirstPipeline", "BrakingSweptCheck", "ImmediateResumePipeline",
-           "ImmediateResumePlanner", "MotionState", "NumpyArmIK",
+           "SLIDING_FORMAT_VERSION", "arithmetic", "AbductionFirstPipeline", "BrakingSweptCheck",
+           "ImmediateResumePipeline", "ImmediateResumePlanner", "MeasuredEngagePipeline", "MeasuredEngagePlanner",
+           "MotionState", "NumpyArmIK",
            "NumpyArmRetargeter", "NumpyCorrector", "NumpyPipeline", "NumpySweptCheck", "StepCommandsDriver",
            "StepCommandsPipeline", "StepCommandsResult", "StepCommandsState", "StepMotion"]
 
 
 def arithmetic(session_format: int) -> Arithmetic:
     """The classes sessions of an older `session_format` were computed with."""
+    if session_format >= SLIDING_FORMAT_VERSION:
+        return Arithmetic(pipeline=MeasuredEngagePipeline)
     if session_format >= FLEXION_FIRST_FORMAT_VERSION:
         return Arithmetic(swept_check=BrakingSweptCheck, pipeline=ImmediateResumePipeline)
     if session_format >= PLANNED_FORMAT_VERSION:
