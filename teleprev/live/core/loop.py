@@ -438,8 +438,7 @@ class SessionLoop(LoopControls):
         return message
 
     def _world_layout(self, c: WorldLayout, now: int) -> None:
-        self._event(topics.WORLD, "teleprev.WorldLayout", {"layout": c.layout, "reason": c.reason}, now,
-                    stamp_ns=c.at_ns)
+        self._event(topics.WORLD, "teleprev.WorldLayout", c.event, now, stamp_ns=c.at_ns)
 
     def _note(self, c: OperatorNote, now: int) -> str:
         self._event(topics.OPERATOR, "teleprev.OperatorEvent", {"event": c.event, "detail": c.detail}, now)
