@@ -29,8 +29,8 @@ EPISODE_S = 2.5
 
 
 def _record(path, marks: str) -> SimpleNamespace:
-    # One engaged episode per session: a second engage may start from where an object pushed the arm, which
-    # the sim arm's servo rule faults on (the report on branch physics2 says why; not this test's subject).
+    # One engaged episode per session is all these tests need (re-engages, which start from the command the
+    # arm's controller holds wherever contact pushed the arm: tests/world/test_physics_eval.py).
     ran = teleprev("record", PHYSICS_RIG, "--out", path, "--episodes", "1", "--episode-time", EPISODE_S,
                    "--engage-after", "0.3", "--marks", marks, "--no-preview")
     assert ran.returncode == 0, ran.stderr + ran.stdout
