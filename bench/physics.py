@@ -8,6 +8,15 @@ physics_realtime_x   simulated seconds per wall second, the slowest task: the xA
                      second of the process's CPU time (what a quiet core would give)
 render_fps           640x480 colour frames per wall second from the front camera, the world stepping
                      1/30 s between frames, on the same core (Mesa's llvmpipe held to one thread)
+eval_physics_*       `teleprev eval --physics` on a session recorded here on the physics rig (4 episodes of
+                     3 s; --quick 2): eval_physics_realtime_x the world seconds both plays stepped per wall
+                     second they took (the world stepped as fast as it goes, on one core);
+                     eval_physics_session_x the session's seconds per wall second of the whole evaluation
+                     (re-run and both plays); eval_physics_agree whether the recorded commands, played
+                     again, give every episode the mark the live world gave it
+realtime_physics_*   bench/realtime.py --rig physics: unattended physics-rig sessions (preview in a pty)
+                     beside 8 busy processes (--quick: 1 session, 2 busy), measured where the robot feels
+                     them: arm faults, the longest command gap, sender lateness, audit failures
 
 JSON keys:
     physics_realtime_x      float
@@ -15,6 +24,14 @@ JSON keys:
     physics_realtime_x_cpu  float
     core                    int
     steal_ms                float
+    eval_physics_realtime_x float
+    eval_physics_session_x  float
+    eval_physics_agree      bool
+    eval_physics_episodes   int
+    realtime_physics_sessions     int
+    realtime_physics_arm_faults   int
+    realtime_physics_gap_ms_max   float
+    realtime_physics_late_ms_p99  float
 """
 
 from __future__ import annotations
@@ -83,10 +100,63 @@ def render_fps(frames: int) -> float:
         return frames / (time.perf_counter() - start)
 
 
+def _all_cores(cores: set[int]):
+    """While inside: this process (and what it starts) on `cores` again, then back on the one it had."""
+    import contextlib
+
+    @contextlib.contextmanager
+    def scope():
+        pinned = os.sched_getaffinity(0)
+        os.sched_setaffinity(0, cores)
+        try:
+            yield
+        finally:
+            os.sched_setaffinity(0, pinned)
+
+    return scope()
+
+
+def eval_figures(quick: bool, cores: set[int]) -> dict:
+    """`teleprev eval --physics` on a physics-rig session recorded here (the recording on every core; the
+    evaluation in this process, on its one core)."""
+    import tempfile
+
+    import realtime
+
+    from teleprev.evaluation.evaluate import evaluate
+
+    episodes = 2 if quick else 4
+    folder = Path(tempfile.mkdtemp(prefix="physics-eval-"))
+    out = folder / "session.mcap"
+    with _all_cores(cores):
+        code = realtime.record(realtime.PHYSICS_RIG, out, 3.0 * episodes, episodes, 0.3)
+    if code != 0:
+        raise SystemExit(f"bench/physics.py: recording the session for eval --physics failed (exit {code})")
+    start = time.perf_counter()
+    session = evaluate([out], physics=True).report["sessions"][0]
+    wall = time.perf_counter() - start
+    played = session["physics"]
+    return {"eval_physics_realtime_x": played["world_s"] / played["wall_s"],
+            "eval_physics_session_x": session["overall"]["duration_s"] / wall,
+            "eval_physics_agree": played["agree"], "eval_physics_episodes": len(played["episodes"])}
+
+
+def realtime_figures(quick: bool, cores: set[int]) -> dict:
+    """bench/realtime.py --rig physics: its figures (on every core, beside its busy processes)."""
+    import tempfile
+
+    import realtime
+
+    with _all_cores(cores):
+        return realtime.physics_figures(1 if quick else 4, 4.0 if quick else 20.0, 2 if quick else 8,
+                                        Path(tempfile.mkdtemp(prefix="physics-realtime-")))
+
+
 def main() -> None:
     args = common.parser(__doc__).parse_args()
     from teleprev.world.layout import TASKS
 
+    cores = os.sched_getaffinity(0)
     core = _pin_to_one_core()
     steal_before = common.steal_ms()
     measured = {task: realtime_x(task, 1.0 if args.quick else 5.0) for task in TASKS}
@@ -98,7 +168,10 @@ def main() -> None:
     figures["physics_realtime_x_cpu"] = min(cpu for _, cpu in measured.values())
     figures["core"] = core
     figures["steal_ms"] = (steal_after - steal_before) if steal_before is not None and steal_after is not None else None
-    targets = {"physics_realtime_x": ">= 5", "render_fps": ">= 15"}
+    figures |= eval_figures(args.quick, cores)
+    figures |= realtime_figures(args.quick, cores)
+    targets = {"physics_realtime_x": ">= 5", "render_fps": ">= 15", "eval_physics_realtime_x": ">= 5",
+               "eval_physics_agree": "true", "realtime_physics_arm_faults": "0", "realtime_physics_gap_ms_max": "<= 25"}
     common.report("bench/physics.py: the MuJoCo world on one core (xArm6 + LEAP Hand, 500 Hz)", figures, targets,
                   args.json)
 

@@ -25,6 +25,15 @@ Figures (issue 23):
 and the mechanism measured under the same load (why the sender is a SCHED_FIFO process), thread vs
 process, with and without real-time priority: mechanism_<kind>_late_ms_p99 / _max, _gaps_over_25ms.
 
+--rig physics: the same check on the physics rig (rigs/sim_physics.toml, issue 39), the world stepping in
+a process of its own; sessions of two episodes each, preview in a pty at 80x24, beside the busy processes
+(default 8, --quick 2; --sessions, default 4, --quick 1). bench/physics.py reports these figures too:
+    realtime_physics_sessions      sessions recorded under the load
+    realtime_physics_arm_faults    controller faults the sim arm raised
+    realtime_physics_gap_ms_max    the longest interval between two commands of one engaged run (stamps)
+    realtime_physics_late_ms_p99   how late the sender's ticks woke, p99 over every tick
+    realtime_physics_audit_failures  sessions `teleprev audit` fails
+
 JSON keys:
     loaded_sessions                        int
     arm_faults                             int
@@ -279,6 +288,34 @@ def export_audit(sessions: list[Path], folder: Path) -> float:
     return max(v for st in report.streams for v in st.ratios.values())
 
 
+# ---- the physics rig -------------------------------------------------------------------------------------
+PHYSICS_RIG = ROOT / "rigs" / "sim_physics.toml"
+PHYSICS_TARGETS = {"realtime_physics_arm_faults": "0", "realtime_physics_gap_ms_max": "<= 25",
+                   "realtime_physics_audit_failures": "0"}
+
+
+def physics_figures(sessions: int, seconds: float, busy: int, folder: Path) -> dict:
+    """The loaded real-time check on the physics rig: `sessions` unattended recordings of two episodes each,
+    preview in a pty at 80x24, beside `busy` busy processes, each measured as the sim rig's are."""
+    results = []
+    with common.Load(busy):
+        for k in range(sessions):
+            out = folder / f"physics_{k:02d}.mcap"
+            code = record(PHYSICS_RIG, out, seconds, 2, 1.0, (80, 24))
+            m = measure(out, "physics", False)
+            m["returncode"] = code
+            results.append(m)
+            print(f"{out.name}: rc {code}, faults {m['arm_faults']}, audit {'ok' if m['audit_ok'] else 'FAILED'}, "
+                  f"gap {m['gap_ms']:.1f} ms, late p99 {m['late_ms_p99']:.2f} ms", file=sys.stderr, flush=True)
+    return {
+        "realtime_physics_sessions": sum(m["ok"] for m in results),
+        "realtime_physics_arm_faults": sum(m["arm_faults"] for m in results),
+        "realtime_physics_gap_ms_max": max(m["gap_ms"] for m in results),
+        "realtime_physics_late_ms_p99": max(m["late_ms_p99"] for m in results),
+        "realtime_physics_audit_failures": sum(not m["audit_ok"] for m in results),
+    }
+
+
 # ---- the mechanism -------------------------------------------------------------------------------------
 PERIOD = 1 / 120
 
@@ -374,6 +411,9 @@ def main() -> None:
     p.add_argument("--seconds", type=float, default=20.0, help="each session's length")
     p.add_argument("--busy", type=int, default=None, help="busy processes beside the sessions (default 8, --quick 2)")
     p.add_argument("--keep", type=Path, default=None, help="keep the sessions in this folder")
+    p.add_argument("--rig", choices=("sim", "physics"), default="sim",
+                   help="physics: the check on the physics rig alone (realtime_physics_* figures)")
+    p.add_argument("--sessions", type=int, default=None, help="with --rig physics: sessions (default 4, --quick 1)")
     args = p.parse_args()
     from tests.helpers.ports import free_port
     from tests.helpers.vmc import HumanLikeSender, WristTwister
@@ -383,6 +423,11 @@ def main() -> None:
         args.busy = 2 if args.quick else 8
     folder = args.keep or Path(tempfile.mkdtemp(prefix="realtime-"))
     folder.mkdir(parents=True, exist_ok=True)
+    if args.rig == "physics":
+        sessions = args.sessions or (1 if args.quick else 4)
+        common.report(f"bench/realtime.py --rig physics: {sessions} sessions of {seconds:g} s beside {args.busy} busy "
+                      "processes", physics_figures(sessions, seconds, args.busy, folder), PHYSICS_TARGETS, args.json)
+        return
     sim = ROOT / "rigs" / "sim.toml"
     plan = [("sim", sim, (80, 24)), ("sim", sim, (120, 45))] * (1 if args.quick else 3)
     plan = plan[:1] if args.quick else plan

@@ -36,8 +36,8 @@ Events:
     /events/mode              teleprev.ModeSwitch
     /events/device            teleprev.DeviceEvent
     /events/operator          teleprev.OperatorEvent
-    /events/world             teleprev.WorldLayout   a physics rig's scene (objects' starting poses, seed), each
-                                                     time the world begins one
+    /events/world             teleprev.WorldLayout   a physics rig's scene (objects' starting poses, seed, the
+                                                     robot's state), each time the world begins one
 """
 
 from __future__ import annotations
@@ -160,8 +160,11 @@ EVENT_SCHEMAS: dict[str, dict] = {
     "teleprev.WorldLayout": _schema(
         "teleprev.WorldLayout",
         "The physics world began a scene: its task, the seed it was drawn from, the anchor and every object's "
-        "starting pose (teleprev/world/layout.py: layout_from_record restores it), and why.",
-        {"layout": {"type": "object"}, "reason": _STR},
+        "starting pose (teleprev/world/layout.py: layout_from_record restores it), and why; the world's time "
+        "when it began it (world_ns), the robot's joint positions then, at rest (robot: name -> position), and "
+        "whether they were placed (the drives' targets reset to them) or kept from the scene before.",
+        {"layout": {"type": "object"}, "reason": _STR, "world_ns": _INT, "robot": {"type": "object"},
+         "placed": {"type": "boolean"}},
         ["layout"],
     ),
     "teleprev.OperatorEvent": _schema(

@@ -144,10 +144,16 @@ def eval_(
     rows: int = typer.Option(
         30, "--rows", min=1, help="Sessions shown in the table of a corpus (the worst; the report has all)."
     ),
+    physics: bool = typer.Option(
+        False, "--physics", help="Also play each session into the physics world from its recorded scenes and "
+        "judge every episode's outcome, with the recorded and with the re-computed commands: an episode that "
+        "succeeds with the recorded commands and fails with the re-computed ones is a regression.",
+    ),
 ) -> None:
     """Re-run the pipeline on recorded raw streams, measure it, and catch regressions.
 
-    Exits 1 on a regression or a session that could not be evaluated."""
+    Exits 1 on a regression (with --physics, also an episode the re-computed commands fail) or a session
+    that could not be evaluated."""
     from rich.console import Console
 
     from teleprev.cli.outputs import check_input, check_output
@@ -175,7 +181,7 @@ def eval_(
                 paths, models, config,
                 baseline=read_report(baseline) if baseline else None,
                 tolerances=load_tolerances(tolerances) if tolerances else None,
-                executor=executor, plots=plots, on_done=bar,
+                executor=executor, plots=plots, on_done=bar, physics=physics,
             )
     finally:
         if executor is not None:
@@ -184,12 +190,20 @@ def eval_(
         print_report(console, result.report, result.regressions)  # one session: every metric, per episode
     else:
         print_corpus(console, result, rows)
+    outcome_regressions = result.outcome_regressions
+    if physics:
+        from teleprev.evaluation.physics import print_physics
+
+        if len(paths) == 1:
+            print_physics(console, result.report)
+        for why in outcome_regressions:
+            console.print(f"[bold red]outcome regression[/] {why}", highlight=False)
     if out:
         write_report(result.report, out)
         console.print(f"report written to {out}")
     if plots:
         console.print(f"{len(result.plots)} plot(s) written to {plots}")
-    if result.regressions or result.failed:
+    if result.regressions or result.failed or outcome_regressions:
         raise typer.Exit(1)
 
 

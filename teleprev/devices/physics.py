@@ -10,8 +10,9 @@ module imports no physics engine, so `teleprev --help` and kinematic rigs never 
     physics.mirror()               a copy for reading the whole world in the caller's thread: cameras
                                    (mirror.render(view, w, h, depth)) and object states (mirror.sync().state())
 
-Every scene the world runs is kept with the session time it began (`layouts`) and handed to the
-listeners (the recording stores each as an event, so a session can be played back in its scenes).
+Every scene the world runs is kept with the session time it began and the robot's state then (`layouts`)
+and handed to the listeners (the recording stores each as an event, so a session can be played back in its
+scenes: teleprev/evaluation/physics.py).
 """
 
 from __future__ import annotations
@@ -28,11 +29,21 @@ WORLDS = ("kinematic", "physics")
 
 @dataclass(frozen=True)
 class LayoutRecord:
-    """A scene the world began running at `time_ns` (session clock): Layout.to_record(), why it was loaded."""
+    """A scene the world began running (noted at `time_ns`, session clock): Layout.to_record(), why it was
+    loaded, and how the world began it (teleprev.world.host.WorldLink.began: the world's time then
+    `world_ns`, the robot's joint positions at rest, whether they were placed or kept from the scene before)."""
 
     time_ns: int
     layout: dict
     reason: str
+    world_ns: int = 0
+    robot: dict = field(default_factory=dict)
+    placed: bool = False
+
+    def to_event(self) -> dict:
+        """The teleprev.WorldLayout event's data."""
+        return {"layout": self.layout, "reason": self.reason, "world_ns": self.world_ns, "robot": self.robot,
+                "placed": self.placed}
 
 
 @dataclass
@@ -62,7 +73,7 @@ class PhysicsAccess:
 
                 layout = task_layout(self.task, self.seed)
                 self._host = WorldHost(self.end_effector, layout, self.clock, self.rate_hz)
-                self._note(layout.to_record(), "start")
+                self._note(layout.to_record(), "start", self._host.link.began()[1])
             return self._host
 
     def link(self):
@@ -80,9 +91,9 @@ class PhysicsAccess:
         from teleprev.world.layout import task_layout
 
         layout = task_layout(task, seed, tuple(anchor), dict(spots or {}))
-        self.host().load_layout(layout, robot)
+        began = self.host().load_layout(layout, robot)
         record = layout.to_record()
-        self._note(record, reason)
+        self._note(record, reason, began)
         return record
 
     def place_robot(self, positions: Mapping[str, float]) -> None:
@@ -91,10 +102,12 @@ class PhysicsAccess:
         from teleprev.world.layout import layout_from_record
 
         _, record = self.link().running()
-        self.host().load_layout(layout_from_record(record), positions)
+        began = self.host().load_layout(layout_from_record(record), positions)
+        self._note(record, "robot placed", began)
 
-    def _note(self, record: dict, reason: str) -> None:
-        entry = LayoutRecord(self.clock.now_ns(), record, reason)
+    def _note(self, record: dict, reason: str, began: dict) -> None:
+        entry = LayoutRecord(self.clock.now_ns(), record, reason, int(began["time_ns"]), dict(began["robot"]),
+                             bool(began["placed"]))
         self.layouts.append(entry)
         for listener in list(self.listeners):
             listener(entry)

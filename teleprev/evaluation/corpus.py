@@ -5,6 +5,8 @@ The report is evaluate()'s JSON for the sessions that ran, plus:
 
     sessions[*].rank           1 = worst; the list is ordered worst first (see `badness`)
     sessions[*].regressions    this session against the same session in the baseline, when it has it
+    sessions[*].physics        with --physics: each episode's outcome as recorded, with the recorded and with
+                               the re-computed commands, and the episodes that regressed (evaluation/physics.py)
     failed                     sessions that could not be evaluated, and why (their worker died twice,
                                the file is not a session, ...): they never stop the others
     corpus                     how it ran: sessions, failed, executor, workers, wall time
@@ -31,13 +33,14 @@ class EvalJob:
     models: str | None = None
     rig: str | None = None
     plots: str | None = None  # folder for the per-episode PNGs (absolute: a worker's working folder differs)
+    physics: bool = False  # each session played into the physics world too (teleprev/evaluation/physics.py)
 
 
 def eval_one(job: EvalJob, path: str, emit) -> dict:
     """A task: one session re-run and measured; its entry of the report (and its plots, when asked)."""
     from teleprev.evaluation.evaluate import evaluate
 
-    result = evaluate([path], job.models, job.rig)
+    result = evaluate([path], job.models, job.rig, physics=job.physics)
     entry = result.report["sessions"][0]
     if job.plots:
         from teleprev.evaluation.plots import plot_episodes
@@ -53,14 +56,22 @@ class CorpusEvaluation:
     failed: dict[str, str] = field(default_factory=dict)
     plots: list[Path] = field(default_factory=list)
 
+    @property
+    def outcome_regressions(self) -> list[str]:
+        """With physics: the episodes the re-computed commands turn from success to failure."""
+        from teleprev.evaluation.evaluate import outcome_regressions
+
+        return outcome_regressions(self.report)
+
 
 def badness(entry: dict) -> tuple:
-    """Sort key, larger is worse: regressions against the baseline, hand commands in collision, not
+    """Sort key, larger is worse: regressions (against the baseline, and episodes the re-computed commands
+    fail where the recorded ones succeed), hand commands in collision, not
     reproducing the recording, share of steps the Corrector had to fall back on, largest correction."""
     o = entry["overall"]
     steps = max(int(o.get("steps", 0)), 1)
     return (
-        len(entry.get("regressions", [])),
+        len(entry.get("regressions", [])) + len(entry.get("physics", {}).get("regressions", [])),
         float(o.get("collision_after_frac", 0.0)),
         not entry.get("bit_identical", True),
         int(o.get("fallback", 0)) / steps,
@@ -79,13 +90,13 @@ def _session_baselines(baseline: dict | None) -> dict[str, dict]:
 
 def evaluate_corpus(sessions: list[str | Path], models=None, rig=None, baseline: dict | None = None,
                     tolerances: Tolerances | None = None, executor=None, plots: str | Path | None = None,
-                    on_done: Callable[[Outcome], None] | None = None) -> CorpusEvaluation:
+                    on_done: Callable[[Outcome], None] | None = None, physics: bool = False) -> CorpusEvaluation:
     """Re-run every session (executor None: one after another in this process) and build the report."""
     started = time.perf_counter()
     paths = [str(Path(p).resolve()) for p in sessions]
     labels = [str(p) for p in sessions]
     job = EvalJob(str(Path(models).resolve()) if models else None, str(Path(rig).resolve()) if rig else None,
-                  str(Path(plots).resolve()) if plots else None)
+                  str(Path(plots).resolve()) if plots else None, physics)
     done = on_done or (lambda o: None)
     if executor is None:
         outcomes = []
@@ -229,6 +240,13 @@ def print_corpus(console, result: CorpusEvaluation, limit: int | None = None) ->
     regressed = [s for s in report["sessions"] if s.get("regressions")]
     for s in regressed[: limit or len(regressed)]:
         console.print(f"{Path(s['session']).name}: " + "; ".join(s["regressions"]), highlight=False)
+    played = [s["physics"] for s in report["sessions"] if s.get("physics")]
+    if played:
+        episodes = [e for p in played for e in p["episodes"]]
+        console.print(f"physics: {len(episodes)} episode(s) played; with the recorded commands "
+                      f"{sum(e['replayed'] == 'success' for e in episodes)} succeed, with the re-computed ones "
+                      f"{sum(e['recomputed'] == 'success' for e in episodes)}; recorded marks reproduced: "
+                      f"{sum(e['agree'] for e in episodes)}/{len(episodes)}", highlight=False)
     if result.regressions is not None:
         if result.regressions:
             console.print(f"[bold red]{len(result.regressions)} regression(s) overall:[/]")

@@ -16,9 +16,22 @@ class Evaluation:
     reruns: list[Rerun]
     regressions: list[Regression] | None = None
 
+    @property
+    def outcome_regressions(self) -> list[str]:
+        """With physics: the episodes the re-computed commands turn from success to failure (physics.py)."""
+        return outcome_regressions(self.report)
+
+
+def outcome_regressions(report: dict) -> list[str]:
+    """The physics plays' regressions of a report's sessions, each naming its session and episode."""
+    return [f"{Path(s['session']).name}: {r}" for s in report["sessions"] for r in s.get("physics", {}).get(
+        "regressions", [])]
+
 
 def evaluate(sessions: list[str | Path], models=None, rig=None, baseline: dict | None = None,
-             tolerances: Tolerances | None = None) -> Evaluation:
+             tolerances: Tolerances | None = None, physics: bool = False) -> Evaluation:
+    """Re-run and measure each session; with `physics`, also play it into the physics world, episode by
+    episode, with the recorded and with the re-computed commands (teleprev/evaluation/physics.py)."""
     from teleprev.robot.collision import SelfCollisionChecker
     from teleprev.robot.model import load_robot
 
@@ -36,6 +49,10 @@ def evaluate(sessions: list[str | Path], models=None, rig=None, baseline: dict |
             "rig": r.rig_source,
             "notes": r.notes,
         }
+        if physics:
+            from teleprev.evaluation.physics import play_session
+
+            facts["physics"] = play_session(r).to_report()
         results.append((str(path), m, facts))
         reruns.append(r)
     report = make_report(results)

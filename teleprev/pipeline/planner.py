@@ -21,9 +21,13 @@ other than through their targets.
            (the session loop sends the session back to preview when the loss lasted too long)
     pause  ticks further apart than RESUME_GAP_NS (the sender starved): the arm stood at the last
            command meanwhile, so the next commands start from rest there, one short step in
-    engage from the measured state at rest (ModeUpdate "execute"), at the engage fraction of the speed
-           caps until the commands meet the targets; while braking after a switch to preview, an
-           engage carries on from where the commands are
+    engage at rest, at the engage fraction of the speed caps until the commands meet the targets: the arm
+           from its last command while its controller still holds it (the planner commanded it and no
+           halt came since: a fault or an e-stop stops the controller, which lets go of it), since a
+           servo-mode controller takes a new stream to start where it holds, wherever contact has pushed
+           or held the arm meanwhile (0.6 mrad to 0.1 rad in the physics world); else (a first engage,
+           after a halt) from the measured state (ModeUpdate "execute"), as the hand always does; while
+           braking after a switch to preview, an engage carries on from where the commands are
     preview both sides brake to rest within their limits, then nothing more is sent
     halt   nothing more is sent at once (an e-stop; an actuator that failed: its controller stopped it)
 
@@ -122,6 +126,7 @@ class CommandPlanner:
     """Samples the commands at each tick from the adopted updates (see the module docstring)."""
 
     resumes_slowly = True  # after input loss, at the engage fraction (older sessions: False, older_formats)
+    engages_from_held = True  # the arm engages from the command its controller holds (formats <= 6: False)
 
     def __init__(self, motion: Motion, effector_guard, engage_speed_frac: float, stale_ns: int):
         self.motion = motion
@@ -157,12 +162,20 @@ class CommandPlanner:
             if s.mode == "execute":
                 return
             s.mode, s.engaging, s.input_lost = "execute", True, False
-            if not s.active:  # from rest at the measured state (braking: carry on from the commands)
-                s.arm = _Side(motion=JointMotion.rest(np.asarray(update.arm, dtype=float)))
+            if not s.active:  # from rest (braking: carry on from the commands)
+                s.arm = _Side(motion=JointMotion.rest(self._engage_arm(np.asarray(update.arm, dtype=float))))
                 s.hand = _Side(q=np.asarray(update.hand, dtype=float), v=np.zeros(len(update.hand)))
                 # A controller (and the audit) takes a stream to have stood at its first command one cycle
                 # before it: the hand's cap spans that cycle and the second command's step.
                 s.active, s.last_ns, s.dt_before = True, None, RESUME_PERIOD_NS / 1e9
+
+    def _engage_arm(self, measured: np.ndarray) -> np.ndarray:
+        """Where an engage from rest starts the arm: the last command while the controller holds it (see
+        the module docstring), else the measured state."""
+        held = self.state.arm.motion  # None before the first engage and after a halt
+        if self.engages_from_held and held is not None and held.q.shape == measured.shape:
+            return held.q.copy()
+        return measured
 
     def tick(self, t_ns: int) -> Tick | None:
         """The commands at t_ns, or None while the planner sends nothing."""

@@ -4,7 +4,8 @@
     link = host.link                                # in this process, or any process forked from it
     link.set_targets({"joint1": 0.2})               # the drives' targets by joint name
     link.joint_positions(("joint1",))               # measured
-    host.load_layout(layout, robot={...})           # a new episode's scene (the robot where it stands, or placed)
+    host.load_layout(layout, robot={...})           # a new episode's scene (the robot where it stands, or placed);
+                                                    # returns how the world began it (WorldLink.began)
     mirror = WorldMirror(link)                      # a copy of the world for reading: mirror.sync(); mirror.render()
     host.close()
 
@@ -141,6 +142,17 @@ class WorldLink:
             if int(b.header[GENERATION]) == g:
                 return g, record
 
+    def began(self) -> tuple[int, dict]:
+        """(generation, {"time_ns", "robot", "placed"}): how the world began the scene it runs now: its time,
+        the robot's joint positions at rest, and whether they were placed there (the drives' targets too)
+        or kept from the scene before (the drives keep the actuators' targets)."""
+        b = self.block
+        while True:
+            g = int(b.header[GENERATION])
+            record = b.read_json("began")
+            if int(b.header[GENERATION]) == g:
+                return g, record
+
     def outcome(self) -> WorldOutcome | None:
         """The latest judgement of the running task (None before the first)."""
         b = self.block
@@ -182,9 +194,9 @@ class WorldHost:
         self.block.header[REQUESTED] += 1
         return int(self.block.header[REQUESTED])
 
-    def load_layout(self, layout: Layout, robot: Mapping[str, float] | None = None, timeout_s: float = 5.0) -> None:
-        """Run this scene from now on (the robot where it stands, or placed at rest at `robot`); returns once
-        the world runs it."""
+    def load_layout(self, layout: Layout, robot: Mapping[str, float] | None = None, timeout_s: float = 5.0) -> dict:
+        """Run this scene from now on (the robot where it stands, or placed at rest at `robot`); returns, once
+        the world runs it, how it began it (WorldLink.began)."""
         with self._lock:
             generation = self._request(layout, robot)
         deadline = time.monotonic() + timeout_s
@@ -193,6 +205,7 @@ class WorldHost:
                 raise RuntimeError("the physics world process did not take the new layout "
                                    f"({'it exited' if self.process.poll() is not None else 'timed out'})")
             time.sleep(0.002)
+        return self.link.began()[1]
 
     def close(self) -> None:
         if self.process.poll() is None:

@@ -73,6 +73,11 @@ def _robot_positions(world) -> dict[str, float]:
                                                                      if n != "vacuum"))
 
 
+def _began(block: SharedBlock, world, placed: bool) -> None:
+    """How the world began the scene it runs now (written before the generation that announces it)."""
+    block.write_json("began", {"time_ns": world.time_ns, "robot": _robot_positions(world), "placed": placed})
+
+
 def _info(world) -> dict:
     m = world.model
     joints = {}
@@ -118,6 +123,7 @@ def serve(config: dict) -> None:
     block.ctrl[:nu] = world.data.ctrl
     lower, upper = world.model.actuator_ctrlrange[:, 0].copy(), world.model.actuator_ctrlrange[:, 1].copy()
     block.write_json("running", world.layout.to_record())
+    _began(block, world, True)
     block.header[GENERATION] = generation
     block.header[PID] = os.getpid()
     block.header[REALTIME] = int(_realtime())
@@ -135,6 +141,7 @@ def serve(config: dict) -> None:
                 if request.get("robot"):  # placed: the drives hold it there until the next command
                     block.ctrl[:nu] = world.data.ctrl
                 block.write_json("running", world.layout.to_record())
+                _began(block, world, bool(request.get("robot")))
                 block.header[GENERATION] = generation
                 states.clear()
                 next_state = next_judge = world.time_ns

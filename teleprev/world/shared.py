@@ -11,6 +11,8 @@ commands. Nothing in it is pickled; every part is a fixed-size array or a length
     info      JSON: the effector and, per joint name, its qpos and dof addresses and actuator index
     request   JSON: the layout record asked for (teleprev/world/layout.py: Layout.to_record)
     running   JSON: the layout record the world runs now
+    began     JSON: how the world began running it: its time then, the robot's joint positions (at rest) and
+              whether they were placed (the drives' targets reset to them) or kept from the scene before
     outcome   JSON: the task's outcome judged from the last states (teleprev/world/success.py), under its
               own seqlock
 """
@@ -26,7 +28,7 @@ import numpy as np
 MAX_CTRL = 64
 MAX_STATE = 1024  # qpos and qvel entries: the robot and a task's objects (pour: 106) with room to spare
 HEADER = 16
-_INFO, _LAYOUT, _OUTCOME = 16_384, 65_536, 8_192
+_INFO, _LAYOUT, _OUTCOME, _BEGAN = 16_384, 65_536, 8_192, 8_192
 
 # header slots
 (SEQ, TIME_NS, GENERATION, REQUESTED, ALIVE, STEPS, LATE_MAX_NS, STOP, OUTCOME_SEQ, LATE_BATCHES, PID,
@@ -41,7 +43,7 @@ class _Region:
 
 def _regions() -> dict[str, _Region]:
     sizes = {"header": HEADER * 8, "ctrl": MAX_CTRL * 8, "qpos": MAX_STATE * 8, "qvel": MAX_STATE * 8,
-             "info": _INFO, "request": _LAYOUT, "running": _LAYOUT, "outcome": _OUTCOME}
+             "info": _INFO, "request": _LAYOUT, "running": _LAYOUT, "outcome": _OUTCOME, "began": _BEGAN}
     out, offset = {}, 0
     for name, size in sizes.items():
         out[name] = _Region(offset, size)
@@ -67,7 +69,7 @@ class SharedBlock:
         self.ctrl = view("ctrl", np.float64)
         self.qpos = view("qpos", np.float64)
         self.qvel = view("qvel", np.float64)
-        self._bytes = {name: view(name, np.uint8) for name in ("info", "request", "running", "outcome")}
+        self._bytes = {name: view(name, np.uint8) for name in ("info", "request", "running", "outcome", "began")}
 
     # ---- length-prefixed JSON texts -------------------------------------------------------------
     def write_json(self, name: str, value: dict) -> None:

@@ -2,7 +2,9 @@
 speed caps only), sim_v2.mcap (format 2: motion limits, numpy arithmetic) and sim_v3.mcap (format 3: the
 compiled hot path, commands computed at each pipeline step), each recorded with
 tests/fixtures/fixture_rig.toml, two episodes engaged for 3 s each; sim_v5.mcap (format 5: commands from the
-paced sender's planner, the whole hand braking where a command was not free), one episode of 7 s.
+paced sender's planner, the whole hand braking where a command was not free), one episode of 7 s;
+sim_v6.mcap (format 6: the arm engaged from its measured state), recorded with
+tests/fixtures/fixture_physics_rig.toml, two episodes engaged for 3 s each.
 
 Re-record it only when the format changes on purpose, and keep the old one as sim_v<N>.mcap: the point
 is that older sessions keep working.
@@ -21,6 +23,7 @@ FIXTURE = Path(__file__).parents[1] / "fixtures" / "sim_v1.mcap"
 FIXTURE_V2 = Path(__file__).parents[1] / "fixtures" / "sim_v2.mcap"
 FIXTURE_V3 = Path(__file__).parents[1] / "fixtures" / "sim_v3.mcap"
 FIXTURE_V5 = Path(__file__).parents[1] / "fixtures" / "sim_v5.mcap"  # the whole hand braked (format 6: fingers)
+FIXTURE_V6 = Path(__file__).parents[1] / "fixtures" / "sim_v6.mcap"  # engaged from the measured arm (7: held)
 
 
 def test_every_stream_of_the_old_session_decodes():
@@ -94,6 +97,25 @@ def test_a_planned_format_reruns_with_its_own_arithmetic_bit_for_bit():
     assert (~np.isnan(hand.rerun).any(axis=1)).sum() > 500 and hand.same()
     assert r.models_match
     assert result.report["sessions"][0]["bit_identical"]
+
+
+def test_format_6_reruns_its_engages_from_the_measured_arm_bit_for_bit(monkeypatch):
+    """Format 6, recorded in the physics world: its second engage started from the measured arm, a
+    picoradian off the command the controller held. It reproduces with its own planner, and would not with
+    the current one (format 7 starts from the held command)."""
+    from teleprev.evaluation import reproduce
+    from teleprev.pipeline.older_formats import MeasuredEngagePlanner
+
+    reader = SessionReader(FIXTURE_V6)
+    assert reproduce.recorded_format(reader.metadata) == 6
+    assert [m.payload.data["mode"] for m in reader.messages(["/events/mode"])] == ["execute", "preview"] * 2
+    result = evaluate([FIXTURE_V6])
+    r = result.reruns[0]
+    arm = r.commands["/command/arm"]
+    assert (~np.isnan(arm.rerun).any(axis=1)).sum() > 500 and arm.same()
+    assert result.report["sessions"][0]["bit_identical"]
+    monkeypatch.setattr(MeasuredEngagePlanner, "engages_from_held", True)  # as format 7 engages
+    assert not evaluate([FIXTURE_V6]).reruns[0].commands["/command/arm"].same()
 
 
 def test_a_rerun_keeps_the_long_lived_objects_out_of_the_collectors_scans(monkeypatch):

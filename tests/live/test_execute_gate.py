@@ -4,6 +4,7 @@
 from __future__ import annotations
 
 import threading
+from types import SimpleNamespace
 
 import pytest
 
@@ -74,3 +75,57 @@ def test_a_hold_says_why():
     loop = SessionLoop(SessionClock(), lambda m: None)
     with pytest.raises(ValueError, match="says why"):
         loop.hold("schedule", "")
+
+
+class _Driver:
+    """The driver's side of a mode switch only (its mode, and every mode the loop asked it for); the samples
+    it is fed step nothing."""
+
+    pipeline = SimpleNamespace(arm_names=("joint1",), effector_names=("0",), cfg=SimpleNamespace(stale_ms=100.0))
+    topics = SimpleNamespace(action="", arm="/arm/arm/state")
+
+    def __init__(self):
+        self.mode, self.asked = "preview", []
+
+    def request_mode(self, mode: str, t_ns: int) -> str:
+        self.asked.append(mode)
+        self.mode = "preview" if mode == "estop" else mode
+        return ""
+
+    def take_updates(self) -> list:
+        return []
+
+    def feed(self, msg) -> SimpleNamespace:  # a device event steps nothing
+        return SimpleNamespace(result=None)
+
+
+def test_an_actuator_failing_at_rest_halts_the_planner_once_after_an_engage():
+    """In preview at rest the planner still keeps the arm's last command, which the next engage starts from
+    while the controller holds it. An arm that fails has let go of it: the loop halts the planner (a
+    recorded switch), once, so that the next engage starts from the measured arm. Before any engage, or for
+    a camera, there is nothing to let go of."""
+    from teleprev.messages import Event, Sample
+
+    logged, driver = [], _Driver()
+    ports = {"arm": SimpleNamespace(name="arm"), "hand": SimpleNamespace(name="hand")}
+    loop = SessionLoop(SessionClock(), logged.append, driver, actuators=ports)
+
+    def failed(device: str) -> None:
+        loop.sink(Sample(topics.DEVICE_EVENT, Event(0, "teleprev.DeviceEvent", {"device": device, "event": "error",
+                                                                               "message": "boom"})), 0)
+
+    failed("arm")  # before any engage
+    loop.engage()
+    loop.to_preview("schedule")
+    failed("cam_front")
+    failed("arm")
+    failed("arm")  # again: already halted
+    loop.start()
+    try:
+        wait_until(lambda: loop.backlog() == 0 and len(loop.stats.device_failures) == 2 and
+                   loop.stats.device_failures["arm"] == 3, 5.0, what="the loop to take the failures")
+    finally:
+        loop.stop()
+    assert driver.asked == ["execute", "preview", "estop"]
+    modes = [m.payload.data for m in logged if m.topic == topics.MODE]
+    assert modes[-1] == {"mode": "preview", "reason": "device arm failed", "halt": True}

@@ -278,3 +278,66 @@ def test_every_command_taken_can_still_stop_inside_the_limits(pipeline):
         assert ((after >= arm.lower - 1e-9) & (after <= arm.upper + 1e-9)).all(), (m, flags)
         assert "arm_limit_held" not in flags
     assert checked > 100
+
+
+def _reengage(p, planner, pushed):
+    """Engage, follow a moving target, brake to rest in preview, then engage again with the measured arm
+    `pushed` off the last command (as contact pushes a held arm); the ticks sent, and the last one before."""
+    s = Script(p)
+    t0 = 1_000_000_000
+    events = [(t0, s.target(t0, HOME)), (t0 + 1, s.mode("execute", t0 + 1))] + _moving_target(s, t0 + 2, 240)
+    events.append((t0 + 1_000_000_000, s.mode("preview", t0 + 1_000_000_000)))
+    first = _run(planner, events, t0 + 1 + PERIOD * np.arange(300))
+    held = first[-1].arm
+    t1 = t0 + 3_000_000_000
+    again = [(t1, s.mode("execute", t1, arm=held + pushed))] + _moving_target(s, t1 + 1, 120)
+    return first, _run(planner, again, t1 + 1 + PERIOD * np.arange(120)), held
+
+
+def _servo_faults(sent) -> list:
+    """The sim arm's fault rule (a servo-mode controller: a paused stream starts again where it holds) run
+    over the commands as sent."""
+    from teleprev.devices import ServoStreamRule
+
+    rule = ServoStreamRule(tuple(f"joint{i}" for i in range(1, 7)), 10.0, 500.0, 10_000_000)
+    faults = []
+    for x in sent:
+        broken = rule.check(x.t_ns, x.arm, lambda: (HOME, np.zeros(6)))
+        if broken:
+            faults.append(broken.describe())
+    return faults
+
+
+def test_an_engage_from_rest_starts_from_the_command_the_controller_holds(pipeline):
+    """Contact pushed the held arm 0.6 mrad: the second engage still starts from the last command, so the
+    controller (the sim arm's rule, which is never loosened) sees a smooth stream."""
+    pushed = np.array([0.0, 6e-4, -6e-4, 0.0, 3e-4, 0.0])
+    first, second, held = _reengage(pipeline, _planner(pipeline), pushed)
+    np.testing.assert_array_equal(second[0].arm, held)
+    assert _servo_faults(first + second) == []
+    _within(pipeline, second)
+
+
+def test_format_6_engaged_from_the_measured_arm(pipeline):
+    """Sessions of format 6 re-run as recorded: from the measured arm, whose 0.6 mrad the controller read as
+    a jerk (why format 7 changed it)."""
+    from teleprev.pipeline.older_formats import MeasuredEngagePlanner
+
+    pushed = np.array([0.0, 6e-4, -6e-4, 0.0, 3e-4, 0.0])
+    first, second, held = _reengage(pipeline, MeasuredEngagePlanner.for_pipeline(pipeline), pushed)
+    np.testing.assert_array_equal(second[0].arm, held + pushed)
+    assert any("jerks" in f for f in _servo_faults(first + second))
+
+
+def test_an_arm_held_off_its_command_still_engages_from_it_until_a_halt(pipeline):
+    """Contact may hold the arm 0.1 rad off its command (the palm pressed on an object): the controller holds
+    the command all the same. After a halt (a fault: the controller stopped and let go) the arm engages from
+    where it is measured."""
+    planner = _planner(pipeline)
+    blocked = np.array([0.0, -0.1, 0.0, 0.0, 0.0, 0.0])
+    _, second, held = _reengage(pipeline, planner, blocked)
+    np.testing.assert_array_equal(second[0].arm, held)
+    planner.adopt(ModeUpdate(10_000, 9_000_000_000, "halt"))
+    small = np.full(6, 1e-4)
+    planner.adopt(ModeUpdate(10_001, 9_500_000_000, "execute", HOME + small, np.zeros(len(pipeline.effector_names))))
+    np.testing.assert_array_equal(planner.tick(9_500_000_001).arm, HOME + small)

@@ -93,10 +93,10 @@ class MarkOutcome:
 
 @dataclass(frozen=True)
 class WorldLayout:
-    """The physics world began a scene at at_ns (teleprev.devices.LayoutRecord), recorded on /events/world."""
+    """The physics world began a scene at at_ns: teleprev.devices.LayoutRecord.to_event(), recorded on
+    /events/world."""
 
-    layout: dict
-    reason: str
+    event: dict
     at_ns: int
 
 
@@ -162,8 +162,8 @@ class LoopControls:
     def note(self, event: str, detail: str = "", show: bool = False) -> None:
         self.send(OperatorNote(event, detail, show))
 
-    def world_layout(self, layout: dict, reason: str, at_ns: int) -> None:
-        self.send(WorldLayout(layout, reason, at_ns))
+    def world_layout(self, event: dict, at_ns: int) -> None:
+        self.send(WorldLayout(event, at_ns))
 
     def wired(self, record: WireRecord) -> None:
         """A command an actuator's own process wrote (any thread): queued, to be counted and recorded."""

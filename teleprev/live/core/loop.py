@@ -178,6 +178,7 @@ class SessionLoop(LoopControls):
                                command_errors=self.relay.errors)
         self.episodes = EpisodeTracker()
         self.gate = ExecuteGate()
+        self._planner_holds = False  # the planner keeps commands it engaged with (no halt since): see _device_failed
         watched = driver is not None and not driver.topics.action
         self.input_watch = InputWatch(int(input_loss_to_preview_s * 1e9), int(driver.pipeline.cfg.stale_ms * 1e6)) \
             if watched else None
@@ -341,13 +342,16 @@ class SessionLoop(LoopControls):
         """A device failed: count it, tell the operator, go back to preview (a recorded mode switch, so a
         replay does the same) and stay there until the operator engages. An actuator that failed has been
         stopped by its controller: nothing more is sent (halt). Another device: the commands brake to rest
-        within their limits."""
+        within their limits. An actuator that fails at rest in preview is halted too (once), while the
+        planner still keeps a command for it: its controller let go of that command, so the next engage
+        starts from where the arm is measured (teleprev/pipeline/planner.py)."""
         name = str(data.get("device", ""))
         self.stats.device_failures[name] += 1
         message = f"device {name} failed: {data.get('message', '')}"
         actuator = name in {getattr(p, "name", None) for p in self.relay.actuators.values()}
         self.gate.faulted(message)
-        if self.driver is not None and (self.driver.mode == "execute" or (actuator and self.relay.active)):
+        moving = self.driver is not None and (self.driver.mode == "execute" or (actuator and self.relay.active))
+        if moving or (actuator and self._planner_holds):
             self._apply(ToPreview(f"device {name} failed", halt=actuator))
             message += ("; nothing more is sent to the robot" if actuator else "; the robot brakes to rest") + \
                 ", back in PREVIEW (press space to engage again)"
@@ -421,7 +425,10 @@ class SessionLoop(LoopControls):
             switch["halt"] = True
         self._log(Logged(topics.MODE, t, Event(t, "teleprev.ModeSwitch", switch)))
         self._pass_updates()
+        if halt or mode == "estop":
+            self._planner_holds = False
         if mode == "execute":
+            self._planner_holds = True
             self.stats.engages += 1
             self.gate.engaged()  # the operator engaged again
         if self.input_watch is not None:
@@ -438,8 +445,7 @@ class SessionLoop(LoopControls):
         return message
 
     def _world_layout(self, c: WorldLayout, now: int) -> None:
-        self._event(topics.WORLD, "teleprev.WorldLayout", {"layout": c.layout, "reason": c.reason}, now,
-                    stamp_ns=c.at_ns)
+        self._event(topics.WORLD, "teleprev.WorldLayout", c.event, now, stamp_ns=c.at_ns)
 
     def _note(self, c: OperatorNote, now: int) -> str:
         self._event(topics.OPERATOR, "teleprev.OperatorEvent", {"event": c.event, "detail": c.detail}, now)

@@ -241,7 +241,7 @@ class LiveSession:
         return self.recorder.log(msg)
 
     def _world_layout(self, entry) -> None:
-        self.loop.world_layout(entry.layout, entry.reason, entry.time_ns)
+        self.loop.world_layout(entry.to_event(), entry.time_ns)
 
     def _judge(self) -> tuple[str, str] | None:
         """The physics world's outcome of its task now, as the loop marks a stopping episode with it."""

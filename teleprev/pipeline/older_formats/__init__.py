@@ -9,6 +9,8 @@
     format 6   a hand command that is not free holds back only the fingers whose motion would collide,
                where formats 1 to 5 braked the whole hand; after input loss the planner resumes at the
                engage fraction, where formats 4 and 5 resumed at full speed
+    format 7   an engage from rest starts the arm from the last command while its controller holds it,
+               where formats up to 6 started it from the measured arm
     (format 9, the current one: where the whole hand brakes and its segment is not free with the
     clearance, it brakes keeping its direction, else on into the margin if no link collides on the way,
     where formats 1 to 8 stopped short; a hand joint keeps its braking envelope towards the joint limit
@@ -21,6 +23,8 @@
     target_frame_limiter  TargetFrameHandLimiter: the hand's braking envelope in the target's frame only
                        (formats 1 to 8)
     braking_swept      BrakingSweptCheck: the whole hand brakes where a command is not free (formats 1 to 5)
+    measured_engage    MeasuredEngagePipeline, whose planner engages the arm from its measured state
+                       (formats 4 to 6)
     immediate_resume   ImmediateResumePipeline, whose planner resumes at full speed after input loss
                        (formats 4 and 5)
     step_motion        StepMotion: the commands of a step under the motion limits, and idle steps
@@ -38,6 +42,7 @@ from teleprev.pipeline.arithmetic import Arithmetic
 from teleprev.pipeline.older_formats.abduction_first import AbductionFirstPipeline
 from teleprev.pipeline.older_formats.braking_swept import BrakingSweptCheck
 from teleprev.pipeline.older_formats.immediate_resume import ImmediateResumePipeline, ImmediateResumePlanner
+from teleprev.pipeline.older_formats.measured_engage import MeasuredEngagePipeline, MeasuredEngagePlanner
 from teleprev.pipeline.older_formats.numpy_arithmetic import (
     NumpyArmIK,
     NumpyArmRetargeter,
@@ -69,10 +74,13 @@ FLEXION_FIRST_FORMAT_VERSION = 5
 # Format 6: a hand command that is not free slides the fingers that would collide; after input loss the
 # planner resumes at the engage fraction.
 SLIDING_FORMAT_VERSION = 6
+# Format 7: an engage from rest starts the arm from the command its controller still holds.
+HELD_ENGAGE_FORMAT_VERSION = 7
 
 __all__ = ["MOTION_FORMAT_VERSION", "COMPILED_FORMAT_VERSION", "PLANNED_FORMAT_VERSION", "FLEXION_FIRST_FORMAT_VERSION",
-           "SLIDING_FORMAT_VERSION", "arithmetic", "AbductionFirstPipeline", "BrakingSweptCheck",
-           "ImmediateResumePipeline", "ImmediateResumePlanner", "MotionState", "NumpyArmIK",
+           "SLIDING_FORMAT_VERSION", "HELD_ENGAGE_FORMAT_VERSION", "arithmetic", "AbductionFirstPipeline",
+           "BrakingSweptCheck", "ImmediateResumePipeline", "ImmediateResumePlanner", "MeasuredEngagePipeline",
+           "MeasuredEngagePlanner", "MotionState", "NumpyArmIK",
            "NumpyArmRetargeter", "NumpyCorrector", "NumpyPipeline", "NumpySweptCheck", "StepCommandsDriver",
            "StepCommandsPipeline", "StepCommandsResult", "StepCommandsState", "StepMotion", "StoppingShortSweptCheck",
            "TargetFrameHandLimiter"]
@@ -80,8 +88,11 @@ __all__ = ["MOTION_FORMAT_VERSION", "COMPILED_FORMAT_VERSION", "PLANNED_FORMAT_V
 
 def arithmetic(session_format: int) -> Arithmetic:
     """The classes sessions of an older `session_format` were computed with."""
-    if session_format >= SLIDING_FORMAT_VERSION:
+    if session_format >= HELD_ENGAGE_FORMAT_VERSION:
         return Arithmetic(swept_check=StoppingShortSweptCheck, hand_limiter=TargetFrameHandLimiter)
+    if session_format >= SLIDING_FORMAT_VERSION:
+        return Arithmetic(swept_check=StoppingShortSweptCheck, hand_limiter=TargetFrameHandLimiter,
+                          pipeline=MeasuredEngagePipeline)
     if session_format >= FLEXION_FIRST_FORMAT_VERSION:
         return Arithmetic(swept_check=BrakingSweptCheck, hand_limiter=TargetFrameHandLimiter,
                           pipeline=ImmediateResumePipeline)
