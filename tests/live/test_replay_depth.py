@@ -1,0 +1,77 @@
+"""`teleprev replay SESSION --out` keeps the session's cameras: a physics-rig session whose camera recorded depth,
+replayed to the sim, records every depth frame (and colour and calibration) of the played window, unchanged,
+at the instant the replay played it; the replay session exports to a dataset with the depth feature."""
+
+from __future__ import annotations
+
+import json
+import re
+
+import numpy as np
+import pytest
+
+from teleprev import topics
+from teleprev.messages import CameraInfo, DepthSample
+from teleprev.session.reader import SessionReader
+from tests.helpers.cli import teleprev
+from tests.helpers.depth_session import depth_physics_rig
+
+W, H = 160, 120
+CAMERA = "/camera/cam_front"
+
+
+@pytest.fixture(scope="module")
+def source(tmp_path_factory):
+    d = tmp_path_factory.mktemp("depth_replay")
+    ran = teleprev("record", depth_physics_rig(d, W, H), "--out", d / "demo.mcap", "--episodes", "1",
+                   "--episode-time", "2.0", "--engage-after", "0.3", "--no-preview")
+    assert ran.returncode == 0, ran.stderr + ran.stdout
+    return d / "demo.mcap"
+
+
+def _read(path):
+    with SessionReader(path) as reader:
+        got = {t: [m.payload for m in reader.messages([t])] for t in (f"{CAMERA}/depth", f"{CAMERA}/calibration",
+                                                                      f"{CAMERA}/image", topics.COMMAND_ARM)}
+        return got, reader.episodes()
+
+
+@pytest.mark.parametrize("speed", [1.0, 0.5])
+def test_a_replay_records_the_sessions_depth_as_it_plays_it(source, tmp_path, speed):
+    out = tmp_path / "replay.mcap"
+    ran = teleprev("replay", source, "--episode", "0", "--to", "sim", "--engage-after", "0.2", "--no-preview",
+                   "--speed", speed, "--out", out)
+    assert ran.returncode == 0, ran.stderr + ran.stdout
+    speed = float(re.search(r"played \d+ steps at ([0-9.]+)x", ran.stdout).group(1))  # (capped by the limits)
+    src, _ = _read(source)
+    got, episodes = _read(out)
+    commands = [c.stamp_ns for c in src[topics.COMMAND_ARM]]
+    t0, last = min(commands), max(commands)
+    played = [d for d in src[f"{CAMERA}/depth"] if t0 <= d.stamp_ns <= last]
+    depths = got[f"{CAMERA}/depth"]
+    assert len(played) >= 20 and [d.stamp_ns for d in depths] == sorted(d.stamp_ns for d in depths)
+    assert len(depths) == len(played)  # every frame of the played window, once
+    for a, b in zip(played, depths):
+        assert isinstance(b, DepthSample) and np.array_equal(a.depth, b.depth) and b.scale_m == a.scale_m
+    # stamped at the instant the replay played it: the source's intervals over the speed
+    src_dt = np.diff([d.stamp_ns for d in played]) / speed
+    assert np.abs(np.diff([d.stamp_ns for d in depths]) - src_dt).max() <= 1
+    (episode,) = episodes
+    assert episode.start_ns - 50_000_000 <= depths[0].stamp_ns and depths[-1].stamp_ns <= episode.stop_ns
+    infos = got[f"{CAMERA}/calibration"]
+    assert infos and all(isinstance(i, CameraInfo) and (i.width, i.height) == (W, H) for i in infos)
+    assert infos[0].k == src[f"{CAMERA}/calibration"][0].k
+    assert len(got[f"{CAMERA}/image"]) == len([i for i in src[f"{CAMERA}/image"] if t0 <= i.stamp_ns <= last])
+
+
+def test_the_replay_session_exports_with_its_depth(source, tmp_path):
+    out = tmp_path / "replay.mcap"
+    ran = teleprev("replay", source, "--episode", "0", "--to", "sim", "--engage-after", "0.2", "--no-preview",
+                   "--out", out)
+    assert ran.returncode == 0, ran.stderr + ran.stdout
+    ran = teleprev("export", out, "--repo-id", "lab/replayed", "--root", tmp_path / "ds")
+    assert ran.returncode == 0, ran.stderr + ran.stdout
+    info = json.loads((tmp_path / "ds" / "meta" / "info.json").read_text())
+    feature = info["features"]["observation.images.cam_front_depth"]
+    assert feature["shape"] == [H, W, 1] and feature["info"]["is_depth_map"] is True
+    assert info["total_frames"] >= 20
