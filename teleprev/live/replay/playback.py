@@ -137,10 +137,11 @@ def build_player(session: Path, episode, speed: float, to: str, rig_path=None, s
     )
     if recording is not None:
         recording.playing = lambda: player.state.mode == "playing"
-        if not dataset:  # the session's camera frames go in beside the commands, as their instants are played
-            from teleprev.live.replay.camera_carry import CameraCarry
+        # the source's camera frames go in beside the commands, as their instants are played
+        from teleprev.live.replay.camera_carry import CameraCarry, dataset_depth_frames, session_frames
 
-            recording.carry = CameraCarry(session, recording, player)
+        frames = dataset_depth_frames(session, episode) if dataset else session_frames(session)
+        recording.carry = CameraCarry(frames, recording, player) if frames is not None else None
     return player, runners, tap, rig, message, recording
 
 
