@@ -1,7 +1,9 @@
 """`teleprev replay SESSION --out` keeps the session's cameras: a physics-rig session whose camera recorded depth,
 replayed to the sim, records every depth frame (and colour and calibration) of the played window, unchanged,
 at the instant the replay played it; the replay session exports to a dataset with the depth feature. A dataset
-with depth, replayed --out, records its depth maps too (as lerobot reads them back, in 1 mm counts)."""
+with depth, replayed --out, records its depth maps too (as lerobot reads them back, in 1 mm counts). `teleprev
+eval` writes no session (a report and plots of the re-run pipeline, which takes no camera): a session with depth
+evaluates as any other, reproduced bit for bit, its depth never read."""
 
 from __future__ import annotations
 
@@ -108,3 +110,21 @@ def test_a_datasets_depth_is_recorded_when_its_actions_are_replayed(source, data
         assert np.abs(d.metres()[seen] - want[seen]).max() <= 0.0005 + 1e-6  # 1 mm counts: half a count at most
         assert not d.depth[~seen].any()
         assert seen.mean() > 0.2 and np.median(d.metres()[seen]) > 0.3  # (the front view sees the room past 10 m)
+
+
+def test_eval_of_a_session_with_depth_reproduces_it_without_reading_the_depth(source, tmp_path, monkeypatch):
+    from teleprev.session import reader as session_reader
+
+    decoded = []
+    real = session_reader.SessionReader.messages
+
+    def counting(self, topics=None, *args, **kwargs):
+        decoded.extend(topics or ["(every topic)"])
+        return real(self, topics, *args, **kwargs)
+
+    monkeypatch.setattr(session_reader.SessionReader, "messages", counting)
+    ran = teleprev("eval", source, "--out", tmp_path / "eval.json")
+    assert ran.returncode == 0 and "bit for bit" in ran.stdout, ran.stdout + ran.stderr
+    assert decoded and not [t for t in decoded if t.startswith("/camera/") or t == "(every topic)"], decoded
+    report = json.loads((tmp_path / "eval.json").read_text())
+    assert report["sessions"][0]["bit_identical"] is True
