@@ -34,7 +34,7 @@ COLOUR = "observation.images.cam_front"
 def dataset(tmp_path_factory):
     d = tmp_path_factory.mktemp("depth_rollout")
     rig = depth_physics_rig(d, W, H)
-    ran = teleprev("record", rig, "--out", d / "demo.mcap", "--episodes", "1", "--episode-time", "2.0",
+    ran = teleprev("record", rig, "--out", d / "demo.mcap", "--episodes", "1", "--episode-time", "3.0",
                    "--engage-after", "0.3", "--no-preview")
     assert ran.returncode == 0, ran.stderr + ran.stdout
     ran = teleprev("export", d / "demo.mcap", "--repo-id", "lab/depth_demo", "--root", d / "ds")

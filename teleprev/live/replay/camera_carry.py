@@ -31,6 +31,7 @@ from teleprev.topics import device_topic, parse_device_topic
 # (t0, last) -> the frames (topic, payload) stamped from t0 to last on the source's clock, in stamp order
 Frames = Callable[[int, int], Iterator[tuple[str, object]]]
 DATASET_DEPTH_UNIT_M = 0.001  # a dataset's depth (metres, float) as 16-bit counts: finer than its 12-bit steps
+LATENCY_MARGIN_NS = 5_000_000_000  # frames logged up to this long after they were taken are carried
 DEPTH_MIN_M = 0.01  # lerobot.configs.video.DEFAULT_DEPTH_MIN: a depth feature's depth_min where its info has none
 DEPTH_SUFFIX = "_depth"  # LeRobot's depth feature: observation.images.<camera>_depth
 
@@ -46,11 +47,10 @@ def session_frames(session: Path) -> Frames:
             wanted = camera_topics(reader)
             if not wanted:
                 return
-            # log times follow acquisition stamps within a camera's latency: a second's margin either side
-            for msg in reader.messages(wanted, start_ns=t0 - 1_000_000_000, end_ns=last + 1_000_000_000):
-                if msg.payload.stamp_ns > last:
-                    break
-                if msg.payload.stamp_ns >= t0:
+            # in log-time order, which follows each camera's stamps within its latency (a busy machine's included:
+            # LATENCY_MARGIN_NS); one topic's frame past `last` may come before another's within it
+            for msg in reader.messages(wanted, start_ns=t0 - 1_000_000_000, end_ns=last + LATENCY_MARGIN_NS):
+                if t0 <= msg.payload.stamp_ns <= last:
                     yield msg.topic, msg.payload
     return frames
 
