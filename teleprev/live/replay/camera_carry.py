@@ -28,7 +28,8 @@ from teleprev.messages import DepthSample
 from teleprev.session.reader import SessionReader
 from teleprev.topics import device_topic, parse_device_topic
 
-# (t0, last) -> the frames (topic, payload) stamped from t0 to last on the source's clock, in stamp order
+# (t0, last) -> the frames (topic, payload) stamped from t0 to last on the source's clock, as they were logged
+# (each topic in stamp order; across topics within their latencies)
 Frames = Callable[[int, int], Iterator[tuple[str, object]]]
 DATASET_DEPTH_UNIT_M = 0.001  # a dataset's depth (metres, float) as 16-bit counts: finer than its 12-bit steps
 LATENCY_MARGIN_NS = 5_000_000_000  # frames logged up to this long after they were taken are carried
