@@ -31,6 +31,7 @@ class LoopSnapshot:
     dropped: int = 0
     fault: str = ""  # why the session stays in preview until the operator engages
     camera: Any = None  # the latest ImageSample of the first camera heard from, for the preview
+    depth: Any = None  # the latest DepthSample of the first depth camera heard from, for the preview
     input_age_ms: float = 0.0  # how old the sample the last step took was then (session clock - its stamp)
     stale_ms: float = 0.0  # the pipeline's stale limit: input older than this holds the last command (0: none)
 

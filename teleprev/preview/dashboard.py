@@ -5,6 +5,9 @@ the banner (with timed episodes' countdown of the current period), the keys (eve
 many lines as the width needs), the episode line and the device table always; the pictures share what is left, the
 robot first, then the hand, then the camera,
 each only where it has room to be read (at 80x24: robot, hand and camera side by side).
+
+With a depth camera the camera panel shows colour, depth (colour-mapped) or both side by side: `c` switches
+(CAMERA_MODES), and the key shows only where there is depth to switch to.
 """
 
 from __future__ import annotations
@@ -15,13 +18,15 @@ from rich.panel import Panel
 from rich.table import Table
 from rich.text import Text
 
-from teleprev.preview.camera_view import CameraView
+from teleprev.preview.camera_view import CameraView, DepthView
 from teleprev.preview.robot_view import Layer, RobotView
 from teleprev.status import DeviceRow, LoopSnapshot  # what the live session hands the preview to draw
 
 KEYS = (("space", "preview/execute"), ("x", "e-stop"), ("s/e", "start/end episode"),
         ("n", "next episode"),
         ("d", "discard"), ("a", "discard, again"), ("y/f", "success/failure"), ("r", "ready"), ("q", "quit"))
+CAMERA_KEY = ("c", "colour/depth")  # shown with a depth camera only: the camera panel's CAMERA_MODES in turn
+CAMERA_MODES = ("colour", "depth", "both")
 PREVIEW_STYLE = "bold black on yellow"
 EXECUTE_STYLE = "bold white on red"
 REAL_STYLE = "grey70"
@@ -50,11 +55,11 @@ def mode_banner(mode: str, width: int, countdown: tuple[str, float] | None = Non
     return text
 
 
-def key_lines(width: int) -> Text:
+def key_lines(width: int, keys: tuple[tuple[str, str], ...] = KEYS) -> Text:
     """Every key and what it does, centred, on as many lines as `width` needs (none is ever cut off)."""
     lines: list[list[tuple[str, str]]] = [[]]
     used = 0
-    for key, what in KEYS:
+    for key, what in keys:
         size = len(key) + 1 + len(what) + (3 if lines[-1] else 0)
         if lines[-1] and used + size > width:
             lines.append([])
@@ -131,6 +136,8 @@ class Dashboard:
         self.robot_view = robot_view
         self.hand_view = hand_view
         self.camera_view = CameraView()
+        self.depth_view = DepthView()
+        self.camera_mode = CAMERA_MODES[0]
         self.arm_names = tuple(arm_names)
         self.effector_names = tuple(effector_names)
         self.model = robot_model
@@ -142,6 +149,21 @@ class Dashboard:
         if effector is not None and self.effector_names[0] in self.model.joint_index:
             joints.update(zip(self.effector_names, effector))
         return self.model.vector(joints)
+
+    def next_camera_mode(self) -> str:
+        """The camera panel's next mode (the `c` key): colour, depth, both, colour, ..."""
+        self.camera_mode = CAMERA_MODES[(CAMERA_MODES.index(self.camera_mode) + 1) % len(CAMERA_MODES)]
+        return self.camera_mode
+
+    def camera_panels(self, camera, depth) -> list:
+        """(title, draw(cols, rows)) of the camera's panels in the current mode: colour without depth."""
+        colour = ("camera", lambda c, r: self.camera_view.render(camera, c, r))
+        mapped = ("depth", lambda c, r: self.depth_view.render(depth, c, r))
+        if depth is None or self.camera_mode == "colour":
+            return [colour] if camera is not None else []
+        if self.camera_mode == "depth" or camera is None:
+            return [mapped]
+        return [mapped, colour]  # beside each other where both fit; colour is dropped first (at 80x24)
 
     def robot_panel(self, snap: LoopSnapshot, cols: int, rows: int) -> RenderableType:
         step = snap.step
@@ -176,11 +198,12 @@ class Dashboard:
         return Group(caption, self.hand_view.render(layers, cols, rows - 1))
 
     def render(self, snap: LoopSnapshot, devices: list[DeviceRow], width: int, height: int, now_ns: int,
-               camera=None, countdown: tuple[str, float] | None = None) -> RenderableType:
+               camera=None, countdown: tuple[str, float] | None = None, depth=None) -> RenderableType:
         """The screen for a terminal of width x height; `camera` is the latest frame (an ImageSample) of the
-        camera to show, or None; `countdown`: timed episodes' current period and its seconds left, or None."""
+        camera to show, or None; `depth` the latest depth frame (a DepthSample), or None; `countdown`: timed
+        episodes' current period and its seconds left, or None."""
         episode = episode_line(snap, now_ns, tuple(dict.fromkeys(r.hint for r in devices if r.hint)))
-        keys = key_lines(width)
+        keys = key_lines(width, KEYS if depth is None else (*KEYS[:-1], CAMERA_KEY, KEYS[-1]))
         table = device_table(devices)
         fixed = 1 + len(episode.plain.splitlines()) + len(keys.plain.splitlines()) + len(devices) + 1
         body_rows = height - fixed
@@ -190,8 +213,7 @@ class Dashboard:
         sides = []
         if self.hand_view is not None:
             sides.append(("hand", lambda c, r: self.hand_panel(snap, c, r)))
-        if camera is not None:
-            sides.append(("camera", lambda c, r: self.camera_view.render(camera, c, r)))
+        sides += self.camera_panels(camera, depth)
         # the robot gets two shares of the width, each side panel one (at least its minimum), while the robot
         # still has its own minimum; the camera goes first, then the hand
         while sides:

@@ -76,3 +76,21 @@ def record_depth_session(path: Path, camera: SoftwareRealSense, seconds: float, 
         camera.stop()
     return DepthRecording(path, recorder.close(), stats, counters, seconds)
 
+
+
+def depth_physics_rig(folder: Path, width: int = 160, height: int = 120) -> Path:
+    """The physics rig (rigs/sim_physics.toml) with its camera at width x height rendering depth too."""
+    import os
+    import re
+
+    from teleprev.rig import default_rig_path
+
+    os.environ.setdefault("MUJOCO_GL", "egl")  # headless rendering, decided before the world imports mujoco
+    text = (default_rig_path().parent / "sim_physics.toml").read_text()
+    text = re.sub(r"(\[devices\.cam_front\][^\[]*?)width = 640\nheight = 480\n",
+                  rf"\1width = {width}\nheight = {height}\ndepth = true\n", text, flags=re.S)
+    if "depth = true" not in text:
+        raise AssertionError("rigs/sim_physics.toml's camera no longer reads as this helper expects")
+    path = folder / "sim_physics_depth.toml"
+    path.write_text(text)
+    return path

@@ -65,7 +65,7 @@ from teleprev.live.core.episodes import EpisodeTracker
 from teleprev.live.core.gate import ExecuteGate, GateState
 from teleprev.live.core.input_watch import InputEvent, InputWatch
 from teleprev.live.core.relay import CommandRelay, tick_records
-from teleprev.messages import Event, ImageSample, Logged, PoseSample, Sample
+from teleprev.messages import DepthSample, Event, ImageSample, Logged, PoseSample, Sample
 from teleprev.pipeline.driver import PipelineDriver
 from teleprev.status import LoopSnapshot
 from teleprev.thread_priority import raise_this_thread
@@ -185,6 +185,7 @@ class SessionLoop(LoopControls):
         self.snapshot = LoopSnapshot(session_started_ns=clock.now_ns(),
                                      stale_ms=driver.pipeline.cfg.stale_ms if driver is not None else 0.0)
         self._camera_topic: str | None = None
+        self._depth_topic: str | None = None
         self._last_ns = 0
         self._thread: threading.Thread | None = None
         self.failure = ""  # why the loop no longer runs the pipeline (it raised), or ""
@@ -286,6 +287,9 @@ class SessionLoop(LoopControls):
         if isinstance(payload, ImageSample) and self._camera_topic in (None, sample.topic):
             self._camera_topic = sample.topic
             self.snapshot = replace(self.snapshot, camera=payload)
+        elif isinstance(payload, DepthSample) and self._depth_topic in (None, sample.topic):
+            self._depth_topic = sample.topic
+            self.snapshot = replace(self.snapshot, depth=payload)
         if self.driver is None or self.failure:
             return
         started = time.perf_counter_ns()

@@ -23,7 +23,7 @@ from teleprev.live.record.cues import Cues
 from teleprev.live.record.operator_actions import handle_key
 from teleprev.live.record.schedule import EpisodeTimes, Period, Schedule
 from teleprev.live.record.session import LiveSession
-from teleprev.preview.dashboard import Dashboard
+from teleprev.preview.dashboard import CAMERA_KEY, Dashboard
 from teleprev.preview.keys import KeyReader
 from teleprev.preview.robot_view import RobotView
 from teleprev.robot.model import load_robot
@@ -77,18 +77,29 @@ def make_dashboard(recording: LiveSession, view: str) -> Dashboard:
     )
 
 
+def with_camera_key(dashboard: Dashboard | None, then):
+    """A key handler: the camera key switches what the dashboard's camera panel shows (nothing the recording
+    does), every other key goes on to `then`."""
+    def press(key: str):
+        if key == CAMERA_KEY[0] and dashboard is not None:
+            dashboard.next_camera_mode()
+            return None
+        return then(key)
+    return press
+
+
 def _frame(dashboard: Dashboard, recording: LiveSession, console: Console, countdown=None):
     size = console.size
     snap = recording.loop.snapshot
     return dashboard.render(snap, recording.device_rows(), size.width, size.height, recording.clock.now_ns(),
-                            camera=snap.camera, countdown=countdown)
+                            camera=snap.camera, countdown=countdown, depth=snap.depth)
 
 
 def run_interactive(recording: LiveSession, console: Console, view: str, fps: float, show: bool = True) -> PreviewStats:
     stats = PreviewStats()
     quit_flag: list = []
     dashboard = make_dashboard(recording, view) if show else None
-    press = lambda k: handle_key(recording, k, quit_flag)  # noqa: E731
+    press = with_camera_key(dashboard, lambda k: handle_key(recording, k, quit_flag))
     with KeyReader(press), recording.pressing(press):
         if dashboard is None:
             while not quit_flag and not recording.failure:  # nobody watches a screen: end at once
@@ -366,7 +377,8 @@ def run_timed(recording: LiveSession, plan: EpisodeTimes, console: Console | Non
     pacer = PreviewPacer(fps, recording.loop.backlog)
     run = TimedRun(recording, plan, cues, keys)
     next_frame = 0.0
-    with KeyReader(keys.press), recording.pressing(keys.press):
+    press = with_camera_key(dashboard, keys.press)
+    with KeyReader(press), recording.pressing(press):
         if live:
             live.start()
         try:

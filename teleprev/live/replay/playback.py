@@ -137,6 +137,11 @@ def build_player(session: Path, episode, speed: float, to: str, rig_path=None, s
     )
     if recording is not None:
         recording.playing = lambda: player.state.mode == "playing"
+        # the source's camera frames go in beside the commands, as their instants are played
+        from teleprev.live.replay.camera_carry import CameraCarry, dataset_depth_frames, session_frames
+
+        frames = dataset_depth_frames(session, episode) if dataset else session_frames(session)
+        recording.carry = CameraCarry(frames, recording, player) if frames is not None else None
     return player, runners, tap, rig, message, recording
 
 
@@ -176,6 +181,8 @@ def play(session: Path, episode, speed: float, to: str, rig_path, engage_after, 
         live_view = _start_view(foxglove, session, player, console)
         for r in runners:
             r.start()
+        if recording is not None and recording.carry is not None:
+            recording.carry.start()
         thread.start()
         _show(session, player, thread, to, rig, engage_after, console, view, show, message)
     finally:
@@ -258,6 +265,8 @@ def _finish(player: Player, thread: threading.Thread, runners, live_view, record
         thread.join(2.0)
     for r in runners:
         r.stop()
+    if recording is not None and recording.carry is not None:
+        recording.carry.stop()  # the frames of the instants played are in, before the file closes
     if live_view is not None:
         live_view[1].set()
         live_view[2].join(2.0)

@@ -269,6 +269,7 @@ class PlayerState:
     index: int = 0
     sent: list[tuple[str, str, np.ndarray]] = field(default_factory=list)  # (phase, kind, command) in send order
     message: str = ""
+    start_ns: int | None = None  # the clock's instant of the first played step, once playing (its commands' stamps)
 
 
 class Player:
@@ -340,6 +341,7 @@ class Player:
         self.state.mode = "playing"
         start, t0 = time.perf_counter(), self.p.t_ns[0]
         start_ns = self._now_ns() + int(self.period * 1e9)
+        self.state.start_ns = start_ns
         arm_sent, eff_sent = self.p.sent("arm"), self.p.sent("effector")
         for k in range(len(self.p.t_ns)):
             if self._stop.is_set():

@@ -1,7 +1,8 @@
 """`teleprev replay --out SESSION.mcap`: a replay recorded as a session of its own: every command sent to
 the robot (the engage ramp and the played steps) on /command/arm and /command/hand as it leaves, the
-states the robot reports, one episode around the played steps, and the rig in the metadata, so that
-`teleprev audit`, `replay` and `export` read it like any recording.
+states the robot reports, the source session's camera frames (colour, depth, calibration) as their instants are
+played (teleprev/live/replay/camera_carry.py), one episode around the played steps, and the rig in the metadata,
+so that `teleprev audit`, `replay` and `export` read it like any recording.
 """
 
 from __future__ import annotations
@@ -39,6 +40,7 @@ class ReplayRecording:
         self.recorder = Recorder(out, meta).start()
         self.started = False
         self.playing = lambda: True  # whether the player is past its engage ramp (build_player sets it)
+        self.carry = None  # the source session's camera frames (a CameraCarry, which build_player sets), or None
 
     @property
     def error(self) -> str:
@@ -66,6 +68,10 @@ class ReplayRecording:
                 self._write(sample.topic, receive_ns, sample.payload)
             then(sample, receive_ns)
         return record
+
+    def record(self, topic: str, payload) -> None:
+        """A message recorded as it arrives (the source's camera frames: teleprev/live/replay/camera_carry.py)."""
+        self._write(topic, self.clock.now_ns(), payload)
 
     def command(self, topic: str, sample: JointSample) -> None:
         if not self.started and self.playing():  # the episode is what is played; the engage ramp comes before it

@@ -2,7 +2,9 @@
 
     PolicyCard.read(path)    what the folder says of itself, from its JSON files alone (no torch): the
                              policy type, its input and output features with their shapes, the fps of
-                             the dataset it was trained on (when that dataset's folder is still there)
+                             the dataset it was trained on (when that dataset's folder is still there),
+                             and the unit its depth maps were given in (lerobot-train's
+                             --dataset.depth_output_unit: "mm" unless the training said "m")
     LeRobotPolicy.load(path) the policy (lerobot.policies.factory.get_policy_class) and its saved pre- and
                              post-processors (make_pre_post_processors), run once on a blank observation:
                              `chunk(observation)` gives the actions it plans from one observation, in the
@@ -22,6 +24,10 @@ import numpy as np
 from teleprev.errors import ConfigError
 
 FILES = ("config.json", "model.safetensors")  # what a saved policy needs (the processors' JSON too)
+# lerobot.configs.video.DEFAULT_DEPTH_UNIT (not imported: lerobot loads in ~15 s): the unit LeRobotDataset, and so
+# lerobot-train, gives depth maps in unless told otherwise
+LEROBOT_DEPTH_UNIT = "mm"
+DEPTH_UNITS_M = {"m": 1.0, "mm": 1000.0}  # depth unit -> its units per metre
 
 
 @dataclass(frozen=True)
@@ -31,6 +37,12 @@ class PolicyCard:
     inputs: dict[str, tuple[int, ...]]  # feature name -> shape (images: channels, height, width)
     outputs: dict[str, tuple[int, ...]]
     dataset_fps: int  # 0: unknown (the training dataset's folder is gone)
+    depth_unit: str = LEROBOT_DEPTH_UNIT  # what the training dataset returned depth maps in: "m" or "mm"
+
+    def is_depth(self, name: str) -> bool:
+        """A depth-map input: one channel (LeRobot's <camera>_depth features, (1, H, W); colour has three)."""
+        shape = self.inputs[name]
+        return len(shape) == 3 and shape[0] == 1
 
     @classmethod
     def read(cls, path: Path) -> PolicyCard:
@@ -59,7 +71,7 @@ class PolicyCard:
                 f"config.json is not a LeRobot policy config ({type(exc).__name__}: {exc})", where
             ) from None
         check_weights(path / "model.safetensors")
-        return cls(path, kind, inputs, outputs, _dataset_fps(path))
+        return cls(path, kind, inputs, outputs, _dataset_fps(path), _depth_unit(path))
 
 
 def check_weights(path: Path) -> None:
@@ -84,6 +96,20 @@ def _dataset_fps(path: Path) -> int:
         return int(json.loads((Path(root) / "meta" / "info.json").read_text())["fps"]) if root else 0
     except (OSError, ValueError, KeyError, TypeError):
         return 0
+
+
+def _depth_unit(path: Path) -> str:
+    """The depth unit the policy was trained on (train_config.json's dataset.depth_output_unit; lerobot's default
+    where it does not say). Refuses (ConfigError) a unit lerobot does not have."""
+    try:
+        train = json.loads((path / "train_config.json").read_text())
+        unit = (train.get("dataset") or {}).get("depth_output_unit") or LEROBOT_DEPTH_UNIT
+    except (OSError, ValueError, AttributeError):
+        return LEROBOT_DEPTH_UNIT
+    if unit not in DEPTH_UNITS_M:
+        raise ConfigError(f"train_config.json's dataset.depth_output_unit is {unit!r}, not one of "
+                          f"{', '.join(DEPTH_UNITS_M)}", str(path / "train_config.json"))
+    return unit
 
 
 class LeRobotPolicy:
@@ -130,10 +156,12 @@ class LeRobotPolicy:
     def warm_up(self) -> None:
         """One inference on a blank observation, then a reset: torch's first call (allocations, kernel
         choice) costs seconds, which the first episode's first plan must not wait for."""
-        blank = {
-            name: np.zeros((shape[1], shape[2], shape[0]), np.uint8) if len(shape) == 3 else np.zeros(shape, np.float32)
-            for name, shape in self.card.inputs.items()
-        }
+        def zeros(name, shape):
+            if len(shape) != 3:
+                return np.zeros(shape, np.float32)
+            return np.zeros((shape[1], shape[2], shape[0]), np.float32 if self.card.is_depth(name) else np.uint8)
+
+        blank = {name: zeros(name, shape) for name, shape in self.card.inputs.items()}
         self.chunk(blank, "")
         self.reset()
 

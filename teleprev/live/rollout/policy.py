@@ -3,7 +3,11 @@
     PolicyFeatures   what the policy observes and does, as the export recipe defines a dataset's features
                      (datasets/recipes/default.toml): `observation.state` from the measured arm and end
                      effector, `observation.images.<camera>` from each camera, `action` the arm and end
-                     effector's joints (the pipeline's `action_names`)
+                     effector's joints (the pipeline's `action_names`); `observation.images.<camera>_depth`
+                     from a depth camera, for a policy trained with it: (H, W, 1) float32 in the unit the
+                     training's LeRobotDataset gave (lerobot-train's depth_output_unit, millimetres by
+                     default), which lerobot's prepare_observation_for_inference makes (1, 1, H, W) as
+                     the dataset's batches are
     LatestSamples    the session loop's tap: the latest logged sample of each stream
     PolicyRunner     two threads. Inference: whenever no more actions are left than the last inference
                      took frames (LEAD at least), the latest observation goes through the policy, and its
@@ -36,11 +40,12 @@ import numpy as np
 
 from teleprev import topics
 from teleprev.errors import ConfigError
-from teleprev.export.recipe import IMAGE, JOINTS, POSE, Recipe, ResolvedFeature, resolve
+from teleprev.export.recipe import DEPTH_SCHEMAS, IMAGE, JOINTS, POSE, Recipe, ResolvedFeature, resolve
 from teleprev.export.streams import pose_values
-from teleprev.messages import ImageSample, JointSample, Logged, PoseSample
+from teleprev.messages import DepthSample, ImageSample, JointSample, Logged, PoseSample
 
-SCHEMAS = {"joints": JOINTS, "pose": POSE, "image": IMAGE}  # a StreamSpec's payload -> its recorded schema
+# a StreamSpec's payload -> its recorded schema (depth: the RawImage it is recorded as by default)
+SCHEMAS = {"joints": JOINTS, "pose": POSE, "image": IMAGE, "depth": DEPTH_SCHEMAS[0]}
 LEAD = 2  # actions left, at least, when the next inference starts (frames of slack for its latency)
 
 
@@ -56,8 +61,9 @@ class Policy(Protocol):
 
 @dataclass(frozen=True)
 class PolicyFeatures:
-    observations: tuple[ResolvedFeature, ...]  # state vectors and images, in the recipe's order
+    observations: tuple[ResolvedFeature, ...]  # state vectors, images and depth maps, in the recipe's order
     action: ResolvedFeature
+    depth_per_m: float = 1000.0  # a depth map's units per metre, as the policy was trained (millimetres: 1000)
 
     @classmethod
     def for_streams(cls, recipe: Recipe, streams: dict[str, str], inputs: dict[str, str]) -> PolicyFeatures:
@@ -77,6 +83,11 @@ class PolicyFeatures:
     def names(self) -> tuple[str, ...]:
         return tuple(f.name for f in self.observations)
 
+    def observed_by(self, inputs, depth_per_m: float) -> PolicyFeatures:
+        """Only the features a policy takes (`inputs`: its input feature names): one trained without depth gets
+        none, nor anything else the recipe makes that it was not trained on."""
+        return PolicyFeatures(tuple(f for f in self.observations if f.name in inputs), self.action, depth_per_m)
+
 
 class LatestSamples:
     """The latest logged sample of each stream: a SessionLoop tap (called on the loop's thread)."""
@@ -92,8 +103,9 @@ class LatestSamples:
 
 
 def observe(features: PolicyFeatures, latest: LatestSamples) -> dict[str, np.ndarray] | None:
-    """One observation as a dataset's frame holds it (float32 vectors, RGB uint8 height x width x 3), from
-    the latest samples; None until every stream has sent something."""
+    """One observation as a dataset's frame holds it (float32 vectors, RGB uint8 height x width x 3, depth
+    float32 height x width x 1 in the policy's depth unit), from the latest samples; None until every stream
+    has sent something."""
     out: dict[str, np.ndarray] = {}
     for f in features.observations:
         samples = [latest.get(s.topic) for s in f.sources]
@@ -101,6 +113,9 @@ def observe(features: PolicyFeatures, latest: LatestSamples) -> dict[str, np.nda
             return None
         if f.is_image:
             out[f.name] = decode_jpeg(samples[0])
+            continue
+        if f.is_depth:
+            out[f.name] = depth_map(samples[0], features.depth_per_m)
             continue
         parts = []
         for s in samples:
@@ -119,6 +134,14 @@ def decode_jpeg(sample: ImageSample) -> np.ndarray:
     if image is None:
         raise ValueError(f"a camera image stamped {sample.stamp_ns} does not decode")
     return image
+
+
+def depth_map(sample: DepthSample, per_m: float) -> np.ndarray:
+    """A depth frame as the policy's dataset gave it: (H, W, 1) float32 in metres times `per_m`."""
+    from teleprev.export.session import depth_image
+
+    image = depth_image(sample)
+    return image if per_m == 1.0 else image * np.float32(per_m)
 
 
 @dataclass

@@ -25,7 +25,7 @@ from teleprev.export.recipe import Recipe, load_recipe
 from teleprev.live.record.run import run_timed
 from teleprev.live.record.schedule import EpisodeTimes
 from teleprev.live.record.session import LiveSession, RecordOptions
-from teleprev.live.rollout.lerobot_policy import PolicyCard
+from teleprev.live.rollout.lerobot_policy import DEPTH_UNITS_M, PolicyCard
 from teleprev.live.rollout.policy import LatestSamples, PolicyFeatures, PolicyRunner, observe
 from teleprev.messages import JointSample, Sample
 from teleprev.pipeline.step import action_names as joint_action_names
@@ -106,10 +106,10 @@ def check_rollout(options: RolloutOptions) -> RolloutPlan:
               topics.device_topic("hand", inputs["effector"].split("/")[2], "state"): len(effector)}
     given = {}
     for f in features.observations:
-        if f.is_image:
+        if f.is_video:
             settings = rig.devices[f.sources[0].topic.split("/")[2]].settings
             h, w = getattr(settings, "height", None), getattr(settings, "width", None)
-            given[f.name] = (3, h, w) if h and w else None
+            given[f.name] = (1 if f.is_depth else 3, h, w) if h and w else None
         else:
             sizes = [widths.get(s.topic, 7 if s.schema.endswith("PoseInFrame") else None) for s in f.sources]
             given[f.name] = None if None in sizes else (sum(sizes),)
@@ -131,7 +131,8 @@ def check_rollout(options: RolloutOptions) -> RolloutPlan:
     if not fps:
         cameras = [f.sources[0].topic for f in features.observations if f.is_image]
         fps = round(rates[cameras[0]]) if cameras else DEFAULT_FPS
-    return RolloutPlan(card, recipe, rig, features, action_names, fps)
+    observed = features.observed_by(card.inputs, DEPTH_UNITS_M[card.depth_unit])
+    return RolloutPlan(card, recipe, rig, observed, action_names, fps)
 
 
 def episode_plan(options: RolloutOptions) -> EpisodeTimes:
