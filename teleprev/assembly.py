@@ -131,6 +131,7 @@ def build_effector(rig: Rig, robot: RobotModel, cfg: PipelineConfig, max_dt: flo
     spec = rig.effector
     if spec.self_colliding:
         from teleprev.noncollision.corrector import Corrector
+        from teleprev.noncollision.mirrored import load_corrector
 
         hand = load_robot(spec.hand_urdf)
         swept = checker = None
@@ -140,7 +141,7 @@ def build_effector(rig: Rig, robot: RobotModel, cfg: PipelineConfig, max_dt: flo
             swept = how.swept_check(hand, SelfCollisionChecker(hand), hand_clearance_m(rig))
             checker = swept.grown
             _capped_speed(rig, "hand_speed", hand.velocity_limit)
-        corrector = (how.corrector or Corrector).load(models_dir(rig, models), hand, checker)
+        corrector = load_corrector(how.corrector or Corrector, models_dir(rig, models), hand, checker)
         return LeapEffector(spec, hand, corrector, cfg, max_dt, calibration.leap_map()), swept
     if spec.is_switch:
         return VacuumEffector(spec, cfg, max_dt), None
