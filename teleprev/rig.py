@@ -126,6 +126,11 @@ class Rig:
     text: str | None = None  # the TOML, for a rig read from text (a session's recorded rig has no file)
     sim: SimSection = field(default_factory=SimSection)  # [sim]: the world the sim devices live in
     session: SessionSection = field(default_factory=SessionSection)  # [session]
+    sides: dict = field(default_factory=dict)  # [sides.left], [sides.right] (teleprev/sides.py); {}: single-arm
+
+    @property
+    def bimanual(self) -> bool:
+        return bool(self.sides)
 
     def check_task(self, task: str, where: str) -> None:
         """Refuse a task label that a device of this rig has to act out and does not know (a simulated
@@ -191,6 +196,40 @@ class Rig:
         return p if p.is_absolute() else self.dir / p
 
 
+@dataclass(frozen=True)
+class SideRig(Rig):
+    """One side of a bimanual rig seen as a single-arm rig (teleprev/sides.py: side_rig)."""
+
+    side: Any = None  # teleprev.sides.Side
+
+    @property
+    def effector(self) -> EndEffector:
+        return self.side.effector
+
+
+def side_rig(rig: Rig, side: str) -> SideRig:
+    """One side of a bimanual rig as a single-arm rig: its robot, end effector, [pipeline] and calibration,
+    the devices of this side and those of no side (cameras). What build_pipeline, motion_limits and the
+    checks of a single-arm rig take."""
+    s = rig.sides[side]
+    other = set().union(*(o.devices.values() for n, o in rig.sides.items() if n != side))
+    mine = set(s.devices.values())
+    devices = {n: d for n, d in rig.devices.items() if n in mine or n not in other}
+    section = replace(rig.rig, robot=s.robot, end_effector=s.section.end_effector,
+                      calibration=s.section.calibration or rig.rig.calibration)
+    out = SideRig(rig.path, section, s.pipeline, devices, rig.raw, rig.frames, rig.tasks, rig.text, rig.sim,
+                  rig.session, side=s)
+    check_single_arm(out, f"{rig.path or 'rig'} [sides.{side}]")
+    return out
+
+
+def check_single_arm(rig: Rig, where: str) -> None:
+    """The checks parse_rig makes of a single-arm rig's robot and motion limits (a side of a bimanual one)."""
+    _check_robot(rig.rig, rig.pipeline, where)
+    _check_motion_limits(rig.rig, rig.pipeline, where)
+    _check_device_motion_limits({n: d for n, d in rig.devices.items()}, rig.rig, where)
+
+
 def default_rig_path() -> Path:
     return data_dir("rigs") / "sim.toml"
 
@@ -203,6 +242,10 @@ def load_rig(path: str | Path | None = None) -> Rig:
         value = getattr(rig.rig, key)
         if value and not exists(rig.resolve(value)):
             raise ConfigError(f"no such {what} {str(rig.resolve(value))!r}", f"{path} [rig].{key}")
+    for name, side in rig.sides.items():
+        value = side.section.calibration
+        if value and not rig.resolve(value).is_file():
+            raise ConfigError(f"no such file {str(rig.resolve(value))!r}", f"{path} [sides.{name}].calibration")
     return rig
 
 
@@ -251,10 +294,10 @@ def load_recorded_rig(metadata: dict, session: Path) -> Rig | None:
 
 def parse_rig(data: dict, path: Path | None, where: str | None = None) -> Rig:
     where = where or str(path)
-    unknown = sorted(set(data) - {"rig", "session", "pipeline", "devices", "frames", "tasks", "sim"})
+    unknown = sorted(set(data) - {"rig", "session", "pipeline", "devices", "frames", "tasks", "sim", "sides"})
     if unknown:
         raise ConfigError(f"unknown table [{unknown[0]}] (expected [rig], [session], [pipeline], [devices.<name>], "
-                          "[frames.<name>], [tasks] and [sim])", where)
+                          "[frames.<name>], [tasks], [sim] and [sides.<left|right>])", where)
     rig = from_table(RigSection, data.get("rig", {}), f"{where} [rig]")
     session = from_table(SessionSection, data.get("session", {}), f"{where} [session]")
     sim = from_table(SimSection, data.get("sim", {}), f"{where} [sim]")
@@ -290,8 +333,13 @@ def parse_rig(data: dict, path: Path | None, where: str | None = None) -> Rig:
         if name != "suit" and (name not in devices or devices[name].kind != "camera"):
             raise ConfigError("names no camera of this rig (a [frames] table is a camera device's name, or suit)",
                               f"{where} [frames.{name}]")
+    from teleprev.sides import parse_sides
+
+    sides = parse_sides(data.get("sides"), data.get("pipeline", {}), devices, where)
     out = Rig(path.resolve() if path else None, rig, pipeline, devices, data, frames, tasks, session=session,
-              sim=sim)
+              sim=sim, sides=sides)
+    for name in sides:
+        side_rig(out, name)  # each side's robot and limits checked as a single-arm rig's
     out.check_task(rig.task, f"{where} [rig].task")
     return out
 

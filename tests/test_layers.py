@@ -25,7 +25,7 @@ LAYERS: list[tuple[str, ...]] = [
     ("teleprev.robot", "teleprev.human", "teleprev.session", "teleprev.world"),
     ("teleprev.devices", "teleprev.retarget", "teleprev.noncollision", "teleprev.emulators"),
     ("teleprev.pipeline",),
-    ("teleprev.rig", "teleprev.assembly"),
+    ("teleprev.rig", "teleprev.sides", "teleprev.assembly", "teleprev.bimanual"),
     ("teleprev.preview", "teleprev.export", "teleprev.study"),
     ("teleprev.live", "teleprev.live.core", "teleprev.live.view"),
     ("teleprev.live.record",),

@@ -24,6 +24,7 @@ from teleprev.devices.registry import GROUP, available, load_plugin
 from teleprev.devices.runner import ActuatorPort, DeviceRunner, RunnerStats, Sink, default_gap_s
 from teleprev.devices.servo_limits import FAULT_TOLERANCE, ServoStreamRule, ServoViolation
 from teleprev.errors import ConfigError, DeviceError, DeviceStartError, SessionError, TeleprevError, describe_exception
+from teleprev.human import mirror as body_mirror
 from teleprev.human import smplx
 from teleprev.messages import (
     CameraInfo,
@@ -77,6 +78,7 @@ __all__ = [
     "OperatorLink",
     "StreamSpec",
     "wait_until_due",
+    "body_mirror",
     "DeviceFault",
     "JointLimits",
     "PolledActuator",

@@ -1,8 +1,8 @@
-"""sim.glove: the simulated operator's right hand as a mocap glove stream (SMPL-X hand pose)."""
+"""sim.glove: the simulated operator's right (or left) hand as a mocap glove stream (SMPL-X hand pose)."""
 
 from __future__ import annotations
 
-from teleprev.devices import JointSample, smplx
+from teleprev.devices import JointSample, body_mirror, smplx
 from teleprev_devices.sim.device import timing
 from teleprev_devices.sim.operated import OperatorDevice, OperatorSettings
 
@@ -10,9 +10,12 @@ from teleprev_devices.sim.operated import OperatorDevice, OperatorSettings
 @timing(rate_hz=120.0, latency_ms=2.0, jitter_ms=0.3, clock_offset_s=1234.5, clock_drift_ppm=15.0)
 class GloveSettings(OperatorSettings):
     noise_rad: float = 0.002  # sensor noise (standard deviation) on every finger angle
+    side: str = "right"  # "left": the operator's left hand, its pose mirrored from the right (teleprev/human/mirror.py)
 
     def __post_init__(self):
         super().__post_init__()
+        if self.side not in ("left", "right"):
+            raise ValueError(f"side must be 'left' or 'right', got {self.side!r}")
         if self.noise_rad < 0:
             raise ValueError(f"noise_rad must be >= 0, got {self.noise_rad}")
 
@@ -28,4 +31,6 @@ class SimGlove(OperatorDevice[GloveSettings], kind="glove", stream="hand", paylo
             noise = self.noise_blocks["noise_rad"].next()
             flexion, abduction = flexion + noise[:15], abduction + noise[15:]
         pose = smplx.hand_pose_from_angles(flexion, abduction).reshape(45)
+        if self.settings.side == "left":
+            pose = body_mirror.mirror_hand_pose(pose)
         return JointSample(0, smplx.HAND_POSE_NAMES, pose)

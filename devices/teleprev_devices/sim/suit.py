@@ -1,10 +1,10 @@
-"""sim.suit: the simulated operator's right wrist as an IMU suit stream."""
+"""sim.suit: the simulated operator's right (or left) wrist as an IMU suit stream."""
 
 from __future__ import annotations
 
 import numpy as np
 
-from teleprev.devices import PoseSample, transforms
+from teleprev.devices import PoseSample, body_mirror, transforms
 from teleprev_devices.sim.device import timing
 from teleprev_devices.sim.operated import OperatorDevice, OperatorSettings
 
@@ -13,9 +13,12 @@ from teleprev_devices.sim.operated import OperatorDevice, OperatorSettings
 class SuitSettings(OperatorSettings):
     noise_m: float = 0.0005  # sensor noise (standard deviation) on the wrist position
     noise_rad: float = 0.002  # and on its orientation
+    side: str = "right"  # "left": the operator's left wrist, mirrored from the right (teleprev/human/mirror.py)
 
     def __post_init__(self):
         super().__post_init__()
+        if self.side not in ("left", "right"):
+            raise ValueError(f"side must be 'left' or 'right', got {self.side!r}")
         if self.noise_m < 0 or self.noise_rad < 0:
             raise ValueError(f"noise_m and noise_rad must be >= 0, got {self.noise_m} and {self.noise_rad}")
 
@@ -28,6 +31,8 @@ class SimSuit(OperatorDevice[SuitSettings], kind="suit", stream="wrist", payload
     def _acquire(self, true_ns: int) -> PoseSample:
         s = self.operator.state(self.operator.time_s(true_ns))
         position, rotation = s.wrist_position, s.wrist_rotation
+        if self.settings.side == "left":
+            position, rotation = body_mirror.mirror_wrist(position, rotation)
         if self.settings.noise_m > 0:
             position = position + self.noise_blocks["noise_m"].next()
         if self.settings.noise_rad > 0:
