@@ -100,9 +100,10 @@ def record(
     from teleprev.cli.outputs import check_output
     from teleprev.cli.pages import announce_pages
     from teleprev.cli.signals import StopSignals
+    from teleprev.live.record.bimanual_session import open_session
     from teleprev.live.record.cues import Cues
     from teleprev.live.record.run import print_summary, run_interactive, run_script, run_timed
-    from teleprev.live.record.session import LiveSession, RecordOptions, default_session_path
+    from teleprev.live.record.session import RecordOptions, default_session_path
 
     plan = check_options(rig, task, duration, engage_after, connect_timeout, episodes, episode_time, reset_time, marks)
     check_fps(fps)
@@ -118,7 +119,7 @@ def record(
     unconnected: list[str] = []
     with StopSignals() as signals:
         with signals.deferred():  # the session file opened whole (a signal now is raised in the try below)
-            recording = LiveSession(options)
+            recording = open_session(options)
         if recording.view is not None:
             console.print(f"Foxglove: open connection {recording.view.url}", highlight=False)
         if plan is not None and plan.engage_after_s is not None and \

@@ -148,13 +148,14 @@ def recorded_rig(path: Path, meta: dict, rig_path: str | Path | None):
     return rig
 
 
-def actuator_history(reader, side: str, names: tuple[str, ...]) -> ActuatorHistory:
-    """The measured states and (re)connections of the session's actuator of one side ("arm", "hand")."""
+def actuator_history(reader, side: str, names: tuple[str, ...], device: str = "") -> ActuatorHistory:
+    """The measured states and (re)connections of the session's actuator of one side ("arm", "hand"): the
+    device named, else the first of its kind."""
     from teleprev.messages import Event, JointSample
 
     history = ActuatorHistory()
     kind = "arm" if side == "arm" else "hand"
-    states = sorted(tp for tp in reader.topics if tp.startswith(f"/{kind}/") and tp.endswith("/state"))
+    states = sorted(tp for tp in reader.topics if tp.startswith(f"/{kind}/{device}") and tp.endswith("/state"))
     if not states:
         return history
     device = states[0].split("/")[2]
@@ -187,30 +188,54 @@ def audit_stream(topic: str, side: str, limits: dict, t_ns: np.ndarray, q: np.nd
     return audit
 
 
+def _command_streams(rig) -> list[tuple[str, str, dict, str]]:
+    """(topic, "arm" | "hand", its limits, its device) of each command stream a session of `rig` records: a
+    bimanual rig's per side (/command/left/arm, against the left side's limits)."""
+    from teleprev.assembly import motion_limits
+    from teleprev.pipeline.bimanual import side_topic
+    from teleprev.rig import side_rig
+
+    if not rig.bimanual:
+        limits = motion_limits(rig)
+        return [(topics.COMMAND_ARM, "arm", limits, ""), (topics.COMMAND_HAND, "hand", limits, "")]
+    out = []
+    for side, s in rig.sides.items():
+        limits = motion_limits(side_rig(rig, side))
+        out += [(side_topic(topic, side), kind, limits, s.devices[kind])
+                for topic, kind in ((topics.COMMAND_ARM, "arm"), (topics.COMMAND_HAND, "hand"))]
+    return out
+
+
 def audit_session(path: str | Path, rig_path: str | Path | None = None) -> AuditReport:
     from teleprev.assembly import motion_limits
+    from teleprev.rig import side_rig
     from teleprev.session.reader import SessionReader
 
     path = Path(path)
     with SessionReader(path) as reader:
-        limits = motion_limits(recorded_rig(path, reader.metadata, rig_path))
+        rig = recorded_rig(path, reader.metadata, rig_path)
         report = AuditReport(str(path))
-        for topic, side in ((topics.COMMAND_ARM, "arm"), (topics.COMMAND_HAND, "hand")):
+        for topic, side, limits, device in _command_streams(rig):
             t, q, names = _joint_samples(reader, topic) if topic in reader.topics else (np.zeros(0, np.int64), None, ())
             if len(t) and names != limits[side]["names"]:
                 raise SessionError(
                     f"{topic} commands joints {names}, the rig's robot has {limits[side]['names']}", str(path)
                 )
-            history = actuator_history(reader, side, limits[side]["names"]) if len(t) else None
+            history = actuator_history(reader, side, limits[side]["names"], device) if len(t) else None
             report.streams.append(
                 audit_stream(topic, side, limits, t, q, rests=history.for_stream(t) if history else None)
             )
-        hand_limits = limits["hand"]
         state_topics = [tp for tp in reader.topics if tp.startswith("/hand/") and tp.endswith("/state")]
-        if state_topics and hand_limits.get("checker") is not None:
-            _, q, _ = _joint_samples(reader, state_topics[0])
-            report.hand_state_samples = len(q)
-            report.hand_state_colliding = int(hand_limits["checker"].pair_matrix(q).any(axis=1).sum()) if len(q) else 0
+        checks = [(state_topics[0], motion_limits(rig)["hand"])] if state_topics and not rig.bimanual else \
+            [(f"/hand/{s.devices['hand']}/state", motion_limits(side_rig(rig, n))["hand"]) for n, s in rig.sides.items()
+             if f"/hand/{s.devices['hand']}/state" in reader.topics]
+        for topic, hand_limits in checks:
+            if hand_limits.get("checker") is None:
+                continue
+            _, q, _ = _joint_samples(reader, topic)
+            report.hand_state_samples += len(q)
+            colliding = int(hand_limits["checker"].pair_matrix(q).any(axis=1).sum()) if len(q) else 0
+            report.hand_state_colliding = (report.hand_state_colliding or 0) + colliding
         return report
 
 

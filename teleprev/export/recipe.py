@@ -238,11 +238,16 @@ def resolve(
         inputs = {}
     out: list[ResolvedFeature] = []
     what = "file" if "import" in metadata else "session"  # a recording teleprev did not make is no session
+    sides = recorded_sides(metadata, where)
     for spec in recipe.feature:
         fwhere = f"{where}: feature {spec.name!r}"
         sources: list[Source] = []
+        per_side = [e for e in spec.streams if _is_side_role(e)] if sides else []
+        for side in sides if per_side else ():  # all of the left side's values first, as LeRobot's bi_* robots
+            sources.extend(side_source(entry, side, sides[side], schemas, fwhere, what) for entry in per_side)
         for entry in spec.streams:
-            sources.extend(_sources(entry, schemas, devices, inputs, fwhere, what))
+            if entry not in per_side:
+                sources.extend(_sources(entry, schemas, devices, inputs, fwhere, what))
         images = [s for s in sources if s.schema in (IMAGE, DEPTH)]
         if images and len(images) != len(sources):
             raise ConfigError(
@@ -316,6 +321,44 @@ def _sources(entry: str, schemas: dict[str, str], devices: dict[str, list[str]],
         found = [parsed[1]]
     prefix = found[0] if role_name in ("camera", "depth") else role.prefix
     return [_checked(entry, T.device_topic(role.kind, found[0], role.stream), schemas, role.schema, prefix, where)]
+
+
+def recorded_sides(metadata: dict[str, dict[str, str]], where: str) -> dict[str, dict[str, str]]:
+    """A bimanual session's sides (its "sides" record: side -> role -> device), left first; {} for one arm."""
+    from teleprev.sides import SIDES
+
+    record = metadata.get("sides") or {}
+    try:
+        return {side: json.loads(record[side]) for side in SIDES if side in record}
+    except json.JSONDecodeError as exc:
+        raise SessionError(f"the sides record is not JSON ({exc})", where) from None
+
+
+# A side's device for each per-device role: the role's pipeline input -> the side's device role
+_SIDE_DEVICE = {"arm": "arm", "effector": "hand", "hand": "glove", "wrist": "suit"}
+
+
+def _is_side_role(entry: str) -> bool:
+    """A recipe stream that a bimanual session has once per side: a joint or wrist role named without a device."""
+    role = ROLES.get(entry)
+    return role is not None and role.schema in (JOINTS, POSE) and (bool(role.topic) or role.pipeline_input != "")
+
+
+def side_source(entry: str, side: str, devices: dict[str, str], schemas: dict[str, str], where: str,
+                what: str = "session") -> Source:
+    """A role's stream on one side of a bimanual session, its joints named as LeRobot's bimanual robots name
+    theirs: "left_arm.joint1", ..., "right_hand.15" (the side's prefix before the role's)."""
+    from teleprev.pipeline.bimanual import side_topic
+
+    role = ROLES[entry]
+    if role.topic:
+        topic = side_topic(role.topic, side)
+    else:
+        topic = T.device_topic(role.kind, devices.get(_SIDE_DEVICE[role.pipeline_input], ""), role.stream)
+    if topic not in schemas:
+        hint = f": {PREVIEW_ONLY}" if role.topic.startswith("/command/") and is_preview_only(schemas) else ""
+        raise SessionError(f"stream {entry!r} of the {side} side ({topic}) is not in this {what}{hint}", where)
+    return _checked(f"{entry}:{side}", topic, schemas, role.schema, f"{side}_{role.prefix}", where)
 
 
 def _checked(entry: str, topic: str, schemas: dict[str, str], schema: str, prefix: str, where: str) -> Source:

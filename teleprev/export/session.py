@@ -14,7 +14,6 @@ from pathlib import Path
 
 import numpy as np
 
-from teleprev import topics
 from teleprev.errors import ConfigError, SessionError
 from teleprev.export.recipe import DEPTH, IMAGE, Recipe, ResolvedFeature, resolve
 from teleprev.export.report import EpisodeReport, SessionReport
@@ -297,12 +296,17 @@ def _interpolation(source: SessionSource, topic: str, stream) -> str:
     """How a command stream moves between its commands: the arm's jerk-limited profile (cubic Hermite on
     the recorded positions and velocities), a switch's step (hold), else straight segments (the hand's
     commands: each one a segment from the last, as the swept check saw it)."""
-    if topic == topics.COMMAND_ARM and stream.velocities is not None:
+    if _is_command(topic, "arm") and stream.velocities is not None:
         return "hermite"
     effector = EFFECTORS.get(source.reader.metadata.get("rig", {}).get("end_effector", ""))
-    if topic == topics.COMMAND_HAND and effector is not None and effector.is_switch:
+    if _is_command(topic, "hand") and effector is not None and effector.is_switch:
         return "hold"
     return "linear"
+
+
+def _is_command(topic: str, kind: str) -> bool:
+    """The commands to the arm (or hand): /command/arm, or a bimanual side's /command/<side>/arm."""
+    return topic == f"/command/{kind}" or (topic.startswith("/command/") and topic.endswith(f"/{kind}"))
 
 
 def _sampled(stream, look, frames: np.ndarray, kind: str) -> np.ndarray:

@@ -40,6 +40,11 @@ class SideInputs:
     mirrored: bool = False  # the glove is the operator's left hand: mirrored into the right hand's terms
 
 
+@dataclass(frozen=True)
+class ModeState:
+    mode: str
+
+
 class BimanualDriver:
     def __init__(self, sides: dict[str, tuple[PipelineDriver, SideInputs]]):
         self.drivers = {side: driver for side, (driver, _) in sides.items()}
@@ -50,6 +55,11 @@ class BimanualDriver:
     def mode(self) -> str:
         modes = {d.state.mode for d in self.drivers.values()}
         return modes.pop() if len(modes) == 1 else "mixed"
+
+    @property
+    def state(self) -> ModeState:
+        """What a single-arm driver's `state.mode` tells (LiveSession.settle reads it): both sides' mode."""
+        return ModeState(self.mode)
 
     def _for_side(self, side: str, msg: Logged) -> Logged:
         inputs = self.inputs[side]

@@ -31,8 +31,10 @@ def device_lost(counts: dict[str, int]) -> int:
 
 
 def is_preview_only(session_topics) -> bool:
-    """Whether a recorded session holds no command at all (the robot was never engaged)."""
-    return COMMAND_ARM not in session_topics and COMMAND_HAND not in session_topics
+    """Whether a recorded session holds no command at all (the robot was never engaged); a bimanual session's
+    commands are on its sides' topics (/command/left/arm, ...)."""
+    return not any(t in (COMMAND_ARM, COMMAND_HAND) or (t.startswith("/command/") and t.endswith(("/arm", "/hand")))
+                   for t in session_topics)
 
 
 @dataclass

@@ -1,0 +1,172 @@
+"""The session loop of a bimanual rig: one ordered stream, a pipeline and a paced sender per side.
+
+Everything the single-arm loop does (ordering, recording, the gate, episodes, input loss, faults) it does
+here too, through SessionLoop's own code; what differs is what a sample feeds and where commands go:
+- each sample feeds the BimanualDriver (teleprev/pipeline/bimanual.py), which steps the side whose glove
+  it is and records that side's results on its own topics (/pipeline/left/corrected, ...);
+- each side has its own CommandSender (its own planner and limits, in a paced process of its own) and
+  relay; a tick is recorded on the side's topics (/command/left/arm, /command/left/hand,
+  /command/left/tick). Updates from both sides' steps reach both senders, mode switches together;
+- a device that fails faults its side (BimanualDriver.fault): that side halts if the device is its
+  actuator, the other side brakes to rest; both stay in preview until the operator engages.
+Actuators in processes of their own (real xArm/LEAP plugins) are not yet wired per side: a bimanual rig
+runs its actuators in the session process (BimanualSession refuses the others).
+"""
+
+from __future__ import annotations
+
+import time
+from collections import Counter
+from dataclasses import dataclass, replace
+
+from teleprev import topics
+from teleprev.live.core.controls import ToPreview
+from teleprev.live.core.input_watch import InputWatch
+from teleprev.live.core.loop import SessionLoop
+from teleprev.live.core.relay import CommandRelay, tick_records
+from teleprev.messages import ImageSample, Logged, PoseSample, Sample
+from teleprev.pipeline.bimanual import BimanualDriver, side_topic
+
+
+@dataclass(frozen=True)
+class SideTick:
+    """A sender's tick, with the side whose sender made it."""
+
+    side: str
+    item: object  # sender.SentTick
+
+    @property
+    def late_ns(self) -> int:
+        return self.item.late_ns
+
+
+class RelayPair:
+    """Both sides' CommandRelays, seen by SessionLoop's code as its one relay."""
+
+    def __init__(self, relays: dict[str, CommandRelay]):
+        self.relays = relays
+        self.sent: Counter = Counter()  # commands the actuators took, per "<side>/<kind>"
+        self.errors: Counter = Counter()
+        self.actuators = {f"{side}/{kind}": port for side, r in relays.items() for kind, port in r.actuators.items()}
+        self.sender = self  # (SessionLoop stops "the sender" when a halt itself fails)
+
+    @property
+    def active(self) -> bool:
+        return any(r.active for r in self.relays.values())
+
+    def start(self) -> None:
+        for r in self.relays.values():
+            r.start()
+
+    def stop(self, timeout: float) -> None:
+        for r in self.relays.values():
+            r.stop(timeout)
+
+    def pass_updates(self, updates: dict[str, list]) -> None:
+        for side, ups in updates.items():
+            self.relays[side].pass_updates(ups)
+
+    def count(self) -> None:
+        """The per-side counts, gathered (the preview and the file's metadata read `sent` and `errors`)."""
+        for side, r in self.relays.items():
+            for kind, n in r.sent.items():
+                self.sent[f"{side}/{kind}"] = n
+            for kind, n in r.errors.items():
+                self.errors[f"{side}/{kind}"] = n
+
+
+class BimanualLoop(SessionLoop):
+    def __init__(self, clock, log, driver: BimanualDriver, *, inbox, actuators: dict[str, dict], senders: dict,
+                 device_sides: dict[str, str], input_loss_to_preview_s: float = 1.0, **kwargs):
+        """`actuators` and `senders`: per side, as SessionLoop takes them for one; `device_sides`: device name ->
+        its side (a failure of one faults that side)."""
+        super().__init__(clock, log, None, inbox=inbox, input_loss_to_preview_s=input_loss_to_preview_s, **kwargs)
+        self.driver = driver
+        self.device_sides = device_sides
+        relays = {}
+        for side, sender in senders.items():
+            pipeline = driver.drivers[side].pipeline
+            relays[side] = CommandRelay(
+                clock, actuators[side], sender, (pipeline.arm_names, pipeline.effector_names),
+                on_tick=lambda received, item, side=side: self.inbox.put(received, SideTick(side, item)),
+                on_gone=lambda side=side: self.halt(f"the {side} command sender stopped"))
+        self.relay = RelayPair(relays)
+        self.stats.commands_sent, self.stats.command_errors = self.relay.sent, self.relay.errors
+        stale_ms = max(d.pipeline.cfg.stale_ms for d in driver.drivers.values())
+        self.input_watch = InputWatch(int(input_loss_to_preview_s * 1e9), int(stale_ms * 1e6))
+        self.snapshot = replace(self.snapshot, stale_ms=stale_ms)
+
+    def stop(self, timeout: float = 5.0) -> None:
+        super().stop(timeout)
+        self.relay.count()
+
+    def _sample(self, sample: Sample, receive_ns: int) -> None:
+        t = self._stamp(receive_ns)
+        payload = sample.payload
+        if isinstance(payload, PoseSample):  # as SessionLoop._sample: -0.0 read back as +0.0
+            payload = replace(payload, position=payload.position + 0.0, orientation=payload.orientation + 0.0)
+        msg = Logged(sample.topic, t, payload)
+        self._log(msg)
+        for tap in self.taps:
+            tap(msg)
+        self.stats.count(sample.topic, t, payload)
+        if sample.topic == topics.DEVICE_EVENT and payload.data.get("event") == "error":
+            self._device_failed(payload.data)
+        if isinstance(payload, ImageSample) and self._camera_topic in (None, sample.topic):
+            self._camera_topic = sample.topic
+            self.snapshot = replace(self.snapshot, camera=payload)
+        if self.failure:
+            return
+        started = time.perf_counter_ns()
+        outputs = self.driver.feed(msg)
+        stepped = [o for o in outputs.values() if o.result is not None]
+        if not stepped:
+            return
+        if len(self.stats.step_ns) < 100_000:
+            self.stats.step_ns.append(time.perf_counter_ns() - started)
+        for out in stepped:
+            update = out.result.update
+            usable = out.result.arm_target is not None if update is None else \
+                update.arm is not None and update.hand is not None
+            self._input_event(self.input_watch.stepped(t, usable, out.result.report.get("flags", [])))
+        self._pass_updates()
+        for out in stepped:
+            for topic, value in out.logged:
+                self._log(Logged(topic, self._stamp(), value))
+        self.relay.count()
+        self.snapshot = replace(self.snapshot, mode=self.driver.mode, step=stepped[-1].result,
+                                commands_sent=sum(self.stats.commands_sent.values()),
+                                dropped=sum(self.stats.dropped.values()))
+
+    def _tick(self, item: SideTick, receive_ns: int) -> None:
+        """One side's tick, on that side's topics."""
+        self.stats.ticks += 1
+        if len(self.stats.late_ns) < 1_000_000:
+            self.stats.late_ns.append(item.late_ns)
+        for msg in tick_records(item.item, self.relay.relays[item.side], self._stamp, receive_ns):
+            self._log(replace(msg, topic=side_topic(msg.topic, item.side)))
+
+    def _device_failed(self, data: dict) -> None:
+        """A device failed: its side faults (halting if it is that side's actuator), the other side brakes
+        to rest; recorded as a switch to preview, and the gate refuses to engage until the operator does."""
+        name = str(data.get("device", ""))
+        self.stats.device_failures[name] += 1
+        side = self.device_sides.get(name)
+        message = f"device {name} failed: {data.get('message', '')}"
+        self.gate.faulted(message)
+        if side is not None and (self.driver.mode == "execute" or self.relay.active):
+            actuator = name in {getattr(p, "name", None) for p in self.relay.relays[side].actuators.values()}
+            t = self._stamp()
+            self.driver.fault(side, message, t)
+            switch = {"mode": "preview", "reason": f"device {name} failed", "side": side}
+            if actuator:
+                switch["halt"] = True
+            self._event(topics.MODE, "teleprev.ModeSwitch", switch, t)
+            self._pass_updates()
+            if self.input_watch is not None:
+                self.input_watch.left_execute()
+            message += f"; the {side} side stops, the other brakes to rest: back in PREVIEW (press space to engage)"
+        elif self.driver.mode == "execute":  # a device of no side (a camera): both brake to rest
+            self._apply(ToPreview(f"device {name} failed"))
+            message += "; both sides brake to rest, back in PREVIEW (press space to engage again)"
+        self.snapshot = replace(self.snapshot, message=message, fault=self.gate.fault)

@@ -1,0 +1,174 @@
+"""A recording on a bimanual rig: both sides' devices, a pipeline and a paced sender per side, one loop,
+one file. `open_session` picks it for a rig with [sides] (teleprev/sides.py), LiveSession otherwise.
+
+The file holds the devices' raw streams under their own names (/glove/glove_left/hand, /arm/arm_right/state),
+and each side's pipeline results and commands on topics with the side after the first segment
+(/pipeline/left/corrected, /command/right/arm, /command/right/tick: teleprev/pipeline/bimanual.py). The
+"sides" metadata record names, per side, the devices and robot; an export reads it to name the dataset's
+joints as LeRobot's bimanual robots do ("left_arm.joint1", ..., "right_hand.15").
+"""
+
+from __future__ import annotations
+
+import json
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from teleprev import topics
+from teleprev.bimanual import build_side_pipelines, side_inputs
+from teleprev.clock import SessionClock
+from teleprev.devices.contract import DeviceContext
+from teleprev.errors import ConfigError
+from teleprev.live.core.bimanual_loop import BimanualLoop
+from teleprev.live.core.loop import LoopInbox
+from teleprev.live.record.metadata import session_metadata
+from teleprev.live.record.session import PREVIEW_SLACK_S, URDF_MEDIA_TYPE, LiveSession, RecordOptions
+from teleprev.messages import Logged, RobotDescription
+from teleprev.pipeline.bimanual import BimanualDriver, side_topic
+from teleprev.rig import Rig, load_rig
+from teleprev.robot.model import load_robot
+from teleprev.sides import SIDES
+
+SIDES_RECORD = "sides"  # metadata record: side -> JSON of its devices, robot and end effector
+
+
+def open_session(options: RecordOptions) -> LiveSession:
+    """The recording for the rig of `options`: bimanual for a rig with [sides], else single-arm."""
+    rig = load_rig(options.rig)
+    return BimanualSession(options) if rig.bimanual else LiveSession(options)
+
+
+@dataclass
+class _MetadataView:
+    """What session_metadata reads of a session, for the right side (the left's models are recorded too)."""
+
+    rig: Rig
+    options: RecordOptions
+    task: str
+    pipeline: object
+    driver: object
+    preview_lead_s: float
+    physics: object = None
+
+
+def sides_record(rig: Rig) -> dict[str, str]:
+    return {side: json.dumps({**s.devices, "robot": s.robot, "end_effector": s.section.end_effector,
+                              "hand_urdf": s.effector.hand_urdf}) for side, s in rig.sides.items()}
+
+
+class BimanualSession(LiveSession):
+    def __init__(self, options: RecordOptions):  # noqa: PLR0915 (the wiring of one recording, in order)
+        from teleprev.devices.runner import ActuatorPort, DeviceRunner
+        from teleprev.live.core.sender import CommandSender
+        from teleprev.pipeline.planner import CommandPlanner
+        from teleprev.session.recorder import LAG_BUDGET_S, Recorder
+
+        self.options = options
+        self.rig = rig = load_rig(options.rig)
+        if options.policy is not None or options.webxr_host or options.foxglove is not None:
+            raise ConfigError("a bimanual rig records with the sim or glove/suit devices only for now (no "
+                              "--foxglove, rollout or WebXR yet)", str(rig.path))
+        if rig.sim.world == "physics":
+            raise ConfigError("a bimanual rig has no physics world yet: use [sim] world = \"kinematic\"",
+                              f"{rig.path} [sim]")
+        self.task = options.task or rig.rig.task
+        out = Path(options.out)
+        if out.exists():
+            raise ConfigError("a session with this name exists already; choose another --out", str(out))
+        self.clock = SessionClock()
+        self.physics = None
+        # Each side's devices see that side's robot; each side has its own kinematic sim world (shared dict).
+        self.context = rig.device_context(self.clock)
+        contexts = {side: DeviceContext(self.clock, rig.dir, {}, s.robot, s.section.end_effector,
+                                        operator=self.context.operator) for side, s in rig.sides.items()}
+        self.contexts = [self.context, *contexts.values()]
+        device_sides = {name: side for side, s in rig.sides.items() for name in s.devices.values()}
+        self.devices = {}
+        for name, entry in rig.devices.items():
+            context = contexts[device_sides[name]] if name in device_sides else self.context
+            self.devices[name] = entry.cls(name, entry.settings, context)
+        for name, device in self.devices.items():
+            if getattr(device, "own_process", False):
+                raise ConfigError(f"device {name!r} runs in a process of its own; a bimanual rig runs its actuators "
+                                  "in the session process for now", f"{rig.path} [devices.{name}]")
+        self.pipelines = build_side_pipelines(rig, options.models)
+        self.driver = BimanualDriver({side: (_driver(self.pipelines[side], rig, side), side_inputs(rig, side))
+                                      for side in SIDES})
+        self.pipeline = self.pipelines["right"]
+        self.robots = {side: load_robot(s.robot) for side, s in rig.sides.items()}
+        self.robot = self.robots["right"]
+        out.parent.mkdir(parents=True, exist_ok=True)
+        self.view = None
+        meta = session_metadata(_MetadataView(rig, options, self.task, self.pipeline,
+                                              self.driver.drivers["right"], self.preview_lead_s))
+        meta[SIDES_RECORD] = sides_record(rig)
+        meta["pipeline"] = {"inputs": json.dumps(side_inputs(rig, "right").topics.__dict__),
+                            "sides": json.dumps({side: side_inputs(rig, side).topics.__dict__ for side in SIDES})}
+        left_models = self.pipelines["left"].model_hashes()
+        if left_models is not None:
+            meta["models_left"] = left_models
+        attachments = {r.urdf_path.name: (URDF_MEDIA_TYPE, Path(r.urdf_path).read_bytes())
+                       for r in self.robots.values()}
+        self.recorder = Recorder(out, meta, attachments=attachments, on_failure=self._recording_failed,
+                                 lag_budget_s=LAG_BUDGET_S, on_behind=self._recording_behind)
+        inbox = LoopInbox(options.queue_size)
+        self.hosts = {}
+        self.runners = {name: DeviceRunner(dev, inbox.sink, self.clock) for name, dev in self.devices.items()}
+        actuators = {side: {kind: ActuatorPort(self.devices[s.devices[kind]], self.runners[s.devices[kind]])
+                            for kind in ("arm", "hand")} for side, s in rig.sides.items()}
+        self.senders = {side: CommandSender(CommandPlanner.for_pipeline(p), self.clock,
+                                            rig.sides[side].pipeline.command_rate_hz,
+                                            warm_pose=_inside_limits(self.robots[side], p.arm_names,
+                                                                     p.effector_names))
+                        for side, p in self.pipelines.items()}
+        self.sender = self.senders["right"]  # (the file's sender record: both sides run at the same rate)
+        self.loop = BimanualLoop(self.clock, self._log, self.driver, inbox=inbox, actuators=actuators,
+                                 senders=self.senders, device_sides=device_sides,
+                                 input_loss_to_preview_s=rig.session.input_loss_to_preview_s,
+                                 on_episode_start=self._episode_started)
+        self.summary = None
+        self.cannot_start = False
+        self._press = self._press_unattended
+        self.context.operator.act = self.act
+
+    @property
+    def preview_lead_s(self) -> float:
+        """LiveSession's, for the side that takes longer to brake."""
+        bound = max(p.motion.stop_time_bound() for p in self.pipelines.values())
+        rate = min(s.pipeline.command_rate_hz for s in self.rig.sides.values())
+        return bound + 2.0 / rate + PREVIEW_SLACK_S
+
+    def _episode_started(self, task: str) -> None:
+        for context in self.contexts:
+            for listener in context.task_listeners:
+                listener(task)
+
+    def start(self) -> BimanualSession:
+        for sender in self.senders.values():
+            sender.start()
+        self.recorder.start()
+        t = self.clock.now_ns()
+        for side, robot in self.robots.items():
+            self._log(Logged(side_topic(topics.ROBOT_DESCRIPTION, side), t,
+                             RobotDescription(t, robot.urdf_path.read_text())))
+        self.loop.start()
+        for runner in self.runners.values():
+            runner.start()
+        if self.options.practice:
+            self.loop.note("practice_start")
+        return self
+
+
+def _driver(pipeline, rig: Rig, side: str):
+    from teleprev.assembly import build_driver
+
+    return build_driver(pipeline, side_inputs(rig, side).topics)
+
+
+def _inside_limits(robot, *joint_sets: tuple[str, ...]) -> tuple[np.ndarray, ...]:
+    """Zero clipped into the limits of each set of the robot's joints (a sender warms its planner there)."""
+    return tuple(np.clip(np.zeros(len(n)), robot.lower[robot.indices(n)], robot.upper[robot.indices(n)])
+                 for n in joint_sets)
+

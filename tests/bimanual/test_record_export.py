@@ -1,0 +1,89 @@
+"""A bimanual session recorded unattended with `teleprev record rigs/sim_bimanual.toml`, exported with
+LeRobot's bimanual naming, loaded back with LeRobotDataset exactly."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from teleprev.assembly import motion_limits
+from teleprev.rig import load_rig, side_rig
+from teleprev.session.reader import SessionReader
+from tests.helpers.cli import teleprev
+
+ROOT = Path(__file__).resolve().parents[2]
+RIG = ROOT / "rigs" / "sim_bimanual.toml"
+
+
+def expected_names() -> list[str]:
+    arm = [f"joint{i}" for i in range(1, 7)]
+    hand = [str(i) for i in range(16)]
+    return [f"{side}_{role}.{j}" for side in ("left", "right") for role, joints in (("arm", arm), ("hand", hand))
+            for j in joints]
+
+
+@pytest.fixture(scope="module")
+def session(tmp_path_factory) -> Path:
+    out = tmp_path_factory.mktemp("bimanual") / "s.mcap"
+    ran = teleprev("record", RIG, "--duration", "6", "--engage-after", "1.5", "--no-preview", "--out", out)
+    assert ran.returncode == 0, ran.stdout + ran.stderr
+    return out
+
+
+def test_session_records_both_sides(session):
+    rig = load_rig(RIG)
+    with SessionReader(session) as r:
+        sides = {side: json.loads(text) for side, text in r.metadata["sides"].items()}
+        assert sides["left"]["arm"] == "arm_left" and sides["left"]["robot"] == "xarm6_leap_hand_left"
+        for side in ("left", "right"):
+            limits = motion_limits(side_rig(rig, side))
+            for kind in ("arm", "hand"):
+                msgs = [m.payload for m in r.messages([f"/command/{side}/{kind}"])]
+                assert len(msgs) > 100, f"{side} {kind}: {len(msgs)} commands"
+                assert msgs[0].names == tuple(limits[kind]["names"])
+            assert sum(1 for _ in r.messages([f"/pipeline/{side}/corrected"])) > 100
+        assert "/command/arm" not in r.topics  # no single-arm stream in a bimanual session
+    info = teleprev("info", session)
+    assert info.returncode == 0 and "never engaged" not in info.stdout
+
+
+def test_audit_checks_each_side_against_its_own_limits(session):
+    from teleprev.evaluation.audit import audit_session
+
+    report = audit_session(session)
+    assert [s.topic for s in report.streams] == ["/command/left/arm", "/command/left/hand", "/command/right/arm",
+                                                 "/command/right/hand"]
+    assert all(s.commands > 100 for s in report.streams)
+    assert report.ok, report.as_dict()
+    assert report.hand_state_samples > 200 and report.hand_state_colliding == 0
+
+
+def test_export_uses_lerobot_bimanual_names_and_loads_back_exactly(session, tmp_path):
+    from lerobot.datasets.lerobot_dataset import LeRobotDataset
+
+    root = tmp_path / "ds"
+    ran = teleprev("export", session, "--repo-id", "lab/bimanual", "--root", root)
+    assert ran.returncode == 0, ran.stdout + ran.stderr
+    ds = LeRobotDataset("lab/bimanual", root=root, video_backend="pyav")
+    for feature in ("action", "observation.state"):
+        assert ds.meta.features[feature]["names"] == expected_names()
+        assert tuple(ds.meta.features[feature]["shape"]) == (44,)
+    # The left half is what the left side's command streams give on their own (a single-arm export of them):
+    # sides are concatenated, not altered.
+    recipe = tmp_path / "left.toml"
+    recipe.write_text('[[feature]]\nname = "observation.state"\nstreams = ["/arm/arm_left/state", '
+                      '"/hand/hand_left/state"]\n\n[[feature]]\nname = "action"\n'
+                      'streams = ["/command/left/arm", "/command/left/hand"]\n')
+    ran = teleprev("export", session, "--repo-id", "lab/left", "--root", tmp_path / "left", "--recipe", recipe)
+    assert ran.returncode == 0, ran.stdout + ran.stderr
+    left = LeRobotDataset("lab/left", root=tmp_path / "left", video_backend="pyav")
+    assert len(left) == len(ds) > 30
+    both = np.stack([ds[i]["action"].numpy() for i in range(len(ds))])
+    alone = np.stack([left[i]["action"].numpy() for i in range(len(left))])
+    np.testing.assert_array_equal(both[:, :22], alone)
+    state_both = np.stack([ds[i]["observation.state"].numpy() for i in range(len(ds))])
+    state_alone = np.stack([left[i]["observation.state"].numpy() for i in range(len(left))])
+    np.testing.assert_array_equal(state_both[:, :22], state_alone)
