@@ -13,6 +13,9 @@
     [devices.glove]              # one table per device: a plugin and that plugin's settings
     plugin = "sim.glove"
 
+    [sides.left]                 # a bimanual rig: each side's devices, robot, mount and limits (teleprev/sides.py)
+    arm = "arm_left"
+
 Everything is checked when the file is loaded, before any device opens: unknown keys, wrong types,
 unknown plugins and missing devices are ConfigErrors that name the file, the table and the key.
 The default rig (rigs/sim.toml) is all simulated devices.

@@ -36,6 +36,10 @@ Streams are named by role, so one recipe fits any rig: the role is looked up amo
 rig has several of its kind ("arm_state:left"), otherwise the one device (or the one the pipeline used)
 is taken. A stream may also be given by its topic ("/arm/left/state").
 
+In a bimanual session (its "sides" metadata record), a joint or wrist role named without a device is taken
+once per side, all of the left side's streams first, its joints named "left_<prefix>.<joint>" as LeRobot's
+bimanual robots name theirs: the default recipe gives one `action` of left_arm.joint1 .. right_hand.15.
+
 A feature's `timing` is "action" for features named action / action.*, "observation" otherwise:
 observations use the latest sample at or before the frame's time, actions the commanded trajectory at
 the frame's time (the commands sampled where the frames are, see timeline.py), so a dataset's actions
