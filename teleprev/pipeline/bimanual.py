@@ -22,7 +22,8 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 from teleprev.human.mirror import mirror_hand_pose
-from teleprev.messages import JointSample, Logged
+from teleprev.messages import Event, JointSample, Logged
+from teleprev.pipeline.cross_side import CrossSideGuard
 from teleprev.pipeline.driver import InputTopics, Outputs, PipelineDriver
 from teleprev.pipeline.planner import ModeUpdate, TargetUpdate
 
@@ -46,10 +47,13 @@ class ModeState:
 
 
 class BimanualDriver:
-    def __init__(self, sides: dict[str, tuple[PipelineDriver, SideInputs]]):
+    def __init__(self, sides: dict[str, tuple[PipelineDriver, SideInputs]], guard: CrossSideGuard | None = None):
+        """`guard`: the check that keeps the two sides apart (teleprev/pipeline/cross_side.py); None: none."""
         self.drivers = {side: driver for side, (driver, _) in sides.items()}
         self.inputs = {side: inputs for side, (_, inputs) in sides.items()}
+        self.guard = guard
         self.faults: dict[str, str] = {}  # side -> why it faulted, until the operator engages again
+        self._updates: dict[str, list] = {side: [] for side in self.drivers}  # for the planners, guarded
 
     @property
     def mode(self) -> str:
@@ -74,9 +78,22 @@ class BimanualDriver:
         out = {}
         for side, driver in self.drivers.items():
             o = driver.feed(self._for_side(side, msg))
+            contacts = self._collect(side)
+            if contacts:
+                _mark_held(o, contacts)
             o.logged = [(side_topic(topic, side), payload) for topic, payload in o.logged]
             out[side] = o
         return out
+
+    def _collect(self, side: str) -> list[tuple[str, str]]:
+        """The updates `side`'s driver made, through the guard, onto the planner's queue; the contacts of one held."""
+        driver, held = self.drivers[side], []
+        for update in driver.take_updates():
+            if self.guard is not None:
+                update, contacts = self.guard.guard(side, update, driver.state.mode == "execute")
+                held += contacts
+            self._updates[side].append(update)
+        return held
 
     def request_mode(self, mode: str, t_ns: int) -> str:
         """Both sides switch, or neither: "" or why (naming the side) it was refused."""
@@ -99,4 +116,19 @@ class BimanualDriver:
             driver.request_mode("estop" if name == side else "preview", t_ns)
 
     def take_updates(self) -> dict[str, list[TargetUpdate | ModeUpdate]]:
-        return {side: driver.take_updates() for side, driver in self.drivers.items()}
+        """Each side's planner updates made since the last call, in order (a held target replaced)."""
+        for side in self.drivers:
+            self._collect(side)
+        out, self._updates = self._updates, {side: [] for side in self.drivers}
+        return out
+
+
+def _mark_held(out: Outputs, contacts: list[tuple[str, str]]) -> None:
+    """The step's recorded report says its target was held, and which links (left, right) it would have joined."""
+    for _, payload in out.logged:
+        if isinstance(payload, Event) and payload.schema == "teleprev.StepReport":
+            payload.data["flags"] = [*payload.data.get("flags", []), "cross_side_held"]
+            payload.data["cross_side_contacts"] = [f"left:{a}|right:{b}" for a, b in contacts]
+    if out.result is not None:
+        out.result.report.setdefault("flags", [])
+        out.result.report["flags"] = [*out.result.report["flags"], "cross_side_held"]

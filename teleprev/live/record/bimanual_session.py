@@ -17,7 +17,7 @@ from pathlib import Path
 import numpy as np
 
 from teleprev import topics
-from teleprev.bimanual import build_side_pipelines, side_inputs
+from teleprev.bimanual import build_guard, build_side_pipelines, side_inputs
 from teleprev.clock import SessionClock
 from teleprev.devices.contract import DeviceContext
 from teleprev.errors import ConfigError
@@ -95,7 +95,7 @@ class BimanualSession(LiveSession):
                                   "in the session process for now", f"{rig.path} [devices.{name}]")
         self.pipelines = build_side_pipelines(rig, options.models)
         self.driver = BimanualDriver({side: (_driver(self.pipelines[side], rig, side), side_inputs(rig, side))
-                                      for side in SIDES})
+                                      for side in SIDES}, build_guard(rig, self.pipelines))
         self.pipeline = self.pipelines["right"]
         self.robots = {side: load_robot(s.robot) for side, s in rig.sides.items()}
         self.robot = self.robots["right"]
