@@ -16,11 +16,17 @@ through a fresh BimanualDriver and exports it.
                               and observation.state named left_arm.joint1 .. right_hand.15 in that order, and each
                               side's half equal, value for value, to an export of that side's streams alone
     sessions                  sessions recorded (and loaded: > 100 commands per side)
+    cross_side_colliding_commands  a scripted episode drives the two hands through each other on purpose
+                              (tests/helpers/bimanual_drive.py: the real BimanualDriver with its cross-side
+                              guard, each side's real CommandPlanner ticked at 120 Hz, offline): sender ticks
+                              at which the two robots' commands touch, checked exactly by FCL (target 0)
+    cross_side_held           targets the guard held in that episode (target >= 1)
+    cross_side_unguarded_colliding  the same episode without the guard: its ticks in contact (the script
+                              does bring the sides together)
 
 Not built yet, printed as null with the reason under `notes` (and left out of the keys below):
-cross_side_colliding_commands, cross_side_held (no cross-side swept collision check), lerobot_train_ok (ACT
-needs an image: the sim bimanual rig has no camera that shows both robots), emulated_bimanual_session_ok
-(no emulated bimanual rig).
+lerobot_train_ok (ACT needs an image: the sim bimanual rig has no camera that shows both robots),
+emulated_bimanual_session_ok (no emulated bimanual rig).
 
 JSON keys:
     step_ms_p99               float
@@ -30,6 +36,9 @@ JSON keys:
     audit_failures            int
     export_roundtrip_exact    bool
     sessions                  int
+    cross_side_colliding_commands  int
+    cross_side_held           int
+    cross_side_unguarded_colliding  int
 """
 
 from __future__ import annotations
@@ -59,9 +68,6 @@ TARGETS = {"step_ms_p99": "<= 1.0", "bimanual_realtime_faults": "0", "command_ga
            "audit_failures": "0", "export_roundtrip_exact": "true", "cross_side_colliding_commands": "0",
            "cross_side_held": ">= 1", "lerobot_train_ok": "true", "emulated_bimanual_session_ok": "true"}
 NOT_BUILT = {
-    "cross_side_colliding_commands": "not built: no cross-side swept collision check yet (each hand is checked "
-                                     "against itself only)",
-    "cross_side_held": "not built: no cross-side swept collision check yet",
     "lerobot_train_ok": "not built: ACT needs an image feature and the sim bimanual rig has no camera showing both "
                         "robots yet",
     "emulated_bimanual_session_ok": "not built: no emulated bimanual rig (two xArm emulators, two Dynamixel buses) "
@@ -165,6 +171,14 @@ def export_roundtrip(path: Path, folder: Path) -> bool:
     return len(both) > 30
 
 
+def drive(guard: bool):
+    """The scripted episode that drives the two hands through each other, with or without the guard."""
+    from teleprev.rig import load_rig
+    from tests.helpers.bimanual_drive import drive_through
+
+    return drive_through(load_rig(RIG), guard=guard)
+
+
 def main() -> None:
     p = common.parser(__doc__)
     p.add_argument("--busy", type=int, default=None, help="busy processes beside the sessions (default 8, --quick 2)")
@@ -186,6 +200,7 @@ def main() -> None:
             print(f"{out.name}: faults {results[-1]['faults']}, gap {results[-1]['gap_ms']:.1f} ms, "
                   f"audit {'ok' if results[-1]['audit_ok'] else 'FAILED'}", file=sys.stderr, flush=True)
         steps = step_times(sessions[0]) if sessions else []
+        guarded, unguarded = drive(True), drive(False)
         exact = export_roundtrip(sessions[0], folder / "datasets") if sessions else False
     figures = {
         "step_ms_p99": common.percentile(steps, 99) if steps else float("nan"),
@@ -195,6 +210,9 @@ def main() -> None:
         "audit_failures": sum(not r["audit_ok"] for r in results),
         "export_roundtrip_exact": bool(exact),
         "sessions": sum(r["ok"] for r in results),
+        "cross_side_colliding_commands": guarded.colliding_commands,
+        "cross_side_held": guarded.held,
+        "cross_side_unguarded_colliding": unguarded.colliding_commands,
         "busy_processes": busy,
         **{key: None for key in NOT_BUILT},
         "notes": NOT_BUILT,
