@@ -46,6 +46,16 @@ def test_session_records_both_sides(session):
                 assert msgs[0].names == tuple(limits[kind]["names"])
             assert sum(1 for _ in r.messages([f"/pipeline/{side}/corrected"])) > 100
         assert "/command/arm" not in r.topics  # no single-arm stream in a bimanual session
+        # both robots in one /tf tree: each side's links under "world" at its mount
+        frames = {}
+        for m in r.messages(["/tf"]):
+            for t in m.payload.transforms:
+                frames[(t.parent, t.child)] = t
+        for side in ("left", "right"):
+            root = frames[("world", f"{side}/link_base")]
+            np.testing.assert_allclose(root.translation, rig.sides[side].section.mount_xyz)
+            assert (f"{side}/link_eef", f"{side}/base") in frames and (f"{side}/base", f"{side}/palm_lower") in frames
+        assert {p.split("/")[0] for p, _ in frames} == {"world", "left", "right"}
     info = teleprev("info", session)
     assert info.returncode == 0 and "never engaged" not in info.stdout
 

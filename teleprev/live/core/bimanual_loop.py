@@ -75,13 +75,20 @@ class RelayPair:
                 self.errors[f"{side}/{kind}"] = n
 
 
+PREVIEWED_SIDE = "right"
+
+
 class BimanualLoop(SessionLoop):
     def __init__(self, clock, log, driver: BimanualDriver, *, inbox, actuators: dict[str, dict], senders: dict,
-                 device_sides: dict[str, str], input_loss_to_preview_s: float = 1.0, **kwargs):
+                 device_sides: dict[str, str], side_frames: dict | None = None,
+                 input_loss_to_preview_s: float = 1.0, **kwargs):
         """`actuators` and `senders`: per side, as SessionLoop takes them for one; `device_sides`: device name ->
-        its side (a failure of one faults that side)."""
+        its side (a failure of one faults that side); `side_frames`: each side's robot on /tf (bimanual_session.py's
+        SideFrames: `sample(driver, arm_state)`)."""
         super().__init__(clock, log, None, inbox=inbox, input_loss_to_preview_s=input_loss_to_preview_s, **kwargs)
         self.driver = driver
+        self.side_frames = side_frames or {}
+        self._arm_topics = {driver.inputs[side].topics.arm: side for side in self.side_frames}
         self.device_sides = device_sides
         relays = {}
         for side, sender in senders.items():
@@ -119,6 +126,11 @@ class BimanualLoop(SessionLoop):
             return
         started = time.perf_counter_ns()
         outputs = self.driver.feed(msg)
+        side = self._arm_topics.get(sample.topic)
+        if side is not None:
+            tf = self.side_frames[side].sample(self.driver.drivers[side], payload)
+            if tf is not None:
+                self._log(Logged(topics.TF, self._stamp(), tf))
         stepped = [o for o in outputs.values() if o.result is not None]
         if not stepped:
             return
@@ -134,9 +146,15 @@ class BimanualLoop(SessionLoop):
             for topic, value in out.logged:
                 self._log(Logged(topic, self._stamp(), value))
         self.relay.count()
-        self.snapshot = replace(self.snapshot, mode=self.driver.mode, step=stepped[-1].result,
-                                commands_sent=sum(self.stats.commands_sent.values()),
-                                dropped=sum(self.stats.dropped.values()))
+        # The terminal preview draws one robot: the right side's (SIDES' last), until it draws both.
+        shown = self.driver.drivers[PREVIEWED_SIDE]
+        step = outputs[PREVIEWED_SIDE].result or self.snapshot.step
+        latest, pipeline = shown.latest, shown.pipeline
+        self.snapshot = replace(
+            self.snapshot, mode=self.driver.mode, step=step,
+            measured_arm=pipeline.measured(latest.get(shown.topics.arm), pipeline.arm_names),
+            measured_effector=pipeline.measured(latest.get(shown.topics.effector), pipeline.effector_names),
+            commands_sent=sum(self.stats.commands_sent.values()), dropped=sum(self.stats.dropped.values()))
 
     def _tick(self, item: SideTick, receive_ns: int) -> None:
         """One side's tick, on that side's topics."""

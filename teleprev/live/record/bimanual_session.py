@@ -17,19 +17,22 @@ from pathlib import Path
 import numpy as np
 
 from teleprev import topics
-from teleprev.bimanual import build_guard, build_side_pipelines, side_inputs
+from teleprev.bimanual import build_guard, build_side_pipelines, mount, side_inputs
 from teleprev.clock import SessionClock
 from teleprev.devices.contract import DeviceContext
 from teleprev.errors import ConfigError
 from teleprev.live.core.bimanual_loop import BimanualLoop
 from teleprev.live.core.loop import LoopInbox
+from teleprev.live.record.frames import RobotFrames
 from teleprev.live.record.metadata import session_metadata
 from teleprev.live.record.session import PREVIEW_SLACK_S, URDF_MEDIA_TYPE, LiveSession, RecordOptions
-from teleprev.messages import Logged, RobotDescription
+from teleprev.messages import Logged, RobotDescription, Transform, TransformsSample
 from teleprev.pipeline.bimanual import BimanualDriver, side_topic
 from teleprev.rig import Rig, load_rig
+from teleprev.robot.frames import FramePublisher
 from teleprev.robot.model import load_robot
 from teleprev.sides import SIDES
+from teleprev.transforms import matrix_to_quat
 
 SIDES_RECORD = "sides"  # metadata record: side -> JSON of its devices, robot and end effector
 
@@ -124,8 +127,11 @@ class BimanualSession(LiveSession):
                                                                      p.effector_names))
                         for side, p in self.pipelines.items()}
         self.sender = self.senders["right"]  # (the file's sender record: both sides run at the same rate)
+        tf_period_ns = int(1e9 / rig.pipeline.tf_rate_hz) if rig.pipeline.tf_rate_hz > 0 else 0
+        side_frames = {side: SideFrames(side, RobotFrames(FramePublisher(robot), tf_period_ns), mount(rig, side))
+                       for side, robot in self.robots.items()}
         self.loop = BimanualLoop(self.clock, self._log, self.driver, inbox=inbox, actuators=actuators,
-                                 senders=self.senders, device_sides=device_sides,
+                                 senders=self.senders, device_sides=device_sides, side_frames=side_frames,
                                  input_loss_to_preview_s=rig.session.input_loss_to_preview_s,
                                  on_episode_start=self._episode_started)
         self.summary = None
@@ -159,6 +165,30 @@ class BimanualSession(LiveSession):
         if self.options.practice:
             self.loop.note("practice_start")
         return self
+
+
+WORLD_FRAME = "world"  # the root of a bimanual /tf tree: each side's robot hangs from it at its mount
+
+
+@dataclass
+class SideFrames:
+    """One side's robot on /tf, its frames named "<side>/<link>" under WORLD_FRAME at the side's mount, so both
+    robots share one tree (a Foxglove URDF layer per side, with the frame prefix "<side>/")."""
+
+    side: str
+    frames: RobotFrames
+    mount: np.ndarray  # 4x4: the robot's root in the world
+
+    def sample(self, driver, arm_state) -> TransformsSample | None:
+        tf = self.frames.sample(driver, arm_state)
+        if tf is None:
+            return None
+        root = self.frames.publisher.model.desc.root
+        mounted = Transform(WORLD_FRAME, f"{self.side}/{root}", self.mount[:3, 3].copy(),
+                            matrix_to_quat(self.mount[:3, :3]))
+        return TransformsSample(tf.stamp_ns, (mounted, *(
+            Transform(f"{self.side}/{t.parent}", f"{self.side}/{t.child}", t.translation, t.rotation)
+            for t in tf.transforms)))
 
 
 def _driver(pipeline, rig: Rig, side: str):
