@@ -9,8 +9,8 @@ here too, through SessionLoop's own code; what differs is what a sample feeds an
   /command/left/tick). Updates from both sides' steps reach both senders, mode switches together;
 - a device that fails faults its side (BimanualDriver.fault): that side halts if the device is its
   actuator, the other side brakes to rest; both stay in preview until the operator engages.
-Actuators in processes of their own (real xArm/LEAP plugins) are not yet wired per side: a bimanual rig
-runs its actuators in the session process (BimanualSession refuses the others).
+An actuator in a process of its own (the real xArm and LEAP plugins) gets its commands from its side's
+sender, and what it wrote is recorded on its side's /command/<side>/wire.
 """
 
 from __future__ import annotations
@@ -20,6 +20,7 @@ from collections import Counter
 from dataclasses import dataclass, replace
 
 from teleprev import topics
+from teleprev.live.core.actuator_host import WireRecord
 from teleprev.live.core.controls import ToPreview
 from teleprev.live.core.input_watch import InputWatch
 from teleprev.live.core.loop import SessionLoop
@@ -38,6 +39,14 @@ class SideTick:
     @property
     def late_ns(self) -> int:
         return self.item.late_ns
+
+
+@dataclass(frozen=True)
+class SideWire:
+    """A command one side's actuator process wrote (actuator_host.WireRecord), with its side."""
+
+    side: str
+    record: WireRecord
 
 
 class RelayPair:
@@ -81,10 +90,11 @@ PREVIEWED_SIDE = "right"
 class BimanualLoop(SessionLoop):
     def __init__(self, clock, log, driver: BimanualDriver, *, inbox, actuators: dict[str, dict], senders: dict,
                  device_sides: dict[str, str], side_frames: dict | None = None,
-                 input_loss_to_preview_s: float = 1.0, **kwargs):
+                 hosted: dict[str, frozenset[str]] | None = None, input_loss_to_preview_s: float = 1.0, **kwargs):
         """`actuators` and `senders`: per side, as SessionLoop takes them for one; `device_sides`: device name ->
-        its side (a failure of one faults that side); `side_frames`: each side's robot on /tf (bimanual_session.py's
-        SideFrames: `sample(driver, arm_state)`)."""
+        its side (a failure of one faults that side); `hosted`: per side, the kinds ("arm", "hand") whose
+        actuator runs in a process of its own (its sender hands it the commands); `side_frames`: each side's
+        robot on /tf (bimanual_session.py's SideFrames: `sample(driver, arm_state)`)."""
         super().__init__(clock, log, None, inbox=inbox, input_loss_to_preview_s=input_loss_to_preview_s, **kwargs)
         self.driver = driver
         self.side_frames = side_frames or {}
@@ -96,7 +106,8 @@ class BimanualLoop(SessionLoop):
             relays[side] = CommandRelay(
                 clock, actuators[side], sender, (pipeline.arm_names, pipeline.effector_names),
                 on_tick=lambda received, item, side=side: self.inbox.put(received, SideTick(side, item)),
-                on_gone=lambda side=side: self.halt(f"the {side} command sender stopped"))
+                on_gone=lambda side=side: self.halt(f"the {side} command sender stopped"),
+                hosted=(hosted or {}).get(side, frozenset()))
         self.relay = RelayPair(relays)
         self.stats.commands_sent, self.stats.command_errors = self.relay.sent, self.relay.errors
         stale_ms = max(d.pipeline.cfg.stale_ms for d in driver.drivers.values())
@@ -156,8 +167,21 @@ class BimanualLoop(SessionLoop):
             measured_effector=pipeline.measured(latest.get(shown.topics.effector), pipeline.effector_names),
             commands_sent=sum(self.stats.commands_sent.values()), dropped=sum(self.stats.dropped.values()))
 
-    def _tick(self, item: SideTick, receive_ns: int) -> None:
-        """One side's tick, on that side's topics."""
+    def wired_side(self, side: str, record: WireRecord) -> None:
+        """A command one side's actuator process wrote (any thread): queued, to be counted and recorded."""
+        self.inbox.put(self.clock.now_ns(), SideWire(side, record))
+
+    def _tick(self, item: SideTick | SideWire, receive_ns: int) -> None:
+        """One side's tick, or a command its actuator's process wrote, on that side's topics."""
+        if isinstance(item, SideWire):
+            r = item.record
+            self.relay.relays[item.side].wire(r.kind, r.sent)
+            data = {"kind": r.kind, "seq": r.seq, "t_ns": r.t_ns, "call_ms": r.call_ns / 1e6, "sent": r.sent}
+            if r.error:
+                data["error"] = r.error
+            self._event(side_topic(topics.COMMAND_WIRE, item.side), "teleprev.CommandWire", data, receive_ns,
+                        stamp_ns=r.wire_ns)
+            return
         self.stats.ticks += 1
         if len(self.stats.late_ns) < 1_000_000:
             self.stats.late_ns.append(item.late_ns)

@@ -64,6 +64,7 @@ def sides_record(rig: Rig) -> dict[str, str]:
 class BimanualSession(LiveSession):
     def __init__(self, options: RecordOptions):  # noqa: PLR0915 (the wiring of one recording, in order)
         from teleprev.devices.runner import ActuatorPort, DeviceRunner
+        from teleprev.live.core.actuator_host import ActuatorHost
         from teleprev.live.core.sender import CommandSender
         from teleprev.pipeline.planner import CommandPlanner
         from teleprev.session.recorder import LAG_BUDGET_S, Recorder
@@ -92,10 +93,6 @@ class BimanualSession(LiveSession):
         for name, entry in rig.devices.items():
             context = contexts[device_sides[name]] if name in device_sides else self.context
             self.devices[name] = entry.cls(name, entry.settings, context)
-        for name, device in self.devices.items():
-            if getattr(device, "own_process", False):
-                raise ConfigError(f"device {name!r} runs in a process of its own; a bimanual rig runs its actuators "
-                                  "in the session process for now", f"{rig.path} [devices.{name}]")
         self.pipelines = build_side_pipelines(rig, options.models)
         self.driver = BimanualDriver({side: (_driver(self.pipelines[side], rig, side), side_inputs(rig, side))
                                       for side in SIDES}, build_guard(rig, self.pipelines))
@@ -117,12 +114,26 @@ class BimanualSession(LiveSession):
         self.recorder = Recorder(out, meta, attachments=attachments, on_failure=self._recording_failed,
                                  lag_budget_s=LAG_BUDGET_S, on_behind=self._recording_behind)
         inbox = LoopInbox(options.queue_size)
+        # An actuator whose plugin allows it runs in a paced process of its own (live/core/actuator_host.py), fed
+        # by its side's sender: "<side>/<kind>" -> its host.
         self.hosts = {}
-        self.runners = {name: DeviceRunner(dev, inbox.sink, self.clock) for name, dev in self.devices.items()}
-        actuators = {side: {kind: ActuatorPort(self.devices[s.devices[kind]], self.runners[s.devices[kind]])
+        for side, s in rig.sides.items():
+            p = self.pipelines[side]
+            names = {"arm": p.arm_names, "hand": p.effector_names}
+            for kind in ("arm", "hand"):
+                device = self.devices[s.devices[kind]]
+                if device.own_process:
+                    self.hosts[f"{side}/{kind}"] = ActuatorHost(kind, device, inbox.sink, self.clock, names[kind])
+        hosted = {host.name: host for host in self.hosts.values()}
+        self.runners = {name: hosted.get(name) or DeviceRunner(dev, inbox.sink, self.clock)
+                        for name, dev in self.devices.items()}
+        actuators = {side: {kind: self.hosts.get(f"{side}/{kind}") or
+                            ActuatorPort(self.devices[s.devices[kind]], self.runners[s.devices[kind]])
                             for kind in ("arm", "hand")} for side, s in rig.sides.items()}
         self.senders = {side: CommandSender(CommandPlanner.for_pipeline(p), self.clock,
                                             rig.sides[side].pipeline.command_rate_hz,
+                                            outlets=tuple(h.outlet for key, h in self.hosts.items()
+                                                          if key.startswith(f"{side}/")),
                                             warm_pose=_inside_limits(self.robots[side], p.arm_names,
                                                                      p.effector_names))
                         for side, p in self.pipelines.items()}
@@ -133,7 +144,11 @@ class BimanualSession(LiveSession):
         self.loop = BimanualLoop(self.clock, self._log, self.driver, inbox=inbox, actuators=actuators,
                                  senders=self.senders, device_sides=device_sides, side_frames=side_frames,
                                  input_loss_to_preview_s=rig.session.input_loss_to_preview_s,
-                                 on_episode_start=self._episode_started)
+                                 on_episode_start=self._episode_started,
+                                 hosted={side: frozenset(k.split("/")[1] for k in self.hosts
+                                                         if k.startswith(f"{side}/")) for side in SIDES})
+        for key, host in self.hosts.items():
+            host.on_wire = lambda record, side=key.split("/")[0]: self.loop.wired_side(side, record)
         self.summary = None
         self.cannot_start = False
         self._press = self._press_unattended
@@ -152,7 +167,9 @@ class BimanualSession(LiveSession):
                 listener(task)
 
     def start(self) -> BimanualSession:
-        for sender in self.senders.values():
+        for host in self.hosts.values():  # forked first, before this session starts any thread
+            host.fork()
+        for sender in self.senders.values():  # after the actuators' processes, whose command pipes they write
             sender.start()
         self.recorder.start()
         t = self.clock.now_ns()
