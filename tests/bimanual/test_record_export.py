@@ -83,13 +83,22 @@ def test_export_uses_lerobot_bimanual_names_and_loads_back_exactly(session, tmp_
         assert tuple(ds.meta.features[feature]["shape"]) == (44,)
     # The left half is what the left side's command streams give on their own (a single-arm export of them):
     # sides are concatenated, not altered.
+    # (no split at a gap in either export: one side's streams may pause where the other's do not)
     recipe = tmp_path / "left.toml"
-    recipe.write_text('[[feature]]\nname = "observation.state"\nstreams = ["/arm/arm_left/state", '
-                      '"/hand/hand_left/state"]\n\n[[feature]]\nname = "action"\n'
+    recipe.write_text('[export]\nmax_gap_ms = 60000.0\n\n[[feature]]\nname = "observation.state"\n'
+                      'streams = ["/arm/arm_left/state", "/hand/hand_left/state"]\n\n[[feature]]\nname = "action"\n'
                       'streams = ["/command/left/arm", "/command/left/hand"]\n')
     ran = teleprev("export", session, "--repo-id", "lab/left", "--root", tmp_path / "left", "--recipe", recipe)
     assert ran.returncode == 0, ran.stdout + ran.stderr
     left = LeRobotDataset("lab/left", root=tmp_path / "left", video_backend="pyav")
+    whole = tmp_path / "both.toml"
+    whole.write_text('[export]\nmax_gap_ms = 60000.0\n\n[[feature]]\nname = "observation.state"\n'
+                     'streams = ["arm_state", "effector_state"]\n\n[[feature]]\nname = "action"\n'
+                     'streams = ["arm_command", "effector_command"]\n')
+    ran = teleprev("export", session, "--repo-id", "lab/whole", "--root", tmp_path / "whole", "--recipe", whole)
+    assert ran.returncode == 0, ran.stdout + ran.stderr
+    ds = LeRobotDataset("lab/whole", root=tmp_path / "whole", video_backend="pyav")
+    assert ds.meta.features["action"]["names"] == expected_names()
     assert len(left) == len(ds) > 30
     both = np.stack([ds[i]["action"].numpy() for i in range(len(ds))])
     alone = np.stack([left[i]["action"].numpy() for i in range(len(left))])
