@@ -74,6 +74,15 @@ def _capped_speed(rig: Rig, key: str, urdf_velocity: np.ndarray) -> np.ndarray:
     return np.minimum(urdf_velocity, value)
 
 
+def _single_arm(rig: Rig) -> None:
+    """A bimanual rig has a pipeline and limits per side (teleprev/bimanual.py, rig.side_rig): what asks for
+    the rig's one is not built for two sides yet."""
+    if rig.bimanual:
+        raise ConfigError("a bimanual rig ([sides.left], [sides.right]): replay, eval, rollout and a dataset's "
+                          "audit are not built for two sides yet (record, export and a session's audit are)",
+                          str(rig.path or "rig"))
+
+
 def hand_clearance_m(rig: Rig) -> float:
     cfg, row = rig.pipeline, effector_limits(rig.rig.end_effector)
     return (cfg.hand_clearance_mm if cfg.hand_clearance_mm is not None else (row.clearance_mm if row else 0.0)) / 1000.0
@@ -101,6 +110,7 @@ def build_pipeline(rig: Rig, models: str | Path | None = None, calibration: Cali
                    session_format: int = FORMAT_VERSION) -> Pipeline:
     """The rig's pipeline, computing as sessions of `session_format` were computed (default: the format
     `record` writes now)."""
+    _single_arm(rig)
     how = _arithmetic(session_format)
     cfg = rig.pipeline
     calibration = calibration if calibration is not None else rig_calibration(rig)
@@ -154,6 +164,7 @@ def motion_limits(rig: Rig) -> dict[str, dict]:
     link-motion bound (teleprev/pipeline/swept.py). `teleprev audit` measures sessions against these."""
     from teleprev.pipeline.swept import reach_table
 
+    _single_arm(rig)
     cfg = rig.pipeline
     robot = load_robot(rig.rig.robot)
     ik = ArmIK(robot, cfg.tcp_link or rig.effector.tcp_link)

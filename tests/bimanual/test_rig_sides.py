@@ -90,3 +90,13 @@ def test_side_calibration_file_must_exist(tmp_path):
     path.write_text(text)
     with pytest.raises(ConfigError, match=r"\[sides.left\].calibration: no such file"):
         load_rig(path)
+
+
+def test_single_arm_commands_refuse_a_bimanual_rig_in_one_line():
+    from teleprev.assembly import build_pipeline, motion_limits
+
+    rig = load_rig(BIMANUAL)
+    for build in (build_pipeline, motion_limits):
+        with pytest.raises(ConfigError, match=r"sim_bimanual.toml: a bimanual rig .*not built for two sides yet"):
+            build(rig)
+    assert build_pipeline(side_rig(rig, "left")).effector.corrector.model.name == "leap_hand_left"
