@@ -150,7 +150,10 @@ class Recorder:
                 st.dropped += 1
                 return False
             now = time.monotonic_ns()
-            lag_ns = now - q[0][0] if depth else 0
+            try:  # the writer pops without this lock: the queue may have emptied since its length was read
+                lag_ns = now - q[0][0] if depth else 0
+            except IndexError:
+                lag_ns = 0
             if lag_ns > self._max_lag_ns:
                 self._max_lag_ns = lag_ns
             if self.lag_budget_ns is not None and self._sheds(msg, lag_ns):

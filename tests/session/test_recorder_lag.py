@@ -84,3 +84,26 @@ def test_a_live_session_records_and_shows_that_the_recording_fell_behind(tmp_pat
     shed = {t: json.loads(v)["shed"] for t, v in counters.items() if t.startswith("/")}
     assert shed["/camera/cam_front/image"] > 0
     assert not any(n for t, n in shed.items() if t.startswith("/command/") or t.startswith("/events/")), shed
+
+
+def test_a_queue_the_writer_empties_meanwhile_is_no_error(tmp_path):
+    """The writer pops without log()'s lock: between log() reading the queue's length and its oldest entry the
+    writer may take the last one. log() must go on (a raise here failed a live session's loop)."""
+    from collections import deque
+
+    from teleprev.messages import Event, Logged
+    from teleprev.session.recorder import Recorder
+
+    class EmptiedMeanwhile(deque):
+        def __len__(self):
+            n = super().__len__()
+            self.clear()  # the writer's popleft, just after the length was read
+            return n
+
+    rec = Recorder(tmp_path / "s.mcap", lag_budget_s=0.2)
+    try:
+        rec._queue = EmptiedMeanwhile([(0, Logged("/x", 1, Event(1, "teleprev.OperatorEvent", {"event": "a"})))])
+        assert rec.log(Logged("/x", 2, Event(2, "teleprev.OperatorEvent", {"event": "b"})))
+    finally:
+        rec._queue = deque()
+        rec.close()
