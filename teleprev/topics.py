@@ -31,6 +31,11 @@ What the pipeline computed and sent:
     /robot_description        RobotDescription   the rig's URDF (ROS 2 std_msgs/String), once at the start;
                                                  the file also carries it as an attachment <robot>.urdf
 
+A bimanual session (a rig with [sides], teleprev/sides.py) records each side's pipeline and command streams with
+the side after the first segment (teleprev/pipeline/bimanual.py: side_topic): /pipeline/left/retargeted,
+/pipeline/left/report, /command/left/arm, /command/left/hand, /command/left/tick, /command/left/wire, and
+/robot_description/left; its /tf names each side's links "<side>/<link>" under a "world" frame.
+
 Events:
     /events/episode           teleprev.EpisodeEvent
     /events/mode              teleprev.ModeSwitch
