@@ -29,7 +29,7 @@ through a fresh BimanualDriver and exports it.
                               write received by its own controller, no controller fault
 
 Not built yet, printed as null with the reason under `notes` (and left out of the keys below):
-lerobot_train_ok (ACT needs an image: the sim bimanual rig has no camera that shows both robots).
+lerobot_train_ok (ACT needs an image: the sim bimanual rig has no camera yet).
 
 JSON keys:
     step_ms_p99               float
@@ -72,8 +72,9 @@ TARGETS = {"step_ms_p99": "<= 1.0", "bimanual_realtime_faults": "0", "command_ga
            "audit_failures": "0", "export_roundtrip_exact": "true", "cross_side_colliding_commands": "0",
            "cross_side_held": ">= 1", "lerobot_train_ok": "true", "emulated_bimanual_session_ok": "true"}
 NOT_BUILT = {
-    "lerobot_train_ok": "not built: ACT needs an image feature and the sim bimanual rig has no camera showing both "
-                        "robots yet",
+    "lerobot_train_ok": "not measured yet: ACT needs an image feature; rigs/sim_bimanual.toml has no camera (a side "
+                        "may own one: [sides.<side>] cameras, rendering that side's robot), and a first try on a "
+                        "loaded machine exported too few frames for lerobot's image stats",
 }
 
 

@@ -215,8 +215,8 @@ def side_rig(rig: Rig, side: str) -> SideRig:
     the devices of this side and those of no side (cameras). What build_pipeline, motion_limits and the
     checks of a single-arm rig take."""
     s = rig.sides[side]
-    other = set().union(*(o.devices.values() for n, o in rig.sides.items() if n != side))
-    mine = set(s.devices.values())
+    other = set().union(*(o.device_names for n, o in rig.sides.items() if n != side))
+    mine = s.device_names
     devices = {n: d for n, d in rig.devices.items() if n in mine or n not in other}
     section = replace(rig.rig, robot=s.robot, end_effector=s.section.end_effector,
                       calibration=s.section.calibration or rig.rig.calibration)

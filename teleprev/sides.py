@@ -10,6 +10,7 @@
     mount_xyz = [0.0, 0.35, 0.0]      # the arm's base in the world (metres) ...
     mount_yaw = 0.0                   # ... and its turn about the world's z (radians)
     calibration = ""                  # this side's calibration file; "": the rig's
+    cameras = ["cam_left"]            # cameras that belong to this side (a wrist camera; a sim camera shows its robot)
     [sides.left.pipeline]             # this side's [pipeline] keys over the rig's (limits, workspace, ...)
     arm_acceleration = 8.0
 
@@ -53,6 +54,7 @@ class SideSection:
     mount_xyz: tuple[float, float, float] = (0.0, 0.0, 0.0)
     mount_yaw: float = 0.0
     calibration: str = ""
+    cameras: tuple[str, ...] = ()  # camera devices of this side: they see (a sim camera renders) this side's robot
     pipeline: dict[str, Any] = field(default_factory=dict)
 
     def __post_init__(self):
@@ -77,6 +79,11 @@ class Side:
         """role (arm, hand, glove, suit) -> device name, for the roles this side has."""
         return {role: getattr(self.section, role) for role in SIDE_DEVICE_KINDS if getattr(self.section, role)}
 
+    @property
+    def device_names(self) -> set[str]:
+        """Every device of this side: its arm, hand, glove, suit and cameras."""
+        return set(self.devices.values()) | set(self.section.cameras)
+
     def prefixed(self, name: str) -> str:
         """A joint or feature name of this side, as LeRobot's bimanual robots name theirs: "left_" + name."""
         return f"{self.name}_{name}"
@@ -95,6 +102,10 @@ def parse_sides(data: Any, pipeline_table: dict, devices: dict[str, DeviceEntry]
     if missing:
         raise ConfigError(f"a bimanual rig needs both sides: add [sides.{missing[0]}]", f"{where} [sides]")
     sides = {name: _side(name, data[name], pipeline_table, devices, f"{where} [sides.{name}]") for name in SIDES}
+    shared = sorted(set(sides["left"].section.cameras) & set(sides["right"].section.cameras))
+    if shared:
+        raise ConfigError(f"both sides name camera {shared[0]!r}: a camera belongs to one side, or to none",
+                          f"{where} [sides.right].cameras")
     for role in ("arm", "hand"):
         if sides["left"].devices[role] == sides["right"].devices[role]:
             raise ConfigError(f"both sides name {role} device {sides['left'].devices[role]!r}: each side drives its "
@@ -112,6 +123,9 @@ def _side(name: SideName, table: Any, pipeline_table: dict, devices: dict[str, D
             raise ConfigError(f"no device {device!r} in this rig (add [devices.{device}])", f"{where}.{role}")
         if devices[device].kind != kind:
             raise ConfigError(f"device {device!r} is a {devices[device].kind}, not a {kind}", f"{where}.{role}")
+    for k, camera in enumerate(section.cameras):
+        if camera not in devices or devices[camera].kind != "camera":
+            raise ConfigError(f"{camera!r} is not a camera device of this rig", f"{where}.cameras[{k}]")
     row = end_effector(section.end_effector, f"{where}.end_effector")
     left = name == "left"
     robot = section.robot or (LEFT_ROBOT.get(row.name, row.robot) if left else row.robot)

@@ -100,3 +100,19 @@ def test_single_arm_commands_refuse_a_bimanual_rig_in_one_line():
         with pytest.raises(ConfigError, match=r"sim_bimanual.toml: a bimanual rig .*not built for two sides yet"):
             build(rig)
     assert build_pipeline(side_rig(rig, "left")).effector.corrector.model.name == "leap_hand_left"
+
+
+def test_a_camera_belongs_to_one_side_or_none():
+    data = _data()
+    data["devices"]["cam_right"] = {"plugin": "sim.camera", "width": 160, "height": 120}
+    data["devices"]["cam_top"] = {"plugin": "sim.camera", "width": 160, "height": 120}
+    data["sides"]["right"]["cameras"] = ["cam_right"]
+    rig = parse_rig(data, BIMANUAL)
+    assert "cam_right" in side_rig(rig, "right").devices and "cam_right" not in side_rig(rig, "left").devices
+    assert "cam_top" in side_rig(rig, "left").devices and "cam_top" in side_rig(rig, "right").devices  # no side's
+    data["sides"]["left"]["cameras"] = ["cam_right"]
+    with pytest.raises(ConfigError, match=r"\[sides.right\].cameras: both sides name camera 'cam_right'"):
+        parse_rig(data, BIMANUAL)
+    data["sides"]["left"]["cameras"] = ["arm_left"]
+    with pytest.raises(ConfigError, match=r"\[sides.left\].cameras\[0\]: 'arm_left' is not a camera device"):
+        parse_rig(data, BIMANUAL)

@@ -88,7 +88,7 @@ class BimanualSession(LiveSession):
         contexts = {side: DeviceContext(self.clock, rig.dir, {}, s.robot, s.section.end_effector,
                                         operator=self.context.operator) for side, s in rig.sides.items()}
         self.contexts = [self.context, *contexts.values()]
-        device_sides = {name: side for side, s in rig.sides.items() for name in s.devices.values()}
+        device_sides = {name: side for side, s in rig.sides.items() for name in s.device_names}
         self.devices = {}
         for name, entry in rig.devices.items():
             context = contexts[device_sides[name]] if name in device_sides else self.context
