@@ -48,8 +48,15 @@ def run_emulated_bimanual(folder: Path, commands: int = 100, timeout_s: float = 
             rec.loop.start_episode()
             engage_until_accepted(rec, 30.0)  # (refused until both sides have previewed)
             sent = rec.loop.stats.commands_sent
-            wait_until(lambda: min(sent[f"{s}/{k}"] for s in SIDES for k in ("arm", "hand")) > commands, timeout_s,
-                       what="commands written on both sides")
+
+            def written() -> bool:
+                # On a loaded machine the input may stall past the rig's bound and send the session back to
+                # preview; an operator engages again (this run's subject is the wire, not input loss).
+                if rec.loop.driver.mode != "execute":
+                    rec.loop.engage()
+                return min(sent[f"{s}/{k}"] for s in SIDES for k in ("arm", "hand")) > commands
+
+            wait_until(written, timeout_s, what="commands written on both sides", poll_s=0.1)
             rec.loop.to_preview()
             settled = rec.settle(5.0)
             pids = {key: host.pid for key, host in rec.hosts.items()}
