@@ -133,6 +133,7 @@ class _Episode:
     phase_names: list[str]
     wrist: _Track  # (6,): position (task frame), roll pitch yaw
     hand: _Track  # (30,)
+    built: int = 0  # phases laid out on the tracks so far (they are laid out as they begin: _build)
     cut: bool = False  # ended early by set_task
 
 
@@ -166,6 +167,8 @@ class SimOperator:
         self._clock = clock
         self._task = task
         self._lock = threading.RLock()
+        self._eyes = None  # what the operator sees (see watch)
+        self._looking = False
         self._hold: np.ndarray | None = None  # a calibration pose held instead of the task (see hold)
         rng = np.random.default_rng([seed, 0x5EED])
         self._wrist_tremor = _Tremor(rng, 3, tremor=0.0006, sway=0.006)
@@ -195,35 +198,52 @@ class SimOperator:
         rng = np.random.default_rng([self.seed, index])
         rest = rng.normal(0.0, 0.006, 3).clip(-0.015, 0.015)
         script = SCRIPTS[task](rng, rest)
-        wrist, hand = _Track(start, wrist0), _Track(start, hand0)
-        t = start
-        phase_starts = []
-        for ph in script.phases:
-            phase_starts.append(t)
-            if ph.position is not None or ph.rpy is not None:
+        phase_starts = list(np.cumsum([start] + [ph.duration for ph in script.phases[:-1]]))
+        end = start + sum(ph.duration for ph in script.phases)
+        self._episodes.append(_Episode(index, task, script, start, end, phase_starts,
+                                       [p.name for p in script.phases], _Track(start, wrist0), _Track(start, hand0)))
+        del self._episodes[:-_KEEP_EPISODES]
+
+    def _build(self, ep: _Episode, t: float) -> None:
+        """Lay the episode's tracks out up to the phases begun by t. A phase that aims (Phase.aim) looks at
+        the world as it begins: where the operator sees the objects and the robot's hand then (`watch`)
+        moves its target; without eyes it goes where the script planned."""
+        phases = ep.script.phases
+        if self._looking:  # asked again while looking (eyes that ask the operator): the phases wait
+            return
+        while ep.built < len(phases) and not ep.cut and ep.phase_starts[ep.built] <= t:
+            ph, start = phases[ep.built], ep.phase_starts[ep.built]
+            wrist, hand = ep.wrist, ep.hand
+            position = ph.position
+            if ph.aim is not None and self._eyes is not None:
+                self._looking = True
+                try:
+                    seen = self._eyes()
+                finally:
+                    self._looking = False
+                position = ph.aim(seen, wrist(start)[:3], position)
+            if position is not None or ph.rpy is not None:
                 current = wrist.values[-1]
                 target = np.concatenate([
-                    current[:3] if ph.position is None else ph.position,
+                    current[:3] if position is None else position,
                     current[3:] if ph.rpy is None else ph.rpy,
                 ])
-                wrist.move(t + ph.wrist_window[0] * ph.duration, t + ph.wrist_window[1] * ph.duration, target)
+                wrist.move(start + ph.wrist_window[0] * ph.duration, start + ph.wrist_window[1] * ph.duration, target)
             if ph.hand is not None:
-                hand.move(t + ph.hand_window[0] * ph.duration, t + ph.hand_window[1] * ph.duration, ph.hand)
-            t += ph.duration
-            wrist.hold_until(t)
-            hand.hold_until(t)
-        self._episodes.append(
-            _Episode(index, task, script, start, t, phase_starts, [p.name for p in script.phases], wrist, hand)
-        )
-        del self._episodes[:-_KEEP_EPISODES]
+                hand.move(start + ph.hand_window[0] * ph.duration, start + ph.hand_window[1] * ph.duration, ph.hand)
+            wrist.hold_until(start + ph.duration)
+            hand.hold_until(start + ph.duration)
+            ep.built += 1
 
     def _episode(self, t: float) -> _Episode:
         with self._lock:
             while t >= self._episodes[-1].end:
                 last = self._episodes[-1]
+                self._build(last, last.end)
                 self._append_episode(last.end, last.wrist.values[-1], last.hand.values[-1])
             for ep in reversed(self._episodes):
                 if t >= ep.start:
+                    self._build(ep, t)
                     return ep
             return self._episodes[0]  # older than what is kept: the earliest state we have
 
@@ -246,6 +266,7 @@ class SimOperator:
                 return True
             # Cut at the end of the current phase, where both hand and wrist are at rest.
             cut = next((s for s in ep.phase_starts if s >= now), ep.end)
+            self._build(ep, cut)
             pause_start = ep.phase_starts[-1]  # already resting in the pause: end the episode here
             if now >= pause_start:
                 cut = max(now, pause_start)
@@ -324,6 +345,20 @@ class SimOperator:
     def episode(self, t: float) -> tuple[int, str]:
         ep = self._episode(t)
         return ep.index, ep.task
+
+    def episode_span(self, index: int) -> tuple[float, float]:
+        """Start and end (seconds) of episode `index` (made up to it where not yet made)."""
+        with self._lock:
+            while self._episodes[-1].index < index:
+                last = self._episodes[-1]
+                self._build(last, last.end)
+                self._append_episode(last.end, last.wrist.values[-1], last.hand.values[-1])
+            ep = next(e for e in self._episodes if e.index == index)
+            return ep.start, ep.end
+
+    def watch(self, eyes) -> None:
+        """Look at the world while acting: `eyes()` gives each object's position (task frame) and yaw now."""
+        self._eyes = eyes
 
     def spots(self, t: float) -> dict[str, tuple[float, float, float]]:
         """Where the episode at t put its objects (task frame x, y and yaw), for the physics world's layout."""
