@@ -17,6 +17,16 @@ eval_physics_*       `teleprev eval --physics` on a session recorded here on the
 realtime_physics_*   bench/realtime.py --rig physics: unattended physics-rig sessions (preview in a pty)
                      beside 8 busy processes (--quick: 1 session, 2 busy), measured where the robot feels
                      them: arm faults, the longest command gap, sender lateness, audit failures
+demo_success_rate    per task, the share of the simulated operator's episodes that world/success.py
+                     judges a success, through the rig's retarget, Corrector and command planner into
+                     the physics world, in lock step off the wall clock (teleprev/evaluation/demos.py):
+                     20 episodes of each task (seeds 0..19), the operator watching the world;
+                     demo_success_rate_min the lowest task's
+demo_success_without_corrector   the same per task with the CCN not applied (the retargeted hand where
+                     the exact check finds it free, else the last free target held; the swept check on)
+demo_success_without_guard       the same per task with no hand self-collision check at all (bench only)
+--quick: one episode of pick_place for each of the three, instead of 20 of every task; --demos N sets the
+episodes per task, --jobs N runs them in N processes.
 
 JSON keys:
     physics_realtime_x      float
@@ -32,6 +42,8 @@ JSON keys:
     realtime_physics_arm_faults   int
     realtime_physics_gap_ms_max   float
     realtime_physics_late_ms_p99  float
+    demo_success_rate_min   float
+    demo_episodes           int
 """
 
 from __future__ import annotations
@@ -152,8 +164,45 @@ def realtime_figures(quick: bool, cores: set[int]) -> dict:
                                         Path(tempfile.mkdtemp(prefix="physics-realtime-")))
 
 
+HAND_RUNS = {"demo_success_rate": "corrector", "demo_success_without_corrector": "no_corrector",
+             "demo_success_without_guard": "no_guard"}
+
+
+def _demo(job: tuple[str, int, str]) -> tuple[str, int, str, bool, str]:
+    from teleprev.evaluation.demos import run_demo
+    from teleprev.rig import load_rig
+
+    task, seed, hand = job
+    result = run_demo(load_rig(Path(__file__).resolve().parents[1] / "rigs" / "sim_physics.toml"), task, seed, hand)
+    return task, seed, hand, result.outcome.success, result.outcome.reason
+
+
+def demo_success(tasks: tuple[str, ...], episodes: int, hands: dict[str, tuple[str, ...]], jobs: int) -> dict:
+    """{figure: {task: share of successes}}: `episodes` seeds of each task per hand side (hands: figure ->
+    the tasks it runs), each judged by world/success.py; every episode's outcome is printed to stderr."""
+    import multiprocessing
+
+    work = [(task, seed, HAND_RUNS[figure]) for figure, run in hands.items() for task in run
+            for seed in range(episodes)]
+    if jobs > 1:
+        with multiprocessing.get_context("fork").Pool(jobs) as pool:
+            done = list(pool.imap_unordered(_demo, work))
+    else:
+        done = [_demo(job) for job in work]
+    wins: dict[tuple[str, str], list[bool]] = {}
+    for task, seed, hand, success, reason in sorted(done):
+        print(f"demo {hand:12s} {task:12s} seed {seed:2d}: {'success' if success else 'failure'}: {reason}",
+              file=sys.stderr)
+        wins.setdefault((hand, task), []).append(success)
+    return {figure: {task: sum(wins[HAND_RUNS[figure], task]) / episodes for task in run}
+            for figure, run in hands.items()}
+
+
 def main() -> None:
-    args = common.parser(__doc__).parse_args()
+    parser = common.parser(__doc__)
+    parser.add_argument("--demos", type=int, default=20, help="episodes of each task for the demo figures")
+    parser.add_argument("--jobs", type=int, default=1, help="processes for the demo episodes")
+    args = parser.parse_args()
     from teleprev.world.layout import TASKS
 
     cores = os.sched_getaffinity(0)
@@ -170,8 +219,19 @@ def main() -> None:
     figures["steal_ms"] = (steal_after - steal_before) if steal_before is not None and steal_after is not None else None
     figures |= eval_figures(args.quick, cores)
     figures |= realtime_figures(args.quick, cores)
+    with _all_cores(cores):  # the demos after the timings, on every core
+        if args.quick:
+            demos = demo_success(TASKS, 1, dict.fromkeys(HAND_RUNS, ("pick_place",)), 1)
+            episodes = 1
+        else:
+            demos = demo_success(TASKS, args.demos, dict.fromkeys(HAND_RUNS, TASKS), args.jobs)
+            episodes = args.demos
+    figures |= demos
+    figures["demo_success_rate_min"] = min(demos["demo_success_rate"].values())
+    figures["demo_episodes"] = episodes
     targets = {"physics_realtime_x": ">= 5", "render_fps": ">= 15", "eval_physics_realtime_x": ">= 5",
-               "eval_physics_agree": "true", "realtime_physics_arm_faults": "0", "realtime_physics_gap_ms_max": "<= 25"}
+               "eval_physics_agree": "true", "realtime_physics_arm_faults": "0", "realtime_physics_gap_ms_max": "<= 25",
+               "demo_success_rate_min": ">= 0.8"}
     common.report("bench/physics.py: the MuJoCo world on one core (xArm6 + LEAP Hand, 500 Hz)", figures, targets,
                   args.json)
 

@@ -118,12 +118,11 @@ def run_demo(rig: Rig, task: str, seed: int, hand: HandSide = "corrector", close
              pipeline=None) -> DemoResult:
     """One episode of `task` by the sim operator of `seed`, through the rig's pipeline into a physics world
     stepped in lock step (see the module docstring); `closed_loop` False: the operator does not watch."""
-    from teleprev_devices.sim.operator import SimOperator
-    from teleprev_devices.sim.world import SimWorld
-
     from teleprev.world.layout import task_layout
+    from teleprev.world.places import DEFAULT_ANCHOR
     from teleprev.world.success import judge
     from teleprev.world.world import PhysicsWorld
+    from teleprev_devices.sim.operator import SimOperator
 
     pipeline = pipeline if pipeline is not None else demo_pipeline(rig, hand)
     glove, suit, arm_dev, hand_dev = (rig.of_kind(k)[0].name for k in ("glove", "suit", "arm", "hand"))
@@ -132,7 +131,7 @@ def run_demo(rig: Rig, task: str, seed: int, hand: HandSide = "corrector", close
     planner = CommandPlanner.for_pipeline(pipeline)
 
     op = SimOperator(seed, task, "fixed")
-    anchor = SimWorld(rig.rig.robot, rig.rig.end_effector).anchor
+    anchor = DEFAULT_ANCHOR  # the scene around the TCP at the arm's home, as the sim rig lays it out
     layout = task_layout(task, seed, tuple(anchor), op.spots(0.0))
     world = PhysicsWorld(rig.rig.end_effector, layout, rig.sim.rate_hz)
     if closed_loop:

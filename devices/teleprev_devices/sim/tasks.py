@@ -188,9 +188,13 @@ def _place(b: _Builder, target, place_z: float, yaw: float, name: str = "cup", b
     b.add("move", 1.2, _side_grasp_point(target, place_z + b.rng.uniform(0.08, 0.12), yaw), _v(0, LEVEL, yaw),
           aim=_carry(name, goal))
     b.add("place", 1.0, _side_grasp_point(target, place_z, yaw), aim=_carry(name, goal, base + 0.004))
-    b.add("release", 0.5, hand=grasps.open_hand(b.rng.uniform(0, 0.5)))
+    # Let go by relaxing the fingers, not opening them wide: straightening fingers sweep along the cup's
+    # far side and flick it over. They open once the hand has moved off sideways.
+    b.add("release", 0.6, hand=grasps.rest(b.rng.uniform(0, 0.3)))
     _, palm = _palm_frame(yaw)
-    b.add("retreat", 0.5, _side_grasp_point(target, place_z, yaw) - 0.05 * palm + _v(0, 0, 0.08))
+    b.add("retreat", 0.6, _side_grasp_point(target, place_z, yaw) - 0.06 * palm + _v(0, 0, 0.02),
+          hand=grasps.open_hand(b.rng.uniform(0, 0.5)), hand_window=(0.5, 1.0))
+    b.add("retreat", 0.4, _side_grasp_point(target, place_z, yaw) - 0.06 * palm + _v(0, 0, 0.10))
 
 
 def pick_place(rng: np.random.Generator, rest: np.ndarray) -> Script:
