@@ -58,6 +58,7 @@ class PhysicsAccess:
 
     def __post_init__(self):
         self._host = None
+        self._eyes = None  # the mirror `seen` reads
         self._lock = threading.Lock()
 
     @property
@@ -111,6 +112,13 @@ class PhysicsAccess:
         self.layouts.append(entry)
         for listener in list(self.listeners):
             listener(entry)
+
+    def seen(self, anchor) -> dict[str, tuple[float, float, float, float]]:
+        """What a person watching sees now (teleprev.world.world.PhysicsWorld.seen), from a mirror of the world
+        kept for it; callers take turns (the sim operator asks under its own lock)."""
+        if self._eyes is None:
+            self._eyes = self.mirror()
+        return self._eyes.sync().seen(anchor)
 
     def outcome(self) -> Any:
         """The world's latest judgement of its task (teleprev.world.host.WorldOutcome), None before the world

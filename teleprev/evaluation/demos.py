@@ -135,7 +135,7 @@ def run_demo(rig: Rig, task: str, seed: int, hand: HandSide = "corrector", close
     layout = task_layout(task, seed, tuple(anchor), op.spots(0.0))
     world = PhysicsWorld(rig.rig.end_effector, layout, rig.sim.rate_hz)
     if closed_loop:
-        op.watch(lambda: _seen(world, anchor))
+        op.watch(lambda: world.seen(anchor))
     arm_names, hand_names = pipeline.arm_names, pipeline.effector_names
 
     engage_ns, lead_ns = round(ENGAGE_S * 1e9), round(START_S * 1e9)
@@ -189,19 +189,6 @@ def run_demo(rig: Rig, task: str, seed: int, hand: HandSide = "corrector", close
         world.step()
         t += step_ns
     return DemoResult(task, seed, hand, judge(layout, states), t / 1e9, ticks, actions)
-
-
-def _seen(world, anchor) -> dict[str, tuple[float, float, float, float]]:
-    """What the operator sees: each free object's position (task frame: metres from the resting wrist)
-    and yaw, and the robot hand's ("hand": the TCP)."""
-    tcp = world.tcp()
-    out = {"hand": (tcp[0, 3] - anchor[0], tcp[1, 3] - anchor[1], tcp[2, 3] - anchor[2],
-                    float(np.arctan2(tcp[1, 0], tcp[0, 0])))}
-    for name, o in world.state().objects.items():
-        r = o.rotation
-        out[name] = (o.position[0] - anchor[0], o.position[1] - anchor[1], o.position[2] - anchor[2],
-                     float(np.arctan2(r[1, 0], r[0, 0])))
-    return out
 
 
 def _sample(device: str, t_ns: int, op, op_t: float, world, arm_names, hand_names, inputs: InputTopics) -> Logged:

@@ -155,6 +155,40 @@ def _carry(obj: str, goal, base: float | None = None):
     return aim
 
 
+# pour: the wrist over the bowl at POUR_OVER from its centre, so that rolled ~115 degrees about the
+# fingers (the TCP the pivot) the cup, held GRASP_ALONG / GRASP_OUT from the TCP and 8.5 cm below it,
+# swings over to point its mouth down into the bowl: the mouth comes to about (-0.065, -0.065) from the TCP.
+POUR_OVER = _v(0.065, 0.045, 0)
+
+
+def _pour_over(bowl: str, cup: str):
+    """Aim: the wrist to POUR_OVER from the bowl as seen, corrected by how far the held cup sits from where
+    a grasp puts it (seen against the robot's hand)."""
+    def aim(seen: dict, wrist: np.ndarray, planned: np.ndarray | None) -> np.ndarray:
+        out = np.array(planned if planned is not None else wrist, dtype=float)
+        held, hand = _v(*seen[cup][:3]), _v(*seen["hand"][:3])
+        if held[2] < TABLE_Z + LIFTED:
+            return out
+        slip = _v(GRASP_ALONG, GRASP_OUT, 0) - (held - hand)
+        out[:2] = (_v(*seen[bowl][:3]) + POUR_OVER + slip)[:2]
+        return out
+    return aim
+
+
+def _lift_by(dz: float):
+    """Aim: straight up from where the wrist is."""
+    def aim(seen: dict, wrist: np.ndarray, planned: np.ndarray | None) -> np.ndarray:
+        return wrist + _v(0, 0, dz)
+    return aim
+
+
+def _move_by(offset: np.ndarray):
+    """Aim: from where the wrist is, by `offset`."""
+    def aim(seen: dict, wrist: np.ndarray, planned: np.ndarray | None) -> np.ndarray:
+        return wrist + offset
+    return aim
+
+
 def _pick(b: _Builder, cup: np.ndarray, grasp_z: float, yaw: float, squeeze: float,
           tightness: tuple[float, float] = (0.35, 0.95), name: str = "cup") -> float:
     """Reach, pre-shape, grasp and lift a cup; returns the grasp tightness."""
@@ -187,14 +221,17 @@ def _place(b: _Builder, target, place_z: float, yaw: float, name: str = "cup", b
     goal = target if goal is None else goal
     b.add("move", 1.2, _side_grasp_point(target, place_z + b.rng.uniform(0.08, 0.12), yaw), _v(0, LEVEL, yaw),
           aim=_carry(name, goal))
-    b.add("place", 1.0, _side_grasp_point(target, place_z, yaw), aim=_carry(name, goal, base + 0.004))
+    # Set down a centimetre over its place: lower, the hand (its arm lagging by millimetres) presses the cup
+    # into the table, and that squeeze tips it over when the fingers let go.
+    b.add("place", 1.0, _side_grasp_point(target, place_z, yaw), aim=_carry(name, goal, base + 0.01))
     # Let go by relaxing the fingers, not opening them wide: straightening fingers sweep along the cup's
-    # far side and flick it over. They open once the hand has moved off sideways.
+    # far side and flick it over. Then straight up, the relaxed fingers sliding off over the rim (moving
+    # off sideways, they drag the cup along), and away, the hand opening.
     b.add("release", 0.6, hand=grasps.rest(b.rng.uniform(0, 0.3)))
     _, palm = _palm_frame(yaw)
-    b.add("retreat", 0.6, _side_grasp_point(target, place_z, yaw) - 0.06 * palm + _v(0, 0, 0.02),
-          hand=grasps.open_hand(b.rng.uniform(0, 0.5)), hand_window=(0.5, 1.0))
-    b.add("retreat", 0.4, _side_grasp_point(target, place_z, yaw) - 0.06 * palm + _v(0, 0, 0.10))
+    b.add("retreat", 0.7, _side_grasp_point(target, place_z + 0.13, yaw), aim=_lift_by(0.13))
+    b.add("retreat", 0.5, _side_grasp_point(target, place_z + 0.13, yaw) - 0.05 * palm,
+          hand=grasps.open_hand(b.rng.uniform(0, 0.5)), aim=_move_by(-0.05 * palm))
 
 
 def pick_place(rng: np.random.Generator, rest: np.ndarray) -> Script:
@@ -250,19 +287,19 @@ def pour(rng: np.random.Generator, rest: np.ndarray) -> Script:
     cup = _spot(b, "pour", "cup")
     bowl = _spot(b, "pour", "bowl")
     grasp_z = TABLE_Z + GRASP_HEIGHT
-    pour_z = TABLE_Z + rng.uniform(0.20, 0.25)
-    tilt = -rng.uniform(1.5, 2.0)  # pronation tips the cup's mouth to the left, over the bowl
-    c = _pick(b, cup, grasp_z, rng.uniform(-0.2, 0.0), squeeze=0.0, tightness=(0.3, 0.6))
-    b.add("move", 1.2, bowl + _v(-0.03, -0.10, pour_z))
+    pour_z = TABLE_Z + rng.uniform(0.21, 0.24)
+    # Pronation tips the cup's mouth to the left, over the bowl; the xArm's last joint (+-3.11 rad, from
+    # -1.57 at home) allows about 90 degrees of it, the shakes shake the contents out.
+    tilt = -rng.uniform(1.45, 1.5)
+    c = _pick(b, cup, grasp_z, rng.uniform(-0.2, 0.0), squeeze=0.25, tightness=(0.3, 0.6))
+    b.add("move", 1.4, bowl + POUR_OVER + _v(0, 0, pour_z), _v(0, 0, 0), aim=_pour_over("bowl", "cup"))
     # The grip tightens while the cup is upside down and shaken, and eases once it is upright again.
     b.add("pour", 1.2, rpy=_v(tilt, 0, 0), hand=grasps.power(min(1.0, c + rng.uniform(0.3, 0.45))))
-    b.add("shake", 0.35, rpy=_v(tilt - 0.15, 0, 0))
-    b.add("shake", 0.35, rpy=_v(tilt + 0.05, 0, 0))
+    b.add("shake", 0.35, rpy=_v(tilt - 0.05, 0, 0))
+    b.add("shake", 0.35, rpy=_v(tilt + 0.25, 0, 0))
+    b.add("shake", 0.35, rpy=_v(tilt - 0.05, 0, 0))
     b.add("upright", 1.0, rpy=_v(0, 0, 0), hand=grasps.power(c))
-    b.add("move", 1.1, _side_grasp_point(cup, grasp_z + 0.10))
-    b.add("place", 0.7, _side_grasp_point(cup, grasp_z))
-    b.add("release", 0.5, hand=grasps.open_hand(0.3))
-    b.add("retreat", 0.5, _side_grasp_point(cup, grasp_z) + _v(-0.05, -0.03, 0.08))
+    _place(b, cup, grasp_z, 0.0)
     _rest(b, rest)
     objects = (
         _cup("cup", cup, CUP_COLOURS[1]),

@@ -9,7 +9,8 @@ drops upright onto the table (or the cup below it), or hangs from the peg it was
 camera shows a grasp that worked.
 
 On a physics rig (DeviceContext.physics) the objects are the physics world's instead: `follow_operator`
-loads each new operator episode's scene into it, its objects where the episode's script put them.
+loads each new operator episode's scene into it, its objects where the episode's script put them, and
+has the operator watch the world (SimOperator.watch): its aimed phases go where it sees the objects.
 """
 
 from __future__ import annotations
@@ -70,6 +71,7 @@ class SimWorld:
         self._episode: tuple | None = None
         self._objects: list[PlacedObject] = []
         self._physics_episode: tuple | None = None
+        self._watching = False
 
     # ---- robot state ---------------------------------------------------------------------------
     def set_joints(self, names: tuple[str, ...], values: np.ndarray) -> None:
@@ -189,6 +191,9 @@ class SimWorld:
         op = self._shared.get("sim.operator")
         if op is None:
             return
+        if not self._watching:  # the operator watches the world it acts in, as a person at the table does
+            self._watching = True
+            op.watch(lambda: physics.seen(self.anchor))
         t = op.time_s(now_ns)
         key = op.episode(t)
         with self._lock:
