@@ -27,6 +27,16 @@ demo_success_without_corrector   the same per task with the CCN not applied (the
 demo_success_without_guard       the same per task with no hand self-collision check at all (bench only)
 --quick: one episode of pick_place for each of the three, instead of 20 of every task; --demos N sets the
 episodes per task, --jobs N runs them in N processes.
+rollout_success_rate the policy scored: `teleprev record` on the physics rig (rollout_demos episodes of
+                     pick_place by the watching operator, each marked by the world), `teleprev export`, a
+                     small ACT trained by lerobot-train on the CPU (rollout_train_steps steps; no pretrained
+                     backbone), then `teleprev rollout` on the physics rig (rollout_episodes episodes), its
+                     episodes' marks by the world: the share that succeeded (lerobot-eval's pc_success / 100).
+                     rollout_demo_success_rate: the demos' own. --quick: 1 demo, 2 steps, 1 episode,
+                     of 6 s each (too short for a pick-and-place: a smoke run of the path, rate 0).
+                     A GPU makes the training minutes instead of hours at the sizes a policy needs to
+                     learn the task (tens of thousands of steps, pretrained backbone); the CPU run here
+                     is the path, not a trained policy.
 
 JSON keys:
     physics_realtime_x      float
@@ -44,12 +54,18 @@ JSON keys:
     realtime_physics_late_ms_p99  float
     demo_success_rate_min   float
     demo_episodes           int
+    rollout_success_rate    float
+    rollout_demo_success_rate  float
+    rollout_demos           int
+    rollout_train_steps     int
+    rollout_episodes        int
 """
 
 from __future__ import annotations
 
 import os
 import sys
+import tempfile
 import time
 from pathlib import Path
 
@@ -198,10 +214,56 @@ def demo_success(tasks: tuple[str, ...], episodes: int, hands: dict[str, tuple[s
             for figure, run in hands.items()}
 
 
+ROLLOUT_TASK = "pick_place"
+ROLLOUT_EPISODE_S = 16.0  # an operator's pick-and-place (10-14 s after its start) with its rest
+
+
+def _teleprev(*args) -> None:
+    """A `teleprev` command as a user runs it; its output on failure."""
+    import subprocess
+
+    command = [str(Path(sys.executable).with_name("teleprev")), *map(str, args)]
+    ran = subprocess.run(command, capture_output=True, text=True)
+    if ran.returncode != 0:
+        raise RuntimeError(f"{' '.join(command)} failed ({ran.returncode}):\n{ran.stdout[-2000:]}{ran.stderr[-2000:]}")
+
+
+def _success_rate(session: Path) -> float:
+    from teleprev.session.episodes import success_by_task
+    from teleprev.session.reader import SessionReader
+
+    with SessionReader(session) as reader:
+        rate = success_by_task(reader.episodes())[ROLLOUT_TASK]
+    return (rate.pc_success or 0.0) / 100.0
+
+
+def policy_rollout(folder: Path, demos: int, steps: int, episodes: int, episode_s: float = ROLLOUT_EPISODE_S) -> dict:
+    """Record demos on the physics rig, export them, train a small ACT, roll it out there: the rollout's
+    success rate by the world's marks (see the module docstring)."""
+    sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+    from tests.helpers.policies import train_tiny_act
+
+    rig = Path(__file__).resolve().parents[1] / "rigs" / "sim_physics.toml"
+    demo = folder / "demos.mcap"
+    _teleprev("record", rig, "--task", ROLLOUT_TASK, "--episodes", demos, "--episode-time", episode_s,
+              "--engage-after", 1.0, "--no-preview", "--no-cues", "--out", demo)
+    _teleprev("export", demo, "--repo-id", "bench/physics_demos", "--root", folder / "demos")
+    policy = train_tiny_act(folder / "demos", "bench/physics_demos", folder / "train", steps=steps,
+                            timeout_s=max(300.0, 2.0 * steps))
+    rolled = folder / "rollout.mcap"
+    _teleprev("rollout", "--policy", policy, "--config", rig, "--task", ROLLOUT_TASK, "--episodes", episodes,
+              "--episode-time", episode_s, "--engage-after", 1.0, "--out", rolled)
+    return {"rollout_success_rate": _success_rate(rolled), "rollout_demo_success_rate": _success_rate(demo),
+            "rollout_demos": demos, "rollout_train_steps": steps, "rollout_episodes": episodes}
+
+
 def main() -> None:
     parser = common.parser(__doc__)
     parser.add_argument("--demos", type=int, default=20, help="episodes of each task for the demo figures")
     parser.add_argument("--jobs", type=int, default=1, help="processes for the demo episodes")
+    parser.add_argument("--rollout-demos", type=int, default=10, help="demos the rolled-out policy learns from")
+    parser.add_argument("--train-steps", type=int, default=300, help="lerobot-train steps of that policy")
+    parser.add_argument("--rollout-episodes", type=int, default=5, help="episodes of its rollout")
     args = parser.parse_args()
     from teleprev.world.layout import TASKS
 
@@ -229,6 +291,10 @@ def main() -> None:
     figures |= demos
     figures["demo_success_rate_min"] = min(demos["demo_success_rate"].values())
     figures["demo_episodes"] = episodes
+    os.environ.setdefault("HF_HUB_OFFLINE", "1")  # nothing downloaded: no pretrained backbone, no Hub
+    with tempfile.TemporaryDirectory(prefix="bench_physics_") as tmp, _all_cores(cores):
+        sizes = (1, 2, 1, 6.0) if args.quick else (args.rollout_demos, args.train_steps, args.rollout_episodes)
+        figures |= policy_rollout(Path(tmp), *sizes)
     targets = {"physics_realtime_x": ">= 5", "render_fps": ">= 15", "eval_physics_realtime_x": ">= 5",
                "eval_physics_agree": "true", "realtime_physics_arm_faults": "0", "realtime_physics_gap_ms_max": "<= 25",
                "demo_success_rate_min": ">= 0.8"}

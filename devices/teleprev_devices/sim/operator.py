@@ -12,13 +12,13 @@ top a person's physiological tremor (8-12 Hz, a fraction of a millimetre) and sl
 differ in layout, speed (0.85-1.2x), grasp tightness and angles, drawn from (seed, episode number).
 
 Phase scripts (grasp shapes in devices/sim/grasps.py; c = tightness):
-    pick_place    reach+pre-shape, approach, grasp power(c), lift (squeezing: c+0.25..0.45), move,
-                  place, release, retreat, return, pause
+    pick_place    reach+pre-shape beside the cup, approach (down beside it, then in), grasp power(c),
+                  lift (squeezing: c+0.25..0.45), move, place, release (relax), retreat (up, then
+                  off and open), return, pause
     hang          reach palm-down+pre-shape, approach, pinch(c), lift (firmer pinch c+0.3), move to the
                   peg, hang (roll), lower, release, retreat, return, pause
-    pour          pick as above, move beside the bowl, pour (pronate 85-115 deg, grip tightens to c+0.3..0.45),
-                  shake twice, upright (grip eases),
-                  move back, place, release, retreat, return, pause
+    pour          pick as above, move over the bowl, pour (pronate 83-86 deg, grip tightens to c+0.3..0.45),
+                  shake three times, upright (grip eases), then place it back as pick_place does
     box_rotation  reach palm-down, approach, claw grip, rotate (yaw 70-100 deg), release, lift, unwind,
                   reposition with a flat hand, push (fingers squeezed together), retreat, return, pause
     cup_stack     two picks (power grasps) each placed onto the third cup, then return, pause
@@ -27,10 +27,15 @@ retarget into LEAP self-collision (fingertips in the palm, thumb across the fing
 every task squeezes that far while carrying or pushing (lift/move/place, pour/shake, hang, push) and
 is collision-free while reaching, pre-shaping, returning and pausing.
 
-The task follows `set_task` (the session calls it at every episode start through
-DeviceContext.task_listeners): the current phase finishes, the hand returns to rest, and the next
-episode is the new task. `mode="fixed"` ignores set_task and
-`mode="cycle"` goes through the five tasks in turn.
+The task follows `set_task`: the current phase finishes, the hand returns to rest, and the next episode
+is the new task. A session calls `on_episode_task` at every episode start (DeviceContext.task_listeners):
+a fresh episode of its task begins that way, and the operator rests after it until the session's next
+episode, so that its episodes are the session's. `mode="fixed"` ignores both and `mode="cycle"` goes
+through the five tasks in turn.
+
+Watching (`watch`, on a physics rig): phases that aim (tasks.Phase.aim) are laid out as they begin, to
+where the operator sees the objects and the robot's hand then, as a person at the table corrects a reach
+for a cup that is not quite where it was; blind, they go where the script planned.
 """
 
 from __future__ import annotations
@@ -167,6 +172,9 @@ class SimOperator:
         self._clock = clock
         self._task = task
         self._lock = threading.RLock()
+        # Paced by a session's episodes (on_episode_task): the index of the last episode allowed to begin,
+        # resting after it until the next is asked for; None: one episode after another
+        self._allowed: int | None = None
         self._eyes = None  # what the operator sees (see watch)
         self._looking = False
         self._hold: np.ndarray | None = None  # a calibration pose held instead of the task (see hold)
@@ -221,7 +229,8 @@ class SimOperator:
                     seen = self._eyes()
                 finally:
                     self._looking = False
-                position = ph.aim(seen, wrist(start)[:3], position)
+                if seen is not None:  # nothing seen yet: as planned
+                    position = ph.aim(seen, wrist(start)[:3], position)
             if position is not None or ph.rpy is not None:
                 current = wrist.values[-1]
                 target = np.concatenate([
@@ -237,7 +246,7 @@ class SimOperator:
 
     def _episode(self, t: float) -> _Episode:
         with self._lock:
-            while t >= self._episodes[-1].end:
+            while t >= self._episodes[-1].end and (self._allowed is None or self._next_index <= self._allowed):
                 last = self._episodes[-1]
                 self._build(last, last.end)
                 self._append_episode(last.end, last.wrist.values[-1], last.hand.values[-1])
@@ -247,22 +256,28 @@ class SimOperator:
                     return ep
             return self._episodes[0]  # older than what is kept: the earliest state we have
 
-    def set_task(self, name: str) -> bool:
+    def set_task(self, name: str, anew: bool = False) -> bool:
         """Switch to another task: the current phase ends, the hand returns to rest, then the new task's
-        episodes follow. Returns False (and changes nothing) when the task is fixed or cycling."""
+        episodes follow. `anew`: the same task too, a fresh episode of it begun that way (at once when
+        resting), as a session's episode starts. Returns False (and changes nothing) when the task is fixed
+        or cycling."""
         if name not in SCRIPTS:
             raise ValueError(f"unknown task {name!r} (tasks: {', '.join(TASKS)})")
         if self.mode != "follow":
             return False
         with self._lock:
-            if name == self._task:
+            if name == self._task and not anew:
                 return True
             self._task = name
             now = self._now_s()
             ep = self._episode(now)
+            if anew and ep.cut and ep.task == name:  # already ending (a start a moment ago): that new one
+                return True
             del self._episodes[self._episodes.index(ep) + 1:]  # what follows is made again, as the new task
             self._next_index = ep.index + 1
-            if ep.task == name or ep.cut:
+            if self._allowed is not None:  # paced by the session: this next one, then rest until asked again
+                self._allowed = self._next_index
+            if (ep.task == name and not anew) or ep.cut:
                 return True
             # Cut at the end of the current phase, where both hand and wrist are at rest.
             cut = next((s for s in ep.phase_starts if s >= now), ep.end)
@@ -287,11 +302,16 @@ class SimOperator:
             return True
 
     def on_episode_task(self, name: str) -> None:
-        """The session's episode-start hook (DeviceContext.task_listeners): follow the episode's task
-        label when it is one of the five; "calibration:<pose>" holds a calibration pose (open, fist,
+        """The session's episode-start hook (DeviceContext.task_listeners): a fresh episode of the episode's
+        task when its label is one of the five, and from the first such start on, rest after each episode
+        until the session's next one (so that the operator's episodes are the session's: the physics world
+        lays each one's scene out as it begins); "calibration:<pose>" holds a calibration pose (open, fist,
         neutral) until "calibration:done"; any other label leaves the operator at what it is doing."""
         if name in SCRIPTS:
-            self.set_task(name)
+            with self._lock:
+                if self._allowed is None:  # from now on an episode begins only when the session's does
+                    self._allowed = self._next_index - 1
+            self.set_task(name, anew=True)
         elif name.startswith("calibration:"):
             self.hold(name.split(":", 1)[1])
 
@@ -357,7 +377,8 @@ class SimOperator:
             return ep.start, ep.end
 
     def watch(self, eyes) -> None:
-        """Look at the world while acting: `eyes()` gives each object's position (task frame) and yaw now."""
+        """Look at the world while acting: `eyes()` gives each object's and the robot hand's ("hand")
+        position (task frame) and yaw now, or None when it has seen nothing yet."""
         self._eyes = eyes
 
     def spots(self, t: float) -> dict[str, tuple[float, float, float]]:
