@@ -17,6 +17,26 @@ eval_physics_*       `teleprev eval --physics` on a session recorded here on the
 realtime_physics_*   bench/realtime.py --rig physics: unattended physics-rig sessions (preview in a pty)
                      beside 8 busy processes (--quick: 1 session, 2 busy), measured where the robot feels
                      them: arm faults, the longest command gap, sender lateness, audit failures
+demo_success_rate    per task, the share of the simulated operator's episodes that world/success.py
+                     judges a success, through the rig's retarget, Corrector and command planner into
+                     the physics world, in lock step off the wall clock (teleprev/evaluation/demos.py):
+                     20 episodes of each task (seeds 0..19), the operator watching the world;
+                     demo_success_rate_min the lowest task's
+demo_success_without_corrector   the same per task with the CCN not applied (the retargeted hand where
+                     the exact check finds it free, else the last free target held; the swept check on)
+demo_success_without_guard       the same per task with no hand self-collision check at all (bench only)
+--quick: one episode of pick_place for each of the three, instead of 20 of every task; --demos N sets the
+episodes per task, --jobs N runs them in N processes.
+rollout_success_rate the policy scored: `teleprev record` on the physics rig (rollout_demos episodes of
+                     pick_place by the watching operator, each marked by the world), `teleprev export`, a
+                     small ACT trained by lerobot-train on the CPU (rollout_train_steps steps; no pretrained
+                     backbone), then `teleprev rollout` on the physics rig (rollout_episodes episodes), its
+                     episodes' marks by the world: the share that succeeded (lerobot-eval's pc_success / 100).
+                     rollout_demo_success_rate: the demos' own. --quick: 1 demo, 2 steps, 1 episode,
+                     of 6 s each (too short for a pick-and-place: a smoke run of the path, rate 0).
+                     A GPU makes the training minutes instead of hours at the sizes a policy needs to
+                     learn the task (tens of thousands of steps, pretrained backbone); the CPU run here
+                     is the path, not a trained policy.
 
 JSON keys:
     physics_realtime_x      float
@@ -32,12 +52,20 @@ JSON keys:
     realtime_physics_arm_faults   int
     realtime_physics_gap_ms_max   float
     realtime_physics_late_ms_p99  float
+    demo_success_rate_min   float
+    demo_episodes           int
+    rollout_success_rate    float
+    rollout_demo_success_rate  float
+    rollout_demos           int
+    rollout_train_steps     int
+    rollout_episodes        int
 """
 
 from __future__ import annotations
 
 import os
 import sys
+import tempfile
 import time
 from pathlib import Path
 
@@ -152,8 +180,94 @@ def realtime_figures(quick: bool, cores: set[int]) -> dict:
                                         Path(tempfile.mkdtemp(prefix="physics-realtime-")))
 
 
+HAND_RUNS = {"demo_success_rate": "corrector", "demo_success_without_corrector": "no_corrector",
+             "demo_success_without_guard": "no_guard"}
+
+
+def _demo(job: tuple[str, int, str]) -> tuple[str, int, str, bool, str]:
+    from teleprev.evaluation.demos import run_demo
+    from teleprev.rig import load_rig
+
+    task, seed, hand = job
+    result = run_demo(load_rig(Path(__file__).resolve().parents[1] / "rigs" / "sim_physics.toml"), task, seed, hand)
+    return task, seed, hand, result.outcome.success, result.outcome.reason
+
+
+def demo_success(tasks: tuple[str, ...], episodes: int, hands: dict[str, tuple[str, ...]], jobs: int) -> dict:
+    """{figure: {task: share of successes}}: `episodes` seeds of each task per hand side (hands: figure ->
+    the tasks it runs), each judged by world/success.py; every episode's outcome is printed to stderr."""
+    import multiprocessing
+
+    work = [(task, seed, HAND_RUNS[figure]) for figure, run in hands.items() for task in run
+            for seed in range(episodes)]
+    if jobs > 1:
+        with multiprocessing.get_context("fork").Pool(jobs) as pool:
+            done = list(pool.imap_unordered(_demo, work))
+    else:
+        done = [_demo(job) for job in work]
+    wins: dict[tuple[str, str], list[bool]] = {}
+    for task, seed, hand, success, reason in sorted(done):
+        print(f"demo {hand:12s} {task:12s} seed {seed:2d}: {'success' if success else 'failure'}: {reason}",
+              file=sys.stderr)
+        wins.setdefault((hand, task), []).append(success)
+    return {figure: {task: sum(wins[HAND_RUNS[figure], task]) / episodes for task in run}
+            for figure, run in hands.items()}
+
+
+ROLLOUT_TASK = "pick_place"
+ROLLOUT_EPISODE_S = 16.0  # an operator's pick-and-place (10-14 s after its start) with its rest
+
+
+def _teleprev(*args, ok: tuple[int, ...] = (0,)) -> None:
+    """A `teleprev` command as a user runs it; its output when it exits otherwise than `ok`."""
+    import subprocess
+
+    command = [str(Path(sys.executable).with_name("teleprev")), *map(str, args)]
+    ran = subprocess.run(command, capture_output=True, text=True)
+    print(ran.stdout[-600:], file=sys.stderr)
+    if ran.returncode not in ok:
+        raise RuntimeError(f"{' '.join(command)} failed ({ran.returncode}):\n{ran.stdout[-2000:]}{ran.stderr[-2000:]}")
+
+
+def _success_rate(session: Path) -> float:
+    from teleprev.session.episodes import success_by_task
+    from teleprev.session.reader import SessionReader
+
+    with SessionReader(session) as reader:
+        rate = success_by_task(reader.episodes())[ROLLOUT_TASK]
+    return (rate.pc_success or 0.0) / 100.0
+
+
+def policy_rollout(folder: Path, demos: int, steps: int, episodes: int, episode_s: float = ROLLOUT_EPISODE_S) -> dict:
+    """Record demos on the physics rig, export them, train a small ACT, roll it out there: the rollout's
+    success rate by the world's marks (see the module docstring)."""
+    sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+    from tests.helpers.policies import train_tiny_act
+
+    rig = Path(__file__).resolve().parents[1] / "rigs" / "sim_physics.toml"
+    demo = folder / "demos.mcap"
+    _teleprev("record", rig, "--task", ROLLOUT_TASK, "--episodes", demos, "--episode-time", episode_s,
+              "--engage-after", 1.0, "--no-preview", "--no-cues", "--out", demo)
+    _teleprev("export", demo, "--repo-id", "bench/physics_demos", "--root", folder / "demos")
+    policy = train_tiny_act(folder / "demos", "bench/physics_demos", folder / "train", steps=steps,
+                            timeout_s=max(300.0, 2.0 * steps))
+    rolled = folder / "rollout.mcap"
+    # Exit 1 where the policy never acted in time to engage (a slow CPU inference): recorded and judged all
+    # the same, each such episode a failure.
+    _teleprev("rollout", "--policy", policy, "--config", rig, "--task", ROLLOUT_TASK, "--episodes", episodes,
+              "--episode-time", episode_s, "--engage-after", 1.0, "--out", rolled, ok=(0, 1))
+    return {"rollout_success_rate": _success_rate(rolled), "rollout_demo_success_rate": _success_rate(demo),
+            "rollout_demos": demos, "rollout_train_steps": steps, "rollout_episodes": episodes}
+
+
 def main() -> None:
-    args = common.parser(__doc__).parse_args()
+    parser = common.parser(__doc__)
+    parser.add_argument("--demos", type=int, default=20, help="episodes of each task for the demo figures")
+    parser.add_argument("--jobs", type=int, default=1, help="processes for the demo episodes")
+    parser.add_argument("--rollout-demos", type=int, default=10, help="demos the rolled-out policy learns from")
+    parser.add_argument("--train-steps", type=int, default=300, help="lerobot-train steps of that policy")
+    parser.add_argument("--rollout-episodes", type=int, default=5, help="episodes of its rollout")
+    args = parser.parse_args()
     from teleprev.world.layout import TASKS
 
     cores = os.sched_getaffinity(0)
@@ -170,8 +284,23 @@ def main() -> None:
     figures["steal_ms"] = (steal_after - steal_before) if steal_before is not None and steal_after is not None else None
     figures |= eval_figures(args.quick, cores)
     figures |= realtime_figures(args.quick, cores)
+    with _all_cores(cores):  # the demos after the timings, on every core
+        if args.quick:
+            demos = demo_success(TASKS, 1, dict.fromkeys(HAND_RUNS, ("pick_place",)), 1)
+            episodes = 1
+        else:
+            demos = demo_success(TASKS, args.demos, dict.fromkeys(HAND_RUNS, TASKS), args.jobs)
+            episodes = args.demos
+    figures |= demos
+    figures["demo_success_rate_min"] = min(demos["demo_success_rate"].values())
+    figures["demo_episodes"] = episodes
+    os.environ.setdefault("HF_HUB_OFFLINE", "1")  # nothing downloaded: no pretrained backbone, no Hub
+    with tempfile.TemporaryDirectory(prefix="bench_physics_") as tmp, _all_cores(cores):
+        sizes = (1, 2, 1, 6.0) if args.quick else (args.rollout_demos, args.train_steps, args.rollout_episodes)
+        figures |= policy_rollout(Path(tmp), *sizes)
     targets = {"physics_realtime_x": ">= 5", "render_fps": ">= 15", "eval_physics_realtime_x": ">= 5",
-               "eval_physics_agree": "true", "realtime_physics_arm_faults": "0", "realtime_physics_gap_ms_max": "<= 25"}
+               "eval_physics_agree": "true", "realtime_physics_arm_faults": "0", "realtime_physics_gap_ms_max": "<= 25",
+               "demo_success_rate_min": ">= 0.8"}
     common.report("bench/physics.py: the MuJoCo world on one core (xArm6 + LEAP Hand, 500 Hz)", figures, targets,
                   args.json)
 

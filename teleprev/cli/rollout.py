@@ -81,6 +81,8 @@ def rollout(
     console.print(f"policy: {stats.inferences} inferences ({stats.policy_hz():.1f} Hz while inferring), "
                   f"{stats.handed} actions handed on at {plan.fps:g} fps, {stats.starved} frames without one",
                   highlight=False)
+    if recording.summary is not None:
+        print_success(console, recording.options.out)
     if signals.received is not None:
         raise typer.Exit(signals.exit_code)
     errors = Console(stderr=True)
@@ -100,3 +102,17 @@ def rollout(
     if missed:
         errors.print(f"[bold red]error:[/] {escape(missed)}", highlight=False, soft_wrap=True)
         raise typer.Exit(1)
+
+
+def print_success(console, session: Path) -> None:
+    """Each task's success rate over the session's episodes (lerobot-eval's pc_success), from the marks the
+    session recorded: the physics world's on a physics rig; nothing where no episode has an outcome."""
+    from teleprev.session.episodes import success_by_task
+    from teleprev.session.reader import SessionReader
+
+    with SessionReader(session) as reader:
+        rates = success_by_task(reader.episodes())
+    for rate in rates.values():
+        if rate.pc_success is not None:
+            console.print(f"success {rate.task or '(no task)'}: {rate.successes} of {rate.judged} episodes "
+                          f"(pc_success {rate.pc_success:.1f})", highlight=False)

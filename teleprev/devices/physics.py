@@ -58,6 +58,8 @@ class PhysicsAccess:
 
     def __post_init__(self):
         self._host = None
+        self._eyes = None  # the mirror `seen` reads
+        self._closed = False
         self._lock = threading.Lock()
 
     @property
@@ -112,12 +114,26 @@ class PhysicsAccess:
         for listener in list(self.listeners):
             listener(entry)
 
+    def seen(self, anchor) -> dict[str, tuple[float, float, float, float]]:
+        """What a person watching sees now (teleprev.world.world.PhysicsWorld.seen), from a mirror of the world
+        kept for it; callers take turns (the sim operator asks under its own lock)."""
+        if self._closed:
+            raise RuntimeError("the physics world is closed")
+        if self._eyes is None:
+            self._eyes = self.mirror()
+        return self._eyes.sync().seen(anchor)
+
+    @property
+    def closed(self) -> bool:
+        return self._closed
+
     def outcome(self) -> Any:
         """The world's latest judgement of its task (teleprev.world.host.WorldOutcome), None before the world
         started or judged."""
         return self._host.link.outcome() if self._host is not None else None
 
     def close(self) -> None:
+        self._closed = True
         with self._lock:
             if self._host is not None:
                 self._host.close()

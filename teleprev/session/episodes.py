@@ -72,3 +72,32 @@ def episodes_from(messages: Iterable[Logged], path: Path) -> list[Episode]:
     for ep in found.values():
         ep["outcome"] = ep["marked"] or ep["judged"]
     return [Episode(**found[i]) for i in sorted(found)]
+
+
+@dataclass(frozen=True, slots=True)
+class TaskSuccess:
+    """One task's episodes and how many of them succeeded, as lerobot-eval reports `pc_success`: kept
+    (not discarded) episodes with an outcome count, the operator's mark over the physics world's."""
+
+    task: str
+    episodes: int  # kept episodes of the task
+    judged: int  # of those, the ones with an outcome
+    successes: int
+
+    @property
+    def pc_success(self) -> float | None:
+        """Per cent of the judged episodes that succeeded; None when none was judged."""
+        return 100.0 * self.successes / self.judged if self.judged else None
+
+
+def success_by_task(episodes: Iterable[Episode]) -> dict[str, TaskSuccess]:
+    """Each task's TaskSuccess, tasks in the order their first episode came."""
+    counts: dict[str, list[int]] = {}
+    for ep in episodes:
+        if ep.discarded:
+            continue
+        c = counts.setdefault(ep.task, [0, 0, 0])
+        c[0] += 1
+        c[1] += ep.outcome is not None
+        c[2] += ep.outcome == "success"
+    return {task: TaskSuccess(task, *c) for task, c in counts.items()}

@@ -206,6 +206,20 @@ class PhysicsWorld:
                 touching.add(int(b2 if self._robot[b1] else b1))
         return touching
 
+    def seen(self, anchor) -> dict[str, tuple[float, float, float, float]]:
+        """What a person watching the scene sees: every free object's position and yaw, and the robot hand's
+        (its TCP, as "hand"), in the task frame (metres from `anchor`, the TCP at the arm's home)."""
+        ax, ay, az = (float(v) for v in anchor)
+
+        def pose(p, r) -> tuple[float, float, float, float]:
+            return float(p[0]) - ax, float(p[1]) - ay, float(p[2]) - az, float(np.arctan2(r[1, 0], r[0, 0]))
+
+        tcp = self.tcp()
+        out = {"hand": pose(tcp[:3, 3], tcp[:3, :3])}
+        for name, o in self.state().objects.items():
+            out[name] = pose(o.position, o.rotation)
+        return out
+
     def state(self) -> WorldState:
         with self.lock:
             touching = self._touching_robot()

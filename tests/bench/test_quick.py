@@ -26,7 +26,8 @@ BENCHES = sorted(p for p in BENCH.glob("*.py") if p.name != "common.py")
 # Seconds a quick run may take (2 shared cores); a bench not named gets DEFAULT_LIMIT_S. About three
 # times what each takes here, so that only a hang, or a bench that stopped being quick, trips it.
 DEFAULT_LIMIT_S = 120
-LIMIT_S = {"bimanual": 200, "corpus": 200, "export": 200, "faults": 200, "realtime": 240, "rollout": 200}
+LIMIT_S = {"bimanual": 200, "corpus": 200, "export": 200, "faults": 200, "physics": 400, "realtime": 240,
+           "rollout": 200}
 
 
 def _common():

@@ -130,7 +130,15 @@ def test_switching_twice_within_an_episode_stays_smooth():
     op = SimOperator(seed=6, clock=clock)
     states = []
     t = 0.0
-    for switch_at, task in ((2.0, "pour"), (3.9, "hang"), (4.6, "box_rotation")):
+    while t < 2.0:
+        states.append(op.state(t))
+        t += 1 / RATE
+    clock.t_ns = int(2.0e9)
+    op.set_task("pour")
+    # The cut episode returns to rest and ends; both later switches come while it is returning.
+    end = next(s for s in np.arange(2.0, 10.0, 0.01) if op.episode(s)[1] != "pick_place")
+    switches = [(end - 0.7, "hang"), (end - 0.3, "box_rotation")]
+    for switch_at, task in switches:
         while t < switch_at:
             states.append(op.state(t))
             t += 1 / RATE
@@ -145,3 +153,16 @@ def test_switching_twice_within_an_episode_stays_smooth():
     fingers = np.array([s.flexion for s in states])
     assert (np.linalg.norm(np.diff(pos, axis=0), axis=1) * RATE).max() < 1.5
     assert (np.abs(np.diff(fingers, axis=0)) * RATE).max() < 10.0
+
+
+def test_a_watching_operator_reaches_for_the_cup_where_it_sees_it():
+    """Blind, the operator reaches where its script put the cup; watching, where the cup is: moved 5 cm
+    further away along x, the grasp (the wrist at rest before closing) lands 5 cm further along x too."""
+    blind, watching = SimOperator(seed=3, task="pick_place", mode="fixed"), SimOperator(seed=3, task="pick_place",
+                                                                                           mode="fixed")
+    cup = watching.spots(0.0)["cup"]
+    moved = {"cup": (cup[0] + 0.05, cup[1], -0.30, 0.0), "hand": (0.0, 0.0, 0.0, 0.0)}
+    watching.watch(lambda: moved)
+    grasp = next(t for t in np.arange(0.0, 10.0, 0.01) if blind.state(t).phase == "grasp")
+    shift = watching.state(grasp).wrist_position - blind.state(grasp).wrist_position
+    assert shift == pytest.approx([0.05, 0.0, 0.0], abs=1e-9)

@@ -1,6 +1,7 @@
 """The whole loop on the sim rig: a recorded demo -> `teleprev export` -> `lerobot-train` (a tiny ACT) ->
 `teleprev rollout` (2 episodes, each previewed, then executed) -> `teleprev audit` passes, `teleprev eval`
-re-runs it from its recorded actions bit for bit, and `teleprev export` makes a dataset of it."""
+re-runs it from its recorded actions bit for bit, and `teleprev export` makes a dataset of it. On the physics
+rig the rollout marks its episode by the world and prints each task's success rate."""
 
 from __future__ import annotations
 
@@ -9,7 +10,7 @@ import numpy as np
 from teleprev import topics
 from teleprev.evaluation.reproduce import rerun_session
 from teleprev.session.reader import SessionReader
-from tests.helpers.cli import teleprev
+from tests.helpers.cli import ROOT, teleprev
 from tests.helpers.policies import train_tiny_act
 from tests.helpers.sessions import colliding_hand_rig
 
@@ -29,6 +30,20 @@ def test_record_export_train_rollout_audit_eval_export(tmp_path, sim_session, mo
     ran = teleprev("export", sim_session, "--repo-id", "lab/demo", "--root", demo)
     assert ran.returncode == 0, ran.stderr
     policy = train_tiny_act(demo, "lab/demo", tmp_path / "train")
+
+    # on the physics rig every episode is marked by the world, and the rollout says each task's success rate
+    # (lerobot-eval's pc_success) from the marks it recorded
+    physics = tmp_path / "physics.mcap"
+    ran = teleprev("rollout", "--policy", policy, "--config", ROOT / "rigs" / "sim_physics.toml", "--task",
+                   "pick_place", "--episodes", 1, "--episode-time", EPISODE_S, "--engage-after", ENGAGE_S,
+                   "--out", physics)
+    # (exit 1 where the policy never acted in time to engage: the episode is recorded and judged all the same)
+    assert ran.returncode in (0, 1), ran.stdout + ran.stderr
+    with SessionReader(physics) as reader:
+        (judged,) = reader.episodes()
+    assert judged.judged in ("success", "failure") and judged.judged_reason
+    won = int(judged.judged == "success")
+    assert f"success pick_place: {won} of 1 episodes (pc_success {100.0 * won:.1f})" in ran.stdout, ran.stdout
 
     session = tmp_path / "rollout.mcap"
     ran = teleprev("rollout", "--policy", policy, "--episodes", EPISODES, "--episode-time", EPISODE_S,

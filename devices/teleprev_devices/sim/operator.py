@@ -12,13 +12,13 @@ top a person's physiological tremor (8-12 Hz, a fraction of a millimetre) and sl
 differ in layout, speed (0.85-1.2x), grasp tightness and angles, drawn from (seed, episode number).
 
 Phase scripts (grasp shapes in devices/sim/grasps.py; c = tightness):
-    pick_place    reach+pre-shape, approach, grasp power(c), lift (squeezing: c+0.25..0.45), move,
-                  place, release, retreat, return, pause
+    pick_place    reach+pre-shape beside the cup, approach (down beside it, then in), grasp power(c),
+                  lift (squeezing: c+0.25..0.45), move, place, release (relax), retreat (up, then
+                  off and open), return, pause
     hang          reach palm-down+pre-shape, approach, pinch(c), lift (firmer pinch c+0.3), move to the
                   peg, hang (roll), lower, release, retreat, return, pause
-    pour          pick as above, move beside the bowl, pour (pronate 85-115 deg, grip tightens to c+0.3..0.45),
-                  shake twice, upright (grip eases),
-                  move back, place, release, retreat, return, pause
+    pour          pick as above, move over the bowl, pour (pronate 83-86 deg, grip tightens to c+0.3..0.45),
+                  shake three times, upright (grip eases), then place it back as pick_place does
     box_rotation  reach palm-down, approach, claw grip, rotate (yaw 70-100 deg), release, lift, unwind,
                   reposition with a flat hand, push (fingers squeezed together), retreat, return, pause
     cup_stack     two picks (power grasps) each placed onto the third cup, then return, pause
@@ -27,10 +27,15 @@ retarget into LEAP self-collision (fingertips in the palm, thumb across the fing
 every task squeezes that far while carrying or pushing (lift/move/place, pour/shake, hang, push) and
 is collision-free while reaching, pre-shaping, returning and pausing.
 
-The task follows `set_task` (the session calls it at every episode start through
-DeviceContext.task_listeners): the current phase finishes, the hand returns to rest, and the next
-episode is the new task. `mode="fixed"` ignores set_task and
-`mode="cycle"` goes through the five tasks in turn.
+The task follows `set_task`: the current phase finishes, the hand returns to rest, and the next episode
+is the new task. A session calls `on_episode_task` at every episode start (DeviceContext.task_listeners):
+a fresh episode of its task begins that way, and the operator rests after it until the session's next
+episode, so that its episodes are the session's. `mode="fixed"` ignores both and `mode="cycle"` goes
+through the five tasks in turn.
+
+Watching (`watch`, on a physics rig): phases that aim (tasks.Phase.aim) are laid out as they begin, to
+where the operator sees the objects and the robot's hand then, as a person at the table corrects a reach
+for a cup that is not quite where it was; blind, they go where the script planned.
 """
 
 from __future__ import annotations
@@ -133,6 +138,7 @@ class _Episode:
     phase_names: list[str]
     wrist: _Track  # (6,): position (task frame), roll pitch yaw
     hand: _Track  # (30,)
+    built: int = 0  # phases laid out on the tracks so far (they are laid out as they begin: _build)
     cut: bool = False  # ended early by set_task
 
 
@@ -166,6 +172,11 @@ class SimOperator:
         self._clock = clock
         self._task = task
         self._lock = threading.RLock()
+        # Paced by a session's episodes (on_episode_task): the index of the last episode allowed to begin,
+        # resting after it until the next is asked for; None: one episode after another
+        self._allowed: int | None = None
+        self._eyes = None  # what the operator sees (see watch)
+        self._looking = False
         self._hold: np.ndarray | None = None  # a calibration pose held instead of the task (see hold)
         rng = np.random.default_rng([seed, 0x5EED])
         self._wrist_tremor = _Tremor(rng, 3, tremor=0.0006, sway=0.006)
@@ -195,57 +206,82 @@ class SimOperator:
         rng = np.random.default_rng([self.seed, index])
         rest = rng.normal(0.0, 0.006, 3).clip(-0.015, 0.015)
         script = SCRIPTS[task](rng, rest)
-        wrist, hand = _Track(start, wrist0), _Track(start, hand0)
-        t = start
-        phase_starts = []
-        for ph in script.phases:
-            phase_starts.append(t)
-            if ph.position is not None or ph.rpy is not None:
+        phase_starts = list(np.cumsum([start] + [ph.duration for ph in script.phases[:-1]]))
+        end = start + sum(ph.duration for ph in script.phases)
+        self._episodes.append(_Episode(index, task, script, start, end, phase_starts,
+                                       [p.name for p in script.phases], _Track(start, wrist0), _Track(start, hand0)))
+        del self._episodes[:-_KEEP_EPISODES]
+
+    def _build(self, ep: _Episode, t: float) -> None:
+        """Lay the episode's tracks out up to the phases begun by t. A phase that aims (Phase.aim) looks at
+        the world as it begins: where the operator sees the objects and the robot's hand then (`watch`)
+        moves its target; without eyes it goes where the script planned."""
+        phases = ep.script.phases
+        if self._looking:  # asked again while looking (eyes that ask the operator): the phases wait
+            return
+        while ep.built < len(phases) and not ep.cut and ep.phase_starts[ep.built] <= t:
+            ph, start = phases[ep.built], ep.phase_starts[ep.built]
+            wrist, hand = ep.wrist, ep.hand
+            position = ph.position
+            if ph.aim is not None and self._eyes is not None:
+                self._looking = True
+                try:
+                    seen = self._eyes()
+                finally:
+                    self._looking = False
+                if seen is not None:  # nothing seen yet: as planned
+                    position = ph.aim(seen, wrist(start)[:3], position)
+            if position is not None or ph.rpy is not None:
                 current = wrist.values[-1]
                 target = np.concatenate([
-                    current[:3] if ph.position is None else ph.position,
+                    current[:3] if position is None else position,
                     current[3:] if ph.rpy is None else ph.rpy,
                 ])
-                wrist.move(t + ph.wrist_window[0] * ph.duration, t + ph.wrist_window[1] * ph.duration, target)
+                wrist.move(start + ph.wrist_window[0] * ph.duration, start + ph.wrist_window[1] * ph.duration, target)
             if ph.hand is not None:
-                hand.move(t + ph.hand_window[0] * ph.duration, t + ph.hand_window[1] * ph.duration, ph.hand)
-            t += ph.duration
-            wrist.hold_until(t)
-            hand.hold_until(t)
-        self._episodes.append(
-            _Episode(index, task, script, start, t, phase_starts, [p.name for p in script.phases], wrist, hand)
-        )
-        del self._episodes[:-_KEEP_EPISODES]
+                hand.move(start + ph.hand_window[0] * ph.duration, start + ph.hand_window[1] * ph.duration, ph.hand)
+            wrist.hold_until(start + ph.duration)
+            hand.hold_until(start + ph.duration)
+            ep.built += 1
 
     def _episode(self, t: float) -> _Episode:
         with self._lock:
-            while t >= self._episodes[-1].end:
+            while t >= self._episodes[-1].end and (self._allowed is None or self._next_index <= self._allowed):
                 last = self._episodes[-1]
+                self._build(last, last.end)
                 self._append_episode(last.end, last.wrist.values[-1], last.hand.values[-1])
             for ep in reversed(self._episodes):
                 if t >= ep.start:
+                    self._build(ep, t)
                     return ep
             return self._episodes[0]  # older than what is kept: the earliest state we have
 
-    def set_task(self, name: str) -> bool:
+    def set_task(self, name: str, anew: bool = False) -> bool:
         """Switch to another task: the current phase ends, the hand returns to rest, then the new task's
-        episodes follow. Returns False (and changes nothing) when the task is fixed or cycling."""
+        episodes follow. `anew`: the same task too, a fresh episode of it begun that way (at once when
+        resting), as a session's episode starts. Returns False (and changes nothing) when the task is fixed
+        or cycling."""
         if name not in SCRIPTS:
             raise ValueError(f"unknown task {name!r} (tasks: {', '.join(TASKS)})")
         if self.mode != "follow":
             return False
         with self._lock:
-            if name == self._task:
+            if name == self._task and not anew:
                 return True
             self._task = name
             now = self._now_s()
             ep = self._episode(now)
+            if anew and ep.cut and ep.task == name:  # already ending (a start a moment ago): that new one
+                return True
             del self._episodes[self._episodes.index(ep) + 1:]  # what follows is made again, as the new task
             self._next_index = ep.index + 1
-            if ep.task == name or ep.cut:
+            if self._allowed is not None:  # paced by the session: this next one, then rest until asked again
+                self._allowed = self._next_index
+            if (ep.task == name and not anew) or ep.cut:
                 return True
             # Cut at the end of the current phase, where both hand and wrist are at rest.
             cut = next((s for s in ep.phase_starts if s >= now), ep.end)
+            self._build(ep, cut)
             pause_start = ep.phase_starts[-1]  # already resting in the pause: end the episode here
             if now >= pause_start:
                 cut = max(now, pause_start)
@@ -266,11 +302,16 @@ class SimOperator:
             return True
 
     def on_episode_task(self, name: str) -> None:
-        """The session's episode-start hook (DeviceContext.task_listeners): follow the episode's task
-        label when it is one of the five; "calibration:<pose>" holds a calibration pose (open, fist,
+        """The session's episode-start hook (DeviceContext.task_listeners): a fresh episode of the episode's
+        task when its label is one of the five, and from the first such start on, rest after each episode
+        until the session's next one (so that the operator's episodes are the session's: the physics world
+        lays each one's scene out as it begins); "calibration:<pose>" holds a calibration pose (open, fist,
         neutral) until "calibration:done"; any other label leaves the operator at what it is doing."""
         if name in SCRIPTS:
-            self.set_task(name)
+            with self._lock:
+                if self._allowed is None:  # from now on an episode begins only when the session's does
+                    self._allowed = self._next_index - 1
+            self.set_task(name, anew=True)
         elif name.startswith("calibration:"):
             self.hold(name.split(":", 1)[1])
 
@@ -324,6 +365,21 @@ class SimOperator:
     def episode(self, t: float) -> tuple[int, str]:
         ep = self._episode(t)
         return ep.index, ep.task
+
+    def episode_span(self, index: int) -> tuple[float, float]:
+        """Start and end (seconds) of episode `index` (made up to it where not yet made)."""
+        with self._lock:
+            while self._episodes[-1].index < index:
+                last = self._episodes[-1]
+                self._build(last, last.end)
+                self._append_episode(last.end, last.wrist.values[-1], last.hand.values[-1])
+            ep = next(e for e in self._episodes if e.index == index)
+            return ep.start, ep.end
+
+    def watch(self, eyes) -> None:
+        """Look at the world while acting: `eyes()` gives each object's and the robot hand's ("hand")
+        position (task frame) and yaw now, or None when it has seen nothing yet."""
+        self._eyes = eyes
 
     def spots(self, t: float) -> dict[str, tuple[float, float, float]]:
         """Where the episode at t put its objects (task frame x, y and yaw), for the physics world's layout."""

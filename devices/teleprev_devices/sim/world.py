@@ -9,7 +9,8 @@ drops upright onto the table (or the cup below it), or hangs from the peg it was
 camera shows a grasp that worked.
 
 On a physics rig (DeviceContext.physics) the objects are the physics world's instead: `follow_operator`
-loads each new operator episode's scene into it, its objects where the episode's script put them.
+loads each new operator episode's scene into it, its objects where the episode's script put them, and
+has the operator watch the world (SimOperator.watch): its aimed phases go where it sees the objects.
 """
 
 from __future__ import annotations
@@ -25,6 +26,7 @@ from teleprev_devices.sim.tasks import SCRIPTS, TABLE_Z, SceneObject
 
 TABLE = SceneObject("table", "box", (1.2, 1.3, 0.04), (0.30, 0.0, -0.02), 0.0, (95, 120, 150), False)
 
+EYES_PERIOD_S = 0.05  # how often the watching operator looks (a person's visual feedback takes ~0.1 s)
 _GRASP_REACH = 0.09  # metres between the grasp point and an object's centre for a grasp to hold it
 
 
@@ -70,6 +72,7 @@ class SimWorld:
         self._episode: tuple | None = None
         self._objects: list[PlacedObject] = []
         self._physics_episode: tuple | None = None
+        self._watching = False
 
     # ---- robot state ---------------------------------------------------------------------------
     def set_joints(self, names: tuple[str, ...], values: np.ndarray) -> None:
@@ -189,6 +192,9 @@ class SimWorld:
         op = self._shared.get("sim.operator")
         if op is None:
             return
+        if not self._watching:  # the operator watches the world it acts in, as a person at the table does
+            self._watching = True
+            op.watch(Eyes(lambda: physics.seen(self.anchor), alive=lambda: not physics.closed))
         t = op.time_s(now_ns)
         key = op.episode(t)
         with self._lock:
@@ -198,6 +204,34 @@ class SimWorld:
         index, task = key
         physics.load_layout(task, op.seed, self.anchor, op.spots(t),
                             reason=f"operator episode {index} (seed {op.seed}): {task}")
+
+
+class Eyes:
+    """What the operator sees, looked at every EYES_PERIOD_S by a thread of its own: reading the physics
+    world (a mirror of it, rebuilt whenever the scene changes) must not hold up the glove and suit
+    threads that ask. Calling gives the latest look (None before the first); it stops looking when
+    `alive()` turns false (the world closed with the session)."""
+
+    def __init__(self, look, alive=lambda: True, period_s: float = EYES_PERIOD_S):
+        self._look, self._alive, self._period_s = look, alive, period_s
+        self._seen = None
+        self._stop = threading.Event()
+        self._thread = threading.Thread(target=self._run, name="sim-operator-eyes", daemon=True)
+        self._thread.start()
+
+    def _run(self) -> None:
+        while not self._stop.is_set() and self._alive():
+            try:
+                self._seen = self._look()
+            except Exception:  # the world not (or no longer) running: the operator acts on what it saw
+                pass
+            self._stop.wait(self._period_s)
+
+    def __call__(self):
+        return self._seen
+
+    def close(self) -> None:
+        self._stop.set()
 
 
 def shared_world(context) -> SimWorld:
