@@ -178,6 +178,7 @@ def run_sessions(count: int, seconds: float, engage_after: float, busy: int) -> 
             print(f"wire session {k}: rc {s.returncode}, arm {s.arm_commands} commands, gap max "
                   f"{max(s.gaps_ms, default=float('nan')):.1f} ms, late p99 "
                   f"{np.percentile(s.late_ms, 99) if s.late_ms else float('nan'):.2f} ms, per cycle {s.per_cycle_max}, "
+                  f"speed/accel/jerk ratio max {np.max(s.ratios, axis=0).round(3).tolist() if s.ratios else []}, "
                   f"faults {s.box_faults or 0}, arm errors {s.arm_errors[:1]}, arm refused {s.arm_refused}, "
                   f"matched {s.matched}, hand errors {s.hand_errors[:1]} {'; '.join(s.notes)}",
                   file=__import__("sys").stderr, flush=True)
