@@ -8,6 +8,7 @@
 
 from __future__ import annotations
 
+import os
 import threading
 import time
 from collections.abc import Callable
@@ -19,6 +20,7 @@ from teleprev import topics
 from teleprev.devices.servo_limits import STREAM_GAP_NS
 from teleprev.emulators.wire_schedule import PlannedSend
 from teleprev.errors import DeviceError
+from teleprev.live.core.paced import ACTUATOR_PRIORITY
 from teleprev.messages import JointSample
 from tests.helpers.wait import WaitTimeout, wait_until
 
@@ -100,6 +102,13 @@ class CommandStream:
         # sending would otherwise send a position that does not match its stamp, which the servo rule (it
         # differentiates stamps) reads as a jerk. A stall longer than the rule's stream gap starts a new
         # stream from rest, as the rule (and the controller) take it.
+        # Paced as the product's command path is (the actuators' processes: SCHED_FIFO 49, where permitted): an
+        # ordinary thread of a busy process stalls for tens of ms, and the emulated box rightly takes the
+        # target after a stall as a jump (teleprev/emulators/xarm_servo.py), which says nothing of the plugin.
+        try:
+            os.sched_setscheduler(threading.get_native_id(), os.SCHED_FIFO, os.sched_param(ACTUATOR_PRIORITY))
+        except (OSError, AttributeError):
+            pass
         names = self.device.joint_names
         start, t0, last, last_ns = None, 0, None, None
         next_t = time.monotonic()
