@@ -23,10 +23,11 @@ port instead of spinning (dynamixel-sdk polls a non-blocking port until its pack
 of the process runs.
 
 One read that gets no (or a garbled, or an earlier request's late) reply is a counted miss ("read_misses",
-ReadMiss), tried again at once, a command waiting for the bus going first; the hand faults when miss_limit reads in a row fail: a hand that stops answering stops its commands within
-miss_limit x the SDK's reply wait (2 x latency timer + 2 ms: 5 x 4 ms with the timer at 1 ms, 5 x 34 ms at
-16 ms), plus a poll period. A register write on connect whose status packet does not come is sent again
-(WRITE_TRIES in all): writes are idempotent, and one lost reply is no reason to refuse the hand.
+ReadMiss), tried again at once, a command waiting for the bus going first; the hand faults when miss_limit
+reads in a row fail: a hand that stops answering stops its commands within miss_limit x the SDK's reply wait
+(2 x latency timer + 2 ms: 5 x 4 ms with the timer at 1 ms, 5 x 34 ms at 16 ms), plus a poll period. A
+register write on connect whose status packet does not come is sent again (WRITE_TRIES in all): writes are
+idempotent, and one lost reply is no reason to refuse the hand.
 
 A fault stops the hand's commands and says which motor and what: a Hardware Error Status bit
 (overload, overheating, input voltage: the motor turned its torque off; checked every

@@ -15,7 +15,6 @@ from teleprev.clock import SessionClock
 from teleprev.devices.contract import DeviceContext
 from teleprev.errors import ConfigError, DeviceError
 from teleprev.messages import JointSample
-from tests.helpers.wait import wait_until
 from teleprev_devices.leap import (
     GOAL_POSITION,
     LeapHand,
@@ -26,6 +25,7 @@ from teleprev_devices.leap import (
     signed32,
     ticks_from_angles,
 )
+from tests.helpers.wait import wait_until
 
 NAMES = tuple(str(i) for i in range(16))
 

@@ -149,7 +149,7 @@ def test_a_replay_to_the_arm_writes_from_paced_processes_not_the_player(tmp_path
             r.stop()
         recording.close()
     finally:
-        arm, hand = box.finish(), bus.finish()
+        arm, _ = box.finish(), bus.finish()
 
     assert player.state.message == "", (player.state.message, errors)
     assert sum(1 for phase, _, _ in player.state.sent if phase == "playing") > 60
