@@ -12,7 +12,7 @@ commands as the emulated controller received them give emulator_faults and the w
 arm command is matched in order and by value with its arrival; wire_arrival_gap_ms_max between two targets of
 one engaged run, wire_arrival_late_ms_p99 / _max against the tick's planned instant (its stamp less how late
 the sender woke), wire_targets_per_cycle_max, wire_speed/accel/jerk_ratio_max (the controller's judgement on
-arrival times); wire_write_after_tick_ms_p99 / leap_write_after_tick_ms_p99 (a tick's sampling to the start of
+its servo cycle: teleprev/emulators/xarm_servo.py); wire_write_after_tick_ms_p99 / leap_write_after_tick_ms_p99 (a tick's sampling to the start of
 the arm's / hand's write, /command/wire); loaded_xarm_session_ok / loaded_leap_session_ok (no device error or
 refused command, every arm command arrived, the hand's goal writes at least its commands),
 loaded_xarm_command_rate_hz, loaded_sdk_roundtrip_ms_p99 (a write to the first state showing it),
