@@ -10,11 +10,12 @@ operator, the sim camera and the emulated arm and hand, its preview in a pseudo-
 processes made here, the emulators in real-time processes of their own (hardware outside this machine). The
 commands as the emulated controller received them give emulator_faults and the wire_ figures: each recorded
 arm command is matched in order and by value with its arrival; wire_arrival_gap_ms_max between two targets of
-one engaged run, wire_arrival_late_ms_p99 / _max against the tick's planned instant (its stamp less how late
-the sender woke), wire_targets_per_cycle_max, wire_speed/accel/jerk_ratio_max (the controller's judgement on
-its servo cycle: teleprev/emulators/xarm_servo.py); wire_write_after_tick_ms_p99 / leap_write_after_tick_ms_p99 (a tick's sampling to the start of
-the arm's / hand's write, /command/wire); loaded_xarm_session_ok / loaded_leap_session_ok (no device error or
-refused command, every arm command arrived, the hand's goal writes at least its commands),
+one engaged run, wire_arrival_late_ms_p99 / _max against the tick's planned instant (its stamp: the tick's
+instant on the sender's grid), wire_targets_per_cycle_max, wire_speed/accel/jerk_ratio_max (the controller's
+judgement on its servo cycle: teleprev/emulators/xarm_servo.py); wire_write_after_tick_ms_p99 /
+leap_write_after_tick_ms_p99 (a tick's sampling to the start of the arm's / hand's write, /command/wire);
+loaded_xarm_session_ok / loaded_leap_session_ok (no device error or refused command, every arm command
+arrived, the hand's goal writes at least its commands),
 loaded_xarm_command_rate_hz, loaded_sdk_roundtrip_ms_p99 (a write to the first state showing it),
 loaded_leap_command_rate_hz, loaded_leap_read_miss_frac, loaded_leap_faults. xarm_sdk_session_ok and
 leap_sdk_session_ok hold only if they hold in the recorded sessions too.
@@ -190,7 +191,7 @@ class HandSession:
         """What kept the session from being ok (nothing: it was)."""
         return [why for why, bad in (
             (f"{self.faults} faults: {[e['message'] for e in self.log.of('error')][:2]}", self.faults > 0),
-            (f"{self.probe.failed} commands failed", self.probe.failed > 0),
+            (f"{self.probe.failed} commands failed (last: {self.probe.last_error})", self.probe.failed > 0),
             (f"{self.corrupt_requests} corrupt requests", self.corrupt_requests > 0),
             (f"{self.goal_writes} goal writes for {self.probe.sent} commands", self.goal_writes < self.probe.sent),
             (f"{self.refused} refused", self.refused > 0)) if bad]
@@ -303,7 +304,8 @@ def main() -> None:
     xarm_rate = len(box.commands) / (2 * seconds)
     xarm_not_ok = [why for why, bad in (
         (f"device errors: {[e['message'] for e in arm_log.of('error')][:2]}", arm_log.count("error") > 0),
-        (f"{sum(p.failed for p in arm_probes)} commands failed", any(p.failed for p in arm_probes)),
+        (f"{sum(p.failed for p in arm_probes)} commands failed (last: {[p.last_error for p in arm_probes]})",
+         any(p.failed for p in arm_probes)),
         (f"controller faults: {box.faults[:2]}", bool(box.faults)),
         (f"unknown registers: {dict(box.unknown)}", bool(box.unknown)),
         (f"{arm_sent} commands sent, {len(box.commands)} taken", len(box.commands) != arm_sent),

@@ -137,8 +137,7 @@ def measure(path: Path, code: int, arm: dict, hand: dict, offset_ns: int) -> Wir
         return s
     by_stamp = {t: d for t, d in ticks}
     stamps = np.array([c.stamp_ns for c in commands[:n]], dtype=np.int64)
-    due = np.array([t - int(round(by_stamp.get(t, {}).get("late_ms", 0.0) * 1e6)) for t in stamps.tolist()],
-                   dtype=np.int64)  # the sender's schedule: its tick's instant less how late it woke
+    due = stamps  # the sender's schedule: each command is stamped with its tick's instant on the grid
     active = np.array([bool(by_stamp.get(t, {}).get("active", True)) for t in stamps.tolist()])
     arrived = np.array([a[0] for a in taken[:n]], dtype=np.int64) + offset_ns
     s.late_ms = ((arrived - due) / 1e6).tolist()
