@@ -57,17 +57,19 @@ class EventLog:
             return False
 
 
-def _towards(origin: np.ndarray, start: np.ndarray, joints: slice) -> float:
-    """The swing's direction from `start`: back towards where the stream first started. A stream that starts
-    again (after a stall or a fault) where its last swing left it, always swinging the same way, crept up by
-    up to 2 x amplitude a time until its commands were refused at a joint limit (bench/hardware.py, load 25:
-    1276 of 3571 xArm commands, "joint3=0.1920 not in [-3.1102, 0.1920]")."""
-    return -1.0 if float(np.sum(start[joints] - origin[joints])) > 0.0 else 1.0
+def _swing(origin: np.ndarray, start: np.ndarray, joints: slice, amplitude: float) -> np.ndarray:
+    """Each joint's swing from `start`: `amplitude` up from where the stream first started, back down to it
+    from anywhere above. A stream that starts again (after a stall or a fault) where its last swing left it,
+    always swinging up, crept by up to 2 x amplitude a time until its commands were refused at a joint limit
+    (bench/hardware.py, load 25: 1276 of 3571 xArm commands, "joint3=0.1920 not in [-3.1102, 0.1920]"); it
+    stays within [origin, origin + 2 x amplitude]."""
+    above = start[joints] - origin[joints]
+    return np.where(above > 1e-9, -above / 2.0, amplitude)
 
 
 class CommandStream:
     """Sends `device` a command every 1/rate_hz s from its own thread, stamped when it is sent: the joints
-    start where the device is and move by +-amplitude * (1 - cos(w t)) (at rest at t = 0, so the stream
+    start where the device is and move by amplitude * (1 - cos(w t)) (at rest at t = 0, so the stream
     keeps far inside the servo rule's acceleration and jerk limits). Counts sent and failed commands;
     `planned` keeps, for each command sent, the instant it was due to leave (its schedule, on the monotonic
     clock) and what it was, which an emulator's arrival times are measured against."""
@@ -119,7 +121,7 @@ class CommandStream:
             pass
         names = self.device.joint_names
         start, t0, last, last_ns = None, 0, None, None
-        origin, sign = None, 1.0  # where the stream first started; which way its swing goes from `start`
+        origin, swing = None, self.amplitude  # where the stream first started; each joint's swing from `start`
         next_t = time.monotonic()
         while not self._stop.is_set():
             now = time.monotonic()
@@ -134,15 +136,15 @@ class CommandStream:
                 if start is None:
                     continue
                 origin = start.copy() if origin is None else origin
-                sign = _towards(origin, start, self.joints)
+                swing = _swing(origin, start, self.joints, self.amplitude)
             stamp = self.clock.now_ns()
             if t0 is None:
                 t0 = stamp
             elif last_ns is not None and stamp - last_ns > STREAM_GAP_NS:
                 start, t0 = last, stamp  # the rule sees a new stream, at rest on the last command
-                sign = _towards(origin, start, self.joints)
+                swing = _swing(origin, start, self.joints, self.amplitude)
             q = start.copy()
-            q[self.joints] += sign * self.amplitude * (1 - np.cos(self.omega * (stamp - t0) / 1e9))
+            q[self.joints] += swing * (1 - np.cos(self.omega * (stamp - t0) / 1e9))
             t = time.perf_counter()
             try:
                 self.device.send(JointSample(stamp, names, q))
