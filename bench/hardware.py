@@ -10,11 +10,12 @@ operator, the sim camera and the emulated arm and hand, its preview in a pseudo-
 processes made here, the emulators in real-time processes of their own (hardware outside this machine). The
 commands as the emulated controller received them give emulator_faults and the wire_ figures: each recorded
 arm command is matched in order and by value with its arrival; wire_arrival_gap_ms_max between two targets of
-one engaged run, wire_arrival_late_ms_p99 / _max against the tick's planned instant (its stamp less how late
-the sender woke), wire_targets_per_cycle_max, wire_speed/accel/jerk_ratio_max (the controller's judgement on
-arrival times); wire_write_after_tick_ms_p99 / leap_write_after_tick_ms_p99 (a tick's sampling to the start of
-the arm's / hand's write, /command/wire); loaded_xarm_session_ok / loaded_leap_session_ok (no device error or
-refused command, every arm command arrived, the hand's goal writes at least its commands),
+one engaged run, wire_arrival_late_ms_p99 / _max against the tick's planned instant (its stamp: the tick's
+instant on the sender's grid), wire_targets_per_cycle_max, wire_speed/accel/jerk_ratio_max (the controller's
+judgement on its servo cycle: teleprev/emulators/xarm_servo.py); wire_write_after_tick_ms_p99 /
+leap_write_after_tick_ms_p99 (a tick's sampling to the start of the arm's / hand's write, /command/wire);
+loaded_xarm_session_ok / loaded_leap_session_ok (no device error or refused command, every arm command
+arrived, the hand's goal writes at least its commands),
 loaded_xarm_command_rate_hz, loaded_sdk_roundtrip_ms_p99 (a write to the first state showing it),
 loaded_leap_command_rate_hz, loaded_leap_read_miss_frac, loaded_leap_faults. xarm_sdk_session_ok and
 leap_sdk_session_ok hold only if they hold in the recorded sessions too.
@@ -186,10 +187,18 @@ class HandSession:
         self.timer_ms = self.hand.bus.latency_timer_ms  # as the plugin found (or set) it
         return self
 
+    def why_not(self) -> list[str]:
+        """What kept the session from being ok (nothing: it was)."""
+        return [why for why, bad in (
+            (f"{self.faults} faults: {[e['message'] for e in self.log.of('error')][:2]}", self.faults > 0),
+            (f"{self.probe.failed} commands failed (last: {self.probe.last_error})", self.probe.failed > 0),
+            (f"{self.corrupt_requests} corrupt requests", self.corrupt_requests > 0),
+            (f"{self.goal_writes} goal writes for {self.probe.sent} commands", self.goal_writes < self.probe.sent),
+            (f"{self.refused} refused", self.refused > 0)) if bad]
+
     @property
     def ok(self) -> bool:
-        return (self.faults == 0 and self.probe.failed == 0 and self.corrupt_requests == 0
-                and self.goal_writes >= self.probe.sent and self.refused == 0)
+        return not self.why_not()
 
     @property
     def miss_frac(self) -> float:
@@ -293,8 +302,15 @@ def main() -> None:
     hand, hand_log, hand_runner, hand_probe = hands[1].hand, hands[1].log, hands[1].runner, hands[1].probe
     arm_sent = sum(p.sent for p in arm_probes)
     xarm_rate = len(box.commands) / (2 * seconds)
-    xarm_ok = (arm_log.count("error") == 0 and not any(p.failed for p in arm_probes) and box.faults == []
-               and not box.unknown and len(box.commands) == arm_sent and arm.counters()["refused_commands"] == 0)
+    xarm_not_ok = [why for why, bad in (
+        (f"device errors: {[e['message'] for e in arm_log.of('error')][:2]}", arm_log.count("error") > 0),
+        (f"{sum(p.failed for p in arm_probes)} commands failed (last: {[p.last_error for p in arm_probes]})",
+         any(p.failed for p in arm_probes)),
+        (f"controller faults: {box.faults[:2]}", bool(box.faults)),
+        (f"unknown registers: {dict(box.unknown)}", bool(box.unknown)),
+        (f"{arm_sent} commands sent, {len(box.commands)} taken", len(box.commands) != arm_sent),
+        (f"{arm.counters()['refused_commands']} refused", arm.counters()["refused_commands"] > 0)) if bad]
+    xarm_ok = not xarm_not_ok
     wire_figures = wire_timing(box, [(a, p.planned) for a, p in zip(arm_arrivals, arm_probes)])
     emulator_faults = len(box.faults)
     trips = [t for p in arm_probes for t in roundtrips_ms(p.sends, arm_log.seen, 1e-5)]
@@ -369,6 +385,11 @@ def main() -> None:
         "leap_faults_1ms": hands[1].faults,
         "emulator_conformance": conformance(),
     }
+    for why in xarm_not_ok:
+        print(f"threaded xarm session not ok: {why}", file=sys.stderr)
+    for ms, run in hands.items():
+        if not run.ok:
+            print(f"threaded leap session at {ms} ms not ok: {run.why_not()}", file=sys.stderr)
     for name, log in (("xarm", arm_log), ("leap at 16 ms", hands[16].log), ("leap at 1 ms", hand_log)):
         for e in log.of("error")[:1]:
             print(f"{name} session: {e['message']}", file=sys.stderr)  # why a session was not ok

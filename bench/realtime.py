@@ -71,6 +71,7 @@ import fcntl
 import multiprocessing as mp
 import os
 import pty
+import re
 import select
 import struct
 import subprocess
@@ -99,14 +100,18 @@ TARGETS = {"loaded_sessions": ">= 10", "arm_faults": "0", "audit_failures": "0",
 
 
 # ---- sessions ------------------------------------------------------------------------------------------
-def _drain(fd: int, stop: threading.Event) -> None:
+def _drain(fd: int, stop: threading.Event, tail: bytearray) -> None:
+    """Read the preview's pty until stopped, keeping the last 8 KiB in `tail` (why a session failed)."""
     while not stop.is_set():
         if select.select([fd], [], [], 0.2)[0]:
             try:
-                if not os.read(fd, 65536):
-                    return
+                chunk = os.read(fd, 65536)
             except OSError:
                 return
+            if not chunk:
+                return
+            tail += chunk
+            del tail[:-8192]
 
 
 def record(rig: Path, out: Path, seconds: float, episodes: int, engage_after: float, size=None) -> int:
@@ -123,8 +128,8 @@ def record(rig: Path, out: Path, seconds: float, episodes: int, engage_after: fl
         return done.returncode
     master, slave = pty.openpty()
     fcntl.ioctl(slave, termios.TIOCSWINSZ, struct.pack("HHHH", size[1], size[0], 0, 0))
-    stop = threading.Event()
-    reader = threading.Thread(target=_drain, args=(master, stop), daemon=True)
+    stop, tail = threading.Event(), bytearray()
+    reader = threading.Thread(target=_drain, args=(master, stop, tail), daemon=True)
     reader.start()
     try:
         proc = subprocess.Popen(cmd, stdin=slave, stdout=slave, stderr=slave, env={**env, "TERM": "xterm-256color"},
@@ -135,6 +140,9 @@ def record(rig: Path, out: Path, seconds: float, episodes: int, engage_after: fl
         os.close(slave)
         reader.join(2)
         os.close(master)
+    if code != 0:  # the lines after the preview closed, without the terminal's escape sequences
+        said = re.sub(r"\x1b\[[0-9;?]*[A-Za-z]|\x1b[()][A-Z0-9]|\r", "", tail.decode(errors="replace"))
+        print(f"{out.name}: teleprev record exited {code}: {' '.join(said.split()[-60:])}", file=sys.stderr)
     return code
 
 

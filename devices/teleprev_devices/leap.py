@@ -22,10 +22,12 @@ power-on: 8 ms per 16-motor read). While waiting for a reply the SDK's read loop
 port instead of spinning (dynamixel-sdk polls a non-blocking port until its packet timeout), so the rest
 of the process runs.
 
-One read that gets no (or a garbled) reply is a counted miss ("read_misses"), tried again at once; the
-hand faults when miss_limit reads in a row fail: a hand that stops answering stops its commands within
-miss_limit x the SDK's reply wait (2 x latency timer + 2 ms: 5 x 4 ms with the timer at 1 ms, 5 x 34 ms at
-16 ms), plus a poll period.
+One read that gets no (or a garbled, or an earlier request's late) reply is a counted miss ("read_misses",
+ReadMiss), tried again at once, a command waiting for the bus going first; the hand faults when miss_limit
+reads in a row fail: a hand that stops answering stops its commands within miss_limit x the SDK's reply wait
+(2 x latency timer + 2 ms: 5 x 4 ms with the timer at 1 ms, 5 x 34 ms at 16 ms), plus a poll period. A
+register write on connect whose status packet does not come is sent again (WRITE_TRIES in all): writes are
+idempotent, and one lost reply is no reason to refuse the hand.
 
 A fault stops the hand's commands and says which motor and what: a Hardware Error Status bit
 (overload, overheating, input voltage: the motor turned its torque off; checked every
@@ -77,6 +79,7 @@ HARDWARE_ERRORS = {0x01: "input voltage error", 0x04: "overheating", 0x08: "moto
 ALERT = 0x80  # bit 7 of a status packet's error byte: the motor has a hardware error
 USB_SERIAL_SYSFS = Path("/sys/bus/usb-serial/devices")  # where Linux's ftdi_sio exposes each port's latency_timer
 LATENCY_TIMER_MS = 1  # the shortest the FTDI chip allows (AN232B-04: 1 to 255 ms)
+WRITE_TRIES = 3  # a connect-time register write whose status packet is lost is sent again (writes are idempotent)
 
 
 def ticks_from_angles(q: np.ndarray) -> np.ndarray:
@@ -114,6 +117,11 @@ class DynamixelBus(Protocol):
 
 class PortGone(DeviceError):
     """The serial port itself failed (the adapter unplugged): no reply is coming, however long one waits."""
+
+
+class ReadMiss(DeviceError):
+    """A read without a good reply from every motor (none in time, a garbled one, or one meant for an earlier
+    request): the bus's ordinary noise, counted and tried again (LeapHand._sync_read)."""
 
 
 def latency_timer_path(port: str) -> Path:
@@ -191,7 +199,8 @@ class SdkDynamixelBus:
             raise DeviceError(f"cannot open the serial port at {self.baudrate} baud", self.where)
         _sleep_until_bytes(self.port)
 
-    def _no_answer(self, result: int, motor: int | None, what: str) -> DeviceError:
+    def _no_answer(self, result: int, motor: int | None, what: str, kind: type[DeviceError] = DeviceError
+                   ) -> DeviceError:
         who = f"motor {motor}" if motor is not None else "a motor"
         if result == self._sdk.COMM_RX_TIMEOUT:
             said = f"{who} did not answer {what} (no status packet in time: unpowered, its cable, or another ID)"
@@ -199,18 +208,25 @@ class SdkDynamixelBus:
             said = f"{who} sent a corrupted reply to {what} (bad CRC: noise, a loose cable, or the wrong baud rate)"
         else:
             said = f"{who}: {what}: {self.packet.getTxRxResult(result)}"
-        return DeviceError(said, self.where)
+        return kind(said, self.where)
 
     def write(self, ids, address, size, values) -> None:
+        """Write one register of each motor, each confirmed by its status packet. A reply that does not come
+        (or comes garbled) is the line's noise: the same value is written again, WRITE_TRIES times in all,
+        since writing it twice leaves the motor as writing it once."""
         call = {1: self.packet.write1ByteTxRx, 2: self.packet.write2ByteTxRx, 4: self.packet.write4ByteTxRx}[size]
         for i, v in zip(ids, values):
-            try:
-                result, error = call(self.port, i, address, int(v))
-            except PORT_ERRORS as exc:
-                raise self._gone(exc) from None
             what = f"writing {int(v)} at address {address}"
+            for _ in range(WRITE_TRIES):
+                try:
+                    result, error = call(self.port, i, address, int(v))
+                except PORT_ERRORS as exc:
+                    raise self._gone(exc) from None
+                if result not in (self._sdk.COMM_RX_TIMEOUT, self._sdk.COMM_RX_CORRUPT):
+                    break
             if result != self._sdk.COMM_SUCCESS:
-                raise self._no_answer(result, i, what)
+                raise self._no_answer(result, i, what + (f" ({WRITE_TRIES} tries)" if result in (
+                    self._sdk.COMM_RX_TIMEOUT, self._sdk.COMM_RX_CORRUPT) else ""))
             if error & ALERT:
                 bits, _, _ = self.packet.read1ByteTxRx(self.port, i, HARDWARE_ERROR_STATUS[0])
                 raise DeviceError(hardware_error(i, bits), self.where)
@@ -221,17 +237,26 @@ class SdkDynamixelBus:
         group = self._sdk.GroupSyncRead(self.port, self.packet, address, size)
         for i in ids:
             group.addParam(i)
+        what = f"the sync read at address {address}"
         try:
             result = group.txRxPacket()
         except PORT_ERRORS as exc:
             raise self._gone(exc) from None
+        except (IndexError, ValueError) as exc:  # the SDK parsing bytes that are no whole packet
+            raise ReadMiss(f"a garbled reply to {what} ({type(exc).__name__}: {exc})", self.where) from None
         if result != self._sdk.COMM_SUCCESS:
             # the group reads the motors in turn and stops at the first that fails: the first without data
             failed = next((i for i in ids if not group.data_dict.get(i)), None)
-            raise self._no_answer(result, failed, f"the sync read at address {address}")
+            raise self._no_answer(result, failed, what, ReadMiss)
         missing = [i for i in ids if not group.isAvailable(i, address, size)]
         if missing:
-            raise DeviceError(f"motors {missing} did not answer the sync read at address {address}", self.where)
+            raise ReadMiss(f"motors {missing} did not answer {what}", self.where)
+        # a status packet from the right motor but for an earlier request (it came after the SDK stopped
+        # waiting for it) carries another read's bytes; the SDK takes it as this read's answer
+        short = [i for i in ids if len(group.data_dict[i]) != size]
+        if short:
+            raise ReadMiss(f"motor {short[0]} answered {what} with {len(group.data_dict[short[0]])} bytes, not "
+                           f"{size} (a late reply to an earlier request)", self.where)
         return {i: group.getData(i, address, size) for i in ids}
 
     def sync_write(self, ids, address, size, values) -> None:
@@ -338,14 +363,16 @@ class LeapHand(PolledActuator[LeapSettings], kind="hand", sdk_module="dynamixel_
 
     def _sync_read(self, field: tuple[int, int]) -> dict[int, int]:
         """A sync read, tried until it succeeds or miss_limit tries in a row have failed: a reply lost, late or
-        garbled is the bus's ordinary noise (a counted miss); miss_limit in a row is a hand that stopped."""
-        failures: list[DeviceError] = []
+        garbled is the bus's ordinary noise (a counted miss); miss_limit in a row is a hand that stopped.
+        Between two tries a command waiting for the bus goes first (the hand's writes do not wait out a
+        read's retries)."""
+        failures: list[ReadMiss] = []
         while len(failures) < self.settings.miss_limit:
+            if failures and self._connected:
+                self._let_commands_through()
             try:
                 return self.bus.sync_read(list(MOTOR_IDS), *field)
-            except PortGone:
-                raise
-            except DeviceError as exc:
+            except ReadMiss as exc:
                 failures.append(exc)
                 self._misses += 1
         raise failures[0]  # what went wrong first (later tries on a dead bus say less)

@@ -14,6 +14,7 @@ and reconnects; connecting again clears it, and the device then says what it nee
 from __future__ import annotations
 
 import threading
+import time
 from abc import abstractmethod
 from dataclasses import dataclass
 from typing import Protocol, TypeVar
@@ -26,6 +27,7 @@ from teleprev.errors import ConfigError, DeviceError
 from teleprev.messages import JointSample, Sample
 
 _TOLERANCE = 1e-9  # rad: round-off of a command computed exactly at a limit
+COMMAND_TURN_S = 0.1  # the longest a poll gives the lock up between two tries, for a waiting command
 
 
 @dataclass
@@ -98,6 +100,7 @@ class PolledActuator(Actuator[P]):
         self.state_topic = self.topic("state")
         self.period_ns = int(round(1e9 / settings.rate_hz))
         self._lock = threading.Lock()
+        self._command_waiting = threading.Event()  # send() wants the lock (_let_commands_through)
         self._connected = False
         self._target: np.ndarray | None = None
         self._refused = 0
@@ -127,6 +130,17 @@ class PolledActuator(Actuator[P]):
     def _refuse(self, target: np.ndarray, stamp_ns: int) -> None:
         """Raise DeviceError to refuse a target the limits allow (default: refuse nothing more), DeviceFault
         to also stop the commands. `stamp_ns` is the instant the command is meant for."""
+
+    def _let_commands_through(self) -> None:
+        """From inside `_poll` (the lock held): give the lock up until a command waiting for it has been
+        written (COMMAND_TURN_S at most), so that a read's retries do not hold back the commands."""
+        self._lock.release()
+        try:
+            deadline = time.monotonic() + COMMAND_TURN_S
+            while self._command_waiting.is_set() and time.monotonic() < deadline:
+                time.sleep(0.0002)
+        finally:
+            self._lock.acquire()
 
     def connect(self) -> None:
         with self._lock:
@@ -170,7 +184,9 @@ class PolledActuator(Actuator[P]):
         return [Sample(self.state_topic, JointSample((before + after) // 2, self.joint_names, q))]
 
     def send(self, command: JointSample) -> None:
+        self._command_waiting.set()
         with self._lock:
+            self._command_waiting.clear()
             if not self._connected:
                 raise DeviceError("not connected: command dropped", self.where)
             if self._fault is not None:

@@ -26,7 +26,9 @@ adapter's (FTDI AN232B-04), never what a plugin would like:
 Injected faults (`inject(kind, motor)`): overload, overheating, input_voltage (Hardware Error Status
 bits), silent (the motor stops answering), bad_crc (every reply's CRC is wrong until cleared), unplug
 (the pseudo-terminal closes and the port's path disappears, as when the adapter is pulled out; `plug()`
-puts it back at the same path).
+puts it back at the same path), lost_reply (the motor acts on its next request but its status packet is
+lost on the line), stale_reply (before its next reply the motor's answer to an earlier 1-byte read reaches
+the host: a reply that came after the host stopped waiting for it).
 """
 
 from __future__ import annotations
@@ -47,7 +49,7 @@ from pathlib import Path
 from teleprev.emulators import dynamixel_wire as wire
 from teleprev.emulators.listening import EmulatorError
 
-FAULTS = ("overload", "overheating", "input_voltage", "silent", "bad_crc", "unplug")
+FAULTS = ("overload", "overheating", "input_voltage", "silent", "bad_crc", "unplug", "lost_reply", "stale_reply")
 HARDWARE_FAULTS = {"overload": wire.OVERLOAD, "overheating": wire.OVERHEATING, "input_voltage": wire.INPUT_VOLTAGE}
 MOTOR_IDS = tuple(range(16))
 OPEN_HAND = 2048  # ticks: the LEAP Hand's flat open hand
@@ -70,6 +72,8 @@ class Motor:
         self.set(wire.BAUD_RATE, baud)
         self.position = float(position)
         self.silent = False
+        self.lose_next = False  # injected: the next status packet is lost
+        self.stale_next = False  # injected: an earlier request's late reply goes before the next one
         self._moved = time.monotonic()
         self.reboot()
 
@@ -320,13 +324,17 @@ class DynamixelBus:
                 m.silent = True
             elif kind == "bad_crc":
                 self.bad_crc = True
+            elif kind == "lost_reply":
+                m.lose_next = True
+            elif kind == "stale_reply":
+                m.stale_next = True
 
     def operator_clear(self) -> None:
         """The hand power-cycled and the adapter back in: no hardware errors, every motor answers."""
         with self._lock:
             self.bad_crc = False
             for m in self.motors.values():
-                m.silent = False
+                m.silent = m.lose_next = m.stale_next = False
                 m.set(wire.HARDWARE_ERROR_STATUS, 0)
                 m.reboot()
         if not self.plugged:
@@ -410,7 +418,17 @@ class DynamixelBus:
             error, data = self._unicast(m, instruction, params)
             if not m.answers(instruction):
                 return []
-            return [(m, self._status(m, error, data))]
+            return self._as_heard(m, self._status(m, error, data))
+
+    def _as_heard(self, m: Motor, packet: bytes) -> list[tuple[Motor, bytes]]:
+        """A motor's status packet as the host gets it, after the injected lost_reply and stale_reply."""
+        if m.lose_next:
+            m.lose_next = False
+            return []
+        if m.stale_next:
+            m.stale_next = False
+            return [(m, self._status(m, 0, bytes([m.hardware_error]))), (m, packet)]
+        return [(m, packet)]
 
     def _unicast(self, m: Motor, instruction: int, params: bytes) -> tuple[int, bytes]:
         if instruction == wire.PING:
@@ -465,7 +483,7 @@ class DynamixelBus:
                 continue
             answers.append((m, *m.read(address, size)))
         if not fast:  # each motor its own status packet, in the order asked (e-Manual, Sync Read / Bulk Read)
-            return [(m, self._status(m, error, data)) for m, error, data in answers]
+            return [heard for m, error, data in answers for heard in self._as_heard(m, self._status(m, error, data))]
         if not answers:
             return []
         parts = [(error | (wire.ALERT if m.hardware_error else 0), m.id, data) for m, error, data in answers]

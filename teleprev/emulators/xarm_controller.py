@@ -16,8 +16,9 @@ What the box does, each from the SDK's source (xarm/) or UFactory's documents, n
 - joint limits: the SDK's table for the arm's series (xarm/core/config/x_config.py JOINT_LIMITS; an SN from
   XI1305 on is the "_1305" row, x3/xarm.py _is_out_of_joint_range): a target past them is error 23.
 - servo mode (mode 1): a servo cycle of `servo_period_s` runs only the latest target that arrived in it,
-  judged on arrival times: error 24 for a joint too fast, error 60 for the flange, jolts counted
-  (xarm_servo.ServoCycle, `box.servo`); every target's arrival is stamped (`arrivals`).
+  judged on the box's cycle at the stream's pace (a stall, an early target, a burst as the motors run
+  them): error 24 for a joint too fast, error 60 for the flange, jolts counted (xarm_servo.ServoCycle,
+  `box.servo`); every target's arrival is stamped (`arrivals`).
 - position mode (mode 0): set_servo_angle, set_position and reset move the arm at the requested speed
   (xarm_moves.PositionMoves).
 - the TCP pose (get_position, the reports) is forward kinematics of our URDF (xarm_kinematics);

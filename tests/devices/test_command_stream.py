@@ -58,3 +58,40 @@ def test_a_stream_whose_clock_stalls_stays_inside_the_servo_rule():
         stream.stop()
     assert clock.readings >= 46, "the clock never stalled past the stream gap"
     assert arm.broken == []
+
+
+class MonotonicClock:
+    def now_ns(self) -> int:
+        return time.monotonic_ns()
+
+
+class FaultingArm(JudgedArm):
+    """Refuses every 7th command, as a device does after a fault: the stream starts again from its target."""
+
+    def __init__(self):
+        super().__init__()
+        self.sends = 0
+        self.seen: list[np.ndarray] = []
+
+    def send(self, sample) -> None:
+        self.sends += 1
+        if self.sends % 7 == 0:
+            from teleprev.errors import DeviceError
+
+            raise DeviceError("refused", "faulting arm")
+        super().send(sample)
+        self.seen.append(np.asarray(sample.positions, dtype=float))
+
+
+def test_a_stream_that_starts_again_swings_back_instead_of_creeping():
+    """Started again where its last swing left it, the stream swings back to where it began, never past it:
+    it stays within [start, start + 2 x amplitude] (always swinging up, it crept into a joint limit under load;
+    swinging down by as much, it passed a hand's joint limit that it began next to)."""
+    arm = FaultingArm()
+    stream = CommandStream(arm, MonotonicClock(), rate_hz=200.0, amplitude=0.05, period_s=0.1).start()
+    try:
+        wait_until(lambda: stream.failed >= 30, 20.0, what="30 restarts", poll_s=0.05)
+    finally:
+        stream.stop()
+    moved = np.array(arm.seen)[:, 0]
+    assert moved.max() <= 2 * 0.05 + 1e-9 and moved.min() >= -1e-9, (moved.min(), moved.max())

@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import math
 import sys
+import threading
 import time
 
 import numpy as np
@@ -18,11 +19,13 @@ from teleprev_devices.leap import (
     GOAL_POSITION,
     LeapHand,
     LeapSettings,
+    ReadMiss,
     SdkDynamixelBus,
     angles_from_ticks,
     signed32,
     ticks_from_angles,
 )
+from tests.helpers.wait import wait_until
 
 NAMES = tuple(str(i) for i in range(16))
 
@@ -171,3 +174,37 @@ def test_rig_settings_are_checked(tmp_path):
     rig.write_text('[devices.hand]\nplugin = "leap.hand"\nkp = "600"\n')
     with pytest.raises(ConfigError, match=r"\[devices.hand\].kp: expected an integer, got '600'"):
         load_rig(rig)
+
+
+class MissingBus(BusDouble):
+    """The first `misses` position reads each wait `wait_s` and get no reply (a motor's packet lost)."""
+
+    def __init__(self, misses: int, wait_s: float):
+        super().__init__()
+        self.misses, self.wait_s = misses, wait_s
+
+    def sync_read(self, ids, address, size):
+        if address == 132 and self.misses > 0 and self.is_open and any(e[0] == "sync_write" for e in self.log):
+            self.misses -= 1
+            self.log.append(("sync_read", address, "missed"))
+            time.sleep(self.wait_s)
+            raise ReadMiss("motor 5 did not answer the sync read at address 132", "bus double")
+        return super().sync_read(ids, address, size)
+
+
+def test_a_command_is_written_between_a_reads_retries():
+    """A read that misses is tried again, and a command waiting for the bus is written before the next try
+    (the hand's writes do not wait out the read's retries)."""
+    bus = MissingBus(misses=0, wait_s=0.03)
+    h = hand(bus)
+    h.connect()
+    bus.misses = 4
+    reader = threading.Thread(target=h.read, args=(1.0,))
+    reader.start()
+    wait_until(lambda: ("sync_read", 132, "missed") in bus.log, 1.0, what="the first read to miss")
+    h.send(JointSample(0, NAMES, np.full(16, 0.1)))
+    reader.join()
+    missed = [i for i, e in enumerate(bus.log) if e == ("sync_read", 132, "missed")]
+    written = max(i for i, e in enumerate(bus.log) if e[0] == "sync_write")
+    assert len(missed) == 4 and written < missed[1], bus.log[-8:]
+    assert h.counters()["read_misses"] == 4

@@ -222,3 +222,31 @@ def test_a_hand_that_stops_answering_faults_within_the_stated_bound(bus):
     finally:
         s.stop()
         bus.operator_clear()
+
+
+def test_a_write_on_connect_whose_reply_is_lost_is_written_again(bus):
+    """Motor 13's status packet for the first write on connect (torque off) is lost on the line: the plugin
+    writes the same value again instead of refusing the hand."""
+    bus.inject("lost_reply", motor=13)
+    hand = LeapHand("hand", settings(bus), DeviceContext(SessionClock()))
+    try:
+        hand.connect()
+        assert not bus.motors[13].lose_next  # the lost reply was the connect's
+    finally:
+        hand.disconnect()
+        bus.operator_clear()
+
+
+def test_a_late_reply_to_an_earlier_read_is_a_named_miss(bus):
+    """A 1-byte status packet meant for an earlier read reaches the host during a 4-byte position read: the
+    SDK takes it as the answer; the plugin calls it a read miss, not an IndexError."""
+    link = SdkDynamixelBus(bus.port, latency_timer=str(bus.latency_timer_path))
+    link.open()
+    try:
+        bus.inject("stale_reply", motor=5)
+        with pytest.raises(leap.ReadMiss, match=r"motor 5 answered the sync read at address 132 with \d bytes, not 4"):
+            link.sync_read([4, 5, 6], 132, 4)
+        assert set(link.sync_read([4, 5, 6], 132, 4)) == {4, 5, 6}  # the next read is whole again
+    finally:
+        link.close()
+        bus.operator_clear()

@@ -137,8 +137,7 @@ def measure(path: Path, code: int, arm: dict, hand: dict, offset_ns: int) -> Wir
         return s
     by_stamp = {t: d for t, d in ticks}
     stamps = np.array([c.stamp_ns for c in commands[:n]], dtype=np.int64)
-    due = np.array([t - int(round(by_stamp.get(t, {}).get("late_ms", 0.0) * 1e6)) for t in stamps.tolist()],
-                   dtype=np.int64)  # the sender's schedule: its tick's instant less how late it woke
+    due = stamps  # the sender's schedule: each command is stamped with its tick's instant on the grid
     active = np.array([bool(by_stamp.get(t, {}).get("active", True)) for t in stamps.tolist()])
     arrived = np.array([a[0] for a in taken[:n]], dtype=np.int64) + offset_ns
     s.late_ms = ((arrived - due) / 1e6).tolist()
@@ -178,7 +177,9 @@ def run_sessions(count: int, seconds: float, engage_after: float, busy: int) -> 
             print(f"wire session {k}: rc {s.returncode}, arm {s.arm_commands} commands, gap max "
                   f"{max(s.gaps_ms, default=float('nan')):.1f} ms, late p99 "
                   f"{np.percentile(s.late_ms, 99) if s.late_ms else float('nan'):.2f} ms, per cycle {s.per_cycle_max}, "
-                  f"faults {s.box_faults or 0}, hand errors {len(s.hand_errors)} {'; '.join(s.notes)}",
+                  f"speed/accel/jerk ratio max {np.max(s.ratios, axis=0).round(3).tolist() if s.ratios else []}, "
+                  f"faults {s.box_faults or 0}, arm errors {s.arm_errors[:1]}, arm refused {s.arm_refused}, "
+                  f"matched {s.matched}, hand errors {s.hand_errors[:1]} {'; '.join(s.notes)}",
                   file=__import__("sys").stderr, flush=True)
     return sessions
 

@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import os
 import signal
+import threading
 import time
 
 from teleprev import topics
@@ -114,3 +115,53 @@ def test_an_actuator_process_that_dies_is_a_device_fault_and_execute_stays_refus
     assert len(errors) == 1 and "the actuator's process ended" in errors[0], errors
     modes = [m.payload.data for m in reader.messages([topics.MODE])]
     assert {"mode": "preview", "reason": "device arm failed", "halt": True} in modes, modes
+
+
+def test_a_replay_to_the_arm_writes_from_paced_processes_not_the_player(tmp_path, monkeypatch):
+    """`replay --to arm` hands the played commands to the same paced actuator processes a recording uses:
+    no SDK write from the replay's process, and each write on the replay recording's /command/wire."""
+    from teleprev.live.replay.playback import build_player
+
+    log = tmp_path / "writes.txt"
+    box, bus, rig = emulated(tmp_path)
+    out, replayed = tmp_path / "s.mcap", tmp_path / "replayed.mcap"
+    try:
+        with LiveSession(RecordOptions(out=out, rig=rig, connect_timeout_s=20)) as rec:
+            assert rec.wait_connected() == []
+            rec.loop.start_episode()
+            wait_until(lambda: rec.loop.snapshot.step is not None, 20, what="a pipeline step")
+            rec.loop.engage()
+            wait_until(lambda: rec.loop.stats.commands_sent["arm"] > 60, 30, what="commands written")
+            rec.loop.to_preview()
+            assert rec.settle(5.0)
+        monkeypatch.setattr(XArm, "_write", note_writer(XArm, log))
+        monkeypatch.setattr(LeapHand, "_write", note_writer(LeapHand, log))
+        player, runners, _, _, _, recording = build_player(out, None, 1.0, "arm", rig, smoothed=True, out=replayed)
+        pids = {kind: player.actuators[kind].pid for kind in ("arm", "hand")}
+        for r in runners:
+            r.start()
+        thread = threading.Thread(target=player.run)
+        thread.start()
+        player.engage()
+        thread.join(60)
+        errors = {r.name: r.stats().last_error for r in runners if r.stats().last_error}
+        for r in runners:
+            r.stop()
+        recording.close()
+    finally:
+        arm, _ = box.finish(), bus.finish()
+
+    assert player.state.message == "", (player.state.message, errors)
+    assert sum(1 for phase, _, _ in player.state.sent if phase == "playing") > 60
+    writes = [line.split() for line in log.read_text().splitlines()]
+    by_plugin = {name: {(int(pid), int(policy)) for n, pid, policy in writes if n == name}
+                 for name in ("XArm", "LeapHand")}
+    assert by_plugin["XArm"] == {(pids["arm"], os.SCHED_FIFO)}, by_plugin
+    assert by_plugin["LeapHand"] == {(pids["hand"], os.SCHED_FIFO)}, by_plugin
+    assert os.getpid() not in pids.values()
+    reader = SessionReader(replayed)
+    wired = [m.payload.data for m in reader.messages([topics.COMMAND_WIRE])]
+    commanded = [m.payload.stamp_ns for m in reader.messages([topics.COMMAND_ARM])]
+    assert [w["t_ns"] for w in wired if w["kind"] == "arm"] == commanded and all(w["sent"] for w in wired
+                                                                               if w["kind"] == "arm")
+    assert arm["faults"] == [] and len(arm["arrivals"]) >= len(commanded)

@@ -6,7 +6,9 @@ to 172 ms apart, 14 in one 8.33 ms period. So an actuator whose plugin allows it
 runs whole (connect, read, send) in a process forked from the session before its threads start, with
 real-time priority one below the sender's (teleprev/live/core/paced.py):
 
-    main thread     waits for the sender's commands (a pipe: sender.WireCommand) and writes each at once
+    main thread     waits for the sender's commands (a pipe: sender.WireCommand) and writes each at once; in a
+                    replay, which has no sender, the player hands its commands over (`send`) ahead of their
+                    stamps, and each is written at its stamp, so the player's thread sets no command's timing
                     through an ActuatorPort, the plugin's SDK call; says what went out and when (WireRecord)
     runner thread   the device's DeviceRunner: connects, reconnects, polls the state, reports gaps and faults
 
@@ -32,6 +34,7 @@ from teleprev import topics
 from teleprev.clock import SessionClock
 from teleprev.devices.contract import Actuator
 from teleprev.devices.runner import ActuatorPort, DeviceRunner, RunnerStats, Sink
+from teleprev.errors import DeviceError
 from teleprev.live.core.paced import (
     ACTUATOR_PRIORITY,
     PacedStatus,
@@ -46,6 +49,7 @@ from teleprev.live.core.sender import Outlet, WireCommand
 from teleprev.messages import Event, JointSample, PoseSample, Sample
 
 _STATS_EVERY_NS = 100_000_000  # how often the process sends its runner's stats (the preview's device rows)
+SUPERSEDED = "superseded"  # a WireRecord's error when a later command was written instead
 
 
 @dataclass(frozen=True)
@@ -60,6 +64,13 @@ class WireRecord:
     call_ns: int
     sent: bool
     error: str = ""
+
+    def event_data(self) -> dict:
+        """As a recording's /command/wire event carries it (stamped with `wire_ns`)."""
+        data = {"kind": self.kind, "seq": self.seq, "t_ns": self.t_ns, "call_ms": self.call_ns / 1e6, "sent": self.sent}
+        if self.error:
+            data["error"] = self.error
+        return data
 
 
 @dataclass(frozen=True)
@@ -78,13 +89,17 @@ class ActuatorHost:
     """The session's handle on one actuator's process (see the module docstring)."""
 
     def __init__(self, kind: str, device: Actuator, sink: Sink, clock: SessionClock, names: tuple[str, ...],
-                 priority: int = ACTUATOR_PRIORITY):
+                 priority: int = ACTUATOR_PRIORITY, commands_from_session: bool = False):
         """`sink` is the session loop's (samples and events arrive as from a DeviceRunner); `names` the
         actuator's joints as the planner's commands name them. `on_wire(WireRecord)` is called for every
-        command written (set it before `start`)."""
+        command written (set it before `start`). `commands_from_session`: no paced sender writes the
+        commands pipe (a replay): the session hands each command over with `send`."""
         self.kind, self.device, self.sink, self.clock = kind, device, sink, clock
         self.priority = priority
+        self.commands_from_session = commands_from_session
         self.on_wire = lambda record: None
+        self.refusal = ""  # why the device did not take a command the session sent (send raises it after)
+        self._seq = 0
         self.status: PacedStatus | None = None
         self.pid: int | None = None
         self._commands_r, commands_w = paced_pipe()
@@ -126,9 +141,24 @@ class ActuatorHost:
         self._thread.start()
         return self
 
+    def send(self, command: JointSample) -> None:
+        """From the session (`commands_from_session`): hand one command to the process, which writes it at
+        its stamp (at once if that has passed). DeviceError when the process is gone, or when the device did
+        not take an earlier command."""
+        if self.refusal:
+            raise DeviceError(f"command dropped: the device did not take an earlier one ({self.refusal})",
+                              self.device.name)
+        self._seq += 1
+        try:
+            os.write(self.outlet.fd, frame(WireCommand(self._seq, command)))  # one frame: an atomic pipe write
+        except OSError as exc:
+            raise DeviceError(f"the actuator's process is gone ({exc}): command dropped", self.device.name) from None
+
     def stop(self, timeout: float = 5.0) -> None:
         """Stop the device (its runner closes it) and the process; wait for its last reports."""
         self._stopping = True
+        if self.commands_from_session:
+            close_held(self.outlet.fd)
         close_held(self._control_w)
         self._control_w = None
         if self._thread is not None:
@@ -157,6 +187,8 @@ class ActuatorHost:
                 if isinstance(item, Forwarded):
                     self.sink(item.sample, item.receive_ns)
                 elif isinstance(item, WireRecord):
+                    if not item.sent and not item.error.startswith(SUPERSEDED):
+                        self.refusal = self.refusal or item.error or "not taken"
                     self.on_wire(item)
                 elif isinstance(item, RunnerStats):
                     self._stats = item
@@ -193,9 +225,13 @@ class _Host:
         port = ActuatorPort(h.device, runner)
         inbox = b""
         next_stats = 0
+        pending: list[WireCommand] = []  # handed over ahead of their stamps (a replay's player), written at them
         while True:
             watched = [self.control] + ([self.commands] if self.commands is not None else [])
-            ready, _, _ = select.select(watched, [], [], 0.05)
+            wait_s = 0.05
+            if pending:
+                wait_s = min(wait_s, max(0.0, (min(c.command.stamp_ns for c in pending) - clock.now_ns()) / 1e9))
+            ready, _, _ = select.select(watched, [], [], wait_s)
             if self.control in ready:
                 break  # the session closed it (it never writes): stop
             if self.commands in ready:
@@ -204,12 +240,17 @@ class _Host:
                     os.close(self.commands)
                     self.commands = None
                 commands, inbox = unframe(inbox + chunk, _TO_HOST)
+                pending += commands
+            now = clock.now_ns()
+            due = [c for c in pending if c.command.stamp_ns <= now]  # a command goes out at its stamp, not before
+            if due:
+                pending = [c for c in pending if c.command.stamp_ns > now]
                 # The latest command wins (Actuator.send): commands that queued up while a write waited (a
                 # hand's write waits for a read in progress on its bus) are not written after it in a burst.
-                for c in commands[:-1]:
+                for c in due[:-1]:
                     self._report(WireRecord(h.kind, c.seq, c.command.stamp_ns, clock.now_ns(), 0, False,
-                                            "superseded: a later command was due before this one could be written"))
-                for c in commands[-1:]:
+                                            f"{SUPERSEDED}: a later command was due before this one could be written"))
+                for c in due[-1:]:
                     down = port.dropped_down
                     wire = clock.now_ns()
                     sent = port.send(c.command)

@@ -337,10 +337,7 @@ class SessionLoop(LoopControls):
     def _wire(self, r: WireRecord, receive_ns: int) -> None:
         """Record one command as its actuator's process wrote it (/command/wire, stamped when the write began)."""
         self.relay.wire(r.kind, r.sent)
-        data = {"kind": r.kind, "seq": r.seq, "t_ns": r.t_ns, "call_ms": r.call_ns / 1e6, "sent": r.sent}
-        if r.error:
-            data["error"] = r.error
-        self._event(topics.COMMAND_WIRE, "teleprev.CommandWire", data, receive_ns, stamp_ns=r.wire_ns)
+        self._event(topics.COMMAND_WIRE, "teleprev.CommandWire", r.event_data(), receive_ns, stamp_ns=r.wire_ns)
 
     def _device_failed(self, data: dict) -> None:
         """A device failed: count it, tell the operator, go back to preview (a recorded mode switch, so a

@@ -5,11 +5,16 @@ the interpreter lock and the CPU; a command that waits for either arrives late, 
 followed by the next one on time is a jump that a servo-mode arm runs at once. So the commands leave from a
 process of their own, forked from the session before its threads start, which does nothing else:
 
-    every 1 / command_rate_hz, on the session clock (a tick that wakes late is taken at the instant it
-    wakes; missed ticks are skipped, never sent in a burst):
+    every 1 / command_rate_hz, on the session clock (missed ticks are skipped, never sent in a burst):
         adopt the updates the session loop has sent since the last tick (targets, mode switches)
-        sample the commands at this instant (teleprev/pipeline/planner.py: CommandPlanner.tick)
-        hand them back, stamped with this instant and with the tick's lateness
+        sample the commands at the tick's instant on the grid (teleprev/pipeline/planner.py:
+        CommandPlanner.tick), the last grid instant the tick woke at or after
+        hand them back, stamped with that instant and with how late the tick woke
+
+The commands are sampled on the grid, not at the instant the tick wakes, because a servo-mode arm runs its
+targets on a fixed cycle of its own (UFactory's 4 ms; teleprev/emulators/xarm_servo.py): positions sampled
+at wake instants 0.04-0.08 ms off the grid (p99, SCHED_FIFO) read there as 17 % more acceleration and twice
+the jerk of a stream at its limits (bench/hardware.py's recorded sessions).
 
 The process asks for SCHED_FIFO (real-time priority, above every ordinary process on the machine) where it
 is permitted (root, CAP_SYS_NICE or an rtprio limit); `realtime` says whether it got it. Measured on a
@@ -238,7 +243,7 @@ class _Sender:
             t = clock.now_ns()
             if not self._adopt():
                 return
-            tick = self.planner.tick(t)
+            tick = self.planner.tick(t0 + (t - t0) // period * period)  # the grid instant it woke at or after
             if tick is not None:
                 self._hand_out(tick)  # on the wire first: recording can wait
                 self._write(SentTick(tick, t - due))

@@ -97,7 +97,7 @@ def build_player(session: Path, episode, speed: float, to: str, rig_path=None, s
     message = "" if effective >= speed else (f"playing at {effective:.2f}x: {speed:g}x would exceed a joint's speed, "
                                              "acceleration or jerk limit")
     clock = SessionClock()
-    actuators, runners, tap, recording = {}, [], StateTap(), None
+    actuators, runners, tap, recording, hosts = {}, [], StateTap(), None, {}
     if to != "preview":
         context = rig.device_context(clock)
         if to == "sim":
@@ -109,10 +109,22 @@ def build_player(session: Path, episode, speed: float, to: str, rig_path=None, s
                 kind: rig.of_kind(kind)[0].cls(rig.of_kind(kind)[0].name, rig.of_kind(kind)[0].settings, context)
                 for kind in ("arm", "hand")
             }
-        recording = ReplayRecording(out, rig, session, episode, clock) if out is not None else None
-        actuators = recording.actuators(devices) if recording else devices
-        sink = recording.sink(tap.sink) if recording else tap.sink
-        runners = [DeviceRunner(dev, sink, clock) for dev in devices.values()]
+        sink = tap.sink  # (the recording's, once it exists: _Sink)
+        hosts = _hosts(devices, _Sink(sink), clock, playback)
+        try:
+            recording = ReplayRecording(out, rig, session, episode, clock) if out is not None else None
+        except BaseException:
+            for host in hosts.values():
+                host.stop()
+            raise
+        if recording is not None:
+            sink = recording.sink(tap.sink)
+            for host in hosts.values():
+                host.sink.to = sink
+                host.on_wire = recording.wired
+        actuators = {kind: hosts.get(kind) or dev for kind, dev in devices.items()}
+        actuators = recording.actuators(actuators) if recording else actuators
+        runners = [hosts.get(kind) or DeviceRunner(dev, sink, clock) for kind, dev in devices.items()]
 
     def measured():
         arm = next((s for t, s in tap.latest.items() if t.startswith("/arm/")), None)
@@ -134,6 +146,7 @@ def build_player(session: Path, episode, speed: float, to: str, rig_path=None, s
         rig.pipeline.engage_speed_frac,
         motion=pipeline.motion,
         clock=clock,
+        lead_s=HANDOVER_LEAD_S if hosts else 0.0,
     )
     if recording is not None:
         recording.playing = lambda: player.state.mode == "playing"
@@ -143,6 +156,34 @@ def build_player(session: Path, episode, speed: float, to: str, rig_path=None, s
         frames = dataset_depth_frames(session, episode) if dataset else session_frames(session)
         recording.carry = CameraCarry(frames, recording, player) if frames is not None else None
     return player, runners, tap, rig, message, recording
+
+
+HANDOVER_LEAD_S = 0.05  # how far ahead of its stamp the player hands a command to its actuator's process
+
+
+class _Sink:
+    """A sink whose destination is set after it is handed out (an actuator's process is forked before the
+    replay's recording starts its thread)."""
+
+    def __init__(self, to):
+        self.to = to
+
+    def __call__(self, sample, receive_ns: int) -> None:
+        self.to(sample, receive_ns)
+
+
+def _hosts(devices: dict, sink: _Sink, clock: SessionClock, playback) -> dict:
+    """The real actuators whose plugins allow it (`own_process`), each in a paced process of its own, forked
+    now (before any thread of the replay's starts), where its commands go on the wire, as in a recording
+    (teleprev/live/core/actuator_host.py); the player hands them their commands."""
+    from teleprev.live.core.actuator_host import ActuatorHost
+
+    names = {"arm": playback.arm_names, "hand": playback.effector_names}
+    hosts = {kind: ActuatorHost(kind, dev, sink, clock, names[kind], commands_from_session=True)
+             for kind, dev in devices.items() if dev.own_process}
+    for host in hosts.values():
+        host.fork()
+    return hosts
 
 
 def _start_view(port: int | None, session: Path, player: Player, console: Console):

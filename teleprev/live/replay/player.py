@@ -288,8 +288,12 @@ class Player:
         rate_hz: float = 120.0,
         motion=None,
         clock=None,
+        lead_s: float = 0.0,
     ):
+        """`lead_s`: hand each played command over this long before its stamp (actuators in processes of
+        their own write each at its stamp: the player's thread then sets no command's timing)."""
         self.p = playback
+        self.lead_s = lead_s
         self.motion = motion  # teleprev.pipeline.motion.Motion: the engage ramp keeps its limits
         self.clock = clock  # stamps the commands with the time they are sent (a robot runs them then)
         self.speed = speed
@@ -347,10 +351,12 @@ class Player:
             if self._stop.is_set():
                 break
             due = (self.p.t_ns[k] - t0) / 1e9 / self.speed
-            time.sleep(max(0.0, due - (time.perf_counter() - start)))
+            time.sleep(max(0.0, due - self.lead_s - (time.perf_counter() - start)))
             self.state.index = k
             # stamped with when it is meant to run at this speed: what the robot's timing will be
             self._send(self.p.arm[k], self.p.effector[k], start_ns + int(round(due * 1e9)), arm_sent[k], eff_sent[k])
+        if self.lead_s and not self._stop.is_set():  # the last commands handed over go out at their stamps
+            self._stop.wait(self.lead_s + 2 * self.period)
         self.state.mode = "done"
         return self.state
 

@@ -1,8 +1,9 @@
 """`teleprev replay --out SESSION.mcap`: a replay recorded as a session of its own: every command sent to
-the robot (the engage ramp and the played steps) on /command/arm and /command/hand as it leaves, the
-states the robot reports, the source session's camera frames (colour, depth, calibration) as their instants are
-played (teleprev/live/replay/camera_carry.py), one episode around the played steps, and the rig in the metadata,
-so that `teleprev audit`, `replay` and `export` read it like any recording.
+the robot (the engage ramp and the played steps) on /command/arm and /command/hand as it leaves (and, for an
+actuator in a process of its own, each write on /command/wire), the states the robot reports, the source
+session's camera frames (colour, depth, calibration) as their instants are played
+(teleprev/live/replay/camera_carry.py), one episode around the played steps, and the rig in the metadata, so
+that `teleprev audit`, `replay` and `export` read it like any recording.
 """
 
 from __future__ import annotations
@@ -78,6 +79,12 @@ class ReplayRecording:
             self.started = True
             self._episode("start")
         self._write(topic, self.clock.now_ns(), sample)
+
+    def wired(self, record) -> None:
+        """A command as its actuator's process wrote it (actuator_host.WireRecord): /command/wire, stamped
+        when the write began, as a recording has it."""
+        self._write(topics.COMMAND_WIRE, self.clock.now_ns(),
+                    Event(record.wire_ns, "teleprev.CommandWire", record.event_data()))
 
     def close(self) -> None:
         """Write what is queued and close the file (`error` says if the recording had to stop early)."""
