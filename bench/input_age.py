@@ -121,8 +121,8 @@ def measure(folder: Path, seconds: float, busy: int, input_nice: int | None = No
             if input_nice is not None:  # the input threads put back where they were before issue 42
                 for thread in (*(r._thread for r in rec.runners.values()), rec.devices["glove"]._receiver._thread):
                     os.setpriority(os.PRIO_PROCESS, thread.native_id, input_nice)
-            receiver = rec.devices["glove"]._receiver
-            parse = receiver.parse
+            decoder = rec.devices["glove"]._receiver.decoder
+            parse = decoder.parse
 
             def timed_parse(data, receive_ns):
                 frame = parse(data, receive_ns)
@@ -130,7 +130,7 @@ def measure(folder: Path, seconds: float, busy: int, input_nice: int | None = No
                     read.setdefault(frame.stamp_ns, frame.receive_ns)
                 return frame
 
-            receiver.parse = timed_parse
+            decoder.parse = timed_parse
             go.set()
             time.sleep(0.5)
             rec.loop.engage("bench")

@@ -296,8 +296,8 @@ def test_a_datagram_that_makes_the_parser_raise_is_counted_and_the_next_one_is_r
     glove = VmcGlove("g", VmcSettings(port=port), context)
     glove.connect()
     receiver = glove._receiver
-    parse = receiver.parse
-    monkeypatch.setattr(receiver, "parse", lambda data, t: parse(data, t) if data != b"boom" else 1 / 0)
+    parse = receiver.decoder.parse
+    monkeypatch.setattr(receiver.decoder, "parse", lambda data, t: parse(data, t) if data != b"boom" else 1 / 0)
     sender = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
     try:
         sender.sendto(b"boom", ("127.0.0.1", port))
