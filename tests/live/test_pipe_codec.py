@@ -8,11 +8,11 @@ import pytest
 
 from teleprev.devices.runner import RunnerStats
 from teleprev.live.core.actuator_host import Forwarded
-from teleprev.live.core.paced import PacedStatus
 from teleprev.live.core.pipe_codec import frame, types_by_name, unframe
 from teleprev.live.core.sender import SentTick
 from teleprev.messages import Event, JointSample, Sample
 from teleprev.pipeline.planner import ModeUpdate, TargetUpdate, Tick
+from teleprev.thread_priority import PacedStatus
 
 
 def test_updates_and_ticks_come_back_bit_for_bit():

@@ -36,9 +36,6 @@ from teleprev.devices.contract import Actuator
 from teleprev.devices.runner import ActuatorPort, DeviceRunner, RunnerStats, Sink
 from teleprev.errors import DeviceError
 from teleprev.live.core.paced import (
-    ACTUATOR_PRIORITY,
-    PacedStatus,
-    become_paced,
     close_held,
     fork_paced,
     paced_pipe,
@@ -47,6 +44,7 @@ from teleprev.live.core.paced import (
 from teleprev.live.core.pipe_codec import frame, types_by_name, unframe, write_what_fits
 from teleprev.live.core.sender import Outlet, WireCommand
 from teleprev.messages import Event, JointSample, PoseSample, Sample
+from teleprev.thread_priority import ACTUATOR_PRIORITY, PacedStatus, become_paced
 
 _STATS_EVERY_NS = 100_000_000  # how often the process sends its runner's stats (the preview's device rows)
 SUPERSEDED = "superseded"  # a WireRecord's error when a later command was written instead

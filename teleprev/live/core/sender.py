@@ -48,9 +48,6 @@ import numpy as np
 
 from teleprev.clock import SessionClock
 from teleprev.live.core.paced import (
-    DEFAULT_PRIORITY,
-    PacedStatus,
-    become_paced,
     close_held,
     fork_paced,
     paced_pipe,
@@ -59,6 +56,7 @@ from teleprev.live.core.paced import (
 from teleprev.live.core.pipe_codec import frame, types_by_name, unframe, write_what_fits
 from teleprev.messages import JointSample
 from teleprev.pipeline.planner import CommandPlanner, ModeUpdate, TargetUpdate, Tick
+from teleprev.thread_priority import DEFAULT_PRIORITY, PacedStatus, become_paced
 
 _STOP = "stop"
 
