@@ -9,7 +9,9 @@ late, not old. The session is engaged (execute), so that the command sender tick
 ticks too. Every glove sample is timed at each stage, on the session clock:
 
     sent      the sender's send instant (its /VMC/Ext/T)
-    read      the receiving thread read the datagram (Frame.receive_ns)
+    read      the VMC decoding process read the datagram (Frame.receive_ns; devices/vmc/decoding_process.py,
+              at SCHED_FIFO where permitted)
+    decoded   the session's receiver read the decoded frame from that process's pipe
     handed    the device's runner handed the sample to the loop's queue (its log time)
     stepped   the session loop fed it to the pipeline step
 
@@ -19,7 +21,8 @@ here, bench/common.py Load) beside the session; the sender is not raised above t
 
 input_age_ms_p95_loaded   p95 of the age under the load (issue 42: <= 50)
 
---compare adds a loaded session with the receiving and runner threads put back at nice 0 (before issue 42).
+--compare adds a loaded session with the decoding process, the receiving and the runner threads put back at
+ordinary scheduling, nice 0 (before issue 42).
 The load average is printed too: other work on the machine delays the session as the busy processes do.
 --quick: sessions of 3 s beside 2 busy processes.
 
@@ -47,7 +50,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 
 RATE_HZ = 120.0
 GLOVE = "/glove/glove/hand"
-STAGES = ("read", "handed", "stepped")
+STAGES = ("read", "decoded", "handed", "stepped")
 
 
 def _sender(port: int, seconds: float, ready, go, out) -> None:
@@ -77,10 +80,12 @@ def _sender(port: int, seconds: float, ready, go, out) -> None:
 def measure(folder: Path, seconds: float, busy: int, input_nice: int | None = None) -> dict:
     """One session of `seconds` beside `busy` busy processes: each stage's age (ms, from the stamp) per
     glove sample, the frames sent and stepped, and how long the sender took to send (ms). `input_nice`:
-    put the receiving and runner threads at this nice value (0: as before issue 42) instead of the loop's."""
+    put the decoding process (not real-time), the receiving and runner threads at this nice value (0: as
+    before issue 42) instead of their own."""
     from teleprev.live.record.session import LiveSession, RecordOptions
     from tests.helpers.ports import free_port
     from tests.helpers.vmc import rig_text
+    from tests.helpers.wait import wait_until
 
     port = free_port()
     name = f"age_busy{busy}_nice{input_nice}"
@@ -89,6 +94,7 @@ def measure(folder: Path, seconds: float, busy: int, input_nice: int | None = No
     rec = LiveSession(RecordOptions(out=folder / f"{name}.mcap", rig=rig))
     clock = rec.clock
     read: dict[int, int] = {}
+    decoded: dict[int, int] = {}
     handed: dict[int, int] = {}
     stepped: dict[int, int] = {}
 
@@ -117,20 +123,22 @@ def measure(folder: Path, seconds: float, busy: int, input_nice: int | None = No
     with common.Load(busy):
         rec.start()
         try:
-            rec.wait_connected(0.2)
+            wait_until(lambda: rec.runners["glove"].connected, 60.0, what="the glove's receiver opened")
             if input_nice is not None:  # the input threads put back where they were before issue 42
-                for thread in (*(r._thread for r in rec.runners.values()), rec.devices["glove"]._receiver._thread):
-                    os.setpriority(os.PRIO_PROCESS, thread.native_id, input_nice)
-            decoder = rec.devices["glove"]._receiver.decoder
-            parse = decoder.parse
+                receiver = rec.devices["glove"]._receiver
+                os.sched_setscheduler(receiver._process.pid, os.SCHED_OTHER, os.sched_param(0))
+                for tid in (*(r._thread.native_id for r in rec.runners.values()), receiver._thread.native_id,
+                            receiver._process.pid):
+                    os.setpriority(os.PRIO_PROCESS, tid, input_nice)
+            fanout = rec.devices["glove"]._receiver.fanout
+            publish = fanout.publish
 
-            def timed_parse(data, receive_ns):
-                frame = parse(data, receive_ns)
-                if frame is not None:
-                    read.setdefault(frame.stamp_ns, frame.receive_ns)
-                return frame
+            def timed_publish(frame):
+                read.setdefault(frame.stamp_ns, frame.receive_ns)
+                decoded.setdefault(frame.stamp_ns, clock.now_ns())
+                publish(frame)
 
-            decoder.parse = timed_parse
+            fanout.publish = timed_publish
             go.set()
             time.sleep(0.5)
             rec.loop.engage("bench")
@@ -142,7 +150,7 @@ def measure(folder: Path, seconds: float, busy: int, input_nice: int | None = No
     skip = 60  # the first half second: the clock sync locking, the engage ramp
     stamps = sorted(stepped)[skip:]
     ages = {stage: np.array([(times[s] - s) / 1e6 for s in stamps if s in times])
-            for stage, times in zip(STAGES, (read, handed, stepped))}
+            for stage, times in zip(STAGES, (read, decoded, handed, stepped))}
     return {"sent": sent, "send_ms": np.array(late) * 1e3, "stepped": len(stepped), "ages": ages}
 
 
@@ -179,7 +187,7 @@ def main() -> None:
     p.add_argument("--busy", type=int, default=4, help="busy processes beside the loaded session (default 4)")
     p.add_argument("--seconds", type=float, default=10.0, help="seconds per session (default 10; --quick 3)")
     p.add_argument("--compare", action="store_true",
-                   help="also a loaded session with the input threads at nice 0 (as before issue 42)")
+                   help="also a loaded session with the input process and threads at nice 0 (as before issue 42)")
     args = p.parse_args()
     runs = input_age(3.0 if args.quick else args.seconds, 2 if args.quick else args.busy, compare=args.compare)
     for name, s in runs.items():

@@ -27,6 +27,9 @@ DEFAULT_PRIORITY = 50  # SCHED_FIFO priority: above ordinary processes, below th
 # The actuators' processes, one below the sender: a hand's process busy reading its bus never holds up the
 # sender's tick, and a write waits at most for the rest of a tick (a fraction of a millisecond).
 ACTUATOR_PRIORITY = DEFAULT_PRIORITY - 1
+# A receiver's decoding process (devices/vmc/decoding_process.py): below the command path and the physics world
+# (40): it decodes the operator's input and moves nothing, and a few milliseconds of decoding wait for those.
+INPUT_PRIORITY = 30
 # How long a thread of a paced process that wants the interpreter lock waits before the running thread is
 # asked for it (Python's default is 5 ms): an actuator's process writes commands on its main thread while
 # its runner and SDK threads poll; at 5 ms, writes began up to 8.3 ms after their tick (bench/hardware.py).
@@ -54,20 +57,23 @@ class PacedStatus:
     detail: str
 
 
-def become_paced(priority: int = DEFAULT_PRIORITY) -> PacedStatus:
+def become_paced(priority: int = DEFAULT_PRIORITY, die_with_parent_thread: bool = True) -> PacedStatus:
     """In a paced child: ignore the terminal's signals (the session stops it, after braking), die with the
     session (PR_SET_PDEATHSIG), one BLAS thread, the interpreter lock handed over within SWITCH_INTERVAL_S,
     and SCHED_FIFO `priority` where permitted (root, CAP_SYS_NICE or an rtprio limit); threads started after
-    this inherit the priority."""
+    this inherit the priority. PR_SET_PDEATHSIG fires when the thread that started the child ends: a child
+    started from another thread than the session's main one (`die_with_parent_thread` False) watches for
+    its parent's end itself."""
     import sys
 
     sys.setswitchinterval(SWITCH_INTERVAL_S)
     for sig in (signal.SIGINT, signal.SIGTERM, signal.SIGHUP, signal.SIGQUIT):
         signal.signal(sig, signal.SIG_IGN)
-    try:
-        ctypes.CDLL(None, use_errno=True).prctl(1, signal.SIGKILL)  # PR_SET_PDEATHSIG: die with the session
-    except (OSError, AttributeError):
-        pass
+    if die_with_parent_thread:
+        try:
+            ctypes.CDLL(None, use_errno=True).prctl(1, signal.SIGKILL)  # PR_SET_PDEATHSIG: die with the session
+        except (OSError, AttributeError):
+            pass
     try:
         from threadpoolctl import threadpool_limits
 
@@ -79,4 +85,4 @@ def become_paced(priority: int = DEFAULT_PRIORITY) -> PacedStatus:
         return PacedStatus(True, f"SCHED_FIFO priority {priority}")
     except (PermissionError, OSError, AttributeError) as exc:
         return PacedStatus(False, f"no real-time priority ({exc}): run as root, or grant CAP_SYS_NICE or an "
-                                  "rtprio limit (limits.conf) to let the command path use SCHED_FIFO")
+                                  "rtprio limit (limits.conf) to let this process use SCHED_FIFO")

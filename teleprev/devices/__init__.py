@@ -39,7 +39,7 @@ from teleprev.messages import (
     TransformsSample,
 )
 from teleprev.robot.effectors import EFFECTORS, EndEffector, end_effector
-from teleprev.thread_priority import raise_this_thread
+from teleprev.thread_priority import INPUT_PRIORITY, PacedStatus, become_paced, raise_this_thread
 from teleprev.topics import KIND_TOPICS, device_topic, parse_device_topic
 from teleprev.world import places as world_places
 
@@ -96,6 +96,9 @@ __all__ = [
     "available",
     "load_plugin",
     "raise_this_thread",  # a plugin's own receiving thread, at the session loop's priority
+    "become_paced",  # a plugin's own decoding process, at real-time priority where permitted
+    "PacedStatus",
+    "INPUT_PRIORITY",
     # samples, time and topics
     "Event",
     "ImageSample",

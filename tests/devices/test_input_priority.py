@@ -1,8 +1,9 @@
 """The threads a glove's or headset's sample passes before the session loop (the socket's receiving thread,
-the device's runner) run at the loop's nice value, so that busy processes beside a session do not leave
-samples waiting in a socket or a queue while the loop is free (bench/input_age.py measures the age this
-keeps off: at nice 0 beside 4 busy processes a 120 Hz glove's samples reached the step 181-422 ms old at
-p95, at nice -10 40-57 ms). Root here, as in CI: without it the threads stay where they are and say why."""
+the device's runner) run at the loop's nice value (a VMC glove's socket is read by a real-time process),
+so that busy processes beside a session do not leave samples waiting in a socket or a queue while the loop
+is free (bench/input_age.py measures the age this keeps off: at nice 0 beside 4 busy processes a 120 Hz
+glove's samples reached the step 181-422 ms old at p95, at nice -10 40-57 ms). Root here, as in CI:
+without it the threads stay where they are and say why."""
 
 from __future__ import annotations
 
@@ -13,7 +14,7 @@ from pathlib import Path
 import pytest
 
 from teleprev.clock import SessionClock
-from teleprev.devices import DeviceContext, DeviceRunner
+from teleprev.devices import INPUT_PRIORITY, DeviceContext, DeviceRunner
 from teleprev.thread_priority import LOOP_NICE
 from teleprev_devices.vmc import VmcGlove
 from teleprev_devices.vmc.plugins import VmcSettings
@@ -41,7 +42,9 @@ def _run(device, clock):
     return runner, got
 
 
-def test_a_vmc_glove_is_received_and_handed_on_at_the_loops_priority():
+def test_a_vmc_glove_is_decoded_at_real_time_priority_and_handed_on_at_the_loops():
+    """The socket is read and decoded by a process of its own at SCHED_FIFO (devices/vmc/decoding_process.py),
+    the pipe it writes to and the runner at the loop's nice value."""
     clock = SessionClock()
     port = free_port()
     runner, got = _run(VmcGlove("g", VmcSettings(port=port), DeviceContext(clock)), clock)
@@ -51,7 +54,10 @@ def test_a_vmc_glove_is_received_and_handed_on_at_the_loops_priority():
         sender.start(rate_hz=120.0, seconds=0.3)
         wait_until(lambda: any(s.topic == "/glove/g/hand" for s in got), what="a glove sample over UDP")
         receiver = runner.device._receiver
-        assert receiver.priority == runner.priority == f"nice {LOOP_NICE}"
+        assert receiver.priority == f"SCHED_FIFO priority {INPUT_PRIORITY}"
+        assert os.sched_getscheduler(receiver._process.pid) == os.SCHED_FIFO
+        assert os.sched_getparam(receiver._process.pid).sched_priority == INPUT_PRIORITY
+        assert receiver.reading_priority == runner.priority == f"nice {LOOP_NICE}"
         assert _nice(receiver._thread.native_id) == LOOP_NICE
         assert _nice(runner._thread.native_id) == LOOP_NICE
     finally:

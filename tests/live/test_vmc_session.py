@@ -82,7 +82,9 @@ def test_a_glove_that_dies_mid_session_stops_the_robot(tmp_path):
         engage_until_accepted(rec)  # refused until inputs are fresh
         time.sleep(1.0)
         sender.stop()  # the glove (and suit) go quiet; 0.3 s later the glove fails
-        wait_until(lambda: rec.loop.stats.device_failures, 5.0, what="the glove's failure")
+        # (the loop counts the failure, then switches and shows it: wait for what the preview shows)
+        wait_until(lambda: rec.loop.stats.device_failures and rec.loop.snapshot.message.startswith("device glove"),
+                   5.0, what="the glove's failure shown")
         shown = rec.loop.snapshot  # what the preview shows
         time.sleep(0.5)
     finally:
