@@ -13,7 +13,8 @@ ticks too. Every glove sample is timed at each stage, on the session clock:
               at SCHED_FIFO where permitted)
     decoded   the session's receiver read the decoded frame from that process's pipe
     handed    the device's runner handed the sample to the loop's queue (its log time)
-    stepped   the session loop fed it to the pipeline step
+    stepped   the session loop fed it to the pipeline step (a sample with a newer one queued behind it is
+              recorded but not stepped: "superseded", counted apart)
 
 and its age when the step takes it (stepped - its stamp: the acquisition time on the session clock,
 ClockSync's mapping of /VMC/Ext/T) is the figure. Measured quiet, then under --busy busy processes (made
@@ -101,9 +102,11 @@ def measure(folder: Path, seconds: float, busy: int, input_nice: int | None = No
     feed = rec.driver.feed
 
     def timed_feed(msg, *a):
-        if msg.topic == GLOVE:
-            stepped.setdefault(msg.payload.stamp_ns, clock.now_ns())
-        return feed(msg, *a)
+        now = clock.now_ns()
+        out = feed(msg, *a)
+        if msg.topic == GLOVE and out.result is not None:  # (a superseded sample steps nothing)
+            stepped.setdefault(msg.payload.stamp_ns, now)
+        return out
 
     rec.driver.feed = timed_feed
     runner = rec.runners["glove"]
@@ -151,12 +154,13 @@ def measure(folder: Path, seconds: float, busy: int, input_nice: int | None = No
     stamps = sorted(stepped)[skip:]
     ages = {stage: np.array([(times[s] - s) / 1e6 for s in stamps if s in times])
             for stage, times in zip(STAGES, (read, decoded, handed, stepped))}
-    return {"sent": sent, "send_ms": np.array(late) * 1e3, "stepped": len(stepped), "ages": ages}
+    return {"sent": sent, "send_ms": np.array(late) * 1e3, "stepped": len(stepped), "ages": ages,
+            "superseded": rec.loop.stats.superseded}
 
 
 def summary(result: dict) -> dict:
     """Counts, the sender's own send time, and each stage's age: p50, p95, max (ms)."""
-    out = {"sent": result["sent"], "stepped": result["stepped"],
+    out = {"sent": result["sent"], "stepped": result["stepped"], "superseded": result["superseded"],
            "send_p95": float(np.percentile(result["send_ms"], 95)) if len(result["send_ms"]) else float("nan")}
     for stage, a in result["ages"].items():
         for name, value in (("p50", np.percentile(a, 50)), ("p95", np.percentile(a, 95)), ("max", a.max())):
@@ -177,9 +181,9 @@ def input_age(seconds: float, busy: int = 4, quiet: bool = True, compare: bool =
 
 
 def describe(name: str, s: dict) -> str:
-    return (f"{name}: {s['sent']} frames sent (send p95 {s['send_p95']:.1f} ms), {s['stepped']} stepped; age from the "
-            "stamp, p50/p95/max ms: " + "; ".join(f"{st} {s[f'{st}_p50']:.1f}/{s[f'{st}_p95']:.1f}/{s[f'{st}_max']:.1f}"
-                                                 for st in STAGES))
+    stages = "; ".join(f"{st} {s[f'{st}_p50']:.1f}/{s[f'{st}_p95']:.1f}/{s[f'{st}_max']:.1f}" for st in STAGES)
+    return (f"{name}: {s['sent']} frames sent (send p95 {s['send_p95']:.1f} ms), {s['stepped']} stepped "
+            f"({s['superseded']} superseded: recorded, not stepped); age from the stamp, p50/p95/max ms: {stages}")
 
 
 def main() -> None:

@@ -43,6 +43,8 @@ Events:
     /events/operator          teleprev.OperatorEvent
     /events/world             teleprev.WorldLayout   a physics rig's scene (objects' starting poses, seed, the
                                                      robot's state), each time the world begins one
+    /events/superseded        teleprev.Superseded    a glove sample recorded but not stepped: a newer one was
+                                                     queued already (the loop behind); logged just before it
 """
 
 from __future__ import annotations
@@ -68,6 +70,7 @@ MODE = "/events/mode"
 DEVICE_EVENT = "/events/device"
 OPERATOR = "/events/operator"
 WORLD = "/events/world"
+SUPERSEDED = "/events/superseded"
 
 KIND_TOPICS = {
     "glove": ("hand", "xr_left", "xr_right"),  # xr_*: an XR page's raw hand joints (webxr.glove)
@@ -171,6 +174,14 @@ EVENT_SCHEMAS: dict[str, dict] = {
         {"layout": {"type": "object"}, "reason": _STR, "world_ns": _INT, "robot": {"type": "object"},
          "placed": {"type": "boolean"}},
         ["layout"],
+    ),
+    "teleprev.Superseded": _schema(
+        "teleprev.Superseded",
+        "The sample of `topic` logged at `log_time_ns` (just after this) was recorded but stepped nothing: the "
+        "session loop, behind, had a newer one of that topic queued already and stepped that one. A re-run "
+        "skips the same step.",
+        {"topic": _STR, "log_time_ns": _INT},
+        ["topic", "log_time_ns"],
     ),
     "teleprev.OperatorEvent": _schema(
         "teleprev.OperatorEvent",

@@ -214,7 +214,7 @@ def _rerun(reader: SessionReader, path: Path, models, rig_path, started: float) 
         )
     # a policy's rollout: its recorded actions are the input that steps the pipeline (PipelineDriver)
     streamed = [inputs.hand, inputs.wrist, inputs.arm, inputs.effector, *([inputs.action] if inputs.action else []),
-                topics.MODE, topics.COMMAND_TICK,
+                topics.MODE, topics.SUPERSEDED, topics.COMMAND_TICK,
                 topics.DEVICE_EVENT, *(k for k in outputs if k not in tables)]
     # the actuators' measured states and resets: where a controller starts a stream (metrics' derivatives)
     histories = {topics.COMMAND_ARM: ActuatorHistory(), topics.COMMAND_HAND: ActuatorHistory()}

@@ -2,11 +2,13 @@
 
 It keeps the latest sample of each input stream, runs a step on every sample of the trigger stream (the
 glove: pipeline outputs at glove rate; with an `action` topic, a policy's actions: `Pipeline.joint_step`
-on each, the glove and suit only recorded) and applies mode switches. Everything it decides depends only on
-the samples and their log times, in log-time order. Each step's targets and each accepted mode switch
-become an update for the command planner (`take_updates`), so replaying a session's raw streams and its
-mode switches through a driver built from the same rig and models, and the updates through a planner at
-the recorded ticks, reproduces the recorded commands.
+on each, the glove and suit only recorded) and applies mode switches. A trigger sample that a
+/events/superseded record names (the live loop, behind, stepped a newer one instead) only updates the
+latest sample. Everything it decides depends only on the samples and their log times, in log-time order.
+Each step's targets and each accepted mode switch become an update for the command planner
+(`take_updates`), so replaying a session's raw streams and its mode switches through a driver built from
+the same rig and models, and the updates through a planner at the recorded ticks, reproduces the
+recorded commands.
 """
 
 from __future__ import annotations
@@ -64,6 +66,7 @@ class PipelineDriver:
         self.recorded_names = self._recorded_names()
         self._seq = 0  # the planner's updates, numbered in the order they are made
         self._updates: list[TargetUpdate | ModeUpdate] = []
+        self._superseded: set[int] = set()  # log times of samples recorded but not to be stepped
 
     def recorded_values(self, result: StepResult) -> tuple[np.ndarray | None, ...]:
         """What one step records on each of `recorded_topics`, in that order (None: nothing): the one place
@@ -125,12 +128,18 @@ class PipelineDriver:
 
     def advance(self, msg: Logged, hand_input: HandInput | None = None) -> StepResult | None:
         """What `feed` does, without making the messages to record: the step's result, or None when the
-        sample stepped nothing (an input sample other than the trigger's, a mode switch)."""
+        sample stepped nothing (an input sample other than the trigger's or superseded, a mode switch)."""
         payload = msg.payload
         topic = msg.topic
         if topic in self._input_topics:
             if isinstance(payload, (JointSample, PoseSample)):
                 self.latest[topic] = payload
+            if msg.log_time_ns in self._superseded:  # a newer sample was queued already: it steps instead
+                self._superseded.discard(msg.log_time_ns)
+                return None
+        elif topic == topics.SUPERSEDED and isinstance(payload, Event):
+            self._superseded.add(int(payload.data["log_time_ns"]))
+            return None
         elif topic == topics.MODE and isinstance(payload, Event):
             # A recorded switch: it was accepted live, and the same state accepts it again.
             data = payload.data

@@ -2,7 +2,9 @@
 
 Device reader threads (devices/runner.py) hand samples to a bounded queue; one loop thread takes them in
 arrival order, gives each a strictly increasing log time on the session clock (its host receive time),
-records it, feeds the pipeline driver, passes the step's targets and every accepted mode switch to the
+records it, feeds the pipeline driver (a glove sample with a newer one queued behind it is recorded but
+steps nothing, and /events/superseded says so: a loop that fell behind steps the newest input, not its
+backlog), passes the step's targets and every accepted mode switch to the
 paced command sender (teleprev/live/core/sender.py), publishes the robot's frames on /tf, and carries out the
 operator's controls (mode switches, episodes). Because the loop is the only place where order is
 decided, replaying a session's raw streams in log-time order meets the pipeline with exactly the inputs
@@ -98,6 +100,7 @@ class LoopStats:
     step_ns: list[int] = field(default_factory=list)  # pipeline step durations (bounded)
     device_failures: Counter = field(default_factory=Counter)  # "error" device events, per device
     late_ns: list[int] = field(default_factory=list)  # how late each of the sender's ticks woke (bounded)
+    superseded: int = 0  # glove samples recorded but not stepped: a newer one was queued already
     ticks: int = 0
     engages: int = 0  # accepted switches to execute
 
@@ -120,12 +123,15 @@ class LoopInbox:
     def __init__(self, size: int = 4096):
         self.queue: queue.Queue = queue.Queue(maxsize=size)
         self.dropped: Counter = Counter()  # samples there was no room for, per topic
+        self.queued: Counter = Counter()  # samples put on the queue so far, per topic (one writer each)
 
     def sink(self, sample: Sample, receive_ns: int) -> None:
         try:
             self.queue.put_nowait((receive_ns, sample))
         except queue.Full:
             self.dropped[sample.topic] += 1
+            return
+        self.queued[sample.topic] += 1
 
     def put(self, receive_ns: int | None, item) -> None:
         self.queue.put((receive_ns, item))
@@ -186,6 +192,7 @@ class SessionLoop(LoopControls):
                                      stale_ms=driver.pipeline.cfg.stale_ms if driver is not None else 0.0)
         self._camera_topic: str | None = None
         self._depth_topic: str | None = None
+        self._taken: Counter = Counter()  # trigger samples taken off the queue so far, per topic
         self._last_ns = 0
         self._thread: threading.Thread | None = None
         self.failure = ""  # why the loop no longer runs the pipeline (it raised), or ""
@@ -270,7 +277,15 @@ class SessionLoop(LoopControls):
         return t
 
     def _sample(self, sample: Sample, receive_ns: int) -> None:
+        superseded = self._superseded(sample.topic)
+        marked = self._stamp(receive_ns) if superseded else 0
         t = self._stamp(receive_ns)
+        if superseded:  # recorded before the sample, so that a re-run knows when it meets the sample
+            marker = Logged(topics.SUPERSEDED, marked,
+                            Event(marked, "teleprev.Superseded", {"topic": sample.topic, "log_time_ns": t}))
+            self._log(marker)
+            self.driver.feed(marker)
+            self.stats.superseded += 1
         payload = sample.payload
         if isinstance(payload, PoseSample):
             # Foxglove's pose schema cannot store -0.0 (it reads back as +0.0); adding +0.0 turns -0.0
@@ -319,6 +334,16 @@ class SessionLoop(LoopControls):
             commands_sent=sum(self.stats.commands_sent.values()), dropped=sum(self.stats.dropped.values()),
             input_age_ms=age_ns / 1e6,
         )
+
+    def _superseded(self, topic: str) -> bool:
+        """Whether this glove sample (the step's trigger) is to be recorded but not stepped: a newer one is
+        queued already, so the loop is behind, and stepping this one would only make the newer one wait
+        longer (its age when stepped is the input's age at the robot). Every sample is still recorded; a
+        re-run skips the same steps (/events/superseded)."""
+        if self.driver is None or self.failure or self.driver.topics.action or topic != self.driver.topics.hand:
+            return False
+        self._taken[topic] += 1
+        return self.inbox.queued[topic] > self._taken[topic]
 
     def _pass_updates(self) -> None:
         """The planner's updates the driver made, to the sender."""
