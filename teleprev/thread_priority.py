@@ -27,9 +27,11 @@ DEFAULT_PRIORITY = 50  # SCHED_FIFO priority: above ordinary processes, below th
 # The actuators' processes, one below the sender: a hand's process busy reading its bus never holds up the
 # sender's tick, and a write waits at most for the rest of a tick (a fraction of a millisecond).
 ACTUATOR_PRIORITY = DEFAULT_PRIORITY - 1
-# A receiver's decoding process (devices/vmc/decoding_process.py): below the command path and the physics world
-# (40): it decodes the operator's input and moves nothing, and a few milliseconds of decoding wait for those.
-INPUT_PRIORITY = 30
+# A receiver's decoding process (devices/vmc/decoding_process.py): above every ordinary process, below every
+# other real-time one (the command path, the physics world at 40, an emulated motor bus at 10): it decodes the
+# operator's input and moves nothing. Any real-time priority puts it before ordinary processes, which is all
+# the input needs.
+INPUT_PRIORITY = 5
 # How long a thread of a paced process that wants the interpreter lock waits before the running thread is
 # asked for it (Python's default is 5 ms): an actuator's process writes commands on its main thread while
 # its runner and SDK threads poll; at 5 ms, writes began up to 8.3 ms after their tick (bench/hardware.py).

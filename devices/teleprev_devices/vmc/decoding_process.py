@@ -7,10 +7,10 @@ Why a process (issue 42, bench/input_age.py): python-osc takes 1-3 ms of interpr
 datagram, 12-40 % of a core at 120 Hz, all of it under the session's interpreter lock; and a receiving
 thread at nice -10 still waits for a CPU whenever other terminal sessions' work fills the machine (Linux
 shares the CPUs between sessions first: beside 4 busy processes of another session a 120 Hz glove's
-datagrams waited in the socket 103 ms at p95). This process asks for SCHED_FIFO (INPUT_PRIORITY, below the
-command path and the physics world: it decodes input, it moves nothing), where no ordinary process delays
-it, and without it takes the loop's nice -10. It ignores the terminal's signals (the session closes it) and ends
-when the session does: its pipe breaks, or (a quiet socket) it sees its parent gone. (Not PR_SET_PDEATHSIG,
+datagrams waited in the socket 103 ms at p95). This process asks for SCHED_FIFO (INPUT_PRIORITY: above every ordinary
+process, below every other real-time one: it decodes input, it moves nothing), where no ordinary process
+delays it, and without it takes the loop's nice -10. It ignores the terminal's signals (the session closes
+it) and ends when the session does: its pipe breaks, or (a quiet socket) it sees its parent gone. (Not PR_SET_PDEATHSIG,
 which fires when the thread that started it ends: a device's runner thread may end before the session.)
 What it writes: devices/vmc/records.py.
 """

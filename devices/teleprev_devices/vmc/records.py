@@ -1,7 +1,7 @@
 """The records the VMC decoding process (devices/vmc/decoding_process.py) writes to its pipe: a fixed binary
 layout, so that nothing is unpickled and doubles cross bit for bit. Each is a RECORD header (kind, body
 length) and its body:
-    STATUS    once, first: the process's scheduling as the receiver reports it ("SCHED_FIFO priority 30")
+    STATUS    once, first: the process's scheduling as the receiver reports it ("SCHED_FIFO priority 5")
     COUNTERS  the decoder's counters (devices/vmc/decode.py: Counters), whenever a datagram changed them
     FRAME     a datagram's Frame: receive and stamp times on the session clock, then each bone it updated
               (its index in BONE_NAMES and 7 doubles: position, unit rotation); the receiver keeps the skeleton.
