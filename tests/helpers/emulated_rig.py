@@ -9,6 +9,9 @@ and the stamping of their arrival.
     rig.write_text(sim_operator_rig(box.keys, bus.keys, camera=False))
     ...                                       # record
     arm, hand = box.finish(), bus.finish()    # what the emulators saw
+
+A test that acts on an emulator while the session runs asks it: `box.ask(command_count)` runs the module-level
+function `command_count(emulator)` in the emulator's process and returns what it returns.
 """
 
 from __future__ import annotations
@@ -59,7 +62,12 @@ def _serve(make, name: str, summarize, conn) -> None:
         pass
     emulator = make().start()
     conn.send(emulator.rig_keys(name))
-    conn.recv()  # until the session is over
+    while (asked := conn.recv()) != "stop":  # until the session is over
+        function, args = asked
+        try:
+            conn.send(("answer", function(emulator, *args)))
+        except Exception as e:  # noqa: BLE001 - the asking test shows it
+            conn.send(("raised", f"{type(e).__name__}: {e}"))
     summary = summarize(emulator)
     emulator.stop()
     conn.send(summary)
@@ -74,6 +82,16 @@ class EmulatorProcess:
         self.proc = mp.get_context("fork").Process(target=_serve, args=(make, name, summarize, theirs), daemon=True)
         self.proc.start()
         self.keys: str = ours.recv()
+
+    def ask(self, function, *args, timeout_s: float = 30.0):
+        """`function(emulator, *args)` run in the emulator's process; `function` is a module-level function."""
+        self.conn.send((function, args))
+        if not self.conn.poll(timeout_s):
+            raise RuntimeError(f"the emulator's process did not answer {function.__name__} in {timeout_s:g} s")
+        kind, value = self.conn.recv()
+        if kind == "raised":
+            raise RuntimeError(f"{function.__name__} raised in the emulator's process: {value}")
+        return value
 
     def finish(self, timeout_s: float = 30.0) -> dict:
         self.conn.send("stop")
