@@ -71,6 +71,9 @@ class DeviceContext:
     # The rig's physics world ([sim] world = "physics"), which sim devices measure from, command into and
     # render; None: the kinematic sim world.
     physics: PhysicsAccess | None = None
+    # Sockets the rig's network plugins share (a VMC port, the XR page's server), whatever side their device is
+    # on: a bimanual rig's sides each have their own `shared` (their own sim world) but one VMC sender.
+    receivers: dict[Any, Any] = field(default_factory=dict)
 
     @property
     def effector(self) -> EndEffector:

@@ -45,11 +45,11 @@ V = TypeVar("V", bound=WebXrSettings)
 class _WebXrDevice(FanoutDevice[V]):
     def open_receiver(self) -> XrServer:
         s = self.settings
-        return acquire(self.context.shared, s.host, s.port, self.context.clock, s.cert_folder(self.context.rig_dir),
+        return acquire(self.context.receivers, s.host, s.port, self.context.clock, s.cert_folder(self.context.rig_dir),
                        self.context.operator)
 
     def close_receiver(self, server: XrServer) -> None:
-        release(self.context.shared, server, self.settings.port)
+        release(self.context.receivers, server, self.settings.port)
 
     def endpoint(self) -> str:
         port = self._receiver.port if self._receiver is not None else self.settings.port

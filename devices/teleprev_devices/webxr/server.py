@@ -310,7 +310,7 @@ def _addresses(host: str) -> list[str]:
 
 
 def acquire(shared: dict, host: str, port: int, clock: SessionClock, cert_dir: Path, hooks: OperatorLink) -> XrServer:
-    """The server for (host, port), started by the first plugin that asks (kept in context.shared)."""
+    """The server for (host, port), started by the first plugin that asks (kept in context.receivers)."""
     def conflict(server: XrServer) -> str:
         return "" if server.credentials.cert.parent == Path(cert_dir) else (
             f"the devices on {host}:{port} share one server but name different cert_dir; give them the same one")

@@ -86,7 +86,8 @@ class BimanualSession(LiveSession):
         # Each side's devices see that side's robot; each side has its own kinematic sim world (shared dict).
         self.context = rig.device_context(self.clock)
         contexts = {side: DeviceContext(self.clock, rig.dir, {}, s.robot, s.section.end_effector,
-                                        operator=self.context.operator) for side, s in rig.sides.items()}
+                                        operator=self.context.operator, receivers=self.context.receivers)
+                    for side, s in rig.sides.items()}
         self.contexts = [self.context, *contexts.values()]
         device_sides = {name: side for side, s in rig.sides.items() for name in s.device_names}
         self.devices = {}
