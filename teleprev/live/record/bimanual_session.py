@@ -19,7 +19,6 @@ import numpy as np
 from teleprev import topics
 from teleprev.bimanual import build_guard, build_side_pipelines, mount, side_inputs
 from teleprev.clock import SessionClock
-from teleprev.devices.contract import DeviceContext
 from teleprev.errors import ConfigError
 from teleprev.live.core.bimanual_loop import BimanualLoop
 from teleprev.live.core.loop import LoopInbox
@@ -85,15 +84,10 @@ class BimanualSession(LiveSession):
         self.physics = None
         # Each side's devices see that side's robot; each side has its own kinematic sim world (shared dict).
         self.context = rig.device_context(self.clock)
-        contexts = {side: DeviceContext(self.clock, rig.dir, {}, s.robot, s.section.end_effector,
-                                        operator=self.context.operator, receivers=self.context.receivers)
-                    for side, s in rig.sides.items()}
+        contexts = rig.side_contexts(self.context)
         self.contexts = [self.context, *contexts.values()]
-        device_sides = {name: side for side, s in rig.sides.items() for name in s.device_names}
-        self.devices = {}
-        for name, entry in rig.devices.items():
-            context = contexts[device_sides[name]] if name in device_sides else self.context
-            self.devices[name] = entry.cls(name, entry.settings, context)
+        device_sides = rig.device_sides()
+        self.devices = rig.open_devices(rig.devices, self.context, contexts)
         self.pipelines = build_side_pipelines(rig, options.models)
         self.driver = BimanualDriver({side: (_driver(self.pipelines[side], rig, side), side_inputs(rig, side))
                                       for side in SIDES}, build_guard(rig, self.pipelines))
