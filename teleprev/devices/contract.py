@@ -45,14 +45,18 @@ class StreamSpec:
     rate_hz: float
 
 
+GESTURE = "gesture"  # OperatorLink.act's `via` for an action asked by a hand gesture (the XR page's pinches)
+
+
 @dataclass
 class OperatorLink:
-    """The recording behind a device that carries the operator's controls (an XR page): `act(action)` carries
+    """The recording behind a device that carries the operator's controls (an XR page): `act(action, via)` carries
     out an operator action (live.record.operator_actions names them) and says why not ("" when done, "unknown" for
-    no such action); `status()` is what the operator is shown. The recording sets both once it runs; outside
-    one (devices check, calibrate) they stay None."""
+    no such action); `via` is how the operator asked: "" (a button), or GESTURE (a hand's pinch, which a
+    recording whose hands both drive robots refuses). `status()` is what the operator is shown. The recording
+    sets both once it runs; outside one (devices check, calibrate) they stay None."""
 
-    act: Callable[[str], str] | None = None
+    act: Callable[[str, str], str] | None = None
     status: Callable[[], dict] | None = None
 
 

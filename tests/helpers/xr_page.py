@@ -44,8 +44,9 @@ class PageClient:
         self.ws.send(wire.pack(self.seq if seq is None else seq, now_ms, now_ms, head=head, left=left, right=right))
         self.seq = (self.seq if seq is None else seq) + 1
 
-    def action(self, action: str) -> dict:
-        self.ws.send(json.dumps({"type": "action", "action": action}))
+    def action(self, action: str, via: str = "") -> dict:
+        """Send an action as the page does (`via`: "gesture" for a pinch) and return the server's answer."""
+        self.ws.send(json.dumps({"type": "action", "action": action, "via": via}))
         while True:
             message = json.loads(self.ws.recv(timeout=5))
             if message["type"] == "ack":

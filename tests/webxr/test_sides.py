@@ -12,26 +12,12 @@ import pytest
 from teleprev.clock import SessionClock
 from teleprev.devices import DeviceContext
 from teleprev.human.mirror import mirror_hand_pose, mirror_wrist
-from teleprev.transforms import axis_angle_to_matrix, matrix_to_quat, quat_to_matrix
+from teleprev.transforms import axis_angle_to_matrix, quat_to_matrix
 from teleprev_devices.webxr import WebXrGlove, WebXrSuit
 from teleprev_devices.webxr.plugins import WebXrSettings
 from tests.helpers.wait import wait_until
-from tests.helpers.xr_hands import local_rotations, xr_hand
+from tests.helpers.xr_hands import local_rotations, mirror_in_xr, xr_hand
 from tests.helpers.xr_page import PageClient
-
-XR_X = np.diag([-1.0, 1.0, 1.0])  # the reference space mirrored left <-> right (x is the operator's right)
-
-
-def mirror_in_xr(joints: np.ndarray) -> np.ndarray:
-    """A hand's joints as its mirror image's, written out from the definition: positions x -> -x, and each
-    joint frame's bone (-z) and back (+y) mirrored, its x = y cross z again."""
-    out = np.array(joints, dtype=float)
-    for k in range(len(out)):
-        out[k, :3] = XR_X @ out[k, :3]
-        r = quat_to_matrix(out[k, 3:7])
-        y, z = XR_X @ r[:, 1], XR_X @ r[:, 2]
-        out[k, 3:7] = matrix_to_quat(np.column_stack([np.cross(y, z), y, z]))
-    return out
 
 
 @pytest.fixture

@@ -29,6 +29,7 @@ from pathlib import Path
 import numpy as np
 
 from teleprev.devices import (
+    GESTURE,
     ClockSync,
     DeviceError,
     DeviceStartError,
@@ -266,8 +267,9 @@ class XrServer:
             page.session = str(message.get("session", ""))[:40]
         elif kind == "action":
             action = str(message.get("action", ""))
+            via = GESTURE if message.get("via") == GESTURE else ""
             act = self.hooks.act
-            refused = act(action) if act is not None else "no session is recording (teleprev record starts one)"
+            refused = act(action, via) if act is not None else "no session is recording (teleprev record starts one)"
             if refused == "unknown":
                 self.counters.malformed_messages += 1
             else:
