@@ -16,26 +16,13 @@ from teleprev.session.reader import SessionReader
 from teleprev.transforms import axis_angle_to_matrix
 from tests.helpers.wait import wait_until
 from tests.helpers.xr_hands import local_rotations, mirror_in_xr, xr_hand
-from tests.helpers.xr_page import PageClient
-
-
-def rig_text(cert_dir) -> str:
-    sides = "".join(
-        f'[sides.{side}]\narm = "arm_{side}"\nhand = "hand_{side}"\nglove = "glove_{side}"\nsuit = "suit_{side}"\n'
-        f'mount_xyz = [0.0, {0.3 if side == "left" else -0.3}, 0.0]\n\n'
-        + "".join(f'[devices.{kind}_{side}]\nplugin = "webxr.{kind}"\nport = 0\nside = "{side}"\n'
-                  f'cert_dir = "{cert_dir}"\n\n' for kind in ("glove", "suit"))
-        + f'[devices.arm_{side}]\nplugin = "sim.arm"\n\n[devices.hand_{side}]\nplugin = "sim.hand"\n\n'
-        for side in ("left", "right"))
-    return f'[rig]\nname = "xr_bimanual"\n\n[pipeline]\ntcp_link = "palm_lower"\n\n{sides}'
+from tests.helpers.xr_page import PageClient, bimanual_webxr_rig
 
 
 @pytest.fixture
 def session(tmp_path):
-    rig = tmp_path / "rig.toml"
-    rig.write_text(rig_text(tmp_path / "cert"))
     out = tmp_path / "s.mcap"
-    rec = open_session(RecordOptions(rig=rig, out=out))
+    rec = open_session(RecordOptions(rig=bimanual_webxr_rig(tmp_path), out=out))
     rec.start()
     stop = threading.Event()
     try:
