@@ -193,6 +193,23 @@ class Rig:
             physics = PhysicsAccess(clock, self.rig.end_effector, self.sim.rate_hz, self.rig.task)
         return DeviceContext(clock, self.dir, {}, self.rig.robot, self.rig.end_effector, physics=physics)
 
+    def device_sides(self) -> dict[str, str]:
+        """A bimanual rig's devices that belong to a side: device name -> "left" | "right"."""
+        return {name: side for side, s in self.sides.items() for name in s.device_names}
+
+    def side_contexts(self, context: DeviceContext) -> dict[str, DeviceContext]:
+        """A bimanual rig's device context per side, for the devices of that side: its robot and end effector,
+        its own `shared` (its own sim world), and `context`'s clock, operator link and network sockets."""
+        return {side: DeviceContext(context.clock, self.dir, {}, s.robot, s.section.end_effector,
+                                    operator=context.operator, receivers=context.receivers)
+                for side, s in self.sides.items()}
+
+    def open_devices(self, names, context: DeviceContext, contexts: dict[str, DeviceContext]) -> dict:
+        """The named devices (name -> plugin instance), each opened with its side's context, else `context`."""
+        sides = self.device_sides()
+        return {name: self.devices[name].cls(name, self.devices[name].settings,
+                                             contexts[sides[name]] if name in sides else context) for name in names}
+
     def resolve(self, relative: str) -> Path:
         """A path from the rig file, relative to the rig file's folder."""
         p = Path(relative)

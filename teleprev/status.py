@@ -14,6 +14,16 @@ import numpy as np
 
 
 @dataclass(frozen=True)
+class SideView:
+    """One side of a bimanual rig as the preview draws it: that side's last step and measured joints."""
+
+    side: str
+    step: Any = None  # the side's last StepResult
+    measured_arm: np.ndarray | None = None
+    measured_effector: np.ndarray | None = None
+
+
+@dataclass(frozen=True)
 class LoopSnapshot:
     """What the terminal preview shows; replaced as a whole by the loop thread."""
 
@@ -34,6 +44,7 @@ class LoopSnapshot:
     depth: Any = None  # the latest DepthSample of the first depth camera heard from, for the preview
     input_age_ms: float = 0.0  # how old the sample the last step took was then (session clock - its stamp)
     stale_ms: float = 0.0  # the pipeline's stale limit: input older than this holds the last command (0: none)
+    sides: tuple[SideView, ...] = ()  # a bimanual rig's sides, left first (the fields above: the right side's)
 
     @property
     def input_old(self) -> bool:

@@ -1,8 +1,8 @@
 """One receiving socket shared by several device plugins: each plugin subscribes and reads every item in
 order (a bounded queue each), and the plugins on one address share the receiver through the context.
 
-    receiver = acquire(context.shared, ("vmc", host, port), lambda: VmcReceiver(...))
-    sub = receiver.fanout.subscribe(); receiver.fanout.wait(sub, 0.1); release(context.shared, key, receiver)
+    receiver = acquire(context.receivers, ("vmc", host, port), lambda: VmcReceiver(...))
+    sub = receiver.fanout.subscribe(); receiver.fanout.wait(sub, 0.1); release(context.receivers, key, receiver)
 
 Used by the VMC receiver (one UDP port: a suit and a glove) and the WebXR server (one page: the glove's
 hands and the suit's wrist); FanoutDevice is their plugins' common half.
@@ -118,7 +118,7 @@ _SHARED_LOCK = threading.Lock()
 def acquire[R: Receiver](
     shared: dict, key: tuple, open_: Callable[[], R], conflict: Callable[[R], str] = lambda r: ""
 ) -> R:
-    """The receiver under `key` in context.shared, opened by the first plugin that asks (a failed one is
+    """The receiver under `key` in context.receivers, opened by the first plugin that asks (a failed one is
     closed and opened again). `conflict(receiver)`: why this plugin's settings cannot share it ("" if they can)."""
     with _SHARED_LOCK:
         entry = shared.get(key)

@@ -1,7 +1,15 @@
-"""`teleprev calibrate`: guided open hand, fist and neutral wrist; writes the calibration a rig references."""
+"""`teleprev calibrate`: guided open hand, fist and neutral wrist; writes the calibration a rig references.
+
+A bimanual rig is calibrated in one go: the operator holds each pose with both hands, each side's glove and suit
+are averaged on their own, and each side gets its own file (`--out` with `_left` / `_right` before its suffix),
+referenced by `[sides.<side>] calibration`. The left glove's pose is mirrored into the right hand's terms first,
+as the bimanual pipeline mirrors it before retargeting (teleprev/human/mirror.py), so that the file's joint
+scales apply to what the left side's retargeting reads.
+"""
 
 from __future__ import annotations
 
+from dataclasses import dataclass, field
 from pathlib import Path
 
 import typer
@@ -15,11 +23,33 @@ STEPS = (
 )
 
 
+@dataclass
+class Reading:
+    """One side's glove and suit as calibrate reads them (side "": a single-arm rig)."""
+
+    side: str
+    hand_topic: str
+    wrist_topic: str
+    out: Path
+    mirrored: bool = False  # the operator's left hand: its pose mirrored into the right hand's terms
+    samples: dict[str, list] = field(default_factory=lambda: {"hand": [], "wrist": []})
+
+    @property
+    def where(self) -> str:
+        return f" on the {self.side} side" if self.side else ""
+
+
+def side_out(out: Path, side: str) -> Path:
+    """The file a side's calibration goes to: `out` with _<side> before its suffix (calib/ada_left.toml)."""
+    return out.with_name(f"{out.stem}_{side}{out.suffix or '.toml'}")
+
+
 def calibrate(
     rig: Path | None = typer.Argument(
         None, help="Rig file (TOML) whose glove and suit to read. Default: the all-simulated rig."
     ),
-    out: Path = typer.Option(Path("calibration.toml"), "--out", "-o", help="Calibration file to write."),
+    out: Path = typer.Option(Path("calibration.toml"), "--out", "-o",
+                             help="Calibration file to write (a bimanual rig: one per side, _left and _right added)."),
     seconds: float = typer.Option(1.5, "--seconds", help="How long each pose is averaged."),
     hold: float | None = typer.Option(
         None, "--hold", help="Unattended: wait this long for each pose instead of asking for Enter."
@@ -36,7 +66,8 @@ def calibrate(
     from teleprev.cli.pages import announce_pages
     from teleprev.clock import SessionClock
     from teleprev.devices.runner import DeviceRunner
-    from teleprev.errors import DeviceError
+    from teleprev.errors import ConfigError, DeviceError
+    from teleprev.human.mirror import mirror_hand_pose
     from teleprev.human.smplx import hand_pose_from_values
     from teleprev.retarget.calibration import write_calibration
     from teleprev.retarget.calibration_fit import calibrate as compute
@@ -47,69 +78,91 @@ def calibrate(
     r = load_rig(rig)
     if webxr_host:
         r = r.with_device_settings("webxr", "--webxr-host", host=webxr_host)
-    r.require("glove", "suit")
     clock = SessionClock()
     context = r.device_context(clock)
-    glove, suit = r.of_kind("glove")[0], r.of_kind("suit")[0]
-    devices = [e.cls(e.name, e.settings, context) for e in (glove, suit)]
-    hand_topic, wrist_topic = devices[0].topic("hand"), devices[1].topic("wrist")
-    samples: dict[str, list] = {"hand": [], "wrist": []}
+    contexts = [context]
+    if r.bimanual:
+        by_side = r.side_contexts(context)
+        contexts += by_side.values()
+        for side, s in r.sides.items():
+            if not s.devices.get("glove") or not s.devices.get("suit"):
+                raise ConfigError("calibrate reads each side's glove and suit: name both", f"{r.path} [sides.{side}]")
+        names = {side: (s.devices["glove"], s.devices["suit"]) for side, s in r.sides.items()}
+        opened = r.open_devices([n for pair in names.values() for n in pair], context, by_side)
+        pairs = {side: (opened[g], opened[su]) for side, (g, su) in names.items()}
+    else:
+        r.require("glove", "suit")
+        glove, suit = r.of_kind("glove")[0], r.of_kind("suit")[0]
+        pairs = {"": tuple(e.cls(e.name, e.settings, context) for e in (glove, suit))}
+    readings = [Reading(side, g.topic("hand"), su.topic("wrist"), side_out(out, side) if side else out,
+                        mirrored=side == "left") for side, (g, su) in pairs.items()]
+    devices = [d for pair in pairs.values() for d in pair]
+    by_topic = {t: (reading, key) for reading in readings
+                for t, key in ((reading.hand_topic, "hand"), (reading.wrist_topic, "wrist"))}
     collecting = [False]
 
     def sink(sample, receive_ns: int) -> None:
-        if not collecting[0]:
+        if not collecting[0] or sample.topic not in by_topic:  # (a suit may stream more poses: an XR headset's head)
             return
-        if sample.topic == hand_topic:
-            samples["hand"].append(hand_pose_from_values(sample.payload.names, sample.payload.positions))
-        elif sample.topic == wrist_topic:  # (a suit may stream more poses: an XR headset's head)
-            samples["wrist"].append(sample.payload.matrix()[:3, :3])
+        reading, key = by_topic[sample.topic]
+        if key == "hand":
+            values = sample.payload.positions
+            if reading.mirrored:
+                values = mirror_hand_pose(values, sample.payload.names)
+            reading.samples["hand"].append(hand_pose_from_values(sample.payload.names, values))
+        else:
+            reading.samples["wrist"].append(sample.payload.matrix()[:3, :3])
 
     runners = [DeviceRunner(d, sink, clock) for d in devices]
     for runner in runners:
         runner.start()
     announce_pages(console, devices)
-    held: dict[str, dict[str, list]] = {}
+    held: dict[tuple[str, str], dict[str, list]] = {}  # (side, pose) -> samples
+    both = "With both hands: " if r.bimanual else ""
     try:
         for pose, instruction in STEPS:
-            for listener in context.task_listeners:  # a simulated operator takes the pose when asked
-                listener(f"calibration:{pose}")
-            console.print(f"[bold]{pose}[/]: {instruction}")
+            for c in contexts:  # a simulated operator takes the pose when asked
+                for listener in c.task_listeners:
+                    listener(f"calibration:{pose}")
+            console.print(f"[bold]{pose}[/]: {both}{instruction}")
             if hold is None:
                 console.input("  press Enter when you are holding it ")
             else:
                 time.sleep(hold)
-            for key in samples:
-                samples[key].clear()
+            for reading in readings:
+                for key in reading.samples:
+                    reading.samples[key].clear()
             collecting[0] = True
             time.sleep(seconds)
             collecting[0] = False
-            if not samples["hand"] or not samples["wrist"]:
-                raise DeviceError(
-                    f"no glove or suit data arrived while holding '{pose}'; check `teleprev devices check`", str(r.path)
-                )
-            held[pose] = {k: list(v) for k, v in samples.items()}
-            console.print(
-                f"  [green]ok[/]: {len(held[pose]['hand'])} glove and {len(held[pose]['wrist'])} suit samples"
-            )
+            for reading in readings:
+                if not reading.samples["hand"] or not reading.samples["wrist"]:
+                    raise DeviceError(f"no glove or suit data arrived{reading.where} while holding '{pose}'; check "
+                                      "`teleprev devices check`", str(r.path))
+                held[reading.side, pose] = {k: list(v) for k, v in reading.samples.items()}
+                console.print(f"  [green]ok[/]{reading.where}: {len(reading.samples['hand'])} glove and "
+                              f"{len(reading.samples['wrist'])} suit samples")
     finally:
-        for listener in context.task_listeners:
-            listener("calibration:done")
+        for c in contexts:
+            for listener in c.task_listeners:
+                listener("calibration:done")
         for runner in runners:
             runner.stop()
-    cal = compute(
-        np.array(held["open"]["hand"]), np.array(held["fist"]["hand"]), np.array(held["neutral"]["wrist"]), operator
-    )
-    try:
-        path = write_calibration(cal, out)
-    except OSError as exc:  # the folder went away or filled up since the check: the poses are not lost
-        from teleprev.errors import ConfigError
-        from teleprev.retarget.calibration import calibration_toml
+    for reading in readings:
+        side = reading.side
+        cal = compute(np.array(held[side, "open"]["hand"]), np.array(held[side, "fist"]["hand"]),
+                      np.array(held[side, "neutral"]["wrist"]), operator)
+        try:
+            path = write_calibration(cal, reading.out)
+        except OSError as exc:  # the folder went away or filled up since the check: the poses are not lost
+            from teleprev.retarget.calibration import calibration_toml
 
-        print(calibration_toml(cal))
-        raise ConfigError(f"could not write the calibration ({exc.strerror or exc}); it is printed above: save it "
-                          "as a .toml file", str(out)) from None
-    console.print(f"wrote {path}: suit yaw {np.degrees(cal.calibration.suit_yaw):.1f} deg; "
-                  f"reference it from the rig with \\[rig] calibration = \"{path}\"")
+            print(calibration_toml(cal))
+            raise ConfigError(f"could not write the calibration ({exc.strerror or exc}); it is printed above: save "
+                              "it as a .toml file", str(reading.out)) from None
+        table = f"\\[sides.{side}]" if side else "\\[rig]"
+        console.print(f"wrote {path}{reading.where}: suit yaw {np.degrees(cal.calibration.suit_yaw):.1f} deg; "
+                      f"reference it from the rig with {table} calibration = \"{path}\"")
 
 
 def _check_before_the_first_pose(out: Path, hold: float | None, seconds: float) -> None:

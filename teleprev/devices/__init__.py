@@ -16,7 +16,16 @@ from typing import TYPE_CHECKING, Any
 
 from teleprev import transforms
 from teleprev.clock import ClockSync, SessionClock
-from teleprev.devices.contract import KINDS, Actuator, Device, DeviceContext, NoSettings, OperatorLink, StreamSpec
+from teleprev.devices.contract import (
+    GESTURE,
+    KINDS,
+    Actuator,
+    Device,
+    DeviceContext,
+    NoSettings,
+    OperatorLink,
+    StreamSpec,
+)
 from teleprev.devices.pacing import wait_until_due
 from teleprev.devices.physics import WORLDS, LayoutRecord, PhysicsAccess
 from teleprev.devices.polled import DeviceFault, JointLimits, PolledActuator, PolledSettings
@@ -76,6 +85,7 @@ __all__ = [
     "DeviceContext",
     "NoSettings",
     "OperatorLink",
+    "GESTURE",
     "StreamSpec",
     "wait_until_due",
     "body_mirror",

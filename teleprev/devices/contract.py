@@ -45,14 +45,18 @@ class StreamSpec:
     rate_hz: float
 
 
+GESTURE = "gesture"  # OperatorLink.act's `via` for an action asked by a hand gesture (the XR page's pinches)
+
+
 @dataclass
 class OperatorLink:
-    """The recording behind a device that carries the operator's controls (an XR page): `act(action)` carries
+    """The recording behind a device that carries the operator's controls (an XR page): `act(action, via)` carries
     out an operator action (live.record.operator_actions names them) and says why not ("" when done, "unknown" for
-    no such action); `status()` is what the operator is shown. The recording sets both once it runs; outside
-    one (devices check, calibrate) they stay None."""
+    no such action); `via` is how the operator asked: "" (a button), or GESTURE (a hand's pinch, which a
+    recording whose hands both drive robots refuses). `status()` is what the operator is shown. The recording
+    sets both once it runs; outside one (devices check, calibrate) they stay None."""
 
-    act: Callable[[str], str] | None = None
+    act: Callable[[str, str], str] | None = None
     status: Callable[[], dict] | None = None
 
 
@@ -71,6 +75,9 @@ class DeviceContext:
     # The rig's physics world ([sim] world = "physics"), which sim devices measure from, command into and
     # render; None: the kinematic sim world.
     physics: PhysicsAccess | None = None
+    # Sockets the rig's network plugins share (a VMC port, the XR page's server), whatever side their device is
+    # on: a bimanual rig's sides each have their own `shared` (their own sim world) but one VMC sender.
+    receivers: dict[Any, Any] = field(default_factory=dict)
 
     @property
     def effector(self) -> EndEffector:

@@ -5,12 +5,16 @@ the banner (with timed episodes' countdown of the current period), the keys (eve
 many lines as the width needs), the episode line and the device table always; the pictures share what is left, the
 robot first, then the hand, then the camera,
 each only where it has room to be read (at 80x24: robot, hand and camera side by side).
+A bimanual rig's screen has a robot panel per side, left first, before any hand or camera (at 80x24: the two
+robots; at 120x45: the two robots and both hands).
 
 With a depth camera the camera panel shows colour, depth (colour-mapped) or both side by side: `c` switches
 (CAMERA_MODES), and the key shows only where there is depth to switch to.
 """
 
 from __future__ import annotations
+
+from dataclasses import dataclass
 
 import numpy as np
 from rich.console import Group, RenderableType
@@ -20,7 +24,7 @@ from rich.text import Text
 
 from teleprev.preview.camera_view import CameraView, DepthView
 from teleprev.preview.robot_view import Layer, RobotView
-from teleprev.status import DeviceRow, LoopSnapshot  # what the live session hands the preview to draw
+from teleprev.status import DeviceRow, LoopSnapshot, SideView  # what the live session hands the preview to draw
 
 KEYS = (("space", "preview/execute"), ("x", "e-stop"), ("s/e", "start/end episode"),
         ("n", "next episode"),
@@ -126,6 +130,30 @@ def device_table(rows: list[DeviceRow]) -> Table:
     return table
 
 
+@dataclass
+class RobotSide:
+    """One robot the dashboard draws: its views (the arm with its end effector, the hand alone) and joint names.
+    A single-arm rig has one, named ""; a bimanual rig one per side, left first."""
+
+    name: str
+    robot_view: RobotView
+    hand_view: RobotView | None
+    arm_names: tuple[str, ...]
+    effector_names: tuple[str, ...]
+    model: object  # RobotModel of robot_view
+
+    def q(self, arm: np.ndarray | None, effector: np.ndarray | None) -> np.ndarray | None:
+        if arm is None:
+            return None
+        joints = dict(zip(self.arm_names, arm))
+        if effector is not None and self.effector_names[0] in self.model.joint_index:
+            joints.update(zip(self.effector_names, effector))
+        return self.model.vector(joints)
+
+    def title(self, what: str) -> str:
+        return f"{self.name} {what}" if self.name else what
+
+
 class Dashboard:
     """Holds the views (their scale stays fixed between frames) and renders a screen for a given size."""
 
@@ -133,22 +161,27 @@ class Dashboard:
     MIN_SIDE = (18, 6)  # the same for the hand and the camera
 
     def __init__(self, robot_view: RobotView, hand_view: RobotView | None, arm_names, effector_names, robot_model):
-        self.robot_view = robot_view
-        self.hand_view = hand_view
+        self.robots = (RobotSide("", robot_view, hand_view, tuple(arm_names), tuple(effector_names), robot_model),)
         self.camera_view = CameraView()
         self.depth_view = DepthView()
         self.camera_mode = CAMERA_MODES[0]
-        self.arm_names = tuple(arm_names)
-        self.effector_names = tuple(effector_names)
-        self.model = robot_model
 
-    def _robot_q(self, arm: np.ndarray | None, effector: np.ndarray | None) -> np.ndarray | None:
-        if arm is None:
-            return None
-        joints = dict(zip(self.arm_names, arm))
-        if effector is not None and self.effector_names[0] in self.model.joint_index:
-            joints.update(zip(self.effector_names, effector))
-        return self.model.vector(joints)
+    @classmethod
+    def bimanual(cls, sides: tuple[RobotSide, ...]) -> Dashboard:
+        """A robot panel (and a hand panel where there is room) per side, in the order given (left first), each
+        drawing its side of the snapshot (LoopSnapshot.sides)."""
+        first = sides[0]
+        dashboard = cls(first.robot_view, first.hand_view, first.arm_names, first.effector_names, first.model)
+        dashboard.robots = tuple(sides)
+        return dashboard
+
+    @property
+    def robot_view(self) -> RobotView:
+        return self.robots[0].robot_view
+
+    @property
+    def hand_view(self) -> RobotView | None:
+        return self.robots[0].hand_view
 
     def next_camera_mode(self) -> str:
         """The camera panel's next mode (the `c` key): colour, depth, both, colour, ..."""
@@ -165,26 +198,36 @@ class Dashboard:
             return [mapped]
         return [mapped, colour]  # beside each other where both fit; colour is dropped first (at 80x24)
 
-    def robot_panel(self, snap: LoopSnapshot, cols: int, rows: int) -> RenderableType:
-        step = snap.step
+    def _shown(self, snap: LoopSnapshot) -> list[tuple[RobotSide, SideView]]:
+        """Each robot with what the snapshot says of it: a bimanual snapshot's sides by name, else the snapshot."""
+        if len(self.robots) == 1:
+            return [(self.robots[0], SideView("", snap.step, snap.measured_arm, snap.measured_effector))]
+        by_name = {view.side: view for view in snap.sides}
+        return [(robot, by_name.get(robot.name, SideView(robot.name))) for robot in self.robots]
+
+    def robot_panel(self, robot: RobotSide, view: SideView, cols: int, rows: int) -> RenderableType:
+        step = view.step
         layers = []
-        real = self._robot_q(snap.measured_arm, snap.measured_effector)
+        real = robot.q(view.measured_arm, view.measured_effector)
         if real is not None:
             layers.append(Layer(real, REAL_STYLE))
         fixed = frozenset(step.report.get("colliding_links", ())) if step is not None else frozenset()
         if step is not None and step.state.arm_q is not None:
-            preview = self._robot_q(step.state.arm_q, step.state.effector_q)
+            preview = robot.q(step.state.arm_q, step.state.effector_q)
             layers.append(Layer(preview, PREVIEW_ROBOT_STYLE, fixed, FIXED_STYLE))
         if not layers:
             return Text("waiting for the arm's state ...", style="dim")
         title = Text.assemble(
             ("real", REAL_STYLE), "  ", ("preview", PREVIEW_ROBOT_STYLE), "  ", ("fixed", FIXED_STYLE)
         )
-        return Group(title, self.robot_view.render(layers, cols, rows - 1))
+        if step is not None and "cross_side_held" in step.report.get("flags", ()):
+            title.append("  held: would touch the other side", style=FIXED_STYLE)
+        title.truncate(cols)
+        return Group(title, robot.robot_view.render(layers, cols, rows - 1))
 
-    def hand_panel(self, snap: LoopSnapshot, cols: int, rows: int) -> RenderableType:
-        step = snap.step
-        if self.hand_view is None or step is None or step.corrected is None:
+    def hand_panel(self, robot: RobotSide, view: SideView, cols: int, rows: int) -> RenderableType:
+        step = view.step
+        if robot.hand_view is None or step is None or step.corrected is None:
             return Text("")
         fixed = frozenset(step.report.get("colliding_links", ()))
         layers = [Layer(step.corrected, PREVIEW_ROBOT_STYLE)]
@@ -195,7 +238,7 @@ class Dashboard:
         caption = Text(
             f"hand: {action}" + (f" ({', '.join(sorted(fixed))})" if fixed else ""), style=FIXED_STYLE if fixed else ""
         )
-        return Group(caption, self.hand_view.render(layers, cols, rows - 1))
+        return Group(caption, robot.hand_view.render(layers, cols, rows - 1))
 
     def render(self, snap: LoopSnapshot, devices: list[DeviceRow], width: int, height: int, now_ns: int,
                camera=None, countdown: tuple[str, float] | None = None, depth=None) -> RenderableType:
@@ -208,27 +251,30 @@ class Dashboard:
         fixed = 1 + len(episode.plain.splitlines()) + len(keys.plain.splitlines()) + len(devices) + 1
         body_rows = height - fixed
         rows, cols = body_rows - 2, width  # inside the panels' borders (their widths include theirs)
-        if rows < self.MIN_ROBOT[1] or cols < self.MIN_ROBOT[0] + 2:  # too small for pictures: status only
+        shown = self._shown(snap)
+        n = len(shown)  # robot panels: each wants two shares of the width and at least MIN_ROBOT
+        if rows < self.MIN_ROBOT[1] or cols < n * (self.MIN_ROBOT[0] + 2):  # too small for pictures: status only
             return Group(mode_banner(snap.mode, width, countdown), episode, table, keys)
-        sides = []
-        if self.hand_view is not None:
-            sides.append(("hand", lambda c, r: self.hand_panel(snap, c, r)))
+        sides = [(robot.title("hand"), lambda c, r, robot=robot, view=view: self.hand_panel(robot, view, c, r))
+                 for robot, view in shown if robot.hand_view is not None]
         sides += self.camera_panels(camera, depth)
-        # the robot gets two shares of the width, each side panel one (at least its minimum), while the robot
-        # still has its own minimum; the camera goes first, then the hand
+        # each robot gets two shares of the width, each side panel one (at least its minimum), while the robots
+        # still have their own minimum; the camera goes first, then the hands (the right's before the left's)
         while sides:
-            side = max(self.MIN_SIDE[0] + 2, cols // (len(sides) + 2))
-            if cols - len(sides) * side >= self.MIN_ROBOT[0] + 2 and rows >= self.MIN_SIDE[1]:
+            side = max(self.MIN_SIDE[0] + 2, cols // (len(sides) + 2 * n))
+            if cols - len(sides) * side >= n * (self.MIN_ROBOT[0] + 2) and rows >= self.MIN_SIDE[1]:
                 break
             sides.pop()
-        side = max(self.MIN_SIDE[0] + 2, cols // (len(sides) + 2)) if sides else 0
-        robot_cols = cols - len(sides) * side
+        side = max(self.MIN_SIDE[0] + 2, cols // (len(sides) + 2 * n)) if sides else 0
+        robot_cols = [(cols - len(sides) * side) // n] * n
+        robot_cols[-1] += cols - len(sides) * side - sum(robot_cols)
         body = Table.grid(padding=0)
-        body.add_column(width=robot_cols)
+        for c in robot_cols:
+            body.add_column(width=c)
         for _ in sides:
             body.add_column(width=side)
         body.add_row(
-            Panel(self.robot_panel(snap, robot_cols - 2, rows), title=f"robot ({self.robot_view.view})", padding=0,
-                  height=body_rows),
+            *(Panel(self.robot_panel(robot, view, c - 2, rows), title=robot.title(f"robot ({robot.robot_view.view})"),
+                    padding=0, height=body_rows) for (robot, view), c in zip(shown, robot_cols)),
             *(Panel(draw(side - 2, rows), title=title, padding=0, height=body_rows) for title, draw in sides))
         return Group(mode_banner(snap.mode, width, countdown), episode, body, table, keys)

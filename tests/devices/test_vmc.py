@@ -210,7 +210,7 @@ def test_suit_and_glove_share_one_port_and_the_runner_reports_skipped_garbage():
     assert any("1 malformed packets" in e["message"] for e in events if e["event"] == "skipped")
     assert not [e for e in events if e["event"] == "error"]  # skipped input is no failure
     assert runners[1].stats().skipped["malformed_packets"] == 1
-    assert suit.context.shared == {}  # the last one out closed the shared socket
+    assert suit.context.receivers == {}  # the last one out closed the shared socket
 
 
 def test_timeout_turns_silence_into_a_fault_naming_the_port(context):

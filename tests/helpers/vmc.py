@@ -62,6 +62,17 @@ def arm_messages(root_pos=(0, 0, 0), root_quat=(0, 0, 0, 1), elbow_quat=(0, 0, 0
     return msgs
 
 
+def mirrored(name: str, pos, quat) -> tuple[str, tuple, tuple]:
+    """A Right* bone as its Left* twin on a skeleton mirrored through its sagittal plane (Unity x -> -x)."""
+    x, y, z, w = quat
+    return name.replace("Right", "Left"), (-pos[0], pos[1], pos[2]), (x, -y, -z, w)
+
+
+def both_sides(right: list[tuple[str, tuple, tuple]]) -> list:
+    """Bone messages of the given right-side bones and their mirrored left twins (a symmetric operator)."""
+    return [bone(*b) for b in right] + [bone(*mirrored(*b)) for b in right if b[0].startswith("Right")]
+
+
 def arm_frame(**kw):
     return bundle(*arm_messages(**kw))
 
@@ -89,8 +100,9 @@ class VmcSender:
     """Sends a whole frame (arm chain, fingers, /VMC/Ext/T) every 1/rate_hz s from its own thread, the
     fingers flexing slowly; `inject(datagram)` slips an extra datagram in before the next frame."""
 
-    def __init__(self, port: int, host: str = "127.0.0.1", source: str = "127.0.0.1"):
+    def __init__(self, port: int, host: str = "127.0.0.1", source: str = "127.0.0.1", both_sides: bool = False):
         self.address = (host, port)
+        self.both_sides = both_sides  # the left arm and fingers too, mirroring the right (a symmetric operator)
         self.sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
         self.sock.bind((source, 0))
         self.sent = 0
@@ -102,7 +114,11 @@ class VmcSender:
     def frame(self, k: int, rate_hz: float) -> bytes:
         t = k / rate_hz
         flex = 0.6 + 0.4 * np.sin(2 * np.pi * 0.5 * t)
-        return bundle(*arm_messages(t=100.0 + t), *finger_messages(flex)).dgram
+        messages = [*arm_messages(t=100.0 + t), *finger_messages(flex)]
+        if self.both_sides:
+            messages += [bone(*mirrored(*m.params[:1], m.params[1:4], m.params[4:8]))
+                         for m in messages if str(m.params[0]).startswith("Right")]
+        return bundle(*messages).dgram
 
     def send(self, datagram: bytes) -> None:
         self.sock.sendto(datagram, self.address)

@@ -85,3 +85,18 @@ def matrices(joints: np.ndarray) -> np.ndarray:
     out[:, :3, 3] = joints[:, :3]
     out[:, 3, 3] = 1.0
     return np.swapaxes(out, 1, 2).reshape(-1)
+
+
+XR_X = np.diag([-1.0, 1.0, 1.0])  # the reference space mirrored left <-> right (x is the operator's right)
+
+
+def mirror_in_xr(joints: np.ndarray) -> np.ndarray:
+    """A hand's joints as its mirror image's, written out from the definition: positions x -> -x, and each
+    joint frame's bone (-z) and back (+y) mirrored, its x = y cross z again."""
+    out = np.array(joints, dtype=float)
+    for k in range(len(out)):
+        out[k, :3] = XR_X @ out[k, :3]
+        r = quat_to_matrix(out[k, 3:7])
+        y, z = XR_X @ r[:, 1], XR_X @ r[:, 2]
+        out[k, 3:7] = matrix_to_quat(np.column_stack([np.cross(y, z), y, z]))
+    return out

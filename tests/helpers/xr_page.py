@@ -44,8 +44,9 @@ class PageClient:
         self.ws.send(wire.pack(self.seq if seq is None else seq, now_ms, now_ms, head=head, left=left, right=right))
         self.seq = (self.seq if seq is None else seq) + 1
 
-    def action(self, action: str) -> dict:
-        self.ws.send(json.dumps({"type": "action", "action": action}))
+    def action(self, action: str, via: str = "") -> dict:
+        """Send an action as the page does (`via`: "gesture" for a pinch) and return the server's answer."""
+        self.ws.send(json.dumps({"type": "action", "action": action, "via": via}))
         while True:
             message = json.loads(self.ws.recv(timeout=5))
             if message["type"] == "ack":
@@ -64,4 +65,20 @@ def webxr_rig(tmp_path, port: int = 0, input_loss_to_preview_s: float | None = N
     text = text.replace('rate_hz = 72.0', f'rate_hz = 72.0\ncert_dir = "{tmp_path / "cert"}"')
     path = tmp_path / "webxr.toml"
     path.write_text(text)
+    return path
+
+
+def bimanual_webxr_rig(tmp_path):
+    """A bimanual rig driven by the XR page: a webxr.glove and a webxr.suit per side (the left pair with
+    side = "left") on one page, any free port, its certificate kept in tmp_path; sim arms and hands."""
+    cert = tmp_path / "cert"
+    sides = "".join(
+        f'[sides.{side}]\narm = "arm_{side}"\nhand = "hand_{side}"\nglove = "glove_{side}"\nsuit = "suit_{side}"\n'
+        f'mount_xyz = [0.0, {0.3 if side == "left" else -0.3}, 0.0]\n\n'
+        + "".join(f'[devices.{kind}_{side}]\nplugin = "webxr.{kind}"\nport = 0\nside = "{side}"\n'
+                  f'cert_dir = "{cert}"\n\n' for kind in ("glove", "suit"))
+        + f'[devices.arm_{side}]\nplugin = "sim.arm"\n\n[devices.hand_{side}]\nplugin = "sim.hand"\n\n'
+        for side in ("left", "right"))
+    path = tmp_path / "bimanual_webxr.toml"
+    path.write_text(f'[rig]\nname = "xr_bimanual"\n\n[pipeline]\ntcp_link = "palm_lower"\n\n{sides}')
     return path

@@ -119,6 +119,33 @@ def test_devices_check_finds_the_page_left_open_across_a_restart(tmp_path):
         quest.close()
 
 
+def test_on_a_bimanual_rig_the_pages_pinches_are_no_controls_and_its_button_is(tmp_path):
+    """Both hands drive robots: the status says gestures: false, and the page sends nothing for a left pinch
+    (the robots stay in preview); its preview/execute button still switches both sides."""
+    from teleprev.live.record.bimanual_session import open_session
+    from tests.helpers.xr_page import bimanual_webxr_rig
+
+    rec = open_session(RecordOptions(out=tmp_path / "s.mcap", rig=bimanual_webxr_rig(tmp_path)))
+    rec.start()
+    try:
+        url = wait_until(rec.devices["glove_left"].operator_urls, what="the XR page served")[0]
+        with Quest3Browser(url) as quest:
+            quest.enter("immersive-ar")
+            wait_until(lambda: (quest.state()["status"] or {}).get("gestures") is False, 10,
+                       what="the status telling the page that pinches are off")
+            wait_until(lambda: all(v.step is not None for v in rec.loop.snapshot.sides) and
+                       len(rec.loop.snapshot.sides) == 2, 20, what="both sides stepped from the page's hands")
+            quest.now({"left": {"pinch": 1.0}})  # thumb to index: was PREVIEW -> EXECUTE
+            time.sleep(0.5)
+            quest.now({"left": {"pinch": 0.0}})
+            assert quest.state()["actions"] == [] and rec.loop.snapshot.mode == "preview"
+            quest.page.evaluate("document.getElementById('toggle-mode').click()")  # (IWER's overlay is on top)
+            wait_until(lambda: rec.loop.snapshot.mode == "execute", 10, what="execute from the page's button")
+            assert not quest.errors, quest.errors
+    finally:
+        rec.stop()
+
+
 def left_hand(pinch_middle: bool) -> dict:
     """A left hand for IWER to show (only its fingertips matter to the page's gestures): open, or with the
     thumb's tip 5 mm from the middle finger's and 2 cm from the index's."""

@@ -134,7 +134,7 @@ def _bind(host: str, port: int, receive_buffer_kb: int, where: str) -> socket.so
 
 
 def acquire(shared: dict, host: str, port: int, clock: SessionClock, allow: tuple[str, ...] = ()) -> VmcReceiver:
-    """The receiver for (host, port), opened by the first plugin that asks (kept in context.shared)."""
+    """The receiver for (host, port), opened by the first plugin that asks (kept in context.receivers)."""
     def conflict(receiver: VmcReceiver) -> str:
         if receiver.allow == tuple(allow):
             return ""

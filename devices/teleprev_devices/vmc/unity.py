@@ -22,6 +22,14 @@ The wrist pose on /suit/<name>/wrist is the pose of the SMPL-X right-hand frame 
 vector h in the hand frame is D h in Unity bone axes, R_unity D h in Unity world, C R_unity D h in the
 suit frame, so R_wrist = C R_unity D and p_wrist = C p_unity. In T-pose R_wrist = C D: fingers -> -y
 (the operator's right), palm -> -z (down), thumb -> +x (forward).
+
+The left side reads the Left* bones with the same conversions: the left finger bones give the SMPL-X left
+hand's pose (D maps Unity's left fingers, -x in T-pose, onto SMPL-X's left ones, +x). The left wrist is
+given as a right wrist mirrored through the body's sagittal plane (teleprev/human/mirror.py: M R M, with
+M = diag(1, -1, 1) = C D C^-1 in the suit frame), which is what the left side's pipeline and the mirrored
+left robot take (sim.suit's side = "left" gives the same). The mirror in Unity is D, so a mirrored
+skeleton's left wrist is R' = D R D where the right one is R; C R' X = M C R D X equals the mirrored right
+wrist M (C R D) M for X = M: R_wrist = C R_unity M, p_wrist = C p_unity.
 """
 
 from __future__ import annotations
@@ -56,11 +64,14 @@ RIGHT_ARM_CHAIN = (
     "RightHand",
 )
 RIGHT_ARM_REQUIRED = frozenset({"Hips", "Spine", "RightUpperArm", "RightLowerArm", "RightHand"})
+ARM_CHAIN = {"right": RIGHT_ARM_CHAIN, "left": tuple(b.replace("Right", "Left") for b in RIGHT_ARM_CHAIN)}
+ARM_REQUIRED = {"right": RIGHT_ARM_REQUIRED, "left": frozenset(b.replace("Right", "Left") for b in RIGHT_ARM_REQUIRED)}
 
 _FINGER_BONE = {"index": "Index", "middle": "Middle", "pinky": "Little", "ring": "Ring", "thumb": "Thumb"}
 _PART = {"1": "Proximal", "2": "Intermediate", "3": "Distal"}
 # SMPL-X hand joint -> Unity bone, in smplx.HAND_JOINTS order (index1 <- RightIndexProximal, ...).
 RIGHT_HAND_BONES: tuple[str, ...] = tuple(f"Right{_FINGER_BONE[j[:-1]]}{_PART[j[-1]]}" for j in smplx.HAND_JOINTS)
+HAND_BONES = {"right": RIGHT_HAND_BONES, "left": tuple(b.replace("Right", "Left") for b in RIGHT_HAND_BONES)}
 
 # SMPL-X body joint -> Unity bone, in smplx.BODY_JOINTS order; pelvis is the global orientation (root * Hips).
 BODY_BONES: tuple[str, ...] = tuple({
@@ -74,6 +85,7 @@ BODY_BONES: tuple[str, ...] = tuple({
 
 D = np.diag([-1.0, 1.0, 1.0])
 C = np.array([[0.0, 0.0, 1.0], [-1.0, 0.0, 0.0], [0.0, 1.0, 0.0]])
+M = np.diag([1.0, -1.0, 1.0])  # the mirror through the sagittal plane, in the suit frame (= C D C^-1)
 _D_QUAT = np.array([1.0, -1.0, -1.0, 1.0])  # D R D on a quaternion x y z w
 
 
@@ -97,6 +109,7 @@ def chain(root: np.ndarray, locals_: list[np.ndarray]) -> np.ndarray:
     return t
 
 
-def wrist_in_suit(world_unity: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """(position (3,), quaternion x y z w) of the SMPL-X right-hand frame in the suit frame."""
-    return C @ world_unity[:3, 3], transforms.matrix_to_quat(C @ world_unity[:3, :3] @ D)
+def wrist_in_suit(world_unity: np.ndarray, side: str = "right") -> tuple[np.ndarray, np.ndarray]:
+    """(position (3,), quaternion x y z w) of the SMPL-X right-hand frame in the suit frame; of the left hand,
+    that frame mirrored (see the module's docstring)."""
+    return C @ world_unity[:3, 3], transforms.matrix_to_quat(C @ world_unity[:3, :3] @ (D if side == "right" else M))

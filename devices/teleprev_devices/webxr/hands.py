@@ -18,13 +18,20 @@ wrist for the thumb's. A whole-hand or wrist rotation therefore cancels, and the
 its own axis stays in the rotation, where the pipeline reads only the bone's direction
 (smplx.angles_from_hand_pose): twist never reads as abduction, and a thumb metacarpal turned about
 itself (IWER's pinch: about -105 degrees) reads as the same thumb.
+
+The left hand is read through its mirror image, a right hand: positions and joint frames mirrored through
+the reference space's x (a joint frame R becomes X R X, X = diag(-1, 1, 1), so that it is right-handed again
+with -z along the bone and +y out of the back). The right hand's conversions then give the pose in the right
+hand's terms, which is mirrored back into the left hand's own SMPL-X pose (what a left glove publishes; a
+bimanual pipeline mirrors it again before retargeting), and the wrist, given as a mirrored right wrist
+(teleprev/human/mirror.py: M R M in the suit frame, M = A X A^-1), as sim.suit and vmc.suit give a left one.
 """
 
 from __future__ import annotations
 
 import numpy as np
 
-from teleprev.devices import smplx, transforms
+from teleprev.devices import body_mirror, smplx, transforms
 
 FINGERS = ("thumb", "index-finger", "middle-finger", "ring-finger", "pinky-finger")
 _PARTS = {"thumb": ("metacarpal", "phalanx-proximal", "phalanx-distal", "tip"),
@@ -40,6 +47,8 @@ RAW_NAMES: tuple[str, ...] = tuple(f"{j}.{v}" for j in JOINTS for v in JOINT_VAL
 
 M = np.array([[0.0, 0.0, 1.0], [0.0, 1.0, 0.0], [-1.0, 0.0, 0.0]])  # WebXR joint axes -> SMPL-X hand axes
 A = np.array([[0.0, 0.0, -1.0], [-1.0, 0.0, 0.0], [0.0, 1.0, 0.0]])  # XR reference space -> suit frame
+X = np.diag([-1.0, 1.0, 1.0])  # the mirror through the reference space's x: a left hand <-> a right hand
+_X_QUAT = np.array([1.0, -1.0, -1.0, 1.0])  # X R X on a quaternion x y z w
 
 _SMPLX_FINGER = {"index": "index-finger", "middle": "middle-finger", "ring": "ring-finger",
                  "pinky": "pinky-finger", "thumb": "thumb"}
@@ -92,3 +101,27 @@ def head_in_suit(head: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     its axes stay the viewer's (WebXR: -z the gaze, +y up)."""
     head = np.asarray(head, dtype=float)
     return A @ head[:3], transforms.matrix_to_quat(A @ transforms.quat_to_matrix(head[3:7]))
+
+
+def mirrored_hand(joints: np.ndarray) -> np.ndarray:
+    """(25, 8): one hand's joint values as its mirror image's (a left hand as a right one, and back)."""
+    out = np.array(joints, dtype=float)
+    out[:, :3] = out[:, :3] @ X
+    out[:, 3:7] *= _X_QUAT
+    return out
+
+
+def side_hand_pose(joints: np.ndarray, side: str) -> np.ndarray:
+    """(45,) the SMPL-X pose of the `side` hand (its own, as a glove of that hand gives it)."""
+    if side == "right":
+        return hand_pose(joints)
+    return body_mirror.mirror_hand_pose(hand_pose(mirrored_hand(joints)))
+
+
+def side_wrist_in_suit(joints: np.ndarray, side: str) -> tuple[np.ndarray, np.ndarray]:
+    """The `side` wrist's (position, quaternion) in the suit frame: the left one as a mirrored right wrist."""
+    if side == "right":
+        return wrist_in_suit(joints)
+    position, quat = wrist_in_suit(mirrored_hand(joints))
+    position, rotation = body_mirror.mirror_wrist(position, transforms.quat_to_matrix(quat))
+    return position, transforms.matrix_to_quat(rotation)

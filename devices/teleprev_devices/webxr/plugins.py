@@ -12,6 +12,10 @@ in the XR reference space); the suit publishes the right wrist in the suit frame
 headset (/suit/<name>/head). A hand out of view sends nothing: the pipeline sees stale input and the
 commands brake and hold, as for a glove that goes quiet. See hands.py for the frames, server.py for the
 page's connection.
+
+`side = "left"` makes either plugin read the left hand instead (its own SMPL-X pose; its wrist as a mirrored
+right wrist, hands.py): a bimanual rig has a glove and a suit per side on one page and port, the left hand
+driving the left side.
 """
 
 from __future__ import annotations
@@ -34,6 +38,12 @@ class WebXrSettings(ListenSettings):
     port: int = DEFAULT_PORT
     rate_hz: float = 72.0  # the headset's frame rate (Quest 3: 72, 90 or 120)
     cert_dir: str = ""  # where the certificate and pairing token are kept; "": ~/.local/share/teleprev/webxr
+    side: str = "right"  # whose hand and wrist: "right", or "left" (a bimanual rig's left side)
+
+    def __post_init__(self):
+        super().__post_init__()
+        if self.side not in ("left", "right"):
+            raise ValueError(f"side must be 'left' or 'right', got {self.side!r}")
 
     def cert_folder(self, rig_dir: Path) -> Path:
         return rig_dir / self.cert_dir if self.cert_dir else certificate.default_dir()
@@ -45,11 +55,11 @@ V = TypeVar("V", bound=WebXrSettings)
 class _WebXrDevice(FanoutDevice[V]):
     def open_receiver(self) -> XrServer:
         s = self.settings
-        return acquire(self.context.shared, s.host, s.port, self.context.clock, s.cert_folder(self.context.rig_dir),
+        return acquire(self.context.receivers, s.host, s.port, self.context.clock, s.cert_folder(self.context.rig_dir),
                        self.context.operator)
 
     def close_receiver(self, server: XrServer) -> None:
-        release(self.context.shared, server, self.settings.port)
+        release(self.context.receivers, server, self.settings.port)
 
     def endpoint(self) -> str:
         port = self._receiver.port if self._receiver is not None else self.settings.port
@@ -64,8 +74,8 @@ class _WebXrDevice(FanoutDevice[V]):
 
 
 class WebXrGlove(_WebXrDevice[WebXrSettings], kind="glove"):
-    """The right hand as the SMPL-X hand pose on /glove/<name>/hand; each tracked hand's raw joints on
-    /glove/<name>/xr_left and xr_right (hands.RAW_NAMES)."""
+    """The right (or `side`'s) hand as the SMPL-X hand pose on /glove/<name>/hand; each tracked hand's raw
+    joints on /glove/<name>/xr_left and xr_right (hands.RAW_NAMES)."""
 
     def streams(self) -> list[StreamSpec]:
         rate = self.settings.rate_hz
@@ -75,12 +85,11 @@ class WebXrGlove(_WebXrDevice[WebXrSettings], kind="glove"):
     def convert(self, frame: Frame) -> list[Sample]:
         xr = frame.xr
         out = []
-        if xr.right is not None:
-            out.append(
-                Sample(
-                    self.topic("hand"), JointSample(frame.stamp_ns, smplx.HAND_POSE_NAMES, hands.hand_pose(xr.right))
-                )
-            )
+        side = self.settings.side
+        mine = xr.hand(side)
+        if mine is not None:
+            pose = hands.side_hand_pose(mine, side)
+            out.append(Sample(self.topic("hand"), JointSample(frame.stamp_ns, smplx.HAND_POSE_NAMES, pose)))
         for side in hands.HANDS:
             joints = xr.hand(side)
             if joints is not None:
@@ -91,7 +100,8 @@ class WebXrGlove(_WebXrDevice[WebXrSettings], kind="glove"):
 
 
 class WebXrSuit(_WebXrDevice[WebXrSettings], kind="suit"):
-    """The right wrist (PoseSample, frame "suit") on /suit/<name>/wrist and the headset on /suit/<name>/head."""
+    """The right (or `side`'s) wrist (PoseSample, frame "suit") on /suit/<name>/wrist and the headset on
+    /suit/<name>/head."""
 
     def streams(self) -> list[StreamSpec]:
         rate = self.settings.rate_hz
@@ -100,8 +110,9 @@ class WebXrSuit(_WebXrDevice[WebXrSettings], kind="suit"):
     def convert(self, frame: Frame) -> list[Sample]:
         xr = frame.xr
         out = []
-        if xr.right is not None:
-            position, quat = hands.wrist_in_suit(xr.right)
+        mine = xr.hand(self.settings.side)
+        if mine is not None:
+            position, quat = hands.side_wrist_in_suit(mine, self.settings.side)
             out.append(Sample(self.topic("wrist"), PoseSample(frame.stamp_ns, "suit", position, quat)))
         if xr.head is not None:
             position, quat = hands.head_in_suit(xr.head)

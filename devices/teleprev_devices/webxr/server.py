@@ -29,6 +29,7 @@ from pathlib import Path
 import numpy as np
 
 from teleprev.devices import (
+    GESTURE,
     ClockSync,
     DeviceError,
     DeviceStartError,
@@ -266,8 +267,9 @@ class XrServer:
             page.session = str(message.get("session", ""))[:40]
         elif kind == "action":
             action = str(message.get("action", ""))
+            via = GESTURE if message.get("via") == GESTURE else ""
             act = self.hooks.act
-            refused = act(action) if act is not None else "no session is recording (teleprev record starts one)"
+            refused = act(action, via) if act is not None else "no session is recording (teleprev record starts one)"
             if refused == "unknown":
                 self.counters.malformed_messages += 1
             else:
@@ -310,7 +312,7 @@ def _addresses(host: str) -> list[str]:
 
 
 def acquire(shared: dict, host: str, port: int, clock: SessionClock, cert_dir: Path, hooks: OperatorLink) -> XrServer:
-    """The server for (host, port), started by the first plugin that asks (kept in context.shared)."""
+    """The server for (host, port), started by the first plugin that asks (kept in context.receivers)."""
     def conflict(server: XrServer) -> str:
         return "" if server.credentials.cert.parent == Path(cert_dir) else (
             f"the devices on {host}:{port} share one server but name different cert_dir; give them the same one")

@@ -27,6 +27,7 @@ from teleprev.live.core.loop import SessionLoop
 from teleprev.live.core.relay import CommandRelay, tick_records
 from teleprev.messages import ImageSample, Logged, PoseSample, Sample
 from teleprev.pipeline.bimanual import BimanualDriver, side_topic
+from teleprev.status import SideView
 
 
 @dataclass(frozen=True)
@@ -84,7 +85,7 @@ class RelayPair:
                 self.errors[f"{side}/{kind}"] = n
 
 
-PREVIEWED_SIDE = "right"
+PREVIEWED_SIDE = "right"  # the side whose step the snapshot's own fields carry
 
 
 class BimanualLoop(SessionLoop):
@@ -157,14 +158,20 @@ class BimanualLoop(SessionLoop):
             for topic, value in out.logged:
                 self._log(Logged(topic, self._stamp(), value))
         self.relay.count()
-        # The terminal preview draws one robot: the right side's (SIDES' last), until it draws both.
-        shown = self.driver.drivers[PREVIEWED_SIDE]
-        step = outputs[PREVIEWED_SIDE].result or self.snapshot.step
-        latest, pipeline = shown.latest, shown.pipeline
+        # The terminal preview draws both sides; the snapshot's own step and joints are the right side's (the
+        # XR page's status reads those).
+        previous = {view.side: view for view in self.snapshot.sides}
+        views = []
+        for side, shown in self.driver.drivers.items():
+            latest, pipeline = shown.latest, shown.pipeline
+            step = outputs[side].result if side in outputs and outputs[side].result is not None else \
+                getattr(previous.get(side), "step", None)
+            views.append(SideView(side, step, pipeline.measured(latest.get(shown.topics.arm), pipeline.arm_names),
+                                  pipeline.measured(latest.get(shown.topics.effector), pipeline.effector_names)))
+        right = next(view for view in views if view.side == PREVIEWED_SIDE)
         self.snapshot = replace(
-            self.snapshot, mode=self.driver.mode, step=step,
-            measured_arm=pipeline.measured(latest.get(shown.topics.arm), pipeline.arm_names),
-            measured_effector=pipeline.measured(latest.get(shown.topics.effector), pipeline.effector_names),
+            self.snapshot, mode=self.driver.mode, step=right.step, measured_arm=right.measured_arm,
+            measured_effector=right.measured_effector, sides=tuple(views),
             commands_sent=sum(self.stats.commands_sent.values()), dropped=sum(self.stats.dropped.values()))
 
     def wired_side(self, side: str, record: WireRecord) -> None:

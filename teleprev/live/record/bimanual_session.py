@@ -19,12 +19,13 @@ import numpy as np
 from teleprev import topics
 from teleprev.bimanual import build_guard, build_side_pipelines, mount, side_inputs
 from teleprev.clock import SessionClock
-from teleprev.devices.contract import DeviceContext
+from teleprev.devices.contract import GESTURE
 from teleprev.errors import ConfigError
 from teleprev.live.core.bimanual_loop import BimanualLoop
 from teleprev.live.core.loop import LoopInbox
 from teleprev.live.record.frames import RobotFrames
 from teleprev.live.record.metadata import session_metadata
+from teleprev.live.record.operator_actions import ACTION_KEYS, operator_status
 from teleprev.live.record.session import PREVIEW_SLACK_S, URDF_MEDIA_TYPE, LiveSession, RecordOptions
 from teleprev.messages import Logged, RobotDescription, Transform, TransformsSample
 from teleprev.pipeline.bimanual import BimanualDriver, side_topic
@@ -35,6 +36,8 @@ from teleprev.sides import SIDES
 from teleprev.transforms import matrix_to_quat
 
 SIDES_RECORD = "sides"  # metadata record: side -> JSON of its devices, robot and end effector
+GESTURE_REFUSED = ("both hands drive robots, so pinches do nothing: use the foot pedal (Page Down: preview/execute, "
+                   "Page Up: next episode) or the page's buttons")
 
 
 def open_session(options: RecordOptions) -> LiveSession:
@@ -70,10 +73,13 @@ class BimanualSession(LiveSession):
         from teleprev.session.recorder import LAG_BUDGET_S, Recorder
 
         self.options = options
-        self.rig = rig = load_rig(options.rig)
-        if options.policy is not None or options.webxr_host or options.foxglove is not None:
-            raise ConfigError("a bimanual rig records with the sim or glove/suit devices only for now (no "
-                              "--foxglove, rollout or WebXR yet)", str(rig.path))
+        rig = load_rig(options.rig)
+        if options.webxr_host:  # the XR page's devices of both sides: one page, one address
+            rig = rig.with_device_settings("webxr", "--webxr-host", host=options.webxr_host)
+        self.rig = rig
+        if options.policy is not None or options.foxglove is not None:
+            raise ConfigError("a bimanual rig records with its glove/suit (or XR page) devices only for now (no "
+                              "--foxglove or rollout yet)", str(rig.path))
         if rig.sim.world == "physics":
             raise ConfigError("a bimanual rig has no physics world yet: use [sim] world = \"kinematic\"",
                               f"{rig.path} [sim]")
@@ -85,14 +91,10 @@ class BimanualSession(LiveSession):
         self.physics = None
         # Each side's devices see that side's robot; each side has its own kinematic sim world (shared dict).
         self.context = rig.device_context(self.clock)
-        contexts = {side: DeviceContext(self.clock, rig.dir, {}, s.robot, s.section.end_effector,
-                                        operator=self.context.operator) for side, s in rig.sides.items()}
+        contexts = rig.side_contexts(self.context)
         self.contexts = [self.context, *contexts.values()]
-        device_sides = {name: side for side, s in rig.sides.items() for name in s.device_names}
-        self.devices = {}
-        for name, entry in rig.devices.items():
-            context = contexts[device_sides[name]] if name in device_sides else self.context
-            self.devices[name] = entry.cls(name, entry.settings, context)
+        device_sides = rig.device_sides()
+        self.devices = rig.open_devices(rig.devices, self.context, contexts)
         self.pipelines = build_side_pipelines(rig, options.models)
         self.driver = BimanualDriver({side: (_driver(self.pipelines[side], rig, side), side_inputs(rig, side))
                                       for side in SIDES}, build_guard(rig, self.pipelines))
@@ -153,6 +155,15 @@ class BimanualSession(LiveSession):
         self.cannot_start = False
         self._press = self._press_unattended
         self.context.operator.act = self.act
+        self.context.operator.status = lambda: {**operator_status(self.loop.snapshot), "gestures": False}
+
+    def act(self, action: str, via: str = "") -> str:
+        """As LiveSession's, but a hand gesture is refused: both hands drive robots, so a pinch is a grasp, not a
+        control (the XR page stops reading pinches when the status says gestures: false; this holds if it did
+        not). The foot pedal (teleprev/preview/keys.py) and the page's buttons do what the pinches did."""
+        if via == GESTURE and action in ACTION_KEYS:
+            return GESTURE_REFUSED
+        return super().act(action, via)
 
     @property
     def preview_lead_s(self) -> float:

@@ -23,7 +23,7 @@ from teleprev.live.record.cues import Cues
 from teleprev.live.record.operator_actions import handle_key
 from teleprev.live.record.schedule import EpisodeTimes, Period, Schedule
 from teleprev.live.record.session import LiveSession
-from teleprev.preview.dashboard import CAMERA_KEY, Dashboard
+from teleprev.preview.dashboard import CAMERA_KEY, Dashboard, RobotSide
 from teleprev.preview.keys import KeyReader
 from teleprev.preview.robot_view import RobotView
 from teleprev.robot.model import load_robot
@@ -68,6 +68,13 @@ class PreviewPacer:
 
 
 def make_dashboard(recording: LiveSession, view: str) -> Dashboard:
+    robots = getattr(recording, "robots", None)  # a bimanual session: a robot per side
+    if robots is not None:
+        return Dashboard.bimanual(tuple(
+            RobotSide(side, RobotView(robots[side], view, ROBOT_BOUNDS.get(view)),
+                      RobotView(load_robot(s.effector.hand_urdf), "side") if s.effector.hand_urdf else None,
+                      recording.pipelines[side].arm_names, recording.pipelines[side].effector_names, robots[side])
+            for side, s in recording.rig.sides.items()))
     hand_view = None
     if recording.rig.effector.hand_urdf:
         hand_view = RobotView(load_robot(recording.rig.effector.hand_urdf), "side")

@@ -171,9 +171,10 @@ class LiveSession:
         reach it."""
         return self.pipeline.motion.stop_time_bound() + 2.0 / self.rig.pipeline.command_rate_hz + PREVIEW_SLACK_S
 
-    def act(self, action: str) -> str:
+    def act(self, action: str, via: str = "") -> str:
         """An operator action by name (operator_actions.ACTION_KEYS), from a control other than the keyboard:
-        it presses the action's key on whatever reads the keys now. "" when pressed, "unknown" for no such action."""
+        it presses the action's key on whatever reads the keys now. "" when pressed, "unknown" for no such action.
+        `via`: how it was asked (contract.OperatorLink); a one-arm session takes a gesture as any other."""
         key = ACTION_KEYS.get(action)
         if key is None:
             return "unknown"

@@ -48,9 +48,11 @@ function connect() {
   state.ws = ws;
 }
 
-function act(action) {
+// `via`: "gesture" for a pinch (a recording whose left hand drives a robot refuses those; its status says
+// gestures: false, and the page then stops reading pinches at all).
+function act(action, via = "") {
   window.teleprev.actions.push(action);
-  if (state.ws && state.connected) state.ws.send(JSON.stringify({ type: "action", action }));
+  if (state.ws && state.connected) state.ws.send(JSON.stringify({ type: "action", action, via }));
 }
 
 function episodeAction() {
@@ -109,11 +111,12 @@ function tip(hand, name) { const k = 8 * JOINTS.indexOf(name); return [hand[k], 
 function distance(a, b) { return Math.hypot(a[0] - b[0], a[1] - b[1], a[2] - b[2]); }
 
 function gestures(left) {
-  if (!left) { state.pinch.index = state.pinch.middle = false; return; }
+  const off = state.status && state.status.gestures === false;  // both hands drive robots (a bimanual rig)
+  if (!left || off) { state.pinch.index = state.pinch.middle = false; return; }
   const thumb = tip(left, "thumb-tip");
   for (const [finger, action] of [["index", () => "toggle_mode"], ["middle", episodeAction]]) {
     const d = distance(thumb, tip(left, `${finger}-finger-tip`));
-    if (!state.pinch[finger] && d < PINCH_ON_M) { state.pinch[finger] = true; act(action()); }
+    if (!state.pinch[finger] && d < PINCH_ON_M) { state.pinch[finger] = true; act(action(), "gesture"); }
     else if (state.pinch[finger] && d > PINCH_OFF_M) state.pinch[finger] = false;
   }
 }
