@@ -20,8 +20,8 @@ from teleprev import topics
 from teleprev.devices.servo_limits import STREAM_GAP_NS
 from teleprev.emulators.wire_schedule import PlannedSend
 from teleprev.errors import DeviceError
-from teleprev.live.core.paced import ACTUATOR_PRIORITY
 from teleprev.messages import JointSample
+from teleprev.thread_priority import ACTUATOR_PRIORITY
 from tests.helpers.wait import WaitTimeout, wait_until
 
 
