@@ -327,9 +327,9 @@ class LiveSession:
             silent = {name: r.stats() for name, r in self.runners.items() if r.stats().last_receive_ns is None}
             if not silent or time.monotonic() >= deadline:
                 break
-            if any(s.start_failure for s in silent.values()):  # no wait makes it start: say it at once
-                self.cannot_start = True
-                return cannot_start_lines(silent, self.rig)
+            failures = self.start_failures()
+            if failures:  # no wait makes it start: say it at once
+                return failures
             time.sleep(0.02)
         problems = []
         for name, s in silent.items():
@@ -340,6 +340,13 @@ class LiveSession:
                     "raise --connect-timeout)")
             problems.append(f"device {name!r} ({plugin}) sent nothing within {timeout_s:g} s: {tried}{what}")
         return problems
+
+    def start_failures(self) -> list[str]:
+        """One line per reason that devices cannot start at all (a port taken, a folder not writable), or []
+        while none has failed so: no wait makes such a device start, so the session ends at once."""
+        lines = cannot_start_lines({name: r.stats() for name, r in self.runners.items()}, self.rig)
+        self.cannot_start = self.cannot_start or bool(lines)
+        return lines
 
     def device_rows(self) -> list[DeviceRow]:
         rows = []
