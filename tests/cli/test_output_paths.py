@@ -65,6 +65,16 @@ CASES = {
     ),
     "audit --json missing folder": (["audit", FIXTURE, "--json"], [], "missing folder", "--json", "does not exist"),
     "study --out file": (["study", FIXTURE, "--out"], [], "file", "--out", "is a file"),
+    # the collision commands: checked before the robot's checker is built and torch loads
+    "collision dataset under a file": (["collision", "dataset"], ["--uniform", "10"], "deep under a file", "OUT",
+                                       "is a file, not a folder"),
+    "collision dataset file": (["collision", "dataset"], ["--uniform", "10"], "file", "OUT", "is a file"),
+    "collision train-cpn --out folder": (["collision", "train-cpn", "a_folder", "--out"], [], "folder", "--out",
+                                         "is a folder"),
+    "collision train-ccn --out under a file": (["collision", "train-ccn", "a_folder", "--out"], [], "under a file",
+                                               "--out", "is a file, not a folder"),
+    "collision grid-search --out under a file": (["collision", "grid-search", "a_folder", "--out"], [],
+                                                 "deep under a file", "--out", "is a file, not a folder"),
 }
 
 
