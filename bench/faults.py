@@ -13,8 +13,8 @@ Faults (times and offsets drawn from the seed):
   input    while `teleprev record` executes on a VMC glove and suit (real OSC bundles on loopback), the
            sender goes silent or sends NaN for a short time (within the rig's input_loss_to_preview_s) or
            a long one (past it); the record process frozen (SIGSTOP, then SIGCONT) for 2 s
-Every family runs twice: quiet, and under 8 busy processes (common.Load), from one table (FAMILIES) and one
-runner; the files they fault (a clean recording, a cut copy, a base dataset and the sessions appended to it)
+Every family runs twice, quiet and then under 8 busy processes (common.Load), from one table (FAMILIES) and
+one runner; the files they fault (a clean recording, a cut copy, a base dataset and the sessions appended to it)
 are made once, on first use, and shared by both halves.
 Per fault: the exit code, the seconds of recording lost, whether the output opens with the checks of
 `mcap doctor` (the mcap library's readers with CRC validation: every record, the summary, every message),
@@ -686,7 +686,12 @@ class Family:
     parallel: int = 1  # faults run at once: only where no time is measured (what a file or dataset keeps)
 
 
-FAMILIES = (  # those run in parallel first: a broken family shows within minutes
+FAMILIES = (  # the record faults first: their seconds lost under load are the figure most at risk
+    Family("record", "record signal", 24,
+           lambda sh, k, rng: record_signal(sh.work, next(sh.ids), nth_signal(k, 0), rng.uniform(0.5, 3.5))),
+    Family("record", "record full disk", 8,
+           lambda sh, k, rng: record_full_disk(sh.work, next(sh.ids), rng.randrange(400_000, 2_500_000))),
+    Family("input", "input loss and freeze", 15, input_fault, quick=2),
     Family("file", "bit flip", 54, damaged_fault("flip"), quick=2, parallel=4),
     Family("file", "cut", 22, damaged_fault("cut"), parallel=4),
     Family("recover", "recover signal", 18,
@@ -695,33 +700,29 @@ FAMILIES = (  # those run in parallel first: a broken family shows within minute
     Family("export", "export signal", 6, export_signal_fault, parallel=2),
     Family("export", "export full disk", 2,
            lambda sh, k, rng: export_full_disk(sh.work, next(sh.ids), k, sh.dataset[0], sh.dataset[1][0])),
-    Family("record", "record signal", 24,
-           lambda sh, k, rng: record_signal(sh.work, next(sh.ids), nth_signal(k, 0), rng.uniform(0.5, 3.5))),
-    Family("record", "record full disk", 8,
-           lambda sh, k, rng: record_full_disk(sh.work, next(sh.ids), rng.randrange(400_000, 2_500_000))),
-    Family("input", "input loss and freeze", 15, input_fault, quick=2),
     Family("device", "device dies", 2,
            lambda sh, k, rng: device_dies(sh.work, next(sh.ids), rng.uniform(1.0, 2.5))),
 )
 
 
 def run_matrix(families, shared: Shared, loads: dict[str, int], seed: int, add) -> None:
-    """Every family's faults, in each half: quiet, then beside `loads[load]` busy processes. Each fault draws
-    from a generator of its own (seeded in order), so the draws do not depend on which parallel fault ran first;
-    a family's first fault runs alone (it makes the shared files the others use)."""
+    """Every family's faults quiet, then beside `loads[load]` busy processes, family by family (so that a run
+    cut short has both halves of the families it ran). Each fault draws from a generator of its own (seeded in
+    order), so the draws do not depend on which parallel fault ran first; a family's first fault runs alone (it
+    makes the shared files the others use)."""
     draws = random.Random(seed)
-    for load, busy in loads.items():
-        with common.Load(busy):
-            for family in families:
-                n = family.quick if shared.quick else family.per_load
-                rngs = [random.Random(draws.getrandbits(64)) for _ in range(n)]
+    for family in families:
+        for load, busy in loads.items():
+            n = family.quick if shared.quick else family.per_load
+            rngs = [random.Random(draws.getrandbits(64)) for _ in range(n)]
 
-                def one(k: int, family=family, rngs=rngs) -> Row:
-                    t = time.monotonic()
-                    row = family.fault(shared, k, rngs[k])
-                    row.took_s = time.monotonic() - t
-                    return row
+            def one(k: int, family=family, rngs=rngs) -> Row:
+                t = time.monotonic()
+                row = family.fault(shared, k, rngs[k])
+                row.took_s = time.monotonic() - t
+                return row
 
+            with common.Load(busy):
                 if n:
                     add(one(0), load)
                 with ThreadPoolExecutor(family.parallel) as pool:
