@@ -114,9 +114,8 @@ def calibrate(
 
 def _check_before_the_first_pose(out: Path, hold: float | None, seconds: float) -> None:
     """What would lose the operator's three poses, refused before the first: no terminal to press Enter in,
-    or an --out that cannot be written (its folder is created now)."""
-    import os
-
+    or an --out that cannot be written (cli/outputs.py: a read-only folder too, which root's permissions hide)."""
+    from teleprev.cli.outputs import check_output
     from teleprev.errors import ConfigError
     from teleprev.preview.keys import KeyReader
 
@@ -127,11 +126,4 @@ def _check_before_the_first_pose(out: Path, hold: float | None, seconds: float) 
         raise ConfigError(f"--hold must be 0 or more seconds, got {hold:g}")
     if not 0 < seconds < float("inf"):
         raise ConfigError(f"--seconds must be a positive number of seconds, got {seconds:g}")
-    if out.is_dir():
-        raise ConfigError("is a folder; --out names the calibration file to write, e.g. calib/ada.toml", str(out))
-    try:
-        out.parent.mkdir(parents=True, exist_ok=True)
-    except OSError as exc:
-        raise ConfigError(f"cannot create the folder for --out ({exc.strerror or exc})", str(out.parent)) from None
-    if not os.access(out.parent, os.W_OK) or (out.exists() and not os.access(out, os.W_OK)):
-        raise ConfigError("cannot be written (permission denied)", str(out if out.exists() else out.parent))
+    check_output(out, "--out", make_parents=True)  # (write_calibration makes the folders)

@@ -103,7 +103,9 @@ def read_only(tmp_path):
 
 
 @pytest.mark.parametrize("args", [["record", "--duration", "1", "--no-preview", "--out"], ["audit", FIXTURE, "--json"],
-                                  ["eval", FIXTURE, "--out"]], ids=["record", "audit", "eval"])
+                                  ["eval", FIXTURE, "--out"], ["calibrate", "--hold", "0.5", "--out"],
+                                  ["collision", "dataset"], ["recover", FIXTURE, "--out"]],
+                         ids=["record", "audit", "eval", "calibrate", "collision dataset", "recover"])
 def test_a_read_only_folder_is_refused_before_the_work(read_only, args):
     run = teleprev(*args, read_only / "out.mcap")
     line = one_line(run)
