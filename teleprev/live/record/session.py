@@ -344,7 +344,10 @@ class LiveSession:
     def start_failures(self) -> list[str]:
         """One line per reason that devices cannot start at all (a port taken, a folder not writable), or []
         while none has failed so: no wait makes such a device start, so the session ends at once."""
-        lines = cannot_start_lines({name: r.stats() for name, r in self.runners.items()}, self.rig)
+        from teleprev.devices.runner import cannot_start_lines
+
+        lines = cannot_start_lines({name: r.stats() for name, r in self.runners.items()},
+                                   {name: entry.plugin for name, entry in self.rig.devices.items()})
         self.cannot_start = self.cannot_start or bool(lines)
         return lines
 
@@ -372,14 +375,3 @@ class LiveSession:
                          "loop_dropped": self._loop_dropped(name), "sink_errors": s.sink_errors,
                          "failures": self.loop.stats.device_failures.get(name, 0)}
         return out
-
-
-def cannot_start_lines(stats: dict, rig: Rig) -> list[str]:
-    """One line per reason devices cannot start (the devices sharing a receiver share its reason)."""
-    by_reason: dict[str, list[str]] = {}
-    for name, s in stats.items():
-        if s.start_failure:
-            by_reason.setdefault(s.start_failure, []).append(name)
-    return [f"{'devices' if len(names) > 1 else 'device'} {', '.join(repr(n) for n in names)} "
-            f"({', '.join(dict.fromkeys(rig.devices[n].plugin for n in names))}) cannot start: {reason}"
-            for reason, names in by_reason.items()]
