@@ -67,9 +67,10 @@ def calibrate(
     runners = [DeviceRunner(d, sink, clock) for d in devices]
     for runner in runners:
         runner.start()
-    announce_pages(console, devices)
     held: dict[str, dict[str, list]] = {}
     try:
+        _refuse_what_cannot_start(runners, {e.name: e.plugin for e in (glove, suit)})
+        announce_pages(console, devices)
         for pose, instruction in STEPS:
             for listener in context.task_listeners:  # a simulated operator takes the pose when asked
                 listener(f"calibration:{pose}")
@@ -84,6 +85,7 @@ def calibrate(
             time.sleep(seconds)
             collecting[0] = False
             if not samples["hand"] or not samples["wrist"]:
+                _refuse_what_cannot_start(runners, {e.name: e.plugin for e in (glove, suit)}, wait_s=0.0)
                 raise DeviceError(
                     f"no glove or suit data arrived while holding '{pose}'; check `teleprev devices check`", str(r.path)
                 )
@@ -110,6 +112,26 @@ def calibrate(
                           "as a .toml file", str(out)) from None
     console.print(f"wrote {path}: suit yaw {np.degrees(cal.calibration.suit_yaw):.1f} deg; "
                   f"reference it from the rig with \\[rig] calibration = \"{path}\"")
+
+
+START_WAIT_S = 2.0  # how long the devices' first connect may take before the first pose is asked for anyway
+
+
+def _refuse_what_cannot_start(runners, plugins: dict[str, str], wait_s: float = START_WAIT_S) -> None:
+    """A device that cannot start at all (its port taken, its certificate folder not writable) fails at once,
+    in the line `record` says, instead of "no data arrived" after the operator held a pose. Waits up to
+    wait_s for the devices' first connect to end (a slower one is asked about no further)."""
+    import time
+
+    from teleprev.devices.runner import cannot_start_lines
+    from teleprev.errors import DeviceError
+
+    deadline = time.monotonic() + wait_s
+    while time.monotonic() < deadline and any(r.stats().state == "connecting" for r in runners):
+        time.sleep(0.02)
+    lines = cannot_start_lines({r.name: r.stats() for r in runners}, plugins)
+    if lines:
+        raise DeviceError("; ".join(lines))
 
 
 def _check_before_the_first_pose(out: Path, hold: float | None, seconds: float) -> None:

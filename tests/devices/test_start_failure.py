@@ -102,3 +102,21 @@ def test_a_certificate_folder_that_cannot_be_made_is_said_once_and_not_retried(t
     assert stats.start_failure.startswith("WebXR server 127.0.0.1:0: cannot keep the page's certificate")
     errors = [e.data["message"] for e in events if isinstance(e, Event) and e.data["event"] == "error"]
     assert errors == [f"cannot start: {stats.start_failure}"]
+
+
+def test_calibrate_with_the_webxr_port_taken_fails_before_the_first_pose(tmp_path):
+    """It said "no glove or suit data arrived while holding 'open'" after the operator held the pose."""
+    with socket.socket() as taken:
+        taken.bind(("127.0.0.1", 0))
+        taken.listen()
+        port = taken.getsockname()[1]
+        rig = tmp_path / "rig.toml"
+        rig.write_text(WEBXR_RIG.read_text().replace("port = 8443", f"port = {port}"))
+        ran = run_cli(["calibrate", rig, "--hold", "600", "--out", tmp_path / "ada.toml"], timeout=240)
+    assert ran.returncode == 2, (ran.stdout, ran.stderr)
+    assert not has_traceback(ran.stderr)
+    assert re.fullmatch(rf"error: devices 'glove', 'suit' \(webxr.glove, webxr.suit\) cannot start: WebXR server "
+                        rf"127.0.0.1:{port}: cannot listen on 127.0.0.1:{port} \(.*address already in use\); is "
+                        r"another program using the port\?", ran.stderr.strip()), ran.stderr
+    assert "open" not in ran.stdout  # no pose was asked for
+    assert not (tmp_path / "ada.toml").exists()
