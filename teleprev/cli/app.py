@@ -6,6 +6,7 @@ answers quickly; numpy, torch and lerobot are imported inside the commands that 
 
 from __future__ import annotations
 
+import signal
 import sys
 
 import typer
@@ -131,13 +132,16 @@ def main() -> None:
     from rich.console import Console
     from rich.markup import escape
 
+    from teleprev.cli.signals import StopSignals
     from teleprev.errors import TeleprevError
 
     command = typer.main.get_command(app)
     plain_help(command)
+    signals = StopSignals()  # SIGTERM and SIGHUP stop every command as Ctrl-C does (its clean-up runs)
     try:
-        code = command.main(args=foxglove_port_default(ray_address_default(sys.argv[1:])), prog_name="teleprev",
-                            standalone_mode=False)
+        with signals:
+            code = command.main(args=foxglove_port_default(ray_address_default(sys.argv[1:])), prog_name="teleprev",
+                                standalone_mode=False)
     except TeleprevError as exc:
         # escape: "[devices.suit]" in a message is where the error is, not rich markup
         Console(stderr=True).print(f"[bold red]error:[/] {escape(str(exc))}", highlight=False, soft_wrap=True)
@@ -154,9 +158,18 @@ def main() -> None:
     except typer.Abort:  # end of input at a prompt
         sys.exit(1)
     except KeyboardInterrupt:
+        stopped = signals.received not in (None, signal.SIGINT)
+        Console(stderr=True).print(f"stopped by {signals.name}" if stopped else INTERRUPTED, highlight=False)
+        sys.exit(signals.exit_code if stopped else INTERRUPTED_EXIT)
+    code = code if isinstance(code, int) else 0
+    # A signal that stopped a command without clean-up of its own: typer turns the interrupt into exit 130
+    # without a word (and a command that ends quietly on Ctrl-C, as `devices emulate`, returns 0).
+    if signals.received == signal.SIGINT and code == INTERRUPTED_EXIT:
         Console(stderr=True).print(INTERRUPTED, highlight=False)
-        sys.exit(INTERRUPTED_EXIT)
-    sys.exit(code if isinstance(code, int) else 0)
+    elif signals.received is not None and signals.received != signal.SIGINT and code in (0, INTERRUPTED_EXIT):
+        Console(stderr=True).print(f"stopped by {signals.name}", highlight=False)
+        code = signals.exit_code
+    sys.exit(code)
 
 
 if __name__ == "__main__":

@@ -116,10 +116,12 @@ def calibrate(
     runners = [DeviceRunner(d, sink, clock) for d in devices]
     for runner in runners:
         runner.start()
-    announce_pages(console, devices)
     held: dict[tuple[str, str], dict[str, list]] = {}  # (side, pose) -> samples
     both = "With both hands: " if r.bimanual else ""
+    plugins = {runner.name: r.devices[runner.name].plugin for runner in runners}
     try:
+        _refuse_what_cannot_start(runners, plugins)
+        announce_pages(console, devices)
         for pose, instruction in STEPS:
             for c in contexts:  # a simulated operator takes the pose when asked
                 for listener in c.task_listeners:
@@ -137,6 +139,7 @@ def calibrate(
             collecting[0] = False
             for reading in readings:
                 if not reading.samples["hand"] or not reading.samples["wrist"]:
+                    _refuse_what_cannot_start(runners, plugins, wait_s=0.0)
                     raise DeviceError(f"no glove or suit data arrived{reading.where} while holding '{pose}'; check "
                                       "`teleprev devices check`", str(r.path))
                 held[reading.side, pose] = {k: list(v) for k, v in reading.samples.items()}
@@ -165,11 +168,30 @@ def calibrate(
                       f"reference it from the rig with {table} calibration = \"{path}\"")
 
 
+START_WAIT_S = 2.0  # how long the devices' first connect may take before the first pose is asked for anyway
+
+
+def _refuse_what_cannot_start(runners, plugins: dict[str, str], wait_s: float = START_WAIT_S) -> None:
+    """A device that cannot start at all (its port taken, its certificate folder not writable) fails at once,
+    in the line `record` says, instead of "no data arrived" after the operator held a pose. Waits up to
+    wait_s for the devices' first connect to end (a slower one is asked about no further)."""
+    import time
+
+    from teleprev.devices.runner import cannot_start_lines
+    from teleprev.errors import DeviceError
+
+    deadline = time.monotonic() + wait_s
+    while time.monotonic() < deadline and any(r.stats().state == "connecting" for r in runners):
+        time.sleep(0.02)
+    lines = cannot_start_lines({r.name: r.stats() for r in runners}, plugins)
+    if lines:
+        raise DeviceError("; ".join(lines))
+
+
 def _check_before_the_first_pose(out: Path, hold: float | None, seconds: float) -> None:
     """What would lose the operator's three poses, refused before the first: no terminal to press Enter in,
-    or an --out that cannot be written (its folder is created now)."""
-    import os
-
+    or an --out that cannot be written (cli/outputs.py: a read-only folder too, which root's permissions hide)."""
+    from teleprev.cli.outputs import check_output
     from teleprev.errors import ConfigError
     from teleprev.preview.keys import KeyReader
 
@@ -180,11 +202,4 @@ def _check_before_the_first_pose(out: Path, hold: float | None, seconds: float) 
         raise ConfigError(f"--hold must be 0 or more seconds, got {hold:g}")
     if not 0 < seconds < float("inf"):
         raise ConfigError(f"--seconds must be a positive number of seconds, got {seconds:g}")
-    if out.is_dir():
-        raise ConfigError("is a folder; --out names the calibration file to write, e.g. calib/ada.toml", str(out))
-    try:
-        out.parent.mkdir(parents=True, exist_ok=True)
-    except OSError as exc:
-        raise ConfigError(f"cannot create the folder for --out ({exc.strerror or exc})", str(out.parent)) from None
-    if not os.access(out.parent, os.W_OK) or (out.exists() and not os.access(out, os.W_OK)):
-        raise ConfigError("cannot be written (permission denied)", str(out if out.exists() else out.parent))
+    check_output(out, "--out", make_parents=True)  # (write_calibration makes the folders)

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import math
 import shlex
 from pathlib import Path
 
@@ -36,8 +37,8 @@ def _floats(text: str, what: str) -> tuple[float, ...]:
         values = tuple(float(v) for v in text.split(",") if v.strip())
     except ValueError:
         raise typer.BadParameter(f"{what}: expected comma-separated numbers, got {text!r}") from None
-    if not values or any(v < 0 for v in values):
-        raise typer.BadParameter(f"{what}: expected one or more non-negative numbers, got {text!r}")
+    if not values or any(not math.isfinite(v) or v < 0 for v in values):
+        raise typer.BadParameter(f"{what}: expected one or more non-negative finite numbers, got {text!r}")
     return values
 
 
@@ -51,6 +52,16 @@ def _hidden(text: str) -> tuple[int, ...]:
     if not sizes or any(s <= 0 for s in sizes):
         raise typer.BadParameter(f"--hidden: layer widths must be positive, got {text!r}")
     return sizes
+
+
+def check_training_paths(data: Path, out: Path) -> None:
+    """A training command's dataset folder and the weights file it writes (its card goes beside it), before
+    torch loads: one line each."""
+    from teleprev.cli.outputs import check_input, check_output
+
+    check_input(data, "DATA", "collision dataset folder", folder=True)
+    check_output(out, "--out", make_parents=True)
+    check_output(out.with_suffix(".md"), "--out", make_parents=True)
 
 
 def _setup(robot: str):
@@ -80,6 +91,12 @@ def dataset(
     workers: int = typer.Option(0, min=0, help="Worker processes (0: one per core)."),
 ) -> None:
     """Sample configurations, label every link with the exact checker, and write parquet shards."""
+    from teleprev.cli.outputs import check_output
+    from teleprev.cli.values import check_finite
+
+    check_output(out, "OUT", "folder", make_parents=True)
+    for option, value in (("--jitter-min", jitter_min), ("--jitter-max", jitter_max)):
+        check_finite(option, value, "a finite jitter in radians (0 or more)")
     import os
     import time
 
@@ -170,18 +187,23 @@ def train_cpn_cmd(
     """Train the Self-Collision Prediction Network (per-link BCE, Adam) and pick its threshold for recall."""
     from rich.console import Console
 
+    from teleprev.cli.values import check_finite
     from teleprev.noncollision.mlp import ACTIVATIONS
     from teleprev.noncollision.train_cpn import CPNSettings, train_cpn
 
+    check_training_paths(data, out)
+    for option, value in (("--lr", lr), ("--pos-weight", pos_weight), ("--pair-weight", pair_weight)):
+        check_finite(option, value, "a finite number (0 or more)")
     if activation not in ACTIVATIONS:
         raise typer.BadParameter(f"--activation must be one of {', '.join(ACTIVATIONS)}")
     if architecture not in ("grouped", "plain"):
         raise typer.BadParameter("--architecture must be grouped or plain")
+    widths = _hidden(hidden)
     model, checker = _setup(robot)
     console = Console()
     settings = CPNSettings(
         architecture=architecture,
-        hidden=_hidden(hidden),
+        hidden=widths,
         activation=activation,
         epochs=epochs,
         batch_size=batch_size,
@@ -238,15 +260,23 @@ def train_ccn_cmd(
     """Train the Invalid Configuration Correction Network against the frozen CPN."""
     from rich.console import Console
 
+    from teleprev.cli.outputs import check_input
+    from teleprev.cli.values import check_finite
     from teleprev.noncollision.train_ccn import CCNSettings, train_ccn
 
+    check_training_paths(data, out)
+    check_input(cpn, "--cpn", "CPN weights file")
+    check_input(grid, "--grid", "grid-search result")
+    for option, value in (("--alpha", alpha), ("--beta", beta), ("--lr", lr)):
+        check_finite(option, value, "a finite number (0 or more)")
+    widths = _hidden(hidden)
     if grid is not None:
         from teleprev.noncollision.grid_search import read_chosen
 
         alpha, beta = read_chosen(grid)
     model, checker = _setup(robot)
     console = Console()
-    settings = CCNSettings(alpha=alpha, beta=beta, hidden=_hidden(hidden), epochs=epochs, batch_size=batch_size, lr=lr,
+    settings = CCNSettings(alpha=alpha, beta=beta, hidden=widths, epochs=epochs, batch_size=batch_size, lr=lr,
                            val_exact=val_exact, max_train=max_train, seed=seed, device=device)
     console.print(f"alpha = {alpha:g}, beta = {beta:g}")
 
@@ -318,14 +348,20 @@ def grid_search_cmd(
     from rich.console import Console
     from rich.table import Table
 
+    from teleprev.cli.outputs import check_input, check_output
     from teleprev.noncollision.grid_search import grid_search, write_grid
     from teleprev.noncollision.train_ccn import CCNSettings
 
+    for written in (out.with_suffix(".json"), out.with_suffix(".md")):
+        check_output(written, "--out", make_parents=True)
+    check_input(data, "DATA", "collision dataset folder", folder=True)
+    check_input(cpn, "--cpn", "CPN weights file")
     a, b = _floats(alphas, "--alphas"), _floats(betas, "--betas")
+    widths = _hidden(hidden)
     model, checker = _setup(robot)
     console = Console()
     settings = CCNSettings(
-        hidden=_hidden(hidden), epochs=epochs, max_train=max_train, val_exact=val_exact, seed=seed, device=device
+        hidden=widths, epochs=epochs, max_train=max_train, val_exact=val_exact, seed=seed, device=device
     )
 
     def log(p) -> None:

@@ -48,15 +48,17 @@ def check_output(path: Path | None, option: str, kind: Literal["file", "folder"]
     _writable(parent, where)
 
 
-def check_input(path: Path | None, option: str, what: str = "file") -> None:
-    """Refuse a path to read that is missing or a folder."""
+def check_input(path: Path | None, option: str, what: str = "file", *, folder: bool = False) -> None:
+    """Refuse a path to read that is missing, or a folder (with `folder`: a file)."""
     if path is None:
         return
     path = Path(path)
     if not path.exists():
         raise ConfigError(f"no such {what}", f"{option} {path}")
-    if path.is_dir():
+    if path.is_dir() and not folder:
         raise ConfigError(f"is a folder; this option names a {what} to read", f"{option} {path}")
+    if folder and not path.is_dir():
+        raise ConfigError(f"is a file; this names a {what} to read", f"{option} {path}")
 
 
 def _writable(folder: Path, where: str) -> None:

@@ -143,6 +143,7 @@ def record(
                 run_script(recording, duration, episodes, engage_after, console if preview else None, view, fps)
             elif not unconnected:
                 run_interactive(recording, console, view, fps, show=preview)
+                unconnected = recording.start_failures()  # what ended it at once, if a device cannot start
         except KeyboardInterrupt:
             pass  # Ctrl-C, SIGTERM or SIGHUP: the session is finalized below all the same
         finally:

@@ -164,6 +164,12 @@ def eval_(
     check_output(plots, "--plots", "folder", make_parents=True)
     check_input(baseline, "--baseline", "report")
     check_input(tolerances, "--tolerances", "tolerances file")
+    check_input(models, "--models", "folder of CPN/CCN weights", folder=True)
+    if models is not None:  # weights that cannot be read fail every session: say so once, before the work
+        from teleprev.noncollision.mlp import read_info
+
+        for weights in sorted(models.glob("*.safetensors")):
+            read_info(weights)
     paths = resolve_sessions(sessions)
     console = Console()
     executor = None

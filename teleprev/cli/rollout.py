@@ -60,31 +60,35 @@ def rollout(
     plan = check_rollout(options)  # bad input: one line, exit 2, before anything opens
     console = Console()
     console.print(f"loading {plan.card.type} policy from {escape(str(policy))} ...", highlight=False)
-    from teleprev.live.rollout.lerobot_policy import LeRobotPolicy
-
-    loaded = LeRobotPolicy.load(policy)
-    with StopSignals() as signals:
-        with signals.deferred():  # the session file opened whole (a signal now is raised in the try below)
-            run = Rollout(options, plan, loaded)
-        result = None
+    run = result = None
+    with StopSignals() as signals:  # SIGTERM, SIGHUP as Ctrl-C: the robot stops, the recording is finalized
         try:
+            from teleprev.live.rollout.lerobot_policy import LeRobotPolicy
+
+            loaded = LeRobotPolicy.load(policy)
+            with signals.deferred():  # the session file opened whole (a signal now is raised below)
+                run = Rollout(options, plan, loaded)
             signals.check()
-            result = run.run()
+            result = run.run(signals)
         except KeyboardInterrupt:
-            if run.recording.summary is None:  # stopped before the run began: its file is finalized here
+            if run is not None and run.recording.summary is None:  # stopped before the run began
                 with signals.finishing():
                     run.recording.stop()
+    if run is None:  # (only a signal leaves it so) stopped while the policy loaded: nothing was recorded
+        signals.exit_if_stopped(console)
     recording = run.recording
-    if recording.summary is not None:
-        print_summary(console, recording, recording.summary)
-    stats = run.runner.stats
-    console.print(f"policy: {stats.inferences} inferences ({stats.policy_hz():.1f} Hz while inferring), "
-                  f"{stats.handed} actions handed on at {plan.fps:g} fps, {stats.starved} frames without one",
-                  highlight=False)
-    if recording.summary is not None:
-        print_success(console, recording.options.out)
-    if signals.received is not None:
-        raise typer.Exit(signals.exit_code)
+    try:
+        if recording.summary is not None:
+            print_summary(console, recording, recording.summary)
+        stats = run.runner.stats
+        console.print(f"policy: {stats.inferences} inferences ({stats.policy_hz():.1f} Hz while inferring), "
+                      f"{stats.handed} actions handed on at {plan.fps:g} fps, {stats.starved} frames without one",
+                      highlight=False)
+        if recording.summary is not None:
+            print_success(console, recording.options.out)
+    except OSError:  # the terminal went away with the SIGHUP; the file is complete all the same
+        pass
+    signals.exit_if_stopped(console, options.out)
     errors = Console(stderr=True)
     if result is not None and result.unconnected:
         for line in result.unconnected:
@@ -92,9 +96,8 @@ def rollout(
         raise typer.Exit(1)
     failure = stats.failure or recording.loop.failure
     if failure:
-        errors.print(
-            f"[bold red]error:[/] {escape(failure)} (the robot was braked to rest)", highlight=False, soft_wrap=True
-        )
+        errors.print(f"[bold red]error:[/] {escape(failure)} (the robot was braked to rest)", highlight=False,
+                     soft_wrap=True)
         raise typer.Exit(1)
     if recording.loop.stats.device_failures:
         raise typer.Exit(1)

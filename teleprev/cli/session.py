@@ -186,11 +186,14 @@ def recover(
     from rich.console import Console
     from rich.table import Table
 
+    from teleprev.cli.outputs import check_output
     from teleprev.cli.signals import StopSignals
     from teleprev.session.reader import check_written_by_teleprev
+    from teleprev.session.recover import default_destination
     from teleprev.session.recover import recover as do_recover
 
     check_written_by_teleprev(session)
+    check_output(out if out is not None else default_destination(session), "--out", overwrite=False)
 
     with StopSignals() as signals:  # a signal removes the half-written output (the source is never touched)
         try:

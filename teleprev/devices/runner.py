@@ -403,3 +403,15 @@ class ActuatorPort:
             return False
         self.sent += 1
         return True
+
+
+def cannot_start_lines(stats: dict[str, RunnerStats], plugins: dict[str, str]) -> list[str]:
+    """One line per reason devices cannot start at all (the devices sharing a receiver share its reason), from
+    each device's runner stats; `plugins` names each device's plugin."""
+    by_reason: dict[str, list[str]] = {}
+    for name, s in stats.items():
+        if s.start_failure:
+            by_reason.setdefault(s.start_failure, []).append(name)
+    return [f"{'devices' if len(names) > 1 else 'device'} {', '.join(repr(n) for n in names)} "
+            f"({', '.join(dict.fromkeys(plugins[n] for n in names))}) cannot start: {reason}"
+            for reason, names in by_reason.items()]

@@ -110,3 +110,47 @@ def test_a_ctrl_c_after_a_lost_one_still_interrupts(monkeypatch):
             for _ in range(1000):
                 pass
     assert signals.received == signal.SIGINT and signals.later == 2
+
+
+# SIGTERM or SIGHUP sent by the child itself, raised where it is sent (not lost), when `name` is called.
+SIGNAL_AT_A_CALL = """
+import importlib, os, signal
+def signalled_in(module, name, sig):
+    owner, attr = name.rsplit(".", 1) if "." in name else (None, name)
+    mod = importlib.import_module(module)
+    holder = getattr(mod, owner) if owner else mod
+    original = getattr(holder, attr)
+    def wrapped(*args, **kwargs):
+        os.kill(os.getpid(), sig)
+        for _ in range(1000): pass  # the handler runs here
+        return original(*args, **kwargs)
+    setattr(holder, attr, wrapped)
+"""
+
+
+@pytest.mark.parametrize("sig", [signal.SIGTERM, signal.SIGHUP], ids=["sigterm", "sighup"])
+def test_a_stop_signal_while_imports_run_is_one_line(sig):
+    ran = run_child(INTERRUPT_AN_IMPORT.replace("signal.SIGINT", f"signal.{sig.name}"), ["info", "--help"])
+    assert ran.returncode == 128 + sig, (ran.returncode, ran.stderr)
+    assert ran.stderr.strip() == f"stopped by {sig.name}"
+
+
+FIXTURE = ROOT / "tests" / "fixtures" / "sim_v2.mcap"
+
+
+@pytest.mark.parametrize("sig", [signal.SIGINT, signal.SIGTERM, signal.SIGHUP], ids=["sigint", "sigterm", "sighup"])
+@pytest.mark.parametrize("args, module, where", [
+    (["eval", FIXTURE, "--out", "{tmp}/report.json"], "teleprev.evaluation.corpus", "evaluate_corpus"),
+    (["audit", FIXTURE, "--json", "{tmp}/audit.json"], "teleprev.evaluation.audit", "audit_path"),
+    (["info", FIXTURE], "teleprev.session.summary", "summarize"),
+], ids=["eval", "audit", "info"])
+def test_a_stop_signal_during_a_command_is_one_line_and_writes_nothing(tmp_path, sig, args, module, where):
+    """A command without clean-up of its own: SIGTERM and SIGHUP stop it as Ctrl-C does (one line, exit
+    128 + the signal), not a death without a word, and Ctrl-C says "interrupted" (typer's exit 130 said
+    nothing); what it would have written is not half there."""
+    code = SIGNAL_AT_A_CALL + f"\nsignalled_in({module!r}, {where!r}, signal.{sig.name})\n"
+    ran = run_child(code, [str(a).format(tmp=tmp_path) for a in args])
+    assert ran.returncode == 128 + sig, (ran.returncode, ran.stdout[-2000:], ran.stderr)
+    assert not has_traceback(ran.stdout + ran.stderr), ran.stderr
+    assert ran.stderr.strip() == ("interrupted" if sig == signal.SIGINT else f"stopped by {sig.name}"), ran.stderr
+    assert list(tmp_path.iterdir()) == []

@@ -110,7 +110,7 @@ def test_help_shows_choices_and_no_type_labels_that_say_nothing():
 def test_calibrate_refuses_an_out_it_could_not_write_before_the_first_pose(tmp_path):
     (tmp_path / "taken").write_text("a file where the folder should be")
     (tmp_path / "calib").mkdir()
-    for out, said in ((tmp_path / "taken" / "ada.toml", "cannot create the folder for --out"),
+    for out, said in ((tmp_path / "taken" / "ada.toml", "is a file, not a folder"),
                       (tmp_path / "calib", "is a folder")):
         run = teleprev("calibrate", "--out", out, "--hold", "0.5", cwd=tmp_path)
         assert run.returncode == 2 and said in one_line(run) and "ok" not in run.stdout  # no pose was taken

@@ -65,6 +65,16 @@ CASES = {
     ),
     "audit --json missing folder": (["audit", FIXTURE, "--json"], [], "missing folder", "--json", "does not exist"),
     "study --out file": (["study", FIXTURE, "--out"], [], "file", "--out", "is a file"),
+    # the collision commands: checked before the robot's checker is built and torch loads
+    "collision dataset under a file": (["collision", "dataset"], ["--uniform", "10"], "deep under a file", "OUT",
+                                       "is a file, not a folder"),
+    "collision dataset file": (["collision", "dataset"], ["--uniform", "10"], "file", "OUT", "is a file"),
+    "collision train-cpn --out folder": (["collision", "train-cpn", "a_folder", "--out"], [], "folder", "--out",
+                                         "is a folder"),
+    "collision train-ccn --out under a file": (["collision", "train-ccn", "a_folder", "--out"], [], "under a file",
+                                               "--out", "is a file, not a folder"),
+    "collision grid-search --out under a file": (["collision", "grid-search", "a_folder", "--out"], [],
+                                                 "deep under a file", "--out", "is a file, not a folder"),
 }
 
 
@@ -93,7 +103,9 @@ def read_only(tmp_path):
 
 
 @pytest.mark.parametrize("args", [["record", "--duration", "1", "--no-preview", "--out"], ["audit", FIXTURE, "--json"],
-                                  ["eval", FIXTURE, "--out"]], ids=["record", "audit", "eval"])
+                                  ["eval", FIXTURE, "--out"], ["calibrate", "--hold", "0.5", "--out"],
+                                  ["collision", "dataset"], ["recover", FIXTURE, "--out"]],
+                         ids=["record", "audit", "eval", "calibrate", "collision dataset", "recover"])
 def test_a_read_only_folder_is_refused_before_the_work(read_only, args):
     run = teleprev(*args, read_only / "out.mcap")
     line = one_line(run)

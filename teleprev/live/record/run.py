@@ -109,12 +109,12 @@ def run_interactive(recording: LiveSession, console: Console, view: str, fps: fl
     press = with_camera_key(dashboard, lambda k: handle_key(recording, k, quit_flag))
     with KeyReader(press), recording.pressing(press):
         if dashboard is None:
-            while not quit_flag and not recording.failure:  # nobody watches a screen: end at once
+            while not quit_flag and not recording.failure and not recording.start_failures():  # nobody watches
                 time.sleep(0.1)
             return stats
         pacer = PreviewPacer(fps, recording.loop.backlog)
         with Live(console=console, auto_refresh=False, screen=console.is_terminal, transient=False) as live:
-            while not quit_flag:
+            while not quit_flag and not recording.start_failures():  # (the caller says why, in one line)
                 t = time.perf_counter()
                 live.update(_frame(dashboard, recording, console), refresh=True)
                 stats.frames += 1

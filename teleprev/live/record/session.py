@@ -328,9 +328,9 @@ class LiveSession:
             silent = {name: r.stats() for name, r in self.runners.items() if r.stats().last_receive_ns is None}
             if not silent or time.monotonic() >= deadline:
                 break
-            if any(s.start_failure for s in silent.values()):  # no wait makes it start: say it at once
-                self.cannot_start = True
-                return cannot_start_lines(silent, self.rig)
+            failures = self.start_failures()
+            if failures:  # no wait makes it start: say it at once
+                return failures
             time.sleep(0.02)
         problems = []
         for name, s in silent.items():
@@ -341,6 +341,16 @@ class LiveSession:
                     "raise --connect-timeout)")
             problems.append(f"device {name!r} ({plugin}) sent nothing within {timeout_s:g} s: {tried}{what}")
         return problems
+
+    def start_failures(self) -> list[str]:
+        """One line per reason that devices cannot start at all (a port taken, a folder not writable), or []
+        while none has failed so: no wait makes such a device start, so the session ends at once."""
+        from teleprev.devices.runner import cannot_start_lines
+
+        lines = cannot_start_lines({name: r.stats() for name, r in self.runners.items()},
+                                   {name: entry.plugin for name, entry in self.rig.devices.items()})
+        self.cannot_start = self.cannot_start or bool(lines)
+        return lines
 
     def device_rows(self) -> list[DeviceRow]:
         rows = []
@@ -366,14 +376,3 @@ class LiveSession:
                          "loop_dropped": self._loop_dropped(name), "sink_errors": s.sink_errors,
                          "failures": self.loop.stats.device_failures.get(name, 0)}
         return out
-
-
-def cannot_start_lines(stats: dict, rig: Rig) -> list[str]:
-    """One line per reason devices cannot start (the devices sharing a receiver share its reason)."""
-    by_reason: dict[str, list[str]] = {}
-    for name, s in stats.items():
-        if s.start_failure:
-            by_reason.setdefault(s.start_failure, []).append(name)
-    return [f"{'devices' if len(names) > 1 else 'device'} {', '.join(repr(n) for n in names)} "
-            f"({', '.join(dict.fromkeys(rig.devices[n].plugin for n in names))}) cannot start: {reason}"
-            for reason, names in by_reason.items()]

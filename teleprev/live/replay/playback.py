@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import contextlib
 import threading
 import time
 from pathlib import Path
@@ -16,6 +15,7 @@ from teleprev.assembly import build_pipeline, rig_calibration
 from teleprev.clock import SessionClock
 from teleprev.errors import ConfigError, DeviceError
 from teleprev.export.actions import is_dataset
+from teleprev.live.no_signals import NoSignals
 from teleprev.live.record.run import ROBOT_BOUNDS
 from teleprev.live.replay.player import (
     ROUNDING,
@@ -212,7 +212,7 @@ def play(session: Path, episode, speed: float, to: str, rig_path, engage_after, 
          smoothed: bool = False, foxglove: int | None = None, out: Path | None = None, signals=None) -> None:
     """`signals` (teleprev.cli.signals.StopSignals): a stop signal while the player and its recording are
     built is raised once they are whole, and none cuts the robot's stop and the recording's close short."""
-    signals = signals or _NoSignals()
+    signals = signals or NoSignals()
     with signals.deferred():
         built = build_player(session, episode, speed, to, rig_path, smoothed, out)
     player, runners, tap, rig, message, recording = built
@@ -237,19 +237,6 @@ def play(session: Path, episode, speed: float, to: str, rig_path, engage_after, 
         raise DeviceError(f"playback stopped: {player.state.message}")
     if recording is not None:
         recording.check()
-
-
-class _NoSignals:
-    """play() without a command's stop signals (tests, scripts)."""
-
-    def deferred(self):
-        return contextlib.nullcontext()
-
-    def finishing(self):
-        return contextlib.nullcontext()
-
-    def check(self) -> None:
-        pass
 
 
 def _show(session: Path, player: Player, thread: threading.Thread, to: str, rig, engage_after, console: Console,

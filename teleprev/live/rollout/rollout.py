@@ -22,6 +22,7 @@ from teleprev import topics
 from teleprev.clock import SessionClock
 from teleprev.errors import ConfigError
 from teleprev.export.recipe import Recipe, load_recipe
+from teleprev.live.no_signals import NoSignals
 from teleprev.live.record.run import run_timed
 from teleprev.live.record.schedule import EpisodeTimes
 from teleprev.live.record.session import LiveSession, RecordOptions
@@ -189,17 +190,24 @@ class Rollout:
         now = clock.now_ns()
         self.recording.loop.sink(Sample(topics.POLICY_ACTION, JointSample(now, self.plan.action_names, action)), now)
 
-    def run(self) -> RolloutResult:
-        """Start, run the episodes, stop (the file is closed even when interrupted)."""
+    def run(self, signals=None) -> RolloutResult:
+        """Start, run the episodes, stop (the file is closed even when interrupted). `signals`
+        (teleprev.cli.signals.StopSignals): one whose interrupt start-up lost still stops the rollout before
+        the policy acts, and none cuts the robot's stop and the file's close short."""
+        signals = signals or NoSignals()
         o = self.options
         result = RolloutResult(self.recording, self.runner)
         try:
-            self.recording.start()
+            with signals.deferred():
+                self.recording.start()
+            signals.check()
             result.unconnected = self.recording.wait_connected()
+            signals.check()
             if not result.unconnected:
                 self.runner.start()
                 run_timed(self.recording, episode_plan(o))
         finally:
-            self.runner.stop()
-            self.recording.stop()
+            with signals.finishing():
+                self.runner.stop()
+                self.recording.stop()
         return result
