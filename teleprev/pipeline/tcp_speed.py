@@ -1,0 +1,69 @@
+"""The arm's flange (TCP) linear speed: the cap the command planner keeps, and the speed `teleprev audit`
+measures on the commands.
+
+A servo-mode xArm faults (error C60) when its TCP moves faster than 1000 mm/s (UFactory's servo mode guide;
+the SDK's xarm/x3/base.py, _max_tcp_speed), however well its joints keep their own limits: a fast wrist
+sweep with the arm stretched out reaches it (1.18 m/s seen). The flange is the origin of the arm chain's
+last moving link (the xArm's link6, where its link_eef and the controller's TCP with no offset sit).
+
+The planner keeps the cap by lowering the speed fraction ruckig plans with (a lower velocity limit, the
+acceleration and jerk limits unchanged), never by clamping a sample: a clamped sample would break the
+jerk limit. The fraction makes the bound of the flange's speed by the joints' speed caps
+
+    |v_flange| <= sum_i |J_i| x frac x v_max_i,   |J_i| = |a_i x (p - o_i)| (the flange's distance from
+                                                   the axis of joint i)
+
+at most TCP_MARGIN x the cap. Where the fraction drops while the joints move faster than it allows, ruckig
+brakes them to it within the acceleration and jerk limits; the margin covers the flange's speed meanwhile
+(the bound changes little over that braking, a few ticks).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from teleprev.robot.compiled_kinematics import CompiledKinematics
+from teleprev.robot.model import RobotModel
+
+TCP_MARGIN = 0.85  # of the cap: the bound the speed fraction keeps (see the module docstring)
+
+
+class TcpSpeedCap:
+    """The flange's speed cap (m/s) for the arm chain `chain` (joints in its order, speed caps `velocity`)."""
+
+    def __init__(self, chain: RobotModel, velocity: np.ndarray, cap_mps: float):
+        self.cap = float(cap_mps)
+        self.velocity = np.asarray(velocity, dtype=float)
+        self.kinematics = CompiledKinematics(chain)
+        self._flange = chain.link_index[chain.joints[-1].child]
+        self._links = np.array([chain.link_index[j.child] for j in chain.joints])
+        self._axes = np.array([j.axis for j in chain.joints], dtype=float)
+        self._revolute = np.array([j.type != "prismatic" for j in chain.joints])
+
+    def flange(self, q: np.ndarray) -> np.ndarray:
+        """The flange's position (m) at arm joints q (n,), or of each row of a batch (N, n)."""
+        world = self.kinematics.world(q)
+        return world[..., self._flange, :3, 3]
+
+    def speed_bound(self, q: np.ndarray) -> float:
+        """The fastest the flange can move at q with every joint at its speed cap (m/s)."""
+        world = self.kinematics.world(q)
+        p = world[self._flange, :3, 3]
+        frames = world[self._links]
+        axes = np.einsum("kij,kj->ki", frames[:, :3, :3], self._axes)
+        lever = np.linalg.norm(np.cross(axes, p - frames[:, :3, 3]), axis=1)
+        reach = np.where(self._revolute, lever, 1.0)  # a prismatic joint moves the flange at its own speed
+        return float(reach @ self.velocity)
+
+    def speed_frac(self, q: np.ndarray) -> float:
+        """The fraction of the joints' speed caps that keeps the flange's speed bound within TCP_MARGIN x the
+        cap at q (1.0 where the caps alone keep it)."""
+        bound = self.speed_bound(q)
+        return min(1.0, TCP_MARGIN * self.cap / bound) if bound > 0.0 else 1.0
+
+    def speeds(self, t_ns: np.ndarray, q: np.ndarray) -> np.ndarray:
+        """The flange's speed (m/s) between consecutive commands (stamps t_ns, positions q (N, n))."""
+        if len(t_ns) < 2:
+            return np.zeros(0)
+        p = self.flange(q)
+        return np.linalg.norm(np.diff(p, axis=0), axis=1) / (np.diff(t_ns) / 1e9)

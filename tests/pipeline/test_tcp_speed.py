@@ -1,0 +1,61 @@
+"""The flange's linear speed cap (teleprev/pipeline/tcp_speed.py): a target stream that would drive the
+flange faster than the cap gives commands whose flange speed (FK over consecutive commands) keeps it, and
+every joint limit too; the older formats' planner (uncapped_tcp) does not, which is why it is a format."""
+
+import numpy as np
+import pytest
+
+from teleprev.assembly import build_pipeline
+from teleprev.pipeline.older_formats import UncappedTcpPlanner
+from teleprev.pipeline.planner import CommandPlanner
+from teleprev.rig import load_rig
+from tests.pipeline.test_planner import PERIOD, Script, _run, _within
+
+REACHING = np.array([0.0, 0.3, -1.2, 0.0, 1.0, 0.0])  # stretched out: a long lever from joint 1 to the flange
+
+
+@pytest.fixture(scope="module")
+def pipeline():
+    return build_pipeline(load_rig())  # the default sim rig: xArm6 + LEAP Hand (cap 1.0 m/s, the table's)
+
+
+def _sweep(p, planner_class):
+    """A big, fast sweep of the wrist (joints 1, 4 and 5 at 1.5 Hz, 1 rad), once the engage is over: the
+    targets' velocities take the joints to their speed caps."""
+    s = Script(p, arm_start=REACHING)
+    t0 = 1_000_000_000
+    events = [(t0, s.target(t0, REACHING)), (t0 + 1, s.mode("execute", t0 + 1, arm=REACHING))]
+    w, mask = 2 * np.pi * 1.5, np.array([1.0, 0.0, 0.0, 1.0, 1.0, 0.0])
+    for k in range(1, 600):
+        t = t0 + k * PERIOD
+        x = max(k - 100, 0) * PERIOD / 1e9
+        events.append((t, s.target(t, REACHING + mask * np.sin(w * x), mask * w * np.cos(w * x))))
+    return _run(planner_class.for_pipeline(p), events, t0 + 1 + PERIOD * np.arange(600))
+
+
+def test_the_planner_keeps_the_flange_within_its_cap_and_the_joints_within_theirs(pipeline):
+    tcp = pipeline.motion.tcp
+    assert tcp is not None and tcp.cap == 1.0
+    uncapped = _sweep(pipeline, UncappedTcpPlanner)
+    t = np.array([x.t_ns for x in uncapped])
+    assert tcp.speeds(t, np.array([x.arm for x in uncapped])).max() > 1.2 * tcp.cap  # the stream asks for more
+    sent = _sweep(pipeline, CommandPlanner)
+    t, q = np.array([x.t_ns for x in sent]), np.array([x.arm for x in sent])
+    speeds = tcp.speeds(t, q)
+    assert speeds.max() <= tcp.cap, speeds.max()
+    # still moving: capped, not stopped (the bound the speed fraction keeps is conservative: 0.31 m/s here)
+    assert speeds.max() > 0.25 * tcp.cap
+    assert any("arm_tcp_capped" in x.flags for x in sent)
+    _within(pipeline, sent)  # joint position, speed, acceleration and jerk limits, exactly
+
+
+def test_the_speed_bound_holds_the_flange_speed_at_any_pose(pipeline):
+    """speed_bound is a bound: the flange's speed for joint speeds within the caps never passes it."""
+    tcp, arm = pipeline.motion.tcp, pipeline.motion.arm
+    rng = np.random.default_rng(3)
+    for _ in range(50):
+        q = rng.uniform(arm.lower, arm.upper)
+        v = rng.choice([-1.0, 1.0], size=len(q)) * arm.velocity
+        dt = 1e-6
+        speed = np.linalg.norm(tcp.flange(q + v * dt) - tcp.flange(q)) / dt
+        assert speed <= tcp.speed_bound(q) * (1 + 1e-4)
