@@ -8,12 +8,10 @@ last moving link (the xArm's link6, where its link_eef and the controller's TCP 
 
 The planner keeps the cap by lowering the speed fraction ruckig plans with (a lower velocity limit, the
 acceleration and jerk limits unchanged), never by clamping a sample: a clamped sample would break the
-jerk limit. The fraction makes the bound of the flange's speed by the joints' speed caps
-
-    |v_flange| <= sum_i |J_i| x frac x v_max_i,   |J_i| = |a_i x (p - o_i)| (the flange's distance from
-                                                   the axis of joint i)
-
-at most TCP_MARGIN x the cap. Where the fraction drops while the joints move faster than it allows, ruckig
+jerk limit. The fraction makes the fastest the flange can move with every joint within frac x its speed
+cap at most TCP_MARGIN x the cap. That fastest is exact: v_flange = sum_i J_i qdot_i (J_i = a_i x (p - o_i)
+for a revolute joint, a_i for a prismatic one) is convex in qdot, so over the box |qdot_i| <= v_max_i it
+is largest at a corner, one of 2^n sign patterns (64 for six joints, one small matrix product). Where the fraction drops while the joints move faster than it allows, ruckig
 brakes them to it within the acceleration and jerk limits; the margin covers the flange's speed meanwhile
 (the bound changes little over that braking, a few ticks).
 """
@@ -39,6 +37,8 @@ class TcpSpeedCap:
         self._links = np.array([chain.link_index[j.child] for j in chain.joints])
         self._axes = np.array([j.axis for j in chain.joints], dtype=float)
         self._revolute = np.array([j.type != "prismatic" for j in chain.joints])
+        n = len(chain.joints)  # every sign pattern of the joint speeds (a pattern and its negative: one)
+        self._signs = 1.0 - 2.0 * ((np.arange(2 ** max(n - 1, 0))[None, :] >> np.arange(n)[:, None]) & 1)
 
     def flange(self, q: np.ndarray) -> np.ndarray:
         """The flange's position (m) at arm joints q (n,), or of each row of a batch (N, n)."""
@@ -46,14 +46,14 @@ class TcpSpeedCap:
         return world[..., self._flange, :3, 3]
 
     def speed_bound(self, q: np.ndarray) -> float:
-        """The fastest the flange can move at q with every joint at its speed cap (m/s)."""
+        """The fastest the flange can move at q with every joint within its speed cap (m/s)."""
         world = self.kinematics.world(q)
         p = world[self._flange, :3, 3]
         frames = world[self._links]
         axes = np.einsum("kij,kj->ki", frames[:, :3, :3], self._axes)
-        lever = np.linalg.norm(np.cross(axes, p - frames[:, :3, 3]), axis=1)
-        reach = np.where(self._revolute, lever, 1.0)  # a prismatic joint moves the flange at its own speed
-        return float(reach @ self.velocity)
+        columns = np.where(self._revolute[:, None], np.cross(axes, p - frames[:, :3, 3]), axes)  # (n, 3)
+        corners = (columns * self.velocity[:, None]).T @ self._signs  # (3, 2^n)
+        return float(np.sqrt((corners * corners).sum(axis=0).max()))
 
     def speed_frac(self, q: np.ndarray) -> float:
         """The fraction of the joints' speed caps that keeps the flange's speed bound within TCP_MARGIN x the

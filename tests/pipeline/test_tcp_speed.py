@@ -43,19 +43,22 @@ def test_the_planner_keeps_the_flange_within_its_cap_and_the_joints_within_their
     t, q = np.array([x.t_ns for x in sent]), np.array([x.arm for x in sent])
     speeds = tcp.speeds(t, q)
     assert speeds.max() <= tcp.cap, speeds.max()
-    # still moving: capped, not stopped (the bound the speed fraction keeps is conservative: 0.31 m/s here)
-    assert speeds.max() > 0.25 * tcp.cap
+    # still moving: capped, not stopped (the fraction allows for every joint moving at once: 0.45 m/s here)
+    assert speeds.max() > 0.35 * tcp.cap
     assert any("arm_tcp_capped" in x.flags for x in sent)
     _within(pipeline, sent)  # joint position, speed, acceleration and jerk limits, exactly
 
 
-def test_the_speed_bound_holds_the_flange_speed_at_any_pose(pipeline):
-    """speed_bound is a bound: the flange's speed for joint speeds within the caps never passes it."""
+def test_the_speed_bound_is_the_fastest_the_flange_moves_with_the_joints_within_their_caps(pipeline):
+    """speed_bound, against the flange's speed by finite differences of FK: no joint speeds within the caps
+    pass it, and some corner of them reaches it."""
     tcp, arm = pipeline.motion.tcp, pipeline.motion.arm
     rng = np.random.default_rng(3)
-    for _ in range(50):
-        q = rng.uniform(arm.lower, arm.upper)
-        v = rng.choice([-1.0, 1.0], size=len(q)) * arm.velocity
-        dt = 1e-6
-        speed = np.linalg.norm(tcp.flange(q + v * dt) - tcp.flange(q)) / dt
-        assert speed <= tcp.speed_bound(q) * (1 + 1e-4)
+    n, dt = len(arm.velocity), 1e-7
+    corners = np.array([[1.0 if (c >> i) & 1 else -1.0 for i in range(n)] for c in range(2 ** n)])
+    for _ in range(20):
+        q = rng.uniform(arm.lower + 0.01, arm.upper - 0.01)
+        v = np.vstack([corners, rng.uniform(-1, 1, size=(20, n))]) * arm.velocity
+        speed = np.linalg.norm(tcp.flange(q + v * dt) - tcp.flange(q), axis=1) / dt
+        bound = tcp.speed_bound(q)
+        assert speed.max() <= bound * (1 + 1e-4) and speed.max() >= bound * (1 - 1e-4)
