@@ -62,3 +62,12 @@ def test_the_speed_bound_is_the_fastest_the_flange_moves_with_the_joints_within_
         speed = np.linalg.norm(tcp.flange(q + v * dt) - tcp.flange(q), axis=1) / dt
         bound = tcp.speed_bound(q)
         assert speed.max() <= bound * (1 + 1e-4) and speed.max() >= bound * (1 - 1e-4)
+
+
+def test_a_rig_tightens_the_cap_and_a_robot_the_table_lacks_has_none(monkeypatch):
+    from teleprev.robot import limits
+    from tests.pipeline.test_motion import _rig
+
+    assert build_pipeline(_rig(arm_tcp_speed=0.5)).motion.tcp.cap == 0.5
+    monkeypatch.setattr(limits, "ARMS", {})
+    assert build_pipeline(_rig(arm_acceleration=5.0, arm_jerk=200.0)).motion.tcp is None

@@ -86,7 +86,8 @@ HELD_ENGAGE_FORMAT_VERSION = 7
 BRAKING_IN_MARGIN_FORMAT_VERSION = 9
 
 __all__ = ["MOTION_FORMAT_VERSION", "COMPILED_FORMAT_VERSION", "PLANNED_FORMAT_VERSION", "FLEXION_FIRST_FORMAT_VERSION",
-           "SLIDING_FORMAT_VERSION", "HELD_ENGAGE_FORMAT_VERSION", "BRAKING_IN_MARGIN_FORMAT_VERSION", "arithmetic", "AbductionFirstPipeline",
+           "SLIDING_FORMAT_VERSION", "HELD_ENGAGE_FORMAT_VERSION", "BRAKING_IN_MARGIN_FORMAT_VERSION", "arithmetic",
+           "AbductionFirstPipeline",
            "BrakingSweptCheck", "ImmediateResumePipeline", "ImmediateResumePlanner", "MeasuredEngagePipeline",
            "MeasuredEngagePlanner", "MotionState", "NumpyArmIK",
            "NumpyArmRetargeter", "NumpyCorrector", "NumpyPipeline", "NumpySweptCheck", "StepCommandsDriver",

@@ -2,7 +2,8 @@
 format starts them from the last command while the arm's controller still holds it
 (CommandPlanner.engages_from_held: contact may push a held arm a little off it, and a servo-mode
 controller takes the new stream to start where it holds, so the first command read as a jerk). The
-pipeline names its planner (which, as up to format 9, leaves the flange's speed uncapped: uncapped_tcp) for `CommandPlanner.for_pipeline`, so that eval re-runs the ticks with it."""
+pipeline names its planner (which, as up to format 9, leaves the flange's speed uncapped: uncapped_tcp) for
+`CommandPlanner.for_pipeline`, so that eval re-runs the ticks with it."""
 
 from __future__ import annotations
 
