@@ -10,7 +10,7 @@ The planner keeps the cap by lowering the speed fraction ruckig plans with (a lo
 acceleration and jerk limits unchanged), never by clamping a sample: a clamped sample would break the
 jerk limit. The fraction makes the fastest the flange can move with every joint within frac x its speed
 cap at most TCP_MARGIN x the cap. That fastest is exact: v_flange = sum_i J_i qdot_i (J_i = a_i x (p - o_i)
-for a revolute joint, a_i for a prismatic one) is linear in qdot and its norm convex, so over the box |qdot_i| <= v_max_i it
+for a revolute joint, a_i for a prismatic one) is linear in qdot, its norm convex: over |qdot_i| <= v_max_i it
 is largest at a corner, one of 2^(n-1) sign patterns and their negatives (32 for six joints: one small
 matrix product). Where the fraction drops while the joints move faster than it allows, ruckig brakes them
 to it within the acceleration and jerk limits; the margin covers the flange's speed meanwhile (the bound
