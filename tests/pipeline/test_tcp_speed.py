@@ -43,8 +43,9 @@ def test_the_planner_keeps_the_flange_within_its_cap_and_the_joints_within_their
     t, q = np.array([x.t_ns for x in sent]), np.array([x.arm for x in sent])
     speeds = tcp.speeds(t, q)
     assert speeds.max() <= tcp.cap, speeds.max()
-    # still moving: capped, not stopped (the fraction allows for every joint moving at once: 0.45 m/s here)
-    assert speeds.max() > 0.35 * tcp.cap
+    # still moving fast: capped, not stopped (0.77 m/s here; with the joints' caps in the box, not their own
+    # speeds, 0.46 m/s)
+    assert speeds.max() > 0.7 * tcp.cap
     assert any("arm_tcp_capped" in x.flags for x in sent)
     _within(pipeline, sent)  # joint position, speed, acceleration and jerk limits, exactly
 
