@@ -250,8 +250,9 @@ class CommandPlanner:
         goal, estimate, velocity, ahead = target.arm, ESTIMATE_NONE, None, 0.0
         tcp, speeds = self.motion.tcp, None
         if self.caps_tcp_speed and tcp is not None:
-            speeds = tcp.joint_speeds(m.q, m.v)
-            if speeds is not None:
+            speeds = tcp.joint_speeds(m.q, m.v, frac)
+            if speeds is not None:  # the engage fraction is in them
+                frac = 1.0
                 flags.append("arm_tcp_capped")
         if target.arm_v is not None:
             lead = max(t_ns - target.arm_ns, 0)

@@ -8,18 +8,18 @@ last moving link (the xArm's link6, where its link_eef and the controller's TCP 
 
 The planner keeps the cap by lowering the velocity limits ruckig plans with (the acceleration and jerk
 limits unchanged), never by clamping a sample: a clamped sample would break the jerk limit. Each joint's
-limit at a tick is frac x c_i, where c_i = min(v_max_i, |v_i| + HEADROOM_S x a_max_i): the joint's speed
-now and what it can gain meanwhile (0.5 rad/s at 10 rad/s^2; the limit is set again at every tick, so a
-joint speeding up is not held back: within a tick and the jerk's turn of its acceleration it gains 0.18
-rad/s). frac makes the fastest the flange can move with every joint within frac x c_i at most TCP_MARGIN
-x the cap. That fastest is exact: v_flange = sum_i J_i qdot_i (J_i = a_i x (p - o_i) for a revolute joint,
-a_i for a prismatic one) is linear in qdot, its norm convex: over the box |qdot_i| <= c_i it is largest
-at a corner, one of 2^(n-1) sign patterns and their negatives (32 for six joints: one small matrix
-product). Where frac drops while a joint moves faster than it allows, ruckig brakes it to it within the
-acceleration and jerk limits; the margin covers the flange's speed meanwhile (the bound changes little
-over that braking, a few ticks). Taking the joints' own speeds, not their caps, matters: a wrist sweep
-asking 1.29 m/s of the flange got 0.46 m/s with the caps alone (the box allowing every joint at its cap),
-0.77 m/s so.
+limit at a tick is f x c_i, where c_i = min(v_max_i, |v_i| + HEADROOM_S x a_max_i) (v_max_i times the
+engage fraction while the commands engage): the joint's speed now and what it can gain meanwhile (0.5
+rad/s at 10 rad/s^2; the limit is set again at every tick, so a joint speeding up is not held back: within
+a tick and the jerk's turn of its acceleration it gains 0.18 rad/s). f makes the fastest the flange can
+move with every joint within f x c_i at most TCP_MARGIN x the cap. That fastest is exact: v_flange =
+sum_i J_i qdot_i (J_i = a_i x (p - o_i) for a revolute joint, a_i for a prismatic one) is linear in qdot,
+its norm convex: over the box |qdot_i| <= c_i it is largest at a corner, one of 2^(n-1) sign patterns and
+their negatives (32 for six joints: one small matrix product). Where f drops while a joint moves faster
+than it allows, ruckig brakes it to it within the acceleration and jerk limits; the margin covers the
+flange's speed meanwhile (the bound changes little over that braking, a few ticks). Taking the joints' own
+speeds, not their caps, matters: a wrist sweep asking 1.29 m/s of the flange got 0.46 m/s with the caps
+alone (the box allowing every joint at its cap), 0.77 m/s so.
 """
 
 from __future__ import annotations
@@ -65,12 +65,16 @@ class TcpSpeedCap:
         corners = (columns * speeds[:, None]).T @ self._signs  # (3, 2^(n-1))
         return float(np.sqrt((corners * corners).sum(axis=0).max()))
 
-    def joint_speeds(self, q: np.ndarray, v: np.ndarray) -> np.ndarray | None:
-        """The joints' velocity limits for the next profile from q moving at v (see the module docstring), or
-        None where their speed caps keep the flange within TCP_MARGIN x the cap."""
-        if self.speed_bound(q) <= TCP_MARGIN * self.cap:
+    def joint_speeds(self, q: np.ndarray, v: np.ndarray, frac: float = 1.0) -> np.ndarray | None:
+        """The joints' velocity limits for the next profile from q moving at v, under `frac` of their speed caps
+        (the engage fraction; see the module docstring), or None where frac x the caps keeps the flange within
+        TCP_MARGIN x the cap."""
+        caps = self.velocity * frac
+        if self.speed_bound(q, caps) <= TCP_MARGIN * self.cap:
             return None
-        c = np.minimum(self.velocity, np.abs(v) + self.headroom)
+        # frac applies to the caps only: applied to |v| + headroom too, it would hold a joint at
+        # frac x headroom / (1 - frac) (0.5 rad/s while engaging at half speed)
+        c = np.minimum(caps, np.abs(v) + self.headroom)
         bound = self.speed_bound(q, c)
         return c * min(1.0, TCP_MARGIN * self.cap / bound) if bound > 0.0 else c
 

@@ -72,3 +72,21 @@ def test_a_rig_tightens_the_cap_and_a_robot_the_table_lacks_has_none(monkeypatch
     assert build_pipeline(_rig(arm_tcp_speed=0.5)).motion.tcp.cap == 0.5
     monkeypatch.setattr(limits, "ARMS", {})
     assert build_pipeline(_rig(arm_acceleration=5.0, arm_jerk=200.0)).motion.tcp is None
+
+
+def test_an_engage_under_the_cap_still_reaches_its_engage_speed(pipeline):
+    """The engage fraction scales the joints' speed caps, not their speeds plus the headroom (which held a
+    joint at 0.5 rad/s while engaging at half speed): joint 1 turning 2 rad near home engages at well over
+    that, with the flange still within its cap."""
+    from tests.pipeline.test_planner import HOME
+
+    s = Script(pipeline, arm_start=HOME)
+    t0, goal = 1_000_000_000, HOME + np.array([2.0, 0, 0, 0, 0, 0])
+    events = [(t0, s.target(t0, goal)), (t0 + 1, s.mode("execute", t0 + 1, arm=HOME))]
+    events += [(t0 + k * PERIOD, s.target(t0 + k * PERIOD, goal)) for k in range(1, 300)]
+    sent = _run(CommandPlanner.for_pipeline(pipeline), events, t0 + 1 + PERIOD * np.arange(300))
+    t, q = np.array([x.t_ns for x in sent]), np.array([x.arm for x in sent])
+    assert all("engaging" in x.flags for x in sent[1:60]) and any("arm_tcp_capped" in x.flags for x in sent)
+    assert (np.abs(np.diff(q[:, 0])) / (np.diff(t) / 1e9)).max() > 0.8  # 1.07 rad/s
+    assert pipeline.motion.tcp.speeds(t, q).max() <= pipeline.motion.tcp.cap
+    _within(pipeline, sent)
