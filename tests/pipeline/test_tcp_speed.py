@@ -90,3 +90,17 @@ def test_an_engage_under_the_cap_still_reaches_its_engage_speed(pipeline):
     assert (np.abs(np.diff(q[:, 0])) / (np.diff(t) / 1e9)).max() > 0.8  # 1.07 rad/s
     assert pipeline.motion.tcp.speeds(t, q).max() <= pipeline.motion.tcp.cap
     _within(pipeline, sent)
+
+
+@pytest.mark.parametrize("session_format", [4, 5, 6, 7, 9])
+def test_older_formats_rerun_without_the_cap(session_format):
+    """Sessions of formats 4 to 9 were planned without it: eval re-runs them with a planner that leaves the
+    flange uncapped, keeping each format's other classes (format 9: the current swept check and limiter)."""
+    from teleprev.pipeline.older_formats import arithmetic
+    from teleprev.pipeline.swept import SweptCheck
+
+    older = build_pipeline(load_rig(), session_format=session_format)
+    planner = CommandPlanner.for_pipeline(older)
+    assert isinstance(planner, UncappedTcpPlanner) and not planner.caps_tcp_speed
+    assert (arithmetic(session_format).swept_check is SweptCheck) == (session_format == 9)
+    assert type(CommandPlanner.for_pipeline(build_pipeline(load_rig()))) is CommandPlanner
