@@ -6,7 +6,9 @@ the terminal preview's redraw rate while the pipeline runs at 120 Hz, and dex-re
 Step timing drives the pure pipeline step directly (no device threads), with the default LEAP rig and
 the shipped models: the operator's glove at 120 Hz and suit at 60 Hz, execution engaged after 1 s, the
 arm's measured joints following the previous command. preview_fps runs a real recording of the
-default sim rig with the terminal preview drawn into a 120 x 40 off-screen console.
+default sim rig with the terminal preview drawn into a 120 x 40 off-screen console; tcp_speed_ratio_max
+is the fastest the arm's flange moved between consecutive commands of that recording (FK, `teleprev audit`'s
+check) over the rig's cap (arm_tcp_speed, 1.0 m/s for the xArm): at most 1.
 
 JSON keys:
     step_ms_p50                 float
@@ -21,6 +23,7 @@ JSON keys:
     preview_render_ms_p50       float
     pipeline_hz_during_preview  float
     live_step_ms_p50            float
+    tcp_speed_ratio_max         float
 """
 
 from __future__ import annotations
@@ -100,11 +103,13 @@ def step_timing(seconds: float) -> dict:
 
 
 def preview_rate(seconds: float) -> dict:
-    """Frames the terminal preview draws per second during a real recording of the default sim rig."""
+    """Frames the terminal preview draws per second during a real recording of the default sim rig, and
+    the flange's fastest speed over its cap in that recording."""
     import tempfile
 
     from rich.console import Console
 
+    from teleprev.evaluation.audit import audit_session
     from teleprev.live.record.run import run_script
     from teleprev.live.record.session import LiveSession, RecordOptions
     from teleprev.session.reader import SessionReader
@@ -121,7 +126,9 @@ def preview_rate(seconds: float) -> dict:
         with SessionReader(out) as reader:
             steps = reader.topics["/pipeline/report"].message_count
         step_ns = rec.loop.stats.step_ns
+        arm = next(s for s in audit_session(out).streams if s.topic == "/command/arm")
     return {
+        "tcp_speed_ratio_max": arm.ratios["tcp_speed"],
         "preview_fps": stats.fps(),
         "preview_render_ms_p50": common.percentile(stats.render_s, 50) * 1e3,
         "pipeline_hz_during_preview": steps / seconds,
@@ -201,6 +208,7 @@ def main() -> None:
     targets = {
         "step_ms_p50": "<= 0.1", "step_ms_p99": "<= 0.5", "corrected_frac": "reported", "fallback_frac": "reported",
         "preview_fps": ">= 20 (pipeline at 120 Hz)", "dexretargeting_ms_p50": "for comparison",
+        "tcp_speed_ratio_max": "<= 1",
     }
     common.report(f"bench/pipeline.py: one pipeline step (retarget + Corrector + IK + gate), one thread, "
                   f"{args.busy} busy processes beside it", figures, targets, args.json)

@@ -21,6 +21,7 @@ from teleprev.pipeline.guard import JointGuard
 from teleprev.pipeline.motion import Motion
 from teleprev.pipeline.step import Pipeline
 from teleprev.pipeline.swept import SweptCheck
+from teleprev.pipeline.tcp_speed import TcpSpeedCap
 from teleprev.pipeline.trajectory import ArmGenerator, HandLimiter
 from teleprev.retarget.calibration import Calibration, load_calibration
 from teleprev.rig import Rig
@@ -88,6 +89,16 @@ def hand_clearance_m(rig: Rig) -> float:
     return (cfg.hand_clearance_mm if cfg.hand_clearance_mm is not None else (row.clearance_mm if row else 0.0)) / 1000.0
 
 
+def tcp_speed_cap(rig: Rig, ik: ArmIK, arm_speed: np.ndarray, acceleration: np.ndarray) -> TcpSpeedCap | None:
+    """The flange's speed cap: the rig's [pipeline] arm_tcp_speed, else the robot table's; None where
+    neither has one (a robot the table lacks: its joints' limits alone)."""
+    table = arm_limits(rig.rig.robot)
+    value = rig.pipeline.arm_tcp_speed
+    if value is None:
+        value = table.tcp_speed if table else None
+    return None if value is None else TcpSpeedCap(ik.chain, arm_speed, acceleration, value)
+
+
 def build_motion(rig: Rig, ik: ArmIK, arm_speed: np.ndarray, effector, swept: SweptCheck | None = None,
                  hand_limiter: type = HandLimiter) -> Motion:
     """The arm's jerk-limited generator and the hand's acceleration cap (`hand_limiter`: the session format's
@@ -97,13 +108,14 @@ def build_motion(rig: Rig, ik: ArmIK, arm_speed: np.ndarray, effector, swept: Sw
     accel = _limit(rig, "arm_acceleration", table.acceleration if table else None, "arm acceleration limit")
     jerk = _limit(rig, "arm_jerk", table.jerk if table else None, "arm jerk limit")
     arm = ArmGenerator(ik.chain.lower, ik.chain.upper, arm_speed, np.full(n, accel), np.full(n, jerk))
+    tcp = tcp_speed_cap(rig, ik, arm_speed, arm.acceleration)
     hand = None
     row = effector_limits(rig.rig.end_effector)
     if row is None or row.acceleration is not None:
         g = effector.guard
         hand_accel = _limit(rig, "hand_acceleration", row.acceleration if row else None, "hand acceleration limit")
         hand = hand_limiter(g.lower, g.upper, g.speed, np.full(len(g.lower), hand_accel))
-    return Motion(arm, hand, swept)
+    return Motion(arm, hand, swept, tcp)
 
 
 def build_pipeline(rig: Rig, models: str | Path | None = None, calibration: Calibration | None = None,
@@ -179,6 +191,7 @@ def motion_limits(rig: Rig) -> dict[str, dict]:
         ),
         "jerk": _limit(rig, "arm_jerk", table.jerk if table else None, "arm jerk limit"),
     }
+    arm["tcp"] = tcp_speed_cap(rig, ik, arm["velocity"], np.full(len(arm["velocity"]), arm["acceleration"]))
     effector, row = rig.effector, effector_limits(rig.rig.end_effector)
     accel = 0.0
     if row is None or row.acceleration is not None:

@@ -382,6 +382,7 @@ def _check_robot(rig: RigSection, pipeline: PipelineConfig, where: str) -> None:
 
 # Motion limits of a robot that teleprev/robot/limits.py does not know: no arm or hand goes past these.
 MAX_ARM_ACCELERATION, MAX_ARM_JERK, MAX_HAND_ACCELERATION = 100.0, 10_000.0, 2000.0
+MAX_ARM_TCP_SPEED = 5.0  # m/s
 
 
 def _check_motion_limits(rig: RigSection, pipeline: PipelineConfig, where: str) -> None:
@@ -391,6 +392,7 @@ def _check_motion_limits(rig: RigSection, pipeline: PipelineConfig, where: str) 
     for key, row, bound, unit in (
         ("arm_acceleration", arm.acceleration if arm else None, MAX_ARM_ACCELERATION, "rad/s²"),
         ("arm_jerk", arm.jerk if arm else None, MAX_ARM_JERK, "rad/s³"),
+        ("arm_tcp_speed", arm.tcp_speed if arm else None, MAX_ARM_TCP_SPEED, "m/s"),
         (
             "hand_acceleration",
             effector.acceleration if effector else None,

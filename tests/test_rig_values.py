@@ -44,6 +44,12 @@ def rig_with(tmp_path, table: str, line: str):
         ("pipeline", "arm_jerk = inf", "[pipeline].arm_jerk", "expected a finite number, got inf"),
         (
             "pipeline",
+            "arm_tcp_speed = 1.2",
+            "[pipeline].arm_tcp_speed",
+            "1.2 m/s is looser than the robot's own limit (1,",
+        ),
+        (
+            "pipeline",
             "hand_acceleration = 500.0",
             "[pipeline].hand_acceleration",
             "looser than the robot's own limit (200",
@@ -80,6 +86,9 @@ def test_a_tighter_limit_is_taken_and_a_robot_the_table_lacks_has_a_bound(tmp_pa
         ConfigError, match=r"rig.toml \[pipeline\].arm_acceleration: 1000 rad/s² is more than any robot"
     ):
         _check_motion_limits(unknown, PipelineConfig(arm_acceleration=1000.0), "rig.toml")
+    _check_motion_limits(unknown, PipelineConfig(arm_tcp_speed=3.0), "rig.toml")
+    with pytest.raises(ConfigError, match=r"rig.toml \[pipeline\].arm_tcp_speed: 9 m/s is more than any robot"):
+        _check_motion_limits(unknown, PipelineConfig(arm_tcp_speed=9.0), "rig.toml")
 
 
 def test_record_says_so_in_one_line_before_any_device_opens(tmp_path):

@@ -8,6 +8,9 @@ rig's [pipeline] keys, else teleprev/robot/limits.py and the URDF):
     speed      first divided difference on the command stamps
     accel      2 x the second divided difference (an acceleration the commands pass through, between them)
     jerk       6 x the third divided difference (arm)
+    tcp_speed  the flange's linear speed between consecutive commands, by FK, against the rig's
+               arm_tcp_speed (teleprev/pipeline/tcp_speed.py; sessions of format 10 on: older formats
+               did not cap it, and a dataset's actions are not checked)
                (teleprev/pipeline/derivatives.py: the definition eval and the benches use too)
     collisions hand commands in self-collision (exact check, plain shapes), and hand command segments
                that pass through one (checked at link motions of at most SWEPT_STEP_M)
@@ -34,6 +37,7 @@ from teleprev.export.actions import is_dataset, read_actions
 from teleprev.pipeline.derivatives import RESUME_GAP_NS, runs, stream_peaks
 
 SWEPT_STEP_M = 0.0005
+TCP_SPEED_FORMAT_VERSION = 10  # the first session format whose planner caps the flange's speed
 TOLERANCE = 1e-6
 
 
@@ -49,6 +53,8 @@ class StreamAudit:
     accel_limit: float = 0.0
     jerk_max: float = 0.0
     jerk_limit: float | None = None
+    tcp_speed_max: float = 0.0  # m/s, the flange's (arm)
+    tcp_speed_limit: float | None = None  # None: not checked
     colliding: int | None = None  # commands in self-collision (hand)
     swept_colliding: int | None = None  # command segments through a self-collision (hand)
     rounding: dict[str, float] = field(default_factory=dict)  # per check: how much the values' storage may add
@@ -59,6 +65,8 @@ class StreamAudit:
                "accel": self.accel_max / self.accel_limit if self.accel_limit else 0.0}
         if self.jerk_limit:
             out["jerk"] = self.jerk_max / self.jerk_limit
+        if self.tcp_speed_limit:
+            out["tcp_speed"] = self.tcp_speed_max / self.tcp_speed_limit
         return out
 
     @property
@@ -173,15 +181,21 @@ def actuator_history(reader, side: str, names: tuple[str, ...], device: str = ""
 
 
 def audit_stream(topic: str, side: str, limits: dict, t_ns: np.ndarray, q: np.ndarray | None,
-                 from_rest: bool = True, rests=None) -> StreamAudit:
+                 from_rest: bool = True, rests=None, tcp_speed: bool = False) -> StreamAudit:
     """One command stream (stamps, positions in the order of limits[side]['names']) against its limits;
     `from_rest`: each run as a controller starts it (commands; not a dataset's actions), `rests`: where
-    (ActuatorHistory.for_stream)."""
+    (ActuatorHistory.for_stream); `tcp_speed`: the arm's flange speed too, where the rig caps it."""
     lim = limits[side]
+    tcp = lim.get("tcp") if tcp_speed else None
     audit = StreamAudit(topic, speed_limit=float(lim["velocity"].min()), accel_limit=float(lim["acceleration"]),
-                        jerk_limit=lim.get("jerk"))
+                        jerk_limit=lim.get("jerk"), tcp_speed_limit=tcp.cap if tcp is not None else None)
     if len(t_ns):
         _measure(audit, t_ns, q, lim["lower"], lim["upper"], from_rest, rests)
+        if tcp is not None:
+            finite = np.isfinite(q).all(axis=1)
+            t_f, q_f = t_ns[finite], q[finite]
+            audit.tcp_speed_max = max((float(tcp.speeds(t_f[run], q_f[run]).max(initial=0.0))
+                                       for run in _runs(t_f)), default=0.0)
         if side == "hand" and lim.get("checker") is not None:
             audit.colliding = int(lim["checker"].pair_matrix(q).any(axis=1).sum())
             audit.swept_colliding = sum(swept_colliding(lim["checker"], lim["reach"], q[run]) for run in _runs(t_ns))
@@ -208,6 +222,7 @@ def _command_streams(rig) -> list[tuple[str, str, dict, str]]:
 
 def audit_session(path: str | Path, rig_path: str | Path | None = None) -> AuditReport:
     from teleprev.assembly import motion_limits
+    from teleprev.evaluation.reproduce import recorded_format
     from teleprev.rig import side_rig
     from teleprev.session.reader import SessionReader
 
@@ -215,6 +230,7 @@ def audit_session(path: str | Path, rig_path: str | Path | None = None) -> Audit
     with SessionReader(path) as reader:
         rig = recorded_rig(path, reader.metadata, rig_path)
         report = AuditReport(str(path))
+        tcp_speed = recorded_format(reader.metadata) >= TCP_SPEED_FORMAT_VERSION
         for topic, side, limits, device in _command_streams(rig):
             t, q, names = _joint_samples(reader, topic) if topic in reader.topics else (np.zeros(0, np.int64), None, ())
             if len(t) and names != limits[side]["names"]:
@@ -223,7 +239,8 @@ def audit_session(path: str | Path, rig_path: str | Path | None = None) -> Audit
                 )
             history = actuator_history(reader, side, limits[side]["names"], device) if len(t) else None
             report.streams.append(
-                audit_stream(topic, side, limits, t, q, rests=history.for_stream(t) if history else None)
+                audit_stream(topic, side, limits, t, q, rests=history.for_stream(t) if history else None,
+                             tcp_speed=tcp_speed and side == "arm")
             )
         state_topics = [tp for tp in reader.topics if tp.startswith("/hand/") and tp.endswith("/state")]
         checks = [(state_topics[0], motion_limits(rig)["hand"])] if state_topics and not rig.bimanual else \
@@ -282,6 +299,7 @@ def merge(total: StreamAudit, part: StreamAudit) -> None:
     total.speed_max, total.speed_limit = max(total.speed_max, part.speed_max), part.speed_limit
     total.accel_max, total.accel_limit = max(total.accel_max, part.accel_max), part.accel_limit
     total.jerk_max, total.jerk_limit = max(total.jerk_max, part.jerk_max), part.jerk_limit
+    total.tcp_speed_max, total.tcp_speed_limit = max(total.tcp_speed_max, part.tcp_speed_max), part.tcp_speed_limit
     if part.colliding is not None:
         total.colliding = (total.colliding or 0) + part.colliding
         total.swept_colliding = (total.swept_colliding or 0) + part.swept_colliding
@@ -306,6 +324,7 @@ def print_report(report: AuditReport, console) -> None:
             ("speed", s.speed_max, s.speed_limit),
             ("acceleration", s.accel_max, s.accel_limit),
             ("jerk", s.jerk_max, s.jerk_limit),
+            ("tcp_speed", s.tcp_speed_max, s.tcp_speed_limit),
         ):
             if limit:
                 r = ratios[name if name != "acceleration" else "accel"]

@@ -36,6 +36,7 @@ class PipelineConfig:
     # Motion limits of the commands (teleprev/robot/limits.py has the defaults; leave a key out to use them).
     arm_acceleration: float | None = None  # rad/s^2 per arm joint
     arm_jerk: float | None = None  # rad/s^3 per arm joint
+    arm_tcp_speed: float | None = None  # m/s: the flange's linear speed (none in the table or the rig: uncapped)
     arm_feedforward: bool = True  # track the target's own velocity (less lag); false: plan to rest at each target
     hand_acceleration: float | None = None  # rad/s^2 per hand joint (m/s^2 for a gripper)
     hand_clearance_mm: float | None = None  # distance kept between the hand's links along each command segment
@@ -60,7 +61,7 @@ class PipelineConfig:
             raise ValueError(f"command_rate_hz must be in [10, 1000], got {self.command_rate_hz!r}")
         if not 0 <= self.tf_rate_hz < float("inf"):
             raise ValueError(f"tf_rate_hz must be >= 0 (0: every arm state sample), got {self.tf_rate_hz!r}")
-        for key in ("arm_speed", "hand_speed", "arm_acceleration", "arm_jerk", "hand_acceleration"):
+        for key in ("arm_speed", "hand_speed", "arm_acceleration", "arm_jerk", "arm_tcp_speed", "hand_acceleration"):
             value = getattr(self, key)
             if value is not None and not 0 < value < float("inf"):
                 raise ValueError(f"{key} must be a positive, finite number, got {value!r}")

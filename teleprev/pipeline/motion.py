@@ -4,7 +4,8 @@ acceleration cap and the swept check along each hand command's segment.
 The command planner (teleprev/pipeline/planner.py) samples the commands with them at each tick of the
 paced sender; replay's smoothing (teleprev/live/player.py) steps recorded targets with them.
 
-    arm     jerk-limited generator towards the target (ArmGenerator)
+    arm     jerk-limited generator towards the target (ArmGenerator), at a speed fraction that keeps the
+            flange's speed within its cap (TcpSpeedCap)
     hand    acceleration cap towards the target (HandLimiter), each command segment, and the way on to
             where braking from it would stop, checked for self-collision with a clearance margin; where
             that is not free, the fingers whose motion would collide are held back and slide as far
@@ -32,10 +33,11 @@ FEEDFORWARD_TAU_NS = 30e6  # smoothing of the target velocity estimate (IK jitte
 class Motion:
     """The arm generator and (for a LEAP Hand or a gripper) the hand limiter and swept check."""
 
-    def __init__(self, arm: ArmGenerator, hand: HandLimiter | None, swept=None):
+    def __init__(self, arm: ArmGenerator, hand: HandLimiter | None, swept=None, tcp=None):
         self.arm = arm
         self.hand = hand
         self.swept = swept  # teleprev.pipeline.swept.SweptCheck or None
+        self.tcp = tcp  # teleprev.pipeline.tcp_speed.TcpSpeedCap or None (no cap on the flange's speed)
 
     def stop_time_bound(self) -> float:
         """Seconds a switch to preview takes at most to bring the commands to rest (the slower side's

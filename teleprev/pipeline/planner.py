@@ -10,7 +10,9 @@ other than through their targets.
 
     arm    a jerk-limited profile (ruckig) from the last command's position, velocity and acceleration
            towards the target moved on by its velocity to this instant (at most EXTRAPOLATE_MAX_NS; then
-           the target held there, met at rest), sampled at the tick; a profile whose stop (braking as
+           the target held there, met at rest), sampled at the tick, under joint velocity limits that keep
+           the flange within its linear speed cap (teleprev/pipeline/tcp_speed.py: never a clamped sample,
+           so acceleration and jerk stay within theirs); a profile whose stop (braking as
            hard as the limits allow from the sampled state) would pass a joint limit is not taken: the
            arm brakes instead, so it never needs holding at a limit
     hand   the acceleration cap towards the target (where the Corrector put it, met moving with it), each
@@ -127,6 +129,7 @@ class CommandPlanner:
 
     resumes_slowly = True  # after input loss, at the engage fraction (older sessions: False, older_formats)
     engages_from_held = True  # the arm engages from the command its controller holds (formats <= 6: False)
+    caps_tcp_speed = True  # the arm's speed fraction keeps the flange within its cap (formats <= 9: False)
 
     def __init__(self, motion: Motion, effector_guard, engage_speed_frac: float, stale_ns: int):
         self.motion = motion
@@ -245,13 +248,19 @@ class CommandPlanner:
                     flags.append("arm_stopping")
             return True
         goal, estimate, velocity, ahead = target.arm, ESTIMATE_NONE, None, 0.0
+        tcp, speeds = self.motion.tcp, None
+        if self.caps_tcp_speed and tcp is not None:
+            speeds = tcp.joint_speeds(m.q, m.v, frac)
+            if speeds is not None:  # the engage fraction is in them
+                frac = 1.0
+                flags.append("arm_tcp_capped")
         if target.arm_v is not None:
             lead = max(t_ns - target.arm_ns, 0)
             if lead <= EXTRAPOLATE_MAX_NS:  # the moving target, moved on to now, met moving with it
                 estimate, velocity, ahead = ESTIMATE_HELD, target.arm_v, lead / 1e9
             else:  # no newer target for a while: where the extrapolation stops, met at rest
                 goal = target.arm + target.arm_v * (EXTRAPOLATE_MAX_NS / 1e9)
-        plan = self.arm.plan(m, goal, dt, frac, estimate, None, velocity, 0.0, 0.0, ahead)
+        plan = self.arm.plan(m, goal, dt, frac, estimate, None, velocity, 0.0, 0.0, ahead, speeds)
         out = self.arm.follow(m, plan, dt, ENGAGED_TOL)
         if out is None:  # ruckig found no profile: brake instead
             side.motion = self._brake(m, dt, flags)

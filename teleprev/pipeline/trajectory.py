@@ -95,19 +95,22 @@ class ArmGenerator:
 
     def plan(self, s: JointMotion, target: np.ndarray, dt: float, speed_frac: float = 1.0,
              estimate: int = ESTIMATE_NONE, before: np.ndarray | None = None, before_v: np.ndarray | None = None,
-             gap: float = 0.0, keep: float = 0.0, ahead: float = 0.0) -> np.ndarray:
+             gap: float = 0.0, keep: float = 0.0, ahead: float = 0.0,
+             velocity: np.ndarray | None = None) -> np.ndarray:
         """ruckig's inputs for `dt` seconds towards `target` (kernels.arm_plan's rows), with the target's velocity
         estimated as `estimate` says from the target before and its estimate (see kernels.ESTIMATE_*).
 
         The target is clamped to the limits and its velocity to 0.9 of the cap, dropped towards a joint limit
         the joint could not stop before. A moving target is planned in its own frame (where it stands still,
         and the velocity limits shift by its velocity), so the profile meets it rather than the point where
-        it was: `target` is where the target is dt from now, and it was at target - velocity * dt when s was."""
+        it was: `target` is where the target is dt from now, and it was at target - velocity * dt when s was.
+        `velocity`: the joints' velocity limits for this plan, below their caps (default: the caps)."""
         target = float_vector(target)
+        limits = self._limits if velocity is None else self._limits._replace(velocity=float_vector(velocity))
         return arm_plan(float_vector(s.q), float_vector(s.v), target, estimate,
                         target if before is None else float_vector(before),
                         target if before_v is None else float_vector(before_v), float(gap), float(keep), float(ahead),
-                        float(dt), float(speed_frac), *self._limits)
+                        float(dt), float(speed_frac), *limits)
 
     def follow(self, s: JointMotion, plan: np.ndarray, dt: float, tol: float = 0.0) -> tuple | None:
         """`dt` seconds along the time-optimal profile of `plan` (ArmGenerator.plan's rows), or None where ruckig

@@ -3,12 +3,14 @@
 Velocity comes from the URDF (<limit velocity=...>); acceleration and jerk are not in a URDF, so they
 are here, beside it, per arm and per end effector:
 
-    xarm6, xarm7   10 rad/s^2 and 500 rad/s^3 per joint (UFactory's planners use 10 rad/s^2)
+    xarm6, xarm7   10 rad/s^2 and 500 rad/s^3 per joint (UFactory's planners use 10 rad/s^2); the flange
+                   (TCP) at most 1.0 m/s (servo mode faults past 1000 mm/s, error C60: UFactory's servo mode
+                   guide, and the SDK's xarm/x3/base.py _max_tcp_speed)
     leap_hand      200 rad/s^2 per joint; commands keep 3 mm of clearance between links
     parallel_gripper  1 m/s^2 on the jaw opening
     vacuum         a switch: no motion limits
 
-A rig sets `arm_acceleration`, `arm_jerk`, `hand_acceleration` and `hand_clearance_mm` in [pipeline];
+A rig sets `arm_acceleration`, `arm_jerk`, `arm_tcp_speed`, `hand_acceleration` and `hand_clearance_mm` in [pipeline];
 a key left out takes the value here. A robot that is not in this table needs the keys in the rig.
 
 The LEAP Hand's numbers, from its motors: every joint is a Dynamixel XC330-M288-T (ROBOTIS e-Manual:
@@ -35,6 +37,7 @@ from dataclasses import dataclass
 class ArmLimits:
     acceleration: float  # rad/s^2, every joint
     jerk: float  # rad/s^3, every joint
+    tcp_speed: float | None = None  # m/s, the flange's linear speed (teleprev/pipeline/tcp_speed.py)
 
 
 @dataclass(frozen=True)
@@ -45,8 +48,8 @@ class EffectorLimits:
 
 # Keyed by the arm's URDF name; a robot "xarm6_leap_hand" is the arm "xarm6" carrying a LEAP Hand.
 ARMS: dict[str, ArmLimits] = {
-    "xarm6": ArmLimits(acceleration=10.0, jerk=500.0),
-    "xarm7": ArmLimits(acceleration=10.0, jerk=500.0),
+    "xarm6": ArmLimits(acceleration=10.0, jerk=500.0, tcp_speed=1.0),
+    "xarm7": ArmLimits(acceleration=10.0, jerk=500.0, tcp_speed=1.0),
 }
 
 EFFECTORS: dict[str, EffectorLimits] = {

@@ -35,3 +35,36 @@ def test_the_cli_fails_the_old_session_and_writes_json(session, tmp_path):
     assert [d["ok"] for d in data] == [True, False]
     old_arm = data[1]["streams"][0]
     assert old_arm["ratios"]["accel"] > 10  # speed caps alone: hundreds of rad/s^2
+
+
+def _sweep_session(path: Path, speed_of_joint1: float) -> Path:
+    """A session of the current format whose arm commands turn joint 1 of an outstretched xArm6 back and forth
+    (a smooth sine, within every joint limit), the flange far from its axis: fast enough, it passes the
+    flange's 1.0 m/s cap."""
+    import numpy as np
+
+    from teleprev.messages import JointSample, Logged
+    from teleprev.session.writer import McapSessionWriter
+
+    names = tuple(f"joint{i}" for i in range(1, 7))
+    pose = np.array([0.0, 0.5, -2.0, 0.0, 0.0, 0.0])  # the flange 0.63 m from the axis of joint 1
+    w = 4.0  # rad/s: the sine's accel amplitude * w^2 and jerk * w^3 stay within 10 rad/s^2 and 500 rad/s^3
+    period = 8_333_333
+    with McapSessionWriter(path) as writer:
+        for k in range(600):
+            t = 1_000_000_000 + k * period
+            q = pose.copy()
+            q[0] = speed_of_joint1 / w * (1.0 - np.cos(w * k * period / 1e9))  # from rest
+            writer.write(Logged("/command/arm", t, JointSample(t, names, q)))
+    return path
+
+
+def test_the_audit_flags_commands_that_pass_the_flange_speed_cap(tmp_path):
+    from teleprev.rig import default_rig_path
+
+    fast = audit_session(_sweep_session(tmp_path / "fast.mcap", 2.0), default_rig_path()).streams[0]
+    assert fast.ratios["speed"] < 1 and fast.ratios["accel"] < 1 and fast.ratios["jerk"] < 1  # joints: fine
+    assert fast.tcp_speed_limit == 1.0 and fast.tcp_speed_max > 1.1
+    assert any(v.startswith("tcp_speed ") for v in fast.violations), fast.violations
+    slow = audit_session(_sweep_session(tmp_path / "slow.mcap", 0.5), default_rig_path()).streams[0]
+    assert 0.1 < slow.tcp_speed_max < 1.0 and slow.violations == []

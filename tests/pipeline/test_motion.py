@@ -196,6 +196,7 @@ plugin = "sim.glove"
 @pytest.mark.parametrize("robot, pipeline, match", [
     ("xarm6_parallel_gripper", "arm_acceleration = -10.0", r"arm_acceleration must be a positive"),
     ("xarm6_parallel_gripper", "arm_jerk = 0", r"arm_jerk must be a positive"),
+    ("xarm6_parallel_gripper", "arm_tcp_speed = -1.0", r"arm_tcp_speed must be a positive"),
     ("xarm6_parallel_gripper", "arm_speed = 4.0", r"looser than the URDF's velocity limit"),
 ])
 def test_bad_limits_in_a_rig_name_the_file_and_key(robot, pipeline, match):

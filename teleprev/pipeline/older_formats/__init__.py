@@ -11,10 +11,13 @@
                engage fraction, where formats 4 and 5 resumed at full speed
     format 7   an engage from rest starts the arm from the last command while its controller holds it,
                where formats up to 6 started it from the measured arm
-    (format 9, the current one: where the whole hand brakes and its segment is not free with the
-    clearance, it brakes keeping its direction, else on into the margin if no link collides on the way,
-    where formats 1 to 8 stopped short; a hand joint keeps its braking envelope towards the joint limit
-    ahead, where formats 1 to 8 kept it in the target's frame only)
+    format 8   was never recorded
+    format 9   where the whole hand brakes and its segment is not free with the clearance, it brakes
+               keeping its direction, else on into the margin if no link collides on the way, where
+               formats 1 to 8 stopped short; a hand joint keeps its braking envelope towards the joint
+               limit ahead, where formats 1 to 8 kept it in the target's frame only
+    (format 10, the current one: the planner lowers the arm's speed fraction so that the flange keeps
+    its linear speed cap, where formats 4 to 9 left it uncapped)
 
     numpy_arithmetic   NumpyArmIK, NumpyArmRetargeter, NumpySweptCheck, NumpyCorrector (formats 1 and 2)
     abduction_first    AbductionFirstPipeline: the compiled glove reading of formats 3 and 4
@@ -23,6 +26,7 @@
     target_frame_limiter  TargetFrameHandLimiter: the hand's braking envelope in the target's frame only
                        (formats 1 to 8)
     braking_swept      BrakingSweptCheck: the whole hand brakes where a command is not free (formats 1 to 5)
+    uncapped_tcp       UncappedTcpPipeline, whose planner leaves the flange's speed uncapped (formats 4 to 9)
     measured_engage    MeasuredEngagePipeline, whose planner engages the arm from its measured state
                        (formats 4 to 6)
     immediate_resume   ImmediateResumePipeline, whose planner resumes at full speed after input loss
@@ -59,6 +63,7 @@ from teleprev.pipeline.older_formats.step_driver import StepCommandsDriver
 from teleprev.pipeline.older_formats.step_motion import MotionState, StepMotion
 from teleprev.pipeline.older_formats.stopping_short import StoppingShortSweptCheck
 from teleprev.pipeline.older_formats.target_frame_limiter import TargetFrameHandLimiter
+from teleprev.pipeline.older_formats.uncapped_tcp import UncappedTcpPipeline, UncappedTcpPlanner
 
 # Format 2: commands go through the motion limits; idle steps may command between trigger samples; a
 # ModeSwitch with reason "estop" stops commanding at once.
@@ -76,20 +81,27 @@ FLEXION_FIRST_FORMAT_VERSION = 5
 SLIDING_FORMAT_VERSION = 6
 # Format 7: an engage from rest starts the arm from the command its controller still holds.
 HELD_ENGAGE_FORMAT_VERSION = 7
+# Format 8 was never recorded.
+# Format 9: a braking hand keeps its direction, or brakes into the clearance margin, where it stopped short.
+BRAKING_IN_MARGIN_FORMAT_VERSION = 9
 
 __all__ = ["MOTION_FORMAT_VERSION", "COMPILED_FORMAT_VERSION", "PLANNED_FORMAT_VERSION", "FLEXION_FIRST_FORMAT_VERSION",
-           "SLIDING_FORMAT_VERSION", "HELD_ENGAGE_FORMAT_VERSION", "arithmetic", "AbductionFirstPipeline",
+           "SLIDING_FORMAT_VERSION", "HELD_ENGAGE_FORMAT_VERSION", "BRAKING_IN_MARGIN_FORMAT_VERSION", "arithmetic",
+           "AbductionFirstPipeline",
            "BrakingSweptCheck", "ImmediateResumePipeline", "ImmediateResumePlanner", "MeasuredEngagePipeline",
            "MeasuredEngagePlanner", "MotionState", "NumpyArmIK",
            "NumpyArmRetargeter", "NumpyCorrector", "NumpyPipeline", "NumpySweptCheck", "StepCommandsDriver",
            "StepCommandsPipeline", "StepCommandsResult", "StepCommandsState", "StepMotion", "StoppingShortSweptCheck",
-           "TargetFrameHandLimiter"]
+           "TargetFrameHandLimiter", "UncappedTcpPipeline", "UncappedTcpPlanner"]
 
 
 def arithmetic(session_format: int) -> Arithmetic:
     """The classes sessions of an older `session_format` were computed with."""
+    if session_format >= BRAKING_IN_MARGIN_FORMAT_VERSION:
+        return Arithmetic(pipeline=UncappedTcpPipeline)
     if session_format >= HELD_ENGAGE_FORMAT_VERSION:
-        return Arithmetic(swept_check=StoppingShortSweptCheck, hand_limiter=TargetFrameHandLimiter)
+        return Arithmetic(swept_check=StoppingShortSweptCheck, hand_limiter=TargetFrameHandLimiter,
+                          pipeline=UncappedTcpPipeline)
     if session_format >= SLIDING_FORMAT_VERSION:
         return Arithmetic(swept_check=StoppingShortSweptCheck, hand_limiter=TargetFrameHandLimiter,
                           pipeline=MeasuredEngagePipeline)
