@@ -156,8 +156,13 @@ def fuzz(folder: Path, n: int, rate: float) -> dict:
     ready.wait(60)
     rec.start()
     try:
-        rec.wait_connected(0.1)  # the socket is open
-        receiver = rec.devices["glove"]._receiver
+        glove = rec.devices["glove"]
+        deadline = time.monotonic() + 60  # the socket is open and its decoding process reads it
+        while glove._receiver is None and time.monotonic() < deadline:
+            time.sleep(0.02)
+        receiver = glove._receiver
+        if receiver is None:
+            raise SystemExit("the glove's VMC receiver did not open within 60 s")
         go.set()
         deadline = time.monotonic() + n / rate * 4 + 120
         while receiver.counters.datagrams < n and time.monotonic() < deadline:

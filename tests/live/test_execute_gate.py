@@ -82,7 +82,7 @@ class _Driver:
     it is fed step nothing."""
 
     pipeline = SimpleNamespace(arm_names=("joint1",), effector_names=("0",), cfg=SimpleNamespace(stale_ms=100.0))
-    topics = SimpleNamespace(action="", arm="/arm/arm/state")
+    topics = SimpleNamespace(action="", arm="/arm/arm/state", hand="/glove/glove/hand")
 
     def __init__(self):
         self.mode, self.asked = "preview", []
