@@ -33,6 +33,15 @@ def session(tmp_path_factory) -> Path:
     return out
 
 
+@pytest.fixture(scope="module")
+def dataset(session, tmp_path_factory) -> Path:
+    """The session's default export (lab/bimanual): both sides' 44-vectors and the right side's camera."""
+    root = tmp_path_factory.mktemp("bimanual_ds") / "ds"
+    ran = teleprev("export", session, "--repo-id", "lab/bimanual", "--root", root)
+    assert ran.returncode == 0, ran.stdout + ran.stderr
+    return root
+
+
 def test_session_records_both_sides(session):
     rig = load_rig(RIG)
     with SessionReader(session) as r:
@@ -71,16 +80,15 @@ def test_audit_checks_each_side_against_its_own_limits(session):
     assert report.hand_state_samples > 200 and report.hand_state_colliding == 0
 
 
-def test_export_uses_lerobot_bimanual_names_and_loads_back_exactly(session, tmp_path):
+def test_export_uses_lerobot_bimanual_names_and_loads_back_exactly(session, dataset, tmp_path):
     from lerobot.datasets.lerobot_dataset import LeRobotDataset
 
-    root = tmp_path / "ds"
-    ran = teleprev("export", session, "--repo-id", "lab/bimanual", "--root", root)
-    assert ran.returncode == 0, ran.stdout + ran.stderr
-    ds = LeRobotDataset("lab/bimanual", root=root, video_backend="pyav")
+    ds = LeRobotDataset("lab/bimanual", root=dataset, video_backend="pyav")
     for feature in ("action", "observation.state"):
         assert ds.meta.features[feature]["names"] == expected_names()
         assert tuple(ds.meta.features[feature]["shape"]) == (44,)
+    assert tuple(ds.meta.features["observation.images.cam_right"]["shape"]) == (120, 160, 3)
+    assert tuple(ds[len(ds) - 1]["observation.images.cam_right"].shape) == (3, 120, 160)
     # The left half is what the left side's command streams give on their own (a single-arm export of them):
     # sides are concatenated, not altered.
     # (no split at a gap in either export: one side's streams may pause where the other's do not)
@@ -106,3 +114,14 @@ def test_export_uses_lerobot_bimanual_names_and_loads_back_exactly(session, tmp_
     state_both = np.stack([ds[i]["observation.state"].numpy() for i in range(len(ds))])
     state_alone = np.stack([left[i]["observation.state"].numpy() for i in range(len(left))])
     np.testing.assert_array_equal(state_both[:, :22], state_alone)
+
+
+def test_an_act_trains_on_the_bimanual_export(dataset, tmp_path):
+    """lerobot-train (a tiny ACT, two steps on CPU) takes the export as it is: both sides' vectors and the camera."""
+    from tests.helpers.policies import train_tiny_act
+
+    policy = train_tiny_act(dataset, "lab/bimanual", tmp_path / "train")
+    config = json.loads((policy / "config.json").read_text())
+    assert config["input_features"]["observation.state"]["shape"] == [44]
+    assert config["input_features"]["observation.images.cam_right"]["shape"] == [3, 120, 160]
+    assert config["output_features"]["action"]["shape"] == [44]
