@@ -258,37 +258,47 @@ def audit_session(path: str | Path, rig_path: str | Path | None = None) -> Audit
 
 def audit_dataset(root: str | Path, rig_path: str | Path | None) -> AuditReport:
     """The `action` column of a LeRobot dataset, per episode, as commands sent at the frames' timestamps,
-    against a rig's limits (joints matched as read_actions says)."""
+    against a rig's limits (joints matched as read_actions says); a bimanual rig's each side against its own
+    ("action[left arm]" ...)."""
     from teleprev.assembly import motion_limits
-    from teleprev.rig import load_rig
+    from teleprev.rig import load_rig, side_rig
 
     root = Path(root)
     if rig_path is None:
         raise SessionError(
             "a dataset does not carry its rig: pass --config RIG (the robot whose limits apply)", str(root)
         )
-    limits = motion_limits(load_rig(rig_path))
-    data = read_actions(root, limits)
+    rig = load_rig(rig_path)
+    sides = [(side, motion_limits(side_rig(rig, side))) for side in rig.sides] if rig.bimanual else \
+        [("", motion_limits(rig))]
+    report = AuditReport(str(root))
+    for side, limits in sides:
+        data = read_actions(root, limits, side)
+        report.note = report.note or data.note
+        report.streams += _audit_actions(data, limits, f"{side} " if side else "")
+    return report
+
+
+def _audit_actions(data, limits: dict, label: str) -> list[StreamAudit]:
+    """One robot's arm and end-effector columns of a dataset's actions (DatasetActions), episode by episode."""
     stamps, action = data.stamps, data.action
     # The actions are stored as float32: rounded, each value moves by up to half an ulp, which a divided
     # difference of order k at the frames' spacing h can grow to 2^k x that / h^k.
     half_ulp = 2.0 ** -24 * (float(np.abs(action).max()) if action.size else 0.0)
     spacing = np.diff(np.unique(stamps)).min() / 1e9 if len(np.unique(stamps)) > 1 else 1.0
-    report = AuditReport(str(root), note=data.note)
-    arm = StreamAudit("action[arm]")
-    hand = StreamAudit("action[end effector]")
+    arm_topic, hand_topic = f"action[{label}arm]", f"action[{label}end effector]"
+    arm, hand = StreamAudit(arm_topic), StreamAudit(hand_topic)
     for ep in np.unique(data.episodes):
         t, q = data.episode(int(ep))
         t = t + int(ep) * 3_600_000_000_000  # episodes an hour apart: never one run
-        merge(arm, audit_stream("action[arm]", "arm", limits, t, q[:, data.arm_cols], from_rest=False))
-        merge(hand, audit_stream("action[end effector]", "hand", limits, t, q[:, data.hand_cols], from_rest=False))
+        merge(arm, audit_stream(arm_topic, "arm", limits, t, q[:, data.arm_cols], from_rest=False))
+        merge(hand, audit_stream(hand_topic, "hand", limits, t, q[:, data.hand_cols], from_rest=False))
     for total in (arm, hand):
         for name, order, limit in (("speed", 1, total.speed_limit), ("accel", 2, total.accel_limit),
                                    ("jerk", 3, total.jerk_limit)):
             if limit:
                 total.rounding[name] = 2 ** order * half_ulp / spacing ** order / limit
-    report.streams = [arm, hand]
-    return report
+    return [arm, hand]
 
 
 def merge(total: StreamAudit, part: StreamAudit) -> None:
@@ -311,10 +321,11 @@ def audit_path(path: str | Path, rig_path: str | Path | None = None) -> AuditRep
 
 
 def print_report(report: AuditReport, console) -> None:
+    from rich.markup import escape
     from rich.table import Table
 
-    for s in report.streams:
-        table = Table(title=f"{report.session} {s.topic}: {s.commands} commands", title_justify="left")
+    for s in report.streams:  # (escaped: a dataset's "action[arm]" is not rich markup)
+        table = Table(title=escape(f"{report.session} {s.topic}: {s.commands} commands"), title_justify="left")
         table.add_column("check")
         table.add_column("measured", justify="right")
         table.add_column("limit", justify="right")
@@ -344,8 +355,8 @@ def print_report(report: AuditReport, console) -> None:
             f"measured hand state in self-collision: {report.hand_state_colliding} of {report.hand_state_samples} "
             "samples"
         )
-    console.print("[green]audit passed[/]" if report.ok else "[red]audit failed[/]: " + "; ".join(
-        f"{s.topic}: {v}" for s in report.streams for v in s.violations) + (
+    console.print("[green]audit passed[/]" if report.ok else "[red]audit failed[/]: " + escape("; ".join(
+        f"{s.topic}: {v}" for s in report.streams for v in s.violations)) + (
         f"; hand state in self-collision {report.hand_state_colliding}x" if report.hand_state_colliding else ""))
 
 

@@ -18,13 +18,17 @@ def is_dataset(path: Path) -> bool:
     return (Path(path) / "meta" / "info.json").is_file()
 
 
-def _action_columns(names: list[str], joints: tuple[str, ...], prefix: str) -> list[int] | None:
+def _action_columns(names: list[str], joints: tuple[str, ...], prefix: str, side: str = "") -> list[int] | None:
     """Where each joint sits among the action's names: "<prefix>.<joint>" (teleprev's exports), else
-    "<anything>.<joint>" or "<joint>" met exactly once; None if a joint is not found."""
+    "<anything>.<joint>" or "<joint>" met exactly once; None if a joint is not found. With a `side`, only
+    that side's names count: "<side>_<prefix>.<joint>", else "<side>_<anything>.<joint>" met once (LeRobot's
+    bimanual naming)."""
+    if side:
+        names = [n[len(side) + 1:] if n.startswith(f"{side}_") else "" for n in names]
     out = []
     for j in joints:
         exact = [i for i, n in enumerate(names) if n == f"{prefix}.{j}"]
-        loose = [i for i, n in enumerate(names) if n == j or n.endswith("." + j)]
+        loose = [i for i, n in enumerate(names) if (n == j and not side) or n.endswith("." + j)]
         found = exact or (loose if len(loose) == 1 else [])
         if not found:
             return None
@@ -50,10 +54,13 @@ class DatasetActions:
         return self.stamps[rows], self.action[rows]
 
 
-def read_actions(root: str | Path, limits: dict) -> DatasetActions:
+def read_actions(root: str | Path, limits: dict, side: str = "") -> DatasetActions:
     """The `action` column of a LeRobot dataset (teleprev's or anyone's) read from its parquet files
     (without lerobot), its joints matched to the rig's `limits` by name ("arm.joint1" or "joint1"); when
-    no name matches and the action has exactly the rig's arm + end-effector joints, by position."""
+    no name matches and the action has exactly the rig's arm + end-effector joints, by position.
+
+    `side` ("left", "right"): one side of a bimanual dataset, `limits` being that side's: its joints by
+    name ("left_arm.joint1"), else by position when the action has exactly both sides' joints, left first."""
     import pyarrow.parquet as pq
 
     root = Path(root)
@@ -68,15 +75,19 @@ def read_actions(root: str | Path, limits: dict) -> DatasetActions:
         names = next(iter(names.values()), None)
     names = [str(n) for n in names] if names else [f"action.{i}" for i in range(int(feature["shape"][0]))]
     arm_names, hand_names = limits["arm"]["names"], limits["hand"]["names"]
-    arm_cols = _action_columns(names, arm_names, "arm")
-    hand_cols = _action_columns(names, hand_names, "hand")
+    arm_cols = _action_columns(names, arm_names, "arm", side)
+    hand_cols = _action_columns(names, hand_names, "hand", side)
     note = ""
     if arm_cols is None or hand_cols is None:
-        if len(names) != len(arm_names) + len(hand_names):
+        per_side = len(arm_names) + len(hand_names)
+        if len(names) != per_side * (2 if side else 1):
+            whose = f"the {side} side's joints ({side}_arm.joint1 ...; {per_side} a side)" if side else "the rig's joints"
             raise SessionError(f"the action's {len(names)} names {names[:8]}{'...' if len(names) > 8 else ''} do not "
-                               f"name the rig's joints ({len(arm_names)} arm: {list(arm_names)}; {len(hand_names)} "
+                               f"name {whose} ({len(arm_names)} arm: {list(arm_names)}; {len(hand_names)} "
                                f"end effector), and their number differs, so they cannot be matched by position", where)
-        arm_cols, hand_cols = list(range(len(arm_names))), list(range(len(arm_names), len(names)))
+        first = per_side if side == "right" else 0
+        arm_cols = list(range(first, first + len(arm_names)))
+        hand_cols = list(range(first + len(arm_names), first + per_side))
         note = "joints matched by position (the action's names are not the rig's)"
     files = sorted((root / "data").rglob("*.parquet"))
     if not files:

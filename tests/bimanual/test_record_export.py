@@ -116,6 +116,32 @@ def test_export_uses_lerobot_bimanual_names_and_loads_back_exactly(session, data
     np.testing.assert_array_equal(state_both[:, :22], state_alone)
 
 
+def test_the_dataset_audit_measures_each_side_as_lerobot_loads_it(dataset):
+    """`teleprev audit DATASET --config sim_bimanual.toml`: each side's columns (by name) against its own limits,
+    the figures those of the actions lerobot loads (at the frames' timestamps)."""
+    from lerobot.datasets.lerobot_dataset import LeRobotDataset
+
+    from teleprev.evaluation.audit import audit_path
+
+    report = audit_path(dataset, RIG)
+    ds = LeRobotDataset("lab/bimanual", root=dataset, video_backend="pyav")
+    rows = [ds.hf_dataset[i] for i in range(len(ds.hf_dataset))]
+    t = np.array([float(r["timestamp"]) for r in rows])
+    action = np.array([np.asarray(r["action"], dtype=float) for r in rows])
+    rig = load_rig(RIG)
+    assert report.note == "" and len(report.streams) == 4
+    for k, (side, kind) in enumerate((s, k) for s in ("left", "right") for k in ("arm", "hand")):
+        stream = report.streams[k]
+        limits = motion_limits(side_rig(rig, side))[kind]
+        assert stream.topic == f"action[{side} {'arm' if kind == 'arm' else 'end effector'}]"
+        assert stream.commands == len(ds) and stream.position_outside == 0
+        assert stream.speed_limit == float(limits["velocity"].min())
+        cols = [expected_names().index(f"{side}_{kind}.{j}") for j in limits["names"]]
+        v = np.diff(action[:, cols], axis=0) / np.diff(t)[:, None]
+        assert np.isclose(stream.speed_max, np.abs(v).max(), rtol=1e-4)
+        # (an action is a command stamped with its frame's time: no bound on the ratio, as single-arm)
+
+
 def test_an_act_trains_on_the_bimanual_export(dataset, tmp_path):
     """lerobot-train (a tiny ACT, two steps on CPU) takes the export as it is: both sides' vectors and the camera."""
     from tests.helpers.policies import train_tiny_act
