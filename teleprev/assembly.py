@@ -79,8 +79,8 @@ def _single_arm(rig: Rig) -> None:
     """A bimanual rig has a pipeline and limits per side (teleprev/bimanual.py, rig.side_rig): what asks for
     the rig's one is not built for two sides yet."""
     if rig.bimanual:
-        raise ConfigError("a bimanual rig ([sides.left], [sides.right]): replay, eval and rollout are not built "
-                          "for two sides yet (record, export and audit are)",
+        raise ConfigError("a bimanual rig ([sides.left], [sides.right]): eval and rollout are not built for two "
+                          "sides yet (record, export, replay and audit are)",
                           str(rig.path or "rig"))
 
 

@@ -7,7 +7,6 @@ import json
 from pathlib import Path
 
 import numpy as np
-import pytest
 
 from teleprev.assembly import motion_limits
 from teleprev.rig import load_rig, side_rig
@@ -23,23 +22,6 @@ def expected_names() -> list[str]:
     hand = [str(i) for i in range(16)]
     return [f"{side}_{role}.{j}" for side in ("left", "right") for role, joints in (("arm", arm), ("hand", hand))
             for j in joints]
-
-
-@pytest.fixture(scope="module")
-def session(tmp_path_factory) -> Path:
-    out = tmp_path_factory.mktemp("bimanual") / "s.mcap"
-    ran = teleprev("record", RIG, "--duration", "6", "--engage-after", "1.5", "--no-preview", "--out", out)
-    assert ran.returncode == 0, ran.stdout + ran.stderr
-    return out
-
-
-@pytest.fixture(scope="module")
-def dataset(session, tmp_path_factory) -> Path:
-    """The session's default export (lab/bimanual): both sides' 44-vectors and the right side's camera."""
-    root = tmp_path_factory.mktemp("bimanual_ds") / "ds"
-    ran = teleprev("export", session, "--repo-id", "lab/bimanual", "--root", root)
-    assert ran.returncode == 0, ran.stdout + ran.stderr
-    return root
 
 
 def test_session_records_both_sides(session):

@@ -213,6 +213,15 @@ def play(session: Path, episode, speed: float, to: str, rig_path, engage_after, 
     """`signals` (teleprev.cli.signals.StopSignals): a stop signal while the player and its recording are
     built is raised once they are whole, and none cuts the robot's stop and the recording's close short."""
     signals = signals or NoSignals()
+    rig = load_rig(rig_path) if rig_path else None if is_dataset(session) else _recorded_rig(session)
+    if rig is not None and rig.bimanual:
+        from teleprev.live.replay.bimanual_playback import play_bimanual
+
+        if foxglove is not None:
+            raise ConfigError("--foxglove is not built for a bimanual replay yet", str(rig.path or session))
+        play_bimanual(session, episode, speed, to, rig, bool(rig_path), engage_after, console, show, smoothed, out,
+                      signals)
+        return
     with signals.deferred():
         built = build_player(session, episode, speed, to, rig_path, smoothed, out)
     player, runners, tap, rig, message, recording = built

@@ -22,6 +22,7 @@ import numpy as np
 from teleprev import topics
 from teleprev.errors import ConfigError, DeviceError, SessionError
 from teleprev.messages import JointSample
+from teleprev.pipeline.bimanual import side_topic
 from teleprev.pipeline.derivatives import RESUME_GAP_NS, divided_differences, runs
 from teleprev.pipeline.guard import JointGuard
 from teleprev.pipeline.trajectory import JointMotion
@@ -55,17 +56,20 @@ def _stream(reader: SessionReader, topic: str, lo: int, hi: int) -> tuple[dict[i
     return values, names
 
 
-def load_playback(path, episode: int | None = None) -> Playback:
+def load_playback(path, episode: int | None = None, side: str = "") -> Playback:
+    """A session's commands (else its previewed targets); `side`: one side's of a bimanual session
+    (/command/left/arm ...)."""
     with SessionReader(path) as reader:
-        return _playback(reader, path, episode)
+        return _playback(reader, path, episode, side)
 
 
-def load_dataset_playback(root, episode: int | None, limits: dict) -> Playback:
+def load_dataset_playback(root, episode: int | None, limits: dict, side: str = "") -> Playback:
     """One episode of a LeRobot dataset's `action` column (any dataset's) as commands at its frames'
-    timestamps, its joints matched to the rig's by name as `teleprev audit DATASET` matches them."""
+    timestamps, its joints matched to the rig's by name as `teleprev audit DATASET` matches them; `side`:
+    one side's columns of a bimanual dataset (left_arm.joint1 ...), `limits` being that side's."""
     from teleprev.export.actions import read_actions
 
-    data = read_actions(root, limits)
+    data = read_actions(root, limits, side)
     present = np.unique(data.episodes)
     if episode is None:
         raise ConfigError("a dataset is replayed one episode at a time: pass --episode N", str(root))
@@ -79,22 +83,27 @@ def load_dataset_playback(root, episode: int | None, limits: dict) -> Playback:
                     tuple(limits["hand"]["names"]), "dataset actions")
 
 
-def _playback(reader: SessionReader, path, episode: int | None) -> Playback:
+def _playback(reader: SessionReader, path, episode: int | None, side: str = "") -> Playback:
+    def topic(name: str) -> str:
+        return side_topic(name, side) if side else name
+
     lo, hi = 0, 1 << 63
     if episode is not None:
         eps = {e.index: e for e in reader.episodes()}
         if episode not in eps:
             raise SessionError(f"no episode {episode} (episodes: {sorted(eps) or 'none'})", str(path))
         lo, hi = eps[episode].start_ns, eps[episode].stop_ns or hi
-    arm, arm_names = _stream(reader, topics.COMMAND_ARM, lo, hi)
-    eff, eff_names = _stream(reader, topics.COMMAND_HAND, lo, hi)
+    arm, arm_names = _stream(reader, topic(topics.COMMAND_ARM), lo, hi)
+    eff, eff_names = _stream(reader, topic(topics.COMMAND_HAND), lo, hi)
     source = "commands"
     if not arm:
-        arm, arm_names = _stream(reader, topics.ARM_TARGET, lo, hi)
-        eff, eff_names = _stream(reader, topics.CORRECTED, lo, hi)
+        arm, arm_names = _stream(reader, topic(topics.ARM_TARGET), lo, hi)
+        eff, eff_names = _stream(reader, topic(topics.CORRECTED), lo, hi)
         source = "targets"
     if not arm or not eff:
-        raise SessionError("nothing to play: the session holds no arm and end-effector commands or targets", str(path))
+        whose = f"the {side} side's " if side else ""
+        raise SessionError(f"nothing to play: the session holds no {whose}arm and end-effector commands or targets",
+                           str(path))
     stamps = sorted(set(arm) | set(eff))
     first_arm = arm[min(arm)]
     first_eff = eff[min(eff)]
@@ -263,6 +272,33 @@ def smooth(
 SETTLE_S = 30.0  # the longest a smoothed sequence may take to come to rest after its last command
 
 
+class StartTogether:
+    """The players of a bimanual replay: each, at rest on its first command, waits for the others before it
+    plays (so the two sides play the recorded instants together); one that cannot get there (stopped, a robot
+    that reports no state) cancels the start for all."""
+
+    def __init__(self, players: int):
+        self.players, self.arrived, self.cancelled = players, 0, False
+        self._cv = threading.Condition()
+
+    def arrive_and_wait(self, stopped) -> bool:
+        with self._cv:
+            self.arrived += 1
+            self._cv.notify_all()
+            while self.arrived < self.players and not self.cancelled:
+                if stopped():
+                    self.cancelled = True
+                    self._cv.notify_all()
+                    break
+                self._cv.wait(0.05)
+            return not self.cancelled
+
+    def cancel(self) -> None:
+        with self._cv:
+            self.cancelled = True
+            self._cv.notify_all()
+
+
 @dataclass
 class PlayerState:
     mode: str = "preview"  # preview | ramp | playing | done
@@ -289,11 +325,17 @@ class Player:
         motion=None,
         clock=None,
         lead_s: float = 0.0,
+        together: StartTogether | None = None,
+        t0_ns: int | None = None,
     ):
         """`lead_s`: hand each played command over this long before its stamp (actuators in processes of
-        their own write each at its stamp: the player's thread then sets no command's timing)."""
+        their own write each at its stamp: the player's thread then sets no command's timing); `together`: the
+        players of a bimanual replay, each past its ramp, start playing at once; `t0_ns`: the recorded instant
+        played first (default the playback's first step), theirs in common."""
         self.p = playback
         self.lead_s = lead_s
+        self.together = together
+        self.t0_ns = int(playback.t_ns[0]) if t0_ns is None else t0_ns
         self.motion = motion  # teleprev.pipeline.motion.Motion: the engage ramp keeps its limits
         self.clock = clock  # stamps the commands with the time they are sent (a robot runs them then)
         self.speed = speed
@@ -341,9 +383,14 @@ class Player:
                 return self.state
         if self.actuators and not self._ramp():
             self.state.mode = "done"
+            if self.together is not None:
+                self.together.cancel()  # the other side does not play alone
+            return self.state
+        if self.together is not None and not self.together.arrive_and_wait(self._stop.is_set):
+            self.state.mode = "done"
             return self.state
         self.state.mode = "playing"
-        start, t0 = time.perf_counter(), self.p.t_ns[0]
+        start, t0 = time.perf_counter(), self.t0_ns
         start_ns = self._now_ns() + int(self.period * 1e9)
         self.state.start_ns = start_ns
         arm_sent, eff_sent = self.p.sent("arm"), self.p.sent("effector")

@@ -58,9 +58,13 @@ class ReplayRecording:
             topics.EPISODE, now, Event(now, "teleprev.EpisodeEvent", {"event": event, "episode": 0, "task": TASK})
         )
 
-    def actuators(self, devices: dict) -> dict:
-        """The devices, each wrapped so that every command it is sent is recorded first."""
-        return {kind: _Recorded(device, _COMMAND_TOPICS[kind], self) for kind, device in devices.items()}
+    def actuators(self, devices: dict, side: str = "") -> dict:
+        """The devices, each wrapped so that every command it is sent is recorded first; `side`: a bimanual
+        rig's side, whose commands go on /command/<side>/arm and /command/<side>/hand."""
+        from teleprev.pipeline.bimanual import side_topic
+
+        return {kind: _Recorded(device, side_topic(_COMMAND_TOPICS[kind], side) if side else _COMMAND_TOPICS[kind],
+                                self) for kind, device in devices.items()}
 
     def sink(self, then):
         """A runner's sink that records the robot's states, then hands them to `then`."""
