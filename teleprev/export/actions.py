@@ -81,7 +81,8 @@ def read_actions(root: str | Path, limits: dict, side: str = "") -> DatasetActio
     if arm_cols is None or hand_cols is None:
         per_side = len(arm_names) + len(hand_names)
         if len(names) != per_side * (2 if side else 1):
-            whose = f"the {side} side's joints ({side}_arm.joint1 ...; {per_side} a side)" if side else "the rig's joints"
+            whose = f"the {side} side's joints ({side}_arm.joint1 ...; {per_side} a side)" if side else \
+                "the rig's joints"
             raise SessionError(f"the action's {len(names)} names {names[:8]}{'...' if len(names) > 8 else ''} do not "
                                f"name {whose} ({len(arm_names)} arm: {list(arm_names)}; {len(hand_names)} "
                                f"end effector), and their number differs, so they cannot be matched by position", where)

@@ -112,7 +112,8 @@ class BimanualLoop(SessionLoop):
         self.relay = RelayPair(relays)
         self.stats.commands_sent, self.stats.command_errors = self.relay.sent, self.relay.errors
         stale_ms = max(d.pipeline.cfg.stale_ms for d in driver.drivers.values())
-        self.input_watch = InputWatch(int(input_loss_to_preview_s * 1e9), int(stale_ms * 1e6))
+        watched = not any(d.topics.action for d in driver.drivers.values())  # (a policy's actions are not)
+        self.input_watch = InputWatch(int(input_loss_to_preview_s * 1e9), int(stale_ms * 1e6)) if watched else None
         self.snapshot = replace(self.snapshot, stale_ms=stale_ms)
 
     def stop(self, timeout: float = 5.0) -> None:
@@ -152,7 +153,8 @@ class BimanualLoop(SessionLoop):
             update = out.result.update
             usable = out.result.arm_target is not None if update is None else \
                 update.arm is not None and update.hand is not None
-            self._input_event(self.input_watch.stepped(t, usable, out.result.report.get("flags", [])))
+            if self.input_watch is not None:
+                self._input_event(self.input_watch.stepped(t, usable, out.result.report.get("flags", [])))
         self._pass_updates()
         for out in stepped:
             for topic, value in out.logged:

@@ -77,9 +77,9 @@ class BimanualSession(LiveSession):
         if options.webxr_host:  # the XR page's devices of both sides: one page, one address
             rig = rig.with_device_settings("webxr", "--webxr-host", host=options.webxr_host)
         self.rig = rig
-        if options.policy is not None or options.foxglove is not None:
+        if options.foxglove is not None:
             raise ConfigError("a bimanual rig records with its glove/suit (or XR page) devices only for now (no "
-                              "--foxglove or rollout yet)", str(rig.path))
+                              "--foxglove yet)", str(rig.path))
         if rig.sim.world == "physics":
             raise ConfigError("a bimanual rig has no physics world yet: use [sim] world = \"kinematic\"",
                               f"{rig.path} [sim]")
@@ -96,7 +96,8 @@ class BimanualSession(LiveSession):
         device_sides = rig.device_sides()
         self.devices = rig.open_devices(rig.devices, self.context, contexts)
         self.pipelines = build_side_pipelines(rig, options.models)
-        self.driver = BimanualDriver({side: (_driver(self.pipelines[side], rig, side), side_inputs(rig, side))
+        policy = options.policy is not None  # a policy's actions step each side (/policy/<side>/action)
+        self.driver = BimanualDriver({side: (_driver(self.pipelines[side], rig, side, policy), side_inputs(rig, side))
                                       for side in SIDES}, build_guard(rig, self.pipelines))
         self.pipeline = self.pipelines["right"]
         self.robots = {side: load_robot(s.robot) for side, s in rig.sides.items()}
@@ -219,10 +220,17 @@ class SideFrames:
             for t in tf.transforms)))
 
 
-def _driver(pipeline, rig: Rig, side: str):
+def _driver(pipeline, rig: Rig, side: str, policy: bool = False):
+    """A side's driver; `policy`: stepped by the policy's actions for this side (Pipeline.joint_step) instead
+    of the glove."""
+    from dataclasses import replace
+
     from teleprev.assembly import build_driver
 
-    return build_driver(pipeline, side_inputs(rig, side).topics)
+    inputs = side_inputs(rig, side).topics
+    if policy:
+        inputs = replace(inputs, action=side_topic(topics.POLICY_ACTION, side))
+    return build_driver(pipeline, inputs)
 
 
 def _inside_limits(robot, *joint_sets: tuple[str, ...]) -> tuple[np.ndarray, ...]:

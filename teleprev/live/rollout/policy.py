@@ -66,15 +66,24 @@ class PolicyFeatures:
     depth_per_m: float = 1000.0  # a depth map's units per metre, as the policy was trained (millimetres: 1000)
 
     @classmethod
-    def for_streams(cls, recipe: Recipe, streams: dict[str, str], inputs: dict[str, str]) -> PolicyFeatures:
+    def for_streams(cls, recipe: Recipe, streams: dict[str, str], inputs: dict[str, str],
+                    sides: dict[str, str] | None = None) -> PolicyFeatures:
         """The recipe's features over a live session's streams (topic -> StreamSpec payload) and the
-        pipeline's inputs (InputTopics' fields, which pick the device where a rig has several)."""
+        pipeline's inputs (InputTopics' fields, which pick the device where a rig has several); `sides`: a
+        bimanual session's "sides" record (each role once per side, left first, as its export makes them)."""
+        from teleprev.pipeline.bimanual import side_topic
+        from teleprev.sides import SIDES
+
         schemas = {t: SimpleNamespace(schema=SCHEMAS.get(p, p)) for t, p in streams.items()}
-        for t in (topics.COMMAND_ARM, topics.COMMAND_HAND):  # a dataset's action: the commands
+        commands = [topics.COMMAND_ARM, topics.COMMAND_HAND]  # a dataset's action: the commands
+        if sides:
+            commands = [side_topic(t, side) for side in SIDES for t in commands]
+        for t in commands:
             schemas[t] = SimpleNamespace(schema=JOINTS)
-        features = resolve(recipe, schemas, {"pipeline": {"inputs": json.dumps(inputs)}}, "rollout")
+        metadata = {"pipeline": {"inputs": json.dumps(inputs)}, **({"sides": sides} if sides else {})}
+        features = resolve(recipe, schemas, metadata, "rollout")
         actions = [f for f in features if f.is_action]
-        if len(actions) != 1 or [s.topic for s in actions[0].sources] != [topics.COMMAND_ARM, topics.COMMAND_HAND]:
+        if len(actions) != 1 or [s.topic for s in actions[0].sources] != commands:
             raise ConfigError("a policy's action must be the recipe's one action feature made of "
                               "arm_command and effector_command (the joints the pipeline commands)", recipe.path)
         return cls(tuple(f for f in features if not f.is_action), actions[0])

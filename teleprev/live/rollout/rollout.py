@@ -18,20 +18,25 @@ import hashlib
 from dataclasses import dataclass, field
 from pathlib import Path
 
+import numpy as np
+
 from teleprev import topics
 from teleprev.clock import SessionClock
 from teleprev.errors import ConfigError
 from teleprev.export.recipe import Recipe, load_recipe
 from teleprev.live.no_signals import NoSignals
+from teleprev.live.record.bimanual_session import open_session, sides_record
 from teleprev.live.record.run import run_timed
 from teleprev.live.record.schedule import EpisodeTimes
 from teleprev.live.record.session import LiveSession, RecordOptions
 from teleprev.live.rollout.lerobot_policy import DEPTH_UNITS_M, PolicyCard
 from teleprev.live.rollout.policy import LatestSamples, PolicyFeatures, PolicyRunner, observe
 from teleprev.messages import JointSample, Sample
+from teleprev.pipeline.bimanual import side_topic
 from teleprev.pipeline.step import action_names as joint_action_names
-from teleprev.rig import Rig, load_rig
+from teleprev.rig import Rig, load_rig, side_rig
 from teleprev.robot.model import load_robot
+from teleprev.sides import SIDES
 
 DEFAULT_FPS = 30  # a recipe without fps and a rig without camera (as the export's)
 WAITING = "the policy has not acted yet in this episode"  # why an episode's engage waits
@@ -87,6 +92,24 @@ def _joint_names(rig: Rig) -> tuple[tuple[str, ...], tuple[str, ...]]:
     return tuple(n for n in robot.chain_to(tip).joint_names if n not in effector), tuple(effector)
 
 
+def _joints(rig: Rig, inputs: dict[str, str]) -> tuple[tuple[str, ...], dict[str, int]]:
+    """The action's joint names, as the export names them ("arm.joint1" ...; a bimanual rig's each side's
+    "left_arm.joint1" ..., left first), and how many values each arm's and end effector's state stream has."""
+    if not rig.bimanual:
+        arm, effector = _joint_names(rig)
+        return joint_action_names(arm, effector), {
+            topics.device_topic("arm", inputs["arm"].split("/")[2], "state"): len(arm),
+            topics.device_topic("hand", inputs["effector"].split("/")[2], "state"): len(effector)}
+    names, widths = (), {}
+    for side in SIDES:
+        arm, effector = _joint_names(side_rig(rig, side))
+        names += tuple(rig.sides[side].prefixed(n) for n in joint_action_names(arm, effector))
+        devices = rig.sides[side].devices
+        widths[topics.device_topic("arm", devices["arm"], "state")] = len(arm)
+        widths[topics.device_topic("hand", devices["hand"], "state")] = len(effector)
+    return names, widths
+
+
 def check_rollout(options: RolloutOptions) -> RolloutPlan:
     """Refuses, with one ConfigError naming what is wrong, what would make the rollout fail later."""
     episode_plan(options).check()
@@ -99,12 +122,9 @@ def check_rollout(options: RolloutOptions) -> RolloutPlan:
         rig.check_task(options.task, "--task")
     recipe = load_recipe(options.recipe)
     streams, rates, inputs = _rig_streams(rig)
-    features = PolicyFeatures.for_streams(recipe, streams, inputs)
-    arm, effector = _joint_names(rig)
-    action_names = joint_action_names(arm, effector)
+    features = PolicyFeatures.for_streams(recipe, streams, inputs, sides_record(rig) if rig.bimanual else None)
+    action_names, widths = _joints(rig, inputs)
     where = f"{card.path} config.json"
-    widths = {topics.device_topic("arm", inputs["arm"].split("/")[2], "state"): len(arm),
-              topics.device_topic("hand", inputs["effector"].split("/")[2], "state"): len(effector)}
     given = {}
     for f in features.observations:
         if f.is_video:
@@ -150,6 +170,14 @@ def _sha256(path: Path) -> str:
     return h.hexdigest()
 
 
+def session_action_names(recording: LiveSession) -> tuple[str, ...]:
+    """The joints a session's pipeline (a bimanual one's two, prefixed, left first) takes as a policy's action."""
+    pipelines = getattr(recording, "pipelines", None)
+    if pipelines is None:
+        return recording.pipeline.action_names
+    return tuple(recording.rig.sides[side].prefixed(n) for side in SIDES for n in pipelines[side].action_names)
+
+
 @dataclass
 class RolloutResult:
     recording: LiveSession
@@ -165,12 +193,12 @@ class Rollout:
         card = plan.card
         record = {"path": str(card.path), "type": card.type, "model_sha256": _sha256(card.path / "model.safetensors"),
                   "fps": f"{plan.fps:g}", "recipe": plan.recipe.path, "action_names": ",".join(plan.action_names)}
-        self.recording = LiveSession(RecordOptions(
+        self.recording = open_session(RecordOptions(
             out=options.out, rig=options.rig, models=options.models, task=options.task,
             connect_timeout_s=options.connect_timeout_s, policy=record, episode_plan=episode_plan(options)))
-        if self.recording.pipeline.action_names != plan.action_names:  # check_rollout names them as the pipeline
+        if session_action_names(self.recording) != plan.action_names:  # check_rollout names them as the pipeline
             self.recording.stop()
-            raise ConfigError(f"the pipeline's joints {list(self.recording.pipeline.action_names)} differ from the "
+            raise ConfigError(f"the pipeline's joints {list(session_action_names(self.recording))} differ from the "
                               f"rollout's {list(plan.action_names)}", str(options.rig or "rig"))
         self.latest = LatestSamples()
         self.recording.loop.taps.append(self.latest)
@@ -188,7 +216,17 @@ class Rollout:
     def _deliver(self, action) -> None:
         clock = self.recording.clock
         now = clock.now_ns()
-        self.recording.loop.sink(Sample(topics.POLICY_ACTION, JointSample(now, self.plan.action_names, action)), now)
+        pipelines = getattr(self.recording, "pipelines", None)
+        if pipelines is None:
+            self.recording.loop.sink(Sample(topics.POLICY_ACTION, JointSample(now, self.plan.action_names, action)),
+                                     now)
+            return
+        start = 0  # a bimanual policy's action: left_* then right_*, each side's on /policy/<side>/action
+        for side in SIDES:
+            names = pipelines[side].action_names
+            part = np.asarray(action[start:start + len(names)])
+            start += len(names)
+            self.recording.loop.sink(Sample(side_topic(topics.POLICY_ACTION, side), JointSample(now, names, part)), now)
 
     def run(self, signals=None) -> RolloutResult:
         """Start, run the episodes, stop (the file is closed even when interrupted). `signals`
