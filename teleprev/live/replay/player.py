@@ -281,17 +281,22 @@ class StartTogether:
         self.players, self.arrived, self.cancelled = players, 0, False
         self._cv = threading.Condition()
 
-    def arrive_and_wait(self, stopped) -> bool:
+    def arrive_and_wait(self, stopped, hold, period_s: float) -> bool:
+        """Here; then `hold()` (the first command sent again: a servo's stream does not pause) every period
+        until all are here (True), or one cancels or `stopped()` (False)."""
         with self._cv:
             self.arrived += 1
             self._cv.notify_all()
-            while self.arrived < self.players and not self.cancelled:
+        while True:
+            with self._cv:
+                if self.cancelled or self.arrived >= self.players:
+                    return not self.cancelled
                 if stopped():
                     self.cancelled = True
                     self._cv.notify_all()
-                    break
-                self._cv.wait(0.05)
-            return not self.cancelled
+                    return False
+                self._cv.wait(period_s)
+            hold()
 
     def cancel(self) -> None:
         with self._cv:
@@ -386,7 +391,9 @@ class Player:
             if self.together is not None:
                 self.together.cancel()  # the other side does not play alone
             return self.state
-        if self.together is not None and not self.together.arrive_and_wait(self._stop.is_set):
+        if self.together is not None and not self.together.arrive_and_wait(
+                self._stop.is_set, lambda: self._send(self.p.arm[0], self.p.effector[0], self._now_ns()),
+                self.period):
             self.state.mode = "done"
             return self.state
         self.state.mode = "playing"
