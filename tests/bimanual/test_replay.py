@@ -27,45 +27,35 @@ def commands(path: Path, topic: str, played_only: bool = False) -> tuple[np.ndar
     return np.array([m.stamp_ns for m in msgs], dtype=np.int64), np.array([m.positions for m in msgs])
 
 
-def audited(path: Path, tmp_path: Path, must_pass: bool = True) -> dict:
+def audited(path: Path, tmp_path: Path) -> dict:
     out = tmp_path / f"{path.stem}_audit.json"
     ran = teleprev("audit", path, "--json", out)
-    assert ran.returncode in ((0,) if must_pass else (0, 1)), ran.stdout
+    assert ran.returncode == 0, ran.stdout
     (report,) = json.loads(out.read_text())
     return {s["topic"]: s["commands"] for s in report["streams"]}
 
 
-def test_a_bimanual_session_replays_to_sim_each_side_its_own_commands(session, tmp_path):
+def test_a_bimanual_session_is_replayed_to_sim_smoothed_and_refused_unsmoothed(session, tmp_path):
+    ran = teleprev("replay", session, "--to", "sim", "--engage-after", "0", "--no-preview")
+    assert ran.returncode == 2, ran.stdout + ran.stderr
+    assert "add --smooth" in " ".join((ran.stdout + ran.stderr).split())
     out = tmp_path / "replay.mcap"
-    ran = teleprev("replay", session, "--to", "sim", "--engage-after", "0", "--no-preview", "--out", out)
+    ran = teleprev("replay", session, "--to", "sim", "--smooth", "--engage-after", "0", "--no-preview", "--out", out)
     assert ran.returncode == 0, ran.stdout + ran.stderr
-    firsts = {}
     for side in SIDES:
         for kind in ("arm", "hand"):
             topic = f"/command/{side}/{kind}"
-            t_src, q_src = commands(session, topic)
-            t, q = commands(out, topic, played_only=True)
-            # the recorded commands were within the side's limits: played as they are, in their own time, after
-            # (a side at rest on its first command before the other is) the first command held
-            held = len(q) - len(q_src)
-            assert 0 <= held <= 3, held
-            np.testing.assert_allclose(q[held:], q_src, rtol=0, atol=1e-12)  # (a guard's step at a cap: 2e-15)
-            np.testing.assert_array_equal(q[:held], np.repeat(q_src[:1], held, axis=0))
-            np.testing.assert_allclose(np.diff(t[held:]), np.diff(t_src), atol=1_000)  # stamps of the played times
-            firsts[side, kind] = (t[held], t_src[0])
-    # both sides from one recorded instant: their offset as recorded, up to the two threads' start (load)
-    played = firsts["left", "arm"][0] - firsts["right", "arm"][0]
-    recorded = firsts["left", "arm"][1] - firsts["right", "arm"][1]
-    assert abs(played - recorded) < 50e6, (played, recorded)
+            _, q_src = commands(session, topic)
+            _, q = commands(out, topic, played_only=True)
+            assert len(q) > 50
+            np.testing.assert_allclose(q[-1], q_src[-1], atol=1e-6)  # at rest on this side's last command
     with SessionReader(out) as reader:
         for side in SIDES:  # the simulated arm of each side followed that side's commands
             states = [m.payload for m in reader.messages([f"/arm/arm_{side}/state"])]
             assert len(states) > 50
             np.testing.assert_allclose(states[-1].positions, commands(session, f"/command/{side}/arm")[1][-1],
                                        atol=0.01)
-    # Audited per side. Not asserted to pass: in about 1 run of 3 here one hand measured 1.09x its acceleration
-    # limit around the start of play (the recorded commands pass; open, see the branch's report).
-    counts = audited(out, tmp_path, must_pass=False)
+    counts = audited(out, tmp_path)
     assert list(counts) == [f"/command/{s}/{k}" for s in SIDES for k in ("arm", "hand")]
 
 
