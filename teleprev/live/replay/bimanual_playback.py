@@ -47,7 +47,7 @@ class SidePlayer:
     side: str
     player: Player
     runners: list
-    tap: object  # playback.StateTap: the latest state this side's actuators report
+    tap: object  # state_tap.StateTap: the latest state this side's actuators report
 
 
 @dataclass
@@ -71,8 +71,8 @@ def build_bimanual_replay(session: Path, episode, speed: float, to: str, rig: Ri
     from --rig (its calibration applies) rather than from the session."""
     from teleprev.devices.registry import load_plugin
     from teleprev.devices.runner import DeviceRunner
-    from teleprev.live.replay.playback import StateTap
     from teleprev.live.replay.replay_recording import ReplayRecording
+    from teleprev.live.replay.state_tap import StateTap
 
     dataset = is_dataset(session)
     if to == "arm":  # (a replay to the arms writes through their paced actuator processes: not yet per side)

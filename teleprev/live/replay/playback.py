@@ -27,23 +27,12 @@ from teleprev.live.replay.player import (
     validate,
 )
 from teleprev.live.replay.replay_recording import ReplayRecording
-from teleprev.messages import JointSample
+from teleprev.live.replay.state_tap import StateTap
 from teleprev.preview.keys import KeyReader
 from teleprev.preview.robot_view import Layer, RobotView
 from teleprev.rig import load_recorded_rig, load_rig
 from teleprev.robot.model import load_robot
 from teleprev.session.reader import SessionReader
-
-
-class StateTap:
-    """Keeps the latest state each actuator reports, for the engage ramp and the screen."""
-
-    def __init__(self):
-        self.latest: dict[str, JointSample] = {}
-
-    def sink(self, sample, receive_ns: int) -> None:
-        if isinstance(sample.payload, JointSample):
-            self.latest[sample.topic] = sample.payload
 
 
 def _recorded_rig(session: Path):
