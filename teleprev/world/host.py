@@ -197,15 +197,17 @@ class WorldHost:
     def load_layout(self, layout: Layout, robot: Mapping[str, float] | None = None, timeout_s: float = 5.0) -> dict:
         """Run this scene from now on (the robot where it stands, or placed at rest at `robot`); returns, once
         the world runs it, how it began it (WorldLink.began)."""
+        # The lock is held until the world has taken the request: a second request written while the world
+        # reads the first would tear it (seen as a JSONDecodeError that ended the world's process).
         with self._lock:
             generation = self._request(layout, robot)
-        deadline = time.monotonic() + timeout_s
-        while self.block.header[GENERATION] < generation:
-            if self.process.poll() is not None or time.monotonic() > deadline:
-                raise RuntimeError("the physics world process did not take the new layout "
-                                   f"({'it exited' if self.process.poll() is not None else 'timed out'})")
-            time.sleep(0.002)
-        return self.link.began()[1]
+            deadline = time.monotonic() + timeout_s
+            while self.block.header[GENERATION] < generation:
+                if self.process.poll() is not None or time.monotonic() > deadline:
+                    raise RuntimeError("the physics world process did not take the new layout "
+                                       f"({'it exited' if self.process.poll() is not None else 'timed out'})")
+                time.sleep(0.002)
+            return self.link.began()[1]
 
     def close(self) -> None:
         if self.process.poll() is None:
