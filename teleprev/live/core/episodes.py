@@ -64,7 +64,12 @@ class EpisodeTracker:
         message = ""
         if judge is not None:
             for stop in [e for e in events if e["event"] == "stop"]:
-                judged = judge()
+                try:
+                    judged = judge()
+                except Exception as exc:  # noqa: BLE001 - the episode's own events are recorded all the same
+                    judged = None
+                    message = (f"episode {stop['episode'] + 1} ({stopping}): the physics world could not judge it "
+                               f"({type(exc).__name__}: {exc})")
                 if judged is not None:
                     mark, reason = judged
                     events.insert(events.index(stop) + 1, self.judged(stop["episode"], stopping, mark, reason))
