@@ -23,7 +23,7 @@ from tests.world.sessions import ON_TARGET, record_physics
 # The first runs in the operator's own scene (its hand reaching into the cup's: a failure, as it cannot finish
 # in 3 s), the second in a scene with the cup on its target (a recorded success, the operator's reach leaving
 # it alone), the last in one drawn from the seed (a failure).
-PLAN = EpisodeTimes(3, 3.0, 0.0, engage_after_s=0.3, marks="-")
+PLAN = EpisodeTimes(3, 4.0, 0.0, engage_after_s=0.3, marks="-")
 
 
 @pytest.fixture(scope="module")
