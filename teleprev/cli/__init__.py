@@ -16,34 +16,30 @@ INTERRUPTED = "interrupted"  # what a command stopped by Ctrl-C says on stderr
 INTERRUPTED_EXIT = 130  # 128 + SIGINT, as a shell reports it
 
 
-def interrupted_exit():
-    """Say one line and exit 130, from anywhere (inside an import too: nothing is left to clean up there)."""
+def _say_and_exit(line: str, code: int):
+    """Flush what was printed, say `line` on stderr and exit `code` at once, from anywhere (inside an import
+    too: nothing is left to clean up there)."""
     for stream in (sys.stdout, sys.stderr):
         try:
             stream.flush()
         except (OSError, ValueError):
             pass
     try:
-        sys.stderr.write(f"{INTERRUPTED}\n")
+        sys.stderr.write(f"{line}\n")
         sys.stderr.flush()
     except (OSError, ValueError):
         pass
-    os._exit(INTERRUPTED_EXIT)
+    os._exit(code)
+
+
+def interrupted_exit():
+    """Say one line and exit 130."""
+    _say_and_exit(INTERRUPTED, INTERRUPTED_EXIT)
 
 
 def stopped_exit(signum: int, frame=None):
-    """Say which signal stopped the command and exit 128 + it, from anywhere (nothing to clean up yet)."""
-    for stream in (sys.stdout, sys.stderr):
-        try:
-            stream.flush()
-        except (OSError, ValueError):
-            pass
-    try:
-        sys.stderr.write(f"stopped by {signal.Signals(signum).name}\n")
-        sys.stderr.flush()
-    except (OSError, ValueError):
-        pass
-    os._exit(128 + signum)
+    """Say which signal stopped the command and exit 128 + it."""
+    _say_and_exit(f"stopped by {signal.Signals(signum).name}", 128 + signum)
 
 
 def _quiet_interrupt(kind, value, tb, previous=sys.excepthook):
