@@ -25,7 +25,7 @@ from teleprev.live.core.controls import ToPreview
 from teleprev.live.core.input_watch import InputWatch
 from teleprev.live.core.loop import SessionLoop
 from teleprev.live.core.relay import CommandRelay, tick_records
-from teleprev.messages import ImageSample, Logged, PoseSample, Sample
+from teleprev.messages import Logged, Sample
 from teleprev.pipeline.bimanual import BimanualDriver, side_topic
 from teleprev.status import SideView
 
@@ -122,19 +122,8 @@ class BimanualLoop(SessionLoop):
 
     def _sample(self, sample: Sample, receive_ns: int) -> None:
         t = self._stamp(receive_ns)
-        payload = sample.payload
-        if isinstance(payload, PoseSample):  # as SessionLoop._sample: -0.0 read back as +0.0
-            payload = replace(payload, position=payload.position + 0.0, orientation=payload.orientation + 0.0)
-        msg = Logged(sample.topic, t, payload)
-        self._log(msg)
-        for tap in self.taps:
-            tap(msg)
-        self.stats.count(sample.topic, t, payload)
-        if sample.topic == topics.DEVICE_EVENT and payload.data.get("event") == "error":
-            self._device_failed(payload.data)
-        if isinstance(payload, ImageSample) and self._camera_topic in (None, sample.topic):
-            self._camera_topic = sample.topic
-            self.snapshot = replace(self.snapshot, camera=payload)
+        msg = self._record(sample, t)
+        payload = msg.payload
         if self.failure:
             return
         started = time.perf_counter_ns()

@@ -286,25 +286,8 @@ class SessionLoop(LoopControls):
             self._log(marker)
             self.driver.feed(marker)
             self.stats.superseded += 1
-        payload = sample.payload
-        if isinstance(payload, PoseSample):
-            # Foxglove's pose schema cannot store -0.0 (it reads back as +0.0); adding +0.0 turns -0.0
-            # into +0.0 and leaves every other value alone, so the pipeline sees what a replay will.
-            payload = replace(payload, position=np.asarray(payload.position, float) + 0.0,
-                              orientation=np.asarray(payload.orientation, float) + 0.0)
-        msg = Logged(sample.topic, t, payload)
-        self._log(msg)
-        for tap in self.taps:
-            tap(msg)
-        self.stats.count(sample.topic, t, payload)
-        if sample.topic == topics.DEVICE_EVENT and payload.data.get("event") == "error":
-            self._device_failed(payload.data)
-        if isinstance(payload, ImageSample) and self._camera_topic in (None, sample.topic):
-            self._camera_topic = sample.topic
-            self.snapshot = replace(self.snapshot, camera=payload)
-        elif isinstance(payload, DepthSample) and self._depth_topic in (None, sample.topic):
-            self._depth_topic = sample.topic
-            self.snapshot = replace(self.snapshot, depth=payload)
+        msg = self._record(sample, t)
+        payload = msg.payload
         if self.driver is None or self.failure:
             return
         started = time.perf_counter_ns()
@@ -334,6 +317,30 @@ class SessionLoop(LoopControls):
             commands_sent=sum(self.stats.commands_sent.values()), dropped=sum(self.stats.dropped.values()),
             input_age_ms=age_ns / 1e6,
         )
+
+    def _record(self, sample: Sample, t: int) -> Logged:
+        """Record a device's sample at log time t, pass it to the taps and the counters, and keep what the
+        screen shows of it (a failure, the camera, the depth); the recorded message."""
+        payload = sample.payload
+        if isinstance(payload, PoseSample):
+            # Foxglove's pose schema cannot store -0.0 (it reads back as +0.0); adding +0.0 turns -0.0
+            # into +0.0 and leaves every other value alone, so the pipeline sees what a replay will.
+            payload = replace(payload, position=np.asarray(payload.position, float) + 0.0,
+                              orientation=np.asarray(payload.orientation, float) + 0.0)
+        msg = Logged(sample.topic, t, payload)
+        self._log(msg)
+        for tap in self.taps:
+            tap(msg)
+        self.stats.count(sample.topic, t, payload)
+        if sample.topic == topics.DEVICE_EVENT and payload.data.get("event") == "error":
+            self._device_failed(payload.data)
+        if isinstance(payload, ImageSample) and self._camera_topic in (None, sample.topic):
+            self._camera_topic = sample.topic
+            self.snapshot = replace(self.snapshot, camera=payload)
+        elif isinstance(payload, DepthSample) and self._depth_topic in (None, sample.topic):
+            self._depth_topic = sample.topic
+            self.snapshot = replace(self.snapshot, depth=payload)
+        return msg
 
     def _superseded(self, topic: str) -> bool:
         """Whether this glove sample (the step's trigger) is to be recorded but not stepped: a newer one is
