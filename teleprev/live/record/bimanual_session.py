@@ -27,7 +27,7 @@ from teleprev.live.record.frames import RobotFrames
 from teleprev.live.record.metadata import session_metadata
 from teleprev.live.record.operator_actions import ACTION_KEYS, operator_status
 from teleprev.live.record.session import PREVIEW_SLACK_S, URDF_MEDIA_TYPE, LiveSession, RecordOptions
-from teleprev.messages import Logged, RobotDescription, Transform, TransformsSample
+from teleprev.messages import Transform, TransformsSample
 from teleprev.pipeline.bimanual import BimanualDriver, side_topic
 from teleprev.rig import Rig, load_rig
 from teleprev.robot.frames import FramePublisher
@@ -179,21 +179,8 @@ class BimanualSession(LiveSession):
                 listener(task)
 
     def start(self) -> BimanualSession:
-        for host in self.hosts.values():  # forked first, before this session starts any thread
-            host.fork()
-        for sender in self.senders.values():  # after the actuators' processes, whose command pipes they write
-            sender.start()
-        self.recorder.start()
-        t = self.clock.now_ns()
-        for side, robot in self.robots.items():
-            self._log(Logged(side_topic(topics.ROBOT_DESCRIPTION, side), t,
-                             RobotDescription(t, robot.urdf_path.read_text())))
-        self.loop.start()
-        for runner in self.runners.values():
-            runner.start()
-        if self.options.practice:
-            self.loop.note("practice_start")
-        return self
+        return self._start(self.senders.values(),
+                           {side_topic(topics.ROBOT_DESCRIPTION, side): robot for side, robot in self.robots.items()})
 
 
 WORLD_FRAME = "world"  # the root of a bimanual /tf tree: each side's robot hangs from it at its mount

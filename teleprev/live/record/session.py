@@ -16,8 +16,10 @@ import dataclasses
 import datetime as _dt
 import json
 import time
+from collections.abc import Iterable
 from dataclasses import dataclass
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import numpy as np
 
@@ -34,8 +36,11 @@ from teleprev.messages import Logged, RobotDescription
 from teleprev.pipeline.driver import InputTopics, PipelineDriver
 from teleprev.rig import Rig, load_rig
 from teleprev.robot.frames import FramePublisher
-from teleprev.robot.model import load_robot
+from teleprev.robot.model import RobotModel, load_robot
 from teleprev.status import DeviceRow
+
+if TYPE_CHECKING:
+    from teleprev.live.core.sender import CommandSender
 
 URDF_MEDIA_TYPE = "application/xml"  # the rig's URDF, attached to the session as <name>.urdf
 # What a switch to preview may wait for before it reaches the sender: a busy session loop (its queue)
@@ -254,12 +259,19 @@ class LiveSession:
             listener(task)
 
     def start(self) -> LiveSession:
+        return self._start((self.sender,), {topics.ROBOT_DESCRIPTION: self.robot})
+
+    def _start(self, senders: Iterable[CommandSender], descriptions: dict[str, RobotModel]) -> LiveSession:
+        """Start everything in its order; `descriptions`: topic -> the robot whose URDF is logged on it (a
+        bimanual session's: one a side)."""
         for host in self.hosts.values():  # forked first, before this session starts any thread
             host.fork()
-        self.sender.start()  # after the actuators' processes, whose command pipes it writes
+        for sender in senders:  # after the actuators' processes, whose command pipes they write
+            sender.start()
         self.recorder.start()
         t = self.clock.now_ns()  # first in the file, so that Foxglove's URDF layer has the robot from the start
-        self._log(Logged(topics.ROBOT_DESCRIPTION, t, RobotDescription(t, self.robot.urdf_path.read_text())))
+        for topic, robot in descriptions.items():
+            self._log(Logged(topic, t, RobotDescription(t, robot.urdf_path.read_text())))
         self.loop.start()
         for runner in self.runners.values():
             runner.start()
