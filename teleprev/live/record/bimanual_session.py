@@ -26,7 +26,7 @@ from teleprev.live.core.loop import LoopInbox
 from teleprev.live.record.frames import RobotFrames
 from teleprev.live.record.metadata import session_metadata
 from teleprev.live.record.operator_actions import ACTION_KEYS, operator_status
-from teleprev.live.record.session import PREVIEW_SLACK_S, URDF_MEDIA_TYPE, LiveSession, RecordOptions
+from teleprev.live.record.session import PREVIEW_SLACK_S, URDF_MEDIA_TYPE, LiveSession, RecordOptions, inside_limits
 from teleprev.messages import Transform, TransformsSample
 from teleprev.pipeline.bimanual import BimanualDriver, side_topic
 from teleprev.rig import Rig, load_rig
@@ -137,7 +137,7 @@ class BimanualSession(LiveSession):
                                             rig.sides[side].pipeline.command_rate_hz,
                                             outlets=tuple(h.outlet for key, h in self.hosts.items()
                                                           if key.startswith(f"{side}/")),
-                                            warm_pose=_inside_limits(self.robots[side], p.arm_names,
+                                            warm_pose=inside_limits(self.robots[side], p.arm_names,
                                                                      p.effector_names))
                         for side, p in self.pipelines.items()}
         self.sender = self.senders["right"]  # (the file's sender record: both sides run at the same rate)
@@ -218,10 +218,4 @@ def _driver(pipeline, rig: Rig, side: str, policy: bool = False):
     if policy:
         inputs = replace(inputs, action=side_topic(topics.POLICY_ACTION, side))
     return build_driver(pipeline, inputs)
-
-
-def _inside_limits(robot, *joint_sets: tuple[str, ...]) -> tuple[np.ndarray, ...]:
-    """Zero clipped into the limits of each set of the robot's joints (a sender warms its planner there)."""
-    return tuple(np.clip(np.zeros(len(n)), robot.lower[robot.indices(n)], robot.upper[robot.indices(n)])
-                 for n in joint_sets)
 

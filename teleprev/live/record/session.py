@@ -66,6 +66,12 @@ class RecordOptions:
     webxr_host: str = ""  # the XR page's address to listen on, over the rig's (record --webxr-host)
 
 
+def inside_limits(robot: RobotModel, *joint_sets: tuple[str, ...]) -> tuple[np.ndarray, ...]:
+    """Per set of the robot's joints, zero clipped into their limits (a sender warms its planner there)."""
+    return tuple(np.clip(np.zeros(len(names)), robot.lower[robot.indices(names)], robot.upper[robot.indices(names)])
+                 for names in joint_sets)
+
+
 def default_session_path(task: str) -> Path:
     stamp = _dt.datetime.now().strftime("%Y%m%d_%H%M%S")
     return Path("sessions") / f"{stamp}_{task or 'session'}.mcap"
@@ -142,7 +148,7 @@ class LiveSession:
         }
         self.sender = CommandSender(CommandPlanner.for_pipeline(self.pipeline), self.clock,
                                     rig.pipeline.command_rate_hz, outlets=tuple(h.outlet for h in self.hosts.values()),
-                                    warm_pose=self._inside_limits(names["arm"], names["hand"]))
+                                    warm_pose=inside_limits(self.robot, names["arm"], names["hand"]))
         frames = FramePublisher(self.robot, sensor_frames(rig, self.robot, rig_calibration(rig)))
         tf_period_ns = int(1e9 / rig.pipeline.tf_rate_hz) if rig.pipeline.tf_rate_hz > 0 else 0
         self.loop = SessionLoop(self.clock, self._log, self.driver, inbox=inbox, actuators=self.actuators,
@@ -162,12 +168,6 @@ class LiveSession:
         # A device carrying the operator's controls (the XR page) acts on this recording and shows its status.
         self.context.operator.act = self.act
         self.context.operator.status = lambda: operator_status(self.loop.snapshot)
-
-    def _inside_limits(self, *joint_sets: tuple[str, ...]) -> tuple[np.ndarray, ...]:
-        """Per set of the robot's joints, zero clipped into their limits (the sender warms its planner there)."""
-        robot = self.robot
-        return tuple(np.clip(np.zeros(len(names)), robot.lower[robot.indices(names)], robot.upper[robot.indices(names)])
-                     for names in joint_sets)
 
     @property
     def preview_lead_s(self) -> float:
