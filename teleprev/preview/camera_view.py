@@ -20,35 +20,10 @@ from rich.text import Text
 HALF = "▀"
 
 
-class CameraView:
-    def __init__(self) -> None:
-        self._stamp: int | None = None
-        self._rgb: np.ndarray | None = None
+class _FrameView:
+    """The latest frame of a stream as RGB, converted (`_to_rgb`) once per new frame."""
 
-    def rgb(self, sample) -> np.ndarray | None:
-        """The frame of an ImageSample as RGB (decoded at a quarter size; None if it does not decode)."""
-        if sample is None:
-            return None
-        if sample.stamp_ns != self._stamp:
-            import cv2
-
-            if getattr(sample, "format", "jpeg") == "raw":
-                self._rgb = np.asarray(sample.data)
-            else:
-                bgr = cv2.imdecode(np.frombuffer(sample.data, np.uint8), cv2.IMREAD_REDUCED_COLOR_4)
-                self._rgb = None if bgr is None else bgr[:, :, ::-1]
-            self._stamp = sample.stamp_ns
-        return self._rgb
-
-    def render(self, sample, cols: int, rows: int):
-        rgb = self.rgb(sample)
-        if rgb is None:
-            return Text("no camera frame yet", style="dim")
-        return picture(rgb, cols, rows)
-
-
-class DepthView:
-    """The latest depth frame, colour-mapped (depth_rgb) once per new frame."""
+    what = "frame"  # "no <what> frame yet" until one arrives
 
     def __init__(self) -> None:
         self._stamp: int | None = None
@@ -58,14 +33,40 @@ class DepthView:
         if sample is None:
             return None
         if sample.stamp_ns != self._stamp:
-            self._rgb, self._stamp = depth_rgb(sample.metres()), sample.stamp_ns
+            self._rgb, self._stamp = self._to_rgb(sample), sample.stamp_ns
         return self._rgb
+
+    def _to_rgb(self, sample) -> np.ndarray | None:
+        raise NotImplementedError
 
     def render(self, sample, cols: int, rows: int):
         rgb = self.rgb(sample)
         if rgb is None:
-            return Text("no depth frame yet", style="dim")
+            return Text(f"no {self.what} frame yet", style="dim")
         return picture(rgb, cols, rows)
+
+
+class CameraView(_FrameView):
+    """The latest ImageSample as RGB (decoded at a quarter size; None if it does not decode)."""
+
+    what = "camera"
+
+    def _to_rgb(self, sample) -> np.ndarray | None:
+        if getattr(sample, "format", "jpeg") == "raw":
+            return np.asarray(sample.data)
+        import cv2
+
+        bgr = cv2.imdecode(np.frombuffer(sample.data, np.uint8), cv2.IMREAD_REDUCED_COLOR_4)
+        return None if bgr is None else bgr[:, :, ::-1]
+
+
+class DepthView(_FrameView):
+    """The latest depth frame, colour-mapped (depth_rgb)."""
+
+    what = "depth"
+
+    def _to_rgb(self, sample) -> np.ndarray:
+        return depth_rgb(sample.metres())
 
 
 LEVELS = (32, 232)  # the part of OpenCV's TURBO colour map that depths are spread over, far to near
