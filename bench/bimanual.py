@@ -91,29 +91,16 @@ def measure(path: Path) -> dict:
     """Faults, command gaps (per side, from its ticks) and the audit of one session."""
     from teleprev import topics
     from teleprev.evaluation.audit import audit_session
-    from teleprev.messages import Event
+    from teleprev.pipeline.bimanual import side_topic
     from teleprev.session.reader import SessionReader
-    from teleprev.session.summary import SenderSummary
+    from teleprev.session.summary import SenderSummary, summarize
 
+    faults = [e for e in summarize(path).device_events if e.event == "error" and "injected" not in e.message]
     gaps, commands = [], []
     with SessionReader(path) as reader:
-        faults = [m.payload.data for m in reader.messages([topics.DEVICE_EVENT])
-                  if m.payload.data.get("event") == "error" and "injected" not in str(m.payload.data.get("message"))]
         for side in SIDES:
-            stamps, late, active, engages = [], [], [], []
-            for msg in reader.messages([f"/command/{side}/tick", topics.MODE]):
-                ev = msg.payload
-                if not isinstance(ev, Event):
-                    continue
-                if msg.topic == topics.MODE:
-                    if ev.data.get("mode") == "execute":
-                        engages.append(msg.log_time_ns)
-                    continue
-                stamps.append(ev.stamp_ns)
-                late.append(float(ev.data.get("late_ms", 0.0)))
-                active.append(bool(ev.data.get("active", True)))
-            gaps.append(SenderSummary.from_ticks(stamps, late, active, engages, {}).gap_ms_max)
-            commands.append(sum(1 for _ in reader.messages([f"/command/{side}/arm"])))
+            gaps.append(SenderSummary.from_session(reader, side_topic(topics.COMMAND_TICK, side)).gap_ms_max)
+            commands.append(sum(1 for _ in reader.messages([side_topic(topics.COMMAND_ARM, side)])))
     audit = audit_session(path)
     return {"faults": len(faults), "gap_ms": max(gaps), "audit_ok": audit.ok, "ok": min(commands) > 100}
 

@@ -92,6 +92,25 @@ class SenderSummary:
                    float(np.percentile(late, 50)) if len(late) else 0.0,
                    float(np.percentile(late, 99)) if len(late) else 0.0, float(late.max()) if len(late) else 0.0, gap)
 
+    @classmethod
+    def from_session(cls, reader: SessionReader, tick_topic: str = COMMAND_TICK,
+                     meta: dict[str, str] | None = None) -> SenderSummary:
+        """From a session's ticks on `tick_topic` (a bimanual session's sides: /command/<side>/tick) and its
+        engages; `meta`: the file's "sender" record."""
+        stamps, late, active, engages = [], [], [], []
+        for msg in reader.messages([tick_topic, MODE]):
+            ev = msg.payload
+            if not isinstance(ev, Event):
+                continue
+            if msg.topic == MODE:
+                if ev.data.get("mode") == "execute":
+                    engages.append(msg.log_time_ns)
+                continue
+            stamps.append(ev.stamp_ns)
+            late.append(float(ev.data.get("late_ms", 0.0)))
+            active.append(bool(ev.data.get("active", True)))
+        return cls.from_ticks(stamps, late, active, engages, meta or {})
+
 
 @dataclass
 class SessionSummary:
@@ -199,19 +218,7 @@ def summarize(path: str | os.PathLike) -> SessionSummary:
                                                          str(d.get("event", "")), str(d.get("message", ""))))
         sender = None
         if COMMAND_TICK in reader.topics:
-            stamps, late, active, engages = [], [], [], []
-            for msg in reader.messages([COMMAND_TICK, MODE]):
-                ev = msg.payload
-                if not isinstance(ev, Event):
-                    continue
-                if msg.topic == MODE:
-                    if ev.data.get("mode") == "execute":
-                        engages.append(msg.log_time_ns)
-                    continue
-                stamps.append(ev.stamp_ns)
-                late.append(float(ev.data.get("late_ms", 0.0)))
-                active.append(bool(ev.data.get("active", True)))
-            sender = SenderSummary.from_ticks(stamps, late, active, engages, meta.get("sender", {}))
+            sender = SenderSummary.from_session(reader, COMMAND_TICK, meta.get("sender", {}))
         has_counters = bool(counters)
         return SessionSummary(
             reader.path, reader.file_bytes, reader.start_ns, reader.end_ns,
