@@ -75,26 +75,28 @@ def test_export_uses_lerobot_bimanual_names_and_loads_back_exactly(session, data
     # The left half is what the left side's command streams give on their own (a single-arm export of them):
     # sides are concatenated, not altered.
     # (no split at a gap in either export: one side's streams may pause where the other's do not)
-    recipe = tmp_path / "left.toml"
-    recipe.write_text('[export]\nmax_gap_ms = 60000.0\n\n[[feature]]\nname = "observation.state"\n'
-                      'streams = ["/arm/arm_left/state", "/hand/hand_left/state"]\n\n[[feature]]\nname = "action"\n'
-                      'streams = ["/command/left/arm", "/command/left/hand"]\n')
-    ran = teleprev("export", session, "--repo-id", "lab/left", "--root", tmp_path / "left", "--recipe", recipe)
-    assert ran.returncode == 0, ran.stdout + ran.stderr
-    left = LeRobotDataset("lab/left", root=tmp_path / "left", video_backend="pyav")
-    whole = tmp_path / "both.toml"
-    whole.write_text('[export]\nmax_gap_ms = 60000.0\n\n[[feature]]\nname = "observation.state"\n'
-                     'streams = ["arm_state", "effector_state"]\n\n[[feature]]\nname = "action"\n'
-                     'streams = ["arm_command", "effector_command"]\n')
-    ran = teleprev("export", session, "--repo-id", "lab/whole", "--root", tmp_path / "whole", "--recipe", whole)
-    assert ran.returncode == 0, ran.stdout + ran.stderr
-    ds = LeRobotDataset("lab/whole", root=tmp_path / "whole", video_backend="pyav")
+    left = _export(session, tmp_path / "left", ["/arm/arm_left/state", "/hand/hand_left/state"],
+                   ["/command/left/arm", "/command/left/hand"])
+    ds = _export(session, tmp_path / "whole", ["arm_state", "effector_state"], ["arm_command", "effector_command"])
     assert ds.meta.features["action"]["names"] == expected_names()
     assert len(ds) > 30
     for feature in ("action", "observation.state"):
         both = np.stack([ds[i][feature].numpy() for i in range(len(ds))])
         alone = np.stack([left[i][feature].numpy() for i in range(len(left))])
         assert within(both[:, :22], alone), (feature, len(both), len(alone))
+
+
+def _export(session, root: Path, state: list[str], action: list[str]):
+    """`teleprev export` of the session with a recipe of these state and action streams, loaded back."""
+    from lerobot.datasets.lerobot_dataset import LeRobotDataset
+
+    recipe = root.with_suffix(".toml")
+    recipe.write_text("[export]\nmax_gap_ms = 60000.0\n" + "".join(
+        f'\n[[feature]]\nname = "{name}"\nstreams = {json.dumps(streams)}\n'
+        for name, streams in (("observation.state", state), ("action", action))))
+    ran = teleprev("export", session, "--repo-id", f"lab/{root.name}", "--root", root, "--recipe", recipe)
+    assert ran.returncode == 0, ran.stdout + ran.stderr
+    return LeRobotDataset(f"lab/{root.name}", root=root, video_backend="pyav")
 
 
 def test_the_dataset_audit_measures_each_side_as_lerobot_loads_it(dataset):
