@@ -77,16 +77,6 @@ TARGETS = {"step_ms_p99": "<= 1.0", "bimanual_realtime_faults": "0", "command_ga
            "cross_side_held": ">= 1", "lerobot_train_ok": "true", "emulated_bimanual_session_ok": "true"}
 
 
-def record(out: Path, seconds: float) -> int:
-    cmd = [*CLI, "record", str(RIG), "--out", str(out), "--duration", str(seconds), "--engage-after", "1.5",
-           "--no-preview"]
-    done = subprocess.run(cmd, capture_output=True, text=True, env={**os.environ, "PYTHONPATH": PYTHONPATH},
-                          timeout=seconds + 120)
-    if done.returncode != 0:
-        print(f"{out.name}: teleprev record exited {done.returncode}: {done.stderr.strip()[-2000:]}", file=sys.stderr)
-    return done.returncode
-
-
 def measure(path: Path) -> dict:
     """Faults, command gaps (per side, from its ticks) and the audit of one session."""
     from teleprev import topics
@@ -215,6 +205,8 @@ def emulated_ok(folder: Path) -> bool:
 
 
 def main() -> None:
+    import realtime  # its unattended `teleprev record` runner
+
     p = common.parser(__doc__)
     p.add_argument("--busy", type=int, default=None, help="busy processes beside the sessions (default 8, --quick 2)")
     args = p.parse_args()
@@ -227,7 +219,7 @@ def main() -> None:
         with common.Load(busy):
             for k in range(count):
                 out = folder / f"{k:02d}.mcap"
-                code = record(out, seconds)
+                code = realtime.record(RIG, out, seconds, 1, 1.5)
                 if code == 0 and out.is_file():
                     sessions.append(out)
         for out in sessions:
