@@ -104,13 +104,7 @@ class FclSelfCollisionChecker:
         self._objects = objects
 
         # Link pairs that are checked, and the shape pairs under each.
-        excluded = self.exclusions.pair_set()
-        self.link_pairs: tuple[tuple[str, str], ...] = tuple(
-            (a, b)
-            for i, a in enumerate(self.link_names)
-            for b in self.link_names[i + 1:]
-            if frozenset((a, b)) not in excluded
-        )
+        self.link_pairs: tuple[tuple[str, str], ...] = self.exclusions.checked_pairs(self.link_names)
         pair_of = np.full((len(self.link_names),) * 2, -1)  # link positions -> checked pair (-1: not checked)
         for k, (a, b) in enumerate(self.link_pairs):
             pair_of[link_pos[a], link_pos[b]] = pair_of[link_pos[b], link_pos[a]] = k

@@ -72,14 +72,8 @@ class CompiledSelfCollisionChecker:
              for k, n in enumerate(self.link_names)], dtype=np.int64,
         ).reshape(-1, 3)
 
-        # Checked link pairs in SelfCollisionChecker's order.
-        excluded = self.exclusions.pair_set()
-        self.link_pairs: tuple[tuple[str, str], ...] = tuple(
-            (a, b)
-            for i, a in enumerate(self.link_names)
-            for b in self.link_names[i + 1:]
-            if frozenset((a, b)) not in excluded
-        )
+        # Checked link pairs, in the order SelfCollisionChecker reports them (Exclusions.checked_pairs).
+        self.link_pairs: tuple[tuple[str, str], ...] = self.exclusions.checked_pairs(self.link_names)
         self._pairs = np.array([(link_pos[a], link_pos[b]) for a, b in self.link_pairs], dtype=np.int64).reshape(-1, 2)
         self.boxes = collision_kernels.BoxTable(shape_link_rows, shape_local, shape_size, links, spheres, self._pairs)
         # SelfCollisionChecker's two-margin kernels (kernels.*_margins) with both margins `margin`: their

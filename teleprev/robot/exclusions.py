@@ -31,6 +31,13 @@ class Exclusions:
     def pair_set(self) -> set[frozenset[str]]:
         return {frozenset(p.links) for p in self.pairs}
 
+    def checked_pairs(self, link_names: tuple[str, ...]) -> tuple[tuple[str, str], ...]:
+        """The link pairs a self-collision check tests, in the one order every checker reports them in: each
+        pair of `link_names` (in their order) that is not excluded."""
+        excluded = self.pair_set()
+        return tuple((a, b) for i, a in enumerate(link_names) for b in link_names[i + 1:]
+                     if frozenset((a, b)) not in excluded)
+
 
 def exclusions_path(urdf_path: Path) -> Path:
     return urdf_path.with_suffix(".collision.toml")
