@@ -15,6 +15,15 @@ from teleprev.cli.tables import print_table
 
 DEFAULT_ROOT = Path("datasets") / "out"  # beside sessions/, where `teleprev record` writes by default
 Codec = Literal["h264", "hevc", "av1"]
+# Options of more than one command (import takes the dataset's, eval the Ray one), declared once.
+REPO_ID = typer.Option(..., "--repo-id", help="Dataset name, e.g. lab/pick_place.", show_default=False)
+DATASET_ROOT = typer.Option(None, "--root", help="Dataset folder (default: ./datasets/out/<repo-id>).",
+                            show_default=False)
+FPS = typer.Option(0, "--fps", min=0, show_default=False,
+                   help="Frames per second (default: the recipe's, else the reference camera's rate).")
+RAY = typer.Option(None, "--ray", metavar="[ADDRESS]", show_default=False,
+                   help="Run the sessions on Ray: alone, start a local instance (with -j CPUs, default all); auto, "
+                   "HOST:PORT or ray://HOST:PORT: join that cluster. Needs `uv sync --extra ray`.")
 
 
 def export(
@@ -23,17 +32,9 @@ def export(
         help="Session files (.mcap), folders of them or globs ('sessions/*.mcap'), exported in this order.",
         show_default=False,
     ),
-    repo_id: str = typer.Option(..., "--repo-id", help="Dataset name, e.g. lab/pick_place.", show_default=False),
-    root: Path | None = typer.Option(
-        None, "--root", help="Dataset folder (default: ./datasets/out/<repo-id>).", show_default=False
-    ),
-    fps: int = typer.Option(
-        0,
-        "--fps",
-        min=0,
-        help="Frames per second (default: the recipe's, else the reference camera's rate).",
-        show_default=False,
-    ),
+    repo_id: str = REPO_ID,
+    root: Path | None = DATASET_ROOT,
+    fps: int = FPS,
     recipe: str = typer.Option(
         "default", "--recipe", help="Recipe file, or the name of one in datasets/recipes/ (default, with_glove)."
     ),
@@ -42,15 +43,7 @@ def export(
         False, "--include-discarded", help="Export episodes the operator discarded too."
     ),
     workers: int = typer.Option(1, "--workers", "-j", help="Export sessions in this many processes, then merge them."),
-    ray: str | None = typer.Option(
-        None,
-        "--ray",
-        metavar="[ADDRESS]",
-        help="Run the sessions on Ray: alone, start a local instance (with -j CPUs, default "
-        "all); auto, HOST:PORT or ray://HOST:PORT: join that cluster. Needs `uv sync "
-        "--extra ray`.",
-        show_default=False,
-    ),
+    ray: str | None = RAY,
     codec: Codec | None = typer.Option(
         None, "--codec", help="Video codec (default: the recipe's, h264).", show_default=False
     ),

@@ -9,7 +9,7 @@ from pathlib import Path
 
 import typer
 
-from teleprev.cli.export import DEFAULT_ROOT, Codec, print_report, run_stoppable
+from teleprev.cli.export import DATASET_ROOT, DEFAULT_ROOT, FPS, REPO_ID, Codec, print_report, run_stoppable
 
 
 def import_(
@@ -26,17 +26,9 @@ def import_(
         "are cut: a file, or the name of one in datasets/imports/ (ros2_arm).",
         show_default=False,
     ),
-    repo_id: str = typer.Option(..., "--repo-id", help="Dataset name, e.g. lab/pick_place.", show_default=False),
-    root: Path | None = typer.Option(
-        None, "--root", help="Dataset folder (default: ./datasets/out/<repo-id>).", show_default=False
-    ),
-    fps: int = typer.Option(
-        0,
-        "--fps",
-        min=0,
-        help="Frames per second (default: the recipe's, else the reference camera's rate).",
-        show_default=False,
-    ),
+    repo_id: str = REPO_ID,
+    root: Path | None = DATASET_ROOT,
+    fps: int = FPS,
     append: bool = typer.Option(False, "--append", help="Add the files to an existing dataset."),
     codec: Codec | None = typer.Option(
         None, "--codec", help="Video codec (default: the recipe's).", show_default=False

@@ -7,6 +7,7 @@ from typing import Literal
 
 import typer
 
+from teleprev.cli.export import RAY
 from teleprev.cli.record import View
 
 
@@ -132,15 +133,7 @@ def eval_(
         help="Write a PNG per episode (recorded vs re-run joints), and corpus.png for many sessions, into this folder.",
     ),
     workers: int = typer.Option(1, "--workers", "-j", min=1, help="Re-run sessions in this many processes."),
-    ray: str | None = typer.Option(
-        None,
-        "--ray",
-        metavar="[ADDRESS]",
-        help="Run the sessions on Ray: alone, start a local instance (with -j CPUs, default "
-        "all); auto, HOST:PORT or ray://HOST:PORT: join that cluster. Needs `uv sync "
-        "--extra ray`.",
-        show_default=False,
-    ),
+    ray: str | None = RAY,
     rows: int = typer.Option(
         30, "--rows", min=1, help="Sessions shown in the table of a corpus (the worst; the report has all)."
     ),
