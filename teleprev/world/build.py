@@ -18,6 +18,7 @@ from teleprev.paths import data_dir
 from teleprev.robot.effectors import EndEffector
 from teleprev.world import drives
 from teleprev.world.layout import LOOP_BAR, LOOP_HOLE, Layout, Placed, Shape
+from teleprev.world.places import VIEWS, View
 
 _ROBOT_TYPE, _ROBOT_AFFINITY = 1, 2  # robot geoms: collide with what has bit 1 in its affinity... and not themselves
 _OBJECT_TYPE, _OBJECT_AFFINITY = 2, 3
@@ -30,19 +31,7 @@ _TIP_RGBA = (0.88, 0.88, 0.88, 1.0)
 _TOOL_RGBA = (0.5, 0.47, 0.46, 1.0)
 
 
-@dataclass(frozen=True)
-class View:
-    eye: tuple[float, float, float]
-    target: tuple[float, float, float]
-    up: tuple[float, float, float] = (0.0, 0.0, 1.0)
-
-
-# The sim camera's viewpoints (robot base frame), with its 60 degree horizontal field at 4:3.
-VIEWS = {
-    "front": View((1.55, 0.50, 0.95), (0.30, 0.0, 0.20)),
-    "side": View((0.35, -1.45, 0.62), (0.35, 0.0, 0.24)),
-    "top": View((0.42, 0.0, 1.45), (0.42, 0.0, 0.0), (1.0, 0.0, 0.0)),
-}
+# The sim camera's 60 degree horizontal field at 4:3 (its viewpoints: places.VIEWS).
 FOVY_DEG = math.degrees(2 * math.atan(math.tan(math.radians(30.0)) * 3 / 4))
 MAX_IMAGE = (1280, 960)  # the offscreen buffer: the largest camera image the world renders
 CONTACT_TIMECONST = 0.008

@@ -41,3 +41,19 @@ SPOON_YAW = 0.15  # hang: the spoon lies turned this much (rad)
 
 def spot(task: str, name: str) -> Spot:
     return SPOTS[task][name]
+
+
+@dataclass(frozen=True)
+class View:
+    eye: tuple[float, float, float]
+    target: tuple[float, float, float]
+    up: tuple[float, float, float] = (0.0, 0.0, 1.0)
+
+
+# The sim cameras' viewpoints, in the robot base frame (x forward, z up; the table top at z = 0): the same
+# for the kinematic sim camera's renderer and the physics world's cameras.
+VIEWS = {
+    "front": View((1.55, 0.50, 0.95), (0.30, 0.0, 0.20)),
+    "side": View((0.35, -1.45, 0.62), (0.35, 0.0, 0.24)),
+    "top": View((0.42, 0.0, 1.45), (0.42, 0.0, 0.0), (1.0, 0.0, 0.0)),
+}

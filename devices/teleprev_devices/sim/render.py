@@ -8,12 +8,10 @@ and table) is drawn once. A few milliseconds per 640x480 frame.
 
 from __future__ import annotations
 
-from dataclasses import dataclass
-
 import cv2
 import numpy as np
 
-from teleprev.devices import RobotModel, robot_geometry
+from teleprev.devices import RobotModel, robot_geometry, world_places
 from teleprev_devices.sim.world import TABLE, PlacedObject, yaw_pose
 
 _SHIFT = 4  # sub-pixel bits for cv2 polygon coordinates
@@ -34,23 +32,11 @@ _FACE_NORMALS = robot_geometry.BOX_FACE_NORMALS
 _TABLE_POSE = yaw_pose(TABLE.yaw, TABLE.centre)
 
 
-@dataclass(frozen=True)
-class View:
-    eye: tuple[float, float, float]
-    target: tuple[float, float, float]
-    up: tuple[float, float, float] = (0.0, 0.0, 1.0)
-
-
-# In the robot base frame (x forward, z up; the table top at z = 0).
-VIEWS = {
-    "front": View((1.55, 0.50, 0.95), (0.30, 0.0, 0.20)),
-    "side": View((0.35, -1.45, 0.62), (0.35, 0.0, 0.24)),
-    "top": View((0.42, 0.0, 1.45), (0.42, 0.0, 0.0), (1.0, 0.0, 0.0)),
-}
+VIEWS = world_places.VIEWS  # the physics world's cameras see from the same places
 
 
 class Pinhole:
-    def __init__(self, width: int, height: int, fov_deg: float, view: View):
+    def __init__(self, width: int, height: int, fov_deg: float, view: world_places.View):
         self.width, self.height = width, height
         self.f = (width / 2) / np.tan(np.deg2rad(fov_deg) / 2)
         self.cx, self.cy = width / 2, height / 2
