@@ -166,3 +166,58 @@ def test_a_watching_operator_reaches_for_the_cup_where_it_sees_it():
     grasp = next(t for t in np.arange(0.0, 10.0, 0.01) if blind.state(t).phase == "grasp")
     shift = watching.state(grasp).wrist_position - blind.state(grasp).wrist_position
     assert shift == pytest.approx([0.05, 0.0, 0.0], abs=1e-9)
+
+
+def _paced_session(op, clock, starts, end, task="pick_place"):
+    """Episode starts at `starts` (seconds) as a session's task listener calls them, the operator's state asked
+    for in time order as the devices do; returns (times, episode index at each)."""
+    ts = np.arange(0.0, end, 1 / 60)
+    pending, episodes = list(starts), []
+    for t in ts:
+        if pending and t >= pending[0]:
+            clock.t_ns = int(pending.pop(0) * 1e9)
+            op.on_episode_task(task)
+        clock.t_ns = int(t * 1e9)
+        episodes.append(op.state(t).episode)
+    return ts, np.array(episodes)
+
+
+def test_a_paced_operator_begins_an_episode_only_at_a_session_start():
+    """Session episodes of 3 s, shorter than the operator's pick_place: the first start finds the operator in
+    its own episode (it returns to rest, then begins the session's); each later start that finds a paced episode
+    under way sends the hand back to rest and the operator rests until the next start, where it begins at once.
+    No episode of the operator (and so no scene of the physics world) begins in the middle of a session's."""
+    clock = FakeClock()
+    op = SimOperator(seed=3, clock=clock)
+    starts = [1.0, 4.0, 7.0, 10.0, 13.0]
+    ts, episodes = _paced_session(op, clock, starts, 16.0)
+    began = [ts[i] for i in np.flatnonzero(np.diff(episodes)) + 1]
+    first, later = [t for t in began if t < starts[1]], [t for t in began if t >= starts[1]]
+    assert len(first) == 1 and starts[0] < first[0] < starts[1]  # after its own episode's return
+    assert later, began
+    for t in later:  # each at a session's start (the next sample after it), never in the middle of an episode
+        assert min(abs(t - s) for s in starts) < 1 / 60 + 1e-9, (t, began)
+    for index in set(episodes):
+        start, end = op.episode_span(int(index))
+        if start >= starts[1]:
+            assert any(abs(start - s) < 1e-9 for s in starts), (index, start)
+
+
+def test_a_paced_operator_moves_smoothly_through_the_rests():
+    clock = FakeClock()
+    op = SimOperator(seed=5, clock=clock)
+    starts = [0.5, 3.0, 5.5, 8.0, 20.0]
+    ts = np.arange(0.0, 30.0, 1 / RATE)
+    pending, states = list(starts), []
+    for t in ts:
+        if pending and t >= pending[0]:
+            clock.t_ns = int(pending.pop(0) * 1e9)
+            op.on_episode_task("pick_place")
+        clock.t_ns = int(t * 1e9)
+        states.append(op.state(t))
+    pos = np.array([s.wrist_position for s in states])
+    fingers = np.array([s.flexion for s in states])
+    assert (np.linalg.norm(np.diff(pos, axis=0), axis=1) * RATE).max() < 1.5
+    assert (np.abs(np.diff(fingers, axis=0)) * RATE).max() < 10.0
+    phases = [s.phase for s in states if s.t >= 20.0]
+    assert "grasp" in phases  # the long episode at 20 s is a whole one, begun at once

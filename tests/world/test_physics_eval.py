@@ -22,8 +22,10 @@ from tests.world.sessions import ON_TARGET, record_physics
 # Three episodes of 3 s, each engaged 0.3 s in and back in preview before its end: two re-engages from rest.
 # The first runs in the operator's own scene (its hand reaching into the cup's: a failure, as it cannot finish
 # in 3 s), the second in a scene with the cup on its target (a recorded success, the operator's reach leaving
-# it alone), the last in one drawn from the seed (a failure).
-PLAN = EpisodeTimes(3, 4.0, 0.0, engage_after_s=0.3, marks="-")
+# it alone), the last in one drawn from the seed (a failure). 3 s is shorter than the operator's pick_place:
+# the operator begins no scene of its own during an episode after the first (SimOperator's pacing).
+PLAN = EpisodeTimes(3, 3.0, 0.0, engage_after_s=0.3, marks="-")
+SCENE_AT_START_S = 0.5  # a scene begun this soon after an episode's start is the one it runs in
 
 
 @pytest.fixture(scope="module")
@@ -35,6 +37,7 @@ def recorded(tmp_path_factory):
         return SimpleNamespace(
             path=path, folder=folder, episodes=reader.episodes(),
             scenes=[m.payload.data for m in reader.messages([topics.WORLD])],
+            scene_times=[(m.log_time_ns, m.payload.data["reason"]) for m in reader.messages([topics.WORLD])],
             errors=[m.payload.data for m in reader.messages([topics.DEVICE_EVENT])
                     if m.payload.data.get("event") == "error"],
             modes=[(m.log_time_ns, m.payload.data["mode"]) for m in reader.messages([topics.MODE])],
@@ -60,6 +63,17 @@ def test_each_scene_records_where_the_robot_stood(recorded):
         assert set(scene["robot"]) >= {f"joint{i}" for i in range(1, 7)} and isinstance(scene["world_ns"], int)
     assert [s["placed"] for s in recorded.scenes[:2]] == [True, True]  # the start, then the arm placed at home
     assert ON_TARGET in [s["reason"] for s in recorded.scenes]
+
+
+def test_no_scene_of_the_operator_begins_during_a_later_episode(recorded):
+    """The world's mark at an episode's stop judges the scene the episode ran in: after the session's first
+    start, the paced operator begins an episode (and the world its scene) only as a session's episode starts."""
+    assert len(recorded.episodes) == 3
+    for episode in recorded.episodes[1:]:
+        late = [(t - episode.start_ns) / 1e9 for t, reason in recorded.scene_times
+                if reason.startswith("operator episode ") and episode.start_ns + SCENE_AT_START_S * 1e9 < t
+                <= episode.stop_ns]
+        assert late == [], f"episode {episode.index}: an operator scene began {late} s in"
 
 
 def test_eval_physics_reports_each_episode_outcome_as_the_world_marked_it(recorded):

@@ -29,9 +29,13 @@ is collision-free while reaching, pre-shaping, returning and pausing.
 
 The task follows `set_task`: the current phase finishes, the hand returns to rest, and the next episode
 is the new task. A session calls `on_episode_task` at every episode start (DeviceContext.task_listeners):
-a fresh episode of its task begins that way, and the operator rests after it until the session's next
-episode, so that its episodes are the session's. `mode="fixed"` ignores both and `mode="cycle"` goes
-through the five tasks in turn.
+a fresh episode of its task begins that way (at once when resting), and the operator rests after it until
+the session's next episode, so that its episodes are the session's. A session's episode that ends before
+the operator's does not start the next one late: the start that finds it under way sends the hand back to
+rest, and the operator rests until the session's next episode start (the physics world lays out no new
+scene during a session's episode; only at the session's first start does the operator finish its own
+episode's phase and return before the fresh one begins). `mode="fixed"` ignores both and `mode="cycle"`
+goes through the five tasks in turn.
 
 Watching (`watch`, on a physics rig): phases that aim (tasks.Phase.aim) are laid out as they begin, to
 where the operator sees the objects and the robot's hand then, as a person at the table corrects a reach
@@ -140,6 +144,7 @@ class _Episode:
     hand: _Track  # (30,)
     built: int = 0  # phases laid out on the tracks so far (they are laid out as they begin: _build)
     cut: bool = False  # ended early by set_task
+    paced: bool = False  # begun at a session's episode start (on_episode_task)
 
 
 class _Tremor:
@@ -209,7 +214,8 @@ class SimOperator:
         phase_starts = list(np.cumsum([start] + [ph.duration for ph in script.phases[:-1]]))
         end = start + sum(ph.duration for ph in script.phases)
         self._episodes.append(_Episode(index, task, script, start, end, phase_starts,
-                                       [p.name for p in script.phases], _Track(start, wrist0), _Track(start, hand0)))
+                                       [p.name for p in script.phases], _Track(start, wrist0), _Track(start, hand0),
+                                       paced=self._allowed is not None))
         del self._episodes[:-_KEEP_EPISODES]
 
     def _build(self, ep: _Episode, t: float) -> None:
@@ -271,12 +277,18 @@ class SimOperator:
             self._task = name
             now = self._now_s()
             ep = self._episode(now)
-            if anew and ep.cut and ep.task == name:  # already ending (a start a moment ago): that new one
+            resting = now >= (ep.end if ep.cut else ep.phase_starts[-1])  # back at rest (its pause or after)
+            if anew and ep.cut and ep.task == name and not resting:  # already ending (a start a moment ago)
                 return True
             del self._episodes[self._episodes.index(ep) + 1:]  # what follows is made again, as the new task
             self._next_index = ep.index + 1
-            if self._allowed is not None:  # paced by the session: this next one, then rest until asked again
-                self._allowed = self._next_index
+            if self._allowed is not None:
+                self._allowed = self._paced_next(ep, resting, anew)
+            if anew and ep.cut and resting:  # returned from a cut and resting: the new one begins now
+                ep.wrist.hold_until(now)
+                ep.hand.hold_until(now)
+                ep.end = max(ep.end, now)
+                return True
             if (ep.task == name and not anew) or ep.cut:
                 return True
             # Cut at the end of the current phase, where both hand and wrist are at rest.
@@ -300,6 +312,17 @@ class SimOperator:
             ep.end = cut
             ep.cut = True
             return True
+
+    def _paced_next(self, ep: _Episode, resting: bool, anew: bool) -> int:
+        """Paced by the session: the index of the last episode allowed to begin after `ep`, the one that a
+        task switch (or a session's episode start, `anew`) finds under way. At rest, the next begins now; in the
+        middle of the operator's own (the session's first start) after its return to rest; in the middle of a
+        session's episode (a session episode shorter than the task), none: the operator returns to rest and
+        rests until the session's next episode start, so that no scene of its own begins during the session's
+        episode (the world's mark at the episode's stop judges the scene the episode ran in)."""
+        if anew and ep.paced and not resting:
+            return ep.index
+        return ep.index + 1
 
     def on_episode_task(self, name: str) -> None:
         """The session's episode-start hook (DeviceContext.task_listeners): a fresh episode of the episode's
