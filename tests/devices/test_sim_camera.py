@@ -156,3 +156,36 @@ def test_an_object_the_hand_closes_on_moves_with_it_and_drops_when_released():
     assert dropped.pose[2, 3] == pytest.approx(cup.pose[2, 3]) and dropped.pose[1, 3] == pytest.approx(
         cup.pose[1, 3] + 0.1, abs=2e-3
     )
+
+
+class _Physics:
+    """What follow_operator needs of the physics world: its scene requests, recorded."""
+
+    closed = False
+
+    def __init__(self):
+        self.loaded: list[str] = []
+
+    def seen(self, anchor):
+        return None
+
+    def load_layout(self, task, seed, anchor, spots, reason):
+        self.loaded.append(reason)
+
+
+def test_the_physics_scene_only_moves_forward_whichever_actuator_asks_late():
+    # The arm and the hand each ask at their own acquisition time; a thread that ran late asks about a
+    # moment before the operator's new episode, and must not bring the last episode's scene back.
+    from teleprev_devices.sim.operator import SimOperator
+    from teleprev_devices.sim.world import SimWorld
+
+    op = SimOperator(seed=0, task="pick_place", mode="fixed")
+    world = SimWorld("xarm6_leap_hand", "leap_hand", {"sim.operator": op})
+    physics = _Physics()
+    start_1, _ = op.episode_span(1)
+    ns = lambda t: int(t * 1e9)  # noqa: E731
+    world.follow_operator(physics, ns(start_1 - 1.0))  # episode 0's scene
+    world.follow_operator(physics, ns(start_1 + 0.01))  # the arm: episode 1 began
+    world.follow_operator(physics, ns(start_1 - 0.01))  # the hand, late: still episode 0 by its clock
+    world.follow_operator(physics, ns(start_1 + 0.02))
+    assert physics.loaded == ["operator episode 0 (seed 0): pick_place", "operator episode 1 (seed 0): pick_place"]

@@ -188,7 +188,8 @@ class SimWorld:
     # ---- the physics world's scene ---------------------------------------------------------------
     def follow_operator(self, physics, now_ns: int) -> None:
         """Physics: when the operator has begun another episode, run its scene (once per episode, whichever
-        device notices first)."""
+        device notices first). Only forward: each actuator asks at its own acquisition time, and one whose
+        thread ran late may ask about a moment before the episode the other has already begun."""
         op = self._shared.get("sim.operator")
         if op is None:
             return
@@ -198,7 +199,7 @@ class SimWorld:
         t = op.time_s(now_ns)
         key = op.episode(t)
         with self._lock:
-            if key == self._physics_episode:
+            if self._physics_episode is not None and key[0] <= self._physics_episode[0]:
                 return
             self._physics_episode = key
         index, task = key
