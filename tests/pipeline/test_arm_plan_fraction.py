@@ -9,7 +9,6 @@ import pytest
 from teleprev.assembly import build_pipeline
 from teleprev.emulators.xarm_kinematics import ArmKinematics, joint_table
 from teleprev.emulators.xarm_servo import ServoCycle
-from teleprev.pipeline.derivatives import stream_peaks
 from teleprev.rig import load_rig
 from tests.pipeline.test_planner import HOME, PERIOD, Script, _planner, _run, _within
 
