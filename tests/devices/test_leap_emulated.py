@@ -250,3 +250,31 @@ def test_a_late_reply_to_an_earlier_read_is_a_named_miss(bus):
     finally:
         link.close()
         bus.operator_clear()
+
+
+def _reply_thread_priority(conn) -> None:
+    import os
+
+    try:  # as tests/helpers/emulated_rig.py's processes
+        os.sched_setscheduler(0, os.SCHED_FIFO, os.sched_param(40))
+    except PermissionError:
+        conn.send(None)
+        return
+    with DynamixelBus().start() as b:
+        conn.send(os.sched_getparam(b._thread.native_id).sched_priority)
+
+
+def test_the_bus_answers_at_its_process_real_time_priority_never_lower():
+    """In an emulator's process at SCHED_FIFO 40 the thread that answers keeps 40 (it lowered itself to 10,
+    behind the command path's processes, and read requests up to 45 ms late)."""
+    import multiprocessing as mp
+
+    ours, theirs = mp.get_context("fork").Pipe()
+    p = mp.get_context("fork").Process(target=_reply_thread_priority, args=(theirs,))
+    p.start()
+    assert ours.poll(10), "the bus's process did not answer"
+    got = ours.recv()
+    p.join(5)
+    if got is None:
+        pytest.skip("SCHED_FIFO is not permitted here")
+    assert got == 40
