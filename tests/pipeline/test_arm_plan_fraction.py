@@ -73,3 +73,20 @@ def test_the_fraction_costs_little_time_to_reach(pipelines):
         near = [x.t_ns for x in sent if np.abs(x.arm - goal).max() < 1e-3]
         times.append(near[0] - sent[0].t_ns)
     assert times[0] <= 1.06 * times[1], times
+
+
+def test_a_stream_starts_at_half_the_jerk_for_its_first_ticks(pipelines):
+    """The box paces a stream's first targets on one to three arrival gaps (a first SDK call ~1 ms slower
+    read 1.13x the jerk limit at 0.9 in a recorded session): the current format's first four moving ticks
+    keep half the jerk it plans with, then it goes on at that jerk; format 10 started at its limit."""
+    from teleprev.pipeline.motion import STREAM_START_TICKS
+
+    current, format10 = pipelines
+    for p, start_frac in ((current, 0.5), (format10, 1.0)):
+        sent, _ = _engage_and_reach(p)
+        t, q = np.array([x.t_ns for x in sent]) / 1e9, np.array([x.arm for x in sent])
+        jerk = np.abs(np.diff(q, n=3, axis=0)).max(axis=1) / np.diff(t).mean() ** 3  # [k]: ticks k..k+3
+        first = jerk[: STREAM_START_TICKS - 2].max()  # differences within the eased ticks and the rest before
+        assert first <= start_frac * p.motion.arm.jerk.max() * 1.001, (first, start_frac)
+        assert first >= 0.95 * start_frac * p.motion.arm.jerk.max()
+        assert jerk.max() >= 0.99 * p.motion.arm.jerk.max()  # and later at the planned jerk

@@ -19,7 +19,8 @@
     format 10  the planner lowers the arm's speed fraction so that the flange keeps its linear speed cap,
                where formats 4 to 9 left it uncapped
     (format 11, the current one: the planner plans the arm at [pipeline] arm_plan_fraction of its
-    acceleration and jerk limits, where formats up to 10 planned at them)
+    acceleration and jerk limits, a stream's first ticks at half that jerk, where formats up to 10
+    planned at the limits throughout)
 
     numpy_arithmetic   NumpyArmIK, NumpyArmRetargeter, NumpySweptCheck, NumpyCorrector (formats 1 and 2)
     abduction_first    AbductionFirstPipeline: the compiled glove reading of formats 3 and 4
