@@ -177,7 +177,8 @@ def test_a_latency_timer_it_may_not_set_is_one_line_with_the_command(tmp_path, m
 
 
 def test_the_sdk_read_sleeps_instead_of_spinning(bus):
-    """While the SDK waits for a silent motor (about 34 ms), the process's CPU time stays near zero."""
+    """While the plugin waits for a silent motor (100 ms with the timer at 1 ms), the process's CPU time stays near
+    zero."""
     bus.inject("silent", motor=3)
     link = SdkDynamixelBus(bus.port, latency_timer=str(bus.latency_timer_path))
     link.open()
