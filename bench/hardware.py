@@ -103,6 +103,7 @@ from teleprev_devices.leap import LeapHand, LeapSettings  # noqa: E402
 from teleprev_devices.opencv_camera import OpenCVCamera, OpenCVSettings  # noqa: E402
 from teleprev_devices.xarm import XArm, XArmSettings  # noqa: E402
 from tests.helpers import wire_sessions  # noqa: E402
+from tests.helpers.emulated_rig import EmulatorProcess, bus_summary  # noqa: E402
 from tests.helpers.hardware import CommandStream, EventLog  # noqa: E402
 
 LEAKED = re.compile(r"failed: [A-Za-z_.]*(Error|Exception|error)\b[:(]")  # a Python exception, not a sentence
@@ -154,6 +155,50 @@ def roundtrips_ms(sends, seen, atol: float) -> list[float]:
     return out
 
 
+def _bus_where(bus: DynamixelBus) -> tuple[str, str]:
+    return str(bus.port), str(bus.latency_timer_path)
+
+
+def _bus_counts(bus: DynamixelBus) -> tuple[int, int]:
+    return bus.goal_writes, bus.corrupt_requests
+
+
+def _bus_inject(bus: DynamixelBus, kind: str, motor: int) -> None:
+    bus.inject(kind, motor=motor)
+
+
+def _bus_clear(bus: DynamixelBus) -> None:
+    bus.operator_clear()
+
+
+class BusProcess:
+    """An emulated LEAP bus in a real-time process of its own (tests/helpers/emulated_rig.py), as the recorded
+    sessions have it: a bus on a thread of this process answered only when that thread got the interpreter
+    lock, which the plugin's and the arm's threads and the load share (replies read up to 100 ms late, the
+    SDK waiting 34.6 ms: the read misses were the emulator's); a real bus answers whatever the host does."""
+
+    def __init__(self):
+        self.process = EmulatorProcess(DynamixelBus, "hand", bus_summary)
+        self.port, self.latency_timer_path = self.process.ask(_bus_where)
+
+    @property
+    def goal_writes(self) -> int:
+        return self.process.ask(_bus_counts)[0]
+
+    @property
+    def corrupt_requests(self) -> int:
+        return self.process.ask(_bus_counts)[1]
+
+    def inject(self, kind: str, motor: int = 0) -> None:
+        self.process.ask(_bus_inject, kind, motor)
+
+    def operator_clear(self) -> None:
+        self.process.ask(_bus_clear)
+
+    def stop(self) -> None:
+        self.process.finish()
+
+
 def start_session(device, log, clock, rate_hz, **stream) -> tuple[DeviceRunner, Probe]:
     """The device on a runner, connected, and a command stream sending to it."""
     runner = DeviceRunner(device, log.sink, clock, reconnect_s=0.2).start()
@@ -165,7 +210,7 @@ class HandSession:
     """A LEAP session through the real SDK at one setting of its emulated adapter's latency timer: connected
     and commanded from construction until finish(), which keeps its figures (the runner goes on)."""
 
-    def __init__(self, bus: DynamixelBus, clock, set_timer: bool):
+    def __init__(self, bus: BusProcess, clock, set_timer: bool):
         settings = LeapSettings(port=bus.port, latency_timer_path=str(bus.latency_timer_path),
                                 set_latency_timer=set_timer)
         self.bus, self.hand, self.log = bus, LeapHand("hand", settings, DeviceContext(clock)), Timed()
@@ -274,8 +319,8 @@ def main() -> None:
     threading.excepthook = lambda a: escaped.append(a)
     clock = SessionClock()
 
+    buses = {16: BusProcess(), 1: BusProcess()}  # their adapters' timers at the FTDI default (forked before threads)
     box = XArmController(host=None).start()
-    buses = {16: DynamixelBus().start(), 1: DynamixelBus().start()}  # their adapters' timers at the FTDI default
     bus = buses[1]  # the one the faults go to
     arm = XArm("arm", XArmSettings(host=box.host), DeviceContext(clock))
     arm_log = Timed()

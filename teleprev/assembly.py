@@ -18,7 +18,7 @@ from teleprev.pipeline.config import PipelineConfig
 from teleprev.pipeline.driver import InputTopics, PipelineDriver
 from teleprev.pipeline.effectors import Effector, GripperEffector, LeapEffector, VacuumEffector
 from teleprev.pipeline.guard import JointGuard
-from teleprev.pipeline.motion import Motion
+from teleprev.pipeline.motion import STREAM_START_JERK_FRAC, Motion
 from teleprev.pipeline.step import Pipeline
 from teleprev.pipeline.swept import SweptCheck
 from teleprev.pipeline.tcp_speed import TcpSpeedCap
@@ -100,14 +100,18 @@ def tcp_speed_cap(rig: Rig, ik: ArmIK, arm_speed: np.ndarray, acceleration: np.n
 
 
 def build_motion(rig: Rig, ik: ArmIK, arm_speed: np.ndarray, effector, swept: SweptCheck | None = None,
-                 hand_limiter: type = HandLimiter) -> Motion:
+                 hand_limiter: type = HandLimiter, below_limits: bool = True) -> Motion:
     """The arm's jerk-limited generator and the hand's acceleration cap (`hand_limiter`: the session format's
-    class) and swept check, from the robot table (teleprev/robot/limits.py) and the rig's [pipeline] keys."""
+    class) and swept check, from the robot table (teleprev/robot/limits.py) and the rig's [pipeline] keys;
+    the arm planned at [pipeline] arm_plan_fraction of its acceleration and jerk limits, a stream's first
+    ticks at STREAM_START_JERK_FRAC of that jerk (`below_limits` False: at them, as formats up to 10 were)."""
     table = arm_limits(rig.rig.robot)
     n = len(arm_speed)
     accel = _limit(rig, "arm_acceleration", table.acceleration if table else None, "arm acceleration limit")
     jerk = _limit(rig, "arm_jerk", table.jerk if table else None, "arm jerk limit")
-    arm = ArmGenerator(ik.chain.lower, ik.chain.upper, arm_speed, np.full(n, accel), np.full(n, jerk))
+    fraction = rig.pipeline.arm_plan_fraction if below_limits else 1.0
+    arm = ArmGenerator(ik.chain.lower, ik.chain.upper, arm_speed, np.full(n, accel * fraction),
+                       np.full(n, jerk * fraction))
     tcp = tcp_speed_cap(rig, ik, arm_speed, arm.acceleration)
     hand = None
     row = effector_limits(rig.rig.end_effector)
@@ -115,7 +119,7 @@ def build_motion(rig: Rig, ik: ArmIK, arm_speed: np.ndarray, effector, swept: Sw
         g = effector.guard
         hand_accel = _limit(rig, "hand_acceleration", row.acceleration if row else None, "hand acceleration limit")
         hand = hand_limiter(g.lower, g.upper, g.speed, np.full(len(g.lower), hand_accel))
-    return Motion(arm, hand, swept, tcp)
+    return Motion(arm, hand, swept, tcp, STREAM_START_JERK_FRAC if below_limits else 1.0)
 
 
 def build_pipeline(rig: Rig, models: str | Path | None = None, calibration: Calibration | None = None,
@@ -138,7 +142,8 @@ def build_pipeline(rig: Rig, models: str | Path | None = None, calibration: Cali
     arm = how.arm_retargeter(ik, cfg.wrist_scale, cfg.workspace_min, cfg.workspace_max, calibration.suit_to_robot())
     effector, swept = build_effector(rig, robot, cfg, max_dt, calibration, models, how)
     return how.pipeline(cfg, arm, arm_guard, effector,
-                        build_motion(rig, ik, arm_speed, effector, swept, how.hand_limiter) if how.motion else None)
+                        build_motion(rig, ik, arm_speed, effector, swept, how.hand_limiter, how.plans_below_limits)
+                        if how.motion else None)
 
 
 def build_driver(pipeline: Pipeline, inputs: InputTopics, session_format: int = FORMAT_VERSION) -> PipelineDriver:

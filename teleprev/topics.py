@@ -51,7 +51,7 @@ from __future__ import annotations
 
 # Session layout version, written to the "teleprev" metadata record. Sessions of older versions re-run with
 # their own classes (teleprev/pipeline/older_formats), which say what changed at each version.
-FORMAT_VERSION = 10
+FORMAT_VERSION = 11
 
 TASKS_RECORD = "tasks"  # metadata record: task id -> the task as a natural-language instruction
 TF = "/tf"

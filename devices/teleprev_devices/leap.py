@@ -24,8 +24,10 @@ of the process runs.
 
 One read that gets no (or a garbled, or an earlier request's late) reply is a counted miss ("read_misses",
 ReadMiss), tried again at once, a command waiting for the bus going first; the hand faults when miss_limit
-reads in a row fail: a hand that stops answering stops its commands within miss_limit x the SDK's reply wait
-(2 x latency timer + 2 ms: 5 x 4 ms with the timer at 1 ms, 5 x 34 ms at 16 ms), plus a poll period. A
+reads in a row fail. The plugin waits for a reply as long as the SDK does with the adapter's own timer (the
+bytes, 2 x latency timer + 2 ms) plus HOST_DELAY_MS for the host's tty layer (see there): 100 ms with the
+timer at 1 ms, 130 ms at 16 ms. So a hand that stops answering stops its commands within miss_limit x that
+wait (5 x 100 ms = 0.5 s at 1 ms, 0.65 s at 16 ms), plus a poll period. A
 register write on connect whose status packet does not come is sent again (WRITE_TRIES in all): writes are
 idempotent, and one lost reply is no reason to refuse the hand.
 
@@ -80,6 +82,12 @@ ALERT = 0x80  # bit 7 of a status packet's error byte: the motor has a hardware 
 USB_SERIAL_SYSFS = Path("/sys/bus/usb-serial/devices")  # where Linux's ftdi_sio exposes each port's latency_timer
 LATENCY_TIMER_MS = 1  # the shortest the FTDI chip allows (AN232B-04: 1 to 255 ms)
 WRITE_TRIES = 3  # a connect-time register write whose status packet is lost is sent again (writes are idempotent)
+# How much longer than the bus itself takes a reply may reach the process. The adapter's driver (ftdi_sio)
+# hands received bytes to the serial port through the kernel's tty flip buffer, pushed by a kernel worker
+# scheduled like any ordinary process: on a loaded 2-core host that push waited up to 44 ms (p99 17 ms,
+# bench/hardware.py's load plus other work), past the SDK's fixed 34.6 ms wait (its PortHandler assumes a
+# 16 ms latency timer), so replies the motors sent in 2 ms were counted as misses and asked again.
+HOST_DELAY_MS = 96.0
 
 
 def ticks_from_angles(q: np.ndarray) -> np.ndarray:
@@ -151,6 +159,24 @@ def set_latency_timer(path: Path, write: bool = True) -> tuple[int | None, str]:
     return ms, f"USB adapter latency timer {ms} ms ({path})"
 
 
+def _wait_for_replies(port, latency_timer_ms: int | None) -> None:
+    """Make the SDK wait for a reply as long as the bus and the host can take: its own wait (PortHandler.
+    setPacketTimeout: the packet's bytes at the baud rate, 2 x the latency timer, 2 ms) with the adapter's own
+    timer (16 ms where unknown: the SDK's constant), plus HOST_DELAY_MS."""
+    timer_ms = 16 if latency_timer_ms is None else latency_timer_ms
+
+    def set_packet_timeout(packet_length):
+        port.packet_start_time = port.getCurrentTime()
+        port.packet_timeout = reply_wait_ms(port.tx_time_per_byte * packet_length, timer_ms)
+
+    port.setPacketTimeout = set_packet_timeout
+
+
+def reply_wait_ms(bytes_ms: float, latency_timer_ms: int) -> float:
+    """How long the plugin waits for a reply whose bytes take `bytes_ms` on the line."""
+    return bytes_ms + 2.0 * latency_timer_ms + 2.0 + HOST_DELAY_MS
+
+
 def _sleep_until_bytes(port) -> None:
     """Make the SDK's read loop sleep in select() until bytes arrive or its packet timeout ends, instead of
     polling the non-blocking port in a busy loop (dynamixel_sdk rxPacket), which starves the process."""
@@ -198,6 +224,7 @@ class SdkDynamixelBus:
         if not opened:
             raise DeviceError(f"cannot open the serial port at {self.baudrate} baud", self.where)
         _sleep_until_bytes(self.port)
+        _wait_for_replies(self.port, self.latency_timer_ms)
 
     def _no_answer(self, result: int, motor: int | None, what: str, kind: type[DeviceError] = DeviceError
                    ) -> DeviceError:

@@ -58,6 +58,7 @@ NO_LOAD_SPEED = 81 * 4096 / 60  # ticks/s: 81 rev/min at 5.0 V (XC330-M288-T spe
 FTDI_PACKET = 62  # user bytes in one 64-byte USB packet (AN232B-04: 2 status bytes and 62 user bytes)
 FTDI_DEFAULT_LATENCY_MS = 16  # AN232B-04: "The default value of the timer is set to 16 milliseconds"
 POSITION_RANGE = 1_048_575  # Goal Position in modes other than position control (e-Manual, Goal Position)
+REPLY_PRIORITY = 10  # SCHED_FIFO priority of the thread that answers (where allowed): before ordinary processes
 READS = (wire.READ, wire.SYNC_READ, wire.FAST_SYNC_READ, wire.BULK_READ, wire.FAST_BULK_READ)
 
 
@@ -242,6 +243,9 @@ class DynamixelBus:
         self.bad_crc = False
         self.requests: Counter[int] = Counter()
         self.goal_writes = 0  # sync writes of the goal position
+        # The host's tty layer handing the replies on late (a kernel worker pushes received bytes to the
+        # port; under load it waits like any process): every reply reaches the host this much later.
+        self.host_delay_s = 0.0
         self.goal_arrivals_ns: list[int] = []  # time.monotonic_ns() each goal-position sync write was read
         self.unheard = 0  # requests sent at a baud rate no motor listens at
         self.corrupt_requests = 0
@@ -357,9 +361,14 @@ class DynamixelBus:
 
     def _serve(self, master: int) -> None:
         # Real motors answer whatever the host does: where allowed (root), this thread runs before the host's
-        # other work (it mostly sleeps in select).
+        # other work (it mostly sleeps in select), at REPLY_PRIORITY or the real-time priority its process
+        # already has (tests/helpers/emulated_rig.py: 40), never lower: at 10 in a process at 40, requests
+        # waited up to 45 ms behind the command path's processes for this thread to read them, so the SDK's
+        # 34.6 ms wait ran out on replies a bus would have sent in 2 ms (bench/hardware.py's read misses).
         try:
-            os.sched_setscheduler(threading.get_native_id(), os.SCHED_FIFO, os.sched_param(10))
+            me = threading.get_native_id()
+            held = os.sched_getparam(me).sched_priority if os.sched_getscheduler(me) == os.SCHED_FIFO else 0
+            os.sched_setscheduler(me, os.SCHED_FIFO, os.sched_param(max(REPLY_PRIORITY, held)))
         except (OSError, AttributeError):
             pass
         reader = wire.PacketReader()
@@ -379,7 +388,7 @@ class DynamixelBus:
             if not replies:
                 continue
             # Each motor speaks after its return delay, once the one before it is done (half duplex).
-            t, bytes_at = arrived, []
+            t, bytes_at = arrived + self.host_delay_s, []
             for m, out in replies:
                 t += m.return_delay_s + len(out) * 10 / baud
                 bytes_at.append((t, out))

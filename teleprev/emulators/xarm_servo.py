@@ -17,9 +17,14 @@ How this box runs a stream: each target runs at the servo cycle it arrived in (`
 the same cycle replaces the first, which never runs, so a burst is one jump. The motors move from target to
 target at the stream's pace: the box's clock sees a steady stream as a steady number of servo cycles per
 target, and the motors only act at cycle boundaries, so when within a cycle a target arrived (the network's
-and the host's jitter, about 0.1 ms) never reaches them. The pace is the mean arrival gap of the stream's last
-PACE_WINDOW targets. A target that arrives more than one servo cycle off the pace is judged on what the
-motors did with it: after a stall the arm stood on the last target until this one came, then went on (a stop
+and the host's jitter: 0.1 ms quiet, gaps of 7.5-9.2 ms at 8.33 ms under the realtime bench's load) never
+reaches them. The pace is the stream's period as a least-squares line through the arrivals of its last
+PACE_WINDOW steady targets. Their mean gap is that line through the window's two end points alone, so each
+new arrival moved it by its own jitter / PACE_WINDOW: a pace that wobbles by ~0.02 ms from target to target,
+which third-differenced at 2 rad/s read as 1.4-1.55x the jerk limit on a stream whose stamps were within it
+(tests/devices/test_xarm_servo_cycle.py); the line's slope moves ~10x less. A steady stream's pace is the
+same either way. A target that arrives more than one servo cycle off the pace is judged on what the motors
+did with it: after a stall the arm stood on the last target until this one came, then went on (a stop
 and a start, and a burst's last target one jump); a late target with the next close behind leaves the next
 the whole cycles it had (one cycle: 8 ms of motion in 4 ms). A stream starts from rest one servo cycle
 before its first target (a first target far from the arm is a jump).
@@ -210,7 +215,13 @@ class ServoCycle:
         return pace_ns, False
 
     def _pace_ns(self) -> int:
-        return max(int(sum(self._gaps) / len(self._gaps)), self.period_ns) if self._gaps else self.period_ns
+        """The slope of the least-squares line through the window's arrivals (the gaps' running sums)."""
+        if not self._gaps:
+            return self.period_ns
+        arrived = np.concatenate(([0.0], np.cumsum(np.fromiter(self._gaps, dtype=float))))
+        k = np.arange(len(arrived), dtype=float)
+        k -= k.mean()
+        return max(int(np.dot(k, arrived) / np.dot(k, k)), self.period_ns)
 
     def _judge(self, now_ns: int, ran_ns: int, target: np.ndarray) -> Judgement | ServoFault:
         """The target, reached at `ran_ns` on the box's clock, against the three that ran before it (divided

@@ -27,3 +27,4 @@ class Arithmetic:
     corrector: type | None = None  # None: noncollision.corrector.Corrector (loaded for the rigs that have one)
     pipeline: type = Pipeline
     driver: type = PipelineDriver  # what feeds the pipeline its samples
+    plans_below_limits: bool = True  # the arm at [pipeline] arm_plan_fraction of its accel and jerk (<= 10: at them)

@@ -37,6 +37,11 @@ class PipelineConfig:
     arm_acceleration: float | None = None  # rad/s^2 per arm joint
     arm_jerk: float | None = None  # rad/s^3 per arm joint
     arm_tcp_speed: float | None = None  # m/s: the flange's linear speed (none in the table or the rig: uncapped)
+    # The fraction of arm_acceleration and arm_jerk the planner plans with. A servo-mode controller judges
+    # the stream on its own clock, which places each target from arrivals that jitter (0.5-1 ms on a busy
+    # host): a stream planned at the limits reads up to ~10% over them at a stream's start, where the box has
+    # one or two gaps to pace it by (tests/devices/test_xarm_servo_cycle.py, bench/hardware.py).
+    arm_plan_fraction: float = 0.9
     arm_feedforward: bool = True  # track the target's own velocity (less lag); false: plan to rest at each target
     hand_acceleration: float | None = None  # rad/s^2 per hand joint (m/s^2 for a gripper)
     hand_clearance_mm: float | None = None  # distance kept between the hand's links along each command segment
@@ -51,6 +56,8 @@ class PipelineConfig:
         for key in ("stale_ms", "max_command_dt_ms"):
             if not 0 < getattr(self, key) <= 10_000:
                 raise ValueError(f"{key} must be in (0, 10000] ms, got {getattr(self, key)!r}")
+        if not 0 < self.arm_plan_fraction <= 1:
+            raise ValueError(f"arm_plan_fraction must be in (0, 1], got {self.arm_plan_fraction!r}")
         if not 0 < self.engage_speed_frac <= 1:
             raise ValueError(f"engage_speed_frac must be in (0, 1], got {self.engage_speed_frac!r}")
         if self.gripper_joint not in HAND_JOINTS:

@@ -28,16 +28,25 @@ FEEDFORWARD_MAX_GAP_NS = 100_000_000  # targets further apart than this give no 
 EXTRAPOLATE_MAX_NS = 50_000_000
 RESUME_STEP_S = 0.01  # the first step after a pause in the commands (the sim arm's state period)
 FEEDFORWARD_TAU_NS = 30e6  # smoothing of the target velocity estimate (IK jitters by its tolerance)
+# A stream's first moving steps, at this fraction of the arm's jerk (format 11). A servo-mode controller paces
+# a stream by its arrivals (teleprev/emulators/xarm_servo.py): for its first targets it has one to three gaps
+# to go by, each off by the host's 0.5-1.5 ms of jitter (the first SDK call of a run was ~1 ms slower), so the
+# start of a stream planned at the jerk limit read up to 1.25x it there; four ticks (33 ms at 120 Hz) in, the
+# pace rests on four gaps and is within 0.1 ms.
+STREAM_START_TICKS = 4
+STREAM_START_JERK_FRAC = 0.5
 
 
 class Motion:
     """The arm generator and (for a LEAP Hand or a gripper) the hand limiter and swept check."""
 
-    def __init__(self, arm: ArmGenerator, hand: HandLimiter | None, swept=None, tcp=None):
+    def __init__(self, arm: ArmGenerator, hand: HandLimiter | None, swept=None, tcp=None, start_jerk_frac=1.0):
         self.arm = arm
         self.hand = hand
         self.swept = swept  # teleprev.pipeline.swept.SweptCheck or None
         self.tcp = tcp  # teleprev.pipeline.tcp_speed.TcpSpeedCap or None (no cap on the flange's speed)
+        # the arm's jerk over a stream's first STREAM_START_TICKS moving ticks (formats up to 10: 1.0)
+        self.start_jerk_frac = start_jerk_frac
 
     def stop_time_bound(self) -> float:
         """Seconds a switch to preview takes at most to bring the commands to rest (the slower side's

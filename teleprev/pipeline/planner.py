@@ -56,7 +56,14 @@ from teleprev.kernels.motion import (
 )
 from teleprev.pipeline.derivatives import RESUME_GAP_NS, RESUME_PERIOD_NS
 from teleprev.pipeline.frozen import evolve
-from teleprev.pipeline.motion import ENGAGED_TOL, EXTRAPOLATE_MAX_NS, FEEDFORWARD_MAX_GAP_NS, RESUME_STEP_S, Motion
+from teleprev.pipeline.motion import (
+    ENGAGED_TOL,
+    EXTRAPOLATE_MAX_NS,
+    FEEDFORWARD_MAX_GAP_NS,
+    RESUME_STEP_S,
+    STREAM_START_TICKS,
+    Motion,
+)
 from teleprev.pipeline.trajectory import PLAN_GOAL, JointMotion, float_vector
 
 
@@ -118,6 +125,7 @@ class PlannerState:
     input_lost: bool = False  # a tick in execute had no target for a side: the next full one resumes slowly
     last_ns: int | None = None  # the last tick that sent
     dt_before: float = 0.0  # the interval before it (the hand cap's span)
+    stream_ticks: int = 0  # ticks sent since the arm's stream started (an engage from rest, a pause)
     arm: _Side = field(default_factory=_Side)
     hand: _Side = field(default_factory=_Side)
     target: TargetUpdate | None = None  # the latest adopted
@@ -187,7 +195,7 @@ class CommandPlanner:
             return None
         flags: list[str] = []
         if s.last_ns is None:  # the first command of an engage: where the robot is
-            s.last_ns = t_ns
+            s.last_ns, s.stream_ticks = t_ns, 0
             return self._sent(t_ns, flags)
         gap = t_ns - s.last_ns
         if gap <= 0:
@@ -199,7 +207,7 @@ class CommandPlanner:
             # next command as the start of a new stream).
             s.arm.motion = JointMotion.rest(s.arm.motion.q)
             s.hand.v = np.zeros_like(s.hand.v)
-            dt, s.dt_before = RESUME_STEP_S, 0.0
+            dt, s.dt_before, s.stream_ticks = RESUME_STEP_S, 0.0, 0
             flags.append("commands_resumed")
         executing = s.mode == "execute"
         if not executing:
@@ -215,6 +223,7 @@ class CommandPlanner:
                 s.input_lost, s.engaging = False, True
                 flags.append("input_resumed")
         frac = self.engage_speed_frac if s.engaging else 1.0
+        s.stream_ticks += 1
         arm_reached = self._arm(target, t_ns, dt, frac, flags)
         hand_reached = self._hand(target, t_ns, dt, frac, flags)
         s.dt_before = dt
@@ -261,7 +270,8 @@ class CommandPlanner:
             else:  # no newer target for a while: where the extrapolation stops, met at rest
                 goal = target.arm + target.arm_v * (EXTRAPOLATE_MAX_NS / 1e9)
         plan = self.arm.plan(m, goal, dt, frac, estimate, None, velocity, 0.0, 0.0, ahead, speeds)
-        out = self.arm.follow(m, plan, dt, ENGAGED_TOL)
+        starting = self.state.stream_ticks <= STREAM_START_TICKS  # eased in (Motion.start_jerk_frac)
+        out = self.arm.follow(m, plan, dt, ENGAGED_TOL, self.motion.start_jerk_frac if starting else 1.0)
         if out is None:  # ruckig found no profile: brake instead
             side.motion = self._brake(m, dt, flags)
             return False

@@ -112,15 +112,24 @@ class ArmGenerator:
                         target if before_v is None else float_vector(before_v), float(gap), float(keep), float(ahead),
                         float(dt), float(speed_frac), *limits)
 
-    def follow(self, s: JointMotion, plan: np.ndarray, dt: float, tol: float = 0.0) -> tuple | None:
+    def follow(self, s: JointMotion, plan: np.ndarray, dt: float, tol: float = 0.0,
+               jerk_frac: float = 1.0) -> tuple | None:
         """`dt` seconds along the time-optimal profile of `plan` (ArmGenerator.plan's rows), or None where ruckig
         finds none. Returns (the motion, whether the profile reaches the target within dt, its position held
-        within the joint limits, whether that hold changed it, whether it is within `tol` of the target)."""
+        within the joint limits, whether that hold changed it, whether it is within `tol` of the target).
+        `jerk_frac`: the profile at that fraction of the jerk limit."""
         inp = self._inp
         inp.current_velocity, inp.max_velocity, inp.min_velocity, inp.current_position = plan[:4].tolist()
         inp.current_acceleration = s.a.tolist()
         inp.control_interface = self._position
-        if self._otg.calculate(inp, self._traj).value < 0:  # an error result: invalid input or no solution
+        if jerk_frac != 1.0:
+            inp.max_jerk = (self.jerk * jerk_frac).tolist()
+        try:
+            solved = self._otg.calculate(inp, self._traj).value >= 0  # else invalid input or no solution
+        finally:
+            if jerk_frac != 1.0:
+                inp.max_jerk = self.jerk.tolist()
+        if not solved:
             return None
         sample = np.array(self._traj.at_time(dt if dt > 0.0 else 0.0))
         rows, held, close, at_rest = arm_sample(plan[4], plan[5], sample, plan[6], self.lower, self.upper, tol,

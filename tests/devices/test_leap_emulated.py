@@ -177,7 +177,8 @@ def test_a_latency_timer_it_may_not_set_is_one_line_with_the_command(tmp_path, m
 
 
 def test_the_sdk_read_sleeps_instead_of_spinning(bus):
-    """While the SDK waits for a silent motor (about 34 ms), the process's CPU time stays near zero."""
+    """While the plugin waits for a silent motor (100 ms with the timer at 1 ms), the process's CPU time stays near
+    zero."""
     bus.inject("silent", motor=3)
     link = SdkDynamixelBus(bus.port, latency_timer=str(bus.latency_timer_path))
     link.open()
@@ -207,8 +208,24 @@ def test_a_missed_reply_is_counted_not_a_fault(bus):
         bus.operator_clear()
 
 
+def test_a_reply_the_host_hands_on_late_is_read_not_missed(bus):
+    """The motors answer at once but the host's tty layer hands the replies on 45 ms late (a loaded host's
+    kernel worker: bench/hardware.py): the read waits for them. The SDK's own 34.6 ms wait missed it."""
+    link = SdkDynamixelBus(bus.port, latency_timer=str(bus.latency_timer_path))
+    link.open()
+    try:
+        bus.host_delay_s = 0.045
+        t = time.monotonic()
+        assert set(link.sync_read(list(range(16)), 132, 4)) == set(range(16))
+        assert time.monotonic() - t > 0.045
+    finally:
+        bus.host_delay_s = 0.0
+        link.close()
+
+
 def test_a_hand_that_stops_answering_faults_within_the_stated_bound(bus):
-    """miss_limit (5) reads in a row, each waiting the SDK's 34.6 ms for a 16-motor read: 0.17 s, plus a poll."""
+    """miss_limit (5) reads in a row, each waiting 100 ms for a 16-motor read with the timer at 1 ms (the
+    bytes, 2 x 1 ms + 2 ms and leap.HOST_DELAY_MS): 0.5 s, plus a poll."""
     s = Session(bus)
     try:
         time.sleep(0.2)
@@ -217,7 +234,8 @@ def test_a_hand_that_stops_answering_faults_within_the_stated_bound(bus):
         assert s.log.wait(lambda: s.log.count("error") >= 1, timeout_s=3.0), s.log.events
         took = s.log.of("error")[0]["t"] - t
         assert "motor 5 did not answer" in s.log.of("error")[0]["message"]
-        assert took < 5 * 0.0346 + 0.2, took  # the bound, with a poll period and a busy host's slack
+        wait_s = leap.reply_wait_ms(240 * 10 / leap.BAUDRATE * 1e3, 1) / 1e3
+        assert took < 5 * wait_s + 0.2, took  # the bound, with a poll period and a busy host's slack
         assert s.hand.counters()["read_misses"] >= 4
     finally:
         s.stop()
@@ -250,3 +268,31 @@ def test_a_late_reply_to_an_earlier_read_is_a_named_miss(bus):
     finally:
         link.close()
         bus.operator_clear()
+
+
+def _reply_thread_priority(conn) -> None:
+    import os
+
+    try:  # as tests/helpers/emulated_rig.py's processes
+        os.sched_setscheduler(0, os.SCHED_FIFO, os.sched_param(40))
+    except PermissionError:
+        conn.send(None)
+        return
+    with DynamixelBus().start() as b:
+        conn.send(os.sched_getparam(b._thread.native_id).sched_priority)
+
+
+def test_the_bus_answers_at_its_process_real_time_priority_never_lower():
+    """In an emulator's process at SCHED_FIFO 40 the thread that answers keeps 40 (it lowered itself to 10,
+    behind the command path's processes, and read requests up to 45 ms late)."""
+    import multiprocessing as mp
+
+    ours, theirs = mp.get_context("fork").Pipe()
+    p = mp.get_context("fork").Process(target=_reply_thread_priority, args=(theirs,))
+    p.start()
+    assert ours.poll(10), "the bus's process did not answer"
+    got = ours.recv()
+    p.join(5)
+    if got is None:
+        pytest.skip("SCHED_FIFO is not permitted here")
+    assert got == 40

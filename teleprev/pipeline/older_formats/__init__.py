@@ -16,8 +16,11 @@
                keeping its direction, else on into the margin if no link collides on the way, where
                formats 1 to 8 stopped short; a hand joint keeps its braking envelope towards the joint
                limit ahead, where formats 1 to 8 kept it in the target's frame only
-    (format 10, the current one: the planner lowers the arm's speed fraction so that the flange keeps
-    its linear speed cap, where formats 4 to 9 left it uncapped)
+    format 10  the planner lowers the arm's speed fraction so that the flange keeps its linear speed cap,
+               where formats 4 to 9 left it uncapped
+    (format 11, the current one: the planner plans the arm at [pipeline] arm_plan_fraction of its
+    acceleration and jerk limits, a stream's first ticks at half that jerk, where formats up to 10
+    planned at the limits throughout)
 
     numpy_arithmetic   NumpyArmIK, NumpyArmRetargeter, NumpySweptCheck, NumpyCorrector (formats 1 and 2)
     abduction_first    AbductionFirstPipeline: the compiled glove reading of formats 3 and 4
@@ -41,6 +44,8 @@ asks it for every format older than topics.FORMAT_VERSION). Each class subclasse
 """
 
 from __future__ import annotations
+
+from dataclasses import replace
 
 from teleprev.pipeline.arithmetic import Arithmetic
 from teleprev.pipeline.older_formats.abduction_first import AbductionFirstPipeline
@@ -84,9 +89,12 @@ HELD_ENGAGE_FORMAT_VERSION = 7
 # Format 8 was never recorded.
 # Format 9: a braking hand keeps its direction, or brakes into the clearance margin, where it stopped short.
 BRAKING_IN_MARGIN_FORMAT_VERSION = 9
+# Format 10: the planner keeps the flange within its linear speed cap.
+TCP_CAPPED_FORMAT_VERSION = 10
 
 __all__ = ["MOTION_FORMAT_VERSION", "COMPILED_FORMAT_VERSION", "PLANNED_FORMAT_VERSION", "FLEXION_FIRST_FORMAT_VERSION",
-           "SLIDING_FORMAT_VERSION", "HELD_ENGAGE_FORMAT_VERSION", "BRAKING_IN_MARGIN_FORMAT_VERSION", "arithmetic",
+           "SLIDING_FORMAT_VERSION", "HELD_ENGAGE_FORMAT_VERSION", "BRAKING_IN_MARGIN_FORMAT_VERSION",
+           "TCP_CAPPED_FORMAT_VERSION", "arithmetic",
            "AbductionFirstPipeline",
            "BrakingSweptCheck", "ImmediateResumePipeline", "ImmediateResumePlanner", "MeasuredEngagePipeline",
            "MeasuredEngagePlanner", "MotionState", "NumpyArmIK",
@@ -96,7 +104,14 @@ __all__ = ["MOTION_FORMAT_VERSION", "COMPILED_FORMAT_VERSION", "PLANNED_FORMAT_V
 
 
 def arithmetic(session_format: int) -> Arithmetic:
-    """The classes sessions of an older `session_format` were computed with."""
+    """The classes sessions of an older `session_format` were computed with: each planned the arm at its
+    acceleration and jerk limits (format 11 plans below them)."""
+    return replace(_classes(session_format), plans_below_limits=False)
+
+
+def _classes(session_format: int) -> Arithmetic:
+    if session_format >= TCP_CAPPED_FORMAT_VERSION:
+        return Arithmetic()
     if session_format >= BRAKING_IN_MARGIN_FORMAT_VERSION:
         return Arithmetic(pipeline=UncappedTcpPipeline)
     if session_format >= HELD_ENGAGE_FORMAT_VERSION:
