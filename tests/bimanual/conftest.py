@@ -1,5 +1,5 @@
-"""A bimanual session recorded unattended on rigs/sim_bimanual.toml and its default export, once for the
-tests of this folder that read them (record, export, audit, replay, training, rollout)."""
+"""A bimanual session recorded unattended on rigs/sim_bimanual.toml, its default export and a tiny ACT trained
+on it, once for the tests of this folder that read them (record, export, audit, replay, training, rollout)."""
 
 from __future__ import annotations
 
@@ -27,3 +27,11 @@ def dataset(session, tmp_path_factory) -> Path:
     ran = teleprev("export", session, "--repo-id", "lab/bimanual", "--root", root)
     assert ran.returncode == 0, ran.stdout + ran.stderr
     return root
+
+
+@pytest.fixture(scope="session")
+def policy(dataset, tmp_path_factory) -> Path:
+    """A tiny ACT trained by lerobot-train on the export (tests.helpers.policies): its pretrained_model folder."""
+    from tests.helpers.policies import train_tiny_act
+
+    return train_tiny_act(dataset, "lab/bimanual", tmp_path_factory.mktemp("bimanual_act") / "train")

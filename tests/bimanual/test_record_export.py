@@ -127,11 +127,9 @@ def test_the_dataset_audit_measures_each_side_as_lerobot_loads_it(dataset):
         # (an action is a command stamped with its frame's time: no bound on the ratio, as single-arm)
 
 
-def test_an_act_trains_on_the_bimanual_export(dataset, tmp_path):
-    """lerobot-train (a tiny ACT, two steps on CPU) takes the export as it is: both sides' vectors and the camera."""
-    from tests.helpers.policies import train_tiny_act
-
-    policy = train_tiny_act(dataset, "lab/bimanual", tmp_path / "train")
+def test_an_act_trains_on_the_bimanual_export(policy):
+    """lerobot-train (a tiny ACT, two steps on CPU) takes the export as it is: both sides' vectors and the camera
+    (the policy test_rollout.py rolls out)."""
     config = json.loads((policy / "config.json").read_text())
     assert config["input_features"]["observation.state"]["shape"] == [44]
     assert config["input_features"]["observation.images.cam_right"]["shape"] == [3, 120, 160]

@@ -8,20 +8,13 @@ import json
 from pathlib import Path
 
 import numpy as np
-import pytest
 
 from teleprev.session.reader import SessionReader
 from tests.bimanual.test_record_export import expected_names
 from tests.helpers.cli import teleprev
-from tests.helpers.policies import train_tiny_act
 
 RIG = Path(__file__).resolve().parents[2] / "rigs" / "sim_bimanual.toml"
 SIDE_NAMES = tuple(f"arm.joint{k}" for k in range(1, 7)) + tuple(f"hand.{k}" for k in range(16))
-
-
-@pytest.fixture(scope="module")
-def policy(dataset, tmp_path_factory) -> Path:
-    return train_tiny_act(dataset, "lab/bimanual", tmp_path_factory.mktemp("bimanual_act") / "train")
 
 
 def test_the_action_is_split_by_name_into_the_sides(policy, tmp_path):
