@@ -9,13 +9,13 @@ physics_realtime_x   simulated seconds per wall second, the slowest task: the xA
 render_fps           640x480 colour frames per wall second from the front camera, the world stepping
                      1/30 s between frames, on the same core (Mesa's llvmpipe held to one thread)
 eval_physics_*       `teleprev eval --physics` on a session recorded here on the physics rig (4 episodes of
-                     3 s; --quick 2): eval_physics_realtime_x the world seconds both plays stepped per wall
+                     3 s; --quick 1): eval_physics_realtime_x the world seconds both plays stepped per wall
                      second they took (the world stepped as fast as it goes, on one core);
                      eval_physics_session_x the session's seconds per wall second of the whole evaluation
                      (re-run and both plays); eval_physics_agree whether the recorded commands, played
                      again, give every episode the mark the live world gave it
 realtime_physics_*   bench/realtime.py --rig physics: unattended physics-rig sessions (preview in a pty)
-                     beside 8 busy processes (--quick: 1 session, 2 busy), measured where the robot feels
+                     beside 8 busy processes (--quick: 1 session, 1 busy), measured where the robot feels
                      them: arm faults, the longest command gap, sender lateness, audit failures
 demo_success_rate    per task, the share of the simulated operator's episodes that world/success.py
                      judges a success, through the rig's retarget, Corrector and command planner into
@@ -154,7 +154,7 @@ def eval_figures(quick: bool, cores: set[int]) -> dict:
 
     from teleprev.evaluation.evaluate import evaluate
 
-    episodes = 2 if quick else 4
+    episodes = 1 if quick else 4
     folder = Path(tempfile.mkdtemp(prefix="physics-eval-"))
     out = folder / "session.mcap"
     with _all_cores(cores):
@@ -177,7 +177,7 @@ def realtime_figures(quick: bool, cores: set[int]) -> dict:
     import realtime
 
     with _all_cores(cores):
-        return realtime.physics_figures(1 if quick else 4, 4.0 if quick else 20.0, 2 if quick else 8,
+        return realtime.physics_figures(1 if quick else 4, 4.0 if quick else 20.0, 1 if quick else 8,
                                         Path(tempfile.mkdtemp(prefix="physics-realtime-")))
 
 

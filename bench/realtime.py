@@ -2,7 +2,7 @@
 this 2-core machine (4 per core), the preview rendering into a pseudo-terminal at 80x24 and 120x45 and the
 sim camera at 30 fps; every session then measured as a controller would see it.
 
-Sessions (10; --quick: 3 of 4 s, the sim rig at 80x24, the fault and the wrist twist, beside 2 busy processes,
+Sessions (10; --quick: 3 of 4 s, the sim rig at 80x24, the fault and the wrist twist, beside 1 busy process,
 and the mechanisms for 1 s each):
     default sim rig (the simulated operator at its tasks), preview in a pty, 80x24 and 120x45 in turn
     a human-like VMC glove and suit over UDP (tests/helpers/vmc.py: HumanLikeSender), preview at 80x24
@@ -27,7 +27,7 @@ process, with and without real-time priority: mechanism_<kind>_late_ms_p99 / _ma
 
 --rig physics: the same check on the physics rig (rigs/sim_physics.toml, issue 39), the world stepping in
 a process of its own; sessions of two episodes each, preview in a pty at 80x24, beside the busy processes
-(default 8, --quick 2; --sessions, default 4, --quick 1). bench/physics.py reports these figures too:
+(default 8, --quick 1; --sessions, default 4, --quick 1). bench/physics.py reports these figures too:
     realtime_physics_sessions      sessions recorded under the load
     realtime_physics_arm_faults    controller faults the sim arm raised
     realtime_physics_gap_ms_max    the longest interval between two commands of one engaged run (stamps)
@@ -417,7 +417,7 @@ def mechanisms(seconds: float) -> dict:
 def main() -> None:
     p = common.parser(__doc__.splitlines()[0])
     p.add_argument("--seconds", type=float, default=20.0, help="each session's length")
-    p.add_argument("--busy", type=int, default=None, help="busy processes beside the sessions (default 8, --quick 2)")
+    p.add_argument("--busy", type=int, default=None, help="busy processes beside the sessions (default 8, --quick 1)")
     p.add_argument("--keep", type=Path, default=None, help="keep the sessions in this folder")
     p.add_argument("--rig", choices=("sim", "physics"), default="sim",
                    help="physics: the check on the physics rig alone (realtime_physics_* figures)")
@@ -428,7 +428,7 @@ def main() -> None:
 
     seconds = 4.0 if args.quick else args.seconds
     if args.busy is None:
-        args.busy = 2 if args.quick else 8
+        args.busy = 1 if args.quick else 8
     folder = args.keep or Path(tempfile.mkdtemp(prefix="realtime-"))
     folder.mkdir(parents=True, exist_ok=True)
     if args.rig == "physics":
