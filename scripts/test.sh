@@ -17,10 +17,14 @@ fi
 npm ci --prefix tests/webxr/browser --no-audit --no-fund --silent
 # Two workers (pytest-xdist): most tests wait on real time (sessions, sockets, subprocesses, the benches'
 # quick runs), so two share the two cores of a small machine and the suite stays within its 10 minutes.
+# --dist worksteal: each worker takes half of the tests, in order (a module's fixtures set up once), and
+# the first to run out takes over what the other has not started. The default (load) hands the first
+# worker a fixed first chunk, an eighth of the tests: here the benches' quick runs and the bimanual
+# tests, the longest stretch of the suite, which the second worker could not take a share of.
 # A few tests time real-time paths end to end (emulated hardware answering in time); two workers on two
 # cores can starve them where no real robot would be, so a test that fails is run once more alone, and
 # the run says which did: a test that fails alone too fails the suite.
-if .venv/bin/python -m pytest -q -n 2 "$@"; then
+if .venv/bin/python -m pytest -q -n 2 --dist worksteal "$@"; then
   exit 0
 fi
 echo "test.sh: running the failed tests again, one at a time, on a machine without the other worker"
