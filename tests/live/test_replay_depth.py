@@ -75,11 +75,20 @@ def test_a_replay_records_the_sessions_depth_as_it_plays_it(source, tmp_path, sp
     assert len(got[f"{CAMERA}/image"]) == len([i for i in src[f"{CAMERA}/image"] if t0 <= i.stamp_ns <= last])
 
 
+def _worlds() -> set[int]:
+    """The physics world processes this process started that are running."""
+    import psutil
+
+    return {c.pid for c in psutil.Process().children() if "teleprev.world.process" in " ".join(c.cmdline())}
+
+
 def test_the_replay_session_exports_with_its_depth(source, tmp_path):
     out = tmp_path / "replay.mcap"
+    before = _worlds()
     ran = teleprev("replay", source, "--episode", "0", "--to", "sim", "--engage-after", "0.2", "--no-preview",
                    "--out", out)
     assert ran.returncode == 0, ran.stderr + ran.stdout
+    assert _worlds() <= before  # the replay closed the world its sim devices stepped (run here, not in a child)
     ran = teleprev("export", out, "--repo-id", "lab/replayed", "--root", tmp_path / "ds")
     assert ran.returncode == 0, ran.stderr + ran.stdout
     info = json.loads((tmp_path / "ds" / "meta" / "info.json").read_text())

@@ -114,6 +114,8 @@ def build_player(session: Path, episode, speed: float, to: str, rig_path=None, s
         actuators = {kind: hosts.get(kind) or dev for kind, dev in devices.items()}
         actuators = recording.actuators(actuators) if recording else actuators
         runners = [hosts.get(kind) or DeviceRunner(dev, sink, clock) for kind, dev in devices.items()]
+        if context.physics is not None:  # the physics world the sim devices started, closed after them
+            runners.append(_WorldRun(context.physics))
 
     def measured():
         arm = next((s for t, s in tap.latest.items() if t.startswith("/arm/")), None)
@@ -145,6 +147,21 @@ def build_player(session: Path, episode, speed: float, to: str, rig_path=None, s
         frames = dataset_depth_frames(session, episode) if dataset else session_frames(session)
         recording.carry = CameraCarry(frames, recording, player) if frames is not None else None
     return player, runners, tap, rig, message, recording
+
+
+class _WorldRun:
+    """The physics world of a replay to a physics rig's sim devices, among the replay's runners: started by the
+    devices' first use, closed when the runners stop (not only at the process's exit: a replay run inside a
+    longer-lived process would leave the world stepping)."""
+
+    def __init__(self, physics):
+        self.physics = physics
+
+    def start(self) -> None:
+        pass
+
+    def stop(self) -> None:
+        self.physics.close()
 
 
 HANDOVER_LEAD_S = 0.05  # how far ahead of its stamp the player hands a command to its actuator's process
