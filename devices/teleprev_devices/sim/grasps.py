@@ -65,6 +65,22 @@ def power(c: float) -> HandAngles:
     )
 
 
+def pour_grip(c: float) -> HandAngles:
+    """A power grasp for pouring: the middle and ring fingers curl round the cup, deeper than a power
+    grasp's (squeezed past c ~0.8 the fingertips would be in the palm), the index finger (at the rim)
+    only lightly bent along it and the thumb against its side, so that neither curls over the mouth
+    the contents pour from."""
+    out = power(c)
+    curled = (0.75 + 0.85 * c, 0.85 + 0.90 * c, 0.55 + 0.70 * c)
+    shape = {"index": (0.30 + 0.15 * c, 0.25 + 0.15 * c, 0.15), "middle": curled, "ring": curled,
+             "thumb": (0.45, 0.20, 0.10)}
+    for finger, flex in shape.items():
+        for i, v in enumerate(flex, start=1):
+            out[smplx.JOINT_INDEX[f"{finger}{i}"]] = v
+    out[15 + smplx.JOINT_INDEX["thumb1"]] = -0.2
+    return out
+
+
 def fist(c: float) -> HandAngles:
     """Closed fist, thumb folded across the fingers (operators clench between takes)."""
     return _hand(
@@ -104,5 +120,6 @@ def claw(c: float) -> HandAngles:
 
 
 SHAPES: dict[str, Callable[[float], HandAngles]] = {
-    "rest": rest, "open": open_hand, "power": power, "fist": fist, "pinch": pinch, "flat": flat, "claw": claw,
+    "rest": rest, "open": open_hand, "power": power, "pour": pour_grip, "fist": fist, "pinch": pinch, "flat": flat,
+    "claw": claw,
 }

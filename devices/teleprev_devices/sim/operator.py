@@ -17,8 +17,9 @@ Phase scripts (grasp shapes in devices/sim/grasps.py; c = tightness):
                   off and open), return, pause
     hang          reach palm-down+pre-shape, approach, pinch(c), lift (firmer pinch c+0.3), move to the
                   peg, hang (roll), lower, release, retreat, return, pause
-    pour          pick as above, move over the bowl, pour (pronate 83-86 deg, grip tightens to c+0.3..0.45),
-                  shake three times, upright (grip eases), then place it back as pick_place does
+    pour          pick as above (lower, pour_grip: index and thumb off the mouth), move over the bowl
+                  turning the hand towards it, fingers down (grip firm: 0.9..1), pour (pronate ~120 deg),
+                  shake twice, upright, move back turning the hand back, then place it as pick_place does
     box_rotation  reach palm-down, approach, claw grip, rotate (yaw 70-100 deg), release, lift, unwind,
                   reposition with a flat hand, push (fingers squeezed together), retreat, return, pause
     cup_stack     two picks (power grasps) each placed onto the third cup, then return, pause

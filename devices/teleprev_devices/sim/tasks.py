@@ -15,7 +15,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from teleprev.devices import world_places
+from teleprev.devices import transforms, world_places
 from teleprev_devices.sim import grasps
 
 TABLE_Z = world_places.TABLE_Z
@@ -155,22 +155,44 @@ def _carry(obj: str, goal, base: float | None = None):
     return aim
 
 
-# pour: the wrist over the bowl at POUR_OVER from its centre, so that rolled ~115 degrees about the
-# fingers (the TCP the pivot) the cup, held GRASP_ALONG / GRASP_OUT from the TCP and 8.5 cm below it,
-# swings over to point its mouth down into the bowl: the mouth comes to about (-0.065, -0.065) from the TCP.
-POUR_OVER = _v(0.065, 0.045, 0)
+# pour: the xArm's last joint turns about 88 degrees from where a cup is held upright (it stops at
+# -3.11 rad), too little to tip a cup's mouth below the horizontal by a roll alone. A person pours
+# with the whole arm: the hand turned towards the bowl (yaw) and its fingers down (pitch) before the
+# wrist rolls; from that pose the xArm rolls with its forearm (joint4) and wrist (joint5) as well as
+# joint6, the mouth ends about 20 degrees below the horizontal, and every joint keeps about 0.25 rad
+# from its limits through the shakes (the arm's IK along the operator's path, over the layouts' jitter).
+POUR_RPY = _v(-2.1, 0.9, 1.2)
+POUR_Z = 0.22  # m: the wrist over the table as it pours; the mouth comes about as high
+CUP_HEIGHT = 0.10
+# The hand takes the cup this much lower than a pick does (the ring finger still clear of the table):
+# held at GRASP_HEIGHT the fingers close over the rim, and the contents pour onto them.
+POUR_GRASP_LOWER = 0.02
+# Where the operator aims the mouth, from the bowl's centre: the contents leave by the lower lip and
+# the cup turns a little in the fingers as it tips, so that they land about (-1, +2.5) cm from where
+# the mouth is aimed (measured over the demos' seeds); aimed this far off, they land round the middle.
+POUR_AIM = _v(0.01, -0.025, 0)
+EASED = 0.7  # the pour grip once the cup is upright again, on the way back: firm, its fingertips clear of the palm
 
 
-def _pour_over(bowl: str, cup: str):
-    """Aim: the wrist to POUR_OVER from the bowl as seen, corrected by how far the held cup sits from where
-    a grasp puts it (seen against the robot's hand)."""
+def _mouth_sweep(rpy: np.ndarray, yaw_now: float, held: np.ndarray) -> np.ndarray:
+    """Where the cup's mouth comes, from the wrist, as the wrist turns from level at `yaw_now` to `rpy`:
+    the middle of its way from three quarters of the roll (where the contents begin to run out) to the
+    whole roll. `held`: the cup's base centre from the wrist, seen now."""
+    level = transforms.rpy_to_matrix(0.0, 0.0, yaw_now).T
+    ways = [transforms.rpy_to_matrix(s * rpy[0], rpy[1], rpy[2]) @ level @ (held + _v(0, 0, CUP_HEIGHT))
+            for s in (0.75, 1.0)]
+    return (ways[0] + ways[1]) / 2
+
+
+def _pour_over(bowl: str, cup: str, rpy: np.ndarray):
+    """Aim: the wrist where, turned from its orientation now to `rpy`, it pours the cup's contents into
+    the bowl as seen (the held cup seen against the robot's hand: wherever the grasp put it)."""
     def aim(seen: dict, wrist: np.ndarray, planned: np.ndarray | None) -> np.ndarray:
         out = np.array(planned if planned is not None else wrist, dtype=float)
         held, hand = _v(*seen[cup][:3]), _v(*seen["hand"][:3])
         if held[2] < TABLE_Z + LIFTED:
             return out
-        slip = _v(GRASP_ALONG, GRASP_OUT, 0) - (held - hand)
-        out[:2] = (_v(*seen[bowl][:3]) + POUR_OVER + slip)[:2]
+        out[:2] = (_v(*seen[bowl][:3]) + POUR_AIM - _mouth_sweep(rpy, seen["hand"][3], held - hand))[:2]
         return out
     return aim
 
@@ -190,8 +212,8 @@ def _move_by(offset: np.ndarray):
 
 
 def _pick(b: _Builder, cup: np.ndarray, grasp_z: float, yaw: float, squeeze: float,
-          tightness: tuple[float, float] = (0.35, 0.95), name: str = "cup") -> float:
-    """Reach, pre-shape, grasp and lift a cup; returns the grasp tightness."""
+          tightness: tuple[float, float] = (0.35, 0.95), name: str = "cup", shape=grasps.power) -> float:
+    """Reach, pre-shape, grasp (`shape`, one of grasps' shapes) and lift a cup; returns the grasp tightness."""
     c = b.rng.uniform(*tightness)
     high = grasp_z + b.rng.uniform(*ABOVE)
     rpy = _v(0, LEVEL, yaw)
@@ -204,12 +226,12 @@ def _pick(b: _Builder, cup: np.ndarray, grasp_z: float, yaw: float, squeeze: flo
     b.add("approach", 1.0, _side_grasp_point(cup, grasp_z, yaw, STANDOFF),
           aim=_hand_to(name, beside + _v(0, 0, grasp_z - TABLE_Z)))
     b.add("approach", 0.7, _side_grasp_point(cup, grasp_z, yaw), aim=_hand_to(name, grip + _v(0, 0, grasp_z - TABLE_Z)))
-    b.add("grasp", 0.5, hand=grasps.power(c))
+    b.add("grasp", 0.5, hand=shape(c))
     b.add(
         "lift",
         0.9,
         _side_grasp_point(cup, grasp_z + b.rng.uniform(0.10, 0.14), yaw),
-        hand=grasps.power(min(1.0, c + squeeze)),
+        hand=shape(min(1.0, c + squeeze)),
     )
     return c
 
@@ -286,19 +308,32 @@ def pour(rng: np.random.Generator, rest: np.ndarray) -> Script:
     b = _Builder(rng)
     cup = _spot(b, "pour", "cup")
     bowl = _spot(b, "pour", "bowl")
-    grasp_z = TABLE_Z + GRASP_HEIGHT
-    pour_z = TABLE_Z + rng.uniform(0.21, 0.24)
-    # Pronation tips the cup's mouth to the left, over the bowl; the xArm's last joint (+-3.11 rad, from
-    # -1.57 at home) allows about 90 degrees of it, the shakes shake the contents out.
-    tilt = -rng.uniform(1.45, 1.5)
-    c = _pick(b, cup, grasp_z, rng.uniform(-0.2, 0.0), squeeze=0.25, tightness=(0.3, 0.6))
-    b.add("move", 1.4, bowl + POUR_OVER + _v(0, 0, pour_z), _v(0, 0, 0), aim=_pour_over("bowl", "cup"))
-    # The grip tightens while the cup is upside down and shaken, and eases once it is upright again.
-    b.add("pour", 1.2, rpy=_v(tilt, 0, 0), hand=grasps.power(min(1.0, c + rng.uniform(0.3, 0.45))))
-    b.add("shake", 0.35, rpy=_v(tilt - 0.05, 0, 0))
-    b.add("shake", 0.35, rpy=_v(tilt + 0.25, 0, 0))
-    b.add("shake", 0.35, rpy=_v(tilt - 0.05, 0, 0))
-    b.add("upright", 1.0, rpy=_v(0, 0, 0), hand=grasps.power(c))
+    grasp_z = TABLE_Z + GRASP_HEIGHT - POUR_GRASP_LOWER
+    pour_z = TABLE_Z + POUR_Z + rng.uniform(-0.01, 0.01)
+    rpy = POUR_RPY + _v(rng.uniform(-0.05, 0.05), 0, rng.uniform(-0.05, 0.05))
+    yaw = rng.uniform(-0.2, 0.0)
+    _pick(b, cup, grasp_z, yaw, squeeze=0.25, tightness=(0.3, 0.6), shape=grasps.pour_grip)
+    along, palm = _palm_frame(yaw)
+    held = GRASP_ALONG * along + GRASP_OUT * palm + _v(0, 0, TABLE_Z - grasp_z)  # the cup's base from the wrist
+    planned = bowl + POUR_AIM - _mouth_sweep(rpy, yaw, held)
+    # The grip tightens as the cup tips and stays firm until it is upright again: with the fingers
+    # pointing down the cup hangs in them.
+    firm = rng.uniform(0.9, 1.0)
+    # Over the bowl the hand turns towards it and the fingers point down (the cup tilts, still upright
+    # enough to hold its contents), then the wrist rolls the mouth down. Slowly: in this pose the arm's
+    # forearm and wrist joints turn about 2.5 rad for each of the moves.
+    b.add("move", 4.4, _v(planned[0], planned[1], pour_z), _v(0, rpy[1], rpy[2]), grasps.pour_grip(firm),
+          aim=_pour_over("bowl", "cup", rpy))
+    b.add("pour", 3.0, rpy=rpy)
+    # Held there while the contents run out, with a gentle shake (a hard one shakes the cup out of the
+    # hand: upside down it hangs in the fingers).
+    b.add("shake", 0.6, rpy=rpy + _v(0.12, 0, 0))
+    b.add("shake", 0.6, rpy=rpy + _v(-0.05, 0, 0))
+    # Back the way it came, unrolled, then turned back on the way to the cup's place (turned back over
+    # the bowl, the wrist would pass its singularity).
+    b.add("upright", 3.0, rpy=_v(0, rpy[1], rpy[2]))
+    b.add("move", 2.6, _side_grasp_point(cup, grasp_z + 0.12, yaw), _v(0, 0, yaw), grasps.pour_grip(EASED),
+          hand_window=(0.5, 1.0))
     _place(b, cup, grasp_z, 0.0)
     _rest(b, rest)
     objects = (
