@@ -24,8 +24,10 @@ of the section; the prose above it says what each figure means.
 from __future__ import annotations
 
 import argparse
+import contextlib
 import json
 import os
+import signal
 import time
 
 # One thread for numpy's BLAS and torch: the figures are per core.
@@ -83,10 +85,32 @@ class Load:
         return self
 
     def __exit__(self, *exc) -> None:
+        self.resume()  # a stopped process does not act on SIGTERM until it runs again
         for p in self.procs:
             p.terminate()
         for p in self.procs:
             p.join()
+
+    def pause(self) -> None:
+        """Stop the busy processes (SIGSTOP) until resume(): for the parts of a loaded run that are not what
+        it measures (a command's start-up, the checks after it)."""
+        self._signal(signal.SIGSTOP)
+
+    def resume(self) -> None:
+        self._signal(signal.SIGCONT)
+
+    @contextlib.contextmanager
+    def paused(self):
+        self.pause()
+        try:
+            yield
+        finally:
+            self.resume()
+
+    def _signal(self, sig: int) -> None:
+        for p in self.procs:
+            if p.pid is not None and p.exitcode is None:
+                os.kill(p.pid, sig)
 
 
 def steal_ms() -> float | None:

@@ -15,7 +15,11 @@ Faults (times and offsets drawn from the seed):
            a long one (past it); the record process frozen (SIGSTOP, then SIGCONT) for 2 s
 Every family runs twice, quiet and then under 8 busy processes (common.Load), from one table (FAMILIES) and
 one runner; the files they fault (a clean recording, a cut copy, a base dataset and the sessions appended to it)
-are made once, on first use, and shared by both halves.
+are made once, on first use, and shared by both halves. Families that measure time (seconds lost, a resume)
+run their faults one at a time; beside the load, it is stopped while the faulted command starts up (imports
+and numba take 3 s quiet and 48-84 s beside 8 busy processes on 2 shared cores: not what a fault measures)
+and while its output is checked, and it runs from the moment the recording is under way to the command's
+end. The other families run together, 4 faults at once, the load never stopped.
 Per fault: the exit code, the seconds of recording lost, whether the output opens with the checks of
 `mcap doctor` (the mcap library's readers with CRC validation: every record, the summary, every message),
 and whether the old dataset survived (byte for byte, or the whole new one in its place).
@@ -25,8 +29,11 @@ moment the disk filled: the file reached the disk's size); a device dying: the l
 streams that did not die, over 0.1 s; flips and cuts: the log time the kept messages no longer cover,
 minus the damaged range (the chunk the flipped byte is in; everything after a cut).
 Figures:
-  faults_run        faults run (target: >= 300)
+  faults_run        faults run: delivered, and what came of them judged (target: >= 300)
   faults_run_loaded those of them under load (target: half)
+  faults_timed_out  runs that did not do in a bounded time what the fault needs: get under way (START_TIMEOUT_S,
+                    the load stopped) or end after the fault (END_TIMEOUT_S); the first kind is not run (target: 0)
+  bench_errors      faults the bench itself failed on (the exception is printed; the run goes on) (target: 0)
   data_lost_s_max   the largest of those (target: <= 1.0 s)
   silent_failures   faults that lost data (or a dataset) without a non-zero exit and a one-line message,
                     either from the faulted command or from `teleprev info` on what it left
@@ -42,6 +49,8 @@ sessions; of the input family one long NaN loss and one freeze.
 JSON keys:
     faults_run        int
     faults_run_loaded int
+    faults_timed_out  int
+    bench_errors      int
     data_lost_s_max   float
     data_lost_s_max_quiet   float
     data_lost_s_max_loaded  float
@@ -64,7 +73,9 @@ import signal
 import subprocess
 import sys
 import tempfile
+import threading
 import time
+import traceback
 from collections.abc import Callable
 from concurrent.futures import ThreadPoolExecutor
 from dataclasses import asdict, dataclass
@@ -86,6 +97,8 @@ from tests.helpers.faults import (  # noqa: E402
     wait_for_file,
     workers_of,
 )
+from tests.helpers.option_sweep import FIXTURE as SWEEP_FIXTURE  # noqa: E402
+from tests.helpers.option_sweep import BadValue, Sweep, names_option, sweep  # noqa: E402
 
 SIGNALS = (signal.SIGKILL, signal.SIGTERM, signal.SIGHUP)
 LOST_EPS_S = 0.02  # below this a loss is rounding, not data
@@ -105,10 +118,24 @@ class Row:
     resumed_without_operator: bool = False
     load: str = "quiet"  # "quiet", or "loaded": LOADS' busy processes beside it
     took_s: float = 0.0  # the fault's wall time, checks included
+    timed_out: str = ""  # what did not happen in its bounded time (the run got no verdict)
+    refused: bool | None = None  # a bad option value: refused before the work (exit 2, one line naming it, no file)
+    error: str = ""  # the bench itself failed on this fault (its exception)
+
+    @property
+    def ran(self) -> bool:
+        """The fault was delivered and the bench judged what came of it."""
+        return not self.error and not self.timed_out.startswith(NOT_UNDER_WAY)
 
     @property
     def silent(self) -> bool:
-        return not self.announced and (self.lost_s > LOST_EPS_S or self.dataset_ok is False)
+        accepted = self.refused is False and self.exit_code == 0  # a bad value taken without a word
+        return accepted or (not self.announced and (self.lost_s > LOST_EPS_S or self.dataset_ok is False))
+
+
+NOT_UNDER_WAY = "not under way"  # a timed_out that means the fault was never delivered
+START_TIMEOUT_S = 60.0  # a command's start-up to its output under way (3 s quiet; the load is stopped meanwhile)
+END_TIMEOUT_S = 180.0  # a faulted command's end after its fault (finalizing under the load)
 
 
 def started(path: Path, min_bytes: int, timeout: float) -> bool:
@@ -129,28 +156,43 @@ class Faulted:
     code: int | None
     stdout: str = ""
     stderr: str = ""
-    began: bool = True  # its output reached the size that shows it under way, in time
+    timed_out: str = ""  # what it did not do in its bounded time: get under way, or end after the fault
     noted: object = None  # what the fault noted (the times it acted)
 
     @property
     def traceback(self) -> bool:
-        return not self.began or has_traceback(self.stdout + self.stderr)
+        return has_traceback(self.stdout + self.stderr)
 
 
-def during(args: list, out: Path, min_bytes: int, fault) -> Faulted:
+def during(args: list, out: Path, min_bytes: int, fault, load: common.Load, preexec_fn=None) -> Faulted:
     """`teleprev args`; once `out` holds min_bytes, `fault(proc)` (what it returns is kept as `noted`); then
-    the run's end. A run that never got under way is killed (and counts as a traceback: it is a failure)."""
-    proc = start_cli(args)
+    the run's end. The load is stopped while the command starts up (what a fault needs is the recording under
+    way, not the imports) and runs from then to the command's end. A run that does not get under way in
+    START_TIMEOUT_S, or does not end END_TIMEOUT_S after its fault, is killed and marked timed out."""
+    with load.paused():
+        proc = start_cli(args, preexec_fn=preexec_fn)
+        began = started(out, min_bytes, timeout=START_TIMEOUT_S)
     try:
-        if not started(out, min_bytes, timeout=120):
+        if not began:
             proc.kill()
-            return Faulted(proc.wait(), began=False)
+            stdout, stderr = proc.communicate()
+            return Faulted(proc.returncode, stdout, stderr, f"{NOT_UNDER_WAY} ({out.name} under {min_bytes} bytes "
+                                                            f"after {START_TIMEOUT_S:.0f} s)")
         noted = fault(proc)
-        stdout, stderr = proc.communicate(timeout=60)
+        stdout, stderr, late = ended(proc, END_TIMEOUT_S)
     finally:
         if proc.poll() is None:
             proc.kill()
-    return Faulted(proc.returncode, stdout, stderr, noted=noted)
+    return Faulted(proc.returncode, stdout, stderr, "not ended after its fault" if late else "", noted=noted)
+
+
+def ended(proc, timeout: float) -> tuple[str, str, bool]:
+    """(stdout, stderr, late): the process's end, killed if it has not ended in `timeout` s (late)."""
+    try:
+        return *proc.communicate(timeout=timeout), False
+    except subprocess.TimeoutExpired:
+        proc.kill()
+        return *proc.communicate(), True
 
 
 def one_line(run) -> bool:
@@ -215,7 +257,7 @@ def tree(root: Path) -> dict[str, str]:
 RECORD = ["record", "--duration", "60", "--no-preview", "--engage-after", "0.3"]
 
 
-def record_signal(work: Path, k: int, sig: int, after_s: float) -> Row:
+def record_signal(work: Path, k: int, sig: int, after_s: float, load: common.Load) -> Row:
     out = work / f"rec_sig{k}.mcap"
 
     def fault(proc) -> int:
@@ -224,12 +266,15 @@ def record_signal(work: Path, k: int, sig: int, after_s: float) -> Row:
         proc.send_signal(sig)
         return sent_ns
 
-    ran = during(RECORD + ["-o", out], out, 150_000, fault)
-    row = Row("record", f"{sig.name} at {after_s:.2f} s", ran.code, traceback=ran.traceback)
-    if not ran.began:
-        row.detail += " (never started)"
+    ran = during(RECORD + ["-o", out], out, 150_000, fault, load)
+    row = Row("record", f"{sig.name} at {after_s:.2f} s", ran.code, traceback=ran.traceback, timed_out=ran.timed_out)
+    if ran.noted is None:
         return row
-    sent_ns = ran.noted
+    with load.paused():
+        return record_signal_checks(work, k, out, sig, ran.code, ran.noted, row)
+
+
+def record_signal_checks(work: Path, k: int, out: Path, sig: int, code: int | None, sent_ns: int, row: Row) -> Row:
     final = out
     if sig == signal.SIGKILL:
         row.announced, tb = info_announces(out)
@@ -238,41 +283,44 @@ def record_signal(work: Path, k: int, sig: int, after_s: float) -> Row:
         run = run_cli(["recover", out, "-o", final], timeout=120)
         row.traceback |= has_traceback(run.stdout + run.stderr)
     else:
-        row.announced = ran.code == 128 + sig
+        row.announced = code == 128 + sig
     row.opens = mcap_opens(final)
     end = last_log_ns(final) if final.exists() else None
     row.lost_s = max(0.0, (sent_ns - end) / 1e9) if end is not None else float("inf")
     return row
 
 
-def record_full_disk(work: Path, k: int, size: int) -> Row:
+def record_full_disk(work: Path, k: int, size: int, load: common.Load) -> Row:
     with small_disk(work / f"disk{k}", size) as (disk, preexec):
         out = disk / "x.mcap"
         limit = size if preexec is not None else None
-        proc = start_cli(RECORD + ["-o", out], preexec_fn=preexec)
-        full_ns = None
-        try:
-            while proc.poll() is None:  # the moment the file reaches the disk's size: the disk is full
-                if full_ns is None and out.exists():
-                    st = os.statvfs(disk)
-                    if (limit is not None and out.stat().st_size >= limit - 65536) or \
-                            (limit is None and st.f_bavail * st.f_frsize < 65536):
-                        full_ns = time.time_ns()
+
+        def fault(proc) -> int | None:
+            """The moment the file reaches the disk's size (the disk is full), if it did before the end."""
+            deadline = time.monotonic() + END_TIMEOUT_S
+            while proc.poll() is None and time.monotonic() < deadline:
+                st = os.statvfs(disk)
+                if (limit is not None and out.stat().st_size >= limit - 65536) or \
+                        (limit is None and st.f_bavail * st.f_frsize < 65536):
+                    return time.time_ns()
                 time.sleep(0.005)
-            stdout, stderr = proc.communicate(timeout=60)
-        finally:
-            if proc.poll() is None:
-                proc.kill()
-        row = Row(
-            "record",
-            f"full disk at {size // 1000} kB",
-            proc.returncode,
-            announced=one_line(proc_result(proc, stderr)),
-            traceback=has_traceback(stdout + stderr),
-        )
+            return None
+
+        ran = during(RECORD + ["-o", out], out, 1, fault, load, preexec_fn=preexec)
+        full_ns = ran.noted
+        row = Row("record", f"full disk at {size // 1000} kB", ran.code, timed_out=ran.timed_out,
+                  announced=one_line(proc_result(ran.code, ran.stderr)), traceback=ran.traceback)
+        if not out.exists():
+            return row
         saved = work / f"disk{k}.recovered.mcap"
-        run = run_cli(["recover", out, "-o", saved], timeout=120)
-        row.traceback |= has_traceback(run.stdout + run.stderr)
+        with load.paused():
+            run = run_cli(["recover", out, "-o", saved], timeout=120)
+    row.traceback |= has_traceback(run.stdout + run.stderr)
+    with load.paused():
+        return full_disk_checks(saved, full_ns, row)
+
+
+def full_disk_checks(saved: Path, full_ns: int | None, row: Row) -> Row:
     row.opens = mcap_opens(saved)
     end = last_log_ns(saved) if saved.exists() else None
     if end is None or full_ns is None:
@@ -331,7 +379,7 @@ def engaged_after(path: Path, after_ns: int) -> bool:
                for m in SessionReader(path).messages([topics.MODE]))
 
 
-def input_loss(work: Path, k: int, loss: str, lost_s: float) -> Row:
+def input_loss(work: Path, k: int, loss: str, lost_s: float, load: common.Load) -> Row:
     """`record` on a VMC rig, engaged; `loss` ("silent", "nan") for lost_s seconds, 2.5 s into the recording."""
     from tests.helpers.ports import free_port
     from tests.helpers.vmc import rig_text
@@ -352,22 +400,22 @@ def input_loss(work: Path, k: int, loss: str, lost_s: float) -> Row:
 
     try:
         ran = during(["record", rig, "--duration", "6", "--no-preview", "--engage-after", "0.5", "-o", out], out,
-                     100_000, fault)
+                     100_000, fault, load)
     finally:
         lossy.stop()
-    row = Row("input", f"{loss} {lost_s:.1f} s", ran.code, traceback=ran.traceback)
-    if not ran.began:
-        row.detail += " (never started)"
+    row = Row("input", f"{loss} {lost_s:.1f} s", ran.code, traceback=ran.traceback, timed_out=ran.timed_out)
+    if ran.noted is None:
         return row
     lost_ns, back_ns = ran.noted
-    row.opens = mcap_opens(out)
-    if lost_s > 1.0:  # past the default bound: nothing moves until an operator engages
-        moved = commands_moved_after(out, back_ns + 300_000_000)
-        row.resumed_without_operator = moved and not engaged_after(out, lost_ns)
+    with load.paused():
+        row.opens = mcap_opens(out)
+        if lost_s > 1.0:  # past the default bound: nothing moves until an operator engages
+            moved = commands_moved_after(out, back_ns + 300_000_000)
+            row.resumed_without_operator = moved and not engaged_after(out, lost_ns)
     return row
 
 
-def frozen_record(work: Path, k: int, frozen_s: float) -> Row:
+def frozen_record(work: Path, k: int, frozen_s: float, load: common.Load) -> Row:
     out = work / f"frozen{k}.mcap"
 
     def fault(proc) -> tuple[int, int]:
@@ -379,23 +427,23 @@ def frozen_record(work: Path, k: int, frozen_s: float) -> Row:
         return stopped_ns, time.time_ns()
 
     ran = during(["record", "--duration", "6", "--no-preview", "--engage-after", "0.3", "-o", out], out, 150_000,
-                 fault)
-    row = Row("freeze", f"SIGSTOP {frozen_s:.1f} s", ran.code, traceback=ran.traceback)
-    if not ran.began:
-        row.detail += " (never started)"
+                 fault, load)
+    row = Row("freeze", f"SIGSTOP {frozen_s:.1f} s", ran.code, traceback=ran.traceback, timed_out=ran.timed_out)
+    if ran.noted is None:
         return row
     stopped_ns, cont_ns = ran.noted
-    row.opens = mcap_opens(out)
-    moved = commands_moved_after(out, cont_ns + 300_000_000)
-    row.resumed_without_operator = moved and not engaged_after(out, stopped_ns)
+    with load.paused():
+        row.opens = mcap_opens(out)
+        moved = commands_moved_after(out, cont_ns + 300_000_000)
+        row.resumed_without_operator = moved and not engaged_after(out, stopped_ns)
     return row
 
 
-def proc_result(proc, stderr: str):
-    return subprocess.CompletedProcess(proc.args, proc.returncode, "", stderr)
+def proc_result(code: int | None, stderr: str):
+    return subprocess.CompletedProcess([], code, "", stderr)
 
 
-def device_dies(work: Path, k: int, clip_s: float) -> Row:
+def device_dies(work: Path, k: int, clip_s: float, load: common.Load) -> Row:
     import cv2
     import numpy as np
 
@@ -409,26 +457,17 @@ def device_dies(work: Path, k: int, clip_s: float) -> Row:
     rig_text += '\n[devices.cam_clip]\nplugin = "opencv.camera"\nsource = "clip.mp4"\n'
     (folder / "rig.toml").write_text(rig_text)
     out = folder / "s.mcap"
-    run = run_cli(
-        [
-            "record",
-            folder / "rig.toml",
-            "--duration",
-            str(clip_s + 2.5),
-            "--no-preview",
-            "--engage-after",
-            "0.3",
-            "-o",
-            out,
-        ],
-        timeout=180,
-    )
-    row = Row(
-        "record",
-        f"camera clip ends after {clip_s:.1f} s",
-        run.returncode,
-        traceback=has_traceback(run.stdout + run.stderr),
-    )
+    ran = during(["record", folder / "rig.toml", "--duration", str(clip_s + 2.5), "--no-preview", "--engage-after",
+                  "0.3", "-o", out], out, 1, lambda proc: True, load)
+    row = Row("record", f"camera clip ends after {clip_s:.1f} s", ran.code, traceback=ran.traceback,
+              timed_out=ran.timed_out)
+    if ran.noted is None or not out.exists():
+        return row
+    with load.paused():
+        return device_dies_checks(out, ran.code, row)
+
+
+def device_dies_checks(out: Path, code: int | None, row: Row) -> Row:
     row.opens = mcap_opens(out)
     from teleprev.session.reader import SessionReader
     from teleprev.session.summary import summarize
@@ -440,7 +479,7 @@ def device_dies(work: Path, k: int, clip_s: float) -> Row:
         clip = reader.topics.get("/camera/cam_clip/image")
         marked = any(d.device == "cam_clip" for d in s.device_events)
     # The session goes on without it (exit 0); the dead device must be marked in the file.
-    row.announced = run.returncode == 0 and clip is not None and marked
+    row.announced = code == 0 and clip is not None and marked
     row.dataset_ok = None
     if not marked:
         row.lost_s = max(row.lost_s, 2 * LOST_EPS_S)  # an unmarked death counts as silent
@@ -456,8 +495,9 @@ def recover_signal(work: Path, k: int, src: Path, sig: int, after_s: float) -> R
     proc = start_cli(["recover", src, "-o", out])
     time.sleep(after_s)
     proc.send_signal(sig)
-    stdout, stderr = proc.communicate(timeout=60)
-    row = Row("recover", f"{sig.name} at {after_s:.2f} s", proc.returncode, traceback=has_traceback(stdout + stderr))
+    stdout, stderr, late = ended(proc, END_TIMEOUT_S)
+    row = Row("recover", f"{sig.name} at {after_s:.2f} s", proc.returncode, traceback=has_traceback(stdout + stderr),
+              timed_out="not ended after its fault" if late else "")
     intact = hashlib.sha256(src.read_bytes()).hexdigest() == before
     row.opens = (not out.exists()) or mcap_opens(out)  # nothing, or a whole file
     row.lost_s = 0.0 if intact else float("inf")
@@ -482,11 +522,7 @@ def export_signal(work: Path, k: int, base: Path, sessions: list[Path], sig: int
     time.sleep(after_s)
     children = workers_of(proc.pid)
     proc.send_signal(sig)
-    try:
-        stdout, stderr = proc.communicate(timeout=120)
-    except subprocess.TimeoutExpired:
-        proc.kill()
-        stdout, stderr = proc.communicate()
+    stdout, stderr, late = ended(proc, END_TIMEOUT_S)
     deadline = time.monotonic() + 5
     while any(alive(p) for p in children) and time.monotonic() < deadline:
         time.sleep(0.05)
@@ -494,7 +530,7 @@ def export_signal(work: Path, k: int, base: Path, sessions: list[Path], sig: int
     for p in outlived:
         os.kill(p, signal.SIGKILL)
     row = Row("export", f"{sig.name} at {after_s:.1f} s, -j {workers}", proc.returncode,
-              traceback=has_traceback(stdout + stderr))
+              traceback=has_traceback(stdout + stderr), timed_out="not ended after its fault" if late else "")
     if root.is_dir() and tree(root) == old:
         row.dataset_ok = True
     else:
@@ -589,6 +625,60 @@ def same_messages(a: Path, b: Path) -> bool:
         return False
 
 
+# -- option values -----------------------------------------------------------------------------------------
+
+
+OPTION_TIMEOUT_S = 120.0  # a refusal takes a start-up; a bad value accepted does the work, cut short here
+
+
+def option_refused(sh: Shared, bad: BadValue) -> Row:
+    """`teleprev` with one bad option value, in an empty folder: refused before the work (exit 2, one line
+    naming the option, nothing written in the folder), or not."""
+    folder = sh.work / f"option{next(sh.ids)}"
+    folder.mkdir()
+    copy = folder / "session.mcap"
+    if "{copy}" in bad.args:
+        shutil.copyfile(SWEEP_FIXTURE, copy)
+    before = set(folder.rglob("*"))
+    if "{collision}" in bad.args:
+        sh.prepare(("collision_data",))  # made once, by the first fault that needs it
+    args = [a.format(session=SWEEP_FIXTURE, copy=copy, collision=sh.work / "collision") for a in bad.args]
+    row = Row("option", bad.where, None)
+    try:
+        run = run_cli(args, cwd=folder, timeout=OPTION_TIMEOUT_S)
+    except subprocess.TimeoutExpired as exc:
+        row.timed_out = f"not refused in {OPTION_TIMEOUT_S:.0f} s (doing the work)"
+        row.traceback = has_traceback(str(exc.stdout) + str(exc.stderr))
+        row.refused = row.announced = False
+        shutil.rmtree(folder, ignore_errors=True)
+        return row
+    made = sorted(str(p.relative_to(folder)) for p in set(folder.rglob("*")) - before)
+    lines = [x for x in run.stderr.splitlines() if x.strip()]
+    row.exit_code = run.returncode
+    row.traceback = has_traceback(run.stdout + run.stderr)
+    row.refused = run.returncode == 2 and len(lines) == 1 and names_option(lines[0], bad.names) and not made
+    row.announced = row.refused
+    if not row.refused:
+        row.detail += f" ({bad.why}): said {lines[-1][:80] if lines else 'nothing'!r}" + (f", wrote {made}" if made
+                                                                                        else "")
+    shutil.rmtree(folder, ignore_errors=True)
+    return row
+
+
+@functools.cache
+def option_sweep() -> Sweep:
+    return sweep()
+
+
+def option_fault(sh: Shared, k: int, rng: random.Random, load: common.Load) -> Row:
+    """The k-th bad option value of the sweep; past them, an option or command it does not classify."""
+    found = option_sweep()
+    if k < len(found.bad):
+        return option_refused(sh, found.bad[k])
+    what = found.unclassified[k - len(found.bad)]
+    return Row("option", what, None, error="not classified in tests/helpers/option_sweep.py: cannot be swept")
+
+
 # -- the matrix -------------------------------------------------------------------------------------------
 
 
@@ -598,6 +688,13 @@ class Shared:
     def __init__(self, work: Path, quick: bool):
         self.work, self.quick = work, quick
         self.ids = itertools.count()  # every fault's files apart
+        self.lock = threading.Lock()  # faults run in threads, and cached_property does not lock (3.12)
+
+    def prepare(self, needs: tuple[str, ...]) -> None:
+        """Make what a family faults (its `needs`), once, before its faults run in parallel."""
+        with self.lock:
+            for name in needs:
+                getattr(self, name)
 
     @functools.cached_property
     def clean(self) -> tuple[Path, list, object]:
@@ -609,6 +706,15 @@ class Shared:
                        "-o", clean], timeout=180)
         assert run.returncode == 0, run.stderr
         return clean, chunk_spans(clean), message_times(clean)
+
+    @functools.cached_property
+    def collision_data(self) -> Path:
+        """A small collision dataset (`collision dataset`): what the collision trainers of the option sweep read."""
+        out = self.work / "collision"
+        run = run_cli(["collision", "dataset", out, "--uniform", "300", "--boundary", "300", "--shard-size", "100",
+                       "--workers", "1"], timeout=600)
+        assert run.returncode == 0, run.stderr
+        return out
 
     @functools.cached_property
     def cut(self) -> Path:
@@ -649,14 +755,14 @@ def nth_signal(k: int, first: int) -> signal.Signals:
 INPUT_FAULTS = (("nan", 1.5), ("freeze", 2.0), ("silent", 0.4), ("nan", 0.4), ("silent", 1.5))
 
 
-def input_fault(sh: Shared, k: int, rng: random.Random) -> Row:
+def input_fault(sh: Shared, k: int, rng: random.Random, load: common.Load) -> Row:
     loss, seconds = INPUT_FAULTS[k % len(INPUT_FAULTS)]
     if loss == "freeze":
-        return frozen_record(sh.work, next(sh.ids), seconds)
-    return input_loss(sh.work, next(sh.ids), loss, seconds)
+        return frozen_record(sh.work, next(sh.ids), seconds, load)
+    return input_loss(sh.work, next(sh.ids), loss, seconds, load)
 
 
-def export_signal_fault(sh: Shared, k: int, rng: random.Random) -> Row:
+def export_signal_fault(sh: Shared, k: int, rng: random.Random, load: common.Load) -> Row:
     base, sessions, export_s = sh.dataset
     workers = 2 if k % 3 == 2 else 1  # one in three with -j 2
     return export_signal(sh.work, next(sh.ids), base, sessions, nth_signal(k, 2), rng.uniform(0.3, export_s * 1.1),
@@ -664,7 +770,7 @@ def export_signal_fault(sh: Shared, k: int, rng: random.Random) -> Row:
 
 
 def damaged_fault(kind: str):
-    def run(sh: Shared, k: int, rng: random.Random) -> Row:
+    def run(sh: Shared, k: int, rng: random.Random, load: common.Load) -> Row:
         clean, chunks, times = sh.clean
         k = next(sh.ids)
         try:
@@ -681,53 +787,83 @@ class Family:
     group: str  # what --only names
     name: str
     per_load: int  # faults of a full run, in each half (quiet, loaded)
-    fault: Callable[[Shared, int, random.Random], Row]  # the k-th fault of the family, its draws from the rng given
+    # the k-th fault of the family, its draws from the rng given, beside the load given
+    fault: Callable[[Shared, int, random.Random, common.Load], Row]
     quick: int = 1  # faults of a --quick run (quiet only)
-    parallel: int = 1  # faults run at once: only where no time is measured (what a file or dataset keeps)
+    # Timed: what it measures is time (seconds of recording lost, a resume after a loss), so its faults run one
+    # at a time, the load stopped while each command starts up and while its output is checked. Untimed
+    # families (what a file or dataset keeps) run all together, their faults in parallel, the load never
+    # stopped.
+    timed: bool = False
+    needs: tuple[str, ...] = ()  # what of Shared it faults (made before its faults run in parallel)
 
 
 FAMILIES = (  # the record faults first: their seconds lost under load are the figure most at risk
-    Family("record", "record signal", 24,
-           lambda sh, k, rng: record_signal(sh.work, next(sh.ids), nth_signal(k, 0), rng.uniform(0.5, 3.5))),
-    Family("record", "record full disk", 8,
-           lambda sh, k, rng: record_full_disk(sh.work, next(sh.ids), rng.randrange(400_000, 2_500_000))),
-    Family("input", "input loss and freeze", 15, input_fault, quick=2),
-    Family("file", "bit flip", 54, damaged_fault("flip"), quick=2, parallel=4),
-    Family("file", "cut", 22, damaged_fault("cut"), parallel=4),
-    Family("recover", "recover signal", 18,
-           lambda sh, k, rng: recover_signal(sh.work, next(sh.ids), sh.cut, nth_signal(k, 1), rng.uniform(0.05, 1.2)),
-           parallel=3),
-    Family("export", "export signal", 6, export_signal_fault, parallel=2),
-    Family("export", "export full disk", 2,
-           lambda sh, k, rng: export_full_disk(sh.work, next(sh.ids), k, sh.dataset[0], sh.dataset[1][0])),
+    Family("record", "record signal", 24, lambda sh, k, rng, load: record_signal(
+        sh.work, next(sh.ids), nth_signal(k, 0), rng.uniform(0.5, 3.5), load), timed=True),
+    Family("record", "record full disk", 8, lambda sh, k, rng, load: record_full_disk(
+        sh.work, next(sh.ids), rng.randrange(400_000, 2_500_000), load), timed=True),
+    Family("input", "input loss and freeze", 15, input_fault, quick=2, timed=True),
     Family("device", "device dies", 2,
-           lambda sh, k, rng: device_dies(sh.work, next(sh.ids), rng.uniform(1.0, 2.5))),
+           lambda sh, k, rng, load: device_dies(sh.work, next(sh.ids), rng.uniform(1.0, 2.5), load), timed=True),
+    Family("file", "bit flip", 54, damaged_fault("flip"), quick=2, needs=("clean",)),
+    Family("file", "cut", 22, damaged_fault("cut"), needs=("clean",)),
+    Family("recover", "recover signal", 18, lambda sh, k, rng, load: recover_signal(
+        sh.work, next(sh.ids), sh.cut, nth_signal(k, 1), rng.uniform(0.05, 1.2)), needs=("cut",)),
+    Family("export", "export signal", 6, export_signal_fault, needs=("dataset",)),
+    Family("export", "export full disk", 2, lambda sh, k, rng, load: export_full_disk(
+        sh.work, next(sh.ids), k, sh.dataset[0], sh.dataset[1][0]), needs=("dataset",)),
+    Family("options", "option value out of range", len(option_sweep().bad) + len(option_sweep().unclassified),
+           option_fault, quick=3),
 )
+UNTIMED_AT_ONCE = 4  # untimed faults run at once (what a file keeps does not depend on the time it took)
+
+
+@dataclass(frozen=True)
+class Job:
+    """One fault to run: the k-th of its family, with its own generator."""
+
+    family: Family
+    k: int
+    rng: random.Random
+
+
+def run_job(job: Job, shared: Shared, load: common.Load) -> Row:
+    """The fault, timed; a fault the bench itself fails on is a row with its error (the run goes on)."""
+    t = time.monotonic()
+    try:
+        row = job.family.fault(shared, job.k, job.rng, load)
+    except Exception as exc:  # noqa: BLE001 - reported as the bench's own failure, in its row and figure
+        traceback.print_exc()
+        row = Row(job.family.group, f"{job.family.name} {job.k}", None, error=f"{type(exc).__name__}: {exc}")
+    row.took_s = time.monotonic() - t
+    return row
 
 
 def run_matrix(families, shared: Shared, loads: dict[str, int], seed: int, add) -> None:
-    """Every family's faults quiet, then beside `loads[load]` busy processes, family by family (so that a run
-    cut short has both halves of the families it ran). Each fault draws from a generator of its own (seeded in
-    order), so the draws do not depend on which parallel fault ran first; a family's first fault runs alone (it
-    makes the shared files the others use)."""
+    """Every timed family's faults one at a time, quiet then beside `loads[load]` busy processes, family by
+    family (so that a run cut short has both halves of the families it ran); then every untimed family's faults
+    together, UNTIMED_AT_ONCE at a time, quiet and then loaded. Each fault draws from a generator of its own
+    (seeded in a fixed order), so the draws do not depend on which parallel fault ran first."""
     draws = random.Random(seed)
-    for family in families:
-        for load, busy in loads.items():
-            n = family.quick if shared.quick else family.per_load
-            rngs = [random.Random(draws.getrandbits(64)) for _ in range(n)]
 
-            def one(k: int, family=family, rngs=rngs) -> Row:
-                t = time.monotonic()
-                row = family.fault(shared, k, rngs[k])
-                row.took_s = time.monotonic() - t
-                return row
+    def jobs(family: Family) -> list[Job]:
+        n = family.quick if shared.quick else family.per_load
+        return [Job(family, k, random.Random(draws.getrandbits(64))) for k in range(n)]
 
-            with common.Load(busy):
-                if n:
-                    add(one(0), load)
-                with ThreadPoolExecutor(family.parallel) as pool:
-                    for row in pool.map(one, range(1, n)):
-                        add(row, load)
+    planned = [(f, load, jobs(f)) for f in families for load in loads]  # every draw made in one order
+    for family, load, todo in planned:
+        if family.timed:
+            with common.Load(loads[load]) as busy:
+                for job in todo:
+                    add(run_job(job, shared, busy), load)
+    for load in loads:
+        todo = [job for family, half, js in planned if half == load and not family.timed for job in js]
+        for family in {job.family for job in todo}:
+            shared.prepare(family.needs)
+        with common.Load(loads[load]) as busy, ThreadPoolExecutor(UNTIMED_AT_ONCE) as pool:
+            for row in pool.map(lambda job: run_job(job, shared, busy), todo):
+                add(row, load)
 
 
 def main() -> None:
@@ -746,7 +882,9 @@ def main() -> None:
         rows.append(row)
         print(f"{len(rows):4d} {load:6s} {row.kind:8s} {row.detail:42s} exit {row.exit_code!s:5s} lost "
               f"{row.lost_s:7.3f} s opens {row.opens!s:5s} dataset {row.dataset_ok!s:5s} {row.took_s:5.1f} s"
-              f"{' SILENT' if row.silent else ''}{' TRACEBACK' if row.traceback else ''}", file=sys.stderr, flush=True)
+              f"{' SILENT' if row.silent else ''}{' TRACEBACK' if row.traceback else ''}"
+              f"{' TIMED OUT: ' + row.timed_out if row.timed_out else ''}{' ERROR: ' + row.error if row.error else ''}",
+              file=sys.stderr, flush=True)
 
     families = [f for f in FAMILIES if args.only in (None, f.group)]
     loads = {"quiet": LOADS["quiet"]} if args.quick else LOADS
@@ -757,8 +895,10 @@ def main() -> None:
     finite = [r.lost_s for r in rows]
 
     figures = {
-        "faults_run": len(rows),
-        "faults_run_loaded": sum(r.load == "loaded" for r in rows),
+        "faults_run": sum(r.ran for r in rows),
+        "faults_run_loaded": sum(r.ran and r.load == "loaded" for r in rows),
+        "faults_timed_out": sum(bool(r.timed_out) for r in rows),
+        "bench_errors": sum(bool(r.error) for r in rows),
         "data_lost_s_max": round(max(finite, default=0.0), 3),
         **{f"data_lost_s_max_{load}": round(max((r.lost_s for r in rows if r.load == load), default=0.0), 3)
            for load in LOADS},
@@ -792,6 +932,7 @@ def main() -> None:
     print(f"{len(rows)} faults in {took_s / 60:.1f} min", file=sys.stderr)
     targets = {"faults_run": ">= 300", "faults_run_loaded": ">= half",
                "data_lost_s_max": "<= 1.0 (flips and cuts: beyond the damaged range)",
+               "faults_timed_out": "0", "bench_errors": "0",
                "silent_failures": "0", "tracebacks_shown": "0", "datasets_lost": "0", "resumed_without_operator": "0",
                **{f"data_lost_s_max_{load}": "<= 1.0" for load in LOADS}}
     common.report("bench/faults.py: the fault matrix on the real CLI", figures, targets, args.json)
