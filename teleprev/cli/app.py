@@ -93,16 +93,25 @@ def ray_address_default(argv: list[str]) -> list[str]:
 
 
 def foxglove_port_default(argv: list[str]) -> list[str]:
-    """`--foxglove [PORT]`: alone (not followed by a port number), it means Foxglove's usual port."""
+    """`--foxglove [PORT]`: alone (not followed by a number), it means Foxglove's usual port. A number out of the
+    ports' range (-1, 70000) is its value, for the option's range check to refuse."""
     out = []
     for k, arg in enumerate(argv):
-        if arg == "--foxglove" and not (k + 1 < len(argv) and argv[k + 1].isdigit()):
+        if arg == "--foxglove" and not (k + 1 < len(argv) and _is_number(argv[k + 1])):
             out.append(
                 "--foxglove=8765"
             )  # teleprev.live.view.foxglove_view.DEFAULT_PORT (not imported: --help stays fast)
             continue
         out.append(arg)
     return out
+
+
+def _is_number(arg: str) -> bool:
+    try:
+        float(arg)
+    except ValueError:
+        return False
+    return True
 
 
 def plain_help(command) -> None:

@@ -64,11 +64,28 @@ def check_training_paths(data: Path, out: Path) -> None:
     check_output(out.with_suffix(".md"), "--out", make_parents=True)
 
 
+TORCH_DEVICES = ("cpu", "cuda", "mps", "xpu")  # --device: one of these, a GPU's with ":N", or auto
+
+
+def check_device(device: str) -> None:
+    """--device before torch loads (torch names a device it does not know only once training starts)."""
+    from teleprev.errors import ConfigError
+
+    kind, _, index = device.partition(":")
+    if device != "auto" and not (kind in TORCH_DEVICES and (not index or (index.isdigit() and kind != "cpu"))):
+        raise ConfigError(f"--device must be auto, {', '.join(TORCH_DEVICES)} or a GPU's with its number "
+                          f"(cuda:1), got {device!r}")
+
+
 def _setup(robot: str):
+    from teleprev.errors import UrdfError
     from teleprev.robot.collision import SelfCollisionChecker
     from teleprev.robot.model import load_robot
 
-    model = load_robot(robot)
+    try:
+        model = load_robot(robot)
+    except UrdfError as exc:  # name the option: the URDF's own line names only the file
+        raise UrdfError(str(exc), "--robot") from None
     return model, SelfCollisionChecker(model)
 
 
@@ -82,7 +99,7 @@ def dataset(
     boundary: int = typer.Option(
         600_000, "--boundary", "-b", min=0, help="Configurations near the collision boundary."
     ),
-    seed: int = typer.Option(0, help="Random seed (shard k draws from (seed, k))."),
+    seed: int = typer.Option(0, min=0, help="Random seed (shard k draws from (seed, k))."),
     shard_size: int = typer.Option(20_000, min=100, help="Configurations per shard file."),
     bisection_steps: int = typer.Option(8, min=1, max=30, help="Bisection steps towards the boundary."),
     jitter_per_pair: int = typer.Option(2, min=0, help="Jittered copies around each boundary point."),
@@ -177,7 +194,7 @@ def train_cpn_cmd(
     target_recall: float = typer.Option(
         0.998, min=0.0, max=1.0, help="Recall of colliding link labels the threshold must reach on validation."
     ),
-    seed: int = typer.Option(0),
+    seed: int = typer.Option(0, min=0),
     device: str = DEVICE,
     heldout_uniform: int = typer.Option(
         50_000, min=0, help="Fresh uniform samples for the model card's figures (0: skip)."
@@ -187,13 +204,15 @@ def train_cpn_cmd(
     """Train the Self-Collision Prediction Network (per-link BCE, Adam) and pick its threshold for recall."""
     from rich.console import Console
 
-    from teleprev.cli.values import check_finite
+    from teleprev.cli.values import check_finite, check_positive
     from teleprev.noncollision.mlp import ACTIVATIONS
     from teleprev.noncollision.train_cpn import CPNSettings, train_cpn
 
     check_training_paths(data, out)
-    for option, value in (("--lr", lr), ("--pos-weight", pos_weight), ("--pair-weight", pair_weight)):
+    check_device(device)
+    for option, value in (("--pos-weight", pos_weight), ("--pair-weight", pair_weight)):
         check_finite(option, value, "a finite number (0 or more)")
+    check_positive("--lr", lr, "a finite learning rate more than 0")
     if activation not in ACTIVATIONS:
         raise typer.BadParameter(f"--activation must be one of {', '.join(ACTIVATIONS)}")
     if architecture not in ("grouped", "plain"):
@@ -248,7 +267,7 @@ def train_ccn_cmd(
     lr: float = typer.Option(1e-3, min=0.0),
     val_exact: int = typer.Option(3000, min=10, help="Held-out invalid configurations checked exactly every epoch."),
     max_train: int = typer.Option(0, min=0, help="Use at most this many training configurations (0: all)."),
-    seed: int = typer.Option(0),
+    seed: int = typer.Option(0, min=0),
     device: str = DEVICE,
     heldout_uniform: int = typer.Option(
         20_000, min=0, help="Fresh colliding uniform samples for the model card's figures."
@@ -261,14 +280,16 @@ def train_ccn_cmd(
     from rich.console import Console
 
     from teleprev.cli.outputs import check_input
-    from teleprev.cli.values import check_finite
+    from teleprev.cli.values import check_finite, check_positive
     from teleprev.noncollision.train_ccn import CCNSettings, train_ccn
 
     check_training_paths(data, out)
+    check_device(device)
     check_input(cpn, "--cpn", "CPN weights file")
     check_input(grid, "--grid", "grid-search result")
-    for option, value in (("--alpha", alpha), ("--beta", beta), ("--lr", lr)):
+    for option, value in (("--alpha", alpha), ("--beta", beta)):
         check_finite(option, value, "a finite number (0 or more)")
+    check_positive("--lr", lr, "a finite learning rate more than 0")
     widths = _hidden(hidden)
     if grid is not None:
         from teleprev.noncollision.grid_search import read_chosen
@@ -341,7 +362,7 @@ def grid_search_cmd(
     epochs: int = typer.Option(4, min=1, help="Epochs per grid point."),
     max_train: int = typer.Option(200_000, min=0, help="Training configurations per grid point (0: all)."),
     val_exact: int = typer.Option(2000, min=10),
-    seed: int = typer.Option(0),
+    seed: int = typer.Option(0, min=0),
     device: str = DEVICE,
 ) -> None:
     """Train a short CCN per (alpha, beta), score validity and deviation exactly, and pick the pair."""
@@ -356,6 +377,7 @@ def grid_search_cmd(
         check_output(written, "--out", make_parents=True)
     check_input(data, "DATA", "collision dataset folder", folder=True)
     check_input(cpn, "--cpn", "CPN weights file")
+    check_device(device)
     a, b = _floats(alphas, "--alphas"), _floats(betas, "--betas")
     widths = _hidden(hidden)
     model, checker = _setup(robot)

@@ -56,11 +56,13 @@ def check(
 
     from teleprev import topics
     from teleprev.cli.pages import announce_pages
+    from teleprev.cli.values import check_seconds
     from teleprev.clock import SessionClock
     from teleprev.devices import DeviceRunner
     from teleprev.errors import TeleprevError
     from teleprev.rig import default_rig_path, load_rig
 
+    check_seconds("--seconds", seconds)  # typer's min= lets infinity and NaN through
     console = Console()
     loaded = load_rig(rig or default_rig_path())
     if webxr_host:
@@ -150,8 +152,14 @@ def emulate(
 
     from rich.console import Console
 
-    from teleprev.errors import TeleprevError
+    from teleprev.cli.values import check_seconds
+    from teleprev.errors import ConfigError
 
+    if what not in ("xarm", "leap"):
+        raise ConfigError(f"nothing to emulate called {what!r}: xarm or leap")
+    if what == "xarm" and dof not in (6, 7):
+        raise ConfigError(f"--dof must be 6 or 7, got {dof}")
+    check_seconds("--seconds", seconds, zero_ok=True)
     console = Console()
     stop = threading.Event()
     try:  # a device answers in microseconds whatever the host does; an emulator only as soon as it is scheduled
@@ -169,12 +177,8 @@ def emulate(
 
             emulator = DynamixelBus(port).start()
             keys, about = emulator.rig_keys(), f"a LEAP Hand's Dynamixel bus (16 motors) at {emulator.port}"
-        else:
-            console.print(f"[red]nothing to emulate called {what!r}: xarm or leap[/]")
-            raise typer.Exit(2)
-    except (TeleprevError, ValueError) as exc:
-        console.print(f"[red]{exc}[/]", highlight=False)
-        raise typer.Exit(2)
+    except ValueError as exc:  # a host that is not a loopback address, a port that cannot be made
+        raise ConfigError(str(exc)) from None
     for sig in (signal.SIGINT, signal.SIGTERM):
         signal.signal(sig, lambda *_: stop.set())
     console.print(f"emulating {about}; rig keys:", highlight=False)

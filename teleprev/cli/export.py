@@ -90,7 +90,9 @@ def export(
         show_default=False,
     ),
     split_by: str = typer.Option("session", "--split-by", help="Hold out whole sessions, or single episodes."),
-    seed: int = typer.Option(0, "--seed", help="Seed of the held-out draw (the same seed gives the same split)."),
+    seed: int = typer.Option(
+        0, "--seed", min=0, help="Seed of the held-out draw (the same seed gives the same split)."
+    ),
     as_json: bool = typer.Option(False, "--json", help="Print the summary as one JSON object instead of a table."),
 ) -> None:
     """Export recorded sessions to a LeRobot dataset, one LeRobot episode per recorded episode."""

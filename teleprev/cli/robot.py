@@ -64,7 +64,7 @@ def info(urdf: str = URDF_ARG) -> None:
 def check(
     urdf: str = URDF_ARG,
     samples: int = typer.Option(10_000, "--samples", "-n", min=1, help="Uniform samples within the joint limits."),
-    seed: int = typer.Option(0, help="Random seed."),
+    seed: int = typer.Option(0, min=0, help="Random seed."),
 ) -> None:
     """Print the self-collision rate of uniform samples, overall and per link."""
     import numpy as np
@@ -114,7 +114,7 @@ def exclusions(
     samples: int = typer.Option(
         20_000, "--samples", "-n", min=0, help="Uniform samples used to find pairs that always touch."
     ),
-    seed: int = typer.Option(0, help="Random seed."),
+    seed: int = typer.Option(0, min=0, help="Random seed."),
 ) -> None:
     """Write the list of link pairs the self-collision check leaves out, next to the URDF."""
     from rich.console import Console

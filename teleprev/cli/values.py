@@ -22,3 +22,9 @@ def check_finite(option: str, value: float | None, what: str) -> None:
     """A value the command's own range check (typer's min=) lets through as infinity or NaN."""
     if value is not None and not math.isfinite(value):
         raise ConfigError(f"{option} must be {what}, got {value:g}")
+
+
+def check_positive(option: str, value: float | None, what: str) -> None:
+    """A value that must be more than 0 and finite, where typer's min= can say only "0 or more"."""
+    if value is not None and not (math.isfinite(value) and value > 0):
+        raise ConfigError(f"{option} must be {what}, got {value:g}")

@@ -52,6 +52,7 @@ without commands.
 from __future__ import annotations
 
 import json
+import math
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Literal
@@ -109,8 +110,10 @@ class ExportSection:
     def __post_init__(self):
         if not 0 <= self.fps <= 1000:
             raise ValueError(f"fps must be 1..1000 (0: the camera's rate), got {self.fps}")
-        if self.max_gap_ms <= 0 or self.min_episode_s < 0:
-            raise ValueError("max_gap_ms must be > 0 and min_episode_s >= 0")
+        if not (math.isfinite(self.max_gap_ms) and self.max_gap_ms > 0):  # NaN fails every comparison
+            raise ValueError(f"max_gap_ms must be a finite number > 0, got {self.max_gap_ms:g}")
+        if not (math.isfinite(self.min_episode_s) and self.min_episode_s >= 0):
+            raise ValueError(f"min_episode_s must be a finite number >= 0, got {self.min_episode_s:g}")
 
 
 @dataclass(frozen=True)

@@ -33,7 +33,9 @@ EXPORT = ["export", FIXTURE, "--repo-id", "lab/x", "--root", "ds"]
     ([*EXPORT, "--workers", "0"], "--workers must be at least 1, got 0"),
     ([*EXPORT, "--fps", "-1"], "'--fps'"),
     ([*EXPORT, "--holdout", "1.5"], "--holdout must be a fraction between 0 and 1, got 1.5"),
-    ([*EXPORT, "--max-gap-ms", "-5"], "max_gap_ms must be > 0"),
+    ([*EXPORT, "--max-gap-ms", "-5"], "max_gap_ms must be a finite number > 0, got -5"),
+    ([*EXPORT, "--max-gap-ms", "nan"], "max_gap_ms must be a finite number > 0, got nan"),  # was accepted
+    ([*EXPORT, "--max-gap-ms", "inf"], "max_gap_ms must be a finite number > 0, got inf"),
     (["import", FIXTURE, "--repo-id", "lab/x", "--root", "ds", "--fps", "-2"], "'--fps'"),
     # replay, eval
     (["replay", FIXTURE, "--engage-after", "-1", "--to", "sim"], "--engage-after must be 0 or more seconds, got -1"),
@@ -47,11 +49,27 @@ EXPORT = ["export", FIXTURE, "--repo-id", "lab/x", "--root", "ds"]
     (["record", "--duration", "3", "--connect-timeout", "nan"], "--connect-timeout must be a positive number"),
     (["record", "--duration", "inf"], "--duration must be a positive number of seconds, got inf"),
     (["record", "--duration", "3", "--foxglove", "99999"], "'--foxglove'"),
+    (["record", "--duration", "3", "--foxglove", "-1"], "'--foxglove'"),  # was "No such option: -1"
+    (["replay", FIXTURE, "--foxglove", "-5"], "'--foxglove'"),
     (["rollout", "--policy", "nowhere", "--episodes", "0"], "--episodes must be 1 or more, got 0"),
     (["rollout", "--policy", "nowhere", "--episode-time", "-1"], "--episode-time must be a positive number"),
+    # named before the policy folder is looked for (they named the missing policy instead)
+    (["rollout", "--policy", "nowhere", "--task", "bogus"], "--task: task 'bogus' is not one"),
+    (["rollout", "--policy", "nowhere", "--recipe", "bogus"], "bogus: no such recipe file"),
     (["calibrate", "--seconds", "nan", "--hold", "1"], "--seconds must be a positive number of seconds, got nan"),
     (["calibrate", "--seconds", "1", "--hold", "-5"], "--hold must be 0 or more seconds, got -5"),
     (["devices", "check", "--seconds", "0"], "'--seconds'"),
+    (["devices", "check", "--seconds", "inf"], "--seconds must be a positive number of seconds, got inf"),  # traceback
+    # seeds: numpy's generators take none below 0 (a ValueError traceback after the work began)
+    (["robot", "exclusions", "leap_hand_right", "--seed", "-1"], "'--seed'"),
+    (["collision", "dataset", "made", "--seed", "-1"], "'--seed'"),
+    ([*EXPORT, "--seed", "-1"], "'--seed'"),
+    # the collision trainers, before torch loads: a device torch does not know (a traceback after the training
+    # data was read), a learning rate of 0 (trained nothing and wrote the model), a URDF that is not there
+    (["collision", "train-cpn", FIXTURE.parent, "--device", "bogus"], "--device must be auto, cpu, cuda"),
+    (["collision", "train-ccn", FIXTURE.parent, "--device", "cuda:x"], "--device must be auto, cpu, cuda"),
+    (["collision", "train-cpn", FIXTURE.parent, "--lr", "0"], "--lr must be a finite learning rate more than 0"),
+    (["collision", "dataset", "made", "--robot", "bogus"], "--robot: bogus: no such URDF file"),
 ])
 def test_an_option_value_out_of_range_is_refused_before_the_work(tmp_path, args, said):
     run = teleprev(*args, cwd=tmp_path)

@@ -9,6 +9,8 @@ import subprocess
 import sys
 import time
 
+import pytest
+
 from teleprev.emulators.listening import free_loopback_host, listen
 
 CLI = [sys.executable, "-m", "teleprev.cli.app"]
@@ -64,8 +66,8 @@ def test_an_address_that_is_taken_is_one_line():
     finally:
         taken.close()
     assert proc.returncode == 2
-    assert proc.stdout.strip() == f"cannot listen on {host}:502: it is taken (another emulator, or a controller on " \
-                                  "this machine); pick another loopback address, e.g. --host 127.0.0.2"
+    assert proc.stderr.strip() == f"error: cannot listen on {host}:502: it is taken (another emulator, or a " \
+                                  "controller on this machine); pick another loopback address, e.g. --host 127.0.0.2"
 
 
 def test_emulate_leap_refuses_a_path_that_exists(tmp_path):
@@ -74,6 +76,17 @@ def test_emulate_leap_refuses_a_path_that_exists(tmp_path):
     proc = subprocess.run([*CLI, "devices", "emulate", "leap", "--port", str(taken), "--seconds", "1"],
                           capture_output=True, text=True, timeout=60, env={**os.environ, "COLUMNS": "300"})
     assert proc.returncode == 2
-    assert proc.stdout.strip() == (f"cannot put the emulated bus at {taken}: it already exists; pick a path that "
-                                   "does not exist (or leave out --port)")
+    assert proc.stderr.strip() == (f"error: cannot put the emulated bus at {taken}: it already exists; pick a path "
+                                   "that does not exist (or leave out --port)")
     assert taken.read_text() == "keep me" and not taken.is_symlink()
+
+
+@pytest.mark.parametrize("args, said", [
+    (["xarm", "--dof", "5"], "error: --dof must be 6 or 7, got 5"),  # exit 2 without a word on stderr
+    (["xarm", "--seconds", "inf"], "error: --seconds must be 0 or more seconds, got inf"),  # ran for ever
+    (["arm"], "error: nothing to emulate called 'arm': xarm or leap"),
+])
+def test_a_value_it_cannot_emulate_is_one_line_on_stderr(args, said):
+    proc = subprocess.run([*CLI, "devices", "emulate", *args], capture_output=True, text=True, timeout=60,
+                          env={**os.environ, "COLUMNS": "200"})
+    assert (proc.returncode, proc.stderr.strip(), proc.stdout) == (2, said, "")

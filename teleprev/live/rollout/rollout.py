@@ -115,12 +115,12 @@ def check_rollout(options: RolloutOptions) -> RolloutPlan:
     episode_plan(options).check()
     if Path(options.out).exists():
         raise ConfigError("a session with this name exists already; choose another --out", str(options.out))
-    card = PolicyCard.read(options.policy)
     rig = load_rig(options.rig)
     rig.require("glove", "suit", "arm", "hand")
     if options.task:
         rig.check_task(options.task, "--task")
     recipe = load_recipe(options.recipe)
+    card = PolicyCard.read(options.policy)  # after the options' own values: a wrong one is named, not the policy
     streams, rates, inputs = _rig_streams(rig)
     features = PolicyFeatures.for_streams(recipe, streams, inputs, sides_record(rig) if rig.bimanual else None)
     action_names, widths = _joints(rig, inputs)
