@@ -35,6 +35,9 @@ from teleprev.thread_priority import WRITER_NICE, raise_this_thread
 RECORDER_RECORD = "recorder"  # metadata record with the counters, written at close
 DEFAULT_QUEUE_SIZE = 4096
 POLL_S = 0.02  # how often the idle writer looks at the queue
+# A kill loses what was not flushed: up to this, plus the writer's lag. At 0.5 s, a SIGKILL lost 1.043 s at
+# load 24 on 2 cores (bench/faults.py); the cost is a chunk record per interval (a 6 s session: 24, not 12).
+FLUSH_INTERVAL_S = 0.25
 YIELD_EVERY = 16  # messages the writer encodes before letting producers have the GIL
 # The oldest queued message older than this: new camera frames are shed (past twice this: all but commands, events).
 LAG_BUDGET_S = 0.3
@@ -93,7 +96,7 @@ class Recorder:
         metadata: dict[str, dict[str, str]] | None = None,
         *,
         queue_size: int = DEFAULT_QUEUE_SIZE,
-        flush_interval_s: float = 0.5,
+        flush_interval_s: float = FLUSH_INTERVAL_S,
         chunk_size: int = DEFAULT_CHUNK_SIZE,
         fsync: bool = True,
         on_failure: Callable[[BaseException], None] | None = None,
