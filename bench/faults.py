@@ -44,7 +44,8 @@ Figures:
 The machine is shared with other work: times are not figures here, only what happened.
 --quick: every family once (one signal each), quiet only, a 3 s clean recording, exports of 1-2 s
 sessions; of the input family one long NaN loss and one freeze.
---only GROUP: one group of families (record, input, device, recover, export, file), quiet and loaded.
+--only GROUP: one group of families (record, input, device, recover, export, file, options), quiet and loaded;
+repeatable (two runs of complementary groups at once: their --details files together are the full run).
 
 JSON keys:
     faults_run        int
@@ -872,8 +873,8 @@ def main() -> None:
     p = common.parser(__doc__)
     p.add_argument("--seed", type=int, default=16)
     p.add_argument("--details", type=Path, help="write every fault's row to this JSON file")
-    p.add_argument("--only", choices=sorted({f.group for f in FAMILIES}),
-                   help="only this group of families, quiet and loaded")
+    p.add_argument("--only", choices=sorted({f.group for f in FAMILIES}), action="append",
+                   help="only this group of families, quiet and loaded (repeatable)")
     args = p.parse_args()
     os.environ.setdefault("HF_HUB_OFFLINE", "1")
     rows: list[Row] = []
@@ -888,7 +889,7 @@ def main() -> None:
               f"{' TIMED OUT: ' + row.timed_out if row.timed_out else ''}{' ERROR: ' + row.error if row.error else ''}",
               file=sys.stderr, flush=True)
 
-    families = [f for f in FAMILIES if args.only in (None, f.group)]
+    families = [f for f in FAMILIES if args.only is None or f.group in args.only]
     loads = {"quiet": LOADS["quiet"]} if args.quick else LOADS
     with tempfile.TemporaryDirectory(prefix="teleprev-faults-") as tmp:
         run_matrix(families, Shared(Path(tmp), args.quick), loads, args.seed, add)
