@@ -929,6 +929,7 @@ def main() -> None:
         print(f"{len(rows):4d} {load:6s} {row.kind:8s} {row.detail:42s} exit {row.exit_code!s:5s} lost "
               f"{row.lost_s:7.3f} s opens {row.opens!s:5s} dataset {row.dataset_ok!s:5s} {row.took_s:5.1f} s"
               f"{' SILENT' if row.silent else ''}{' TRACEBACK' if row.traceback else ''}"
+              f"{' RESUMED WITHOUT OPERATOR' if row.resumed_without_operator else ''}"
               f"{' TIMED OUT: ' + row.timed_out if row.timed_out else ''}{' ERROR: ' + row.error if row.error else ''}",
               file=sys.stderr, flush=True)
 
