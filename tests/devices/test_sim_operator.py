@@ -221,3 +221,39 @@ def test_a_paced_operator_moves_smoothly_through_the_rests():
     assert (np.abs(np.diff(fingers, axis=0)) * RATE).max() < 10.0
     phases = [s.phase for s in states if s.t >= 20.0]
     assert "grasp" in phases  # the long episode at 20 s is a whole one, begun at once
+
+
+def _phase_start(op, name, after=0.0):
+    return next(t for t in np.arange(after, 60.0, 0.01) if op.state(t).phase == name)
+
+
+def _yaw_between(op, t0, t1):
+    """The wrist's turn about the vertical from t0 to t1 (radians)."""
+    rel = op.state(t1).wrist_rotation @ op.state(t0).wrist_rotation.T
+    return float(np.arctan2(rel[1, 0], rel[0, 0]))
+
+
+def test_a_watching_operator_twists_the_box_by_what_it_sees_is_left():
+    """box_rotation: the twist's aim gives the wrist's turn as well as its position. Seeing the box where it
+    lay, the first twist turns the wrist the most one twist turns (BOX_STROKE) about the box's centre; seeing
+    it already a quarter turn round, the operator does not twist; blind, it twists as the script planned."""
+    from teleprev_devices.sim.operator import REST_WRIST
+    from teleprev_devices.sim.tasks import BOX_AIM, BOX_STROKE
+
+    def twist(seen_turn):
+        op = SimOperator(seed=3, task="box_rotation", mode="fixed")
+        x, y, yaw = op.spots(0.0)["box"]
+        if seen_turn is not None:
+            seen = {"box": (x, y, -0.26, yaw + seen_turn), "hand": (0.0, 0.0, 0.0, 0.0)}
+            op.watch(lambda: seen)
+        start = _phase_start(op, "twist")
+        end = _phase_start(op, "release", start)
+        centre = REST_WRIST[:2] + (x, y)
+        radius = [np.linalg.norm(op.state(t).wrist_position[:2] - centre) for t in (start, end)]
+        return _yaw_between(op, start, end), radius
+
+    turn, (r0, r1) = twist(0.0)
+    assert turn == pytest.approx(BOX_STROKE, abs=0.06)
+    assert r1 == pytest.approx(r0, abs=0.015)  # about the box's centre: the wrist keeps its distance to it
+    assert twist(np.pi / 2)[0] == pytest.approx(0.0, abs=0.06)
+    assert twist(None)[0] == pytest.approx(BOX_AIM, abs=0.06)

@@ -20,8 +20,9 @@ Phase scripts (grasp shapes in devices/sim/grasps.py; c = tightness):
     pour          pick as above (lower, pour_grip: index and thumb off the mouth), move over the bowl
                   turning the hand towards it, fingers down (grip firm: 0.9..1), pour (pronate ~120 deg),
                   shake twice, upright, move back turning the hand back, then place it as pick_place does
-    box_rotation  reach palm-down, approach, claw grip, rotate (yaw 70-100 deg), release, lift, unwind,
-                  reposition with a flat hand, push (fingers squeezed together), retreat, return, pause
+    box_rotation  reach palm-down over the box, approach, claw grip, twist about the box's centre, release,
+                  lift; watching, align over the box and twist again (up to 4 times) until it has turned a
+                  quarter turn; retreat, return, pause
     cup_stack     two picks (power grasps) each placed onto the third cup, then return, pause
 Power grasps tighter than c ~ 0.65, pinches tighter than ~0.75 and flat hands squeezed past ~0.55
 retarget into LEAP self-collision (fingertips in the palm, thumb across the fingers, index over middle);
@@ -229,7 +230,7 @@ class SimOperator:
         while ep.built < len(phases) and not ep.cut and ep.phase_starts[ep.built] <= t:
             ph, start = phases[ep.built], ep.phase_starts[ep.built]
             wrist, hand = ep.wrist, ep.hand
-            position = ph.position
+            position, rpy = ph.position, ph.rpy
             if ph.aim is not None and self._eyes is not None:
                 self._looking = True
                 try:
@@ -237,12 +238,13 @@ class SimOperator:
                 finally:
                     self._looking = False
                 if seen is not None:  # nothing seen yet: as planned
-                    position = ph.aim(seen, wrist(start)[:3], position)
-            if position is not None or ph.rpy is not None:
+                    aimed = ph.aim(seen, wrist(start)[:3], position)
+                    position, rpy = (aimed, rpy) if len(aimed) == 3 else (aimed[:3], aimed[3:])
+            if position is not None or rpy is not None:
                 current = wrist.values[-1]
                 target = np.concatenate([
                     current[:3] if position is None else position,
-                    current[3:] if ph.rpy is None else ph.rpy,
+                    current[3:] if rpy is None else rpy,
                 ])
                 wrist.move(start + ph.wrist_window[0] * ph.duration, start + ph.wrist_window[1] * ph.duration, target)
             if ph.hand is not None:

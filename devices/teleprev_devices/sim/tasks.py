@@ -48,7 +48,8 @@ class Phase:
     wrist_window: tuple[float, float] = (0.0, 1.0)  # part of the phase in which the wrist moves
     hand_window: tuple[float, float] = (0.0, 1.0)
     # Where the operator, watching, moves the wrist instead of `position`: aim(seen, wrist, position) with
-    # `seen` the objects' and the robot hand's task-frame (x, y, z, yaw) as the phase begins (see Aim)
+    # `seen` the objects' and the robot hand's task-frame (x, y, z, yaw) as the phase begins (see Aim);
+    # 3 values (a position), or 6 (a position and the roll, pitch, yaw that replace `rpy`)
     aim: Callable[[dict, np.ndarray, np.ndarray | None], np.ndarray] | None = None
 
 
@@ -343,29 +344,87 @@ def pour(rng: np.random.Generator, rest: np.ndarray) -> Script:
     return Script("pour", tuple(b.phases), objects, _spots(cup=(cup, 0.0), bowl=(bowl, 0.0)))
 
 
+# box_rotation: the hand comes down over the lid palm down, its index and middle fingertips hooked over the
+# far edge and its ring finger and thumb hanging down beside the box, and twists about the box's centre:
+# the box turns where the fingers catch it, less than the hand does (the fingertips slip over the lid and
+# off). So the operator watches how far it has turned and lets go, comes round over it again and twists
+# again until it is a quarter turn round (success.py wants 65 degrees; a box looks the same turned half
+# way round, so 90 is the middle of what counts). The aims give the wrist's turn as well as its position.
+BOX_SIZE = (0.10, 0.14, 0.08)
+BOX_DOWN = _v(-1.4, 0.3, 0.0)  # palm down over the lid (the xArm's joint6 near its end: no further)
+# The TCP from the lid's centre, in the box's frame, when gripping: 2 cm over the lid puts the hooked
+# fingertips just below the far edge (3.5 cm: on the lid, slipping off it: half the twists turn nothing).
+BOX_GRIP = _v(-0.04, 0.0, 0.02)
+BOX_HOVER = 0.12  # m over the grip where the hand turns to the box before coming down
+BOX_AIM = np.pi / 2  # the turn aimed at
+BOX_DONE = np.radians(12)  # within this of BOX_AIM the operator stops twisting
+BOX_STROKE = np.radians(75)  # the most one twist turns the wrist
+BOX_STROKES = 4
+
+
+class _BoxTwister:
+    """The operator's eye on the box: how far it has turned from where it lay (`start`, its yaw as drawn),
+    where the hand goes to grip it and how far to twist next. It remembers the wrist's last turn."""
+
+    def __init__(self, start: float):
+        self.start = start
+        self.yaw = 0.0  # the wrist's yaw (rpy) as last aimed
+
+    def _left(self, seen: dict) -> float:
+        """The twist still needed, anticlockwise (0: done)."""
+        progress = (seen["box"][3] - self.start) % np.pi  # half a turn round looks the same
+        miss = (BOX_AIM - progress) % np.pi
+        return 0.0 if miss <= BOX_DONE or miss >= np.pi - BOX_DONE else float(miss)
+
+    def over(self, height: float):
+        """Aim: the hand over the box as seen, turned as far as the box has (the nearest way round),
+        `height` over the grip; when the box is round, it stays up."""
+        def aim(seen: dict, wrist: np.ndarray, planned: np.ndarray | None) -> np.ndarray:
+            if self._left(seen) == 0.0:
+                return np.concatenate([wrist + _v(0, 0, max(0.0, height - 0.05)), BOX_DOWN + _v(0, 0, self.yaw)])
+            box = seen["box"]
+            self.yaw = float((box[3] - self.start + np.pi / 3) % np.pi - np.pi / 3)
+            c, s = np.cos(self.yaw), np.sin(self.yaw)
+            d = _v(c * BOX_GRIP[0] - s * BOX_GRIP[1], s * BOX_GRIP[0] + c * BOX_GRIP[1], 0)
+            p = _v(box[0], box[1], TABLE_Z + BOX_SIZE[2] + BOX_GRIP[2] + height) + d
+            return np.concatenate([p, BOX_DOWN + _v(0, 0, self.yaw)])
+        return aim
+
+    def twist(self):
+        """Aim: turn the wrist about the box's centre (as seen) by what is left to turn, at most BOX_STROKE."""
+        def aim(seen: dict, wrist: np.ndarray, planned: np.ndarray | None) -> np.ndarray:
+            turn = min(self._left(seen), BOX_STROKE)
+            c, s = np.cos(turn), np.sin(turn)
+            box = _v(*seen["box"][:3])
+            r = wrist - box
+            self.yaw += turn
+            return np.concatenate([box + _v(c * r[0] - s * r[1], s * r[0] + c * r[1], r[2]),
+                                   BOX_DOWN + _v(0, 0, self.yaw)])
+        return aim
+
+
 def box_rotation(rng: np.random.Generator, rest: np.ndarray) -> Script:
     b = _Builder(rng)
     box = _spot(b, "box_rotation", "box")
-    size = (0.10, 0.14, 0.08)
-    top = TABLE_Z + size[2]
-    down = _v(-1.4, 0.3, 0)  # palm down on the lid
-    turn = rng.uniform(1.2, 1.7)
-    b.add("reach", 1.1, box + _v(-0.03, 0, top + 0.10), down, grasps.open_hand(0.8), hand_window=(0.3, 1.0))
-    b.add("approach", 0.6, box + _v(-0.03, 0, top + 0.035))
-    b.add("grip", 0.5, hand=grasps.claw(rng.uniform(0.2, 1.0)))
-    b.add("rotate", 1.4, rpy=down + _v(0, 0, turn))
-    b.add("release", 0.4, hand=grasps.open_hand(0.3))
-    b.add("lift", 0.6, box + _v(-0.03, 0, top + 0.08))
-    b.add("unwind", 1.1, box + _v(-0.10, -0.02, top + 0.06), _v(-0.6, 0.1, 0), grasps.rest(0.2))
-    # Then square the box up with a flat hand against its near face, fingers pressed together.
-    press = rng.uniform(0.2, 0.7)
-    b.add("reposition", 1.2, box + _v(-0.13, -0.02, TABLE_Z + 0.05), _v(0, 0, -1.2), grasps.flat(press))
-    # Pushing squeezes the fingers together.
-    b.add("push", 0.9, box + _v(-0.09, -0.02, TABLE_Z + 0.05), hand=grasps.flat(min(1.0, press + 0.4)))
-    b.add("retreat", 0.5, box + _v(-0.16, -0.04, TABLE_Z + 0.10), _v(0, 0, 0), grasps.rest(0.3))
-    _rest(b, rest)
     yaw = rng.uniform(-world_places.BOX_YAW, world_places.BOX_YAW)
-    objects = (SceneObject("box", "box", size, (box[0], box[1], TABLE_Z + size[2] / 2), yaw, (60, 140, 180)),)
+    eye = _BoxTwister(yaw)
+    grip = box + _v(BOX_GRIP[0], BOX_GRIP[1], TABLE_Z + BOX_SIZE[2] + BOX_GRIP[2])  # as planned, blind
+    b.add("reach", 1.3, grip + _v(0, 0, BOX_HOVER), BOX_DOWN, grasps.open_hand(0.8), hand_window=(0.3, 1.0),
+          aim=eye.over(BOX_HOVER))
+    for stroke in range(BOX_STROKES):
+        if stroke:
+            b.add("align", 1.0, grip + _v(0, 0, BOX_HOVER), BOX_DOWN, aim=eye.over(BOX_HOVER))
+        b.add("approach", 1.0, grip, aim=eye.over(0.0))
+        b.add("grip", 0.5, hand=grasps.claw(rng.uniform(0.2, 1.0)))
+        b.add("twist", 2.2, grip, BOX_DOWN + _v(0, 0, BOX_AIM), aim=eye.twist())
+        b.add("release", 0.4, hand=grasps.open_hand(0.3))
+        b.add("lift", 0.6, grip + _v(0, 0, 0.09), aim=_lift_by(0.09))
+    # Done, the hand clenches on its way back (as operators do between takes): the LEAP Hand's fist is in
+    # self-collision, the Corrector's work in this task, up in the air clear of the box.
+    b.add("retreat", 1.6, grip + _v(-0.05, 0, 0.15), _v(0, 0, 0), grasps.fist(rng.uniform(0.0, 1.0)),
+          hand_window=(0.0, 0.5), aim=_lift_by(0.06))
+    _rest(b, rest)
+    objects = (SceneObject("box", "box", BOX_SIZE, (box[0], box[1], TABLE_Z + BOX_SIZE[2] / 2), yaw, (60, 140, 180)),)
     return Script("box_rotation", tuple(b.phases), objects, _spots(box=(box, yaw)))
 
 
