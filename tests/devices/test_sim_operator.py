@@ -184,22 +184,21 @@ def _paced_session(op, clock, starts, end, task="pick_place"):
 
 def test_a_paced_operator_begins_an_episode_only_at_a_session_start():
     """Session episodes of 3 s, shorter than the operator's pick_place: the first start finds the operator in
-    its own episode (it returns to rest, then begins the session's); each later start that finds a paced episode
-    under way sends the hand back to rest and the operator rests until the next start, where it begins at once.
-    No episode of the operator (and so no scene of the physics world) begins in the middle of a session's."""
+    its own episode (it begins the session's at once, from where the hand is); each later start that finds a
+    paced episode under way sends the hand back to rest and the operator rests until the next start, where it
+    begins at once. No episode of the operator (and so no scene of the physics world) begins in the middle of a
+    session's."""
     clock = FakeClock()
     op = SimOperator(seed=3, clock=clock)
     starts = [1.0, 4.0, 7.0, 10.0, 13.0]
     ts, episodes = _paced_session(op, clock, starts, 16.0)
     began = [ts[i] for i in np.flatnonzero(np.diff(episodes)) + 1]
-    first, later = [t for t in began if t < starts[1]], [t for t in began if t >= starts[1]]
-    assert len(first) == 1 and starts[0] < first[0] < starts[1]  # after its own episode's return
-    assert later, began
-    for t in later:  # each at a session's start (the next sample after it), never in the middle of an episode
+    assert began and [t for t in began if t < starts[1]] == [began[0]], began
+    for t in began:  # each at a session's start (the next sample after it), never in the middle of an episode
         assert min(abs(t - s) for s in starts) < 1 / 60 + 1e-9, (t, began)
     for index in set(episodes):
         start, end = op.episode_span(int(index))
-        if start >= starts[1]:
+        if start >= starts[0]:
             assert any(abs(start - s) < 1e-9 for s in starts), (index, start)
 
 

@@ -292,6 +292,16 @@ class SimOperator:
                 ep.hand.hold_until(now)
                 ep.end = max(ep.end, now)
                 return True
+            if anew and self._allowed is not None and not ep.paced and not ep.cut:
+                # The session's first start finds the operator in an episode of its own: the session's begins
+                # at once, from where the hand is, so that the world lays its scene out as the session's episode
+                # starts rather than seconds into it (after a return to rest).
+                ep.wrist.truncate(now)
+                ep.hand.truncate(now)
+                keep = max(1, sum(1 for s in ep.phase_starts if s < now))
+                ep.phase_starts, ep.phase_names = ep.phase_starts[:keep], ep.phase_names[:keep]
+                ep.end, ep.cut = now, True
+                return True
             if (ep.task == name and not anew) or ep.cut:
                 return True
             # Cut at the end of the current phase, where both hand and wrist are at rest.
@@ -319,7 +329,7 @@ class SimOperator:
     def _paced_next(self, ep: _Episode, resting: bool, anew: bool) -> int:
         """Paced by the session: the index of the last episode allowed to begin after `ep`, the one that a
         task switch (or a session's episode start, `anew`) finds under way. At rest, the next begins now; in the
-        middle of the operator's own (the session's first start) after its return to rest; in the middle of a
+        middle of the operator's own (the session's first start) at once, from where the hand is; in the middle of a
         session's episode (a session episode shorter than the task), none: the operator returns to rest and
         rests until the session's next episode start, so that no scene of its own begins during the session's
         episode (the world's mark at the episode's stop judges the scene the episode ran in)."""
