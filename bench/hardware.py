@@ -85,6 +85,7 @@ import sys
 import threading
 import time
 from collections import Counter
+from dataclasses import dataclass
 from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
@@ -98,12 +99,12 @@ from teleprev.emulators.dynamixel_bus import DynamixelBus  # noqa: E402
 from teleprev.emulators.mjpeg_stream import MjpegServer  # noqa: E402
 from teleprev.emulators.wire_schedule import PlannedSend, lateness_ns  # noqa: E402
 from teleprev.emulators.xarm_controller import XArmController  # noqa: E402
-from teleprev.emulators.xarm_servo import Arrival  # noqa: E402
+from teleprev.emulators.xarm_servo import Arrival, Judgement  # noqa: E402
 from teleprev_devices.leap import LeapHand, LeapSettings  # noqa: E402
 from teleprev_devices.opencv_camera import OpenCVCamera, OpenCVSettings  # noqa: E402
 from teleprev_devices.xarm import XArm, XArmSettings  # noqa: E402
 from tests.helpers import wire_sessions  # noqa: E402
-from tests.helpers.emulated_rig import EmulatorProcess, bus_summary  # noqa: E402
+from tests.helpers.emulated_rig import EmulatorProcess, box_summary, bus_summary  # noqa: E402
 from tests.helpers.hardware import CommandStream, EventLog  # noqa: E402
 
 LEAKED = re.compile(r"failed: [A-Za-z_.]*(Error|Exception|error)\b[:(]")  # a Python exception, not a sentence
@@ -199,6 +200,71 @@ class BusProcess:
         self.process.finish()
 
 
+@dataclass
+class BoxFindings:
+    """What the emulated control box found so far: its latched faults, the registers it lacks, its judgement
+    of every target it ran."""
+
+    faults: list[tuple[int, str, int]]
+    unknown: dict[int, int]
+    judged: list[Judgement]
+
+
+def _box_host(box: XArmController) -> str:
+    return box.host
+
+
+def _box_counts(box: XArmController) -> tuple[int, int]:
+    return len(box.arrivals), len(box.commands)
+
+
+def _box_arrivals(box: XArmController, first: int) -> list[Arrival]:
+    return list(box.arrivals)[first:]
+
+
+def _box_findings(box: XArmController) -> BoxFindings:
+    return BoxFindings(list(box.faults), dict(box.unknown), list(box.judged))
+
+
+def _box_inject(box: XArmController, kind: str) -> None:
+    box.inject(kind)
+
+
+def _box_clear(box: XArmController) -> None:
+    box.operator_clear()
+
+
+class BoxProcess:
+    """The emulated xArm control box in a real-time process of its own, as BusProcess has the LEAP bus: on a
+    thread of this process it answered only once that thread had the interpreter lock, which the plugins'
+    threads and the command streams share, and under load the SDK's 0.1 s reply wait ran out ("no reply
+    within 0.1 s", three in a row: xarm_sdk_session_ok false at a load of 24-43); a real box answers
+    whatever the host does."""
+
+    def __init__(self):
+        self.process = EmulatorProcess(lambda: XArmController(host=None), "arm", box_summary)
+        self.host: str = self.process.ask(_box_host)
+
+    def counts(self) -> tuple[int, int]:
+        """(targets that arrived, targets the arm ran) so far."""
+        return self.process.ask(_box_counts)
+
+    def arrivals(self, first: int = 0) -> list[Arrival]:
+        return self.process.ask(_box_arrivals, first)
+
+    def findings(self) -> BoxFindings:
+        return self.process.ask(_box_findings)
+
+    def inject(self, kind: str) -> None:
+        self.process.ask(_box_inject, kind)
+
+    def operator_clear(self) -> None:
+        self.process.ask(_box_clear)
+
+    def stop(self) -> None:
+        self.process.finish()
+
+
 def start_session(device, log, clock, rate_hz, **stream) -> tuple[DeviceRunner, Probe]:
     """The device on a runner, connected, and a command stream sending to it."""
     runner = DeviceRunner(device, log.sink, clock, reconnect_s=0.2).start()
@@ -273,15 +339,14 @@ def run_faults(kinds, inject, clear, log, said, rng, out, stream):
         log.wait(lambda: log.count("connected") > connects, 6.0)
 
 
-def wire_timing(box: XArmController, streams: list[tuple[list[Arrival], list[PlannedSend]]]) -> dict:
-    """The servo targets as the emulated controller received and judged them; `streams`: each command stream's
-    arrivals at the box and its sender's schedule (gaps are taken within a stream, not across the pause
-    between two)."""
+def wire_timing(judged: list[Judgement], streams: list[tuple[list[Arrival], list[PlannedSend]]]) -> dict:
+    """The servo targets as the emulated controller received (`streams`: each command stream's arrivals at the
+    box and its sender's schedule; gaps are taken within a stream, not across the pause between two) and
+    judged them (`judged`)."""
     taken = [[a for a in arrivals if a.taken] for arrivals, _ in streams]
     gaps = np.concatenate([np.diff([a.received_ns for a in t]) / 1e6 for t in taken if len(t) > 1] or [[np.nan]])
     late = np.array([ns / 1e6 for arrivals, planned in streams for ns in lateness_ns(planned, arrivals)] or [np.nan])
     per_cycle = Counter(a.cycle for t in taken for a in t)
-    judged = list(box.judged)
 
     def worst(ratios) -> float:
         return round(max(ratios), 3) if judged else float("nan")
@@ -319,8 +384,10 @@ def main() -> None:
     threading.excepthook = lambda a: escaped.append(a)
     clock = SessionClock()
 
-    buses = {16: BusProcess(), 1: BusProcess()}  # their adapters' timers at the FTDI default (forked before threads)
-    box = XArmController(host=None).start()
+    # the emulators in processes of their own, forked before this one starts threads; the buses' adapters'
+    # timers at the FTDI default
+    buses = {16: BusProcess(), 1: BusProcess()}
+    box = BoxProcess()
     bus = buses[1]  # the one the faults go to
     arm = XArm("arm", XArmSettings(host=box.host), DeviceContext(clock))
     arm_log = Timed()
@@ -334,11 +401,11 @@ def main() -> None:
     arm_arrivals: list[list[Arrival]] = []
     for ms in (16, 1):
         hand_session = HandSession(buses[ms], clock, set_timer=ms == 1)
-        first = len(box.arrivals)
+        first, _ = box.counts()
         arm_probes.append(Probe(arm, clock, rate_hz=125.0).start())
         time.sleep(seconds)
         arm_probes[-1].stop()
-        arm_arrivals.append(list(box.arrivals)[first:])
+        arm_arrivals.append(box.arrivals(first))
         hands[ms] = hand_session.finish()
         if hands[ms].timer_ms != ms:
             print(f"the {ms} ms LEAP session found the latency timer at {hands[ms].timer_ms} ms", file=sys.stderr)
@@ -346,18 +413,20 @@ def main() -> None:
     buses[16].stop()
     hand, hand_log, hand_runner, hand_probe = hands[1].hand, hands[1].log, hands[1].runner, hands[1].probe
     arm_sent = sum(p.sent for p in arm_probes)
-    xarm_rate = len(box.commands) / (2 * seconds)
+    _, ran = box.counts()
+    found = box.findings()
+    xarm_rate = ran / (2 * seconds)
     xarm_not_ok = [why for why, bad in (
         (f"device errors: {[e['message'] for e in arm_log.of('error')][:2]}", arm_log.count("error") > 0),
         (f"{sum(p.failed for p in arm_probes)} commands failed (last: {[p.last_error for p in arm_probes]})",
          any(p.failed for p in arm_probes)),
-        (f"controller faults: {box.faults[:2]}", bool(box.faults)),
-        (f"unknown registers: {dict(box.unknown)}", bool(box.unknown)),
-        (f"{arm_sent} commands sent, {len(box.commands)} taken", len(box.commands) != arm_sent),
+        (f"controller faults: {found.faults[:2]}", bool(found.faults)),
+        (f"unknown registers: {found.unknown}", bool(found.unknown)),
+        (f"{arm_sent} commands sent, {ran} taken", ran != arm_sent),
         (f"{arm.counters()['refused_commands']} refused", arm.counters()["refused_commands"] > 0)) if bad]
     xarm_ok = not xarm_not_ok
-    wire_figures = wire_timing(box, [(a, p.planned) for a, p in zip(arm_arrivals, arm_probes)])
-    emulator_faults = len(box.faults)
+    wire_figures = wire_timing(found.judged, [(a, p.planned) for a, p in zip(arm_arrivals, arm_probes)])
+    emulator_faults = len(found.faults)
     trips = [t for p in arm_probes for t in roundtrips_ms(p.sends, arm_log.seen, 1e-5)]
     trips += roundtrips_ms(hand_probe.sends, hand_log.seen, 2e-3)
     session_s = time.monotonic() - t0
