@@ -66,13 +66,18 @@ def parser(description: str) -> argparse.ArgumentParser:
 
 
 def _spin() -> None:
+    # An ordinary process, whoever forks it: a fork keeps the forking thread's scheduling, and a spinner that
+    # kept SCHED_FIFO 50 from a paced thread would hold a core against the command sender itself.
+    os.sched_setscheduler(0, os.SCHED_OTHER, os.sched_param(0))
+    os.setpriority(os.PRIO_PROCESS, 0, 0)
     while True:
         pass
 
 
 class Load:
     """`processes` busy processes (a spinning loop each) while inside the with block: the figures "with N
-    busy processes beside it" that the issues ask for, made inside the bench."""
+    busy processes beside it" that the issues ask for, made inside the bench. Each is an ordinary process
+    (SCHED_OTHER, nice 0), as the load beside a session is, even when forked from a real-time thread."""
 
     def __init__(self, processes: int):
         import multiprocessing as mp
