@@ -27,6 +27,10 @@ DEFAULT_PRIORITY = 50  # SCHED_FIFO priority: above ordinary processes, below th
 # The actuators' processes, one below the sender: a hand's process busy reading its bus never holds up the
 # sender's tick, and a write waits at most for the rest of a tick (a fraction of a millisecond).
 ACTUATOR_PRIORITY = DEFAULT_PRIORITY - 1
+# The physics world's process (teleprev/world/process.py): above every ordinary process (an ordinary one fell
+# up to 150 ms behind the clock on a loaded 2-core machine), below the command path, whose ticks and writes
+# never wait for a world step.
+WORLD_PRIORITY = 40
 # A receiver's decoding process (devices/vmc/decoding_process.py): above every ordinary process, below every
 # other real-time one (the command path, the physics world at 40, an emulated motor bus at 10): it decodes the
 # operator's input and moves nothing. Any real-time priority puts it before ordinary processes, which is all

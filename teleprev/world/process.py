@@ -10,9 +10,10 @@ JUDGE_PERIOD_S it judges the task from the states of the last second and publish
 layout asked for (a new episode's scene) is built with the robot where it stands. It ends when asked,
 or when the process that started it is gone.
 
-Where permitted it runs at SCHED_FIFO priority PRIORITY: above every ordinary process (on a loaded 2-core
-machine an ordinary one fell up to 150 ms behind the clock), below the paced command sender's 50, so the
-commands never wait for the world.
+Where permitted it runs at SCHED_FIFO priority WORLD_PRIORITY (teleprev/thread_priority.py, beside the
+others): above every ordinary process (on a loaded 2-core machine an ordinary one fell up to 150 ms behind
+the clock), below the paced command sender's and the actuators' processes, so the commands never wait for
+the world.
 """
 
 from __future__ import annotations
@@ -26,6 +27,7 @@ from collections import deque
 
 import numpy as np
 
+from teleprev.thread_priority import WORLD_PRIORITY
 from teleprev.world.shared import (
     ALIVE,
     GENERATION,
@@ -46,12 +48,11 @@ PERIOD_S = 0.002  # a batch of steps this often (one 500 Hz step per batch when 
 STATE_PERIOD_NS = 20_000_000  # object states kept for judging, 50 per second
 JUDGE_PERIOD_NS = 100_000_000
 LATE_NS = 10_000_000  # a batch that starts this far behind the clock is counted late
-PRIORITY = 40
 
 
 def _realtime() -> bool:
     try:
-        os.sched_setscheduler(0, os.SCHED_FIFO, os.sched_param(PRIORITY))
+        os.sched_setscheduler(0, os.SCHED_FIFO, os.sched_param(WORLD_PRIORITY))
         return True
     except (PermissionError, OSError, AttributeError):
         return False

@@ -50,14 +50,17 @@ def bus_summary(bus) -> dict:
     return {"goal_writes": bus.goal_writes, "corrupt_requests": bus.corrupt_requests}
 
 
+# Below the command path's (teleprev/thread_priority.py): here the emulators share the CPUs that real
+# hardware would not, and must not take them from the processes they measure.
+EMULATOR_PRIORITY = 40
+
+
 def _serve(make, name: str, summarize, conn) -> None:
     import sys
 
     sys.setswitchinterval(0.0002)  # the thread that receives a command stamps it at once, as hardware would
     try:
-        # below the command path's (50, 49): here the emulators share the CPUs that real hardware would
-        # not, and must not take them from the processes they measure
-        os.sched_setscheduler(0, os.SCHED_FIFO, os.sched_param(40))
+        os.sched_setscheduler(0, os.SCHED_FIFO, os.sched_param(EMULATOR_PRIORITY))
     except (PermissionError, OSError):
         pass
     emulator = make().start()
