@@ -20,7 +20,8 @@ loaded_xarm_command_rate_hz, loaded_sdk_roundtrip_ms_p99 (a write to the first s
 loaded_leap_command_rate_hz, loaded_leap_read_miss_frac, loaded_leap_faults. xarm_sdk_session_ok and
 leap_sdk_session_ok hold only if they hold in the recorded sessions too.
 
-The sessions below are driven from this process's threads:
+The sessions below are driven from this process's threads, each device's (its runner's, its SDK's) and
+each command stream's at the actuators' real-time priority, as the product's actuator processes run them:
 
 Figures: xarm_sdk_session_ok / leap_sdk_session_ok (no error, no refused or failed command, the emulator saw
 every command and faulted on none), camera_stream_ok (frames at the stream's rate on the session clock,
@@ -100,12 +101,13 @@ from teleprev.emulators.mjpeg_stream import MjpegServer  # noqa: E402
 from teleprev.emulators.wire_schedule import PlannedSend, lateness_ns  # noqa: E402
 from teleprev.emulators.xarm_controller import XArmController  # noqa: E402
 from teleprev.emulators.xarm_servo import Arrival, Judgement  # noqa: E402
+from teleprev.thread_priority import SWITCH_INTERVAL_S  # noqa: E402
 from teleprev_devices.leap import LeapHand, LeapSettings  # noqa: E402
 from teleprev_devices.opencv_camera import OpenCVCamera, OpenCVSettings  # noqa: E402
 from teleprev_devices.xarm import XArm, XArmSettings  # noqa: E402
 from tests.helpers import wire_sessions  # noqa: E402
 from tests.helpers.emulated_rig import EmulatorProcess, box_summary, bus_summary  # noqa: E402
-from tests.helpers.hardware import CommandStream, EventLog  # noqa: E402
+from tests.helpers.hardware import CommandStream, EventLog, paced_runner  # noqa: E402
 
 LEAKED = re.compile(r"failed: [A-Za-z_.]*(Error|Exception|error)\b[:(]")  # a Python exception, not a sentence
 XARM_SAID = {"collision": "controller error 31", "joint_limit": "controller error 23", "estop": "controller error 1:",
@@ -267,7 +269,7 @@ class BoxProcess:
 
 def start_session(device, log, clock, rate_hz, **stream) -> tuple[DeviceRunner, Probe]:
     """The device on a runner, connected, and a command stream sending to it."""
-    runner = DeviceRunner(device, log.sink, clock, reconnect_s=0.2).start()
+    runner = paced_runner(device, log.sink, clock, reconnect_s=0.2)
     assert log.wait(lambda: log.count("connected") >= 1, 10.0), log.events
     return runner, Probe(device, clock, rate_hz=rate_hz, **stream).start()
 
@@ -382,6 +384,9 @@ def main() -> None:
     loaded = wire_sessions.figures(recorded)
     escaped = []
     threading.excepthook = lambda a: escaped.append(a)
+    # The devices' threads below run at the actuators' priority, as in the product's actuator processes
+    # (tests/helpers/hardware.py's paced_runner), and hand the interpreter lock over as quickly.
+    sys.setswitchinterval(SWITCH_INTERVAL_S)
     clock = SessionClock()
 
     # the emulators in processes of their own, forked before this one starts threads; the buses' adapters'
@@ -392,7 +397,7 @@ def main() -> None:
     arm = XArm("arm", XArmSettings(host=box.host), DeviceContext(clock))
     arm_log = Timed()
     t0 = time.monotonic()
-    arm_runner = DeviceRunner(arm, arm_log.sink, clock, reconnect_s=0.2).start()
+    arm_runner = paced_runner(arm, arm_log.sink, clock, reconnect_s=0.2)
     assert arm_log.wait(lambda: arm_log.count("connected") >= 1, 10.0), arm_log.events
     # The hand first with the adapter's timer as it comes (a lab that may not set it), then as the plugin sets
     # it, each on a hand of its own starting open; the arm is commanded beside each.

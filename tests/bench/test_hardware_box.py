@@ -1,12 +1,14 @@
 """bench/hardware.py's threaded xArm session against a control box in a process of its own (BoxProcess): the
 box answers from there, not from a thread of the process that runs the plugin, and what the bench reads
 of it (arrivals, targets run, faults, its judgement) and does to it (a fault, the operator's clear) goes
-through that process."""
+through that process. The plugin's side runs as in the product's actuator process: its runner's thread
+and the SDK's own threads at the actuators' real-time priority (paced_runner)."""
 
 from __future__ import annotations
 
 import os
 import sys
+import threading
 from pathlib import Path
 
 import numpy as np
@@ -15,9 +17,10 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[2]))
 
 from bench.hardware import BoxProcess  # noqa: E402
 from teleprev.clock import SessionClock  # noqa: E402
-from teleprev.devices import DeviceContext, DeviceRunner  # noqa: E402
+from teleprev.devices import DeviceContext  # noqa: E402
+from teleprev.thread_priority import ACTUATOR_PRIORITY  # noqa: E402
 from teleprev_devices.xarm import XArm, XArmSettings  # noqa: E402
-from tests.helpers.hardware import CommandStream, EventLog  # noqa: E402
+from tests.helpers.hardware import CommandStream, EventLog, paced_runner  # noqa: E402
 from tests.helpers.wait import wait_until  # noqa: E402
 
 
@@ -30,7 +33,8 @@ def test_the_box_answers_from_its_own_process_and_is_read_there():
     clock = SessionClock()
     arm = XArm("arm", XArmSettings(host=box.host), DeviceContext(clock))
     log = EventLog()
-    runner = DeviceRunner(arm, log.sink, clock, reconnect_s=0.1).start()
+    before = {t.native_id for t in threading.enumerate()}
+    runner = paced_runner(arm, log.sink, clock, reconnect_s=0.1)
     stream = None
     try:
         pid, policy = box.process.ask(_where)
@@ -38,6 +42,11 @@ def test_the_box_answers_from_its_own_process_and_is_read_there():
         if os.geteuid() == 0:  # where SCHED_FIFO is permitted, the box has it (tests/helpers/emulated_rig.py)
             assert policy == os.SCHED_FIFO
         assert log.wait(lambda: log.count("connected") == 1), log.events
+        if os.geteuid() == 0:  # the runner's thread and the SDK's reply and report readers, all paced
+            started = [t for t in threading.enumerate() if t.native_id not in before]
+            assert len(started) >= 3, started
+            assert {(t.name, os.sched_getscheduler(t.native_id), os.sched_getparam(t.native_id).sched_priority)
+                    for t in started} == {(t.name, os.SCHED_FIFO, ACTUATOR_PRIORITY) for t in started}
         stream = CommandStream(arm, clock).start()
         wait_until(lambda: box.counts()[1] >= 50, 10.0, what="50 targets run by the box")
         stream.stop()

@@ -1,7 +1,7 @@
 """Driving the real actuator plugins (xarm.arm, leap.hand) against the emulators, for tests and bench/hardware.py.
 
     log = EventLog()
-    runner = DeviceRunner(device, log.sink, clock, reconnect_s=0.1).start()
+    runner = DeviceRunner(device, log.sink, clock, reconnect_s=0.1).start()   # or paced_runner(...): as the product
     stream = CommandStream(device, clock, amplitude=0.05).start()    # smooth stamped commands at 100 Hz
     log.wait(lambda: log.count("error") >= 1)
 """
@@ -17,12 +17,41 @@ from contextlib import nullcontext
 import numpy as np
 
 from teleprev import topics
+from teleprev.devices import DeviceRunner
 from teleprev.devices.servo_limits import STREAM_GAP_NS
 from teleprev.emulators.wire_schedule import PlannedSend
 from teleprev.errors import DeviceError
 from teleprev.messages import JointSample
 from teleprev.thread_priority import ACTUATOR_PRIORITY
 from tests.helpers.wait import WaitTimeout, wait_until
+
+
+def pace_this_thread() -> None:
+    """The calling thread at the actuators' processes' priority (SCHED_FIFO ACTUATOR_PRIORITY, where permitted),
+    as the product's command path runs (teleprev/live/core/actuator_host.py)."""
+    try:
+        os.sched_setscheduler(threading.get_native_id(), os.SCHED_FIFO, os.sched_param(ACTUATOR_PRIORITY))
+    except (OSError, AttributeError):
+        pass
+
+
+def paced_runner(device, sink, clock, **runner) -> DeviceRunner:
+    """A DeviceRunner for `device`, started from a thread at the actuators' priority (pace_this_thread): its
+    thread inherits that priority, and so do the threads the plugin's SDK starts once it connects (the xArm
+    SDK's reply and report readers), as in the product's actuator process. Driven from ordinary threads of
+    a process on a loaded machine, the SDK's reply reader got no CPU in time and the SDK's 0.1 s reply wait
+    ran out ("no reply within 0.1 s": bench/hardware.py's xarm_sdk_session_ok, at a load of 25-30) while
+    the box had long answered."""
+    started: list[DeviceRunner] = []
+
+    def start() -> None:
+        pace_this_thread()
+        started.append(DeviceRunner(device, sink, clock, **runner).start())
+
+    thread = threading.Thread(target=start, name="paced-runner-start")
+    thread.start()
+    thread.join()
+    return started[0]
 
 
 class EventLog:
@@ -112,13 +141,10 @@ class CommandStream:
         # sending would otherwise send a position that does not match its stamp, which the servo rule (it
         # differentiates stamps) reads as a jerk. A stall longer than the rule's stream gap starts a new
         # stream from rest, as the rule (and the controller) take it.
-        # Paced as the product's command path is (the actuators' processes: SCHED_FIFO 49, where permitted): an
-        # ordinary thread of a busy process stalls for tens of ms, and the emulated box rightly takes the
-        # target after a stall as a jump (teleprev/emulators/xarm_servo.py), which says nothing of the plugin.
-        try:
-            os.sched_setscheduler(threading.get_native_id(), os.SCHED_FIFO, os.sched_param(ACTUATOR_PRIORITY))
-        except (OSError, AttributeError):
-            pass
+        # Paced as the product's command path is: an ordinary thread of a busy process stalls for tens of ms,
+        # and the emulated box rightly takes the target after a stall as a jump
+        # (teleprev/emulators/xarm_servo.py), which says nothing of the plugin.
+        pace_this_thread()
         names = self.device.joint_names
         start, t0, last, last_ns = None, 0, None, None
         origin, swing = None, self.amplitude  # where the stream first started; each joint's swing from `start`
