@@ -256,3 +256,30 @@ def test_a_watching_operator_twists_the_box_by_what_it_sees_is_left():
     assert r1 == pytest.approx(r0, abs=0.015)  # about the box's centre: the wrist keeps its distance to it
     assert twist(np.pi / 2)[0] == pytest.approx(0.0, abs=0.06)
     assert twist(None)[0] == pytest.approx(BOX_AIM, abs=0.06)
+
+
+@pytest.mark.parametrize("physics", [True, False])
+def test_on_a_physics_rig_the_operator_rests_until_the_sessions_first_episode(physics):
+    """The robot is engaged as a session's episode begins; on a physics rig, where each episode's scene is laid
+    out as it starts, the operator waits for that cue at rest (engaging on a hand in mid-reach would offset the
+    robot from the operator's hand by the reach for the whole session). The kinematic rig's operator performs
+    from the start."""
+    from types import SimpleNamespace
+
+    from teleprev_devices.sim.operator import shared_operator
+
+    clock = FakeClock()
+    context = SimpleNamespace(clock=clock, shared={}, task_listeners=[], physics=object() if physics else None)
+    op = shared_operator(context, "suit", 0, "")
+    rest = op.state(0.0).wrist_position
+    moved = max(np.linalg.norm(op.state(t).wrist_position - rest) for t in np.arange(0.0, 4.0, 0.1))
+    if not physics:
+        assert moved > 0.05
+        return
+    assert moved < 0.01  # tremor only
+    clock.t_ns = int(4e9)
+    for listener in context.task_listeners:
+        listener("pick_place")
+    (index, _), start = op.episode(4.0), op.episode_span(op.episode(4.0)[0])[0]
+    assert start == pytest.approx(4.0) and index == 1
+    assert max(np.linalg.norm(op.state(t).wrist_position - rest) for t in np.arange(4.0, 8.0, 0.1)) > 0.05

@@ -337,6 +337,17 @@ class SimOperator:
             return ep.index
         return ep.index + 1
 
+    def wait_for_session(self) -> None:
+        """Paced by a session from the start (a physics rig): rest until its first episode starts, so that the
+        robot, engaged as that episode begins, is engaged on a hand at rest, as a person waits for the cue."""
+        with self._lock:
+            ep = self._episodes[-1]
+            ep.wrist.truncate(ep.start)
+            ep.hand.truncate(ep.start)
+            ep.phase_starts, ep.phase_names = ep.phase_starts[:1], ep.phase_names[:1]
+            ep.end, ep.cut, ep.paced = ep.start, True, True
+            self._allowed = ep.index
+
     def on_episode_task(self, name: str) -> None:
         """The session's episode-start hook (DeviceContext.task_listeners): a fresh episode of the episode's
         task when its label is one of the five, and from the first such start on, rest after each episode
@@ -447,6 +458,8 @@ def shared_operator(context, device: str, seed: int, task_setting: str) -> SimOp
         listeners = getattr(context, "task_listeners", None)
         if listeners is not None:
             listeners.append(op.on_episode_task)  # the session sets the task at every episode start
+            if mode == "follow" and getattr(context, "physics", None) is not None:
+                op.wait_for_session()  # the world lays out each session episode's scene as it starts
         return op
 
     op = get_or_create(context.shared, "sim.operator", create)
