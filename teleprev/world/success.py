@@ -81,10 +81,12 @@ def _mug_points(shape) -> np.ndarray:
     """Points round a mug's base and rim and its handle's outer corners (body frame): its lowest is one."""
     r_bottom, r_top, h, _ = shape.size
     a = np.linspace(0, 2 * np.pi, 24, endpoint=False)
-    rings = [np.stack([r * np.cos(a), r * np.sin(a), np.full_like(a, z)], axis=1) for r, z in ((r_bottom, 0.0), (r_top, h))]
+    rings = [np.stack([r * np.cos(a), r * np.sin(a), np.full_like(a, z)], axis=1)
+             for r, z in ((r_bottom, 0.0), (r_top, h))]
     cx, cz = mug_handle_hole(shape)
     out = cx + HANDLE_HOLE[0] / 2 + HANDLE_BAR
-    handle = np.array([[out, 0.0, cz - HANDLE_HOLE[1] / 2 - HANDLE_BAR], [out, 0.0, cz + HANDLE_HOLE[1] / 2 + HANDLE_BAR]])
+    reach = HANDLE_HOLE[1] / 2 + HANDLE_BAR
+    handle = np.array([[out, 0.0, cz - reach], [out, 0.0, cz + reach]])
     return np.concatenate(rings + [handle])
 
 
