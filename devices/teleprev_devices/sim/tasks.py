@@ -299,6 +299,10 @@ def hang(rng: np.random.Generator, rest: np.ndarray) -> Script:
     peg = _spot(b, "hang", "peg")
     peg_z = TABLE_Z + world_places.PEG_HEIGHT
     grasp_z = TABLE_Z + GRASP_HEIGHT
+    # First over the mug's side, well above it: reaching across from the rest, the fingers (20 degrees
+    # down) swept its rim and tipped it over (3 of 8 seeds), the mug being where the hand crosses.
+    b.add("reach", 1.0, _side_grasp_point(mug, grasp_z + 0.2, 0.0, STANDOFF), _v(0, LEVEL, 0),
+          grasps.open_hand(rng.uniform(0, 1)), hand_window=(0.3, 1.0))
     _pick(b, mug, grasp_z, 0.0, squeeze=rng.uniform(0.25, 0.4), name="mug")
     out, up = world_places.MUG_HANDLE
     yaw = world_places.MUG_YAW
