@@ -110,7 +110,7 @@ BOX = Shape("box", (0.10, 0.14, 0.08), 0.30, 0.6, (0.7, 0.55, 0.24, 1.0))
 PEG_STAND = Shape("box", (0.03, 0.03, 0.26), 1.0, 0.8, (0.55, 0.35, 0.16, 1.0))
 # The peg's rolling friction stops a hung mug swinging (a real handle rubs on its peg; without it the
 # mug rocks on the peg's edges for ever). The peg lies along its x, its free end at -x.
-PEG = Shape("box", (0.10, 0.012, 0.012), 0.05, 0.8, (0.55, 0.35, 0.16, 1.0), rolling=0.005)
+PEG = Shape("box", (0.10, 0.012, 0.012), 0.05, 0.8, (0.55, 0.35, 0.16, 1.0), rolling=0.015)
 TARGET = Shape("box", (0.10, 0.10, 0.002), 0.01, 0.5, (0.3, 0.8, 0.3, 0.6))
 POUR_BALLS = 10
 

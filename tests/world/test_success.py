@@ -33,7 +33,7 @@ def _hang_mug(world: PhysicsWorld) -> None:
     yaw = peg.yaw - math.pi / 2  # the mug's y (the hole's axis) along the peg
     hole = np.array([cx * math.cos(yaw), cx * math.sin(yaw), cz])
     world.place_object("mug", np.asarray(peg.position) + [0.0, 0.0, 0.011] - hole, _yaw(yaw))
-    run(world, 1.0)  # it swings on the peg for about a second, as a hung mug does, then hangs still
+    run(world, 1.0)  # it swings on the peg a moment, as a hung mug does, then hangs still
 
 
 def _balls_into_bowl(world: PhysicsWorld) -> None:

@@ -48,7 +48,7 @@ class Phase:
     wrist_window: tuple[float, float] = (0.0, 1.0)  # part of the phase in which the wrist moves
     hand_window: tuple[float, float] = (0.0, 1.0)
     # Where the operator, watching, moves the wrist instead of `position`: aim(seen, wrist, position) with
-    # `seen` the objects' and the robot hand's task-frame (x, y, z, yaw) as the phase begins (see Aim);
+    # `seen` the objects' and the robot hand's task-frame (x, y, z, yaw, ...) as the phase begins (see Aim);
     # 3 values (a position), or 6 (a position and the roll, pitch, yaw that replace `rpy`)
     aim: Callable[[dict, np.ndarray, np.ndarray | None], np.ndarray] | None = None
 
@@ -279,8 +279,13 @@ HANDLE_DROP = 0.012  # m: lowered from the peg's axis through the hole's centre,
 
 
 def _handle(seen: dict, name: str = "mug") -> np.ndarray:
-    x, y, z, yaw = seen[name]
+    """The mug's handle hole as seen: from its base by its axes where the world shows how it leans (a mug
+    held in the hand leans and slips, and a lean of 10 degrees moves the hole about 1 cm), else by its yaw."""
+    pose = seen[name]
     out, up = world_places.MUG_HANDLE
+    if len(pose) >= 10:
+        return _v(*pose[:3]) + out * _v(*pose[4:7]) + up * _v(*pose[7:10])
+    x, y, z, yaw = pose[:4]
     return _v(x + out * np.cos(yaw), y + out * np.sin(yaw), z + up)
 
 
