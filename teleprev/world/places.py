@@ -18,7 +18,7 @@ TASKS = ("pick_place", "hang", "pour", "box_rotation", "cup_stack")
 ARM_HOME = (0.0, -0.27, -0.11, 0.0, -0.85, -1.571)
 DEFAULT_ANCHOR = (0.405, 0.0, 0.30)
 TABLE_Z = -DEFAULT_ANCHOR[2]  # the table top in the task frame
-PEG_HEIGHT = 0.20  # hang: the peg's axis above the table top
+PEG_HEIGHT = 0.18  # hang: the peg's axis above the table top
 
 
 @dataclass(frozen=True)
@@ -30,7 +30,7 @@ class Spot:
 
 SPOTS: dict[str, dict[str, Spot]] = {
     "pick_place": {"cup": Spot(0.10, -0.10), "target": Spot(0.12, 0.14)},
-    "hang": {"mug": Spot(0.10, -0.12), "peg": Spot(0.08, 0.15, 0.01)},
+    "hang": {"mug": Spot(0.10, -0.12), "peg": Spot(0.08, 0.19, 0.01)},
     "pour": {"cup": Spot(0.08, -0.12), "bowl": Spot(0.15, 0.10)},
     "box_rotation": {"box": Spot(0.15, 0.0)},
     "cup_stack": {"cup1": Spot(0.08, -0.16), "cup2": Spot(0.15, -0.02), "cup3": Spot(0.10, 0.15)},
