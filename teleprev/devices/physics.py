@@ -114,7 +114,7 @@ class PhysicsAccess:
         for listener in list(self.listeners):
             listener(entry)
 
-    def seen(self, anchor) -> dict[str, tuple[float, float, float, float]]:
+    def seen(self, anchor) -> dict[str, tuple[float, ...]]:
         """What a person watching sees now (teleprev.world.world.PhysicsWorld.seen), from a mirror of the world
         kept for it; callers take turns (the sim operator asks under its own lock)."""
         if self._closed:

@@ -17,7 +17,7 @@ import numpy as np
 from teleprev.paths import data_dir
 from teleprev.robot.effectors import EndEffector
 from teleprev.world import drives
-from teleprev.world.layout import LOOP_BAR, LOOP_HOLE, Layout, Placed, Shape
+from teleprev.world.layout import HANDLE_BAR, HANDLE_DEPTH, HANDLE_HOLE, HANDLE_Z, Layout, Placed, Shape
 from teleprev.world.places import VIEWS, View
 
 _ROBOT_TYPE, _ROBOT_AFFINITY = 1, 2  # robot geoms: collide with what has bit 1 in its affinity... and not themselves
@@ -70,6 +70,8 @@ def _geom(body, name: str, kind, size, pos, quat=(1.0, 0.0, 0.0, 0.0), mass: flo
         if shape.kind == "sphere":
             # Rolling and spinning friction too (condim 6): without them a ball on a flat floor rolls for ever.
             g.condim, g.friction = 6, [shape.friction, 0.005, 0.0005]
+        elif shape.rolling > 0:
+            g.condim, g.friction = 6, [shape.friction, 0.005, shape.rolling]
     g.contype, g.conaffinity = (_OBJECT_TYPE, _OBJECT_AFFINITY) if collides else (0, 0)
     return g
 
@@ -94,36 +96,36 @@ def _cup_parts(shape: Shape) -> list[tuple]:
     return parts
 
 
-def _spoon_parts(shape: Shape) -> list[tuple]:
-    """A bowl at -x, a handle, and a square loop at +x whose hole (LOOP_HOLE) goes over a peg."""
-    length, width, thick = shape.size
-    outer = LOOP_HOLE + 2 * LOOP_BAR
-    bowl_len = 0.05
-    handle_len = length - bowl_len - outer
-    loop_x = length / 2 - outer / 2
+def mug_handle_hole(shape: Shape) -> tuple[float, float]:
+    """The centre of a mug's handle hole (x out from its axis, z up from its base) in the mug's body frame;
+    the hole (HANDLE_HOLE) spans from the wall's outside outwards, its axis along y."""
+    r_bottom, r_top, h, _ = shape.size
+    wall = r_bottom + (r_top - r_bottom) * HANDLE_Z / h
+    return wall + HANDLE_HOLE[0] / 2, HANDLE_Z
+
+
+def _mug_parts(shape: Shape) -> list[tuple]:
+    """A cup and its handle: a top and a bottom bar out of the wall, and an outer bar joining them."""
+    cx, cz = mug_handle_hole(shape)
+    w, hh = HANDLE_HOLE[0] / 2, HANDLE_HOLE[1] / 2
+    b, d = HANDLE_BAR / 2, HANDLE_DEPTH / 2
+    inner = cx - w - 0.006  # the bars start inside the wall: no gap
+    outer = cx + w + 2 * b
     box = mujoco.mjtGeom.mjGEOM_BOX
     q = (1.0, 0.0, 0.0, 0.0)
-    bar = (LOOP_HOLE + LOOP_BAR) / 2
-    return [
-        ("bowl", box, (bowl_len / 2, width / 2, thick / 2), (-length / 2 + bowl_len / 2, 0.0, 0.0), q),
-        ("handle", box, (handle_len / 2, 0.006, thick / 2), (-length / 2 + bowl_len + handle_len / 2, 0.0, 0.0), q),
-        ("loop_near", box, (LOOP_BAR / 2, outer / 2, thick / 2), (loop_x - bar, 0.0, 0.0), q),
-        ("loop_far", box, (LOOP_BAR / 2, outer / 2, thick / 2), (loop_x + bar, 0.0, 0.0), q),
-        ("loop_left", box, (LOOP_HOLE / 2, LOOP_BAR / 2, thick / 2), (loop_x, bar, 0.0), q),
-        ("loop_right", box, (LOOP_HOLE / 2, LOOP_BAR / 2, thick / 2), (loop_x, -bar, 0.0), q),
+    bar = ((outer - inner) / 2, d, b)
+    return _cup_parts(shape) + [
+        ("handle_top", box, bar, ((outer + inner) / 2, 0.0, cz + hh + b), q),
+        ("handle_bottom", box, bar, ((outer + inner) / 2, 0.0, cz - hh - b), q),
+        ("handle_outer", box, (b, d, hh), (cx + w + b, 0.0, cz), q),
     ]
-
-
-def spoon_loop_centre(shape: Shape) -> float:
-    """Where the loop's hole is along the spoon (x in its body frame)."""
-    return shape.size[0] / 2 - (LOOP_HOLE + 2 * LOOP_BAR) / 2
 
 
 def _parts(shape: Shape) -> list[tuple]:
     if shape.kind == "cup":
         return _cup_parts(shape)
-    if shape.kind == "spoon":
-        return _spoon_parts(shape)
+    if shape.kind == "mug":
+        return _mug_parts(shape)
     q = (1.0, 0.0, 0.0, 0.0)
     if shape.kind == "box":
         return [("", mujoco.mjtGeom.mjGEOM_BOX, tuple(s / 2 for s in shape.size), (0.0, 0.0, 0.0), q)]

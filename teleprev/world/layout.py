@@ -6,7 +6,7 @@ through `anchor` (the TCP at the arm's home pose), with the same jitter. A layou
 operator's episode takes the spots its script drew (`task_layout(..., spots=...)`), so the objects stand
 where the operator reaches. The robot base stands on the table top
 (z = 0). Cups and the bowl are hollow (a floor and a ring of tapered wall plates) so that cups nest and
-hold the pour's contents; the spoon has a loop at the end of its handle that goes over the peg.
+hold the pour's contents; hang's mug is such a cup with a handle whose hole goes over the peg.
 """
 
 from __future__ import annotations
@@ -16,12 +16,12 @@ from typing import Literal
 
 import numpy as np
 
-from teleprev.world.places import BOX_YAW, DEFAULT_ANCHOR, PEG_HEIGHT, SPOON_YAW, SPOTS, TASKS
+from teleprev.world.places import BOX_YAW, DEFAULT_ANCHOR, MUG_HANDLE, MUG_YAW, PEG_HEIGHT, PEG_YAW, SPOTS, TASKS
 
 # Colours (RGBA 0..1), the sim camera's BGR colours turned around.
 _CUP_RGBA = ((0.78, 0.24, 0.16, 1.0), (0.16, 0.47, 0.78, 1.0), (0.24, 0.67, 0.24, 1.0))
 
-Kind = Literal["cup", "box", "sphere", "spoon"]
+Kind = Literal["cup", "box", "sphere", "mug"]
 
 
 @dataclass(frozen=True)
@@ -31,7 +31,7 @@ class Shape:
     cup: size = (bottom radius, top radius, height, wall thickness) (a bowl is a wide, low cup)
     box: size = (x, y, z)
     sphere: size = (radius,)
-    spoon: size = (length, width, thickness); a loop at its +x end, `LOOP_HOLE` square, goes over a peg
+    mug: a cup's size, and a handle on its +x side whose hole (HANDLE_HOLE, its axis along y) goes over a peg
     """
 
     kind: Kind
@@ -39,6 +39,7 @@ class Shape:
     mass: float  # kg
     friction: float  # sliding friction coefficient (MuJoCo's first friction value)
     rgba: tuple[float, float, float, float] = (0.6, 0.6, 0.6, 1.0)
+    rolling: float = 0.0  # m: rolling friction (resists what rolls or swings about a contact), 0: none
 
 
 @dataclass(frozen=True)
@@ -94,16 +95,22 @@ def layout_from_record(record: dict) -> Layout:
     return replace(drawn, objects=objects)
 
 
-LOOP_HOLE = 0.022  # the spoon loop's inner square (m): a 12 mm peg goes through it with room to spare
-LOOP_BAR = 0.006  # the loop's bar width
+# hang: a mug's handle, a ring standing out of its wall. The hole (out from the wall, up) takes the 12 mm
+# peg with about 1 cm to spare each way, as a kitchen mug's does a mug tree's peg.
+HANDLE_HOLE = (0.030, 0.034)
+HANDLE_Z = MUG_HANDLE[1]  # the hole's centre above the mug's base
+HANDLE_BAR = 0.008  # the ring's bars: their width
+HANDLE_DEPTH = 0.014  # and their depth (along the hole's axis)
 
 CUP = Shape("cup", (0.032, 0.042, 0.10, 0.004), 0.05, 0.9)
 BOWL = Shape("cup", (0.055, 0.075, 0.06, 0.005), 0.25, 0.9, (0.78, 0.55, 0.27, 1.0))
 BALL = Shape("sphere", (0.008,), 0.003, 0.6, (0.9, 0.8, 0.2, 1.0))
-SPOON = Shape("spoon", (0.16, 0.035, 0.008), 0.04, 0.8, (0.78, 0.75, 0.75, 1.0))
+MUG = Shape("mug", (0.032, 0.042, 0.10, 0.004), 0.06, 0.9, (0.92, 0.9, 0.85, 1.0))
 BOX = Shape("box", (0.10, 0.14, 0.08), 0.30, 0.6, (0.7, 0.55, 0.24, 1.0))
 PEG_STAND = Shape("box", (0.03, 0.03, 0.26), 1.0, 0.8, (0.55, 0.35, 0.16, 1.0))
-PEG = Shape("box", (0.07, 0.012, 0.012), 0.05, 0.8, (0.55, 0.35, 0.16, 1.0))
+# The peg's rolling friction stops a hung mug swinging (a real handle rubs on its peg; without it the
+# mug rocks on the peg's edges for ever). The peg lies along its x, its free end at -x.
+PEG = Shape("box", (0.10, 0.012, 0.012), 0.05, 0.8, (0.55, 0.35, 0.16, 1.0), rolling=0.015)
 TARGET = Shape("box", (0.10, 0.10, 0.002), 0.01, 0.5, (0.3, 0.8, 0.3, 0.6))
 POUR_BALLS = 10
 
@@ -147,11 +154,14 @@ def _pick_place(p: _Placer) -> tuple[Placed, ...]:
 
 
 def _hang(p: _Placer) -> tuple[Placed, ...]:
-    spoon, peg = p.xy("spoon"), p.xy("peg")
+    mug, peg = p.xy("mug"), p.xy("peg")
+    # The peg turned PEG_YAW, its stand at its far end: the free end points the way the mug comes from.
+    along = np.array([np.cos(PEG_YAW), np.sin(PEG_YAW)])
+    stand = peg + (PEG.size[0] / 2 + PEG_STAND.size[0] / 2) * along
     return (
-        Placed("spoon", SPOON, _at(spoon, SPOON.size[2] / 2), p.yaw("spoon", lambda: SPOON_YAW)),
-        Placed("peg_stand", PEG_STAND, (float(peg[0] + 0.03), float(peg[1]), PEG_STAND.size[2] / 2), fixed=True),
-        Placed("peg", PEG, (float(peg[0] - 0.005), float(peg[1]), PEG_HEIGHT), fixed=True),
+        Placed("mug", MUG, _at(mug, 0.0), p.yaw("mug", lambda: MUG_YAW)),
+        Placed("peg_stand", PEG_STAND, _at(stand, PEG_STAND.size[2] / 2), PEG_YAW, fixed=True),
+        Placed("peg", PEG, _at(peg, PEG_HEIGHT), PEG_YAW, fixed=True),
     )
 
 

@@ -18,7 +18,7 @@ TASKS = ("pick_place", "hang", "pour", "box_rotation", "cup_stack")
 ARM_HOME = (0.0, -0.27, -0.11, 0.0, -0.85, -1.571)
 DEFAULT_ANCHOR = (0.405, 0.0, 0.30)
 TABLE_Z = -DEFAULT_ANCHOR[2]  # the table top in the task frame
-PEG_HEIGHT = 0.22  # hang: the peg's axis above the table top
+PEG_HEIGHT = 0.18  # hang: the peg's axis above the table top
 
 
 @dataclass(frozen=True)
@@ -30,13 +30,17 @@ class Spot:
 
 SPOTS: dict[str, dict[str, Spot]] = {
     "pick_place": {"cup": Spot(0.10, -0.10), "target": Spot(0.12, 0.14)},
-    "hang": {"spoon": Spot(0.10, -0.12), "peg": Spot(0.17, 0.12, 0.01)},
+    "hang": {"mug": Spot(0.10, -0.12), "peg": Spot(0.08, 0.19, 0.01)},
     "pour": {"cup": Spot(0.08, -0.12), "bowl": Spot(0.15, 0.10)},
     "box_rotation": {"box": Spot(0.15, 0.0)},
     "cup_stack": {"cup1": Spot(0.08, -0.16), "cup2": Spot(0.15, -0.02), "cup3": Spot(0.10, 0.15)},
 }
 BOX_YAW = 0.2  # box_rotation: the box starts turned up to this much (rad) either way
-SPOON_YAW = 0.15  # hang: the spoon lies turned this much (rad)
+# hang: the mug stands with its handle towards the operator (the hand holds it by its other side), and
+# the peg points its free end the other way (-y), so the hand pushes the handle onto it sideways.
+MUG_YAW = 3.141592653589793
+MUG_HANDLE = (0.0525, 0.055)  # the handle hole's centre: out from the mug's axis, up from its base
+PEG_YAW = 1.5707963267948966
 
 
 def spot(task: str, name: str) -> Spot:

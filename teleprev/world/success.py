@@ -4,7 +4,7 @@ A task succeeds when its goal holds in every world state of the last REST_S seco
 let go (no contact with the robot) and at rest (slower than REST_SPEED and REST_SPIN). The goals:
 
     pick_place    the cup stands upright on the table, its axis within 4 cm of the target's centre
-    hang          the peg passes through the spoon's loop and the spoon hangs clear of the table
+    hang          the peg passes through the mug's handle and the mug hangs from it clear of the table
     pour          at least 8 of the 10 balls lie inside the bowl
     box_rotation  the box lies flat, turned at least 65 degrees about the vertical from where it started
     cup_stack     the three cups stand nested in one upright stack on the table
@@ -22,8 +22,8 @@ from itertools import pairwise
 
 import numpy as np
 
-from teleprev.world.build import spoon_loop_centre
-from teleprev.world.layout import LOOP_HOLE, POUR_BALLS, Layout
+from teleprev.world.build import mug_handle_hole
+from teleprev.world.layout import HANDLE_BAR, HANDLE_HOLE, POUR_BALLS, Layout
 from teleprev.world.world import ObjectState, WorldState
 
 REST_S = 0.5
@@ -77,25 +77,39 @@ def _pick_place(layout: Layout, s: WorldState) -> Goal:
     return Goal(d <= PLACE_RADIUS and tilt <= UPRIGHT_DEG and on_table, reason)
 
 
+def _mug_points(shape) -> np.ndarray:
+    """Points round a mug's base and rim and its handle's outer corners (body frame): its lowest is one."""
+    r_bottom, r_top, h, _ = shape.size
+    a = np.linspace(0, 2 * np.pi, 24, endpoint=False)
+    rings = [np.stack([r * np.cos(a), r * np.sin(a), np.full_like(a, z)], axis=1)
+             for r, z in ((r_bottom, 0.0), (r_top, h))]
+    cx, cz = mug_handle_hole(shape)
+    out = cx + HANDLE_HOLE[0] / 2 + HANDLE_BAR
+    reach = HANDLE_HOLE[1] / 2 + HANDLE_BAR
+    handle = np.array([[out, 0.0, cz - reach], [out, 0.0, cz + reach]])
+    return np.concatenate(rings + [handle])
+
+
 def _hang(layout: Layout, s: WorldState) -> Goal:
-    spoon, peg = s.objects["spoon"], layout.object("peg")
-    shape = layout.object("spoon").shape
-    r = spoon.rotation
-    # The peg's axis (world x, through its centre) in the spoon's frame, where the loop's hole is a square
-    # in the plane z = 0 around (loop centre, 0).
-    p = r.T @ (np.asarray(peg.position) - np.asarray(spoon.position))
-    d = r.T @ np.array([1.0, 0.0, 0.0])
+    # The mug hangs from the peg: the peg's axis passes through its handle's hole, and its lowest point is
+    # clear of the table (with "let go and at rest", nothing but the peg holds it up).
+    mug, peg = s.objects["mug"], layout.object("peg")
+    shape = layout.object("mug").shape
+    r = mug.rotation
+    # The peg's axis (its x, through its centre) in the mug's frame, where the handle's hole is a rectangle
+    # in the plane y = 0 around mug_handle_hole.
+    p = r.T @ (np.asarray(peg.position) - np.asarray(mug.position))
+    d = r.T @ np.array([math.cos(peg.yaw), math.sin(peg.yaw), 0.0])
     through = False
-    if abs(d[2]) > 0.3:
-        along = -p[2] / d[2]
+    if abs(d[1]) > 0.3:
+        along = -p[1] / d[1]
         hit = p + along * d
-        inside = LOOP_HOLE / 2 + 0.002
-        through = (abs(hit[0] - spoon_loop_centre(shape)) < inside and abs(hit[1]) < inside
+        cx, cz = mug_handle_hole(shape)
+        through = (abs(hit[0] - cx) < HANDLE_HOLE[0] / 2 and abs(hit[2] - cz) < HANDLE_HOLE[1] / 2
                    and abs(along) <= peg.shape.size[0] / 2)
-    half = np.asarray(shape.size) / 2
-    lowest = spoon.position[2] - float(np.abs(r[2, :]) @ half)
+    lowest = mug.position[2] + float((_mug_points(shape) @ r.T)[:, 2].min())
     clear = lowest >= HANG_CLEARANCE
-    reason = (("the peg through the spoon's loop" if through else "the peg not through the spoon's loop")
+    reason = (("the peg through the mug's handle" if through else "the peg not through the mug's handle")
               + f", its lowest point {lowest * 100:.1f} cm above the table (needs >= {HANG_CLEARANCE * 100:.0f})")
     return Goal(through and clear, reason)
 

@@ -206,13 +206,16 @@ class PhysicsWorld:
                 touching.add(int(b2 if self._robot[b1] else b1))
         return touching
 
-    def seen(self, anchor) -> dict[str, tuple[float, float, float, float]]:
+    def seen(self, anchor) -> dict[str, tuple[float, ...]]:
         """What a person watching the scene sees: every free object's position and yaw, and the robot hand's
-        (its TCP, as "hand"), in the task frame (metres from `anchor`, the TCP at the arm's home)."""
+        (its TCP, as "hand"), in the task frame (metres from `anchor`, the TCP at the arm's home), then how
+        it leans (its own x and z axes: where a part of it is, e.g. a held mug's handle):
+        (x, y, z, yaw, x axis (3), z axis (3))."""
         ax, ay, az = (float(v) for v in anchor)
 
-        def pose(p, r) -> tuple[float, float, float, float]:
-            return float(p[0]) - ax, float(p[1]) - ay, float(p[2]) - az, float(np.arctan2(r[1, 0], r[0, 0]))
+        def pose(p, r) -> tuple[float, ...]:
+            return (float(p[0]) - ax, float(p[1]) - ay, float(p[2]) - az, float(np.arctan2(r[1, 0], r[0, 0])),
+                    *(float(v) for v in r[:, 0]), *(float(v) for v in r[:, 2]))
 
         tcp = self.tcp()
         out = {"hand": pose(tcp[:3, 3], tcp[:3, :3])}

@@ -7,12 +7,11 @@ from __future__ import annotations
 import math
 import re
 
-import mujoco
 import numpy as np
 import pytest
 
 from teleprev.world import success
-from teleprev.world.build import spoon_loop_centre
+from teleprev.world.build import mug_handle_hole
 from teleprev.world.layout import POUR_BALLS, TASKS, task_layout
 from teleprev.world.world import PhysicsWorld
 from tests.world.helpers import run
@@ -27,14 +26,14 @@ def _put_cup_on_target(world: PhysicsWorld) -> None:
     world.place_object("cup", (t[0] + 0.01, t[1] - 0.01, 0.01))
 
 
-def _hang_spoon(world: PhysicsWorld) -> None:
-    peg = np.asarray(world.layout.object("peg").position)
-    loop = spoon_loop_centre(world.layout.object("spoon").shape)
-    # Handle up (spoon x -> world z), the loop's hole along the peg (spoon z -> world x).
-    rotation = np.array([[0.0, 0.0, 1.0], [0.0, -1.0, 0.0], [1.0, 0.0, 0.0]])
-    quat = np.zeros(4)
-    mujoco.mju_mat2Quat(quat, rotation.flatten())
-    world.place_object("spoon", peg + [-0.01, 0.0, 0.0] - rotation @ [loop, 0.0, 0.0], quat)
+def _hang_mug(world: PhysicsWorld) -> None:
+    peg = world.layout.object("peg")
+    cx, cz = mug_handle_hole(world.layout.object("mug").shape)
+    # Upright, the handle's hole round the peg and its top bar just over it (then it swings from the peg).
+    yaw = peg.yaw - math.pi / 2  # the mug's y (the hole's axis) along the peg
+    hole = np.array([cx * math.cos(yaw), cx * math.sin(yaw), cz])
+    world.place_object("mug", np.asarray(peg.position) + [0.0, 0.0, 0.011] - hole, _yaw(yaw))
+    run(world, 1.0)  # it swings on the peg a moment, as a hung mug does, then hangs still
 
 
 def _balls_into_bowl(world: PhysicsWorld) -> None:
@@ -56,12 +55,12 @@ def _stack_cups(world: PhysicsWorld) -> None:
     world.place_object("cup2", (base[0], base[1], 0.10))
 
 
-DONE = {"pick_place": _put_cup_on_target, "hang": _hang_spoon, "pour": _balls_into_bowl, "box_rotation": _turn_box,
+DONE = {"pick_place": _put_cup_on_target, "hang": _hang_mug, "pour": _balls_into_bowl, "box_rotation": _turn_box,
         "cup_stack": _stack_cups}
-FAILED_BECAUSE = {"pick_place": "cm from the target's centre", "hang": "the peg not through the spoon's loop",
+FAILED_BECAUSE = {"pick_place": "cm from the target's centre", "hang": "the peg not through the mug's handle",
                   "pour": "0 of 10 balls in the bowl", "box_rotation": "box turned 0 deg",
                   "cup_stack": "is not nested in"}
-SUCCEEDED_BECAUSE = {"pick_place": "on the table", "hang": "the peg through the spoon's loop",
+SUCCEEDED_BECAUSE = {"pick_place": "on the table", "hang": "the peg through the mug's handle",
                      "pour": "10 of 10 balls in the bowl", "box_rotation": "box turned 90 deg",
                      "cup_stack": "cups nested upright"}
 

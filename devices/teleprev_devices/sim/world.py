@@ -171,9 +171,12 @@ class SimWorld:
         yaw = float(np.arctan2(x_axis[1], x_axis[0]))
         for peg in (o for o in self._objects if o.spec.name == "peg"):
             if np.linalg.norm(peg.pose[:3, 3] - obj.pose[:3, 3]) < _GRASP_REACH:
-                # Let go next to the peg: it hangs from it, long side down.
-                hang = peg.pose[:3, 3] - [0.0, 0.0, obj.spec.size[0] / 2 - 0.01]
-                obj.pose = transforms.make_transform(transforms.rpy_to_matrix(0.0, np.pi / 2, 0.0), hang)
+                # Let go next to the peg: it hangs from it upright, its handle's hole round the peg and the
+                # hole's top bar on it (as the physics world's mug comes to hang).
+                out, up = world_places.MUG_HANDLE
+                hole = np.array([out * np.cos(yaw), out * np.sin(yaw), up - height / 2])
+                hang = peg.pose[:3, 3] - hole - [0.0, 0.0, 0.011]
+                obj.pose = yaw_pose(yaw, hang)
                 return
         # Onto whatever it is above (a stacked cup rests on the one below), else the table.
         floor = 0.0
