@@ -257,6 +257,40 @@ def _place(b: _Builder, target, place_z: float, yaw: float, name: str = "cup", b
           hand=grasps.open_hand(b.rng.uniform(0, 0.5)), aim=_move_by(-0.05 * palm))
 
 
+# pick_place lets go as a person setting a cup down does, watching it: the carry looked at once more
+# over the target (the first look was from where the cup was picked up), the cup lowered until it is
+# seen touching the table (carried tilted a few degrees, its base centre is SET_DOWN up when its lowest
+# edge touches), held still a moment, the grip loosened to LOOSE_GRIP (fingers still curled: straightened,
+# they sweep along the cup's far side and flick it over), and only then the hand lifted away and opened.
+SET_DOWN = 0.004  # m
+LOOSE_GRIP = -0.6  # grasps.power's tightness: the fingers off the cup's wall, still round it
+
+
+def _lower_to(obj: str, base: float):
+    """Aim: straight down (or up) until the object, as seen, has its base `base` over the table."""
+    def aim(seen: dict, wrist: np.ndarray, planned: np.ndarray | None) -> np.ndarray:
+        o = _v(*seen[obj][:3])
+        if o[2] < TABLE_Z + LIFTED / 2:  # already down (or not in the hand): stay
+            return np.array(wrist, dtype=float)
+        return wrist + _v(0, 0, TABLE_Z + base - o[2])
+    return aim
+
+
+def _set_down(b: _Builder, target, place_z: float, yaw: float, name: str = "cup") -> None:
+    """Carry the held cup over `target`, set it down watching it, and let go (see SET_DOWN)."""
+    hover = _side_grasp_point(target, place_z + b.rng.uniform(0.08, 0.12), yaw)
+    b.add("move", 1.2, hover, _v(0, LEVEL, yaw), aim=_carry(name, target))
+    b.add("aim", 0.4, hover, aim=_carry(name, target))
+    b.add("place", 1.0, _side_grasp_point(target, place_z, yaw), aim=_carry(name, target, 0.01))
+    b.add("place", 0.5, _side_grasp_point(target, place_z - 0.01, yaw), wrist_window=(0.0, 0.6),
+          aim=_lower_to(name, SET_DOWN))
+    b.add("release", 0.6, hand=grasps.power(LOOSE_GRIP), hand_window=(0.2, 1.0))
+    _, palm = _palm_frame(yaw)
+    b.add("retreat", 0.7, _side_grasp_point(target, place_z + 0.13, yaw), aim=_lift_by(0.13))
+    b.add("retreat", 0.5, _side_grasp_point(target, place_z + 0.13, yaw) - 0.05 * palm,
+          hand=grasps.open_hand(b.rng.uniform(0, 0.5)), aim=_move_by(-0.05 * palm))
+
+
 def pick_place(rng: np.random.Generator, rest: np.ndarray) -> Script:
     b = _Builder(rng)
     cup = _spot(b, "pick_place", "cup")
@@ -264,7 +298,7 @@ def pick_place(rng: np.random.Generator, rest: np.ndarray) -> Script:
     grasp_z = TABLE_Z + GRASP_HEIGHT
     yaw = rng.uniform(-0.25, 0.0)
     _pick(b, cup, grasp_z, yaw, squeeze=rng.uniform(0.25, 0.45))
-    _place(b, target, grasp_z, yaw + rng.uniform(0.0, 0.3))
+    _set_down(b, target, grasp_z, yaw + rng.uniform(0.0, 0.3))
     _rest(b, rest)
     return Script("pick_place", tuple(b.phases), (_cup("cup", cup, CUP_COLOURS[0]),),
                   _spots(cup=(cup, 0.0), target=(target, 0.0)))
