@@ -283,3 +283,31 @@ def test_on_a_physics_rig_the_operator_rests_until_the_sessions_first_episode(ph
     (index, _), start = op.episode(4.0), op.episode_span(op.episode(4.0)[0])[0]
     assert start == pytest.approx(4.0) and index == 1
     assert max(np.linalg.norm(op.state(t).wrist_position - rest) for t in np.arange(4.0, 8.0, 0.1)) > 0.05
+
+
+def test_a_watching_operator_sets_the_cup_down_until_it_sees_it_on_the_table_then_eases_its_grip():
+    """pick_place: after lowering the cup to a centimetre over the table as planned, the operator lowers it
+    by what it sees: the held cup seen 3 cm up, the wrist comes down until the cup's base would be SET_DOWN
+    up (blind: the planned centimetre). Then it lets go with its fingers still curled round the cup (the
+    resting hand's are straighter), and only lifts the hand once the grip is eased."""
+    from teleprev.devices import smplx
+    from teleprev_devices.sim.tasks import SET_DOWN, TABLE_Z
+
+    def set_down(watching: bool):
+        op = SimOperator(seed=3, task="pick_place", mode="fixed")
+        if watching:
+            x, y, _ = op.spots(0.0)["target"]
+            seen = {"cup": (x, y, TABLE_Z + 0.03, 0.0), "hand": (0.0, 0.0, 0.0, 0.0)}
+            op.watch(lambda: seen)
+        start = _phase_start(op, "set down")
+        release = _phase_start(op, "release", start)
+        lift = _phase_start(op, "retreat", release)
+        dz = op.state(release).wrist_position[2] - op.state(start).wrist_position[2]
+        return dz, op, release, lift
+
+    # The same seed sways the wrist alike either way: the difference is the watching operator's.
+    dz, op, release, lift = set_down(watching=True)
+    assert dz - set_down(watching=False)[0] == pytest.approx(SET_DOWN - 0.03 + 0.01, abs=1e-4)
+    curled = [smplx.JOINT_INDEX[f"{f}1"] for f in ("index", "middle", "ring", "pinky")]
+    assert op.state(lift - 0.01).flexion[curled].min() > 0.4  # grasps.rest's are 0.2-0.35
+    assert abs(op.state(lift - 0.01).wrist_position[2] - op.state(release).wrist_position[2]) < 0.01  # (it sways)

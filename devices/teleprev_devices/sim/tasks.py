@@ -15,7 +15,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from teleprev.devices import transforms, world_places
+from teleprev.devices import smplx, transforms, world_places
 from teleprev_devices.sim import grasps
 
 TABLE_Z = world_places.TABLE_Z
@@ -260,10 +260,11 @@ def _place(b: _Builder, target, place_z: float, yaw: float, name: str = "cup", b
 # pick_place lets go as a person setting a cup down does, watching it: the carry looked at once more
 # over the target (the first look was from where the cup was picked up), the cup lowered until it is
 # seen touching the table (carried tilted a few degrees, its base centre is SET_DOWN up when its lowest
-# edge touches), held still a moment, the grip loosened to LOOSE_GRIP (fingers still curled: straightened,
-# they sweep along the cup's far side and flick it over), and only then the hand lifted away and opened.
+# edge touches) and held still a moment, the grip eased (_eased_grip), and only then the hand lifted away
+# and opened.
 SET_DOWN = 0.004  # m
-LOOSE_GRIP = -0.6  # grasps.power's tightness: the fingers off the cup's wall, still round it
+LOOSE_GRIP = -0.6  # grasps.power's tightness below a grasp: the fingers off the cup's wall, still round it
+THUMB_KEPT = 0.5  # of the way from that loose hand's thumb back to where the grip holds it
 
 
 def _lower_to(obj: str, base: float):
@@ -276,15 +277,25 @@ def _lower_to(obj: str, base: float):
     return aim
 
 
-def _set_down(b: _Builder, target, place_z: float, yaw: float, name: str = "cup") -> None:
-    """Carry the held cup over `target`, set it down watching it, and let go (see SET_DOWN)."""
+def _eased_grip(grip: np.ndarray) -> np.ndarray:
+    """The hand letting go of a cup standing on the table: the fingers eased to a loose curl, not
+    straightened (straightening, they sweep along the cup's far side and flick it over), and the thumb
+    only part of the way out (swung out from across the fingers, it knocks the cup's near side)."""
+    loose = grasps.power(LOOSE_GRIP)
+    thumb = [smplx.JOINT_INDEX[f"thumb{i}"] for i in (1, 2, 3)] + [15 + smplx.JOINT_INDEX["thumb1"]]
+    loose[thumb] = THUMB_KEPT * grip[thumb] + (1 - THUMB_KEPT) * loose[thumb]
+    return loose
+
+
+def _set_down(b: _Builder, target, place_z: float, yaw: float, grip: np.ndarray, name: str = "cup") -> None:
+    """Carry the cup held with `grip` over `target`, set it down watching it, and let go (see SET_DOWN)."""
     hover = _side_grasp_point(target, place_z + b.rng.uniform(0.08, 0.12), yaw)
     b.add("move", 1.2, hover, _v(0, LEVEL, yaw), aim=_carry(name, target))
     b.add("aim", 0.4, hover, aim=_carry(name, target))
     b.add("place", 1.0, _side_grasp_point(target, place_z, yaw), aim=_carry(name, target, 0.01))
-    b.add("place", 0.5, _side_grasp_point(target, place_z - 0.01, yaw), wrist_window=(0.0, 0.6),
+    b.add("set down", 0.5, _side_grasp_point(target, place_z - 0.01, yaw), wrist_window=(0.0, 0.6),
           aim=_lower_to(name, SET_DOWN))
-    b.add("release", 0.6, hand=grasps.power(LOOSE_GRIP), hand_window=(0.2, 1.0))
+    b.add("release", 0.6, hand=_eased_grip(grip), hand_window=(0.2, 1.0))
     _, palm = _palm_frame(yaw)
     b.add("retreat", 0.7, _side_grasp_point(target, place_z + 0.13, yaw), aim=_lift_by(0.13))
     b.add("retreat", 0.5, _side_grasp_point(target, place_z + 0.13, yaw) - 0.05 * palm,
@@ -297,8 +308,9 @@ def pick_place(rng: np.random.Generator, rest: np.ndarray) -> Script:
     target = _spot(b, "pick_place", "target")
     grasp_z = TABLE_Z + GRASP_HEIGHT
     yaw = rng.uniform(-0.25, 0.0)
-    _pick(b, cup, grasp_z, yaw, squeeze=rng.uniform(0.25, 0.45))
-    _set_down(b, target, grasp_z, yaw + rng.uniform(0.0, 0.3))
+    squeeze = rng.uniform(0.25, 0.45)
+    c = _pick(b, cup, grasp_z, yaw, squeeze=squeeze)
+    _set_down(b, target, grasp_z, yaw + rng.uniform(0.0, 0.3), grasps.power(min(1.0, c + squeeze)))
     _rest(b, rest)
     return Script("pick_place", tuple(b.phases), (_cup("cup", cup, CUP_COLOURS[0]),),
                   _spots(cup=(cup, 0.0), target=(target, 0.0)))
