@@ -119,7 +119,7 @@ def build_motion(rig: Rig, ik: ArmIK, arm_speed: np.ndarray, effector, swept: Sw
         g = effector.guard
         hand_accel = _limit(rig, "hand_acceleration", row.acceleration if row else None, "hand acceleration limit")
         hand = hand_limiter(g.lower, g.upper, g.speed, np.full(len(g.lower), hand_accel))
-    return Motion(arm, hand, swept, tcp, STREAM_START_JERK_FRAC if below_limits else 1.0)
+    return Motion(arm, hand, swept, tcp, STREAM_START_JERK_FRAC if below_limits else 1.0, fraction)
 
 
 def build_pipeline(rig: Rig, models: str | Path | None = None, calibration: Calibration | None = None,

@@ -40,13 +40,16 @@ STREAM_START_JERK_FRAC = 0.5
 class Motion:
     """The arm generator and (for a LEAP Hand or a gripper) the hand limiter and swept check."""
 
-    def __init__(self, arm: ArmGenerator, hand: HandLimiter | None, swept=None, tcp=None, start_jerk_frac=1.0):
+    def __init__(self, arm: ArmGenerator, hand: HandLimiter | None, swept=None, tcp=None, start_jerk_frac=1.0,
+                 plan_fraction=1.0):
         self.arm = arm
         self.hand = hand
         self.swept = swept  # teleprev.pipeline.swept.SweptCheck or None
         self.tcp = tcp  # teleprev.pipeline.tcp_speed.TcpSpeedCap or None (no cap on the flange's speed)
         # the arm's jerk over a stream's first STREAM_START_TICKS moving ticks (formats up to 10: 1.0)
         self.start_jerk_frac = start_jerk_frac
+        # the arm is planned at this fraction of its acceleration and jerk limits (arm.acceleration, arm.jerk)
+        self.plan_fraction = plan_fraction
 
     def stop_time_bound(self) -> float:
         """Seconds a switch to preview takes at most to bring the commands to rest (the slower side's

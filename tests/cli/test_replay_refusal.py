@@ -11,8 +11,13 @@ from tests.helpers.cli import teleprev
 SIM_RIG = Path(__file__).parents[2] / "rigs" / "sim.toml"
 
 
-def test_the_refusal_alone(sim_dataset):
-    ran = teleprev("replay", sim_dataset, "--episode", "0", "--to", "sim", "--config", SIM_RIG, "--engage-after", "0",
+def test_the_refusal_alone(sim_dataset, tmp_path):
+    # The session's commands are planned below the arm's limits (arm_plan_fraction), so the dataset's actions
+    # exceed them only on a robot with lower ones: a rig at half the acceleration and a fifth of the jerk.
+    rig = tmp_path / "slow.toml"
+    slower = "[pipeline]\narm_acceleration = 5.0\narm_jerk = 100.0\n"
+    rig.write_text(SIM_RIG.read_text().replace("[pipeline]\n", slower, 1))
+    ran = teleprev("replay", sim_dataset, "--episode", "0", "--to", "sim", "--config", rig, "--engage-after", "0",
                    "--no-preview")
     assert ran.returncode == 2, ran.stdout + ran.stderr
     assert ran.stderr.strip() == (f"error: {sim_dataset}: the dataset's actions exceed the robot's acceleration or "

@@ -94,9 +94,12 @@ def _over_the_upper_limit(pipeline, seed: int = 1, streams: int = 12) -> list[fl
 
 
 def test_smoothing_brakes_for_a_joint_limit_instead_of_passing_it(monkeypatch):
+    from dataclasses import replace
+
     from teleprev.pipeline.trajectory import ArmGenerator
 
-    pipeline = build_pipeline(load_rig(SIM_RIG))
+    rig = load_rig(SIM_RIG)  # planned at the limits themselves, the tightest case for braking in time
+    pipeline = build_pipeline(replace(rig, pipeline=replace(rig.pipeline, arm_plan_fraction=1.0)))
     assert max(_over_the_upper_limit(pipeline)) <= 0.0
     # tracking without the live planner's braking test passes the limit on one of these (by ~2e-9 rad)
     monkeypatch.setattr(
