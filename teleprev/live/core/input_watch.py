@@ -73,7 +73,9 @@ class InputWatch:
         it is one; `stalled_s`: how long the loop itself did not run before now (a frozen process)."""
         if not self.executing:
             return None
-        if now_ns - self.last_ok_ns <= self.bound_ns:
+        # A loop that did not run past the bound was frozen (SIGSTOP, a suspended laptop): what it finds queued
+        # then may be samples stamped inside the freeze, which look continuous, so the stall itself decides.
+        if now_ns - self.last_ok_ns <= self.bound_ns and stalled_s * 1e9 <= self.bound_ns:
             if self.held_since_ns is None and now_ns - self.last_ok_ns > self.stale_ns:
                 self.held_since_ns, self.why = now_ns, "no input"
                 return InputEvent("input_held", f"no input for {self.stale_ns / 1e6:g} ms: the robot holds")
