@@ -35,9 +35,10 @@ a fresh episode of its task begins that way (at once when resting), and the oper
 the session's next episode, so that its episodes are the session's. A session's episode that ends before
 the operator's does not start the next one late: the start that finds it under way sends the hand back to
 rest, and the operator rests until the session's next episode start (the physics world lays out no new
-scene during a session's episode; only at the session's first start does the operator finish its own
-episode's phase and return before the fresh one begins). `mode="fixed"` ignores both and `mode="cycle"`
-goes through the five tasks in turn.
+scene during a session's episode; the session's first start, finding the operator in an episode of its
+own, begins the fresh one at once from where the hand is). On a physics rig the operator rests from the
+start until the session's first episode (`wait_for_session`). `mode="fixed"` ignores both and
+`mode="cycle"` goes through the five tasks in turn.
 
 Watching (`watch`, on a physics rig): phases that aim (tasks.Phase.aim) are laid out as they begin, to
 where the operator sees the objects and the robot's hand then, as a person at the table corrects a reach

@@ -177,9 +177,9 @@ def safe_speed(p: Playback, arm_caps: np.ndarray, effector_caps: np.ndarray, req
             for run in pieces:  # each run starts from rest: measured alone
                 _, acc, jerk = divided_differences(t[run], q[run])
                 if side == "arm":  # against the limits, not the fraction of them the planner plans at
-                    limit = getattr(motion, "plan_fraction", 1.0)
-                    ratios += [_power_room(motion.arm.acceleration / limit, acc, 2),
-                               _power_room(motion.arm.jerk / limit, jerk, 3)]
+                    planned = motion.plan_fraction
+                    ratios += [_power_room(motion.arm.acceleration / planned, acc, 2),
+                               _power_room(motion.arm.jerk / planned, jerk, 3)]
                 elif motion.hand is not None:
                     ratios.append(_power_room(motion.hand.acceleration, acc, 2))
     speed = float(min(requested, *ratios))
